@@ -1,0 +1,11 @@
+//! Geometry shared by every stage: boxes, rays and hits, and the two robust intersection tests
+//! (watertight ray/triangle, conservative ray/box) that the CPU reference tracers use. The GLSL
+//! twins of these tests live in `glsl/intersect.glsl` and must stay operation-for-operation equal.
+
+mod aabb;
+mod ray;
+mod triangle;
+
+pub use aabb::Aabb;
+pub use ray::{safe_inverse, Hit, Ray};
+pub use triangle::{intersect_triangle, RayShear};

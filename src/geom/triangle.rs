@@ -1,0 +1,162 @@
+//! The watertight ray/triangle test of Woop, Benthin & Wald, "Watertight Ray/Triangle
+//! Intersection" (JCGT 2(1), 2013), in single precision.
+//!
+//! The ray is sheared so that it runs along +z through the origin; each vertex is transformed once,
+//! and the three 2D edge functions are evaluated on transformed vertices. An edge shared by two
+//! triangles is evaluated from the same two transformed vertices in both, so the two results are
+//! exact negatives of each other and no ray can slip between them. The paper falls back to double
+//! precision when an edge function is exactly zero; we instead accept zeros on both sides (a ray
+//! through an edge or vertex hits every triangle there), which is equally watertight, needs no
+//! `float64` on the GPU, and only costs a duplicate hit at the same `t`, harmless for closest-hit
+//! and any-hit queries. The GLSL twin (`glsl/intersect.glsl`) marks its arithmetic `precise` so
+//! that FMA contraction cannot break the negation symmetry.
+
+use glam::Vec3;
+
+use super::Ray;
+
+/// Per-ray shear constants (section 3 of the paper): `k` are the permuted axes with `kz` the
+/// dominant direction axis, `s` the shear, and `sz = 1/d[kz]`.
+#[derive(Clone, Copy, Debug)]
+pub struct RayShear {
+    pub origin: Vec3,
+    pub k: [usize; 3],
+    pub s: [f32; 3],
+}
+
+impl RayShear {
+    pub fn new(ray: &Ray) -> Self {
+        let d = ray.dir();
+        let a = d.abs();
+        let kz = if a.x >= a.y && a.x >= a.z {
+            0
+        } else if a.y >= a.z {
+            1
+        } else {
+            2
+        };
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        // Swap to keep the triangles' winding (and so the sign of the edge functions) intact.
+        if d[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        RayShear {
+            origin: ray.origin(),
+            k: [kx, ky, kz],
+            s: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]],
+        }
+    }
+}
+
+/// Intersects the sheared ray with triangle `(a, b, c)` and returns the hit distance when it lies in
+/// `[tmin, tmax)`. The distance is measured in units of the ray's (unnormalised) direction.
+#[inline]
+pub fn intersect_triangle(
+    r: &RayShear,
+    a: Vec3,
+    b: Vec3,
+    c: Vec3,
+    tmin: f32,
+    tmax: f32,
+) -> Option<f32> {
+    let [kx, ky, kz] = r.k;
+    let [sx, sy, sz] = r.s;
+    let a = a - r.origin;
+    let b = b - r.origin;
+    let c = c - r.origin;
+    let ax = a[kx] - sx * a[kz];
+    let ay = a[ky] - sy * a[kz];
+    let bx = b[kx] - sx * b[kz];
+    let by = b[ky] - sy * b[kz];
+    let cx = c[kx] - sx * c[kz];
+    let cy = c[ky] - sy * c[kz];
+    let u = cx * by - cy * bx;
+    let v = ax * cy - ay * cx;
+    let w = bx * ay - by * ax;
+    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        return None;
+    }
+    let det = u + v + w;
+    if det == 0.0 {
+        return None;
+    }
+    let az = sz * a[kz];
+    let bz = sz * b[kz];
+    let cz = sz * c[kz];
+    let t_scaled = u * az + v * bz + w * cz;
+    // Compare before dividing, as the paper does, so that rounding cannot move a hit across tmin.
+    let (lo, hi) = if det > 0.0 {
+        (t_scaled >= tmin * det, t_scaled < tmax * det)
+    } else {
+        (t_scaled <= tmin * det, t_scaled > tmax * det)
+    };
+    if !(lo && hi) {
+        return None;
+    }
+    Some(t_scaled / det)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shear(o: [f32; 3], d: [f32; 3]) -> RayShear {
+        RayShear::new(&Ray::new(o.into(), d.into(), 0.0, f32::INFINITY))
+    }
+
+    #[test]
+    fn hits_centre_and_misses_outside() {
+        let (a, b, c) = (
+            Vec3::new(-1.0, -1.0, 0.0),
+            Vec3::new(1.0, -1.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+        );
+        let r = shear([0.0, 0.0, -2.0], [0.0, 0.0, 1.0]);
+        assert_eq!(
+            intersect_triangle(&r, a, b, c, 0.0, f32::INFINITY),
+            Some(2.0)
+        );
+        let r = shear([5.0, 0.0, -2.0], [0.0, 0.0, 1.0]);
+        assert_eq!(intersect_triangle(&r, a, b, c, 0.0, f32::INFINITY), None);
+        // Back side and reversed winding are hit too (no culling).
+        let r = shear([0.0, 0.0, 2.0], [0.0, 0.0, -1.0]);
+        assert_eq!(
+            intersect_triangle(&r, a, c, b, 0.0, f32::INFINITY),
+            Some(2.0)
+        );
+    }
+
+    #[test]
+    fn interval_is_half_open() {
+        let (a, b, c) = (
+            Vec3::new(-1.0, -1.0, 0.0),
+            Vec3::new(1.0, -1.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+        );
+        let r = shear([0.0, 0.0, -2.0], [0.0, 0.0, 1.0]);
+        assert_eq!(intersect_triangle(&r, a, b, c, 0.0, 2.0), None);
+        assert_eq!(intersect_triangle(&r, a, b, c, 2.0, 3.0), Some(2.0));
+    }
+
+    #[test]
+    fn shared_edge_is_watertight() {
+        // Two triangles sharing the diagonal of a quad; rays exactly through the diagonal.
+        let p = [
+            Vec3::new(-1.0, -1.0, 0.3),
+            Vec3::new(1.0, -1.0, 0.1),
+            Vec3::new(1.0, 1.0, -0.2),
+            Vec3::new(-1.0, 1.0, 0.4),
+        ];
+        for i in 4..=60 {
+            let s = -1.0 + 2.0 * i as f32 / 64.0;
+            let r = shear([s, s, 5.0], [0.013, -0.007, -1.0]);
+            let h0 = intersect_triangle(&r, p[0], p[1], p[2], 0.0, f32::INFINITY);
+            let h1 = intersect_triangle(&r, p[0], p[2], p[3], 0.0, f32::INFINITY);
+            assert!(
+                h0.is_some() || h1.is_some(),
+                "ray {i} leaked through the shared edge"
+            );
+        }
+    }
+}
