@@ -1,0 +1,443 @@
+//! Binned SAH construction (Wald 2007), parallel and deterministic.
+//!
+//! Parallelism comes only from `rayon::join` over independent subtrees and from order-independent
+//! reductions (bin counts and box unions, which are exact), so the tree is byte-identical whatever
+//! the thread count.
+
+use std::time::Instant;
+
+use glam::Vec3;
+
+use super::layout::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
+use crate::geom::Aabb;
+use crate::scene::Scene;
+use crate::{Error, Result};
+
+/// Knobs of the exact BVH build.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BuildParams {
+    /// SAH bins per axis.
+    pub bins: usize,
+    /// Largest leaf the SAH may choose; larger sets are always split.
+    pub max_leaf: usize,
+    /// Cost of one box-pair test relative to one triangle test in the SAH.
+    pub traversal_cost: f32,
+    /// From this depth on, nodes are split at the object median instead of by SAH, which bounds the
+    /// depth by `median_below_depth + log2(n)` and so keeps it within [`STACK_SIZE`] for any input
+    /// (SAH alone can build arbitrarily deep chains on adversarial input).
+    pub median_below_depth: u32,
+}
+
+impl BuildParams {
+    pub const DEFAULT: BuildParams = BuildParams {
+        bins: 16,
+        max_leaf: 8,
+        traversal_cost: 1.0,
+        median_below_depth: 32,
+    };
+}
+
+impl Default for BuildParams {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// A built exact BVH in its GPU layout, ready to upload or trace on the CPU.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Bvh {
+    /// Node 0 is the root; each node holds both children's boxes.
+    pub nodes: Vec<GpuNode>,
+    /// Triangles in leaf order.
+    pub triangles: Vec<GpuTriangle>,
+    /// Bounds of the whole scene.
+    pub bounds: Aabb,
+    /// Longest root-to-leaf path, counted in nodes (≤ [`STACK_SIZE`]).
+    pub depth: u32,
+    /// Wall time of the build in milliseconds.
+    pub build_ms: f64,
+}
+
+/// Per-triangle build input.
+struct Prim {
+    bounds: Aabb,
+    centroid: Vec3,
+}
+
+enum BuildNode {
+    Leaf {
+        bounds: Aabb,
+        start: u32,
+        count: u32,
+    },
+    Inner {
+        bounds: Aabb,
+        children: Box<[BuildNode; 2]>,
+    },
+}
+
+impl BuildNode {
+    fn bounds(&self) -> Aabb {
+        match self {
+            BuildNode::Leaf { bounds, .. } | BuildNode::Inner { bounds, .. } => *bounds,
+        }
+    }
+}
+
+/// Subtrees smaller than this are built on the calling thread.
+const PARALLEL_THRESHOLD: usize = 4096;
+
+impl Bvh {
+    /// Builds with [`BuildParams::DEFAULT`].
+    pub fn build(scene: &Scene) -> Result<Bvh> {
+        Self::build_with(scene, &BuildParams::DEFAULT)
+    }
+
+    pub fn build_with(scene: &Scene, params: &BuildParams) -> Result<Bvh> {
+        if params.bins < 2 || params.bins > 256 {
+            return Err(Error::param(
+                "bins",
+                format!("{} is outside 2..=256", params.bins),
+            ));
+        }
+        if params.max_leaf == 0 || params.max_leaf > 64 {
+            return Err(Error::param(
+                "max_leaf",
+                format!("{} is outside 1..=64", params.max_leaf),
+            ));
+        }
+        if params.median_below_depth + 1 >= STACK_SIZE {
+            return Err(Error::param(
+                "median_below_depth",
+                format!(
+                    "{} leaves no room below the {STACK_SIZE}-entry stack",
+                    params.median_below_depth
+                ),
+            ));
+        }
+        scene.validate()?;
+        if scene.triangle_count() >= LEAF_BIT as usize {
+            return Err(Error::param(
+                "scene",
+                format!("{} triangles exceed 2^31", scene.triangle_count()),
+            ));
+        }
+        let start = Instant::now();
+        let prims: Vec<Prim> = (0..scene.triangle_count())
+            .map(|i| {
+                let bounds = Aabb::from_points(scene.triangle(i));
+                Prim {
+                    bounds,
+                    centroid: bounds.center(),
+                }
+            })
+            .collect();
+        let mut order: Vec<u32> = (0..prims.len() as u32).collect();
+        let builder = Builder {
+            prims: &prims,
+            params,
+        };
+        let root = (!order.is_empty()).then(|| builder.build(&mut order, 0, 0));
+        let mut nodes = Vec::new();
+        let root_children = match &root {
+            None => [ChildRef::ABSENT, ChildRef::ABSENT],
+            Some(leaf @ BuildNode::Leaf { .. }) => [child_ref(leaf, 0), ChildRef::ABSENT],
+            Some(BuildNode::Inner { children, .. }) => {
+                nodes.push(GpuNode::default());
+                let refs = [
+                    flatten(&children[0], &mut nodes),
+                    flatten(&children[1], &mut nodes),
+                ];
+                nodes[0] = GpuNode::new(refs[0], refs[1]);
+                refs
+            }
+        };
+        if nodes.is_empty() {
+            nodes.push(GpuNode::new(root_children[0], root_children[1]));
+        }
+        let depth = root.as_ref().map_or(0, tree_depth).max(1);
+        if depth > STACK_SIZE {
+            return Err(Error::param(
+                "median_below_depth",
+                format!(
+                    "the tree has depth {depth}, beyond the {STACK_SIZE}-entry traversal stack"
+                ),
+            ));
+        }
+        let triangles = order
+            .iter()
+            .map(|&i| GpuTriangle::new(scene.triangle(i as usize), i))
+            .collect();
+        Ok(Bvh {
+            nodes,
+            triangles,
+            bounds: root.as_ref().map_or(Aabb::EMPTY, BuildNode::bounds),
+            depth,
+            build_ms: start.elapsed().as_secs_f64() * 1e3,
+        })
+    }
+
+    /// Bytes of the node array.
+    pub fn tree_bytes(&self) -> u64 {
+        std::mem::size_of_val(self.nodes.as_slice()) as u64
+    }
+
+    /// Bytes of the triangle array.
+    pub fn triangle_bytes(&self) -> u64 {
+        std::mem::size_of_val(self.triangles.as_slice()) as u64
+    }
+}
+
+fn tree_depth(node: &BuildNode) -> u32 {
+    match node {
+        BuildNode::Leaf { .. } => 0,
+        BuildNode::Inner { children, .. } => {
+            1 + tree_depth(&children[0]).max(tree_depth(&children[1]))
+        }
+    }
+}
+
+fn child_ref(node: &BuildNode, index: u32) -> ChildRef {
+    match node {
+        BuildNode::Leaf {
+            bounds,
+            start,
+            count,
+        } => ChildRef {
+            bounds: *bounds,
+            child: LEAF_BIT | start,
+            count: *count,
+        },
+        BuildNode::Inner { bounds, .. } => ChildRef {
+            bounds: *bounds,
+            child: index,
+            count: 0,
+        },
+    }
+}
+
+/// Depth-first packing: a node's first child follows it directly, which keeps the common descent
+/// path close in memory.
+fn flatten(node: &BuildNode, nodes: &mut Vec<GpuNode>) -> ChildRef {
+    match node {
+        BuildNode::Leaf { .. } => child_ref(node, 0),
+        BuildNode::Inner { children, .. } => {
+            let index = nodes.len() as u32;
+            nodes.push(GpuNode::default());
+            let a = flatten(&children[0], nodes);
+            let b = flatten(&children[1], nodes);
+            nodes[index as usize] = GpuNode::new(a, b);
+            child_ref(node, index)
+        }
+    }
+}
+
+struct Builder<'a> {
+    prims: &'a [Prim],
+    params: &'a BuildParams,
+}
+
+#[derive(Clone, Copy)]
+struct Bin {
+    bounds: Aabb,
+    count: u32,
+}
+
+const EMPTY_BIN: Bin = Bin {
+    bounds: Aabb::EMPTY,
+    count: 0,
+};
+
+impl Builder<'_> {
+    /// Builds the subtree over the non-empty `order` (a slice of the global order starting at
+    /// `offset`).
+    fn build(&self, order: &mut [u32], offset: u32, depth: u32) -> BuildNode {
+        let (bounds, centroids) = self.bounds_of(order);
+        let n = order.len();
+        let leaf = BuildNode::Leaf {
+            bounds,
+            start: offset,
+            count: n as u32,
+        };
+        if n == 1 {
+            return leaf;
+        }
+        let split = if depth < self.params.median_below_depth {
+            self.sah_split(order, &bounds, &centroids)
+        } else {
+            None
+        };
+        let mid = match split {
+            Some(s) if s.cost >= n as f32 && n <= self.params.max_leaf => return leaf,
+            Some(s) => partition(order, |i| s.bin_of(&self.prims[i as usize]) < s.bin),
+            None if n <= self.params.max_leaf => return leaf,
+            None => self.median_split(order, &centroids),
+        };
+        let (left, right) = order.split_at_mut(mid);
+        let (a, b) = if n >= PARALLEL_THRESHOLD {
+            rayon::join(
+                || self.build(left, offset, depth + 1),
+                || self.build(right, offset + mid as u32, depth + 1),
+            )
+        } else {
+            (
+                self.build(left, offset, depth + 1),
+                self.build(right, offset + mid as u32, depth + 1),
+            )
+        };
+        BuildNode::Inner {
+            bounds,
+            children: Box::new([a, b]),
+        }
+    }
+
+    /// Bounds of the triangles and of their centroids; a parallel, exact reduction for big sets.
+    fn bounds_of(&self, order: &[u32]) -> (Aabb, Aabb) {
+        let one = |i: &u32| {
+            let p = &self.prims[*i as usize];
+            (p.bounds, Aabb::EMPTY.grow(p.centroid))
+        };
+        let merge = |a: (Aabb, Aabb), b: (Aabb, Aabb)| (a.0.union(b.0), a.1.union(b.1));
+        if order.len() >= PARALLEL_THRESHOLD {
+            use rayon::prelude::*;
+            order
+                .par_iter()
+                .map(one)
+                .reduce(|| (Aabb::EMPTY, Aabb::EMPTY), merge)
+        } else {
+            order
+                .iter()
+                .map(one)
+                .fold((Aabb::EMPTY, Aabb::EMPTY), merge)
+        }
+    }
+
+    /// The cheapest SAH plane over all axes, or `None` when all centroids coincide.
+    fn sah_split(&self, order: &[u32], bounds: &Aabb, centroids: &Aabb) -> Option<SahSplit> {
+        let nb = self.params.bins;
+        let extent = centroids.extent();
+        let mut best: Option<SahSplit> = None;
+        for axis in 0..3 {
+            if extent[axis] <= 0.0 {
+                continue;
+            }
+            let binning = SahSplit {
+                cost: 0.0,
+                axis,
+                lo: centroids.min[axis],
+                scale: nb as f32 / extent[axis],
+                bins: nb,
+                bin: 0,
+            };
+            let bins = self.fill_bins(order, nb, |i| binning.bin_of(&self.prims[i as usize]));
+            // Sweep from the right to get suffix areas and counts, then from the left.
+            let mut right_area = vec![0.0f32; nb];
+            let mut right_count = vec![0u32; nb];
+            let mut acc = EMPTY_BIN;
+            for b in (1..nb).rev() {
+                acc = Bin {
+                    bounds: acc.bounds.union(bins[b].bounds),
+                    count: acc.count + bins[b].count,
+                };
+                right_area[b] = acc.bounds.area();
+                right_count[b] = acc.count;
+            }
+            let mut left = EMPTY_BIN;
+            for b in 1..nb {
+                left = Bin {
+                    bounds: left.bounds.union(bins[b - 1].bounds),
+                    count: left.count + bins[b - 1].count,
+                };
+                if left.count == 0 || right_count[b] == 0 {
+                    continue;
+                }
+                let cost = self.params.traversal_cost
+                    + (left.bounds.area() * left.count as f32
+                        + right_area[b] * right_count[b] as f32)
+                        / bounds.area().max(f32::MIN_POSITIVE);
+                if best.as_ref().is_none_or(|s| cost < s.cost) {
+                    best = Some(SahSplit {
+                        cost,
+                        bin: b,
+                        ..binning
+                    });
+                }
+            }
+        }
+        best
+    }
+
+    fn fill_bins(
+        &self,
+        order: &[u32],
+        nb: usize,
+        bin_of: impl Fn(u32) -> usize + Sync,
+    ) -> Vec<Bin> {
+        let add = |mut bins: Vec<Bin>, i: &u32| {
+            let b = &mut bins[bin_of(*i)];
+            b.bounds = b.bounds.union(self.prims[*i as usize].bounds);
+            b.count += 1;
+            bins
+        };
+        let merge = |mut a: Vec<Bin>, b: Vec<Bin>| {
+            for (x, y) in a.iter_mut().zip(b) {
+                x.bounds = x.bounds.union(y.bounds);
+                x.count += y.count;
+            }
+            a
+        };
+        if order.len() >= PARALLEL_THRESHOLD {
+            use rayon::prelude::*;
+            order
+                .par_iter()
+                .fold(|| vec![EMPTY_BIN; nb], add)
+                .reduce(|| vec![EMPTY_BIN; nb], merge)
+        } else {
+            order.iter().fold(vec![EMPTY_BIN; nb], add)
+        }
+    }
+
+    /// Object median along the centroids' longest axis; ties broken by triangle index so the result
+    /// does not depend on the sort's stability.
+    fn median_split(&self, order: &mut [u32], centroids: &Aabb) -> usize {
+        let axis = centroids.largest_axis();
+        let mid = order.len() / 2;
+        order.select_nth_unstable_by(mid, |&a, &b| {
+            let ca = self.prims[a as usize].centroid[axis];
+            let cb = self.prims[b as usize].centroid[axis];
+            ca.total_cmp(&cb).then(a.cmp(&b))
+        });
+        mid
+    }
+}
+
+/// A split between bins `bin - 1` and `bin` on `axis`. Partitioning reuses [`SahSplit::bin_of`],
+/// the very function that filled the bins, so no rounding can put a triangle on the other side of
+/// the plane than the cost assumed (and neither side can come out empty).
+#[derive(Clone, Copy)]
+struct SahSplit {
+    cost: f32,
+    axis: usize,
+    lo: f32,
+    scale: f32,
+    bins: usize,
+    bin: usize,
+}
+
+impl SahSplit {
+    fn bin_of(&self, p: &Prim) -> usize {
+        (((p.centroid[self.axis] - self.lo) * self.scale) as usize).min(self.bins - 1)
+    }
+}
+
+/// In-place partition; returns the number of elements for which `pred` holds (now first).
+fn partition(order: &mut [u32], pred: impl Fn(u32) -> bool) -> usize {
+    let mut i = 0;
+    for j in 0..order.len() {
+        if pred(order[j]) {
+            order.swap(i, j);
+            i += 1;
+        }
+    }
+    i
+}

@@ -1,0 +1,18 @@
+//! The exact triangle BVH: the referee that every RBVH approximation is measured against.
+//!
+//! * [`build`](Bvh::build): binned SAH (Wald, "On fast construction of SAH-based bounding volume
+//!   hierarchies", 2007), parallel with `rayon`, deterministic whatever the thread count.
+//! * [`layout`]: the GPU node in the style of Aila & Laine, "Understanding the efficiency of ray
+//!   traversal on GPUs" (HPG 2009): one 64-byte node holds both children's boxes, so one fetch
+//!   answers "which children does the ray enter, and in which order".
+//! * [`traverse`]: the CPU reference tracer, operation for operation the same as
+//!   `glsl/bvh_traverse.glsl`, on the same packed data.
+
+mod build;
+pub mod layout;
+mod traverse;
+mod validate;
+
+pub use build::{BuildParams, Bvh};
+pub use layout::{GpuNode, GpuTriangle, STACK_SIZE};
+pub use traverse::TraceStats;

@@ -1,0 +1,112 @@
+//! CPU reference tracer for the exact BVH: the same traversal order, box test and triangle test as
+//! `glsl/bvh.glsl`, so that CPU and GPU answers can be compared ray by ray.
+
+use rayon::prelude::*;
+
+use super::layout::{ChildRef, LEAF_BIT, STACK_SIZE};
+use super::Bvh;
+use crate::geom::{intersect_triangle, safe_inverse, Hit, Ray, RayShear};
+
+/// What one ray cost: inner nodes visited and triangles tested. The heat map shows their sum.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TraceStats {
+    pub nodes: u32,
+    pub triangles: u32,
+    /// The stack overflowed (impossible for trees built by [`Bvh::build`]).
+    pub overflow: bool,
+}
+
+impl Bvh {
+    /// Closest hit of one ray, or [`Hit::MISS`]. Invalid rays ([`Ray::is_valid`]) miss.
+    pub fn closest_hit(&self, ray: &Ray) -> (Hit, TraceStats) {
+        self.traverse(ray, false)
+    }
+
+    /// Whether anything is hit in `[tmin, tmax)`: the hit returned is *some* hit, not the closest.
+    pub fn any_hit(&self, ray: &Ray) -> (Hit, TraceStats) {
+        self.traverse(ray, true)
+    }
+
+    /// Traces many rays in parallel with `rayon`.
+    pub fn trace_cpu(&self, rays: &[Ray], any_hit: bool) -> Vec<Hit> {
+        rays.par_iter()
+            .map(|r| self.traverse(r, any_hit).0)
+            .collect()
+    }
+
+    fn traverse(&self, ray: &Ray, any_hit: bool) -> (Hit, TraceStats) {
+        let mut stats = TraceStats::default();
+        if !ray.is_valid() {
+            return (Hit::MISS, stats);
+        }
+        let origin = ray.origin();
+        let inv_dir = safe_inverse(ray.dir());
+        let shear = RayShear::new(ray);
+        let mut t_closest = ray.tmax;
+        let mut best = None;
+        let mut stack = [0u32; STACK_SIZE as usize];
+        let mut sp = 0usize;
+        let mut node = 0u32;
+        loop {
+            stats.nodes += 1;
+            let children = self.nodes[node as usize].children();
+            let entry = |c: &ChildRef| c.bounds.intersect(origin, inv_dir, ray.tmin, t_closest);
+            let (ta, tb) = (entry(&children[0]), entry(&children[1]));
+            // Nearest child first; `b` only goes first when strictly nearer (same rule as GLSL).
+            let order = match (ta, tb) {
+                (Some(a), Some(b)) if b < a => [1, 0],
+                _ => [0, 1],
+            };
+            let mut next = None;
+            for k in order {
+                let c = &children[k];
+                let Some(t_entry) = [ta, tb][k] else { continue };
+                if t_entry > t_closest {
+                    continue;
+                }
+                if c.child & LEAF_BIT != 0 {
+                    let first = (c.child & !LEAF_BIT) as usize;
+                    for slot in first..first + c.count as usize {
+                        stats.triangles += 1;
+                        let [a, b, c] = self.triangles[slot].vertices();
+                        if let Some(t) = intersect_triangle(&shear, a, b, c, ray.tmin, t_closest) {
+                            t_closest = t;
+                            best = Some(slot);
+                            if any_hit {
+                                return (self.hit(slot, t_closest), stats);
+                            }
+                        }
+                    }
+                } else if next.is_none() {
+                    next = Some(c.child);
+                } else if sp < STACK_SIZE as usize {
+                    stack[sp] = c.child;
+                    sp += 1;
+                } else {
+                    stats.overflow = true;
+                }
+            }
+            node = match next {
+                Some(n) => n,
+                None if sp > 0 => {
+                    sp -= 1;
+                    stack[sp]
+                }
+                None => break,
+            };
+        }
+        let hit = best.map_or(Hit::MISS, |slot| self.hit(slot, t_closest));
+        (hit, stats)
+    }
+
+    /// The hit record of triangle slot `slot` (its position in leaf order) at distance `t`.
+    fn hit(&self, slot: usize, t: f32) -> Hit {
+        let tri = &self.triangles[slot];
+        Hit {
+            t,
+            normal: tri.normal().to_array(),
+            id: tri.prim,
+            reserved: [0; 3],
+        }
+    }
+}
