@@ -1,0 +1,176 @@
+//! Procedural scenes that need no files: deterministic, so tests, benchmarks and regression
+//! images can rely on them anywhere, and some come with the exact surface they approximate
+//! ([`analytic()`]) as an oracle for hit distances and normals.
+
+mod analytic;
+mod shapes;
+
+use glam::{DVec3, Mat4, Quat, Vec3};
+
+pub use analytic::Analytic;
+use shapes::Shape;
+
+use super::Scene;
+
+/// The built-in scene names, in the order help texts list them.
+pub const NAMES: &[&str] = &[
+    "default",
+    "plane",
+    "sphere",
+    "torus",
+    "cube",
+    "cylinder",
+    "cone",
+    "bumpy-sphere",
+    "blob",
+];
+
+/// Subdivision level of the "sphere" scene: 20·4⁵ = 20480 triangles.
+const SPHERE_LEVEL: u32 = 5;
+
+/// The exact surface behind built-in scene `name`, for those that have one ("plane", "sphere").
+pub fn analytic(name: &str) -> Option<Analytic> {
+    match name {
+        "plane" => Some(Analytic::Plane {
+            point: Vec3::ZERO,
+            normal: Vec3::Y,
+            half_extent: 1.0,
+        }),
+        "sphere" => {
+            let s = sphere();
+            Some(Analytic::Sphere {
+                center: Vec3::ZERO,
+                radius: 1.0,
+                max_chord_error: analytic::sphere_chord_error(
+                    &s.positions,
+                    &s.triangles,
+                    Vec3::ZERO,
+                    1.0,
+                ),
+            })
+        }
+        _ => None,
+    }
+}
+
+/// Builds built-in scene `name`, or `None` when there is no such scene.
+pub(super) fn build(name: &str) -> Option<Scene> {
+    let parts: Vec<(&str, Shape)> = match name {
+        "default" => showcase(),
+        "plane" => vec![("plane", shapes::grid_plane(1.0, 8))],
+        "sphere" => vec![("sphere", sphere())],
+        "torus" => vec![("torus", torus())],
+        "cube" => vec![("cube", shapes::cube(8))],
+        "cylinder" => vec![("cylinder", shapes::cylinder(96, 4))],
+        "cone" => vec![("cone", shapes::cone(96))],
+        "bumpy-sphere" => vec![("bumpy-sphere", bumpy_sphere())],
+        "blob" => vec![("blob", blob())],
+        _ => return None,
+    };
+    let mut scene = Scene::new(name);
+    for (part, shape) in parts {
+        scene.push_object(part, &shape.positions, &shape.triangles);
+    }
+    Some(scene)
+}
+
+/// The unit sphere at the origin.
+fn sphere() -> Shape {
+    shapes::displaced_sphere(SPHERE_LEVEL, |_| 1.0)
+}
+
+/// A ring torus around the y axis, major radius 1, tube radius 0.35 (12288 triangles).
+fn torus() -> Shape {
+    shapes::torus(1.0, 0.35, 128, 48)
+}
+
+/// Amplitude of the bumps on "bumpy-sphere", relative to its radius 1.
+const BUMP: f64 = 0.07;
+
+/// A unit sphere covered in egg-box bumps: smooth, but with detail at a scale a coarse height
+/// field cannot hold (81920 triangles).
+fn bumpy_sphere() -> Shape {
+    shapes::displaced_sphere(6, |d| {
+        1.0 + BUMP * (12.0 * d.x).sin() * (12.0 * d.y).sin() * (12.0 * d.z).sin()
+    })
+}
+
+/// A smooth lopsided blob, roughly the size and shape of a crouching bunny: a sphere displaced
+/// by a few low-frequency sinusoids and stretched (20480 triangles). Smooth everywhere, so the
+/// error of a height-field approximation depends only on resolution.
+fn blob() -> Shape {
+    let radius = |d: DVec3| {
+        1.0 + 0.20 * (2.0 * d.x + 0.5).sin()
+            + 0.12 * (3.0 * d.y + 1.0).sin() * (2.0 * d.z).cos()
+            + 0.08 * (4.0 * d.z + 2.0 * d.x).sin()
+    };
+    shapes::displaced_sphere(5, radius).transformed(Mat4::from_scale(Vec3::new(1.1, 0.9, 0.8)))
+}
+
+/// The "default" scene: smooth, flat and sharp-edged solids standing on a ground square, close
+/// together so that the framing camera shows them large, with contact points, occlusion and
+/// shadows for the approximations to get wrong (about 120k triangles).
+fn showcase() -> Vec<(&'static str, Shape)> {
+    let place = |shape: Shape, scale: Vec3, turn_deg: f32, at: Vec3| {
+        shape.transformed(Mat4::from_scale_rotation_translation(
+            scale,
+            Quat::from_rotation_y(turn_deg.to_radians()),
+            at,
+        ))
+    };
+    let bump_radius = 0.5;
+    let bump_lift = bump_radius * (1.0 + BUMP as f32);
+    let stand_up = Mat4::from_rotation_x(90f32.to_radians());
+    let (major, minor) = (0.45, 0.16);
+    vec![
+        ("ground", shapes::grid_plane(2.2, 48)),
+        (
+            "sphere",
+            place(sphere(), Vec3::splat(0.7), 0.0, Vec3::new(0.0, 0.7, 0.0)),
+        ),
+        (
+            "torus",
+            shapes::torus(major, minor, 128, 48).transformed(
+                Mat4::from_translation(Vec3::new(0.5, (major + minor) as f32, -1.45))
+                    * Mat4::from_rotation_y(35f32.to_radians())
+                    * stand_up,
+            ),
+        ),
+        (
+            "cube",
+            place(
+                shapes::cube(8),
+                Vec3::splat(0.4),
+                25.0,
+                Vec3::new(0.05, 0.4, 1.4),
+            ),
+        ),
+        (
+            "cylinder",
+            place(
+                shapes::cylinder(96, 4),
+                Vec3::new(0.28, 0.55, 0.28),
+                0.0,
+                Vec3::new(-1.6, 0.55, -0.6),
+            ),
+        ),
+        (
+            "cone",
+            place(
+                shapes::cone(96),
+                Vec3::new(0.35, 0.45, 0.35),
+                0.0,
+                Vec3::new(1.35, 0.45, 0.35),
+            ),
+        ),
+        (
+            "bumpy-sphere",
+            place(
+                bumpy_sphere(),
+                Vec3::splat(bump_radius),
+                0.0,
+                Vec3::new(-1.3, bump_lift, 1.0),
+            ),
+        ),
+    ]
+}

@@ -1,0 +1,359 @@
+//! glTF 2.0 meshes (`.gltf` with `.bin` files or data URIs, and binary `.glb`).
+//!
+//! The `gltf` crate parses and validates the document and loads the buffers; images are never
+//! decoded, since a ray caster needs none of them. Accessors are read here rather than through
+//! the crate's reader, which trusts the file's strides and types and panics on some malformed
+//! ones: every range is checked, so a broken file is an error naming it, never a crash.
+
+use std::path::Path;
+
+use ::gltf::accessor::{DataType, Dimensions};
+use ::gltf::buffer::{Data, View};
+use ::gltf::json::validation::Checked;
+use ::gltf::mesh::{Mode, Semantic};
+use ::gltf::{Accessor, Document, Node, Primitive};
+use glam::{Mat4, Vec3};
+
+use super::Scene;
+use crate::{Error, Result};
+
+/// Loads the glTF or GLB file at `path`: every triangle primitive of every mesh instance in the
+/// default scene (or in all scenes when none is the default), with node transforms applied.
+/// Each primitive instance becomes an object named `mesh/primN`.
+pub(super) fn load(path: &Path) -> Result<Scene> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let ::gltf::Gltf { document, blob } =
+        ::gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| open_error(path, e))?;
+    drop(bytes);
+    let fail = |message: String| Error::parse(path, None, message);
+    check_position_indices(document.as_json()).map_err(fail)?;
+    let document =
+        ::gltf::Document::from_json(document.into_json()).map_err(|e| open_error(path, e))?;
+    let base = match path.parent() {
+        Some(dir) if !dir.as_os_str().is_empty() => dir,
+        _ => Path::new("."),
+    };
+    let buffers = ::gltf::import_buffers(&document, Some(base), blob).map_err(|e| {
+        Error::parse(
+            path,
+            None,
+            format!("cannot load the buffer data it refers to: {e}"),
+        )
+    })?;
+
+    let mut scene = Scene::new(path.display().to_string());
+    for (node, transform) in mesh_instances(&document).map_err(fail)? {
+        let Some(mesh) = node.mesh() else { continue };
+        let mesh_name = mesh
+            .name()
+            .map_or_else(|| format!("mesh{}", mesh.index()), str::to_owned);
+        for primitive in mesh.primitives() {
+            let object = format!("{mesh_name}/prim{}", primitive.index());
+            let Some((positions, triangles)) = read_primitive(&primitive, &buffers)
+                .map_err(|e| fail(format!("mesh {object:?}: {e}")))?
+            else {
+                continue;
+            };
+            if triangles.is_empty() {
+                continue;
+            }
+            // A mirroring transform flips orientation; glTF asks loaders to reverse the winding.
+            let mirror = transform.determinant() < 0.0;
+            let positions: Vec<Vec3> = positions
+                .iter()
+                .map(|&p| transform.transform_point3(p))
+                .collect();
+            let triangles: Vec<[u32; 3]> = triangles
+                .into_iter()
+                .map(|[a, b, c]| if mirror { [a, c, b] } else { [a, b, c] })
+                .collect();
+            scene.push_object(object, &positions, &triangles);
+        }
+    }
+    scene.validate()?;
+    Ok(scene)
+}
+
+/// gltf-json 1.4's validator looks up each primitive's POSITION accessor before checking that
+/// the index exists, and panics when it does not; so that is checked first, here.
+fn check_position_indices(root: &::gltf::json::Root) -> std::result::Result<(), String> {
+    let key = Checked::Valid(::gltf::json::mesh::Semantic::Positions);
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            if let Some(i) = primitive.attributes.get(&key) {
+                if i.value() >= root.accessors.len() {
+                    return Err(format!(
+                        "mesh {m} primitive {p}: POSITION accessor {} does not exist \
+                         (there are {})",
+                        i.value(),
+                        root.accessors.len()
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Maps an error from parsing or validating the document; a JSON syntax error in a `.gltf`
+/// keeps its line.
+fn open_error(path: &Path, e: ::gltf::Error) -> Error {
+    let is_glb = path
+        .extension()
+        .is_some_and(|x| x.eq_ignore_ascii_case("glb"));
+    match e {
+        ::gltf::Error::Io(e) => Error::io(path, e),
+        ::gltf::Error::Deserialize(e) if !is_glb && e.line() > 0 => {
+            Error::parse(path, Some(e.line()), e.to_string())
+        }
+        other => Error::parse(path, None, other.to_string()),
+    }
+}
+
+/// Every node to draw with its world transform, parents before children. The walk is
+/// iterative, so a deep hierarchy cannot overflow the stack, and visits each node at most once
+/// per scene: glTF nodes form trees, and a cycle or a node with two parents (which validation
+/// does not reject) is reported instead of looping forever or multiplying instances.
+fn mesh_instances(document: &Document) -> std::result::Result<Vec<(Node<'_>, Mat4)>, String> {
+    let node_count = document.nodes().len();
+    let scenes: Vec<Vec<Node>> = match document.default_scene() {
+        Some(scene) => vec![scene.nodes().collect()],
+        None if document.scenes().len() > 0 => {
+            document.scenes().map(|s| s.nodes().collect()).collect()
+        }
+        // Without scenes, draw the nodes that are nobody's child rather than nothing at all.
+        None => {
+            let mut is_child = vec![false; node_count];
+            for child in document.nodes().flat_map(|n| n.children()) {
+                is_child[child.index()] = true;
+            }
+            vec![document.nodes().filter(|n| !is_child[n.index()]).collect()]
+        }
+    };
+    let mut instances = Vec::new();
+    for roots in scenes {
+        let mut visited = vec![false; node_count];
+        let mut stack: Vec<(Node, Mat4)> = roots
+            .into_iter()
+            .rev()
+            .map(|n| (n, Mat4::IDENTITY))
+            .collect();
+        while let Some((node, parent)) = stack.pop() {
+            if std::mem::replace(&mut visited[node.index()], true) {
+                return Err(format!(
+                    "node {} is reached twice: the node hierarchy has a cycle or a node with \
+                     two parents",
+                    node.index()
+                ));
+            }
+            let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+            let children: Vec<Node> = node.children().collect();
+            stack.extend(children.into_iter().rev().map(|c| (c, world)));
+            instances.push((node, world));
+        }
+    }
+    Ok(instances)
+}
+
+/// A primitive's positions and the triangles indexing them.
+type Triangles = (Vec<Vec3>, Vec<[u32; 3]>);
+
+/// Reads one primitive, converting strips and fans to triangle lists; `None` for point and
+/// line primitives, which a ray caster cannot hit.
+fn read_primitive(
+    primitive: &Primitive,
+    buffers: &[Data],
+) -> std::result::Result<Option<Triangles>, String> {
+    let mode = primitive.mode();
+    if !matches!(
+        mode,
+        Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+    ) {
+        return Ok(None);
+    }
+    let accessor = primitive
+        .get(&Semantic::Positions)
+        .ok_or("it has no POSITION attribute")?;
+    let positions = read_positions(&accessor, buffers)?;
+    let n = positions.len();
+    let indices: Vec<u32> = match primitive.indices() {
+        Some(accessor) => read_indices(&accessor, buffers)?,
+        None => (0..u32::try_from(n).map_err(|_| "too many vertices")?).collect(),
+    };
+    if let Some(&bad) = indices.iter().find(|&&i| i as usize >= n) {
+        return Err(format!(
+            "index {bad} is out of range: it has only {n} vertices"
+        ));
+    }
+    let triangles = match mode {
+        Mode::TriangleStrip => (0..indices.len().saturating_sub(2))
+            .map(|i| {
+                let (a, b, c) = (indices[i], indices[i + 1], indices[i + 2]);
+                // Every other strip triangle is wound backwards; swap to keep one orientation.
+                if i % 2 == 0 {
+                    [a, b, c]
+                } else {
+                    [a, c, b]
+                }
+            })
+            .collect(),
+        Mode::TriangleFan => (1..indices.len().saturating_sub(1))
+            .map(|i| [indices[i], indices[i + 1], indices[0]])
+            .collect(),
+        _ => indices
+            .chunks_exact(3)
+            .map(|t| [t[0], t[1], t[2]])
+            .collect(),
+    };
+    Ok(Some((positions, triangles)))
+}
+
+fn read_positions(accessor: &Accessor, buffers: &[Data]) -> std::result::Result<Vec<Vec3>, String> {
+    if accessor.data_type() != DataType::F32 || accessor.dimensions() != Dimensions::Vec3 {
+        return Err(format!(
+            "POSITION accessor {} is {:?} {:?}; only float VEC3 positions are supported",
+            accessor.index(),
+            accessor.dimensions(),
+            accessor.data_type()
+        ));
+    }
+    read_accessor(accessor, buffers, 12, |b| {
+        Vec3::new(f32_le(&b[0..4]), f32_le(&b[4..8]), f32_le(&b[8..12]))
+    })
+}
+
+fn read_indices(accessor: &Accessor, buffers: &[Data]) -> std::result::Result<Vec<u32>, String> {
+    if accessor.dimensions() != Dimensions::Scalar {
+        return Err(format!(
+            "index accessor {} is {:?}, not SCALAR",
+            accessor.index(),
+            accessor.dimensions()
+        ));
+    }
+    match accessor.data_type() {
+        DataType::U8 => read_accessor(accessor, buffers, 1, |b| u32::from(b[0])),
+        DataType::U16 => read_accessor(accessor, buffers, 2, |b| {
+            u32::from(u16::from_le_bytes([b[0], b[1]]))
+        }),
+        DataType::U32 => read_accessor(accessor, buffers, 4, |b| {
+            u32::from_le_bytes([b[0], b[1], b[2], b[3]])
+        }),
+        other => Err(format!(
+            "index accessor {} has component type {other:?}; expected an unsigned integer",
+            accessor.index()
+        )),
+    }
+}
+
+fn f32_le(b: &[u8]) -> f32 {
+    f32::from_le_bytes([b[0], b[1], b[2], b[3]])
+}
+
+/// Decodes every element of `accessor` (each `size` bytes) with `decode`, then applies its
+/// sparse substitutions, if any.
+fn read_accessor<T: Copy>(
+    accessor: &Accessor,
+    buffers: &[Data],
+    size: usize,
+    decode: impl Fn(&[u8]) -> T,
+) -> std::result::Result<Vec<T>, String> {
+    let what = format!("accessor {}", accessor.index());
+    let view = accessor.view().ok_or_else(|| {
+        format!("{what} has no buffer view (all-zero sparse accessors are not supported)")
+    })?;
+    let mut values: Vec<T> = elements(
+        &what,
+        buffers,
+        &view,
+        accessor.offset(),
+        accessor.count(),
+        size,
+    )?
+    .map(&decode)
+    .collect();
+    if let Some(sparse) = accessor.sparse() {
+        let indices = sparse.indices();
+        let index_size = indices.index_type().size();
+        let targets = elements(
+            &format!("{what}'s sparse indices"),
+            buffers,
+            &indices.view(),
+            indices.offset(),
+            sparse.count(),
+            index_size,
+        )?;
+        let substitutes = elements(
+            &format!("{what}'s sparse values"),
+            buffers,
+            &sparse.values().view(),
+            sparse.values().offset(),
+            sparse.count(),
+            size,
+        )?;
+        for (target, value) in targets.zip(substitutes) {
+            let target = target
+                .iter()
+                .rev()
+                .fold(0usize, |acc, &b| (acc << 8) | usize::from(b));
+            let slot = values.get_mut(target).ok_or_else(|| {
+                format!(
+                    "{what} has a sparse index {target} beyond its {} elements",
+                    accessor.count()
+                )
+            })?;
+            *slot = decode(value);
+        }
+    }
+    Ok(values)
+}
+
+/// The byte slices of `count` elements of `size` bytes at `offset` in `view`, after checking
+/// that the view lies in its buffer and the elements in the view.
+fn elements<'a>(
+    what: &str,
+    buffers: &'a [Data],
+    view: &View,
+    offset: usize,
+    count: usize,
+    size: usize,
+) -> std::result::Result<impl Iterator<Item = &'a [u8]>, String> {
+    let buffer = buffers
+        .get(view.buffer().index())
+        .ok_or_else(|| format!("{what}: buffer {} was not loaded", view.buffer().index()))?;
+    let view_bytes = view
+        .offset()
+        .checked_add(view.length())
+        .and_then(|end| buffer.get(view.offset()..end))
+        .ok_or_else(|| {
+            format!(
+                "buffer view {} ({} bytes at {}) lies outside buffer {} ({} bytes)",
+                view.index(),
+                view.length(),
+                view.offset(),
+                view.buffer().index(),
+                buffer.len()
+            )
+        })?;
+    let stride = view.stride().unwrap_or(size);
+    if stride < size {
+        return Err(format!(
+            "{what}: byte stride {stride} is smaller than its {size}-byte elements"
+        ));
+    }
+    let needed = match count {
+        0 => Some(0),
+        _ => (count - 1)
+            .checked_mul(stride)
+            .and_then(|n| n.checked_add(size))
+            .and_then(|n| n.checked_add(offset)),
+    };
+    if needed.is_none_or(|n| n > view_bytes.len()) {
+        return Err(format!(
+            "{what}: {count} elements of {size} bytes (stride {stride}) at offset {offset} \
+             do not fit buffer view {} ({} bytes)",
+            view.index(),
+            view.length()
+        ));
+    }
+    Ok((0..count).map(move |i| &view_bytes[offset + i * stride..][..size]))
+}

@@ -1,0 +1,87 @@
+//! The front door: one string names a scene, whether built in or a file of any supported type.
+
+use std::path::Path;
+
+use super::{builtin, gltf, obj, scene_file, Scene};
+use crate::{Error, Result};
+
+/// The file types a scene can be loaded from, by lower-case extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum FileType {
+    Obj,
+    Gltf,
+    SceneFile,
+}
+
+impl FileType {
+    /// The type `path` names by its extension (case-insensitive), or a parse error naming the
+    /// file when it is none of ours.
+    pub(super) fn of(path: &Path) -> Result<FileType> {
+        let ext = path
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase());
+        match ext.as_deref() {
+            Some("obj") => Ok(FileType::Obj),
+            Some("gltf" | "glb") => Ok(FileType::Gltf),
+            Some("toml") => Ok(FileType::SceneFile),
+            _ => Err(Error::parse(
+                path,
+                None,
+                "unsupported file type: expected .obj, .gltf, .glb or .toml",
+            )),
+        }
+    }
+}
+
+impl Scene {
+    /// Loads `spec`: a built-in name (see [`builtin::NAMES`]) or a path ending in `.obj`,
+    /// `.gltf`, `.glb` or `.toml` (a scene file), case-insensitively. Built-in names win, so
+    /// a stray file called `sphere` cannot shadow them. A missing path is an I/O error naming
+    /// it when `spec` looks like a path (has an extension or a separator), and otherwise an
+    /// unknown-scene error listing the built-ins, since it was most likely a mistyped name.
+    pub fn load(spec: &str) -> Result<Scene> {
+        if builtin::NAMES.contains(&spec) {
+            return Scene::builtin(spec);
+        }
+        let path = Path::new(spec);
+        if let Err(e) = std::fs::metadata(path) {
+            let looks_like_path = path.extension().is_some() || spec.contains(['/', '\\']);
+            return Err(if looks_like_path {
+                Error::io(path, e)
+            } else {
+                Error::UnknownScene {
+                    name: spec.to_owned(),
+                    known: builtin::NAMES.join(", "),
+                }
+            });
+        }
+        match FileType::of(path)? {
+            FileType::SceneFile => scene_file::load(path),
+            FileType::Obj | FileType::Gltf => load_mesh_file(path),
+        }
+    }
+
+    /// The built-in scene `name`, or an error listing the built-in names.
+    pub fn builtin(name: &str) -> Result<Scene> {
+        let scene = builtin::build(name).ok_or_else(|| Error::UnknownScene {
+            name: name.to_owned(),
+            known: builtin::NAMES.join(", "),
+        })?;
+        scene.validate()?;
+        Ok(scene)
+    }
+}
+
+/// Loads an OBJ, glTF or GLB file. Scene files refer to meshes through this, which is why it
+/// refuses scene files: one level of arrangement keeps them simple and free of cycles.
+pub(super) fn load_mesh_file(path: &Path) -> Result<Scene> {
+    match FileType::of(path)? {
+        FileType::Obj => obj::load(path),
+        FileType::Gltf => gltf::load(path),
+        FileType::SceneFile => Err(Error::parse(
+            path,
+            None,
+            "a scene file cannot be used as a mesh: expected .obj, .gltf or .glb",
+        )),
+    }
+}

@@ -1,0 +1,229 @@
+//! The scene's geometry: one shared vertex array, indexed triangles and the object each belongs
+//! to. A flat list (rather than a tree of instances) is what both BVH builders consume, and the
+//! object ids keep enough structure for per-object statistics and false-colour renders.
+
+use glam::{Mat4, Vec3};
+
+use super::{Camera, Light};
+use crate::geom::Aabb;
+use crate::{Error, Result};
+
+/// Triangles, their objects, and optionally the camera and light of a scene file.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Scene {
+    /// The file name or built-in name (or a scene file's `name`), used in messages.
+    pub name: String,
+    pub positions: Vec<Vec3>,
+    /// Indices into `positions`.
+    pub triangles: Vec<[u32; 3]>,
+    /// Per triangle, an index into `object_names`.
+    pub object_of_triangle: Vec<u32>,
+    pub object_names: Vec<String>,
+    /// The camera a scene file asked for.
+    pub camera: Option<Camera>,
+    /// The light a scene file asked for.
+    pub light: Option<Light>,
+}
+
+impl Scene {
+    /// An empty scene called `name`.
+    pub fn new(name: impl Into<String>) -> Scene {
+        Scene {
+            name: name.into(),
+            ..Scene::default()
+        }
+    }
+
+    /// Adds one object: `triangles` index into `positions`, which are appended to the scene's
+    /// vertices. Every loader builds its scene through this, so the index offsetting lives in
+    /// one place. Indices that would not fit a `u32` saturate, which [`Scene::validate`] reports.
+    pub fn push_object(
+        &mut self,
+        name: impl Into<String>,
+        positions: &[Vec3],
+        triangles: &[[u32; 3]],
+    ) {
+        self.append_parts(
+            positions.iter().copied(),
+            triangles.iter().copied(),
+            std::iter::once(name.into()),
+            std::iter::repeat_n(0, triangles.len()),
+        );
+    }
+
+    pub fn triangle_count(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// Bounds of the vertices that triangles use: unreferenced vertices (OBJ files often carry
+    /// them) must not widen the box a camera frames or a BVH root covers.
+    pub fn bounds(&self) -> Aabb {
+        self.triangles
+            .iter()
+            .flatten()
+            .filter_map(|&i| self.positions.get(i as usize))
+            .fold(Aabb::EMPTY, |b, &p| b.grow(p))
+    }
+
+    /// The three corners of triangle `i`.
+    ///
+    /// # Panics
+    /// If `i` or one of its indices is out of range (never after [`Scene::validate`]).
+    pub fn triangle(&self, i: usize) -> [Vec3; 3] {
+        self.triangles[i].map(|v| self.positions[v as usize])
+    }
+
+    /// Checks what every tracer relies on: finite vertices, indices in range, one object per
+    /// triangle. The error names the scene (its file) and the first offending element.
+    pub fn validate(&self) -> Result<()> {
+        let invalid = |message: String| Error::InvalidGeometry {
+            source_name: self.name.clone(),
+            message,
+        };
+        let vertex_count = self.positions.len();
+        if u32::try_from(vertex_count).is_err() {
+            return Err(invalid(format!(
+                "{vertex_count} vertices, but triangle indices are 32-bit"
+            )));
+        }
+        if let Some((i, p)) = self
+            .positions
+            .iter()
+            .enumerate()
+            .find(|(_, p)| !p.is_finite())
+        {
+            return Err(invalid(format!(
+                "vertex {i} is not finite: ({}, {}, {})",
+                p.x, p.y, p.z
+            )));
+        }
+        for (t, tri) in self.triangles.iter().enumerate() {
+            if let Some(&v) = tri.iter().find(|&&v| v as usize >= vertex_count) {
+                return Err(invalid(format!(
+                    "triangle {t} refers to vertex {v}, but there are only {vertex_count} vertices"
+                )));
+            }
+        }
+        if self.object_of_triangle.len() != self.triangles.len() {
+            return Err(invalid(format!(
+                "{} object ids for {} triangles",
+                self.object_of_triangle.len(),
+                self.triangles.len()
+            )));
+        }
+        let object_count = self.object_names.len();
+        if let Some((t, o)) = self
+            .object_of_triangle
+            .iter()
+            .enumerate()
+            .find(|(_, &o)| o as usize >= object_count)
+        {
+            return Err(invalid(format!(
+                "triangle {t} belongs to object {o}, but there are only {object_count} objects"
+            )));
+        }
+        Ok(())
+    }
+
+    /// Appends `other`'s geometry transformed by the affine `m`. Its objects keep their names,
+    /// prefixed with `other.name` and `/` so that two copies of one mesh stay apart. A mirroring
+    /// `m` (negative determinant) would turn outward windings inward, so it also reverses the
+    /// winding.
+    pub fn append(&mut self, other: &Scene, m: Mat4) {
+        let mirror = m.determinant() < 0.0;
+        let prefix = if other.name.is_empty() {
+            String::new()
+        } else {
+            format!("{}/", other.name)
+        };
+        self.append_parts(
+            other.positions.iter().map(|&p| m.transform_point3(p)),
+            other
+                .triangles
+                .iter()
+                .map(|&[a, b, c]| if mirror { [a, c, b] } else { [a, b, c] }),
+            other.object_names.iter().map(|n| format!("{prefix}{n}")),
+            other.object_of_triangle.iter().copied(),
+        );
+    }
+
+    /// The scene file's camera, or one that frames [`Scene::bounds`] for `aspect` (width/height).
+    pub fn camera_or_framed(&self, aspect: f32) -> Camera {
+        self.camera
+            .unwrap_or_else(|| Camera::framing(&self.bounds(), aspect))
+    }
+
+    /// Appends vertices, triangles (indexing the new vertices) and objects (with triangles'
+    /// object ids relative to the new objects), offsetting indices by what is already here.
+    fn append_parts(
+        &mut self,
+        positions: impl Iterator<Item = Vec3>,
+        triangles: impl Iterator<Item = [u32; 3]>,
+        object_names: impl Iterator<Item = String>,
+        object_of_triangle: impl Iterator<Item = u32>,
+    ) {
+        let vertex_base = saturating_u32(self.positions.len());
+        let object_base = saturating_u32(self.object_names.len());
+        self.positions.extend(positions);
+        self.triangles
+            .extend(triangles.map(|t| t.map(|v| vertex_base.saturating_add(v))));
+        self.object_names.extend(object_names);
+        self.object_of_triangle
+            .extend(object_of_triangle.map(|o| object_base.saturating_add(o)));
+    }
+}
+
+/// A count as a `u32` index base; saturating makes an overflow an out-of-range index that
+/// [`Scene::validate`] reports, instead of a wrapped index that silently points elsewhere.
+fn saturating_u32(n: usize) -> u32 {
+    u32::try_from(n).unwrap_or(u32::MAX)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn unit_triangle() -> Scene {
+        let mut s = Scene::new("tri");
+        s.push_object("t", &[Vec3::ZERO, Vec3::X, Vec3::Z], &[[0, 2, 1]]);
+        s
+    }
+
+    #[test]
+    fn append_offsets_prefixes_and_keeps_winding_under_mirrors() {
+        let mut s = unit_triangle();
+        s.append(
+            &unit_triangle(),
+            Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0)),
+        );
+        assert_eq!(s.triangles, vec![[0, 2, 1], [3, 4, 5]]);
+        assert_eq!(s.object_names, vec!["t", "tri/t"]);
+        assert_eq!(s.object_of_triangle, vec![0, 1]);
+        let n = |[a, b, c]: [Vec3; 3]| (b - a).cross(c - a);
+        assert_eq!(n(s.triangle(0)).y, n(s.triangle(1)).y);
+        s.validate().unwrap();
+    }
+
+    #[test]
+    fn validate_names_the_bad_element() {
+        let mut s = unit_triangle();
+        s.triangles.push([0, 1, 7]);
+        s.object_of_triangle.push(0);
+        let e = s.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("tri") && e.contains("triangle 1") && e.contains("vertex 7"),
+            "{e}"
+        );
+        let mut s = unit_triangle();
+        s.positions[1].y = f32::INFINITY;
+        let e = s.validate().unwrap_err().to_string();
+        assert!(e.contains("vertex 1") && e.contains("inf"), "{e}");
+    }
+
+    #[test]
+    fn bounds_ignore_unreferenced_vertices() {
+        let mut s = unit_triangle();
+        s.positions.push(Vec3::splat(100.0));
+        assert_eq!(s.bounds().max, Vec3::new(1.0, 0.0, 1.0));
+    }
+}

@@ -1,0 +1,232 @@
+//! TOML scene files: meshes (built-in or from files) placed by transforms, plus an optional
+//! camera and light, so that a reproducible view of a model is one small text file.
+//!
+//! Unknown keys are errors (a typo must not be silently ignored), and every error names the
+//! file and the line of the offending value; the format is described in `scenes/README.md`.
+
+use std::ops::Range;
+use std::path::Path;
+
+use glam::{Mat4, Vec3};
+use serde::Deserialize;
+use toml::Spanned;
+
+use super::load::load_mesh_file;
+use super::{Camera, Light, Scene};
+use crate::{Error, Result};
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneFile {
+    name: Option<String>,
+    camera: Option<Spanned<CameraEntry>>,
+    light: Option<Spanned<LightEntry>>,
+    #[serde(default)]
+    mesh: Vec<Spanned<MeshEntry>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CameraEntry {
+    eye: Spanned<[f32; 3]>,
+    target: Spanned<[f32; 3]>,
+    up: Option<Spanned<[f32; 3]>>,
+    vfov: Option<Spanned<f32>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LightEntry {
+    direction: Option<Spanned<[f32; 3]>>,
+    position: Option<Spanned<[f32; 3]>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MeshEntry {
+    builtin: Option<Spanned<String>>,
+    path: Option<Spanned<String>>,
+    translate: Option<Spanned<[f32; 3]>>,
+    rotate: Option<Spanned<[f32; 3]>>,
+    scale: Option<Spanned<ScaleEntry>>,
+}
+
+#[derive(Deserialize)]
+#[serde(untagged, expecting = "a number or an array of three numbers")]
+enum ScaleEntry {
+    Uniform(f32),
+    PerAxis([f32; 3]),
+}
+
+/// The default vertical field of view, matching framing cameras.
+const DEFAULT_VFOV_DEG: f32 = 40.0;
+
+/// Loads the scene file at `path`. Mesh paths are relative to the file's directory.
+pub(super) fn load(path: &Path) -> Result<Scene> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let file: SceneFile = toml::from_str(&text).map_err(|e| {
+        let line = e.span().map(|s| line_of(&text, s.start));
+        Error::parse(path, line, e.message())
+    })?;
+    let source = Source { path, text: &text };
+
+    if file.mesh.is_empty() {
+        return Err(Error::parse(
+            path,
+            None,
+            "no meshes: a scene file needs at least one [[mesh]] table",
+        ));
+    }
+    let mut scene = Scene::new(path.display().to_string());
+    scene.camera = file.camera.map(|c| source.camera(&c)).transpose()?;
+    scene.light = file.light.map(|l| source.light(&l)).transpose()?;
+    let dir = path.parent().unwrap_or(Path::new(""));
+    for entry in &file.mesh {
+        let transform = source.transform(entry.get_ref())?;
+        let mesh = source.mesh(entry, dir)?;
+        scene.append(&mesh, transform);
+    }
+    scene.validate()?;
+    if let Some(name) = file.name {
+        scene.name = name;
+    }
+    Ok(scene)
+}
+
+/// The 1-based line of byte `offset` in `text`.
+fn line_of(text: &str, offset: usize) -> usize {
+    let before = &text.as_bytes()[..offset.min(text.len())];
+    before.iter().filter(|&&b| b == b'\n').count() + 1
+}
+
+/// The file being read, for errors that point into it.
+struct Source<'a> {
+    path: &'a Path,
+    text: &'a str,
+}
+
+impl Source<'_> {
+    fn error(&self, span: Range<usize>, message: impl Into<String>) -> Error {
+        Error::parse(self.path, Some(line_of(self.text, span.start)), message)
+    }
+
+    /// `value` as a vector, or an error naming `key` when a component is not finite.
+    fn vec3(&self, key: &str, value: &Spanned<[f32; 3]>) -> Result<Vec3> {
+        let v = Vec3::from_array(*value.get_ref());
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(self.error(value.span(), format!("`{key}` must be finite, got {v}")))
+        }
+    }
+
+    fn camera(&self, entry: &Spanned<CameraEntry>) -> Result<Camera> {
+        let c = entry.get_ref();
+        let eye = self.vec3("eye", &c.eye)?;
+        let target = self.vec3("target", &c.target)?;
+        let up =
+            c.up.as_ref()
+                .map_or(Ok(Vec3::Y), |up| self.vec3("up", up))?;
+        if eye == target {
+            return Err(self.error(c.target.span(), "camera `target` must differ from `eye`"));
+        }
+        let view = (target - eye).normalize();
+        if up.length() == 0.0 || view.cross(up.normalize()).length() < 1.0e-4 {
+            let span = c.up.as_ref().map_or(entry.span(), Spanned::span);
+            return Err(self.error(
+                span,
+                "camera `up` must be non-zero and not parallel to the view direction",
+            ));
+        }
+        let vfov_deg = match &c.vfov {
+            Some(v) if !(v.get_ref() > &0.0 && v.get_ref() < &180.0) => {
+                return Err(self.error(
+                    v.span(),
+                    format!("`vfov` must be in (0, 180) degrees, got {}", v.get_ref()),
+                ));
+            }
+            Some(v) => *v.get_ref(),
+            None => DEFAULT_VFOV_DEG,
+        };
+        Ok(Camera {
+            eye,
+            target,
+            up,
+            vfov_deg,
+        })
+    }
+
+    fn light(&self, entry: &Spanned<LightEntry>) -> Result<Light> {
+        match (&entry.get_ref().direction, &entry.get_ref().position) {
+            (Some(direction), None) => {
+                let d = self.vec3("direction", direction)?;
+                if d.length() == 0.0 {
+                    return Err(self.error(direction.span(), "light `direction` must be non-zero"));
+                }
+                Ok(Light::Directional {
+                    direction: d.normalize(),
+                })
+            }
+            (None, Some(position)) => Ok(Light::Point {
+                position: self.vec3("position", position)?,
+            }),
+            _ => Err(self.error(
+                entry.span(),
+                "[light] needs exactly one of `direction` or `position`",
+            )),
+        }
+    }
+
+    /// `translate · rotate · scale`; rotations are in degrees about the X axis first, then Y,
+    /// then Z (fixed axes).
+    fn transform(&self, entry: &MeshEntry) -> Result<Mat4> {
+        let translate = entry
+            .translate
+            .as_ref()
+            .map_or(Ok(Vec3::ZERO), |t| self.vec3("translate", t))?;
+        let rotate = entry
+            .rotate
+            .as_ref()
+            .map_or(Ok(Vec3::ZERO), |r| self.vec3("rotate", r))?;
+        let scale = match &entry.scale {
+            None => Vec3::ONE,
+            Some(s) => {
+                let v = match s.get_ref() {
+                    ScaleEntry::Uniform(k) => Vec3::splat(*k),
+                    ScaleEntry::PerAxis(v) => Vec3::from_array(*v),
+                };
+                if !v.is_finite() || v.cmpeq(Vec3::ZERO).any() {
+                    return Err(self.error(
+                        s.span(),
+                        format!("`scale` must be finite and non-zero, got {v}"),
+                    ));
+                }
+                v
+            }
+        };
+        let r = rotate * std::f32::consts::PI / 180.0;
+        let rotation =
+            Mat4::from_rotation_z(r.z) * Mat4::from_rotation_y(r.y) * Mat4::from_rotation_x(r.x);
+        Ok(Mat4::from_translation(translate) * rotation * Mat4::from_scale(scale))
+    }
+
+    /// Loads the mesh an entry names. Its objects are later prefixed with the name it is given
+    /// here: the built-in name or the path as written, shorter than the resolved path.
+    fn mesh(&self, entry: &Spanned<MeshEntry>, dir: &Path) -> Result<Scene> {
+        match (&entry.get_ref().builtin, &entry.get_ref().path) {
+            (Some(name), None) => {
+                Scene::builtin(name.get_ref()).map_err(|e| self.error(name.span(), e.to_string()))
+            }
+            (None, Some(file)) => {
+                let mut mesh = load_mesh_file(&dir.join(file.get_ref()))
+                    .map_err(|e| self.error(file.span(), format!("cannot load mesh: {e}")))?;
+                mesh.name = file.get_ref().clone();
+                Ok(mesh)
+            }
+            _ => Err(self.error(
+                entry.span(),
+                "[[mesh]] needs exactly one of `builtin` or `path`",
+            )),
+        }
+    }
+}
