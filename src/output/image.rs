@@ -1,0 +1,55 @@
+//! The in-memory image every visualisation produces and every writer takes.
+
+use glam::Vec3;
+
+use crate::Error;
+
+/// A linear-RGB image, row-major with the top row first (pixel `(x, y)` is
+/// `pixels[y * width + x]`), the order in which the camera emits its primary rays.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<Vec3>,
+}
+
+/// The number of pixels of a `width × height` image, or an error when it does not fit in memory
+/// indices.
+pub(crate) fn pixel_count(width: u32, height: u32) -> crate::Result<usize> {
+    usize::try_from(u64::from(width) * u64::from(height))
+        .map_err(|_| Error::param("image size", format!("{width}×{height} pixels is too many")))
+}
+
+/// Checks that a per-pixel input (`what`: "rays", "hits", ...) has one entry per pixel, since a
+/// mismatch means the buffers belong to different images and every pixel would be misplaced.
+pub(crate) fn check_per_pixel(
+    what: &str,
+    len: usize,
+    width: u32,
+    height: u32,
+) -> crate::Result<()> {
+    let pixels = pixel_count(width, height)?;
+    if len == pixels {
+        Ok(())
+    } else {
+        Err(Error::param(
+            what,
+            format!("{len} {what} for a {width}×{height} image, which has {pixels} pixels"),
+        ))
+    }
+}
+
+/// Checks an image about to be written: the file formats cannot hold an empty image, and the
+/// fields are public, so a caller may have built one whose pixel count disagrees with its size.
+pub(crate) fn check_writable(image: &Image) -> crate::Result<()> {
+    if image.width == 0 || image.height == 0 {
+        return Err(Error::param(
+            "image size",
+            format!(
+                "{}×{} is empty; images need at least one pixel",
+                image.width, image.height
+            ),
+        ));
+    }
+    check_per_pixel("pixels", image.pixels.len(), image.width, image.height)
+}
