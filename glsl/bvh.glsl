@@ -1,0 +1,141 @@
+// The exact triangle BVH: layouts of src/bvh/layout.rs and the stack traversal of
+// src/bvh/traverse.rs, operation for operation.
+//
+// The includer chooses where the two buffers live by defining, before the #include:
+//   RBVH_BVH_SET            descriptor set              (default 0)
+//   RBVH_BVH_NODES_BINDING  binding of the node buffer  (default 0)
+//   RBVH_BVH_TRIS_BINDING   binding of the triangles    (default 1)
+#ifndef RBVH_BVH_GLSL
+#define RBVH_BVH_GLSL
+
+#include "intersect.glsl"
+
+#ifndef RBVH_BVH_SET
+#define RBVH_BVH_SET 0
+#endif
+#ifndef RBVH_BVH_NODES_BINDING
+#define RBVH_BVH_NODES_BINDING 0
+#endif
+#ifndef RBVH_BVH_TRIS_BINDING
+#define RBVH_BVH_TRIS_BINDING 1
+#endif
+
+// Must equal bvh::STACK_SIZE; tests/layout.rs checks it.
+#define RBVH_STACK_SIZE 64
+const uint RBVH_LEAF_BIT = 0x80000000u;
+
+// Aila & Laine (2009) node: both children's boxes in 64 bytes.
+struct BvhNode {
+    vec3 a_min;
+    uint a_child;
+    vec3 a_max;
+    uint a_count;
+    vec3 b_min;
+    uint b_child;
+    vec3 b_max;
+    uint b_count;
+};
+
+// 48 bytes: vertices gathered in leaf order, with the scene's triangle index.
+struct BvhTriangle {
+    vec3 v0;
+    uint prim;
+    vec3 v1;
+    uint pad1;
+    vec3 v2;
+    uint pad2;
+};
+
+layout(std430, set = RBVH_BVH_SET, binding = RBVH_BVH_NODES_BINDING) readonly buffer RbvhBvhNodes {
+    BvhNode rbvh_bvh_nodes[];
+};
+layout(std430, set = RBVH_BVH_SET, binding = RBVH_BVH_TRIS_BINDING) readonly buffer RbvhBvhTriangles {
+    BvhTriangle rbvh_bvh_triangles[];
+};
+
+// Traverses nearest child first with a bounded stack. `node_count` bounds the loop (a tree visits
+// each node at most once). `overflow` is set when the stack or the loop bound was exceeded; the hit is
+// then not trustworthy, and the caller reports it. `steps` = nodes visited + triangles tested.
+Hit rbvh_trace_bvh(Ray ray, bool any_hit, uint node_count, out uint steps, out bool overflow) {
+    steps = 0u;
+    overflow = false;
+    if (!rbvh_ray_valid(ray)) {
+        return rbvh_miss();
+    }
+    vec3 inv_dir = rbvh_safe_inverse(ray.dir);
+    RbvhShear sh = rbvh_shear(ray);
+    float t_closest = ray.tmax;
+    uint best = RBVH_INVALID;
+    uint stack[RBVH_STACK_SIZE];
+    uint sp = 0u;
+    uint node = 0u;
+    bool done = false;
+    for (uint visit = 0u; visit <= node_count; ++visit) {
+        steps += 1u;
+        BvhNode n = rbvh_bvh_nodes[node];
+        float ta;
+        float tb;
+        bool ha = rbvh_intersect_box(n.a_min, n.a_max, ray.origin, inv_dir, ray.tmin, t_closest, ta);
+        bool hb = rbvh_intersect_box(n.b_min, n.b_max, ray.origin, inv_dir, ray.tmin, t_closest, tb);
+        bool b_first = ha && hb && tb < ta;
+        uint next = RBVH_INVALID;
+        for (int k = 0; k < 2; ++k) {
+            bool use_b = (k == 0) == b_first;
+            bool h = use_b ? hb : ha;
+            float t_entry = use_b ? tb : ta;
+            uint child = use_b ? n.b_child : n.a_child;
+            uint count = use_b ? n.b_count : n.a_count;
+            if (!h || t_entry > t_closest) {
+                continue;
+            }
+            if ((child & RBVH_LEAF_BIT) != 0u) {
+                uint first = child & ~RBVH_LEAF_BIT;
+                for (uint slot = first; slot < first + count; ++slot) {
+                    steps += 1u;
+                    BvhTriangle tri = rbvh_bvh_triangles[slot];
+                    float t = rbvh_intersect_triangle(sh, tri.v0, tri.v1, tri.v2, ray.tmin, t_closest);
+                    if (t >= 0.0) {
+                        t_closest = t;
+                        best = slot;
+                        if (any_hit) {
+                            break;
+                        }
+                    }
+                }
+                if (any_hit && best != RBVH_INVALID) {
+                    done = true;
+                    break;
+                }
+            } else if (next == RBVH_INVALID) {
+                next = child;
+            } else if (sp < RBVH_STACK_SIZE) {
+                stack[sp] = child;
+                sp += 1u;
+            } else {
+                overflow = true;
+            }
+        }
+        if (done) {
+            break;
+        }
+        if (next == RBVH_INVALID) {
+            if (sp == 0u) {
+                break;
+            }
+            sp -= 1u;
+            next = stack[sp];
+        }
+        node = next;
+        if (visit == node_count) {
+            overflow = true;
+        }
+    }
+    if (best == RBVH_INVALID) {
+        return rbvh_miss();
+    }
+    BvhTriangle tri = rbvh_bvh_triangles[best];
+    vec3 n = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
+    return Hit(t_closest, n.x, n.y, n.z, tri.prim, 0u, 0u, 0u);
+}
+
+#endif

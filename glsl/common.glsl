@@ -1,0 +1,46 @@
+// Rays and hits, byte for byte the records of src/geom/ray.rs (32 bytes each, std430).
+#ifndef RBVH_COMMON_GLSL
+#define RBVH_COMMON_GLSL
+
+struct Ray {
+    vec3 origin;
+    float tmin;
+    vec3 dir;
+    float tmax;
+};
+
+// The normal is three floats, not a vec3: std430 would align a vec3 to 16 bytes and move it.
+struct Hit {
+    float t;        // +inf on a miss
+    float nx;       // unit geometric normal as wound, world space
+    float ny;
+    float nz;
+    uint id;        // primitive index, 0xFFFFFFFF on a miss
+    uint reserved0;
+    uint reserved1;
+    uint reserved2;
+};
+
+const uint RBVH_INVALID = 0xFFFFFFFFu;
+#define RBVH_INF uintBitsToFloat(0x7F800000u)
+#define RBVH_FLT_MAX 3.40282347e+38
+#define RBVH_FLT_MIN 1.17549435e-38
+
+Hit rbvh_miss() {
+    return Hit(RBVH_INF, 0.0, 0.0, 0.0, RBVH_INVALID, 0u, 0u, 0u);
+}
+
+// Same rule as Ray::is_valid: finite origin and direction, non-zero direction, 0 <= tmin <= tmax.
+bool rbvh_ray_valid(Ray r) {
+    bool finite = !any(isnan(r.origin)) && !any(isinf(r.origin)) && !any(isnan(r.dir)) && !any(isinf(r.dir));
+    return finite && r.dir != vec3(0.0) && r.tmin >= 0.0 && r.tmin <= r.tmax;
+}
+
+// 1/d per component; components too small to invert become +-FLT_MAX with their sign (see
+// safe_inverse in src/geom/ray.rs), so the slab test never computes 0 * inf.
+vec3 rbvh_safe_inverse(vec3 d) {
+    vec3 big = mix(vec3(RBVH_FLT_MAX), vec3(-RBVH_FLT_MAX), lessThan(floatBitsToInt(d), ivec3(0)));
+    return mix(1.0 / d, big, lessThan(abs(d), vec3(RBVH_FLT_MIN)));
+}
+
+#endif

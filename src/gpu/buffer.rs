@@ -1,0 +1,216 @@
+//! Storage buffers through `gpu-allocator`. Data goes in and out directly where device memory is
+//! host-visible and coherent (lavapipe, resizable-BAR GPUs), and through a staging buffer and a
+//! transfer command everywhere else (discrete GPUs).
+
+use ash::vk;
+use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
+use gpu_allocator::MemoryLocation;
+
+use super::Context;
+use crate::{Error, Result};
+
+/// A device buffer. Dropping it frees its memory; it keeps its [`Context`] alive meanwhile.
+pub struct Buffer {
+    ctx: Context,
+    name: String,
+    raw: vk::Buffer,
+    allocation: Option<Allocation>,
+    size: u64,
+}
+
+impl std::fmt::Debug for Buffer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Buffer")
+            .field("name", &self.name)
+            .field("size", &self.size)
+            .finish()
+    }
+}
+
+impl Buffer {
+    pub fn raw(&self) -> vk::Buffer {
+        self.raw
+    }
+
+    pub fn size(&self) -> u64 {
+        self.size
+    }
+
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Mapped, coherent memory of this buffer, when it has some.
+    fn host_slice_mut(&mut self) -> Option<&mut [u8]> {
+        let a = self.allocation.as_mut()?;
+        if !a
+            .memory_properties()
+            .contains(vk::MemoryPropertyFlags::HOST_COHERENT)
+        {
+            return None;
+        }
+        let size = self.size as usize;
+        a.mapped_slice_mut().map(|s| &mut s[..size])
+    }
+}
+
+impl Drop for Buffer {
+    fn drop(&mut self) {
+        let s = &self.ctx.shared;
+        if let Some(a) = self.allocation.take() {
+            // An error here means a double free inside gpu-allocator's bookkeeping; nothing to do.
+            let _ = s
+                .allocator
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .free(a);
+        }
+        // SAFETY: every submission that used the buffer was waited on before returning.
+        unsafe { s.device.destroy_buffer(self.raw, None) };
+    }
+}
+
+impl Context {
+    /// Creates a buffer of at least `size` bytes (Vulkan forbids empty buffers, so 0 becomes 4).
+    pub fn create_buffer(
+        &self,
+        name: &str,
+        size: u64,
+        usage: vk::BufferUsageFlags,
+        location: MemoryLocation,
+    ) -> Result<Buffer> {
+        let size = size.max(4);
+        let device = &self.shared.device;
+        let info = vk::BufferCreateInfo::default()
+            .size(size)
+            .usage(usage)
+            .sharing_mode(vk::SharingMode::EXCLUSIVE);
+        let raw = unsafe { device.create_buffer(&info, None) }
+            .map_err(|r| Error::vk("vkCreateBuffer", name, r))?;
+        let requirements = unsafe { device.get_buffer_memory_requirements(raw) };
+        let allocation = self
+            .shared
+            .allocator
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .allocate(&AllocationCreateDesc {
+                name,
+                requirements,
+                location,
+                linear: true,
+                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+            });
+        let allocation = match allocation {
+            Ok(a) => a,
+            Err(source) => {
+                unsafe { device.destroy_buffer(raw, None) };
+                return Err(Error::Allocation {
+                    resource: name.to_string(),
+                    size,
+                    source,
+                });
+            }
+        };
+        // Own the buffer from here on, so that a bind failure frees both.
+        let buffer = Buffer {
+            ctx: self.clone(),
+            name: name.to_string(),
+            raw,
+            allocation: Some(allocation),
+            size,
+        };
+        let a = buffer.allocation.as_ref().expect("just set");
+        unsafe { device.bind_buffer_memory(raw, a.memory(), a.offset()) }
+            .map_err(|r| Error::vk("vkBindBufferMemory", name, r))?;
+        Ok(buffer)
+    }
+
+    /// A device-local storage buffer holding `data`, checked against `maxStorageBufferRange`.
+    pub fn upload_storage<T: bytemuck::Pod>(&self, name: &str, data: &[T]) -> Result<Buffer> {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        self.check_storage_range(
+            name,
+            bytes.len() as u64,
+            "split the work into smaller batches or a smaller scene",
+        )?;
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER
+            | vk::BufferUsageFlags::TRANSFER_DST
+            | vk::BufferUsageFlags::TRANSFER_SRC;
+        let mut buffer =
+            self.create_buffer(name, bytes.len() as u64, usage, MemoryLocation::GpuOnly)?;
+        self.write(&mut buffer, bytes)?;
+        Ok(buffer)
+    }
+
+    /// A device-local storage buffer of `size` bytes, zero-filled.
+    pub fn zeroed_storage(&self, name: &str, size: u64) -> Result<Buffer> {
+        self.check_storage_range(name, size, "split the work into smaller batches")?;
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER
+            | vk::BufferUsageFlags::TRANSFER_DST
+            | vk::BufferUsageFlags::TRANSFER_SRC;
+        let buffer = self.create_buffer(name, size, usage, MemoryLocation::GpuOnly)?;
+        let raw = buffer.raw;
+        self.submit(&format!("clear {name}"), |device, cmd| unsafe {
+            device.cmd_fill_buffer(cmd, raw, 0, vk::WHOLE_SIZE, 0);
+        })?;
+        Ok(buffer)
+    }
+
+    /// Writes `bytes` at the start of `buffer`, directly or through a staging buffer.
+    pub fn write(&self, buffer: &mut Buffer, bytes: &[u8]) -> Result<()> {
+        if bytes.is_empty() {
+            return Ok(());
+        }
+        if let Some(dst) = buffer.host_slice_mut() {
+            dst[..bytes.len()].copy_from_slice(bytes);
+            return Ok(());
+        }
+        let name = format!("staging for {}", buffer.name);
+        let mut staging = self.create_buffer(
+            &name,
+            bytes.len() as u64,
+            vk::BufferUsageFlags::TRANSFER_SRC,
+            MemoryLocation::CpuToGpu,
+        )?;
+        staging
+            .host_slice_mut()
+            .ok_or_else(|| Error::NoDevice(format!("{name}: no host-visible coherent memory")))?
+            [..bytes.len()]
+            .copy_from_slice(bytes);
+        let (src, dst) = (staging.raw, buffer.raw);
+        let region = [vk::BufferCopy::default().size(bytes.len() as u64)];
+        self.submit(&format!("upload {}", buffer.name), |device, cmd| unsafe {
+            device.cmd_copy_buffer(cmd, src, dst, &region);
+        })?;
+        Ok(())
+    }
+
+    /// Reads `buffer` back as `T`s (its whole size, rounded down to whole elements).
+    pub fn read<T: bytemuck::Pod>(&self, buffer: &mut Buffer) -> Result<Vec<T>> {
+        let elem = std::mem::size_of::<T>() as u64;
+        let len = (buffer.size / elem * elem) as usize;
+        let mut out = vec![T::zeroed(); len / elem as usize];
+        let out_bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut out);
+        if let Some(src) = buffer.host_slice_mut() {
+            out_bytes.copy_from_slice(&src[..len]);
+            return Ok(out);
+        }
+        let name = format!("readback of {}", buffer.name);
+        let mut staging = self.create_buffer(
+            &name,
+            len as u64,
+            vk::BufferUsageFlags::TRANSFER_DST,
+            MemoryLocation::GpuToCpu,
+        )?;
+        let (src, dst) = (buffer.raw, staging.raw);
+        let region = [vk::BufferCopy::default().size(len as u64)];
+        self.submit(&format!("download {}", buffer.name), |device, cmd| unsafe {
+            device.cmd_copy_buffer(cmd, src, dst, &region);
+        })?;
+        let src = staging
+            .host_slice_mut()
+            .ok_or_else(|| Error::NoDevice(format!("{name}: no host-visible coherent memory")))?;
+        out_bytes.copy_from_slice(&src[..len]);
+        Ok(out)
+    }
+}

@@ -1,0 +1,477 @@
+//! The headless Vulkan context: instance, optional validation with a debug messenger, device
+//! selection, one compute queue, a command pool and the `gpu-allocator` allocator.
+//!
+//! [`Context`] is a cheap handle (`Arc`); every buffer and pipeline keeps one, so the device and
+//! instance are destroyed only after the last resource made from them — the correct order by
+//! construction, whatever order the user drops things in.
+
+use std::ffi::{c_void, CStr, CString};
+use std::mem::ManuallyDrop;
+use std::sync::{Arc, Mutex};
+
+use ash::vk;
+use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
+
+use crate::{Error, Result};
+
+/// Whether to run the Khronos validation layer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Validation {
+    Off,
+    /// On when `VK_LAYER_KHRONOS_validation` is installed, silently off otherwise.
+    IfInstalled,
+    /// On, and an error when the layer is missing.
+    Required,
+}
+
+impl Validation {
+    /// From `RBVH_VALIDATION`: `1`/`on`/`required` → Required, `auto` → IfInstalled, otherwise Off.
+    pub fn from_env() -> Self {
+        match std::env::var("RBVH_VALIDATION")
+            .unwrap_or_default()
+            .to_ascii_lowercase()
+            .as_str()
+        {
+            "1" | "on" | "required" => Validation::Required,
+            "auto" => Validation::IfInstalled,
+            _ => Validation::Off,
+        }
+    }
+}
+
+/// How to create a [`Context`].
+#[derive(Clone, Debug)]
+pub struct ContextOptions {
+    /// Pick the first device whose name contains this (case-insensitive); `RBVH_DEVICE` when None.
+    /// Without either, a discrete GPU is preferred, then integrated, virtual, and CPU (lavapipe).
+    pub device_name: Option<String>,
+    pub validation: Validation,
+}
+
+impl Default for ContextOptions {
+    fn default() -> Self {
+        ContextOptions {
+            device_name: std::env::var("RBVH_DEVICE").ok().filter(|s| !s.is_empty()),
+            validation: Validation::from_env(),
+        }
+    }
+}
+
+/// What the device can do that our code depends on.
+#[derive(Clone, Copy, Debug)]
+pub struct DeviceLimits {
+    pub max_storage_buffer_range: u64,
+    pub max_compute_work_group_count: [u32; 3],
+    pub max_push_constants_size: u32,
+    /// Nanoseconds per timestamp tick; None when the queue cannot time.
+    pub timestamp_period_ns: Option<f64>,
+}
+
+pub(crate) struct Shared {
+    /// Keeps libvulkan loaded for as long as any handle lives.
+    pub _entry: ash::Entry,
+    pub instance: ash::Instance,
+    pub debug: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
+    /// Boxed so its address, handed to the messenger callback, stays put.
+    pub messages: Box<Mutex<Vec<String>>>,
+    pub device: ash::Device,
+    pub queue: vk::Queue,
+    pub command_pool: vk::CommandPool,
+    /// Serialises use of `command_pool` and `queue` (both externally synchronised in Vulkan).
+    pub submit_lock: Mutex<()>,
+    pub allocator: ManuallyDrop<Arc<Mutex<Allocator>>>,
+    pub limits: DeviceLimits,
+    pub device_name: String,
+    pub driver: String,
+}
+
+/// A Vulkan device ready for compute. Cloning shares it.
+#[derive(Clone)]
+pub struct Context {
+    pub(crate) shared: Arc<Shared>,
+}
+
+impl std::fmt::Debug for Context {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Context")
+            .field("device", &self.shared.device_name)
+            .field("driver", &self.shared.driver)
+            .finish()
+    }
+}
+
+const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
+
+unsafe extern "system" fn debug_callback(
+    severity: vk::DebugUtilsMessageSeverityFlagsEXT,
+    _types: vk::DebugUtilsMessageTypeFlagsEXT,
+    data: *const vk::DebugUtilsMessengerCallbackDataEXT<'_>,
+    user: *mut c_void,
+) -> vk::Bool32 {
+    if severity.contains(vk::DebugUtilsMessageSeverityFlagsEXT::ERROR)
+        && !data.is_null()
+        && !user.is_null()
+    {
+        // SAFETY: `user` is the boxed mutex owned by `Shared`, which outlives the messenger.
+        let sink = unsafe { &*(user as *const Mutex<Vec<String>>) };
+        let msg = unsafe { (*data).message_as_c_str() }
+            .map(|m| m.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        if let Ok(mut v) = sink.lock() {
+            v.push(msg);
+        }
+    }
+    vk::FALSE
+}
+
+impl Context {
+    /// Creates an instance and device of its own, headless.
+    pub fn new(options: &ContextOptions) -> Result<Context> {
+        // SAFETY: loading libvulkan runs its initialisers; this is the documented way with ash.
+        let entry = unsafe { ash::Entry::load() }.map_err(|e| Error::Loader(e.to_string()))?;
+        let layer_present = unsafe { entry.enumerate_instance_layer_properties() }
+            .map_err(|r| Error::vk("vkEnumerateInstanceLayerProperties", "instance", r))?
+            .iter()
+            .any(|l| l.layer_name_as_c_str() == Ok(VALIDATION_LAYER));
+        let validate = match options.validation {
+            Validation::Off => false,
+            Validation::IfInstalled => layer_present,
+            Validation::Required if layer_present => true,
+            Validation::Required => {
+                return Err(Error::NoDevice(
+                    "validation was required but VK_LAYER_KHRONOS_validation is not installed \
+                     (Debian: apt-get install vulkan-validationlayers)"
+                        .into(),
+                ))
+            }
+        };
+        let app_name = CString::new("rbvh").expect("static name");
+        let app = vk::ApplicationInfo::default()
+            .application_name(&app_name)
+            .engine_name(&app_name)
+            .api_version(vk::API_VERSION_1_1);
+        let layers = if validate {
+            vec![VALIDATION_LAYER.as_ptr()]
+        } else {
+            vec![]
+        };
+        let extensions = if validate {
+            vec![ash::ext::debug_utils::NAME.as_ptr()]
+        } else {
+            vec![]
+        };
+        let create = vk::InstanceCreateInfo::default()
+            .application_info(&app)
+            .enabled_layer_names(&layers)
+            .enabled_extension_names(&extensions);
+        let instance = unsafe { entry.create_instance(&create, None) }
+            .map_err(|r| Error::vk("vkCreateInstance", "instance", r))?;
+        // From here on, a failure must destroy what exists: build `Shared` step by step.
+        let mut partial = Partial {
+            entry: Some(entry),
+            instance: Some(instance),
+            debug: None,
+            messages: Box::new(Mutex::new(Vec::new())),
+        };
+        if validate {
+            partial.attach_messenger()?;
+        }
+        partial.finish(options)
+    }
+
+    pub fn device_name(&self) -> &str {
+        &self.shared.device_name
+    }
+
+    /// Driver name and version as the driver reports them.
+    pub fn driver(&self) -> &str {
+        &self.shared.driver
+    }
+
+    pub fn limits(&self) -> &DeviceLimits {
+        &self.shared.limits
+    }
+
+    pub fn validation_enabled(&self) -> bool {
+        self.shared.debug.is_some()
+    }
+
+    /// The raw device, for callers that record their own commands.
+    pub fn device(&self) -> &ash::Device {
+        &self.shared.device
+    }
+
+    /// Errors reported by the validation layer since the last call, as an error value.
+    pub fn check_validation(&self) -> Result<()> {
+        let messages = std::mem::take(
+            &mut *self
+                .shared
+                .messages
+                .lock()
+                .unwrap_or_else(|p| p.into_inner()),
+        );
+        if messages.is_empty() {
+            Ok(())
+        } else {
+            Err(Error::Validation { messages })
+        }
+    }
+
+    /// Fails with [`Error::DeviceLimit`] when a storage buffer of `bytes` exceeds the device's
+    /// `maxStorageBufferRange` (lavapipe does not enforce it; real GPUs and validation do).
+    pub fn check_storage_range(&self, resource: &str, bytes: u64, hint: &str) -> Result<()> {
+        let available = self.shared.limits.max_storage_buffer_range;
+        if bytes > available {
+            return Err(Error::DeviceLimit {
+                resource: resource.to_string(),
+                limit: "maxStorageBufferRange",
+                required: bytes,
+                available,
+                hint: hint.to_string(),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// The instance-level half of a context under construction; cleans up on early return.
+struct Partial {
+    entry: Option<ash::Entry>,
+    instance: Option<ash::Instance>,
+    debug: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
+    messages: Box<Mutex<Vec<String>>>,
+}
+
+impl Drop for Partial {
+    fn drop(&mut self) {
+        // SAFETY: only reached on failure, when nothing else holds these handles.
+        unsafe {
+            if let Some((loader, messenger)) = self.debug.take() {
+                loader.destroy_debug_utils_messenger(messenger, None);
+            }
+            if let Some(instance) = self.instance.take() {
+                instance.destroy_instance(None);
+            }
+        }
+    }
+}
+
+impl Partial {
+    fn instance(&self) -> &ash::Instance {
+        self.instance
+            .as_ref()
+            .expect("instance exists until finish")
+    }
+
+    fn attach_messenger(&mut self) -> Result<()> {
+        let loader = ash::ext::debug_utils::Instance::new(
+            self.entry.as_ref().expect("entry"),
+            self.instance(),
+        );
+        let info = vk::DebugUtilsMessengerCreateInfoEXT::default()
+            .message_severity(
+                vk::DebugUtilsMessageSeverityFlagsEXT::ERROR
+                    | vk::DebugUtilsMessageSeverityFlagsEXT::WARNING,
+            )
+            .message_type(
+                vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
+                    | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
+                    | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
+            )
+            .pfn_user_callback(Some(debug_callback))
+            .user_data(&*self.messages as *const Mutex<Vec<String>> as *mut c_void);
+        let messenger = unsafe { loader.create_debug_utils_messenger(&info, None) }
+            .map_err(|r| Error::vk("vkCreateDebugUtilsMessengerEXT", "validation messenger", r))?;
+        self.debug = Some((loader, messenger));
+        Ok(())
+    }
+
+    fn finish(mut self, options: &ContextOptions) -> Result<Context> {
+        let instance = self.instance().clone();
+        let (physical_device, queue_family) =
+            pick_device(&instance, options.device_name.as_deref())?;
+        let props = unsafe { instance.get_physical_device_properties(physical_device) };
+        let device_name = props
+            .device_name_as_c_str()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let driver = driver_string(&instance, physical_device, &props);
+        let families =
+            unsafe { instance.get_physical_device_queue_family_properties(physical_device) };
+        let timestamp_bits = families[queue_family as usize].timestamp_valid_bits;
+        let limits = DeviceLimits {
+            max_storage_buffer_range: props.limits.max_storage_buffer_range as u64,
+            max_compute_work_group_count: props.limits.max_compute_work_group_count,
+            max_push_constants_size: props.limits.max_push_constants_size,
+            timestamp_period_ns: (timestamp_bits > 0 && props.limits.timestamp_period > 0.0)
+                .then_some(props.limits.timestamp_period as f64),
+        };
+        let priorities = [1.0f32];
+        let queue_info = [vk::DeviceQueueCreateInfo::default()
+            .queue_family_index(queue_family)
+            .queue_priorities(&priorities)];
+        let device_info = vk::DeviceCreateInfo::default().queue_create_infos(&queue_info);
+        let device = unsafe { instance.create_device(physical_device, &device_info, None) }
+            .map_err(|r| Error::vk("vkCreateDevice", device_name.clone(), r))?;
+        let queue = unsafe { device.get_device_queue(queue_family, 0) };
+        let pool_info = vk::CommandPoolCreateInfo::default()
+            .queue_family_index(queue_family)
+            .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER);
+        let command_pool = match unsafe { device.create_command_pool(&pool_info, None) } {
+            Ok(p) => p,
+            Err(r) => {
+                unsafe { device.destroy_device(None) };
+                return Err(Error::vk("vkCreateCommandPool", "command pool", r));
+            }
+        };
+        let allocator = Allocator::new(&AllocatorCreateDesc {
+            instance: instance.clone(),
+            device: device.clone(),
+            physical_device,
+            debug_settings: Default::default(),
+            buffer_device_address: false,
+            allocation_sizes: Default::default(),
+        });
+        let allocator = match allocator {
+            Ok(a) => a,
+            Err(e) => {
+                unsafe {
+                    device.destroy_command_pool(command_pool, None);
+                    device.destroy_device(None);
+                }
+                return Err(Error::Allocation {
+                    resource: "allocator".into(),
+                    size: 0,
+                    source: e,
+                });
+            }
+        };
+        let shared = Shared {
+            _entry: self.entry.take().expect("entry"),
+            instance: self.instance.take().expect("instance"),
+            debug: self.debug.take(),
+            messages: std::mem::replace(&mut self.messages, Box::new(Mutex::new(Vec::new()))),
+            device,
+            queue,
+            command_pool,
+            submit_lock: Mutex::new(()),
+            allocator: ManuallyDrop::new(Arc::new(Mutex::new(allocator))),
+            limits,
+            device_name,
+            driver,
+        };
+        Ok(Context {
+            shared: Arc::new(shared),
+        })
+    }
+}
+
+fn driver_string(
+    instance: &ash::Instance,
+    pd: vk::PhysicalDevice,
+    props: &vk::PhysicalDeviceProperties,
+) -> String {
+    let mut driver = vk::PhysicalDeviceDriverProperties::default();
+    let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut driver);
+    unsafe { instance.get_physical_device_properties2(pd, &mut props2) };
+    let name = driver
+        .driver_name_as_c_str()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let info = driver
+        .driver_info_as_c_str()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let api = props.api_version;
+    format!(
+        "{name} {info} (Vulkan {}.{}.{})",
+        vk::api_version_major(api),
+        vk::api_version_minor(api),
+        vk::api_version_patch(api)
+    )
+    .trim()
+    .to_string()
+}
+
+/// Chooses a device with a compute queue: by name when asked, else by type preference.
+fn pick_device(
+    instance: &ash::Instance,
+    wanted: Option<&str>,
+) -> Result<(vk::PhysicalDevice, u32)> {
+    let devices = unsafe { instance.enumerate_physical_devices() }
+        .map_err(|r| Error::vk("vkEnumeratePhysicalDevices", "instance", r))?;
+    let mut candidates = Vec::new();
+    for pd in devices {
+        let props = unsafe { instance.get_physical_device_properties(pd) };
+        let name = props
+            .device_name_as_c_str()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
+        // Prefer a compute queue that can also time (timestamps) — every lavapipe/GPU queue can.
+        let family = families
+            .iter()
+            .enumerate()
+            .filter(|(_, f)| f.queue_flags.contains(vk::QueueFlags::COMPUTE))
+            .max_by_key(|(_, f)| f.timestamp_valid_bits > 0)
+            .map(|(i, _)| i as u32);
+        let rank = match props.device_type {
+            vk::PhysicalDeviceType::DISCRETE_GPU => 0,
+            vk::PhysicalDeviceType::INTEGRATED_GPU => 1,
+            vk::PhysicalDeviceType::VIRTUAL_GPU => 2,
+            vk::PhysicalDeviceType::CPU => 3,
+            _ => 4,
+        };
+        if props.api_version < vk::API_VERSION_1_1 {
+            continue;
+        }
+        if let Some(family) = family {
+            candidates.push((rank, name, pd, family));
+        }
+    }
+    let names = || {
+        candidates
+            .iter()
+            .map(|c| c.1.clone())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    if candidates.is_empty() {
+        return Err(Error::NoDevice(
+            "no Vulkan 1.1 device with a compute queue (for a CPU device: apt-get install mesa-vulkan-drivers)".into(),
+        ));
+    }
+    if let Some(w) = wanted {
+        let w = w.to_lowercase();
+        return candidates
+            .iter()
+            .find(|c| c.1.to_lowercase().contains(&w))
+            .map(|c| (c.2, c.3))
+            .ok_or_else(|| {
+                Error::NoDevice(format!(
+                    "no device name contains {w:?}; available: {}",
+                    names()
+                ))
+            });
+    }
+    candidates.sort_by_key(|c| c.0);
+    Ok((candidates[0].2, candidates[0].3))
+}
+
+impl Drop for Shared {
+    fn drop(&mut self) {
+        // SAFETY: the last handle is gone, so no buffer, pipeline or submission is alive. The
+        // allocator must go before the device it allocates from; the messenger after everything
+        // that could still report, and the instance last.
+        unsafe {
+            let _ = self.device.device_wait_idle();
+            ManuallyDrop::drop(&mut self.allocator);
+            self.device.destroy_command_pool(self.command_pool, None);
+            self.device.destroy_device(None);
+            if let Some((loader, messenger)) = self.debug.take() {
+                loader.destroy_debug_utils_messenger(messenger, None);
+            }
+            self.instance.destroy_instance(None);
+        }
+    }
+}

@@ -1,0 +1,222 @@
+//! A compute pipeline over `n` storage buffers (bindings `0..n` of set 0) and a push-constant
+//! block. The workgroup size is read from the SPIR-V, so the shader is its one source of truth.
+
+use ash::vk;
+
+use super::{shaders, spirv, Buffer, Context};
+use crate::{Error, Result};
+
+/// A compute pipeline with its layouts and a small descriptor pool.
+pub struct ComputePipeline {
+    ctx: Context,
+    name: String,
+    set_layout: vk::DescriptorSetLayout,
+    layout: vk::PipelineLayout,
+    pipeline: vk::Pipeline,
+    pool: vk::DescriptorPool,
+    bindings: u32,
+    push_size: u32,
+    local_size_x: u32,
+}
+
+impl Drop for ComputePipeline {
+    fn drop(&mut self) {
+        let d = &self.ctx.shared.device;
+        // SAFETY: submissions are synchronous, so nothing is in flight.
+        unsafe {
+            d.destroy_pipeline(self.pipeline, None);
+            d.destroy_pipeline_layout(self.layout, None);
+            d.destroy_descriptor_pool(self.pool, None);
+            d.destroy_descriptor_set_layout(self.set_layout, None);
+        }
+    }
+}
+
+impl ComputePipeline {
+    /// Creates the pipeline from SPIR-V bytes. `bindings` storage buffers, `push_size` bytes of
+    /// push constants (checked against the device's `maxPushConstantsSize`).
+    pub fn new(
+        ctx: &Context,
+        name: &str,
+        spirv_bytes: &[u8],
+        bindings: u32,
+        push_size: u32,
+    ) -> Result<Self> {
+        let words = shaders::words(spirv_bytes).map_err(|e| {
+            Error::NoDevice(format!("{name}: the embedded SPIR-V is unreadable: {e}"))
+        })?;
+        let local_size_x = spirv::reflect(&words)
+            .local_size
+            .map(|s| s[0])
+            .ok_or_else(|| Error::NoDevice(format!("{name}: SPIR-V declares no LocalSize")))?;
+        let max_push = ctx.limits().max_push_constants_size;
+        if push_size > max_push {
+            return Err(Error::DeviceLimit {
+                resource: name.to_string(),
+                limit: "maxPushConstantsSize",
+                required: push_size as u64,
+                available: max_push as u64,
+                hint: "this device is below the Vulkan minimum of 128 bytes".into(),
+            });
+        }
+        let d = &ctx.shared.device;
+        let mut p = ComputePipeline {
+            ctx: ctx.clone(),
+            name: name.to_string(),
+            set_layout: vk::DescriptorSetLayout::null(),
+            layout: vk::PipelineLayout::null(),
+            pipeline: vk::Pipeline::null(),
+            pool: vk::DescriptorPool::null(),
+            bindings,
+            push_size,
+            local_size_x,
+        };
+        let layout_bindings: Vec<_> = (0..bindings)
+            .map(|b| {
+                vk::DescriptorSetLayoutBinding::default()
+                    .binding(b)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .descriptor_count(1)
+                    .stage_flags(vk::ShaderStageFlags::COMPUTE)
+            })
+            .collect();
+        p.set_layout = unsafe {
+            d.create_descriptor_set_layout(
+                &vk::DescriptorSetLayoutCreateInfo::default().bindings(&layout_bindings),
+                None,
+            )
+        }
+        .map_err(|r| Error::vk("vkCreateDescriptorSetLayout", name, r))?;
+        let ranges = [vk::PushConstantRange::default()
+            .stage_flags(vk::ShaderStageFlags::COMPUTE)
+            .size(push_size)];
+        let set_layouts = [p.set_layout];
+        let mut layout_info = vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts);
+        if push_size > 0 {
+            layout_info = layout_info.push_constant_ranges(&ranges);
+        }
+        p.layout = unsafe { d.create_pipeline_layout(&layout_info, None) }
+            .map_err(|r| Error::vk("vkCreatePipelineLayout", name, r))?;
+        let module = unsafe {
+            d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
+        }
+        .map_err(|r| Error::vk("vkCreateShaderModule", name, r))?;
+        let stage = vk::PipelineShaderStageCreateInfo::default()
+            .stage(vk::ShaderStageFlags::COMPUTE)
+            .module(module)
+            .name(c"main");
+        let info = [vk::ComputePipelineCreateInfo::default()
+            .stage(stage)
+            .layout(p.layout)];
+        let created = unsafe { d.create_compute_pipelines(vk::PipelineCache::null(), &info, None) };
+        unsafe { d.destroy_shader_module(module, None) };
+        p.pipeline = created.map_err(|(_, r)| Error::vk("vkCreateComputePipelines", name, r))?[0];
+        let sizes = [vk::DescriptorPoolSize::default()
+            .ty(vk::DescriptorType::STORAGE_BUFFER)
+            .descriptor_count(bindings.max(1) * 4)];
+        p.pool = unsafe {
+            d.create_descriptor_pool(
+                &vk::DescriptorPoolCreateInfo::default()
+                    .flags(vk::DescriptorPoolCreateFlags::FREE_DESCRIPTOR_SET)
+                    .max_sets(4)
+                    .pool_sizes(&sizes),
+                None,
+            )
+        }
+        .map_err(|r| Error::vk("vkCreateDescriptorPool", name, r))?;
+        ctx.check_validation()?;
+        Ok(p)
+    }
+
+    /// Workgroup width declared by the shader.
+    pub fn local_size_x(&self) -> u32 {
+        self.local_size_x
+    }
+
+    /// Binds `buffers` to bindings `0..n`, then dispatches `invocations` threads in as many
+    /// submissions-free dispatches as `maxComputeWorkGroupCount[0]` requires; `push` builds the
+    /// push constants for each dispatch from its first invocation. One submission, timed.
+    pub fn run(
+        &self,
+        buffers: &[&Buffer],
+        invocations: u32,
+        push: impl Fn(u32) -> Vec<u8>,
+    ) -> Result<super::Timing> {
+        if buffers.len() != self.bindings as usize {
+            return Err(Error::param(
+                "buffers",
+                format!(
+                    "{} takes {} buffers, got {}",
+                    self.name,
+                    self.bindings,
+                    buffers.len()
+                ),
+            ));
+        }
+        let d = &self.ctx.shared.device;
+        let set_layouts = [self.set_layout];
+        let set = unsafe {
+            d.allocate_descriptor_sets(
+                &vk::DescriptorSetAllocateInfo::default()
+                    .descriptor_pool(self.pool)
+                    .set_layouts(&set_layouts),
+            )
+        }
+        .map_err(|r| Error::vk("vkAllocateDescriptorSets", self.name.as_str(), r))?[0];
+        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers
+            .iter()
+            .map(|b| {
+                [vk::DescriptorBufferInfo::default()
+                    .buffer(b.raw())
+                    .offset(0)
+                    .range(vk::WHOLE_SIZE)]
+            })
+            .collect();
+        let writes: Vec<_> = infos
+            .iter()
+            .enumerate()
+            .map(|(i, info)| {
+                vk::WriteDescriptorSet::default()
+                    .dst_set(set)
+                    .dst_binding(i as u32)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .buffer_info(info)
+            })
+            .collect();
+        unsafe { d.update_descriptor_sets(&writes, &[]) };
+        let max_groups = self.ctx.limits().max_compute_work_group_count[0].max(1);
+        let per_dispatch = max_groups.saturating_mul(self.local_size_x);
+        let result = self.ctx.submit(&self.name, |device, cmd| unsafe {
+            device.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.pipeline);
+            device.cmd_bind_descriptor_sets(
+                cmd,
+                vk::PipelineBindPoint::COMPUTE,
+                self.layout,
+                0,
+                &[set],
+                &[],
+            );
+            let mut first = 0u32;
+            while first < invocations {
+                let n = (invocations - first).min(per_dispatch);
+                let constants = push(first);
+                debug_assert_eq!(constants.len(), self.push_size as usize);
+                if self.push_size > 0 {
+                    device.cmd_push_constants(
+                        cmd,
+                        self.layout,
+                        vk::ShaderStageFlags::COMPUTE,
+                        0,
+                        &constants,
+                    );
+                }
+                device.cmd_dispatch(cmd, n.div_ceil(self.local_size_x), 1, 1);
+                first += n;
+            }
+        });
+        unsafe {
+            let _ = d.free_descriptor_sets(self.pool, &[set]);
+        }
+        result
+    }
+}

@@ -1,0 +1,173 @@
+//! One-shot command submission with GPU timing: record, submit, wait on a fence (bounded), read
+//! the timestamps, and turn any validation message into an error naming the pass.
+
+use std::time::Instant;
+
+use ash::vk;
+
+use super::Context;
+use crate::{Error, Result};
+
+/// How long one submission may take before we call it hung. Every shader loop is bounded, so only
+/// a driver fault can get here; the error names the pass instead of hanging the process.
+const FENCE_TIMEOUT_NS: u64 = 600 * 1_000_000_000;
+
+/// Timing of one submission.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Timing {
+    /// Between the two timestamps written around the recorded work (device time).
+    pub gpu_ms: Option<f64>,
+    /// Submit to fence signalled, as seen by the host.
+    pub wall_ms: f64,
+}
+
+/// RAII for the per-submission objects, so every exit path frees them.
+struct Scratch<'a> {
+    device: &'a ash::Device,
+    pool: vk::CommandPool,
+    cmd: vk::CommandBuffer,
+    fence: vk::Fence,
+    queries: vk::QueryPool,
+}
+
+impl Drop for Scratch<'_> {
+    fn drop(&mut self) {
+        // SAFETY: the fence was waited on (or the submission never happened) before drop.
+        unsafe {
+            if self.queries != vk::QueryPool::null() {
+                self.device.destroy_query_pool(self.queries, None);
+            }
+            if self.fence != vk::Fence::null() {
+                self.device.destroy_fence(self.fence, None);
+            }
+            if self.cmd != vk::CommandBuffer::null() {
+                self.device.free_command_buffers(self.pool, &[self.cmd]);
+            }
+        }
+    }
+}
+
+impl Context {
+    /// Records `record` into a fresh command buffer between two timestamps, submits it on the
+    /// compute queue and waits. `pass` names the work in errors.
+    pub fn submit(
+        &self,
+        pass: &str,
+        record: impl FnOnce(&ash::Device, vk::CommandBuffer),
+    ) -> Result<Timing> {
+        let s = &self.shared;
+        let device = &s.device;
+        // The command pool and the queue are externally synchronised objects shared by every clone
+        // of the context: one submission at a time.
+        let _serial = s.submit_lock.lock().unwrap_or_else(|p| p.into_inner());
+        let mut scratch = Scratch {
+            device,
+            pool: s.command_pool,
+            cmd: vk::CommandBuffer::null(),
+            fence: vk::Fence::null(),
+            queries: vk::QueryPool::null(),
+        };
+        let alloc = vk::CommandBufferAllocateInfo::default()
+            .command_pool(s.command_pool)
+            .level(vk::CommandBufferLevel::PRIMARY)
+            .command_buffer_count(1);
+        scratch.cmd = unsafe { device.allocate_command_buffers(&alloc) }
+            .map_err(|r| Error::vk("vkAllocateCommandBuffers", pass, r))?[0];
+        scratch.fence = unsafe { device.create_fence(&vk::FenceCreateInfo::default(), None) }
+            .map_err(|r| Error::vk("vkCreateFence", pass, r))?;
+        let timed = s.limits.timestamp_period_ns.is_some();
+        if timed {
+            let info = vk::QueryPoolCreateInfo::default()
+                .query_type(vk::QueryType::TIMESTAMP)
+                .query_count(2);
+            scratch.queries = unsafe { device.create_query_pool(&info, None) }
+                .map_err(|r| Error::vk("vkCreateQueryPool", pass, r))?;
+        }
+        let cmd = scratch.cmd;
+        unsafe {
+            device
+                .begin_command_buffer(
+                    cmd,
+                    &vk::CommandBufferBeginInfo::default()
+                        .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+                )
+                .map_err(|r| Error::vk("vkBeginCommandBuffer", pass, r))?;
+            if timed {
+                device.cmd_reset_query_pool(cmd, scratch.queries, 0, 2);
+                device.cmd_write_timestamp(
+                    cmd,
+                    vk::PipelineStageFlags::TOP_OF_PIPE,
+                    scratch.queries,
+                    0,
+                );
+            }
+            // Each submission stands alone: make earlier submissions' device writes visible to
+            // this one, and this one's writes visible to the host that reads after the fence.
+            let before = [vk::MemoryBarrier::default()
+                .src_access_mask(vk::AccessFlags::MEMORY_WRITE)
+                .dst_access_mask(vk::AccessFlags::MEMORY_READ | vk::AccessFlags::MEMORY_WRITE)];
+            device.cmd_pipeline_barrier(
+                cmd,
+                vk::PipelineStageFlags::ALL_COMMANDS,
+                vk::PipelineStageFlags::ALL_COMMANDS,
+                vk::DependencyFlags::empty(),
+                &before,
+                &[],
+                &[],
+            );
+            record(device, cmd);
+            let after = [vk::MemoryBarrier::default()
+                .src_access_mask(vk::AccessFlags::MEMORY_WRITE)
+                .dst_access_mask(vk::AccessFlags::HOST_READ)];
+            device.cmd_pipeline_barrier(
+                cmd,
+                vk::PipelineStageFlags::ALL_COMMANDS,
+                vk::PipelineStageFlags::HOST,
+                vk::DependencyFlags::empty(),
+                &after,
+                &[],
+                &[],
+            );
+            if timed {
+                device.cmd_write_timestamp(
+                    cmd,
+                    vk::PipelineStageFlags::BOTTOM_OF_PIPE,
+                    scratch.queries,
+                    1,
+                );
+            }
+            device
+                .end_command_buffer(cmd)
+                .map_err(|r| Error::vk("vkEndCommandBuffer", pass, r))?;
+            let cmds = [cmd];
+            let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
+            let start = Instant::now();
+            device
+                .queue_submit(s.queue, &submit, scratch.fence)
+                .map_err(|r| Error::vk("vkQueueSubmit", pass, r))?;
+            device
+                .wait_for_fences(&[scratch.fence], true, FENCE_TIMEOUT_NS)
+                .map_err(|r| Error::vk("vkWaitForFences", pass, r))?;
+            let wall_ms = start.elapsed().as_secs_f64() * 1e3;
+            let gpu_ms = if timed {
+                let mut ticks = [0u64; 2];
+                device
+                    .get_query_pool_results(
+                        scratch.queries,
+                        0,
+                        &mut ticks,
+                        vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
+                    )
+                    .map_err(|r| Error::vk("vkGetQueryPoolResults", pass, r))?;
+                s.limits
+                    .timestamp_period_ns
+                    .map(|p| ticks[1].wrapping_sub(ticks[0]) as f64 * p * 1e-6)
+            } else {
+                None
+            };
+            drop(scratch);
+            self.check_validation()?;
+            Ok(Timing { gpu_ms, wall_ms })
+        }
+    }
+}
