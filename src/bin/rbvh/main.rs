@@ -1,0 +1,41 @@
+//! `rbvh`: render scenes, answer ray files, and (later) build and benchmark RBVHs.
+
+mod prepare;
+mod render;
+mod trace;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(
+    name = "rbvh",
+    version,
+    about = "Rasterized BVH ray casting on Vulkan compute (Novák & Dachsbacher 2012)"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene to PNG (and optionally EXR with depth and normals).
+    Render(render::Args),
+    /// Trace a ray file and write a hit file (formats in README.md).
+    Trace(trace::Args),
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Render(a) => render::run(a),
+        Command::Trace(a) => trace::run(a),
+    };
+    if let Err(e) = result {
+        eprintln!("error: {e}");
+        for cause in e.chain().skip(1) {
+            eprintln!("  caused by: {cause}");
+        }
+        std::process::exit(1);
+    }
+}

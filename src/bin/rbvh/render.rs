@@ -1,0 +1,90 @@
+//! `rbvh render`: primary rays from the scene's (or a framing) camera, shaded to PNG; EXR with
+//! depth and normals; a traversal-cost heat map.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{ensure, Context as _, Result};
+use clap::ValueEnum;
+use rbvh::gpu::{ExactTracer, Query};
+use rbvh::output;
+
+use crate::prepare::{prepare, print_throughput, step, Common};
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    #[command(flatten)]
+    common: Common,
+    /// Output PNG.
+    #[arg(long, short, default_value = "render.png")]
+    out: PathBuf,
+    /// Also write an EXR with R,G,B, Z (hit distance) and N.X,N.Y,N.Z.
+    #[arg(long)]
+    exr: Option<PathBuf>,
+    /// Also write a PNG heat map of traversal steps (nodes visited + triangles tested) per pixel.
+    #[arg(long)]
+    heatmap: Option<PathBuf>,
+    #[arg(long, default_value_t = 800)]
+    width: u32,
+    #[arg(long, default_value_t = 600)]
+    height: u32,
+    #[arg(long, value_enum, default_value_t = Shading::Lambert)]
+    shading: Shading,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum Shading {
+    /// Diffuse under the scene's light (or a headlight).
+    Lambert,
+    /// Geometric normals as colours.
+    Normals,
+}
+
+pub fn run(a: Args) -> Result<()> {
+    ensure!(
+        (1..=16384).contains(&a.width) && (1..=16384).contains(&a.height),
+        "--width and --height must be within 1..=16384 (got {}x{})",
+        a.width,
+        a.height
+    );
+    let p = prepare(&a.common)?;
+    let camera = p.scene.camera_or_framed(a.width as f32 / a.height as f32);
+    let rays = camera.primary_rays(a.width, a.height);
+    let tracer = ExactTracer::new(&p.ctx, &p.bvh).context("uploading the BVH")?;
+    let traced = step("tracing", || {
+        tracer.trace_with(&rays, Query::Closest, a.heatmap.is_some())
+    })?;
+    if a.common.stats {
+        let t = Instant::now();
+        let cpu = p.bvh.trace_cpu(&rays, false);
+        let cpu_ms = t.elapsed().as_secs_f64() * 1e3;
+        std::hint::black_box(cpu);
+        print_throughput(
+            rays.len(),
+            traced.timing.gpu_ms,
+            traced.timing.wall_ms,
+            cpu_ms,
+        );
+    }
+    let image = match a.shading {
+        Shading::Lambert => output::shade(
+            &rays,
+            &traced.hits,
+            a.width,
+            a.height,
+            p.scene.light.as_ref(),
+        )?,
+        Shading::Normals => output::shade_normals(&rays, &traced.hits, a.width, a.height)?,
+    };
+    output::write_png(&a.out, &image)?;
+    eprintln!("wrote {}", a.out.display());
+    if let Some(path) = &a.exr {
+        output::write_exr(path, &image, &traced.hits)?;
+        eprintln!("wrote {}", path.display());
+    }
+    if let (Some(path), Some(steps)) = (&a.heatmap, &traced.steps) {
+        output::write_png(path, &output::heatmap(steps, a.width, a.height, None)?)?;
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
+}

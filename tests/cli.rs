@@ -1,0 +1,137 @@
+//! The `rbvh` binary end to end: render, trace, and clear errors that leave no output behind.
+
+use std::path::Path;
+use std::process::Command;
+
+use rbvh::geom::{Hit, Ray};
+use rbvh::io;
+
+fn rbvh(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_rbvh"))
+        .args(args)
+        .env("RBVH_VALIDATION", "auto")
+        .output()
+        .expect("run rbvh")
+}
+
+fn arg(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn render_writes_png_exr_and_heatmap() {
+    let dir = tempfile::tempdir().unwrap();
+    let (png, exr, heat) = (
+        dir.path().join("a.png"),
+        dir.path().join("a.exr"),
+        dir.path().join("h.png"),
+    );
+    let out = rbvh(&[
+        "render",
+        "--scene",
+        "default",
+        "--width",
+        "96",
+        "--height",
+        "64",
+        "--out",
+        arg(&png),
+        "--exr",
+        arg(&exr),
+        "--heatmap",
+        arg(&heat),
+        "--stats",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("MRays/s") && stderr.contains("GPU/CPU"),
+        "{stderr}"
+    );
+    let img = image::open(&png).unwrap();
+    assert_eq!((img.width(), img.height()), (96, 64));
+    assert!(exr.exists() && heat.exists());
+}
+
+#[test]
+fn trace_answers_a_ray_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rays_path, hits_path) = (dir.path().join("r.bin"), dir.path().join("h.bin"));
+    let rays = vec![
+        Ray::new(
+            glam::Vec3::new(0.0, 0.0, -3.0),
+            glam::Vec3::Z,
+            0.0,
+            f32::INFINITY,
+        ),
+        Ray::new(
+            glam::Vec3::new(0.0, 5.0, -3.0),
+            glam::Vec3::Z,
+            0.0,
+            f32::INFINITY,
+        ),
+    ];
+    io::write_rays(&rays_path, &rays).unwrap();
+    for extra in [&[][..], &["--any-hit"][..], &["--cpu"][..]] {
+        let mut args = vec![
+            "trace",
+            "--scene",
+            "sphere",
+            "--rays",
+            arg(&rays_path),
+            "--hits",
+            arg(&hits_path),
+        ];
+        args.extend_from_slice(extra);
+        let out = rbvh(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let hits = io::read_hits(&hits_path).unwrap();
+        assert_eq!(hits.len(), 2);
+        assert!(
+            hits[0].is_hit() && (hits[0].t - 2.0).abs() < 0.01,
+            "{:?}",
+            hits[0]
+        );
+        assert_eq!(hits[1], Hit::MISS);
+    }
+}
+
+#[test]
+fn errors_name_the_culprit_and_leave_no_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("never.png");
+    let missing = dir.path().join("missing.obj");
+    let out = rbvh(&["render", "--scene", arg(&missing), "--out", arg(&png)]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("missing.obj"));
+    let out = rbvh(&["render", "--scene", "no-such-builtin", "--out", arg(&png)]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no-such-builtin"));
+    let out = rbvh(&["render", "--width", "0", "--out", arg(&png)]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--width"));
+    let bad_rays = dir.path().join("bad.bin");
+    std::fs::write(&bad_rays, [0u8; 33]).unwrap();
+    let hits = dir.path().join("hits.bin");
+    let out = rbvh(&[
+        "trace",
+        "--scene",
+        "sphere",
+        "--rays",
+        arg(&bad_rays),
+        "--hits",
+        arg(&hits),
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("bad.bin"));
+    assert!(!png.exists() && !hits.exists());
+    assert_eq!(
+        std::fs::read_dir(dir.path()).unwrap().count(),
+        1,
+        "only the bad ray file remains"
+    );
+}

@@ -1,0 +1,41 @@
+//! The validation layer is wired up: a deliberately invalid command (a barrier whose access mask
+//! does not fit its stage, harmless to the driver) must come back as `Error::Validation` naming the
+//! problem, not pass silently. Every other GPU test relies on this to fail on validation errors.
+
+mod common;
+
+use rbvh::Error;
+
+#[test]
+fn validation_errors_fail_the_submission() {
+    let ctx = common::context();
+    if !ctx.validation_enabled() {
+        eprintln!("VK_LAYER_KHRONOS_validation is not installed; nothing to check");
+        return;
+    }
+    let result = ctx.submit("deliberately invalid barrier", |device, cmd| unsafe {
+        let barrier = [
+            ash::vk::MemoryBarrier::default().src_access_mask(ash::vk::AccessFlags::SHADER_WRITE)
+        ];
+        device.cmd_pipeline_barrier(
+            cmd,
+            ash::vk::PipelineStageFlags::TRANSFER,
+            ash::vk::PipelineStageFlags::TRANSFER,
+            ash::vk::DependencyFlags::empty(),
+            &barrier,
+            &[],
+            &[],
+        );
+    });
+    match result {
+        Err(Error::Validation { messages }) => {
+            assert!(
+                messages.iter().any(|m| m.contains("vkCmdPipelineBarrier")),
+                "{messages:?}"
+            )
+        }
+        other => panic!("expected a validation error, got {other:?}"),
+    }
+    // The context stays usable, and clean submissions pass.
+    ctx.submit("empty", |_, _| {}).unwrap();
+}
