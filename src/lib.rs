@@ -32,6 +32,7 @@ pub mod geom;
 pub mod gpu;
 pub mod io;
 pub mod output;
+pub mod rbvh;
 pub mod scene;
 
 pub use error::{Error, Result};

@@ -14,5 +14,5 @@ mod traverse;
 mod validate;
 
 pub use build::{BuildParams, Bvh};
-pub use layout::{GpuNode, GpuTriangle, STACK_SIZE};
+pub use layout::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
 pub use traverse::TraceStats;

@@ -1,0 +1,150 @@
+//! GPU layout of the RBVH: the tree reuses the exact BVH's 64-byte node ([`GpuNode`]); triangle
+//! leaves reuse [`GpuTriangle`]; height-field leaves are [`GpuHeightfield`] records; the atlas is
+//! an array of 32-bit texels ([`Texel`]) with a fixed row pitch.
+//!
+//! A child reference in a node is, with `LEAF_BIT` = bit 31 of `child`:
+//! * inner node: `child` = node index, `count` = 0;
+//! * triangle leaf: `child` = `LEAF_BIT | first triangle`, `count` = triangles (0 = absent child);
+//! * height-field leaf: `child` = `LEAF_BIT | leaf index`, `count` = [`HEIGHTFIELD_COUNT`].
+//!
+//! ## Leaf frame and texel grid
+//! A leaf is an orthographic projection along `axis_w` (the normalised area-weighted normal sum
+//! Σ nᵢAᵢ of its triangles, Novák & Dachsbacher 2012), with tangents `u`, `v`. A point `p` has
+//! texel-space coordinates `s = (p − origin)·axis_u`, `t = (p − origin)·axis_v` (so `axis_u =
+//! u / texel_size`) and height `h = (p − origin)·axis_w`. Sample `(i, j)` sits at the texel centre
+//! `(s, t) = (i + ½, j + ½)` with height `q · h_scale`, `q` its 16-bit quantized height. The surface
+//! inside the *cell* between samples `(i, j)` and `(i + 1, j + 1)` is two triangles through the four
+//! corner samples (see `march.rs`); cells with a missing corner keep the triangle of the other three.
+
+use bytemuck::{Pod, Zeroable};
+use glam::{Vec2, Vec3};
+
+pub use crate::bvh::{GpuNode, GpuTriangle, LEAF_BIT};
+
+/// `count` of a child reference that is a height-field leaf.
+pub const HEIGHTFIELD_COUNT: u32 = u32::MAX;
+
+/// One height-field leaf. 64 bytes:
+///
+/// | bytes | field |
+/// |---|---|
+/// | 0..12, 12..16 | `origin` (world), `atlas_base` (index of texel (0, 0) in the atlas) |
+/// | 16..28, 28..32 | `axis_u` (= u / texel size), `res_u` (samples along u) |
+/// | 32..44, 44..48 | `axis_v` (= v / texel size), `res_v` |
+/// | 48..60, 60..64 | `axis_w` (unit projection axis), `h_scale` (world height per quantum) |
+///
+/// Texel `(i, j)` of the tile is at atlas index `atlas_base + j · pitch + i`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuHeightfield {
+    pub origin: [f32; 3],
+    pub atlas_base: u32,
+    pub axis_u: [f32; 3],
+    pub res_u: u32,
+    pub axis_v: [f32; 3],
+    pub res_v: u32,
+    pub axis_w: [f32; 3],
+    pub h_scale: f32,
+}
+const _: () = assert!(std::mem::size_of::<GpuHeightfield>() == 64);
+
+/// A 32-bit atlas texel: bits 0–15 the quantized height (`HOLE` = no surface), bits 16–31 the
+/// world-space unit normal in 8:8 octahedral encoding (Cigolle et al., "A Survey of Efficient
+/// Representations for Independent Unit Vectors", JCGT 2014), worst-case error about 1.2°.
+#[repr(transparent)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct Texel(pub u32);
+const _: () = assert!(std::mem::size_of::<Texel>() == 4);
+
+impl Texel {
+    /// The height code of an empty texel (a hole: no surface, not even after dilation).
+    pub const HOLE_CODE: u16 = 0xFFFF;
+    /// Largest height code of a surface texel.
+    pub const MAX_CODE: u16 = 0xFFFE;
+    pub const HOLE: Texel = Texel(Self::HOLE_CODE as u32);
+
+    pub fn new(height_code: u16, normal: Vec3) -> Texel {
+        debug_assert!(height_code != Self::HOLE_CODE);
+        Texel(height_code as u32 | (encode_octahedral(normal) as u32) << 16)
+    }
+
+    pub fn is_hole(self) -> bool {
+        self.height_code() == Self::HOLE_CODE
+    }
+
+    pub fn height_code(self) -> u16 {
+        (self.0 & 0xFFFF) as u16
+    }
+
+    pub fn normal(self) -> Vec3 {
+        decode_octahedral((self.0 >> 16) as u16)
+    }
+}
+
+/// 8:8 octahedral encoding of a unit vector.
+pub fn encode_octahedral(n: Vec3) -> u16 {
+    let n = n / (n.x.abs() + n.y.abs() + n.z.abs()).max(f32::MIN_POSITIVE);
+    let mut p = Vec2::new(n.x, n.y);
+    if n.z < 0.0 {
+        p = (Vec2::ONE - Vec2::new(p.y.abs(), p.x.abs())) * Vec2::new(sign(p.x), sign(p.y));
+    }
+    let q = |x: f32| ((x.clamp(-1.0, 1.0) * 0.5 + 0.5) * 255.0).round() as u16;
+    q(p.x) | q(p.y) << 8
+}
+
+/// Inverse of [`encode_octahedral`]; `glsl/rbvh.glsl` decodes identically.
+pub fn decode_octahedral(code: u16) -> Vec3 {
+    let f = |b: u16| (b & 0xFF) as f32 / 255.0 * 2.0 - 1.0;
+    let (x, y) = (f(code), f(code >> 8));
+    let z = 1.0 - x.abs() - y.abs();
+    let t = (-z).max(0.0);
+    let x = x + if x >= 0.0 { -t } else { t };
+    let y = y + if y >= 0.0 { -t } else { t };
+    Vec3::new(x, y, z).normalize()
+}
+
+fn sign(x: f32) -> f32 {
+    if x >= 0.0 {
+        1.0
+    } else {
+        -1.0
+    }
+}
+
+/// The texel atlas: `rows` rows of `pitch` texels. Tiles are packed on shelves (see `atlas.rs`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Atlas {
+    pub pitch: u32,
+    pub rows: u32,
+    pub texels: Vec<Texel>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn octahedral_round_trip_is_within_its_bound() {
+        let mut worst = 0.0f32;
+        for i in 0..2000 {
+            let a = i as f32 * 2.399_963;
+            let z = 1.0 - 2.0 * (i as f32 + 0.5) / 2000.0;
+            let r = (1.0 - z * z).sqrt();
+            let n = Vec3::new(r * a.cos(), r * a.sin(), z);
+            let back = decode_octahedral(encode_octahedral(n));
+            worst = worst.max(n.dot(back).clamp(-1.0, 1.0).acos().to_degrees());
+        }
+        assert!(worst < 1.3, "worst octahedral error {worst}°");
+        for n in [Vec3::X, Vec3::Y, Vec3::Z, -Vec3::X, -Vec3::Y, -Vec3::Z] {
+            assert!(decode_octahedral(encode_octahedral(n)).dot(n) > 0.9999, "{n}");
+        }
+    }
+
+    #[test]
+    fn texel_packs_height_and_normal() {
+        let t = Texel::new(1234, Vec3::Y);
+        assert_eq!(t.height_code(), 1234);
+        assert!(!t.is_hole() && Texel::HOLE.is_hole());
+        assert!(t.normal().dot(Vec3::Y) > 0.9999);
+    }
+}

@@ -1,0 +1,83 @@
+//! The Rasterized BVH (Novák & Dachsbacher, Eurographics 2012): a BVH whose leaves are height
+//! fields in a texel atlas, mixed with ordinary triangle leaves where height fields do not fit.
+//!
+//! * [`params`]: quality presets and free parameters;
+//! * `build`: the top-down recursion — refinement criteria, subdivision, leaf frames;
+//! * `raster`: rasterizing a leaf's triangles into its tile, dilation, quantization;
+//! * `atlas`: packing tiles into one atlas;
+//! * [`layout`]: the packed data the GPU reads;
+//! * `march`: the CPU reference caster on exactly that packed data;
+//! * `file`: save and load.
+
+mod atlas;
+mod build;
+mod file;
+mod frame;
+pub mod layout;
+mod march;
+pub mod params;
+mod raster;
+mod split;
+
+pub use layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT};
+pub use params::{RbvhParams, Refinement, Subdivision, QUALITY_NAMES};
+
+use crate::bvh::{GpuNode, GpuTriangle};
+use crate::geom::Aabb;
+
+/// A built RBVH in its packed (GPU) form.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Rbvh {
+    pub params: RbvhParams,
+    /// Node 0 is the root.
+    pub nodes: Vec<GpuNode>,
+    /// Triangles of the triangle (hybrid) leaves, in leaf order.
+    pub triangles: Vec<GpuTriangle>,
+    /// Height-field leaves.
+    pub leaves: Vec<GpuHeightfield>,
+    pub atlas: Atlas,
+    pub bounds: Aabb,
+    /// Longest root-to-leaf path in nodes.
+    pub depth: u32,
+    /// World-space size of one texel (scene diagonal / texels_per_diagonal).
+    pub texel_size: f32,
+    pub stats: RbvhStats,
+}
+
+/// Accounting of one build.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RbvhStats {
+    pub build_ms: f64,
+    pub heightfield_leaves: u32,
+    pub triangle_leaves: u32,
+    /// Texels of all tiles (the atlas has `atlas.pitch × atlas.rows`, the difference is waste).
+    pub tile_texels: u64,
+}
+
+impl Rbvh {
+    pub fn tree_bytes(&self) -> u64 {
+        (std::mem::size_of_val(self.nodes.as_slice()) + std::mem::size_of_val(self.leaves.as_slice())) as u64
+    }
+
+    pub fn atlas_bytes(&self) -> u64 {
+        std::mem::size_of_val(self.atlas.texels.as_slice()) as u64
+    }
+
+    pub fn triangle_bytes(&self) -> u64 {
+        std::mem::size_of_val(self.triangles.as_slice()) as u64
+    }
+
+    pub fn total_bytes(&self) -> u64 {
+        self.tree_bytes() + self.atlas_bytes() + self.triangle_bytes()
+    }
+
+    /// Used tile texels over atlas texels.
+    pub fn fill_ratio(&self) -> f64 {
+        let total = self.atlas.texels.len() as f64;
+        if total == 0.0 {
+            1.0
+        } else {
+            self.stats.tile_texels as f64 / total
+        }
+    }
+}
