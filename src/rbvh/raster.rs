@@ -1,1 +1,557 @@
-//! (in progress)
+//! Rasterizing one leaf's triangles into its height-field tile (Novák & Dachsbacher 2012: "rasterize
+//! surfaces into the atlas"; "texel centres sample the exact triangles"), then dilating and
+//! quantizing it into the packed [`Texel`]s of `layout.rs`.
+//!
+//! ## Algorithm
+//! 1. **Sampling.** Each triangle's geometric normal `n = normalize((b − a) × (c − a))` is taken as
+//!    wound (the same convention as [`crate::geom::Hit`]); zero-area triangles are skipped. Its
+//!    vertices are projected into *sample space*: `x = (p − origin)·u / texel − ½`,
+//!    `y = (p − origin)·v / texel − ½`, so that sample `(i, j)` sits at `(x, y) = (i, j)`, and height
+//!    `h = (p − origin)·w`. Triangles seen edge-on (`|n·w|` below [`EDGE_ON_COS`]) are skipped: they
+//!    cover no sample centre in a way that defines one height, and their neighbours cover the same
+//!    samples. Every sample of the grid inside the triangle's 2D bounding box is tested with 2D edge
+//!    functions *inclusive* of the edges (all ≥ 0 or all ≤ 0, so either winding is accepted), and
+//!    its height is interpolated with the barycentrics. Each edge function is evaluated with its
+//!    two endpoints in a canonical order, so that the two triangles sharing an edge compute exactly
+//!    opposite values: a sample centre on a shared edge is inside at least one of them, never lost
+//!    to rounding (the argument of Woop, Benthin & Wald, "Watertight Ray/Triangle Intersection",
+//!    JCGT 2013, in 2D).
+//! 2. **Single-valuedness.** A sample already written by an earlier triangle keeps its height
+//!    (first writer wins, which is deterministic because triangles are processed in order) unless
+//!    the heights differ by more than `fold_tolerance`: then two layers fold onto one texel, the
+//!    set is not a height field, and [`rasterize`] returns `None`.
+//! 3. `covered` counts the samples written in 1–2.
+//! 4. **Dilation** (the paper's crack avoidance: "allow overlaps + dilation filter"). One pass over
+//!    the state after step 2: each hole with at least one covered 4-neighbour gets the mean, over
+//!    those neighbour directions, of a linear extrapolation (`2h₁ − h₂` when the sample two steps
+//!    away is also covered, else `h₁`), and the normal of the first such neighbour in the fixed
+//!    order −u, +u, −v, +v. Planar surfaces are thus extended exactly. Every leaf's surface reaches
+//!    half a texel or more beyond its triangles, so that neighbouring leaves overlap and meet
+//!    without gaps. The cost: at open mesh boundaries (where no neighbour leaf continues the
+//!    surface) the surface grows a rim of at most one texel.
+//! 5. **Quantization.** With `h_lo`, `h_hi` the extreme heights of all valid samples (after
+//!    dilation), `h_scale = (h_hi − h_lo) / MAX_CODE` (0 when flat or empty), the code of height `h`
+//!    is `round((h − h_lo) / h_scale)` and `frame.origin` moves by `h_lo · w`, so code 0 is the
+//!    lowest height. Sixteen bits over the leaf's own height range give a worst quantization error
+//!    of `(h_hi − h_lo) / (2 · 65534)` (plus f32 rounding of the moved origin).
+//! 6. A tile without any covered sample is still returned (`covered = 0`, all holes); the builder
+//!    decides what to do with it.
+//!
+//! All arithmetic on projected coordinates is done in f64 so that large tiles and far-from-origin
+//! scenes keep sub-texel accuracy; the functions are pure (the builder calls them from rayon tasks).
+
+use glam::{DVec2, DVec3, Vec3};
+
+use super::layout::{GpuHeightfield, Texel};
+use crate::geom::Aabb;
+
+/// Triangles whose unit normal makes `|n·w|` at most this are treated as edge-on and skipped. A
+/// triangle exactly edge-on projects, after f32 rounding of its vertices and of the frame axes,
+/// to `|n·w|` of order 1e-7; 1e-5 leaves a margin above that while dropping only triangles within
+/// 0.0006° of the projection direction.
+pub const EDGE_ON_COS: f32 = 1.0e-5;
+
+/// A leaf's orthographic projection. `u`, `v`, `w` orthonormal (`w` = projection axis, pointing to
+/// where the surface faces); sample `(i, j)` lies at `origin + (i + ½)·texel·u + (j + ½)·texel·v`,
+/// with height measured along `w` from `origin`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Frame {
+    pub origin: Vec3,
+    pub u: Vec3,
+    pub v: Vec3,
+    pub w: Vec3,
+    /// World size of one texel.
+    pub texel: f32,
+    pub res_u: u32,
+    pub res_v: u32,
+}
+
+impl Frame {
+    /// Sample-space coordinates `(x, y, h)` of a world point (see the module docs).
+    fn project(&self, p: Vec3) -> DVec3 {
+        let d = p.as_dvec3() - self.origin.as_dvec3();
+        let texel = self.texel as f64;
+        DVec3::new(
+            d.dot(self.u.as_dvec3()) / texel - 0.5,
+            d.dot(self.v.as_dvec3()) / texel - 0.5,
+            d.dot(self.w.as_dvec3()),
+        )
+    }
+
+    fn samples(&self) -> usize {
+        self.res_u as usize * self.res_v as usize
+    }
+}
+
+/// A rasterized leaf: `frame.origin` has been moved along `w` so that height code 0 is the lowest
+/// height; texels row-major (`j * res_u + i`), [`Texel::HOLE`] where there is no surface.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Tile {
+    pub frame: Frame,
+    pub texels: Vec<Texel>,
+    /// World height per quantum along `w`.
+    pub h_scale: f32,
+    /// Samples covered by triangles (before dilation).
+    pub covered: u32,
+}
+
+impl Tile {
+    /// The packed record: `axis_u = u / texel`, `axis_v = v / texel`, `axis_w = w`, resolution and
+    /// `h_scale` from the tile, `atlas_base` as placed by `atlas::pack`.
+    pub fn heightfield(&self, atlas_base: u32) -> GpuHeightfield {
+        let f = &self.frame;
+        GpuHeightfield {
+            origin: f.origin.to_array(),
+            atlas_base,
+            axis_u: (f.u / f.texel).to_array(),
+            res_u: f.res_u,
+            axis_v: (f.v / f.texel).to_array(),
+            res_v: f.res_v,
+            axis_w: f.w.to_array(),
+            h_scale: self.h_scale,
+        }
+    }
+
+    /// World AABB of the eight corners of the tile's box: `s, t ∈ [½, res − ½]` (texel units, i.e.
+    /// sample centres) and `h ∈ [0, MAX_CODE · h_scale]`. Every reconstructed surface point is a
+    /// convex combination of sample points, so it lies inside; the box is widened by a few ulps of
+    /// its coordinates so that f32 rounding of the corners cannot cut off a surface point either.
+    pub fn world_bounds(&self) -> Aabb {
+        let f = &self.frame;
+        let s = [0.5, f.res_u as f32 - 0.5];
+        let t = [0.5, f.res_v as f32 - 0.5];
+        let h = [0.0, Texel::MAX_CODE as f32 * self.h_scale];
+        let mut corners = Vec::with_capacity(8);
+        for s in s {
+            for t in t {
+                for h in h {
+                    corners.push(f.origin + s * f.texel * f.u + t * f.texel * f.v + h * f.w);
+                }
+            }
+        }
+        let b = Aabb::from_points(corners);
+        let margin = b.min.abs().max(b.max.abs()) * (4.0 * f32::EPSILON);
+        Aabb {
+            min: b.min - margin,
+            max: b.max + margin,
+        }
+    }
+}
+
+/// Rasterizes `triangles` (world space) into `frame`'s sample grid, or returns `None` when the
+/// result is not single-valued: two triangles covering the same sample centre at heights differing
+/// by more than `fold_tolerance` (world units; it should exceed f32 rounding of the heights, e.g. a
+/// fraction of a texel, or samples on shared edges count as folds). See the module docs for the
+/// steps. The grid of `res_u × res_v` samples is allocated in full; the builder keeps both sides
+/// at most `max_tile` (≤ 4096).
+pub fn rasterize(triangles: &[[Vec3; 3]], frame: &Frame, fold_tolerance: f32) -> Option<Tile> {
+    let res_u = frame.res_u as usize;
+    let res_v = frame.res_v as usize;
+    let n = frame.samples();
+    let mut height = vec![0.0f32; n];
+    // Index into `normals` of the triangle that wrote each sample, NONE for a hole.
+    let mut source = vec![NONE; n];
+    let mut normals = Vec::new();
+    let mut covered = 0u32;
+
+    for tri in triangles {
+        let Some(normal) = (tri[1] - tri[0]).cross(tri[2] - tri[0]).try_normalize() else {
+            continue;
+        };
+        if normal.dot(frame.w).abs() <= EDGE_ON_COS {
+            continue;
+        }
+        let p = tri.map(|q| frame.project(q));
+        if !p.iter().all(|q| q.is_finite()) {
+            continue;
+        }
+        let [a, b, c] = p.map(|q| DVec2::new(q.x, q.y));
+        let lo = a.min(b).min(c).ceil().max(DVec2::ZERO);
+        let hi = a
+            .max(b)
+            .max(c)
+            .floor()
+            .min(DVec2::new(res_u as f64 - 1.0, res_v as f64 - 1.0));
+        if lo.x > hi.x || lo.y > hi.y {
+            continue;
+        }
+        let id = normals.len() as u32;
+        normals.push(normal);
+        for j in lo.y as usize..=hi.y as usize {
+            for i in lo.x as usize..=hi.x as usize {
+                let s = DVec2::new(i as f64, j as f64);
+                let e = [edge(b, c, s), edge(c, a, s), edge(a, b, s)];
+                let inside = e.iter().all(|&x| x >= 0.0) || e.iter().all(|&x| x <= 0.0);
+                let sum = e[0] + e[1] + e[2];
+                if !inside || sum == 0.0 {
+                    continue;
+                }
+                let h = ((e[0] * p[0].z + e[1] * p[1].z + e[2] * p[2].z) / sum) as f32;
+                let k = j * res_u + i;
+                if source[k] == NONE {
+                    height[k] = h;
+                    source[k] = id;
+                    covered += 1;
+                } else if (h - height[k]).abs() > fold_tolerance {
+                    return None;
+                }
+            }
+        }
+    }
+
+    let (height, source) = dilate(&height, &source, res_u, res_v);
+    Some(quantize(frame, &height, &source, &normals, covered))
+}
+
+/// Marks a hole in the per-sample source index.
+const NONE: u32 = u32::MAX;
+
+/// Twice the signed area of `(a, b, p)`. The endpoints are put in a canonical (lexicographic) order
+/// and the result negated when swapped, so `edge(a, b, p) == -edge(b, a, p)` exactly: the shared
+/// edge of two triangles classifies every point consistently for both.
+fn edge(a: DVec2, b: DVec2, p: DVec2) -> f64 {
+    let orient = |a: DVec2, b: DVec2| (b.x - a.x) * (p.y - a.y) - (b.y - a.y) * (p.x - a.x);
+    if (a.x, a.y) <= (b.x, b.y) {
+        orient(a, b)
+    } else {
+        -orient(b, a)
+    }
+}
+
+/// Step 4 of the module docs: one dilation pass, reading only the undilated state.
+fn dilate(height: &[f32], source: &[u32], res_u: usize, res_v: usize) -> (Vec<f32>, Vec<u32>) {
+    let mut out_h = height.to_vec();
+    let mut out_s = source.to_vec();
+    let at = |i: isize, j: isize| -> Option<usize> {
+        if !(0..res_u as isize).contains(&i) || !(0..res_v as isize).contains(&j) {
+            return None;
+        }
+        let k = j as usize * res_u + i as usize;
+        (source[k] != NONE).then_some(k)
+    };
+    for j in 0..res_v {
+        for i in 0..res_u {
+            let k = j * res_u + i;
+            if source[k] != NONE {
+                continue;
+            }
+            let (mut sum, mut count, mut first) = (0.0f64, 0u32, NONE);
+            for (di, dj) in [(-1isize, 0isize), (1, 0), (0, -1), (0, 1)] {
+                let (i, j) = (i as isize, j as isize);
+                let Some(k1) = at(i + di, j + dj) else {
+                    continue;
+                };
+                let h1 = height[k1] as f64;
+                sum += match at(i + 2 * di, j + 2 * dj) {
+                    Some(k2) => 2.0 * h1 - height[k2] as f64,
+                    None => h1,
+                };
+                count += 1;
+                if first == NONE {
+                    first = source[k1];
+                }
+            }
+            if count > 0 {
+                out_h[k] = (sum / count as f64) as f32;
+                out_s[k] = first;
+            }
+        }
+    }
+    (out_h, out_s)
+}
+
+/// Step 5 of the module docs: 16-bit heights over the tile's own range, origin moved to `h_lo`.
+fn quantize(frame: &Frame, height: &[f32], source: &[u32], normals: &[Vec3], covered: u32) -> Tile {
+    let valid = || {
+        height
+            .iter()
+            .zip(source)
+            .filter(|(_, &s)| s != NONE)
+            .map(|(&h, _)| h)
+    };
+    let h_lo = valid().fold(f32::INFINITY, f32::min);
+    let h_hi = valid().fold(f32::NEG_INFINITY, f32::max);
+    let (h_lo, h_scale) = if h_lo <= h_hi {
+        (
+            h_lo,
+            ((h_hi as f64 - h_lo as f64) / Texel::MAX_CODE as f64) as f32,
+        )
+    } else {
+        (0.0, 0.0)
+    };
+    let texels = height
+        .iter()
+        .zip(source)
+        .map(|(&h, &s)| {
+            if s == NONE {
+                return Texel::HOLE;
+            }
+            let code = if h_scale > 0.0 {
+                ((h as f64 - h_lo as f64) / h_scale as f64)
+                    .round()
+                    .clamp(0.0, Texel::MAX_CODE as f64) as u16
+            } else {
+                0
+            };
+            Texel::new(code, normals[s as usize])
+        })
+        .collect();
+    Tile {
+        frame: Frame {
+            origin: frame.origin + h_lo * frame.w,
+            ..*frame
+        },
+        texels,
+        h_scale,
+        covered,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Axis-aligned frame over `[0, res]²` in x, y with unit texels, heights along +z.
+    fn xy_frame(res: u32) -> Frame {
+        Frame {
+            origin: Vec3::ZERO,
+            u: Vec3::X,
+            v: Vec3::Y,
+            w: Vec3::Z,
+            texel: 1.0,
+            res_u: res,
+            res_v: res,
+        }
+    }
+
+    /// The square `[lo, hi]²` (in u, v texel units of `frame`) on the height function `h`, as two
+    /// triangles wound so that their normal has a positive w component.
+    fn square(frame: &Frame, lo: f32, hi: f32, h: impl Fn(f32, f32) -> f32) -> Vec<[Vec3; 3]> {
+        let p = |s: f32, t: f32| {
+            frame.origin + s * frame.texel * frame.u + t * frame.texel * frame.v + h(s, t) * frame.w
+        };
+        vec![
+            [p(lo, lo), p(hi, lo), p(hi, hi)],
+            [p(lo, lo), p(hi, hi), p(lo, hi)],
+        ]
+    }
+
+    /// Height of sample `k` measured along `w` from `reference`, decoded from the tile.
+    fn decoded(tile: &Tile, k: usize, reference: Vec3) -> f32 {
+        let f = &tile.frame;
+        (f.origin - reference).dot(f.w) + tile.texels[k].height_code() as f32 * tile.h_scale
+    }
+
+    fn world_sample(tile: &Tile, i: u32, j: u32) -> Vec3 {
+        let f = &tile.frame;
+        let k = (j * f.res_u + i) as usize;
+        f.origin
+            + (i as f32 + 0.5) * f.texel * f.u
+            + (j as f32 + 0.5) * f.texel * f.v
+            + tile.texels[k].height_code() as f32 * tile.h_scale * f.w
+    }
+
+    #[test]
+    fn flat_square_is_exact() {
+        let frame = xy_frame(8);
+        let tile = rasterize(&square(&frame, 0.0, 8.0, |_, _| 2.0), &frame, 0.01).unwrap();
+        assert_eq!(tile.covered, 64);
+        assert_eq!(tile.h_scale, 0.0);
+        assert_eq!(tile.frame.origin, Vec3::new(0.0, 0.0, 2.0));
+        for t in &tile.texels {
+            assert_eq!(t.height_code(), 0);
+            assert!(t.normal().dot(Vec3::Z) > 0.9999);
+        }
+    }
+
+    #[test]
+    fn tilted_plane_is_within_the_quantization_bound() {
+        let frame = Frame {
+            origin: Vec3::new(10.0, -3.0, 1.0),
+            texel: 0.25,
+            ..xy_frame(16)
+        };
+        let plane = |s: f32, t: f32| 0.3 * s + 0.2 * t + 1.0;
+        let tile = rasterize(&square(&frame, 0.0, 16.0, plane), &frame, 0.01).unwrap();
+        assert_eq!(tile.covered, 256);
+        let range = plane(15.5, 15.5) - plane(0.5, 0.5);
+        let bound = range / (2.0 * Texel::MAX_CODE as f32) + 1e-5;
+        for j in 0..16 {
+            for i in 0..16 {
+                let k = j * 16 + i;
+                let want = plane(i as f32 + 0.5, j as f32 + 0.5);
+                let got = decoded(&tile, k, frame.origin);
+                assert!((got - want).abs() <= bound, "({i}, {j}): {got} vs {want}");
+            }
+        }
+        let n = Vec3::new(-0.3 / 0.25, -0.2 / 0.25, 1.0).normalize();
+        assert!(tile.texels[0].normal().dot(n) > 0.999);
+    }
+
+    #[test]
+    fn parallel_layers_fold_unless_within_tolerance() {
+        let frame = xy_frame(8);
+        let mut two = square(&frame, 0.0, 8.0, |_, _| 0.0);
+        two.extend(square(&frame, 0.0, 8.0, |_, _| 10.0));
+        assert_eq!(rasterize(&two, &frame, 1.0), None);
+
+        let mut close = square(&frame, 0.0, 8.0, |_, _| 0.0);
+        close.extend(square(&frame, 0.0, 8.0, |_, _| 0.05));
+        let tile = rasterize(&close, &frame, 0.1).unwrap();
+        assert_eq!(tile.covered, 64);
+        // First writer wins: the lower layer.
+        assert_eq!(tile.frame.origin.z, 0.0);
+        assert_eq!(tile.h_scale, 0.0);
+    }
+
+    #[test]
+    fn dilation_fills_the_ring_and_extrapolates_linearly() {
+        let frame = xy_frame(16);
+        let plane = |s: f32, t: f32| 0.5 * s - 0.25 * t + 3.0;
+        // Samples 4..=11 in each direction are covered (centres 4.5 ..= 11.5).
+        let tile = rasterize(&square(&frame, 4.0, 12.0, plane), &frame, 0.01).unwrap();
+        assert_eq!(tile.covered, 64);
+        let core = |x: u32| (4..=11).contains(&x);
+        let ring = |x: u32| x == 3 || x == 12;
+        let range = plane(12.5, 3.5) - plane(3.5, 12.5);
+        let bound = range / (2.0 * Texel::MAX_CODE as f32) + 1e-5;
+        for j in 0..16 {
+            for i in 0..16 {
+                let k = (j * 16 + i) as usize;
+                let expect = (core(i) && core(j)) || (core(i) && ring(j)) || (ring(i) && core(j));
+                assert_eq!(!tile.texels[k].is_hole(), expect, "({i}, {j})");
+                if expect {
+                    let want = plane(i as f32 + 0.5, j as f32 + 0.5);
+                    let got = decoded(&tile, k, frame.origin);
+                    assert!((got - want).abs() <= bound, "({i}, {j}): {got} vs {want}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn shared_edges_through_sample_centres_lose_no_sample() {
+        // A rotated, offset frame with an odd texel size, and a mesh reaching past the frame whose
+        // vertices lie on sample centres (up to f32 rounding): its edges, diagonals included, run
+        // through sample centres, and every sample must still be covered.
+        let (c, s) = (0.6f32.cos(), 0.6f32.sin());
+        let frame = Frame {
+            origin: Vec3::new(123.37, -45.1, 7.3),
+            u: Vec3::new(c, s, 0.0),
+            v: Vec3::new(-s, c, 0.0),
+            w: Vec3::Z,
+            texel: 0.1,
+            res_u: 17,
+            res_v: 17,
+        };
+        let p = |i: i32, j: i32| {
+            let (x, y) = (i as f32 + 0.5, j as f32 + 0.5);
+            frame.origin
+                + x * frame.texel * frame.u
+                + y * frame.texel * frame.v
+                + (0.01 * x - 0.02 * y) * frame.w
+        };
+        let mut tris = Vec::new();
+        for j in (-2..18).step_by(2) {
+            for i in (-2..18).step_by(2) {
+                let q = [p(i, j), p(i + 2, j), p(i + 2, j + 2), p(i, j + 2)];
+                if (i + j).rem_euclid(4) == 0 {
+                    tris.push([q[0], q[1], q[2]]);
+                    tris.push([q[0], q[2], q[3]]);
+                } else {
+                    tris.push([q[0], q[1], q[3]]);
+                    tris.push([q[1], q[2], q[3]]);
+                }
+            }
+        }
+        let tile = rasterize(&tris, &frame, 1e-3).unwrap();
+        assert_eq!(tile.covered, 17 * 17);
+    }
+
+    #[test]
+    fn degenerate_input_gives_holes_without_panic() {
+        let frame = xy_frame(8);
+        let a = Vec3::new(1.0, 1.0, 0.0);
+        let b = Vec3::new(6.0, 5.0, 1.0);
+        let inputs: [Vec<[Vec3; 3]>; 4] = [
+            vec![],
+            vec![[a, a, b]],
+            vec![[a, b, 0.5 * (a + b)]],
+            // Edge-on: the plane y = 4.5 runs exactly through a row of sample centres.
+            vec![[
+                Vec3::new(0.0, 4.5, 0.0),
+                Vec3::new(8.0, 4.5, 0.0),
+                Vec3::new(4.0, 4.5, 5.0),
+            ]],
+        ];
+        for tris in inputs {
+            let tile = rasterize(&tris, &frame, 0.1).unwrap();
+            assert_eq!(tile.covered, 0);
+            assert_eq!(tile.h_scale, 0.0);
+            assert_eq!(tile.texels.len(), 64);
+            assert!(tile.texels.iter().all(|t| t.is_hole()));
+        }
+        let empty = Frame {
+            res_u: 0,
+            res_v: 0,
+            ..frame
+        };
+        let tile = rasterize(&square(&frame, 0.0, 8.0, |_, _| 1.0), &empty, 0.1).unwrap();
+        assert!(tile.texels.is_empty() && tile.covered == 0);
+        let zero_texel = Frame {
+            texel: 0.0,
+            ..frame
+        };
+        let tile = rasterize(&square(&frame, 0.0, 8.0, |_, _| 1.0), &zero_texel, 0.1).unwrap();
+        assert_eq!(tile.covered, 0);
+    }
+
+    #[test]
+    fn world_bounds_contain_every_sample() {
+        let (c, s) = (0.3f32.cos(), 0.3f32.sin());
+        let frame = Frame {
+            origin: Vec3::new(-5.0, 2.0, 40.0),
+            u: Vec3::new(c, 0.0, -s),
+            v: Vec3::Y,
+            w: Vec3::new(s, 0.0, c),
+            texel: 0.5,
+            res_u: 12,
+            res_v: 9,
+        };
+        let bumpy = |s: f32, t: f32| (0.7 * s).sin() + 0.3 * t;
+        let tile = rasterize(&square(&frame, 1.0, 11.0, bumpy), &frame, 0.01).unwrap();
+        assert!(tile.covered > 0 && tile.h_scale > 0.0);
+        let b = tile.world_bounds();
+        for j in 0..9 {
+            for i in 0..12 {
+                if !tile.texels[(j * 12 + i) as usize].is_hole() {
+                    let p = world_sample(&tile, i, j);
+                    assert!(
+                        p.cmpge(b.min).all() && p.cmple(b.max).all(),
+                        "{p} not in {b:?}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn heightfield_record_matches_the_frame() {
+        let frame = Frame {
+            texel: 0.25,
+            ..xy_frame(8)
+        };
+        let plane = |s: f32, _| 0.1 * s;
+        let tile = rasterize(&square(&frame, 0.0, 8.0, plane), &frame, 0.01).unwrap();
+        let r = tile.heightfield(1234);
+        let f = &tile.frame;
+        assert_eq!(r.atlas_base, 1234);
+        assert_eq!((r.res_u, r.res_v), (8, 8));
+        assert_eq!(r.origin, f.origin.to_array());
+        assert_eq!(r.h_scale, tile.h_scale);
+        assert!((Vec3::from(r.axis_u).dot(f.u) - 1.0 / f.texel).abs() < 1e-5);
+        assert!((Vec3::from(r.axis_v).dot(f.v) - 1.0 / f.texel).abs() < 1e-5);
+        assert!(Vec3::from(r.axis_u).dot(f.v).abs() < 1e-6);
+        assert_eq!(Vec3::from(r.axis_w), f.w);
+    }
+}
