@@ -1,1 +1,391 @@
-//! (in progress)
+//! The top-down RBVH construction of Novák & Dachsbacher (2012):
+//!
+//! ```text
+//! ConstructRBVH(surfaces):
+//!   if surfaces cannot be represented by a single height field:
+//!       split surfaces into A and B; ConstructRBVH(A); ConstructRBVH(B)
+//!   else:
+//!       rasterize surfaces into the atlas
+//! ```
+//!
+//! "Can be represented" means: one connected part (with object split on), a projection axis
+//! exists, the refinement criterion holds along it, and the rasterization is single-valued.
+//! A representable set larger than `max_tile` samples per side is cut into several tiles (the
+//! paper's "subdivide large height fields") that share their border samples, so they meet without
+//! gaps. A set that is not representable and spans fewer than `min_leaf_texels` texels stays as
+//! triangles, traced exactly (the hybrid leaves).
+//!
+//! Parallel with `rayon::join` over subtrees; every per-node computation is sequential and ordered,
+//! so the output is byte-identical for any thread count.
+
+use std::collections::HashMap;
+use std::time::Instant;
+
+use glam::Vec3;
+
+use super::atlas;
+use super::frame::{fit, passes, projection_axis};
+use super::layout::HEIGHTFIELD_COUNT;
+use super::raster::{rasterize, Frame, Tile};
+use super::split::{split, SplitPrim};
+use super::{Rbvh, RbvhParams, RbvhStats};
+use crate::bvh::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
+use crate::geom::Aabb;
+use crate::scene::Scene;
+use crate::{Error, Result};
+
+/// Most triangles in a triangle leaf.
+const MAX_TRIANGLE_LEAF: usize = 8;
+/// From this depth on, splits are object medians, bounding the depth by 32 + log2(n) < STACK_SIZE.
+const MEDIAN_BELOW_DEPTH: u32 = 32;
+/// Subtrees smaller than this are built on the calling thread.
+const PARALLEL_THRESHOLD: usize = 2048;
+/// Upper bound on tile texels before building: beyond it the atlas would not fit 32-bit indices
+/// (nor any device), so the build refuses early instead of running out of memory.
+const MAX_ESTIMATED_TEXELS: f64 = 2.0e9;
+
+enum Node {
+    Inner(Box<[Node; 2]>),
+    Heightfield(Box<Tile>),
+    Triangles { start: u32, count: u32 },
+}
+
+struct Builder<'a> {
+    tris: &'a [[Vec3; 3]],
+    prims: &'a [SplitPrim],
+    params: &'a RbvhParams,
+    texel: f32,
+}
+
+impl Rbvh {
+    /// Builds an RBVH of `scene` with `params` (see [`RbvhParams::quality`] for presets).
+    pub fn build(scene: &Scene, params: &RbvhParams) -> Result<Rbvh> {
+        params.validate()?;
+        scene.validate()?;
+        if scene.triangle_count() >= LEAF_BIT as usize {
+            return Err(Error::param(
+                "scene",
+                format!("{} triangles exceed 2^31", scene.triangle_count()),
+            ));
+        }
+        let start = Instant::now();
+        let bounds = scene.bounds();
+        let diagonal = bounds.diagonal();
+        let texel = if diagonal > 0.0 {
+            diagonal / params.texels_per_diagonal
+        } else {
+            1.0
+        };
+        let tris: Vec<[Vec3; 3]> = (0..scene.triangle_count())
+            .map(|i| scene.triangle(i))
+            .collect();
+        let area: f64 = tris
+            .iter()
+            .map(|[a, b, c]| 0.5 * (*b - *a).cross(*c - *a).length() as f64)
+            .sum();
+        let estimate = area / (texel as f64 * texel as f64);
+        if estimate > MAX_ESTIMATED_TEXELS {
+            return Err(Error::param(
+                "texels_per_diagonal",
+                format!(
+                    "{} would need about {estimate:.3e} texels for {} of surface (limit {MAX_ESTIMATED_TEXELS:.0e}); lower the sampling rate or the quality level",
+                    params.texels_per_diagonal, area
+                ),
+            ));
+        }
+        let components = connected_parts(scene);
+        let prims: Vec<SplitPrim> = tris
+            .iter()
+            .zip(&components)
+            .map(|(t, &component)| {
+                let bounds = Aabb::from_points(*t);
+                SplitPrim {
+                    bounds,
+                    centroid: bounds.center(),
+                    area: 0.5 * (t[1] - t[0]).cross(t[2] - t[0]).length(),
+                    component,
+                }
+            })
+            .collect();
+        let builder = Builder {
+            tris: &tris,
+            prims: &prims,
+            params,
+            texel,
+        };
+        let mut order: Vec<u32> = (0..tris.len() as u32).collect();
+        let root = (!order.is_empty()).then(|| builder.build(&mut order, 0, 0));
+
+        let mut out = Flattened::default();
+        let root_children = match &root {
+            None => [ChildRef::ABSENT, ChildRef::ABSENT],
+            Some(Node::Inner(children)) => {
+                out.nodes.push(GpuNode::default());
+                let refs = [
+                    out.flatten(&children[0], &builder, &order),
+                    out.flatten(&children[1], &builder, &order),
+                ];
+                out.nodes[0] = GpuNode::new(refs[0], refs[1]);
+                refs
+            }
+            Some(leaf) => [out.flatten(leaf, &builder, &order), ChildRef::ABSENT],
+        };
+        if out.nodes.is_empty() {
+            out.nodes
+                .push(GpuNode::new(root_children[0], root_children[1]));
+        }
+        let depth = root.as_ref().map_or(0, depth_of).max(1);
+        if depth > STACK_SIZE {
+            return Err(Error::param(
+                "scene",
+                format!("RBVH depth {depth} exceeds the {STACK_SIZE}-entry stack"),
+            ));
+        }
+        let sizes: Vec<(u32, u32)> = out
+            .tiles
+            .iter()
+            .map(|t| (t.frame.res_u, t.frame.res_v))
+            .collect();
+        let packing = atlas::pack(&sizes)?;
+        for (leaf, &base) in out.leaves.iter_mut().zip(&packing.bases) {
+            leaf.atlas_base = base;
+        }
+        let atlas = atlas::assemble(&out.tiles, &packing);
+        let stats = RbvhStats {
+            build_ms: start.elapsed().as_secs_f64() * 1e3,
+            heightfield_leaves: out.leaves.len() as u32,
+            triangle_leaves: out.triangle_leaves,
+            tile_texels: sizes.iter().map(|&(u, v)| u as u64 * v as u64).sum(),
+        };
+        let bounds = root_children
+            .iter()
+            .filter(|c| !(c.is_leaf() && c.count == 0))
+            .fold(Aabb::EMPTY, |b, c| b.union(c.bounds));
+        Ok(Rbvh {
+            params: *params,
+            nodes: out.nodes,
+            triangles: out.triangles,
+            leaves: out.leaves,
+            atlas,
+            bounds,
+            depth,
+            texel_size: texel,
+            stats,
+        })
+    }
+}
+
+impl Builder<'_> {
+    fn build(&self, order: &mut [u32], offset: u32, depth: u32) -> Node {
+        let n = order.len();
+        let first = &self.prims[order[0] as usize];
+        let one_part = !self.params.object_split
+            || order
+                .iter()
+                .all(|&i| self.prims[i as usize].component == first.component);
+        if one_part {
+            let tris: Vec<[Vec3; 3]> = order.iter().map(|&i| self.tris[i as usize]).collect();
+            if let Some(tiles) = self.heightfield(&tris) {
+                return tiles_subtree(tiles);
+            }
+        }
+        let bounds = order
+            .iter()
+            .fold(Aabb::EMPTY, |b, &i| b.union(self.prims[i as usize].bounds));
+        let small = bounds.diagonal() < self.params.min_leaf_texels * self.texel;
+        if n == 1 || (n <= MAX_TRIANGLE_LEAF && small) {
+            return Node::Triangles {
+                start: offset,
+                count: n as u32,
+            };
+        }
+        let mid = split(
+            self.prims,
+            order,
+            self.params.subdivision,
+            self.params.object_split,
+            depth >= MEDIAN_BELOW_DEPTH,
+        );
+        let (left, right) = order.split_at_mut(mid);
+        let (a, b) = if n >= PARALLEL_THRESHOLD {
+            rayon::join(
+                || self.build(left, offset, depth + 1),
+                || self.build(right, offset + mid as u32, depth + 1),
+            )
+        } else {
+            (
+                self.build(left, offset, depth + 1),
+                self.build(right, offset + mid as u32, depth + 1),
+            )
+        };
+        Node::Inner(Box::new([a, b]))
+    }
+
+    /// The tiles of `tris` as one height field, or None when they are not representable.
+    fn heightfield(&self, tris: &[[Vec3; 3]]) -> Option<Vec<Tile>> {
+        let w = projection_axis(tris)?;
+        if !passes(self.params.refinement, tris, w) {
+            return None;
+        }
+        let frame = fit(tris, w, self.texel);
+        let mut tiles = Vec::new();
+        for window in windows(&frame, self.params.max_tile) {
+            // Layers closer than a texel are one surface at this sampling rate.
+            let tile = rasterize(tris, &window, self.texel)?;
+            if tile.covered > 0 {
+                tiles.push(tile);
+            }
+        }
+        (!tiles.is_empty()).then_some(tiles)
+    }
+}
+
+/// Cuts `frame` into windows of at most `max` samples per side that share their border samples
+/// (window k starts at sample k·(max − 1)), so the cells of neighbouring tiles meet exactly.
+fn windows(frame: &Frame, max: u32) -> Vec<Frame> {
+    let starts = |res: u32| -> Vec<(u32, u32)> {
+        if res <= max {
+            return vec![(0, res)];
+        }
+        let step = max - 1;
+        (0..)
+            .map(|k| k * step)
+            .take_while(|&s| s + 1 < res)
+            .map(|s| (s, max.min(res - s)))
+            .collect()
+    };
+    let mut out = Vec::new();
+    for &(sv, nv) in &starts(frame.res_v) {
+        for &(su, nu) in &starts(frame.res_u) {
+            out.push(Frame {
+                origin: frame.origin
+                    + (su as f32 * frame.texel) * frame.u
+                    + (sv as f32 * frame.texel) * frame.v,
+                res_u: nu,
+                res_v: nv,
+                ..*frame
+            });
+        }
+    }
+    out
+}
+
+/// A balanced subtree over the tiles of one subdivided height field (in window order, so halves
+/// are spatially coherent).
+fn tiles_subtree(mut tiles: Vec<Tile>) -> Node {
+    if tiles.len() == 1 {
+        return Node::Heightfield(Box::new(tiles.pop().expect("one tile")));
+    }
+    let right = tiles.split_off(tiles.len() / 2);
+    Node::Inner(Box::new([tiles_subtree(tiles), tiles_subtree(right)]))
+}
+
+fn depth_of(node: &Node) -> u32 {
+    match node {
+        Node::Inner(c) => 1 + depth_of(&c[0]).max(depth_of(&c[1])),
+        _ => 0,
+    }
+}
+
+#[derive(Default)]
+struct Flattened {
+    nodes: Vec<GpuNode>,
+    triangles: Vec<GpuTriangle>,
+    leaves: Vec<super::GpuHeightfield>,
+    tiles: Vec<Tile>,
+    triangle_leaves: u32,
+}
+
+impl Flattened {
+    /// Depth-first packing; inner boxes are the union of their children's boxes, which for
+    /// height-field leaves include the dilated rim beyond the triangles.
+    fn flatten(&mut self, node: &Node, b: &Builder, order: &[u32]) -> ChildRef {
+        match node {
+            Node::Inner(children) => {
+                let index = self.nodes.len() as u32;
+                self.nodes.push(GpuNode::default());
+                let l = self.flatten(&children[0], b, order);
+                let r = self.flatten(&children[1], b, order);
+                self.nodes[index as usize] = GpuNode::new(l, r);
+                ChildRef {
+                    bounds: l.bounds.union(r.bounds),
+                    child: index,
+                    count: 0,
+                }
+            }
+            Node::Heightfield(tile) => {
+                let index = self.leaves.len() as u32;
+                self.leaves.push(tile.heightfield(0));
+                self.tiles.push((**tile).clone());
+                ChildRef {
+                    bounds: tile.world_bounds(),
+                    child: LEAF_BIT | index,
+                    count: HEIGHTFIELD_COUNT,
+                }
+            }
+            Node::Triangles { start, count } => {
+                let first = self.triangles.len() as u32;
+                let mut bounds = Aabb::EMPTY;
+                for &i in &order[*start as usize..(*start + *count) as usize] {
+                    let t = b.tris[i as usize];
+                    bounds = bounds.union(Aabb::from_points(t));
+                    self.triangles.push(GpuTriangle::new(t, i));
+                }
+                self.triangle_leaves += 1;
+                ChildRef {
+                    bounds,
+                    child: LEAF_BIT | first,
+                    count: *count,
+                }
+            }
+        }
+    }
+}
+
+/// Per triangle, a dense id of its connected part: vertices are welded by position within each
+/// scene object (loaders often duplicate vertices along UV or normal seams), then joined by the
+/// triangles that share them. Ids are numbered in order of first appearance, so they are
+/// deterministic.
+fn connected_parts(scene: &Scene) -> Vec<u32> {
+    let mut key_of: HashMap<(u32, [u32; 3]), u32> = HashMap::new();
+    let mut parent: Vec<u32> = Vec::new();
+    let mut corners = Vec::with_capacity(scene.triangle_count());
+    for (t, tri) in scene.triangles.iter().enumerate() {
+        let object = scene.object_of_triangle.get(t).copied().unwrap_or(0);
+        let ids = tri.map(|v| {
+            let p = scene.positions[v as usize] + Vec3::ZERO;
+            let key = (object, [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]);
+            *key_of.entry(key).or_insert_with(|| {
+                parent.push(parent.len() as u32);
+                parent.len() as u32 - 1
+            })
+        });
+        union(&mut parent, ids[0], ids[1]);
+        union(&mut parent, ids[0], ids[2]);
+        corners.push(ids[0]);
+    }
+    let mut dense: HashMap<u32, u32> = HashMap::new();
+    corners
+        .into_iter()
+        .map(|v| {
+            let root = find(&mut parent, v);
+            let next = dense.len() as u32;
+            *dense.entry(root).or_insert(next)
+        })
+        .collect()
+}
+
+fn find(parent: &mut [u32], mut x: u32) -> u32 {
+    while parent[x as usize] != x {
+        parent[x as usize] = parent[parent[x as usize] as usize];
+        x = parent[x as usize];
+    }
+    x
+}
+
+fn union(parent: &mut [u32], a: u32, b: u32) {
+    let (ra, rb) = (find(parent, a), find(parent, b));
+    if ra != rb {
+        parent[ra.max(rb) as usize] = ra.min(rb);
+    }
+}

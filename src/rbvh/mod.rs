@@ -20,6 +20,7 @@ mod raster;
 mod split;
 
 pub use layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT};
+pub use march::RbvhTraceStats;
 pub use params::{RbvhParams, Refinement, Subdivision, QUALITY_NAMES};
 
 use crate::bvh::{GpuNode, GpuTriangle};
@@ -56,7 +57,8 @@ pub struct RbvhStats {
 
 impl Rbvh {
     pub fn tree_bytes(&self) -> u64 {
-        (std::mem::size_of_val(self.nodes.as_slice()) + std::mem::size_of_val(self.leaves.as_slice())) as u64
+        (std::mem::size_of_val(self.nodes.as_slice())
+            + std::mem::size_of_val(self.leaves.as_slice())) as u64
     }
 
     pub fn atlas_bytes(&self) -> u64 {
