@@ -1,1 +1,434 @@
-//! (in progress)
+//! Saving and loading a built RBVH: one versioned binary file holding everything [`Rbvh`] holds,
+//! so that a build (minutes for a large scene) is done once and traced many times.
+//!
+//! All numbers are little-endian; floats are stored as their IEEE-754 bits, so every value
+//! (NaN payloads and signed zeros included) round-trips exactly and `save → load → save` is
+//! byte-identical. Encoding goes word by word through `to_le_bytes`/`from_le_bytes`, so the file
+//! means the same on a big-endian host (where the conversion swaps) as on a little-endian one
+//! (where it is a plain copy). There is no padding anywhere.
+//!
+//! | bytes | type | field |
+//! |---|---|---|
+//! | 0..8 | `[u8; 8]` | magic `RBVHv` followed by three zero bytes |
+//! | 8..12 | u32 | format version, 1 |
+//! | 12..16 | f32 | `params.texels_per_diagonal` |
+//! | 16..20, 20..24 | u32, f32 | `params.refinement`: tag (0 = `NormalCone`, 1 = `ProjectedArea`), its value (`max_angle_deg` or `min_ratio`) |
+//! | 24..28 | u32 | `params.subdivision`: 0 = `SpatialMedian`, 1 = `AreaSah` |
+//! | 28..32 | u32 | `params.object_split`: 0 or 1 |
+//! | 32..36 | u32 | `params.max_tile` |
+//! | 36..40 | f32 | `params.min_leaf_texels` |
+//! | 40..64 | 6 × f32 | `bounds`: min x, y, z, max x, y, z |
+//! | 64..68 | u32 | `depth` |
+//! | 68..72 | f32 | `texel_size` |
+//! | 72..80 | f64 | `stats.build_ms` |
+//! | 80..84, 84..88 | u32, u32 | `stats.heightfield_leaves`, `stats.triangle_leaves` |
+//! | 88..96 | u64 | `stats.tile_texels` |
+//! | 96..100, 100..104 | u32, u32 | `atlas.pitch`, `atlas.rows` |
+//! | 104..136 | 4 × u64 | counts: nodes `N`, triangles `T`, leaves `L`, texels `X` |
+//! | 136.. | `N` × 64 bytes | `nodes` ([`crate::bvh::GpuNode`], 16 words each) |
+//! | then | `T` × 48 bytes | `triangles` ([`crate::bvh::GpuTriangle`], 12 words each) |
+//! | then | `L` × 64 bytes | `leaves` ([`super::GpuHeightfield`], 16 words each) |
+//! | then | `X` × 4 bytes | `atlas.texels` ([`super::Texel`], one word each), row by row |
+//!
+//! Loading checks everything a tracer relies on, so a loaded RBVH is safe to trace and to upload:
+//! the magic and version, the length (counts × record sizes must be exactly what follows the
+//! header), `X = pitch × rows`, no NaN in the header's floats, enum tags and flags in range, every
+//! node's children (inner: a node index, with count 0; triangle leaf: a range within `triangles`;
+//! height-field leaf: an index into `leaves`), and every leaf's tile inside the atlas with finite
+//! frame and a non-negative height scale. Every failure is an [`Error::Parse`] naming the file.
+
+use std::io::Write;
+use std::path::Path;
+
+use bytemuck::Pod;
+
+use super::layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT, LEAF_BIT};
+use super::march::tile_fits;
+use super::params::{RbvhParams, Refinement, Subdivision};
+use super::{Rbvh, RbvhStats};
+use crate::bvh::{GpuNode, GpuTriangle};
+use crate::geom::Aabb;
+use crate::io::write_atomically;
+use crate::{Error, Result};
+
+/// The first eight bytes of every RBVH file.
+const MAGIC: [u8; 8] = *b"RBVHv\0\0\0";
+/// The format version this build writes and reads.
+const VERSION: u32 = 1;
+/// Bytes before the arrays (see the table in the module docs).
+const HEADER_BYTES: usize = 136;
+
+impl Rbvh {
+    /// Writes the versioned binary file described in the module docs, atomically (through
+    /// [`write_atomically`]): a failed save leaves `path` as it was and no temporary file behind.
+    pub fn save(&self, path: &Path) -> Result<()> {
+        let bytes = self.to_bytes();
+        write_atomically(path, |w| w.write_all(&bytes))
+    }
+
+    /// Reads a file written by [`Rbvh::save`]. A missing or unreadable file is [`Error::Io`];
+    /// every malformation (bad magic, unsupported version, truncation, counts inconsistent with the
+    /// length, references out of range, NaN) is [`Error::Parse`] naming the file and the problem.
+    pub fn load(path: &Path) -> Result<Rbvh> {
+        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        Self::from_bytes(&bytes, path)
+    }
+
+    /// The bytes [`Rbvh::save`] writes.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let arrays = std::mem::size_of_val(self.nodes.as_slice())
+            + std::mem::size_of_val(self.triangles.as_slice())
+            + std::mem::size_of_val(self.leaves.as_slice())
+            + std::mem::size_of_val(self.atlas.texels.as_slice());
+        let mut out = Vec::with_capacity(HEADER_BYTES + arrays);
+        out.extend_from_slice(&MAGIC);
+        put_u32(&mut out, VERSION);
+
+        let p = &self.params;
+        put_f32(&mut out, p.texels_per_diagonal);
+        let (tag, value) = match p.refinement {
+            Refinement::NormalCone { max_angle_deg } => (0, max_angle_deg),
+            Refinement::ProjectedArea { min_ratio } => (1, min_ratio),
+        };
+        put_u32(&mut out, tag);
+        put_f32(&mut out, value);
+        put_u32(
+            &mut out,
+            match p.subdivision {
+                Subdivision::SpatialMedian => 0,
+                Subdivision::AreaSah => 1,
+            },
+        );
+        put_u32(&mut out, u32::from(p.object_split));
+        put_u32(&mut out, p.max_tile);
+        put_f32(&mut out, p.min_leaf_texels);
+
+        for x in self.bounds.min.to_array() {
+            put_f32(&mut out, x);
+        }
+        for x in self.bounds.max.to_array() {
+            put_f32(&mut out, x);
+        }
+        put_u32(&mut out, self.depth);
+        put_f32(&mut out, self.texel_size);
+        out.extend_from_slice(&self.stats.build_ms.to_bits().to_le_bytes());
+        put_u32(&mut out, self.stats.heightfield_leaves);
+        put_u32(&mut out, self.stats.triangle_leaves);
+        out.extend_from_slice(&self.stats.tile_texels.to_le_bytes());
+        put_u32(&mut out, self.atlas.pitch);
+        put_u32(&mut out, self.atlas.rows);
+        for count in [
+            self.nodes.len(),
+            self.triangles.len(),
+            self.leaves.len(),
+            self.atlas.texels.len(),
+        ] {
+            out.extend_from_slice(&(count as u64).to_le_bytes());
+        }
+        debug_assert_eq!(out.len(), HEADER_BYTES);
+
+        put_records(&mut out, &self.nodes);
+        put_records(&mut out, &self.triangles);
+        put_records(&mut out, &self.leaves);
+        put_records(&mut out, &self.atlas.texels);
+        out
+    }
+
+    /// Parses the bytes of an RBVH file; `name_for_errors` is the file named in every error.
+    pub fn from_bytes(bytes: &[u8], name_for_errors: &Path) -> Result<Rbvh> {
+        let path = name_for_errors;
+        let err = |message: String| Error::parse(path, None, message);
+        let head = &bytes[..bytes.len().min(MAGIC.len())];
+        if head != &MAGIC[..head.len()] {
+            return Err(err(format!(
+                "not an RBVH file: it starts with {head:02x?}, not the magic {MAGIC:02x?} (\"RBVHv\")"
+            )));
+        }
+        let mut r = Reader {
+            bytes,
+            pos: 0,
+            path,
+        };
+        r.take(MAGIC.len(), "the magic")?;
+        let version = r.u32("the version")?;
+        if version != VERSION {
+            return Err(err(format!(
+                "unsupported version {version} (this build reads version {VERSION})"
+            )));
+        }
+
+        let texels_per_diagonal = r.f32("params.texels_per_diagonal")?;
+        let refinement = match (
+            r.u32("params.refinement")?,
+            r.f32("params.refinement value")?,
+        ) {
+            (0, max_angle_deg) => Refinement::NormalCone { max_angle_deg },
+            (1, min_ratio) => Refinement::ProjectedArea { min_ratio },
+            (tag, _) => {
+                return Err(err(format!(
+                "params.refinement has tag {tag}; known are 0 (NormalCone) and 1 (ProjectedArea)"
+            )))
+            }
+        };
+        let subdivision = match r.u32("params.subdivision")? {
+            0 => Subdivision::SpatialMedian,
+            1 => Subdivision::AreaSah,
+            tag => {
+                return Err(err(format!(
+                    "params.subdivision has tag {tag}; known are 0 (SpatialMedian) and 1 (AreaSah)"
+                )))
+            }
+        };
+        let object_split = match r.u32("params.object_split")? {
+            0 => false,
+            1 => true,
+            x => return Err(err(format!("params.object_split is {x}, not 0 or 1"))),
+        };
+        let params = RbvhParams {
+            texels_per_diagonal,
+            refinement,
+            subdivision,
+            object_split,
+            max_tile: r.u32("params.max_tile")?,
+            min_leaf_texels: r.f32("params.min_leaf_texels")?,
+        };
+        let bounds = Aabb {
+            min: [r.f32("bounds")?, r.f32("bounds")?, r.f32("bounds")?].into(),
+            max: [r.f32("bounds")?, r.f32("bounds")?, r.f32("bounds")?].into(),
+        };
+        let depth = r.u32("depth")?;
+        let texel_size = r.f32("texel_size")?;
+        let stats = RbvhStats {
+            build_ms: f64::from_bits(r.u64("stats.build_ms")?),
+            heightfield_leaves: r.u32("stats.heightfield_leaves")?,
+            triangle_leaves: r.u32("stats.triangle_leaves")?,
+            tile_texels: r.u64("stats.tile_texels")?,
+        };
+        let pitch = r.u32("atlas.pitch")?;
+        let rows = r.u32("atlas.rows")?;
+        let counts = [
+            r.u64("the node count")?,
+            r.u64("the triangle count")?,
+            r.u64("the leaf count")?,
+            r.u64("the texel count")?,
+        ];
+
+        let floats = [
+            ("params.texels_per_diagonal", texels_per_diagonal),
+            ("params.refinement value", refinement_value(refinement)),
+            ("params.min_leaf_texels", params.min_leaf_texels),
+            ("texel_size", texel_size),
+        ];
+        for (name, x) in floats {
+            if x.is_nan() {
+                return Err(err(format!("{name} is NaN")));
+            }
+        }
+        // Infinite bounds are legitimate (the empty box of an empty scene); NaN is not.
+        if bounds.min.is_nan() || bounds.max.is_nan() {
+            return Err(err(format!("bounds {bounds:?} contain NaN")));
+        }
+        if stats.build_ms.is_nan() {
+            return Err(err("stats.build_ms is NaN".to_string()));
+        }
+
+        let sizes = [
+            std::mem::size_of::<GpuNode>(),
+            std::mem::size_of::<GpuTriangle>(),
+            std::mem::size_of::<GpuHeightfield>(),
+            std::mem::size_of::<Texel>(),
+        ];
+        let mut needed = Some(0u64);
+        for k in 0..4 {
+            needed = needed.and_then(|n| n.checked_add(counts[k].checked_mul(sizes[k] as u64)?));
+        }
+        let remaining = (bytes.len() - r.pos) as u64;
+        let [n_nodes, n_triangles, n_leaves, n_texels] = counts;
+        if needed != Some(remaining) {
+            let (needed, verdict) = match needed {
+                Some(n) if n < remaining => (n.to_string(), "trailing bytes after the arrays"),
+                Some(n) => (n.to_string(), "the file is truncated"),
+                None => ("more than 2^64".to_string(), "the counts are corrupt"),
+            };
+            return Err(err(format!(
+                "the header counts {n_nodes} nodes, {n_triangles} triangles, {n_leaves} leaves and \
+                 {n_texels} texels, which take {needed} bytes, but {remaining} bytes follow the \
+                 {HEADER_BYTES}-byte header: {verdict}"
+            )));
+        }
+        if n_texels != u64::from(pitch) * u64::from(rows) {
+            return Err(err(format!(
+                "the atlas has {n_texels} texels, not pitch × rows = {pitch} × {rows}"
+            )));
+        }
+
+        // The lengths now match the file, so each count fits in memory (usize).
+        let nodes: Vec<GpuNode> = r.records(n_nodes as usize)?;
+        let triangles: Vec<GpuTriangle> = r.records(n_triangles as usize)?;
+        let leaves: Vec<GpuHeightfield> = r.records(n_leaves as usize)?;
+        let texels: Vec<Texel> = r.records(n_texels as usize)?;
+        let atlas = Atlas {
+            pitch,
+            rows,
+            texels,
+        };
+
+        for (index, node) in nodes.iter().enumerate() {
+            let children = [
+                ('a', node.a_child, node.a_count),
+                ('b', node.b_child, node.b_count),
+            ];
+            for (name, child, count) in children {
+                check_child(child, count, &nodes, &triangles, &leaves)
+                    .map_err(|why| err(format!("node {index}, child {name}: {why}")))?;
+            }
+        }
+        for (index, leaf) in leaves.iter().enumerate() {
+            check_leaf(leaf, &atlas)
+                .map_err(|why| err(format!("height-field leaf {index}: {why}")))?;
+        }
+
+        Ok(Rbvh {
+            params,
+            nodes,
+            triangles,
+            leaves,
+            atlas,
+            bounds,
+            depth,
+            texel_size,
+            stats,
+        })
+    }
+}
+
+fn refinement_value(r: Refinement) -> f32 {
+    match r {
+        Refinement::NormalCone { max_angle_deg } => max_angle_deg,
+        Refinement::ProjectedArea { min_ratio } => min_ratio,
+    }
+}
+
+/// Checks one child reference against the layout rules (see [`super::layout`]).
+fn check_child(
+    child: u32,
+    count: u32,
+    nodes: &[GpuNode],
+    triangles: &[GpuTriangle],
+    leaves: &[GpuHeightfield],
+) -> std::result::Result<(), String> {
+    let index = child & !LEAF_BIT;
+    if child & LEAF_BIT == 0 {
+        if count != 0 {
+            return Err(format!("inner node reference with count {count}, not 0"));
+        }
+        if index as usize >= nodes.len() {
+            return Err(format!(
+                "node index {index} is out of range (there are {} nodes)",
+                nodes.len()
+            ));
+        }
+    } else if count == HEIGHTFIELD_COUNT {
+        if index as usize >= leaves.len() {
+            return Err(format!(
+                "height-field leaf index {index} is out of range (there are {} leaves)",
+                leaves.len()
+            ));
+        }
+    } else if u64::from(index) + u64::from(count) > triangles.len() as u64 {
+        return Err(format!(
+            "triangles {index}..{} are out of range (there are {})",
+            u64::from(index) + u64::from(count),
+            triangles.len()
+        ));
+    }
+    Ok(())
+}
+
+/// Checks that a leaf's frame is finite and its tile lies in the atlas.
+fn check_leaf(leaf: &GpuHeightfield, atlas: &Atlas) -> std::result::Result<(), String> {
+    let frame = [leaf.origin, leaf.axis_u, leaf.axis_v, leaf.axis_w];
+    if frame.iter().flatten().any(|x| !x.is_finite()) || !leaf.h_scale.is_finite() {
+        return Err("its frame (origin, axes, h_scale) is not finite".to_string());
+    }
+    if leaf.h_scale < 0.0 {
+        return Err(format!("h_scale {} is negative", leaf.h_scale));
+    }
+    if !tile_fits(leaf, atlas) {
+        return Err(format!(
+            "its {}×{} tile at texel {} does not fit the {}×{} atlas",
+            leaf.res_u, leaf.res_v, leaf.atlas_base, atlas.pitch, atlas.rows
+        ));
+    }
+    Ok(())
+}
+
+fn put_u32(out: &mut Vec<u8>, x: u32) {
+    out.extend_from_slice(&x.to_le_bytes());
+}
+
+fn put_f32(out: &mut Vec<u8>, x: f32) {
+    put_u32(out, x.to_bits());
+}
+
+/// Appends records of 4-byte words (every packed type here is made of `u32`/`f32` fields), each
+/// word little-endian.
+fn put_records<T: Pod>(out: &mut Vec<u8>, records: &[T]) {
+    for &word in bytemuck::cast_slice::<T, u32>(records) {
+        put_u32(out, word);
+    }
+}
+
+/// A cursor over the file's bytes whose every read names the field it wanted when the file ends.
+struct Reader<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+    path: &'a Path,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8]> {
+        let Some(slice) = self.bytes.get(self.pos..self.pos.saturating_add(n)) else {
+            return Err(Error::parse(
+                self.path,
+                None,
+                format!(
+                    "truncated at byte {}: {what} needs bytes {}..{}",
+                    self.bytes.len(),
+                    self.pos,
+                    self.pos.saturating_add(n)
+                ),
+            ));
+        };
+        self.pos += n;
+        Ok(slice)
+    }
+
+    fn u32(&mut self, what: &str) -> Result<u32> {
+        let b = self.take(4, what)?;
+        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    }
+
+    fn f32(&mut self, what: &str) -> Result<f32> {
+        self.u32(what).map(f32::from_bits)
+    }
+
+    fn u64(&mut self, what: &str) -> Result<u64> {
+        let b = self.take(8, what)?;
+        let mut a = [0u8; 8];
+        a.copy_from_slice(b);
+        Ok(u64::from_le_bytes(a))
+    }
+
+    /// Reads `n` records of 4-byte words written by [`put_records`].
+    fn records<T: Pod>(&mut self, n: usize) -> Result<Vec<T>> {
+        let size = std::mem::size_of::<T>();
+        let bytes = self.take(n.saturating_mul(size), "the arrays")?;
+        let mut out = vec![T::zeroed(); n];
+        let words = bytemuck::cast_slice_mut::<T, u32>(&mut out);
+        for (word, b) in words.iter_mut().zip(bytes.chunks_exact(4)) {
+            *word = u32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+        }
+        Ok(out)
+    }
+}

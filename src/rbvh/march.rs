@@ -1,1 +1,1223 @@
-//! (in progress)
+//! CPU reference caster of the RBVH, on exactly the packed data the GPU reads ([`super::layout`]).
+//! It is the oracle of the GLSL march: every step below is meant to be mirrored line by line.
+//!
+//! **Tree**: the exact BVH's traversal (`crate::bvh`'s `traverse.rs`): nearest child first, the
+//! same tie rule, the same bounded stack, the same robust box test (Ize, "Robust BVH Ray
+//! Traversal", JCGT 2013). A leaf child is a triangle leaf, tested with the watertight test of
+//! Woop, Benthin & Wald ("Watertight Ray/Triangle Intersection", JCGT 2013), or a height-field
+//! leaf (Novák & Dachsbacher 2012), marched. The paper gives no detail of the march; this is our
+//! reading (`docs/RBVH.md`):
+//!
+//! 1. **Frame**: the ray is moved into the leaf's frame `(s, t, h)`. The map is affine, so the ray
+//!    parameter is the same in both spaces and a hit's `t` needs no conversion.
+//! 2. **Clip** to the tile's box `s, t ∈ [½, res − ½]`, `h ∈ [0, MAX_CODE·h_scale]`, padded (see
+//!    [`SLACK`], [`EDGE_PAD`]) so that the box never decides a hit: the triangles do.
+//! 3. **Walk** the cells the ray crosses, front to back, with the 2D DDA of Amanatides & Woo, "A
+//!    Fast Voxel Traversal Algorithm for Ray Tracing" (Eurographics 1987), from the cell holding
+//!    the entry point. Cell `(i, j)` spans `s ∈ [i + ½, i + 3⁄2]`, `t ∈ [j + ½, j + 3⁄2]`, between
+//!    samples `(i, j)` and `(i + 1, j + 1)`. Where the ray passes a grid vertex closer than
+//!    rounding can resolve, the cell on the other side of the vertex is tested too.
+//! 4. **Cell**: its surface is two triangles through the four corner samples (three with one
+//!    hole, none with more), tested after a cheap height rejection with the same watertight test
+//!    in frame space. Neighbouring cells share their edge's two vertices bit for bit, so no ray
+//!    slips between cells. The first cell with a hit ends the march.
+//! 5. **Normal**: the stored normal of the corner sample nearest the hit.
+//!
+//! Corrupt data never panics and never loops forever: every index goes through `get` (out of range
+//! = absent), node visits are capped by the node count, a march by the tile's cell count.
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT, LEAF_BIT};
+use super::Rbvh;
+use crate::bvh::{ChildRef, STACK_SIZE};
+use crate::geom::{intersect_triangle, safe_inverse, Aabb, Hit, Ray, RayShear};
+
+/// What one ray cost. The heat map shows `nodes + triangles + cells`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RbvhTraceStats {
+    /// Inner nodes visited.
+    pub nodes: u32,
+    /// Triangles of triangle leaves tested (height-field cells are counted in `cells`).
+    pub triangles: u32,
+    /// Height-field cells visited.
+    pub cells: u32,
+    /// The traversal was cut short: the stack overflowed (impossible for a tree no deeper than
+    /// [`STACK_SIZE`]) or, in corrupt data only, a cycle made it visit more nodes than there are.
+    pub overflow: bool,
+}
+
+/// Relative rounding slack of the march (steps 2–4). Frame-space quantities (the ray's height `o_h + d_h·t`,
+/// the triangle test's hit, boundary crossings) carry rounding errors of a few ulps of the
+/// magnitudes involved; the march's box and per-cell height rejection are widened by this much of
+/// `|o_h| + h_top` (plus one height quantum), and a grid vertex counts as passed ambiguously
+/// within this much of `|o_s| + |o_t| + res_u + res_v` texels. 1e-5 (about 80 ulps) is far beyond
+/// the rounding and still costs almost nothing: few cells are rejected less, few vertices are
+/// passed that closely.
+const SLACK: f32 = 1e-5;
+
+/// Padding of the march's box beyond the outermost samples, in texels (step 2): a ray running
+/// exactly in a border plane of an unpadded box is in or out of the slab by the sign of its zero
+/// direction component ([`safe_inverse`]); the padding leaves that decision to the triangles.
+const EDGE_PAD: f32 = 1.0 / 64.0;
+
+impl Rbvh {
+    /// Closest hit of one ray, or [`Hit::MISS`]. Invalid rays ([`Ray::is_valid`]) miss.
+    ///
+    /// The hit `id` tells the two kinds of leaf apart: a triangle-leaf hit reports the scene
+    /// triangle index (`prim`, below 2³¹); a height-field hit reports `LEAF_BIT | leaf index`
+    /// (bit 31 set; the index is into [`Rbvh::leaves`]). A height-field hit's normal is the stored
+    /// (world-space, dilated, octahedral-quantized) normal of the sample nearest the hit; a
+    /// triangle's is its geometric normal as wound.
+    pub fn closest_hit(&self, ray: &Ray) -> (Hit, RbvhTraceStats) {
+        self.traverse(ray, false)
+    }
+
+    /// Whether anything is hit in `[tmin, tmax)`: the hit returned is *some* hit, not the closest.
+    /// Ids and normals as in [`Rbvh::closest_hit`].
+    pub fn any_hit(&self, ray: &Ray) -> (Hit, RbvhTraceStats) {
+        self.traverse(ray, true)
+    }
+
+    /// Traces many rays in parallel with `rayon`; hits in ray order.
+    pub fn trace_cpu(&self, rays: &[Ray], any_hit: bool) -> Vec<Hit> {
+        rays.par_iter()
+            .map(|r| self.traverse(r, any_hit).0)
+            .collect()
+    }
+
+    fn traverse(&self, ray: &Ray, any_hit: bool) -> (Hit, RbvhTraceStats) {
+        let mut stats = RbvhTraceStats::default();
+        if !ray.is_valid() {
+            return (Hit::MISS, stats);
+        }
+        let origin = ray.origin();
+        let inv_dir = safe_inverse(ray.dir());
+        let shear = RayShear::new(ray);
+        let mut t_closest = ray.tmax;
+        let mut best = Hit::MISS;
+        let mut stack = [0u32; STACK_SIZE as usize];
+        let mut sp = 0usize;
+        let mut node = 0u32;
+        loop {
+            let mut next = None;
+            // A missing node (an index out of range, in corrupt data) has no children.
+            if let Some(gpu_node) = self.nodes.get(node as usize) {
+                // In a tree every node is entered at most once per ray; more visits than nodes
+                // can only come from a cycle in corrupt data.
+                if stats.nodes as usize >= self.nodes.len() {
+                    stats.overflow = true;
+                    break;
+                }
+                stats.nodes += 1;
+                let children = gpu_node.children();
+                let entry = |c: &ChildRef| c.bounds.intersect(origin, inv_dir, ray.tmin, t_closest);
+                let (ta, tb) = (entry(&children[0]), entry(&children[1]));
+                // Nearest child first; `b` only goes first when strictly nearer (as in the BVH).
+                let order = match (ta, tb) {
+                    (Some(a), Some(b)) if b < a => [1, 0],
+                    _ => [0, 1],
+                };
+                for k in order {
+                    let c = &children[k];
+                    let Some(t_entry) = [ta, tb][k] else { continue };
+                    if t_entry > t_closest {
+                        continue;
+                    }
+                    if c.child & LEAF_BIT == 0 {
+                        if next.is_none() {
+                            next = Some(c.child);
+                        } else if sp < STACK_SIZE as usize {
+                            stack[sp] = c.child;
+                            sp += 1;
+                        } else {
+                            stats.overflow = true;
+                        }
+                    } else if c.count == HEIGHTFIELD_COUNT {
+                        let leaf = c.child & !LEAF_BIT;
+                        if let Some((t, normal)) = self.march(leaf, ray, t_closest, &mut stats) {
+                            t_closest = t;
+                            best = Hit {
+                                t,
+                                normal: normal.to_array(),
+                                id: LEAF_BIT | leaf,
+                                reserved: [0; 3],
+                            };
+                            if any_hit {
+                                return (best, stats);
+                            }
+                        }
+                    } else {
+                        let first = (c.child & !LEAF_BIT) as usize;
+                        let end = first
+                            .saturating_add(c.count as usize)
+                            .min(self.triangles.len());
+                        for slot in first..end {
+                            let Some(tri) = self.triangles.get(slot) else {
+                                break;
+                            };
+                            stats.triangles += 1;
+                            let [a, b, v2] = tri.vertices();
+                            if let Some(t) =
+                                intersect_triangle(&shear, a, b, v2, ray.tmin, t_closest)
+                            {
+                                t_closest = t;
+                                best = Hit {
+                                    t,
+                                    normal: tri.normal().to_array(),
+                                    id: tri.prim,
+                                    reserved: [0; 3],
+                                };
+                                if any_hit {
+                                    return (best, stats);
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            node = match next {
+                Some(n) => n,
+                None if sp > 0 => {
+                    sp -= 1;
+                    stack[sp]
+                }
+                None => break,
+            };
+        }
+        (best, stats)
+    }
+
+    /// Marches height-field leaf `leaf_index` for the ray's interval `[tmin, t_closest)`; returns
+    /// the hit distance and the world-space normal. Steps as numbered in the module docs.
+    fn march(
+        &self,
+        leaf_index: u32,
+        ray: &Ray,
+        t_closest: f32,
+        stats: &mut RbvhTraceStats,
+    ) -> Option<(f32, Vec3)> {
+        let leaf = self.leaves.get(leaf_index as usize)?;
+        // A tile needs two samples along each side to have a cell at all.
+        if leaf.res_u < 2 || leaf.res_v < 2 || !tile_fits(leaf, &self.atlas) {
+            return None;
+        }
+        // 1. Frame.
+        let (u, v, w) = (
+            Vec3::from(leaf.axis_u),
+            Vec3::from(leaf.axis_v),
+            Vec3::from(leaf.axis_w),
+        );
+        let rel = ray.origin() - Vec3::from(leaf.origin);
+        let d = ray.dir();
+        let frame = Ray::new(
+            Vec3::new(rel.dot(u), rel.dot(v), rel.dot(w)),
+            Vec3::new(d.dot(u), d.dot(v), d.dot(w)),
+            ray.tmin,
+            t_closest,
+        );
+        // Degenerate or non-finite axes (corrupt data) give a ray no test can answer.
+        if !frame.is_valid() {
+            return None;
+        }
+        let o = frame.origin();
+        let d = frame.dir();
+        let inv = safe_inverse(d);
+        // 2. Clip to the tile's box, padded in height by `slack`: a flat tile (h_scale 0) would
+        // otherwise have a box of zero height, whose entry point *is* the hit, and rounding in
+        // that point could start the walk in the neighbour of the cell whose triangle reports
+        // the hit. Padded along s and t by EDGE_PAD.
+        let h_top = Texel::MAX_CODE as f32 * leaf.h_scale;
+        let slack = SLACK * (o.z.abs() + h_top.abs()) + leaf.h_scale.abs();
+        let tile = Aabb {
+            min: Vec3::new(0.5 - EDGE_PAD, 0.5 - EDGE_PAD, -slack),
+            max: Vec3::new(
+                leaf.res_u as f32 - 0.5 + EDGE_PAD,
+                leaf.res_v as f32 - 0.5 + EDGE_PAD,
+                h_top + slack,
+            ),
+        };
+        let t0 = tile.intersect(o, inv, frame.tmin, frame.tmax)?;
+        let t1 = box_exit(&tile, o, inv).min(frame.tmax);
+        let fr = FrameRay {
+            shear: RayShear::new(&frame),
+            ray: frame,
+            slack,
+        };
+
+        // 3. Walk. The start cell is the one holding the entry point, clamped so that the padding
+        // and rounding at the tile's border cannot put it outside.
+        let last_i = i64::from(leaf.res_u) - 2;
+        let last_j = i64::from(leaf.res_v) - 2;
+        let entry = o + d * t0;
+        let mut ci = start_cell(entry.x, last_i);
+        let mut cj = start_cell(entry.y, last_j);
+        let step_i = step_of(d.x);
+        let step_j = step_of(d.y);
+        let mut next_i = boundary_t(ci, step_i, o.x, inv.x);
+        let mut next_j = boundary_t(cj, step_j, o.y, inv.y);
+        // Where the ray passes a grid vertex closer than rounding can resolve, the walk goes
+        // round it on one side while the watertight test may report the hit in the cell on the
+        // other side; that cell is then tested too. `corner_slack` bounds, in texels, the
+        // rounding of the frame coordinates the two tests work on.
+        let corner_slack = SLACK * (o.x.abs() + o.y.abs() + leaf.res_u as f32 + leaf.res_v as f32);
+        // A straight line crosses each of the (res − 2) inner boundaries per axis at most once, so
+        // it takes at most this many steps, each visiting one cell (two near a grid vertex).
+        let max_steps = u64::from(leaf.res_u - 1) + u64::from(leaf.res_v - 1) - 1;
+        let mut t_in = t0;
+        for _ in 0..max_steps {
+            if t_in > t1 {
+                break;
+            }
+            stats.cells += 1;
+            let t_out = next_i.min(next_j).min(t1);
+            let hit = cell_hit(&self.atlas, leaf, &fr, ci, cj, t_in, t_out);
+            if hit.is_some() {
+                return hit;
+            }
+            // Step across the nearer boundary; on a tie (the ray through a grid vertex) `s` goes
+            // first. Both boundaries infinite: the ray runs along `h`, one cell is all.
+            let across_s = next_i <= next_j;
+            if step_i != 0 && step_j != 0 {
+                // The gap, in texels, by which the ray misses the vertex the step passes.
+                let gap = if across_s {
+                    (next_j - next_i) * d.y.abs()
+                } else {
+                    (next_i - next_j) * d.x.abs()
+                };
+                let (xi, xj) = if across_s {
+                    (ci, cj + step_j)
+                } else {
+                    (ci + step_i, cj)
+                };
+                if gap <= corner_slack && xi >= 0 && xi <= last_i && xj >= 0 && xj <= last_j {
+                    stats.cells += 1;
+                    let t_x = next_i.max(next_j).min(t1);
+                    let hit = cell_hit(&self.atlas, leaf, &fr, xi, xj, t_out, t_x);
+                    if hit.is_some() {
+                        return hit;
+                    }
+                }
+            }
+            if across_s {
+                if step_i == 0 {
+                    break;
+                }
+                ci += step_i;
+                t_in = next_i;
+                if ci < 0 || ci > last_i {
+                    break;
+                }
+                next_i = boundary_t(ci, step_i, o.x, inv.x);
+            } else {
+                cj += step_j;
+                t_in = next_j;
+                if cj < 0 || cj > last_j {
+                    break;
+                }
+                next_j = boundary_t(cj, step_j, o.y, inv.y);
+            }
+        }
+        None
+    }
+}
+
+/// A ray in a leaf's frame `(s, t, h)` with its interval `[tmin, t_closest)`, its shear for the
+/// watertight test, and its height `slack` (see [`SLACK`]); computed once per leaf.
+struct FrameRay {
+    ray: Ray,
+    shear: RayShear,
+    slack: f32,
+}
+
+/// Whether every texel of `leaf`'s tile lies in the atlas: at least one sample per side, no wider
+/// than the atlas row, and its last texel `atlas_base + (res_v − 1)·pitch + res_u − 1` in range.
+/// The loader rejects files with a leaf that does not fit; the march treats one as empty.
+pub(super) fn tile_fits(leaf: &GpuHeightfield, atlas: &Atlas) -> bool {
+    if leaf.res_u == 0 || leaf.res_v == 0 || leaf.res_u > atlas.pitch {
+        return false;
+    }
+    let last = u64::from(leaf.atlas_base)
+        + u64::from(leaf.res_v - 1) * u64::from(atlas.pitch)
+        + u64::from(leaf.res_u - 1);
+    last < atlas.texels.len() as u64
+}
+
+/// The exit distance of a ray from `b`: the far end of the slab test of [`Aabb::intersect`]. It
+/// needs no widening against rounding here: the box is already `slack` taller than any surface.
+fn box_exit(b: &Aabb, o: Vec3, inv: Vec3) -> f32 {
+    let t0 = (b.min - o) * inv;
+    let t1 = (b.max - o) * inv;
+    t0.max(t1).min_element()
+}
+
+/// The cell index holding coordinate `x` (samples sit at `i + ½`, so cell `i` starts there),
+/// clamped to `0..=last`. `as` saturates and maps NaN to 0, so any input gives a valid cell.
+fn start_cell(x: f32, last: i64) -> i64 {
+    ((x - 0.5).floor() as i64).clamp(0, last)
+}
+
+/// The DDA's step along one axis: the sign of the frame-space direction; a zero component never
+/// steps.
+fn step_of(d: f32) -> i64 {
+    if d > 0.0 {
+        1
+    } else if d < 0.0 {
+        -1
+    } else {
+        0
+    }
+}
+
+/// The ray parameter at which the ray leaves cell `c` through its far boundary along one axis,
+/// `+inf` for an axis it never steps along. Computed from the boundary itself rather than by
+/// accumulating `1/d` per step as Amanatides & Woo do, so that long marches do not drift and every
+/// boundary has the same distance whichever way the ray reaches it.
+fn boundary_t(c: i64, step: i64, o: f32, inv: f32) -> f32 {
+    if step > 0 {
+        ((c + 1) as f32 + 0.5 - o) * inv
+    } else if step < 0 {
+        (c as f32 + 0.5 - o) * inv
+    } else {
+        f32::INFINITY
+    }
+}
+
+/// The ray's height at `t`; exactly `o` for a ray parallel to the tile, so that `0 · ∞` cannot make
+/// a NaN when the cell's exit distance is infinite.
+fn height_at(o: f32, d: f32, t: f32) -> f32 {
+    if d == 0.0 {
+        o
+    } else {
+        o + d * t
+    }
+}
+
+/// Texel `(i, j)` of the leaf's tile, or a hole when the index leaves the atlas. The march only
+/// asks for `(i, j)` inside a tile that [`tile_fits`], so the index cannot overflow; the checked
+/// read is the last line of defence.
+fn texel(atlas: &Atlas, leaf: &GpuHeightfield, i: i64, j: i64) -> Texel {
+    let index = i64::from(leaf.atlas_base) + j * i64::from(atlas.pitch) + i;
+    let Ok(index) = usize::try_from(index) else {
+        return Texel::HOLE;
+    };
+    match atlas.texels.get(index) {
+        Some(&t) => t,
+        None => Texel::HOLE,
+    }
+}
+
+/// Steps 4 and 5: intersects the ray with cell `(ci, cj)`, which it crosses over `[t_in, t_out]`;
+/// returns the nearest hit distance of the cell's triangles within the frame ray's interval, and
+/// the normal.
+///
+/// Corners are indexed `k = di + 2·dj`: c00, c10, c01, c11. With all four present the surface is
+/// (c00, c10, c11) and (c00, c11, c01); with one hole, the triangle of the other three taken in the
+/// cycle order c00, c10, c11, c01 (so the winding stays that of the quad); with two or more holes
+/// there is no surface.
+fn cell_hit(
+    atlas: &Atlas,
+    leaf: &GpuHeightfield,
+    fr: &FrameRay,
+    ci: i64,
+    cj: i64,
+    t_in: f32,
+    t_out: f32,
+) -> Option<(f32, Vec3)> {
+    let mut corner = [Texel::HOLE; 4];
+    let mut pos = [Vec3::ZERO; 4];
+    let mut valid = 0;
+    let mut lo = f32::INFINITY;
+    let mut hi = f32::NEG_INFINITY;
+    for k in 0..4 {
+        let i = ci + (k & 1) as i64;
+        let j = cj + (k >> 1) as i64;
+        let c = texel(atlas, leaf, i, j);
+        corner[k] = c;
+        if !c.is_hole() {
+            let h = c.height_code() as f32 * leaf.h_scale;
+            pos[k] = Vec3::new(i as f32 + 0.5, j as f32 + 0.5, h);
+            valid += 1;
+            lo = lo.min(h);
+            hi = hi.max(h);
+        }
+    }
+    if valid < 3 {
+        return None;
+    }
+
+    // Cheap rejection: the ray's height over the cell misses the corners' height range (by more
+    // than the rounding slack covers).
+    let o = fr.ray.origin();
+    let d = fr.ray.dir();
+    let h_a = height_at(o.z, d.z, t_in);
+    let h_b = height_at(o.z, d.z, t_out);
+    if h_a.max(h_b) < lo - fr.slack || h_a.min(h_b) > hi + fr.slack {
+        return None;
+    }
+
+    let (first, second) = if valid == 4 {
+        ([0, 1, 3], Some([0, 3, 2]))
+    } else {
+        let cycle = [0, 1, 3, 2];
+        let mut tri = [0usize; 3];
+        let mut n = 0;
+        for k in cycle {
+            if !corner[k].is_hole() && n < 3 {
+                tri[n] = k;
+                n += 1;
+            }
+        }
+        (tri, None)
+    };
+    // The second triangle only counts when nearer than the first one's hit.
+    let [a, b, c] = first;
+    let mut t_hit = intersect_triangle(&fr.shear, pos[a], pos[b], pos[c], fr.ray.tmin, fr.ray.tmax);
+    if let Some([a, b, c]) = second {
+        let t_max = t_hit.unwrap_or(fr.ray.tmax);
+        let t = intersect_triangle(&fr.shear, pos[a], pos[b], pos[c], fr.ray.tmin, t_max);
+        if t.is_some() {
+            t_hit = t;
+        }
+    }
+    let t = t_hit?;
+
+    // The normal of the corner sample nearest the hit: sample i sits at s = i + ½, so the nearest
+    // is floor(s) (halves round up), clamped to the cell; a hole there falls back to the first
+    // present corner in the order c00, c10, c01, c11.
+    let s = o.x + d.x * t;
+    let r = o.y + d.y * t;
+    let di = ((s.floor() as i64).clamp(ci, ci + 1) - ci) as usize;
+    let dj = ((r.floor() as i64).clamp(cj, cj + 1) - cj) as usize;
+    let mut nearest = corner[di + 2 * dj];
+    if nearest.is_hole() {
+        for c in corner {
+            if !c.is_hole() {
+                nearest = c;
+                break;
+            }
+        }
+    }
+    Some((t, nearest.normal()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bvh::{GpuNode, GpuTriangle};
+    use crate::rbvh::{RbvhParams, RbvhStats};
+
+    /// World size of one texel in the test leaves.
+    const TS: f32 = 0.5;
+    const MISS_ID: u32 = u32::MAX;
+
+    /// A leaf looking down at the plane `y = y0`: `u = +x`, `v = +z`, `w = +y`, origin
+    /// `(-2, y0, -2)`, so sample `(i, j)` is at world `x = -2 + (i + ½)·TS`, `z = -2 + (j + ½)·TS`.
+    fn flat_leaf(y0: f32, res_u: u32, res_v: u32, h_scale: f32) -> GpuHeightfield {
+        GpuHeightfield {
+            origin: [-2.0, y0, -2.0],
+            atlas_base: 0,
+            axis_u: [1.0 / TS, 0.0, 0.0],
+            res_u,
+            axis_v: [0.0, 0.0, 1.0 / TS],
+            res_v,
+            axis_w: [0.0, 1.0, 0.0],
+            h_scale,
+        }
+    }
+
+    /// The world point at frame coordinates `(s, t, h)` (the axes are orthogonal).
+    fn world(l: &GpuHeightfield, s: f32, t: f32, h: f32) -> Vec3 {
+        let (u, v) = (Vec3::from(l.axis_u), Vec3::from(l.axis_v));
+        Vec3::from(l.origin)
+            + s * u / u.length_squared()
+            + t * v / v.length_squared()
+            + h * Vec3::from(l.axis_w)
+    }
+
+    /// The world box of the leaf's tile box (its eight corners).
+    fn leaf_box(l: &GpuHeightfield) -> Aabb {
+        let (s1, t1) = (l.res_u as f32 - 0.5, l.res_v as f32 - 0.5);
+        let h1 = Texel::MAX_CODE as f32 * l.h_scale;
+        let mut b = Aabb::EMPTY;
+        for s in [0.5, s1] {
+            for t in [0.5, t1] {
+                for h in [0.0, h1] {
+                    b = b.grow(world(l, s, t, h));
+                }
+            }
+        }
+        b
+    }
+
+    fn hf_child(l: &GpuHeightfield, index: u32) -> ChildRef {
+        ChildRef {
+            bounds: leaf_box(l),
+            child: LEAF_BIT | index,
+            count: HEIGHTFIELD_COUNT,
+        }
+    }
+
+    /// A tile of `res_u × res_v` texels (pitch `res_u`) from `f(i, j)`.
+    fn tile(res_u: u32, res_v: u32, f: impl Fn(u32, u32) -> Texel) -> Vec<Texel> {
+        let mut texels = Vec::new();
+        for j in 0..res_v {
+            for i in 0..res_u {
+                texels.push(f(i, j));
+            }
+        }
+        texels
+    }
+
+    fn rbvh(
+        nodes: Vec<GpuNode>,
+        triangles: Vec<GpuTriangle>,
+        leaves: Vec<GpuHeightfield>,
+        atlas: Atlas,
+    ) -> Rbvh {
+        Rbvh {
+            params: RbvhParams::quality(2).unwrap(),
+            nodes,
+            triangles,
+            leaves,
+            atlas,
+            bounds: Aabb::EMPTY,
+            depth: 1,
+            texel_size: TS,
+            stats: RbvhStats::default(),
+        }
+    }
+
+    /// One height-field leaf under the root, its tile at texel 0 of an atlas of pitch `res_u`.
+    fn single(l: GpuHeightfield, texels: Vec<Texel>) -> Rbvh {
+        let pitch = l.res_u.max(1);
+        let atlas = Atlas {
+            pitch,
+            rows: texels.len() as u32 / pitch,
+            texels,
+        };
+        let root = GpuNode::new(hf_child(&l, 0), ChildRef::ABSENT);
+        rbvh(vec![root], vec![], vec![l], atlas)
+    }
+
+    fn flat_plane() -> Rbvh {
+        single(
+            flat_leaf(1.0, 8, 8, 0.0),
+            tile(8, 8, |_, _| Texel::new(0, Vec3::Y)),
+        )
+    }
+
+    /// A ray straight down onto world `(x, z)` from `y = 10`.
+    fn down(x: f32, z: f32) -> Ray {
+        Ray::new(Vec3::new(x, 10.0, z), -Vec3::Y, 0.0, f32::INFINITY)
+    }
+
+    /// A ray with direction `dir` (y = -1) that reaches world `(x, y0, z)` at t = `t`.
+    fn towards(x: f32, y0: f32, z: f32, dir: Vec3, t: f32) -> Ray {
+        Ray::new(Vec3::new(x, y0, z) - t * dir, dir, 0.0, f32::INFINITY)
+    }
+
+    fn assert_hit(r: &Rbvh, ray: &Ray, t: f32, id: u32) -> Hit {
+        let (hit, _) = r.closest_hit(ray);
+        assert_eq!(hit.id, id, "{ray:?} → {hit:?}");
+        assert!(
+            (hit.t - t).abs() <= 1e-5 * t.max(1.0),
+            "{ray:?}: t {} expected {t}",
+            hit.t
+        );
+        hit
+    }
+
+    fn assert_miss(r: &Rbvh, ray: &Ray) {
+        let (hit, _) = r.closest_hit(ray);
+        assert_eq!(hit, Hit::MISS, "{ray:?}");
+        assert_eq!(r.any_hit(ray).0, Hit::MISS, "{ray:?}");
+    }
+
+    #[test]
+    fn flat_plane_is_hit_at_its_height() {
+        let r = flat_plane();
+        let hit = assert_hit(&r, &down(0.3, 0.2), 9.0, LEAF_BIT);
+        assert!(hit.normal().dot(Vec3::Y) > 0.9999, "{hit:?}");
+        assert_eq!(r.closest_hit(&down(0.3, 0.2)).1.cells, 1);
+        // Oblique rays from every quadrant, grazing ones included, hit at the same height.
+        let dirs = [
+            Vec3::new(0.1, -1.0, 0.05),
+            Vec3::new(-0.7, -1.0, 0.3),
+            Vec3::new(0.4, -1.0, -0.9),
+            Vec3::new(-3.0, -1.0, -2.0),
+            Vec3::new(40.0, -1.0, 7.0),
+        ];
+        for dir in dirs {
+            for (x, z) in [(0.0, 0.0), (1.6, -1.6), (-1.7, 1.2), (-0.5, 0.75)] {
+                let hit = assert_hit(&r, &towards(x, 1.0, z, dir, 9.0), 9.0, LEAF_BIT);
+                assert!(hit.normal().dot(Vec3::Y) > 0.9999);
+            }
+        }
+        // Sample centres and cell boundaries (shared edges and corners) are hit too.
+        for k in 1..=13 {
+            let x = -2.0 + (0.5 + 0.5 * k as f32) * TS;
+            assert_hit(&r, &down(x, x), 9.0, LEAF_BIT);
+            assert_hit(
+                &r,
+                &towards(x, 1.0, -x, Vec3::new(0.3, -1.0, 0.2), 9.0),
+                9.0,
+                LEAF_BIT,
+            );
+        }
+        // So is the tile's border, whatever the sign of the ray's zero components in the frame.
+        // (In the world, a tight node box decides for a ray in its face plane, as in the exact
+        // BVH; the box here is loose, so that the march decides.)
+        let mut loose = r.clone();
+        let l = loose.leaves[0];
+        let mut child = hf_child(&l, 0);
+        child.bounds.min -= Vec3::splat(0.1);
+        child.bounds.max += Vec3::splat(0.1);
+        loose.nodes[0] = GpuNode::new(child, ChildRef::ABSENT);
+        for x in [-1.75, 1.75] {
+            for dir in [Vec3::new(0.0, -1.0, 0.0), Vec3::new(-0.0, -1.0, -0.0)] {
+                let ray = Ray::new(Vec3::new(x, 10.0, x), dir, 0.0, f32::INFINITY);
+                assert_hit(&loose, &ray, 9.0, LEAF_BIT);
+            }
+        }
+    }
+
+    #[test]
+    fn rays_outside_the_tile_or_interval_miss() {
+        let r = flat_plane();
+        // The surface spans the sample centres: x, z in [-1.75, 1.75].
+        for (x, z) in [(1.8, 0.0), (0.0, -1.8), (5.0, 5.0), (-1.76, -1.76)] {
+            assert_miss(&r, &down(x, z));
+        }
+        assert_miss(
+            &r,
+            &Ray::new(Vec3::new(0.0, 10.0, 0.0), Vec3::Y, 0.0, f32::INFINITY),
+        );
+        assert_miss(&r, &Ray::new(Vec3::new(0.0, 10.0, 0.0), -Vec3::Y, 0.0, 8.9));
+        assert_miss(
+            &r,
+            &Ray::new(Vec3::new(0.0, 10.0, 0.0), -Vec3::Y, 9.1, 20.0),
+        );
+        // tmax is exclusive, tmin inclusive, as for triangles.
+        assert_miss(&r, &Ray::new(Vec3::new(0.0, 10.0, 0.0), -Vec3::Y, 0.0, 9.0));
+        assert_hit(
+            &r,
+            &Ray::new(Vec3::new(0.0, 10.0, 0.0), -Vec3::Y, 9.0, 9.5),
+            9.0,
+            LEAF_BIT,
+        );
+        // Invalid rays miss.
+        assert_miss(
+            &r,
+            &Ray::new(Vec3::new(f32::NAN, 10.0, 0.0), -Vec3::Y, 0.0, 20.0),
+        );
+        assert_miss(
+            &r,
+            &Ray::new(Vec3::new(0.0, 10.0, 0.0), Vec3::ZERO, 0.0, 20.0),
+        );
+    }
+
+    #[test]
+    fn tilted_plane_is_hit_at_its_height() {
+        // Height i at sample i: h = s − ½ in frame units, i.e. y = 2x + 4.5 in the world.
+        let n = Vec3::new(-2.0, 1.0, 0.0).normalize();
+        let l = flat_leaf(1.0, 8, 8, 0.001);
+        let r = single(l, tile(8, 8, |i, _| Texel::new((i * 1000) as u16, n)));
+        let hit = assert_hit(&r, &down(0.3, 0.2), 10.0 - 5.1, LEAF_BIT);
+        assert!(hit.normal().dot(n) > 0.9995, "{hit:?}");
+        // Starting inside the tile's box, marching several cells before the hit:
+        // y = 10 − t meets y = 2(−1.5 + 0.3t) + 4.5 at t = 8.5 / 1.6.
+        let ray = Ray::new(
+            Vec3::new(-1.5, 10.0, 0.0),
+            Vec3::new(0.3, -1.0, 0.0),
+            0.0,
+            f32::INFINITY,
+        );
+        assert_hit(&r, &ray, 8.5 / 1.6, LEAF_BIT);
+        assert!(r.closest_hit(&ray).1.cells >= 3);
+    }
+
+    #[test]
+    fn a_cell_is_two_triangles_split_along_c00_c11() {
+        // One cell, c11 raised by 1: on the diagonal the surface is at ½ (bilinear would say ¼).
+        let l = flat_leaf(1.0, 2, 2, 0.001);
+        let codes = [0, 0, 0, 1000];
+        let r = single(
+            l,
+            tile(2, 2, |i, j| {
+                Texel::new(codes[(i + 2 * j) as usize], Vec3::Y)
+            }),
+        );
+        let at = |s: f32, t: f32| world(&l, s, t, 0.0);
+        let p = at(1.0, 1.0);
+        assert_hit(&r, &down(p.x, p.z), 10.0 - 1.5, LEAF_BIT);
+        // Below the diagonal (t < s) the triangle (c00, c10, c11) has h = t − ½, above it h = s − ½.
+        let p = at(1.25, 0.75);
+        assert_hit(&r, &down(p.x, p.z), 10.0 - 1.25, LEAF_BIT);
+        let p = at(0.75, 1.25);
+        assert_hit(&r, &down(p.x, p.z), 10.0 - 1.25, LEAF_BIT);
+    }
+
+    #[test]
+    fn one_hole_keeps_the_other_triangle_two_holes_none() {
+        let normals = [Vec3::Y, Vec3::X, Vec3::Z, -Vec3::X];
+        let with_holes = |holes: &[usize]| {
+            let l = flat_leaf(1.0, 2, 2, 0.0);
+            single(
+                l,
+                tile(2, 2, |i, j| {
+                    let k = (i + 2 * j) as usize;
+                    if holes.contains(&k) {
+                        Texel::HOLE
+                    } else {
+                        Texel::new(0, normals[k])
+                    }
+                }),
+            )
+        };
+        let l = flat_leaf(1.0, 2, 2, 0.0);
+        let near_c00 = world(&l, 0.8, 0.8, 0.0);
+        let near_c11 = world(&l, 1.3, 1.3, 0.0);
+        // c11 missing: the triangle (c00, c10, c01) remains.
+        let r = with_holes(&[3]);
+        assert_hit(&r, &down(near_c00.x, near_c00.z), 9.0, LEAF_BIT);
+        assert_miss(&r, &down(near_c11.x, near_c11.z));
+        // At the cell centre the nearest sample is c11, a hole: the normal falls back to c00's.
+        let centre = world(&l, 1.0, 1.0, 0.0);
+        let hit = assert_hit(&r, &down(centre.x, centre.z), 9.0, LEAF_BIT);
+        assert!(hit.normal().dot(normals[0]) > 0.9999, "{hit:?}");
+        // c00 missing: the triangle (c10, c11, c01) remains.
+        let r = with_holes(&[0]);
+        assert_miss(&r, &down(near_c00.x, near_c00.z));
+        assert_hit(&r, &down(near_c11.x, near_c11.z), 9.0, LEAF_BIT);
+        // Two holes: no surface at all.
+        let r = with_holes(&[1, 2]);
+        assert_miss(&r, &down(near_c00.x, near_c00.z));
+        assert_miss(&r, &down(near_c11.x, near_c11.z));
+    }
+
+    #[test]
+    fn normal_is_the_nearest_samples() {
+        let normal = |i: u32, j: u32| Vec3::new(i as f32 - 3.5, 8.0, j as f32 - 3.5).normalize();
+        let l = flat_leaf(1.0, 8, 8, 0.0);
+        let r = single(l, tile(8, 8, |i, j| Texel::new(0, normal(i, j))));
+        for (s, t, i, j) in [
+            (2.3, 3.8, 2, 3),
+            (2.7, 3.2, 2, 3),
+            (3.1, 0.6, 3, 0),
+            (6.9, 7.4, 6, 7),
+        ] {
+            let p = world(&l, s, t, 0.0);
+            let hit = assert_hit(&r, &down(p.x, p.z), 9.0, LEAF_BIT);
+            assert!(
+                hit.normal().dot(normal(i, j)) > 0.9999,
+                "({s}, {t}) → {hit:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_hole_in_the_tile_lets_rays_through() {
+        // Samples (3..=4, 3..=4) missing: the cells around them have two or more holes.
+        let hole = |i: u32, j: u32| (3..=4).contains(&i) && (3..=4).contains(&j);
+        let l = flat_leaf(1.0, 8, 8, 0.0);
+        let r = single(
+            l,
+            tile(8, 8, |i, j| {
+                if hole(i, j) {
+                    Texel::HOLE
+                } else {
+                    Texel::new(0, Vec3::Y)
+                }
+            }),
+        );
+        for (s, t) in [(4.0, 4.0), (3.6, 4.4), (4.5, 4.0)] {
+            let p = world(&l, s, t, 0.0);
+            assert_miss(&r, &down(p.x, p.z));
+            assert_miss(&r, &towards(p.x, 1.0, p.z, Vec3::new(0.2, -1.0, -0.1), 9.0));
+        }
+        for (s, t) in [(1.0, 1.0), (6.0, 4.0), (4.0, 1.2)] {
+            let p = world(&l, s, t, 0.0);
+            assert_hit(&r, &down(p.x, p.z), 9.0, LEAF_BIT);
+        }
+    }
+
+    /// Root: inner node 1 and a triangle leaf; node 1: height-field leaves 0 (the plane y = 1)
+    /// and 1 (the plane y = 1 shifted by +10 in x).
+    fn hybrid(triangle_y: f32) -> Rbvh {
+        let l0 = flat_leaf(1.0, 8, 8, 0.0);
+        let mut l1 = flat_leaf(1.0, 8, 8, 0.0);
+        l1.atlas_base = 64;
+        l1.origin[0] += 10.0;
+        let tri = GpuTriangle::new(
+            [
+                Vec3::new(-1.0, triangle_y, -1.0),
+                Vec3::new(1.0, triangle_y, -1.0),
+                Vec3::new(-1.0, triangle_y, 1.0),
+            ],
+            7,
+        );
+        let tri_leaf = ChildRef {
+            bounds: Aabb::from_points(tri.vertices()),
+            child: LEAF_BIT,
+            count: 1,
+        };
+        let node1 = GpuNode::new(hf_child(&l0, 0), hf_child(&l1, 1));
+        let inner = ChildRef {
+            bounds: leaf_box(&l0).union(leaf_box(&l1)),
+            child: 1,
+            count: 0,
+        };
+        let root = GpuNode::new(inner, tri_leaf);
+        let mut texels = tile(8, 8, |_, _| Texel::new(0, Vec3::Y));
+        texels.extend(tile(8, 8, |_, _| Texel::new(0, -Vec3::Y)));
+        let atlas = Atlas {
+            pitch: 8,
+            rows: 16,
+            texels,
+        };
+        rbvh(vec![root, node1], vec![tri], vec![l0, l1], atlas)
+    }
+
+    #[test]
+    fn hybrid_tree_returns_the_nearer_leaf() {
+        let r = hybrid(2.0);
+        let hit = assert_hit(&r, &down(-0.5, -0.5), 8.0, 7);
+        assert!(hit.normal().y.abs() > 0.9999);
+        assert_hit(&r, &down(1.5, 1.5), 9.0, LEAF_BIT);
+        let hit = assert_hit(&r, &down(10.5, 0.0), 9.0, LEAF_BIT | 1);
+        assert!(hit.normal().dot(-Vec3::Y) > 0.9999);
+        assert_miss(&r, &down(5.0, 0.0));
+        // A triangle below the plane is hidden by it.
+        let r = hybrid(0.5);
+        assert_hit(&r, &down(-0.5, -0.5), 9.0, LEAF_BIT);
+        // Up from between the two: the triangle at 0.5 first.
+        let up = Ray::new(Vec3::new(-0.5, -5.0, -0.5), Vec3::Y, 0.0, f32::INFINITY);
+        assert_hit(&r, &up, 5.5, 7);
+    }
+
+    #[test]
+    fn any_hit_finds_a_hit_exactly_where_closest_does() {
+        let r = hybrid(2.0);
+        for k in 0..40 {
+            let x = -3.0 + 0.4 * k as f32;
+            let ray = towards(
+                x,
+                1.0,
+                0.3 - 0.01 * k as f32,
+                Vec3::new(0.1, -1.0, 0.05),
+                9.0,
+            );
+            let (closest, _) = r.closest_hit(&ray);
+            let (any, _) = r.any_hit(&ray);
+            assert_eq!(closest.is_hit(), any.is_hit(), "{ray:?}");
+            assert!(any.t >= closest.t);
+        }
+        let rays: Vec<Ray> = (0..30).map(|k| down(-2.0 + 0.5 * k as f32, 0.1)).collect();
+        let hits = r.trace_cpu(&rays, false);
+        for (ray, hit) in rays.iter().zip(&hits) {
+            assert_eq!(*hit, r.closest_hit(ray).0);
+        }
+    }
+
+    #[test]
+    fn corrupt_data_misses_without_panicking() {
+        let ray = down(0.0, 0.0);
+        let good = flat_plane();
+        assert_hit(&good, &ray, 9.0, LEAF_BIT);
+        let with_leaf = |f: &dyn Fn(&mut GpuHeightfield)| {
+            let mut r = good.clone();
+            f(&mut r.leaves[0]);
+            r
+        };
+        let corrupt = [
+            with_leaf(&|l| l.atlas_base = 1_000_000),
+            with_leaf(&|l| l.atlas_base = u32::MAX),
+            with_leaf(&|l| l.res_u = 0),
+            with_leaf(&|l| l.res_v = 1),
+            with_leaf(&|l| (l.res_u, l.res_v) = (u32::MAX, u32::MAX)),
+            with_leaf(&|l| l.res_v = 9),
+            with_leaf(&|l| l.axis_u = [f32::NAN; 3]),
+            with_leaf(&|l| l.axis_w = [0.0; 3]),
+        ];
+        for r in &corrupt {
+            let (hit, stats) = r.closest_hit(&ray);
+            assert_eq!(hit, Hit::MISS, "{:?}", r.leaves[0]);
+            assert!(!stats.overflow);
+        }
+        let with_root = |a: ChildRef| {
+            let mut r = good.clone();
+            r.nodes[0] = GpuNode::new(a, ChildRef::ABSENT);
+            r
+        };
+        let big = ChildRef {
+            bounds: good.nodes[0].children()[0].bounds,
+            ..ChildRef::ABSENT
+        };
+        let corrupt = [
+            with_root(ChildRef {
+                child: LEAF_BIT | 5,
+                count: HEIGHTFIELD_COUNT,
+                ..big
+            }),
+            with_root(ChildRef {
+                child: 99,
+                count: 0,
+                ..big
+            }),
+            with_root(ChildRef {
+                child: LEAF_BIT | 3,
+                count: u32::MAX - 1,
+                ..big
+            }),
+            with_root(ChildRef {
+                child: u32::MAX,
+                count: u32::MAX - 1,
+                ..big
+            }),
+        ];
+        for r in &corrupt {
+            assert_eq!(r.closest_hit(&ray).0, Hit::MISS, "{:?}", r.nodes[0]);
+            assert_eq!(r.any_hit(&ray).0, Hit::MISS);
+        }
+        // A cycle (the root as its own child) ends, flagged.
+        let r = with_root(ChildRef {
+            child: 0,
+            count: 0,
+            ..big
+        });
+        let (hit, stats) = r.closest_hit(&ray);
+        assert_eq!(hit.id, MISS_ID);
+        assert!(stats.overflow && stats.nodes == 1, "{stats:?}");
+        // No nodes at all.
+        let mut r = good.clone();
+        r.nodes.clear();
+        assert_eq!(r.closest_hit(&ray), (Hit::MISS, RbvhTraceStats::default()));
+    }
+
+    #[test]
+    fn grazing_and_long_marches_end_within_the_cell_bound() {
+        // Along the flat plane at its very height, and just above it.
+        let r = flat_plane();
+        for y in [1.0, 1.0 + 1e-7, 0.999_999] {
+            for dir in [Vec3::X, Vec3::new(1.0, 0.0, 1.0), Vec3::new(-1.0, 0.0, 0.3)] {
+                let ray = Ray::new(Vec3::new(0.0, y, 0.1) - 5.0 * dir, dir, 0.0, f32::INFINITY);
+                let (_, stats) = r.closest_hit(&ray);
+                assert!(stats.cells <= 13, "{ray:?}: {stats:?}");
+            }
+        }
+        // An empty tile's box crossed corner to corner: every cell on the way, and no more.
+        let l = flat_leaf(1.0, 9, 6, 0.001);
+        let r = single(l, tile(9, 6, |_, _| Texel::HOLE));
+        let (a, b) = (world(&l, 0.5, 0.5, 1.0), world(&l, 8.5, 5.5, 2.0));
+        let ray = Ray::new(a - (b - a), b - a, 0.0, f32::INFINITY);
+        let (hit, stats) = r.closest_hit(&ray);
+        assert_eq!(hit, Hit::MISS);
+        assert!((8..=8 + 5 - 1).contains(&stats.cells), "{stats:?}");
+    }
+
+    /// A deterministic bumpy tile with a few holes, in a rotated frame.
+    fn bumpy() -> Rbvh {
+        let w = Vec3::new(0.2, 1.0, -0.1).normalize();
+        let u = w.cross(Vec3::Z).normalize();
+        let v = w.cross(u);
+        let (res_u, res_v) = (9, 7);
+        let l = GpuHeightfield {
+            origin: [-1.0, 0.5, 2.0],
+            atlas_base: 3,
+            axis_u: (u / 0.3).to_array(),
+            res_u,
+            axis_v: (v / 0.3).to_array(),
+            res_v,
+            axis_w: w.to_array(),
+            h_scale: 1.0e-4,
+        };
+        let code = |i: u32, j: u32| {
+            let x = (i * 7919 + j * 104_729) % 65_521;
+            (x * 13 % 30_000) as u16
+        };
+        let mut texels = vec![Texel::new(0, Vec3::X); 3];
+        texels.extend(tile(res_u, res_v, |i, j| {
+            if (i, j) == (4, 3) || (i, j) == (7, 1) || (i, j) == (1, 5) || (i, j) == (2, 5) {
+                Texel::HOLE
+            } else {
+                Texel::new(code(i, j), w)
+            }
+        }));
+        texels.extend(vec![Texel::HOLE; (res_u - 3) as usize]);
+        let atlas = Atlas {
+            pitch: res_u,
+            rows: res_v + 1,
+            texels,
+        };
+        // A loose box, so that the march, not the box, decides at the tile's border.
+        let mut child = hf_child(&l, 0);
+        child.bounds.min -= Vec3::splat(0.1);
+        child.bounds.max += Vec3::splat(0.1);
+        let root = GpuNode::new(child, ChildRef::ABSENT);
+        rbvh(vec![root], vec![], vec![l], atlas)
+    }
+
+    /// Every triangle of every cell, by brute force: the nearest hit in frame space.
+    fn brute_force(r: &Rbvh, ray: &Ray) -> Option<f32> {
+        let l = &r.leaves[0];
+        let (u, v, w) = (
+            Vec3::from(l.axis_u),
+            Vec3::from(l.axis_v),
+            Vec3::from(l.axis_w),
+        );
+        let rel = ray.origin() - Vec3::from(l.origin);
+        let d = ray.dir();
+        let frame = Ray::new(
+            Vec3::new(rel.dot(u), rel.dot(v), rel.dot(w)),
+            Vec3::new(d.dot(u), d.dot(v), d.dot(w)),
+            ray.tmin,
+            ray.tmax,
+        );
+        let shear = RayShear::new(&frame);
+        let vertex = |i: u32, j: u32| {
+            let t = r.atlas.texels[(l.atlas_base + j * r.atlas.pitch + i) as usize];
+            (!t.is_hole()).then(|| {
+                Vec3::new(
+                    i as f32 + 0.5,
+                    j as f32 + 0.5,
+                    t.height_code() as f32 * l.h_scale,
+                )
+            })
+        };
+        let mut best: Option<f32> = None;
+        for j in 0..l.res_v - 1 {
+            for i in 0..l.res_u - 1 {
+                let c = [
+                    vertex(i, j),
+                    vertex(i + 1, j),
+                    vertex(i + 1, j + 1),
+                    vertex(i, j + 1),
+                ];
+                let present: Vec<Vec3> = c.iter().flatten().copied().collect();
+                let tris = match present.len() {
+                    4 => vec![
+                        [present[0], present[1], present[2]],
+                        [present[0], present[2], present[3]],
+                    ],
+                    3 => vec![[present[0], present[1], present[2]]],
+                    _ => vec![],
+                };
+                for [a, b, c] in tris {
+                    if let Some(t) = intersect_triangle(&shear, a, b, c, frame.tmin, frame.tmax) {
+                        best = Some(best.map_or(t, |x| x.min(t)));
+                    }
+                }
+            }
+        }
+        best
+    }
+
+    #[test]
+    fn march_agrees_with_brute_force_on_a_bumpy_tile() {
+        let r = bumpy();
+        let l = r.leaves[0];
+        let mut hits = 0;
+        let mut n = 0;
+        for a in 0..12 {
+            for b in 0..9 {
+                n += 1;
+                // Targets all over the tile and a little beyond; directions from steep to grazing,
+                // from above and from below.
+                let target = world(&l, -0.5 + 0.83 * a as f32, -0.3 + 0.81 * b as f32, 1.5);
+                let phi = 0.7 * (a * 9 + b) as f32;
+                let elevation = [0.05, 0.2, 0.6, 1.5, -0.3, 8.0][(a + b) as usize % 6];
+                let dir = Vec3::new(phi.cos(), -elevation, phi.sin());
+                let ray = Ray::new(target - 6.0 * dir, dir, 0.0, f32::INFINITY);
+                let (hit, stats) = r.closest_hit(&ray);
+                // At most 8 + 6 − 1 steps, each visiting one cell or two near a grid vertex.
+                assert!(stats.cells <= 2 * (8 + 6 - 1), "{stats:?}");
+                let expected = brute_force(&r, &ray);
+                assert_eq!(
+                    hit.is_hit(),
+                    expected.is_some(),
+                    "ray {ray:?}: {hit:?} vs {expected:?}"
+                );
+                if let Some(t) = expected {
+                    hits += 1;
+                    assert_eq!(hit.t, t, "ray {ray:?}");
+                    assert_eq!(hit.id, LEAF_BIT);
+                }
+            }
+        }
+        assert!(
+            hits > n / 4 && hits < n,
+            "{hits} of {n} hit: the test would not test much"
+        );
+    }
+
+    #[test]
+    fn tile_fits_checks_the_last_texel() {
+        let atlas = Atlas {
+            pitch: 8,
+            rows: 4,
+            texels: vec![Texel::HOLE; 32],
+        };
+        let fits = |base, res_u, res_v| {
+            tile_fits(
+                &GpuHeightfield {
+                    atlas_base: base,
+                    ..flat_leaf(0.0, res_u, res_v, 0.0)
+                },
+                &atlas,
+            )
+        };
+        assert!(fits(0, 8, 4) && fits(4, 4, 4) && fits(31, 1, 1));
+        assert!(!fits(5, 4, 4) && !fits(0, 9, 1) && !fits(0, 0, 1) && !fits(32, 1, 1));
+        assert!(!fits(u32::MAX, u32::MAX, u32::MAX));
+    }
+
+    #[test]
+    fn rays_through_grid_vertices_and_edges_agree_with_brute_force() {
+        // Aimed exactly at every sample (a vertex shared by four cells) and every edge midpoint,
+        // from all around, axis-aligned directions included: where the walk and the triangle
+        // test could disagree about which cell a hit is in.
+        let r = bumpy();
+        let l = r.leaves[0];
+        let mut n = 0;
+        let mut hits = 0;
+        for j in 0..l.res_v {
+            for i in 0..l.res_u {
+                let texel = r.atlas.texels[(l.atlas_base + j * r.atlas.pitch + i) as usize];
+                let h = if texel.is_hole() {
+                    1.0
+                } else {
+                    texel.height_code() as f32 * l.h_scale
+                };
+                for half in 0..4 {
+                    let s = i as f32 + 0.5 + 0.5 * (half & 1) as f32;
+                    let t = j as f32 + 0.5 + 0.5 * (half >> 1) as f32;
+                    let target = world(&l, s, t, h);
+                    for k in 0..24 {
+                        let elevation = [0.02, 0.1, 0.3, 1.0, 3.0, -0.2][k % 6];
+                        let phi = 0.37 * k as f32;
+                        let dirs = [
+                            Vec3::new(phi.cos(), -elevation, phi.sin()),
+                            Vec3::new(1.0, -elevation, 0.0),
+                            Vec3::new(0.0, -elevation, -1.0),
+                            Vec3::new(-1.0, -elevation, 1.0),
+                        ];
+                        for dir in dirs {
+                            let ray = Ray::new(target - 3.0 * dir, dir, 0.0, f32::INFINITY);
+                            let (hit, _) = r.closest_hit(&ray);
+                            let expected = brute_force(&r, &ray);
+                            n += 1;
+                            assert_eq!(hit.is_hit(), expected.is_some(), "{ray:?}: {hit:?}");
+                            if let Some(t) = expected {
+                                hits += 1;
+                                assert!((hit.t - t).abs() <= 1e-5 * t, "{ray:?}: {} vs {t}", hit.t);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        assert!(hits > n / 2, "{hits} of {n}");
+    }
+}

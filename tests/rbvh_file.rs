@@ -1,0 +1,271 @@
+//! The RBVH file through the public API: exact round trips, the documented layout, errors that
+//! name the file and say what is wrong, and saves that are all or nothing.
+
+use std::path::Path;
+
+use glam::Vec3;
+use rbvh::bvh::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT};
+use rbvh::geom::Aabb;
+use rbvh::rbvh::{
+    Atlas, GpuHeightfield, Rbvh, RbvhParams, RbvhStats, Refinement, Subdivision, Texel,
+    HEIGHTFIELD_COUNT,
+};
+use rbvh::Error;
+
+/// Bytes before the arrays, per the format table in `src/rbvh/file.rs`.
+const HEADER_BYTES: usize = 136;
+
+/// A small hybrid RBVH built by hand: a root over an inner node (two height-field leaves) and a
+/// triangle leaf, in a 8 × 9 atlas holding a 4 × 4 and a 3 × 5 tile.
+fn sample() -> Rbvh {
+    let leaf = |origin: [f32; 3], atlas_base, res_u, res_v| GpuHeightfield {
+        origin,
+        atlas_base,
+        axis_u: [2.0, 0.0, 0.0],
+        res_u,
+        axis_v: [0.0, 0.0, 2.0],
+        res_v,
+        axis_w: [0.0, 1.0, 0.0],
+        h_scale: 1.0e-4,
+    };
+    let leaves = vec![
+        leaf([0.0, 0.0, 0.0], 0, 4, 4),
+        leaf([5.0, -1.0, 0.5], 36, 3, 5),
+    ];
+    let mut texels = vec![Texel::HOLE; 8 * 9];
+    for (k, t) in texels.iter_mut().enumerate() {
+        if k % 5 != 3 {
+            *t = Texel::new(
+                (k * 977 % 65_000) as u16,
+                Vec3::new(0.1 * k as f32, 1.0, -0.3),
+            );
+        }
+    }
+    let triangles = vec![
+        GpuTriangle::new([Vec3::ZERO, Vec3::X, Vec3::Z], 4),
+        GpuTriangle::new([Vec3::ONE, Vec3::Y, -Vec3::Z], 9),
+    ];
+    let unit = Aabb {
+        min: Vec3::splat(-1.0),
+        max: Vec3::splat(6.0),
+    };
+    let hf = |index| ChildRef {
+        bounds: unit,
+        child: LEAF_BIT | index,
+        count: HEIGHTFIELD_COUNT,
+    };
+    let nodes = vec![
+        GpuNode::new(
+            ChildRef {
+                bounds: unit,
+                child: 1,
+                count: 0,
+            },
+            ChildRef {
+                bounds: unit,
+                child: LEAF_BIT,
+                count: 2,
+            },
+        ),
+        GpuNode::new(hf(0), hf(1)),
+    ];
+    Rbvh {
+        params: RbvhParams {
+            refinement: Refinement::ProjectedArea { min_ratio: 0.75 },
+            subdivision: Subdivision::AreaSah,
+            object_split: false,
+            ..RbvhParams::quality(3).unwrap()
+        },
+        nodes,
+        triangles,
+        leaves,
+        atlas: Atlas {
+            pitch: 8,
+            rows: 9,
+            texels,
+        },
+        bounds: unit,
+        depth: 2,
+        texel_size: 0.5,
+        stats: RbvhStats {
+            build_ms: 12.25,
+            heightfield_leaves: 2,
+            triangle_leaves: 1,
+            tile_texels: 31,
+        },
+    }
+}
+
+/// The message of a Parse error, after checking that it names `path`.
+fn parse_error(result: rbvh::Result<Rbvh>, path: &Path) -> String {
+    match result {
+        Err(e @ Error::Parse { .. }) => {
+            let text = e.to_string();
+            assert!(text.contains(&path.display().to_string()), "{text}");
+            text
+        }
+        other => panic!("expected a parse error, got {other:?}"),
+    }
+}
+
+#[test]
+fn save_load_round_trips_exactly() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scene.rbvh");
+    let original = sample();
+    original.save(&path).unwrap();
+    let loaded = Rbvh::load(&path).unwrap();
+    assert_eq!(loaded, original);
+    let bytes = std::fs::read(&path).unwrap();
+    assert_eq!(bytes, original.to_bytes());
+    let again = dir.path().join("again.rbvh");
+    loaded.save(&again).unwrap();
+    assert_eq!(std::fs::read(&again).unwrap(), bytes);
+
+    // The documented framing: magic, version 1, then the arrays after a 136-byte header.
+    assert_eq!(&bytes[..8], b"RBVHv\0\0\0");
+    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 1);
+    let arrays = 2 * 64 + 2 * 48 + 2 * 64 + 72 * 4;
+    assert_eq!(bytes.len(), HEADER_BYTES + arrays);
+    let first_texel = HEADER_BYTES + arrays - 72 * 4;
+    let word = u32::from_le_bytes(bytes[first_texel..first_texel + 4].try_into().unwrap());
+    assert_eq!(word, original.atlas.texels[0].0);
+}
+
+#[test]
+fn odd_float_values_survive_bit_for_bit() {
+    let mut r = sample();
+    r.bounds = Aabb::EMPTY;
+    r.stats.build_ms = -0.0;
+    r.triangles[0].v0 = [f32::from_bits(0x7fc0_1234), -0.0, f32::MIN_POSITIVE];
+    let back = Rbvh::from_bytes(&r.to_bytes(), Path::new("odd.rbvh")).unwrap();
+    assert_eq!(back.to_bytes(), r.to_bytes());
+    assert_eq!(back.bounds, Aabb::EMPTY);
+}
+
+#[test]
+fn truncated_files_are_parse_errors_naming_the_file() {
+    let bytes = sample().to_bytes();
+    let path = Path::new("cut.rbvh");
+    for len in [
+        0,
+        3,
+        8,
+        11,
+        12,
+        50,
+        HEADER_BYTES - 1,
+        HEADER_BYTES,
+        HEADER_BYTES + 100,
+        bytes.len() - 1,
+    ] {
+        let message = parse_error(Rbvh::from_bytes(&bytes[..len], path), path);
+        assert!(message.contains("truncated"), "{len}: {message}");
+    }
+    // One byte too many is as wrong as one too few.
+    let mut long = bytes.clone();
+    long.push(0);
+    let message = parse_error(Rbvh::from_bytes(&long, path), path);
+    assert!(message.contains("trailing"), "{message}");
+}
+
+#[test]
+fn bad_magic_and_unknown_versions_are_rejected() {
+    let path = Path::new("x.rbvh");
+    let mut bytes = sample().to_bytes();
+    bytes[0] = b'P';
+    let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
+    assert!(message.contains("not an RBVH file"), "{message}");
+
+    let mut bytes = sample().to_bytes();
+    bytes[8..12].copy_from_slice(&2u32.to_le_bytes());
+    let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
+    assert!(message.contains("unsupported version 2"), "{message}");
+    assert!(message.contains("reads version 1"), "{message}");
+}
+
+#[test]
+fn inconsistent_contents_are_rejected_with_the_reason() {
+    let path = Path::new("bad.rbvh");
+    let check = |r: Rbvh, expect: &str| {
+        let message = parse_error(Rbvh::from_bytes(&r.to_bytes(), path), path);
+        assert!(message.contains(expect), "expected {expect:?} in {message}");
+    };
+    let mut r = sample();
+    r.nodes[0].a_child = 2;
+    check(r, "node 0, child a: node index 2 is out of range");
+    let mut r = sample();
+    r.nodes[0].a_child ^= 1 << 20;
+    check(r, "out of range");
+    let mut r = sample();
+    r.nodes[1].b_child = LEAF_BIT | 2;
+    check(
+        r,
+        "node 1, child b: height-field leaf index 2 is out of range",
+    );
+    let mut r = sample();
+    r.nodes[0].b_count = 3;
+    check(r, "triangles 0..3 are out of range");
+    let mut r = sample();
+    r.nodes[0].a_count = 5;
+    check(r, "inner node reference with count 5");
+    let mut r = sample();
+    r.leaves[1].res_v = 6;
+    check(r, "height-field leaf 1");
+    let mut r = sample();
+    r.leaves[0].atlas_base = u32::MAX;
+    check(r, "does not fit");
+    let mut r = sample();
+    r.leaves[0].axis_w[1] = f32::NAN;
+    check(r, "not finite");
+    let mut r = sample();
+    r.atlas.rows = 8;
+    check(r, "pitch × rows");
+    let mut r = sample();
+    r.params.texels_per_diagonal = f32::NAN;
+    check(r, "texels_per_diagonal is NaN");
+    let mut r = sample();
+    r.texel_size = f32::NAN;
+    check(r, "texel_size is NaN");
+
+    // Counts that overflow, or promise more than the file holds.
+    let mut bytes = sample().to_bytes();
+    bytes[HEADER_BYTES - 8..HEADER_BYTES].copy_from_slice(&u64::MAX.to_le_bytes());
+    let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
+    assert!(message.contains("counts"), "{message}");
+    // An unknown enum tag.
+    let mut bytes = sample().to_bytes();
+    bytes[24..28].copy_from_slice(&7u32.to_le_bytes());
+    let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
+    assert!(
+        message.contains("params.subdivision has tag 7"),
+        "{message}"
+    );
+}
+
+#[test]
+fn a_missing_file_is_an_io_error_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("nowhere.rbvh");
+    match Rbvh::load(&path) {
+        Err(e @ Error::Io { .. }) => assert!(e.to_string().contains("nowhere.rbvh"), "{e}"),
+        other => panic!("expected an I/O error, got {other:?}"),
+    }
+}
+
+#[test]
+fn a_failed_save_leaves_nothing_behind() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("missing-dir").join("scene.rbvh");
+    match sample().save(&path) {
+        Err(e @ Error::Io { .. }) => assert!(e.to_string().contains("scene.rbvh"), "{e}"),
+        other => panic!("expected an I/O error, got {other:?}"),
+    }
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+    // A save over an existing file replaces it whole.
+    let path = dir.path().join("scene.rbvh");
+    std::fs::write(&path, b"old").unwrap();
+    sample().save(&path).unwrap();
+    assert_eq!(Rbvh::load(&path).unwrap(), sample());
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+}
