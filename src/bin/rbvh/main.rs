@@ -1,5 +1,6 @@
 //! `rbvh`: render scenes, answer ray files, and (later) build and benchmark RBVHs.
 
+mod build;
 mod prepare;
 mod render;
 mod trace;
@@ -21,6 +22,8 @@ struct Cli {
 enum Command {
     /// Render a scene to PNG (and optionally EXR with depth and normals).
     Render(render::Args),
+    /// Build an RBVH and report its nodes, leaves, texels and memory against the exact BVH.
+    Build(build::Args),
     /// Trace a ray file and write a hit file (formats in README.md).
     Trace(trace::Args),
 }
@@ -30,6 +33,7 @@ fn main() {
     let result = match cli.command {
         Command::Render(a) => render::run(a),
         Command::Trace(a) => trace::run(a),
+        Command::Build(a) => build::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e}");

@@ -1,0 +1,333 @@
+//! The RBVH builder and its CPU reference caster, refereed by the exact BVH: analytic plane and
+//! sphere, every preset, determinism, degenerate input, error shrinking with quality, save/load.
+
+mod common;
+
+use glam::Vec3;
+use rbvh::bvh::Bvh;
+use rbvh::geom::Ray;
+use rbvh::rbvh::{Rbvh, RbvhParams, Refinement, Subdivision, HEIGHTFIELD_COUNT};
+use rbvh::scene::builtin::{self, Analytic};
+use rbvh::scene::Scene;
+
+fn q(level: u32) -> RbvhParams {
+    RbvhParams::quality(level).unwrap()
+}
+
+/// Mean and max |t − t_exact| / diagonal over rays both hit, and the hit/miss disagreement rate.
+fn error_vs_exact(scene: &Scene, r: &Rbvh, rays: &[Ray]) -> (f64, f64, f64) {
+    let exact = Bvh::build(scene).unwrap();
+    let diag = scene.bounds().diagonal() as f64;
+    let (mut sum, mut max, mut both, mut mismatch) = (0.0, 0.0f64, 0usize, 0usize);
+    for ray in rays {
+        let (e, a) = (exact.closest_hit(ray).0, r.closest_hit(ray).0);
+        if e.is_hit() != a.is_hit() {
+            mismatch += 1;
+        } else if e.is_hit() {
+            let err = (a.t - e.t).abs() as f64 / diag;
+            sum += err;
+            max = max.max(err);
+            both += 1;
+        }
+    }
+    (
+        sum / both.max(1) as f64,
+        max,
+        mismatch as f64 / rays.len() as f64,
+    )
+}
+
+fn heightfield_leaf_count(r: &Rbvh) -> usize {
+    r.nodes
+        .iter()
+        .flat_map(|n| [n.a_count, n.b_count])
+        .filter(|&c| c == HEIGHTFIELD_COUNT)
+        .count()
+}
+
+#[test]
+fn plane_is_one_leaf_with_exact_heights() {
+    let scene = Scene::builtin("plane").unwrap();
+    let Some(Analytic::Plane {
+        point,
+        normal,
+        half_extent,
+    }) = builtin::analytic("plane")
+    else {
+        panic!()
+    };
+    let params = RbvhParams {
+        max_tile: 4096,
+        ..q(2)
+    };
+    let r = Rbvh::build(&scene, &params).unwrap();
+    assert_eq!((r.leaves.len(), r.stats.triangle_leaves), (1, 0));
+    assert_eq!(heightfield_leaf_count(&r), 1);
+    assert_eq!(
+        r.leaves[0].h_scale, 0.0,
+        "a flat leaf needs no height range"
+    );
+    // With the default tile limit the plane is subdivided into tiles, still with no triangles.
+    let tiled = Rbvh::build(&scene, &q(2)).unwrap();
+    assert!(tiled.leaves.len() > 1 && tiled.stats.triangle_leaves == 0);
+    assert!(tiled.leaves.iter().all(|l| l.res_u <= 64 && l.res_v <= 64));
+    let mut rng = common::Rng(11);
+    for r in [&r, &tiled] {
+        for _ in 0..2000 {
+            let target = point
+                + Vec3::new(rng.next_f32() * 2.0 - 1.0, 0.0, rng.next_f32() * 2.0 - 1.0)
+                    * 0.98
+                    * half_extent;
+            let dir = (-normal
+                + 0.6 * (rng.unit_vector() - normal * rng.unit_vector().dot(normal)))
+            .normalize();
+            let origin = target - 2.0 * dir;
+            let hit = r.closest_hit(&Ray::new(origin, dir, 0.0, f32::INFINITY)).0;
+            assert!(hit.is_hit(), "missed the plane at {target}");
+            assert!((hit.t - 2.0).abs() < 2e-5, "t {}", hit.t);
+            assert!(hit.normal().dot(normal) > 0.9999);
+        }
+    }
+}
+
+#[test]
+fn sphere_leaves_respect_the_cone_and_height_error_bound() {
+    let scene = Scene::builtin("sphere").unwrap();
+    let Some(Analytic::Sphere {
+        center,
+        radius,
+        max_chord_error,
+    }) = builtin::analytic("sphere")
+    else {
+        panic!()
+    };
+    for level in [0, 2, 4] {
+        let params = q(level);
+        let Refinement::NormalCone { max_angle_deg } = params.refinement else {
+            panic!()
+        };
+        let r = Rbvh::build(&scene, &params).unwrap();
+        assert!(r.leaves.len() > 1);
+        // Every stored normal lies within φ_max of its leaf's axis (plus the 8-bit encoding error).
+        let cos = (max_angle_deg + 1.5).to_radians().cos();
+        for leaf in &r.leaves {
+            let w = Vec3::from(leaf.axis_w);
+            for j in 0..leaf.res_v {
+                for i in 0..leaf.res_u {
+                    let t = r.atlas.texels[(leaf.atlas_base + j * r.atlas.pitch + i) as usize];
+                    if !t.is_hole() {
+                        assert!(t.normal().dot(w) >= cos, "normal outside the cone");
+                    }
+                }
+            }
+        }
+        // Hit points lie on the sphere within the tessellation, reconstruction and quantization
+        // error: nearly all within a tenth of a texel of it; the rare worst cases are rays that hit
+        // the dilated rim of a neighbouring leaf, extrapolated linearly from a curved surface
+        // (error about κ·texel²/cos³φ_max), bounded by half a texel.
+        let mut rng = common::Rng(level as u64);
+        let mut errors: Vec<f32> = (0..3000)
+            .map(|_| {
+                let origin = center + rng.unit_vector() * 3.0 * radius;
+                let dir = (center + rng.unit_vector() * 0.6 * radius - origin).normalize();
+                let hit = r.closest_hit(&Ray::new(origin, dir, 0.0, f32::INFINITY)).0;
+                assert!(hit.is_hit());
+                ((origin + hit.t * dir - center).length() - radius).abs()
+            })
+            .collect();
+        errors.sort_by(f32::total_cmp);
+        let (p99, worst) = (errors[errors.len() * 99 / 100], errors[errors.len() - 1]);
+        println!(
+            "Q{level}: {} leaves, radial error p99 {p99:.2e}, max {worst:.2e}, texel {:.2e}",
+            r.leaves.len(),
+            r.texel_size
+        );
+        assert!(
+            p99 <= max_chord_error + 0.1 * r.texel_size,
+            "Q{level}: p99 radial error {p99}"
+        );
+        assert!(
+            worst <= max_chord_error + 0.5 * r.texel_size,
+            "Q{level}: radial error {worst}"
+        );
+    }
+}
+
+#[test]
+fn build_is_identical_for_any_thread_count() {
+    let scene = Scene::builtin("default").unwrap();
+    let build = |threads| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| Rbvh::build(&scene, &q(1)).unwrap())
+    };
+    let (a, b) = (build(1), build(3));
+    assert_eq!(
+        (&a.nodes, &a.leaves, &a.triangles),
+        (&b.nodes, &b.leaves, &b.triangles)
+    );
+    assert_eq!(a.atlas, b.atlas);
+}
+
+#[test]
+fn every_preset_and_strategy_builds_and_texels_grow_with_quality() {
+    let scene = Scene::builtin("default").unwrap();
+    let mut previous = 0;
+    for level in 0..5 {
+        let r = Rbvh::build(&scene, &q(level)).unwrap();
+        assert!(
+            r.stats.tile_texels > previous,
+            "Q{level} has no more texels than the level below"
+        );
+        previous = r.stats.tile_texels;
+        assert!(
+            r.fill_ratio() > 0.5,
+            "Q{level}: atlas fill {}",
+            r.fill_ratio()
+        );
+    }
+    for (refinement, subdivision, object_split) in [
+        (
+            Refinement::ProjectedArea { min_ratio: 0.8 },
+            Subdivision::SpatialMedian,
+            true,
+        ),
+        (
+            Refinement::NormalCone {
+                max_angle_deg: 45.0,
+            },
+            Subdivision::AreaSah,
+            true,
+        ),
+        (
+            Refinement::NormalCone {
+                max_angle_deg: 60.0,
+            },
+            Subdivision::SpatialMedian,
+            false,
+        ),
+    ] {
+        let params = RbvhParams {
+            refinement,
+            subdivision,
+            object_split,
+            ..q(1)
+        };
+        let r = Rbvh::build(&scene, &params).unwrap();
+        let rays = scene.camera_or_framed(1.0).primary_rays(48, 48);
+        let (_, _, mismatch) = error_vs_exact(&scene, &r, &rays);
+        assert!(mismatch < 0.05, "{params:?}: {mismatch}");
+    }
+}
+
+#[test]
+fn error_shrinks_as_quality_rises() {
+    let scene = Scene::builtin("blob").unwrap();
+    let rays = scene.camera_or_framed(1.0).primary_rays(96, 96);
+    let errors: Vec<(f64, f64, f64)> = [0, 2, 4]
+        .iter()
+        .map(|&l| error_vs_exact(&scene, &Rbvh::build(&scene, &q(l)).unwrap(), &rays))
+        .collect();
+    println!("blob mean/max t error vs exact and miss mismatch, Q0 Q2 Q4: {errors:?}");
+    assert!(
+        errors[2].0 < errors[1].0 && errors[1].0 < errors[0].0,
+        "{errors:?}"
+    );
+    assert!(errors.iter().all(|e| e.2 < 0.02), "{errors:?}");
+}
+
+#[test]
+fn degenerate_inputs() {
+    let ray = Ray::new(Vec3::new(0.2, 0.2, -5.0), Vec3::Z, 0.0, f32::INFINITY);
+    let empty = Scene::new("empty");
+    let r = Rbvh::build(&empty, &q(2)).unwrap();
+    assert!(!r.closest_hit(&ray).0.is_hit());
+    let mut one = Scene::new("one");
+    one.push_object("t", &[Vec3::ZERO, Vec3::X, Vec3::Y], &[[0, 1, 2]]);
+    let r = Rbvh::build(&one, &q(2)).unwrap();
+    assert!(!r.leaves.is_empty() && r.stats.triangle_leaves == 0);
+    assert!((r.closest_hit(&ray).0.t - 5.0).abs() < 1e-4);
+    // Zero-area triangles and duplicated vertices (same positions, different indices).
+    let mut odd = Scene::new("odd");
+    odd.push_object(
+        "t",
+        &[
+            Vec3::ZERO,
+            Vec3::X,
+            Vec3::Y,
+            Vec3::ZERO,
+            Vec3::X,
+            Vec3::Y,
+            Vec3::splat(0.5),
+        ],
+        &[[0, 1, 2], [3, 4, 5], [6, 6, 6], [0, 0, 1], [4, 1, 2]],
+    );
+    let r = Rbvh::build(&odd, &q(2)).unwrap();
+    assert!((r.closest_hit(&ray).0.t - 5.0).abs() < 1e-4);
+}
+
+#[test]
+fn parameters_out_of_range_and_huge_rates_are_errors() {
+    let scene = Scene::builtin("sphere").unwrap();
+    let err = Rbvh::build(
+        &scene,
+        &RbvhParams {
+            texels_per_diagonal: 1.0e6,
+            ..q(2)
+        },
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("texels_per_diagonal") && err.contains("lower"),
+        "{err}"
+    );
+    assert!(Rbvh::build(
+        &scene,
+        &RbvhParams {
+            max_tile: 1,
+            ..q(2)
+        }
+    )
+    .is_err());
+    assert!(RbvhParams::quality(7).is_err());
+    // Tiny rates still give valid, coarse results: at 2 texels per diagonal a sphere is eight
+    // 3×3 tiles (traced without error); at 16 it is already recognisable.
+    let ray = Ray::new(Vec3::new(0.1, 0.2, -3.0), Vec3::Z, 0.0, f32::INFINITY);
+    let tiny = Rbvh::build(
+        &scene,
+        &RbvhParams {
+            texels_per_diagonal: 2.0,
+            ..q(2)
+        },
+    )
+    .unwrap();
+    assert!(tiny.leaves.len() >= 2);
+    tiny.closest_hit(&ray);
+    let coarse = Rbvh::build(
+        &scene,
+        &RbvhParams {
+            texels_per_diagonal: 16.0,
+            ..q(2)
+        },
+    )
+    .unwrap();
+    let rays = scene.camera_or_framed(1.0).primary_rays(64, 64);
+    let (mean, _, mismatch) = error_vs_exact(&scene, &coarse, &rays);
+    println!("16 texels per diagonal: mean t error {mean:.2e} of the diagonal, hit/miss mismatch {mismatch:.3}");
+    assert!(mean < 0.01 && mismatch < 0.05, "{mean} {mismatch}");
+}
+
+#[test]
+fn save_load_round_trip_is_byte_identical() {
+    let scene = Scene::builtin("default").unwrap();
+    let r = Rbvh::build(&scene, &q(1)).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("default.rbvh");
+    r.save(&path).unwrap();
+    let back = Rbvh::load(&path).unwrap();
+    assert_eq!(back, r);
+    assert_eq!(back.to_bytes(), std::fs::read(&path).unwrap());
+}
