@@ -136,7 +136,10 @@ mod tests {
         }
         assert!(worst < 1.3, "worst octahedral error {worst}°");
         for n in [Vec3::X, Vec3::Y, Vec3::Z, -Vec3::X, -Vec3::Y, -Vec3::Z] {
-            assert!(decode_octahedral(encode_octahedral(n)).dot(n) > 0.9999, "{n}");
+            assert!(
+                decode_octahedral(encode_octahedral(n)).dot(n) > 0.9999,
+                "{n}"
+            );
         }
     }
 

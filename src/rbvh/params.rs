@@ -54,11 +54,16 @@ impl RbvhParams {
     /// the previous one, so about twice its texels.
     pub fn quality(level: u32) -> Result<RbvhParams> {
         if level > 4 {
-            return Err(Error::param("quality", format!("{level} is not a preset; use 0..=4 (Q0 coarsest … Q4 finest)")));
+            return Err(Error::param(
+                "quality",
+                format!("{level} is not a preset; use 0..=4 (Q0 coarsest … Q4 finest)"),
+            ));
         }
         Ok(RbvhParams {
             texels_per_diagonal: 256.0 * std::f32::consts::SQRT_2.powi(level as i32),
-            refinement: Refinement::NormalCone { max_angle_deg: 60.0 },
+            refinement: Refinement::NormalCone {
+                max_angle_deg: 60.0,
+            },
             subdivision: Subdivision::SpatialMedian,
             object_split: true,
             max_tile: 64,
@@ -70,11 +75,17 @@ impl RbvhParams {
     pub fn validate(&self) -> Result<()> {
         let rate = self.texels_per_diagonal;
         if !(rate.is_finite() && (1.0..=1.0e6).contains(&rate)) {
-            return Err(Error::param("texels_per_diagonal", format!("{rate} is outside 1..=1e6")));
+            return Err(Error::param(
+                "texels_per_diagonal",
+                format!("{rate} is outside 1..=1e6"),
+            ));
         }
         match self.refinement {
             Refinement::NormalCone { max_angle_deg: a } if !(a > 0.0 && a < 90.0) => {
-                return Err(Error::param("max_angle_deg", format!("{a} is outside (0, 90) degrees")))
+                return Err(Error::param(
+                    "max_angle_deg",
+                    format!("{a} is outside (0, 90) degrees"),
+                ))
             }
             Refinement::ProjectedArea { min_ratio: r } if !(r > 0.0 && r <= 1.0) => {
                 return Err(Error::param("min_ratio", format!("{r} is outside (0, 1]")))
@@ -82,11 +93,17 @@ impl RbvhParams {
             _ => {}
         }
         if !(4..=4096).contains(&self.max_tile) {
-            return Err(Error::param("max_tile", format!("{} is outside 4..=4096", self.max_tile)));
+            return Err(Error::param(
+                "max_tile",
+                format!("{} is outside 4..=4096", self.max_tile),
+            ));
         }
         let m = self.min_leaf_texels;
         if !(m.is_finite() && (0.0..=1.0e4).contains(&m)) {
-            return Err(Error::param("min_leaf_texels", format!("{m} is outside 0..=1e4")));
+            return Err(Error::param(
+                "min_leaf_texels",
+                format!("{m} is outside 0..=1e4"),
+            ));
         }
         Ok(())
     }
@@ -114,12 +131,29 @@ mod tests {
     fn out_of_range_parameters_are_errors() {
         let q = RbvhParams::quality(2).unwrap();
         let bad = [
-            RbvhParams { texels_per_diagonal: 0.0, ..q },
-            RbvhParams { texels_per_diagonal: f32::NAN, ..q },
-            RbvhParams { refinement: Refinement::NormalCone { max_angle_deg: 90.0 }, ..q },
-            RbvhParams { refinement: Refinement::ProjectedArea { min_ratio: 0.0 }, ..q },
+            RbvhParams {
+                texels_per_diagonal: 0.0,
+                ..q
+            },
+            RbvhParams {
+                texels_per_diagonal: f32::NAN,
+                ..q
+            },
+            RbvhParams {
+                refinement: Refinement::NormalCone {
+                    max_angle_deg: 90.0,
+                },
+                ..q
+            },
+            RbvhParams {
+                refinement: Refinement::ProjectedArea { min_ratio: 0.0 },
+                ..q
+            },
             RbvhParams { max_tile: 2, ..q },
-            RbvhParams { min_leaf_texels: -1.0, ..q },
+            RbvhParams {
+                min_leaf_texels: -1.0,
+                ..q
+            },
         ];
         for p in bad {
             assert!(p.validate().is_err(), "{p:?}");
