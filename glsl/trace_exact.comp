@@ -21,11 +21,16 @@ layout(std430, set = 0, binding = 5) writeonly buffer Steps {
     uint steps_out[];
 };
 
+// Shared with trace_rbvh.comp and src/gpu/tracer.rs (TraceParams); the last three are unused here.
 layout(push_constant) uniform Params {
     uint ray_offset;  // first ray of this dispatch (dispatches are split at maxComputeWorkGroupCount)
     uint ray_count;   // rays in the whole batch
-    uint node_count;
     uint flags;       // bit 0: any hit; bit 1: write per-ray steps
+    uint node_count;
+    uint tri_count;
+    uint leaf_count;
+    uint atlas_pitch;
+    uint atlas_len;
 } pc;
 
 void main() {

@@ -13,12 +13,12 @@
 //! ```
 //!
 //! ```no_run
-//! use rbvh::{bvh::Bvh, gpu::{Context, ContextOptions, ExactTracer}, scene::Scene};
+//! use rbvh::{bvh::Bvh, gpu::{Context, ContextOptions, Tracer}, scene::Scene};
 //!
 //! let scene = Scene::load("sphere")?;
 //! let bvh = Bvh::build(&scene)?;
 //! let ctx = Context::new(&ContextOptions::default())?;
-//! let tracer = ExactTracer::new(&ctx, &bvh)?;
+//! let tracer = Tracer::exact(&ctx, &bvh)?;
 //! let camera = scene.camera_or_framed(1.0);
 //! let rays = camera.primary_rays(64, 64);
 //! let traced = tracer.trace(&rays, rbvh::gpu::Query::Closest)?;

@@ -9,7 +9,7 @@ mod common;
 use glam::Vec3;
 use rbvh::bvh::Bvh;
 use rbvh::geom::{Hit, Ray};
-use rbvh::gpu::{ExactTracer, Query};
+use rbvh::gpu::{Query, Tracer};
 use rbvh::scene::Scene;
 
 /// Smallest barycentric coordinate of the point where `ray` meets the plane of triangle `id`.
@@ -114,7 +114,7 @@ fn gpu_and_cpu_tracers_agree() {
     for (k, (name, side, random)) in cases.into_iter().enumerate() {
         let scene = Scene::load(name).unwrap();
         let bvh = Bvh::build(&scene).unwrap();
-        let tracer = ExactTracer::new(&ctx, &bvh).unwrap();
+        let tracer = Tracer::exact(&ctx, &bvh).unwrap();
         let rays = rays_for(&scene, side, random, k as u64 + 1);
         for (query, any) in [(Query::Closest, false), (Query::Any, true)] {
             let gpu = tracer.trace(&rays, query).unwrap().hits;
@@ -136,7 +136,7 @@ fn gpu_and_cpu_tracers_agree() {
 fn invalid_rays_miss_on_the_gpu() {
     let ctx = common::context();
     let bvh = Bvh::build(&Scene::builtin("sphere").unwrap()).unwrap();
-    let tracer = ExactTracer::new(&ctx, &bvh).unwrap();
+    let tracer = Tracer::exact(&ctx, &bvh).unwrap();
     let o = Vec3::new(0.0, 0.0, -3.0);
     let rays = [
         Ray::new(Vec3::splat(f32::NAN), Vec3::Z, 0.0, f32::INFINITY),
@@ -164,7 +164,7 @@ fn empty_scene_and_empty_batch() {
         light: None,
     };
     let bvh = Bvh::build(&empty).unwrap();
-    let tracer = ExactTracer::new(&ctx, &bvh).unwrap();
+    let tracer = Tracer::exact(&ctx, &bvh).unwrap();
     let rays = [Ray::new(Vec3::ZERO, Vec3::X, 0.0, f32::INFINITY)];
     assert_eq!(
         tracer.trace(&rays, Query::Closest).unwrap().hits,

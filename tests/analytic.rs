@@ -6,7 +6,7 @@ mod common;
 use glam::Vec3;
 use rbvh::bvh::Bvh;
 use rbvh::geom::{Hit, Ray};
-use rbvh::gpu::{ExactTracer, Query};
+use rbvh::gpu::{Query, Tracer};
 use rbvh::scene::builtin::{self, Analytic};
 use rbvh::scene::Scene;
 
@@ -14,7 +14,7 @@ fn trace_both(name: &str, rays: &[Ray]) -> [Vec<Hit>; 2] {
     let scene = Scene::builtin(name).unwrap();
     let bvh = Bvh::build(&scene).unwrap();
     let ctx = common::context();
-    let gpu = ExactTracer::new(&ctx, &bvh)
+    let gpu = Tracer::exact(&ctx, &bvh)
         .unwrap()
         .trace(rays, Query::Closest)
         .unwrap()

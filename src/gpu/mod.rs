@@ -4,14 +4,14 @@
 
 mod buffer;
 mod context;
-mod exact_tracer;
 mod pipeline;
 pub mod shaders;
 pub mod spirv;
 mod submit;
+mod tracer;
 
 pub use buffer::Buffer;
 pub use context::{Context, ContextOptions, Validation};
-pub use exact_tracer::{ExactTracer, Query, Traced};
 pub use pipeline::ComputePipeline;
 pub use submit::Timing;
+pub use tracer::{Query, TraceParams, Traced, Tracer};

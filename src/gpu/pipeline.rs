@@ -128,6 +128,10 @@ impl ComputePipeline {
         Ok(p)
     }
 
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
     /// Workgroup width declared by the shader.
     pub fn local_size_x(&self) -> u32 {
         self.local_size_x

@@ -21,6 +21,21 @@ use glam::{Vec2, Vec3};
 
 pub use crate::bvh::{GpuNode, GpuTriangle, LEAF_BIT};
 
+/// Relative rounding slack of the height-field march (steps 2–4 of `march.rs`); `glsl/rbvh.glsl`
+/// defines the same value. Frame-space quantities (the ray's height `o_h + d_h·t`,
+/// the triangle test's hit, boundary crossings) carry rounding errors of a few ulps of the
+/// magnitudes involved; the march's box and per-cell height rejection are widened by this much of
+/// `|o_h| + h_top` (plus one height quantum), and a grid vertex counts as passed ambiguously
+/// within this much of `|o_s| + |o_t| + res_u + res_v` texels. 1e-5 (about 80 ulps) is far beyond
+/// the rounding and still costs almost nothing: few cells are rejected less, few vertices are
+/// passed that closely.
+pub const MARCH_SLACK: f32 = 1e-5;
+
+/// Padding of the march's box beyond the outermost samples, in texels (step 2): a ray running
+/// exactly in a border plane of an unpadded box is in or out of the slab by the sign of its zero
+/// direction component (`safe_inverse`); the padding leaves that decision to the triangles.
+pub const MARCH_EDGE_PAD: f32 = 1.0 / 64.0;
+
 /// `count` of a child reference that is a height-field leaf.
 pub const HEIGHTFIELD_COUNT: u32 = u32::MAX;
 

@@ -29,7 +29,10 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT, LEAF_BIT};
+use super::layout::{
+    Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT, LEAF_BIT, MARCH_EDGE_PAD as EDGE_PAD,
+    MARCH_SLACK as SLACK,
+};
 use super::Rbvh;
 use crate::bvh::{ChildRef, STACK_SIZE};
 use crate::geom::{intersect_triangle, safe_inverse, Aabb, Hit, Ray, RayShear};
@@ -47,20 +50,6 @@ pub struct RbvhTraceStats {
     /// [`STACK_SIZE`]) or, in corrupt data only, a cycle made it visit more nodes than there are.
     pub overflow: bool,
 }
-
-/// Relative rounding slack of the march (steps 2–4). Frame-space quantities (the ray's height `o_h + d_h·t`,
-/// the triangle test's hit, boundary crossings) carry rounding errors of a few ulps of the
-/// magnitudes involved; the march's box and per-cell height rejection are widened by this much of
-/// `|o_h| + h_top` (plus one height quantum), and a grid vertex counts as passed ambiguously
-/// within this much of `|o_s| + |o_t| + res_u + res_v` texels. 1e-5 (about 80 ulps) is far beyond
-/// the rounding and still costs almost nothing: few cells are rejected less, few vertices are
-/// passed that closely.
-const SLACK: f32 = 1e-5;
-
-/// Padding of the march's box beyond the outermost samples, in texels (step 2): a ray running
-/// exactly in a border plane of an unpadded box is in or out of the slab by the sign of its zero
-/// direction component ([`safe_inverse`]); the padding leaves that decision to the triangles.
-const EDGE_PAD: f32 = 1.0 / 64.0;
 
 impl Rbvh {
     /// Closest hit of one ray, or [`Hit::MISS`]. Invalid rays ([`Ray::is_valid`]) miss.

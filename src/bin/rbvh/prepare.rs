@@ -1,13 +1,16 @@
 //! What every command does first: pick the device, load the scene, build the acceleration
 //! structure — with a spinner on long steps (hidden when stderr is not a terminal).
 
+use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, Result};
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use rbvh::bvh::Bvh;
-use rbvh::gpu::{Context, ContextOptions, Validation};
+use rbvh::geom::{Hit, Ray};
+use rbvh::gpu::{Context, ContextOptions, Query, Traced, Tracer, Validation};
+use rbvh::rbvh::Rbvh;
 use rbvh::scene::Scene;
 
 /// Options shared by the commands that trace.
@@ -19,13 +22,18 @@ pub struct Common {
     /// Acceleration structure to trace through.
     #[arg(long, value_enum, default_value_t = Method::Exact)]
     pub method: Method,
+    #[command(flatten)]
+    pub quality: Quality,
+    /// Trace this saved RBVH (from `rbvh build --out`) instead of building one (implies --method rbvh).
+    #[arg(long)]
+    pub rbvh: Option<PathBuf>,
     /// Vulkan device to use: any part of its name (default: $RBVH_DEVICE, else the best GPU, else lavapipe).
     #[arg(long)]
     pub device: Option<String>,
     /// Run the Vulkan validation layer and fail on any error it reports.
     #[arg(long)]
     pub validate: bool,
-    /// Print timings and ray throughput.
+    /// Print timings and ray throughput (for --method rbvh also the exact BVH's on the same rays).
     #[arg(long)]
     pub stats: bool,
 }
@@ -34,11 +42,36 @@ pub struct Common {
 pub enum Method {
     /// Exact triangle BVH (the reference).
     Exact,
+    /// Rasterized BVH at --quality.
+    Rbvh,
+}
+
+/// The structure a command traces through.
+pub enum Structure {
+    Exact(Bvh),
+    Rbvh(Box<Rbvh>),
+}
+
+impl Structure {
+    pub fn tracer(&self, ctx: &Context) -> Result<Tracer> {
+        Ok(match self {
+            Structure::Exact(b) => Tracer::exact(ctx, b),
+            Structure::Rbvh(r) => Tracer::rbvh(ctx, r),
+        }
+        .context("uploading the acceleration structure")?)
+    }
+
+    pub fn trace_cpu(&self, rays: &[Ray], any_hit: bool) -> Vec<Hit> {
+        match self {
+            Structure::Exact(b) => b.trace_cpu(rays, any_hit),
+            Structure::Rbvh(r) => r.trace_cpu(rays, any_hit),
+        }
+    }
 }
 
 pub struct Prepared {
     pub scene: Scene,
-    pub bvh: Bvh,
+    pub structure: Structure,
     pub ctx: Context,
 }
 
@@ -59,7 +92,21 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
     let scene = step("loading scene", || Scene::load(&c.scene))
         .with_context(|| format!("loading scene {:?}", c.scene))?;
     let load_ms = t.elapsed().as_secs_f64() * 1e3;
-    let bvh = step("building BVH", || Bvh::build(&scene))?;
+    let structure = match (&c.rbvh, c.method) {
+        (Some(path), _) => Structure::Rbvh(Box::new(
+            step("loading RBVH", || Rbvh::load(path))
+                .with_context(|| format!("loading RBVH {}", path.display()))?,
+        )),
+        (None, Method::Exact) => Structure::Exact(step("building BVH", || Bvh::build(&scene))?),
+        (None, Method::Rbvh) => {
+            let mut levels = c.quality.levels()?;
+            anyhow::ensure!(levels.len() == 1, "--quality: give one level to trace");
+            let (_, params) = levels.remove(0);
+            Structure::Rbvh(Box::new(step("building RBVH", || {
+                Rbvh::build(&scene, &params)
+            })?))
+        }
+    };
     let ctx = Context::new(&ContextOptions {
         device_name: c
             .device
@@ -74,36 +121,78 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
     .context("creating the Vulkan device")?;
     if c.stats {
         eprintln!(
-            "scene {}: {} triangles, loaded in {load_ms:.1} ms; BVH {} nodes, depth {}, built in {:.1} ms; {} + {} bytes",
+            "scene {}: {} triangles, loaded in {load_ms:.1} ms",
             scene.name,
-            scene.triangle_count(),
-            bvh.nodes.len(),
-            bvh.depth,
-            bvh.build_ms,
-            bvh.tree_bytes(),
-            bvh.triangle_bytes()
+            scene.triangle_count()
         );
+        match &structure {
+            Structure::Exact(bvh) => eprintln!(
+                "exact BVH: {} nodes, depth {}, built in {:.1} ms, {} + {} bytes (tree + triangles)",
+                bvh.nodes.len(),
+                bvh.depth,
+                bvh.build_ms,
+                bvh.tree_bytes(),
+                bvh.triangle_bytes()
+            ),
+            Structure::Rbvh(r) => eprintln!(
+                "RBVH: {} nodes, {} height-field + {} triangle leaves, depth {}, built in {:.1} ms, {} bytes (tree {}, atlas {}, triangles {})",
+                r.nodes.len(),
+                r.stats.heightfield_leaves,
+                r.stats.triangle_leaves,
+                r.depth,
+                r.stats.build_ms,
+                r.total_bytes(),
+                r.tree_bytes(),
+                r.atlas_bytes(),
+                r.triangle_bytes()
+            ),
+        }
         eprintln!("device: {} ({})", ctx.device_name(), ctx.driver());
     }
-    Ok(Prepared { scene, bvh, ctx })
+    Ok(Prepared {
+        scene,
+        structure,
+        ctx,
+    })
 }
 
-/// Prints throughput of the GPU trace and of the CPU reference on the same rays, and their ratio.
-pub fn print_throughput(rays: usize, gpu_ms: Option<f64>, wall_ms: f64, cpu_ms: f64) {
-    let mrays = |ms: f64| rays as f64 / (ms * 1e3);
-    match gpu_ms {
-        Some(g) => eprintln!(
-            "trace: {rays} rays, GPU {g:.2} ms = {:.2} MRays/s (wall {wall_ms:.2} ms); CPU reference {cpu_ms:.2} ms = {:.2} MRays/s; GPU/CPU = {:.2}x",
-            mrays(g),
-            mrays(cpu_ms),
-            cpu_ms / g
-        ),
-        None => eprintln!(
-            "trace: {rays} rays, wall {wall_ms:.2} ms = {:.2} MRays/s (no GPU timestamps); CPU reference {:.2} MRays/s",
-            mrays(wall_ms),
+/// `--stats` after a trace: GPU MRays/s, the CPU reference's on the same rays and their ratio;
+/// for an RBVH also the exact BVH's GPU MRays/s on the same rays, and the speedup.
+pub fn report_throughput(p: &Prepared, rays: &[Ray], query: Query, traced: &Traced) -> Result<()> {
+    let mrays = |ms: f64| rays.len() as f64 / (ms * 1e3);
+    let any = query == Query::Any;
+    let t = Instant::now();
+    std::hint::black_box(p.structure.trace_cpu(rays, any));
+    let cpu_ms = t.elapsed().as_secs_f64() * 1e3;
+    let Some(gpu_ms) = traced.timing.gpu_ms else {
+        eprintln!(
+            "trace: {} rays, wall {:.2} ms = {:.2} MRays/s (no GPU timestamps); CPU reference {:.2} MRays/s",
+            rays.len(),
+            traced.timing.wall_ms,
+            mrays(traced.timing.wall_ms),
             mrays(cpu_ms)
-        ),
+        );
+        return Ok(());
+    };
+    eprintln!(
+        "trace: {} rays, GPU {gpu_ms:.2} ms = {:.2} MRays/s; CPU reference {cpu_ms:.2} ms = {:.2} MRays/s; GPU/CPU = {:.2}x",
+        rays.len(),
+        mrays(gpu_ms),
+        mrays(cpu_ms),
+        cpu_ms / gpu_ms
+    );
+    if let Structure::Rbvh(_) = p.structure {
+        let bvh = Bvh::build(&p.scene)?;
+        let exact = Tracer::exact(&p.ctx, &bvh)?.trace(rays, query)?;
+        if let Some(exact_ms) = exact.timing.gpu_ms {
+            eprintln!(
+                "exact BVH on the same rays: GPU {exact_ms:.2} ms = {:.2} MRays/s; RBVH speedup {:.2}x",
+                mrays(exact_ms),
+                exact_ms / gpu_ms
+            );
+        }
     }
+    Ok(())
 }
 
 /// RBVH quality: presets, optionally adjusted by free parameters (which make the level "custom").

@@ -2,14 +2,13 @@
 //! depth and normals; a traversal-cost heat map.
 
 use std::path::PathBuf;
-use std::time::Instant;
 
-use anyhow::{ensure, Context as _, Result};
+use anyhow::{ensure, Result};
 use clap::ValueEnum;
-use rbvh::gpu::{ExactTracer, Query};
+use rbvh::gpu::Query;
 use rbvh::output;
 
-use crate::prepare::{prepare, print_throughput, step, Common};
+use crate::prepare::{prepare, report_throughput, step, Common};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -50,21 +49,12 @@ pub fn run(a: Args) -> Result<()> {
     let p = prepare(&a.common)?;
     let camera = p.scene.camera_or_framed(a.width as f32 / a.height as f32);
     let rays = camera.primary_rays(a.width, a.height);
-    let tracer = ExactTracer::new(&p.ctx, &p.bvh).context("uploading the BVH")?;
+    let tracer = p.structure.tracer(&p.ctx)?;
     let traced = step("tracing", || {
         tracer.trace_with(&rays, Query::Closest, a.heatmap.is_some())
     })?;
     if a.common.stats {
-        let t = Instant::now();
-        let cpu = p.bvh.trace_cpu(&rays, false);
-        let cpu_ms = t.elapsed().as_secs_f64() * 1e3;
-        std::hint::black_box(cpu);
-        print_throughput(
-            rays.len(),
-            traced.timing.gpu_ms,
-            traced.timing.wall_ms,
-            cpu_ms,
-        );
+        report_throughput(&p, &rays, Query::Closest, &traced)?;
     }
     let image = match a.shading {
         Shading::Lambert => output::shade(

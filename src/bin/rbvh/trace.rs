@@ -1,13 +1,12 @@
 //! `rbvh trace`: a ray file in, a hit file out, so that any outside harness can query the tracer.
 
 use std::path::PathBuf;
-use std::time::Instant;
 
-use anyhow::{Context as _, Result};
-use rbvh::gpu::{ExactTracer, Query};
+use anyhow::Result;
+use rbvh::gpu::Query;
 use rbvh::io;
 
-use crate::prepare::{prepare, print_throughput, step, Common};
+use crate::prepare::{prepare, report_throughput, step, Common};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -36,19 +35,12 @@ pub fn run(a: Args) -> Result<()> {
         Query::Closest
     };
     let hits = if a.cpu {
-        p.bvh.trace_cpu(&rays, a.any_hit)
+        p.structure.trace_cpu(&rays, a.any_hit)
     } else {
-        let tracer = ExactTracer::new(&p.ctx, &p.bvh).context("uploading the BVH")?;
+        let tracer = p.structure.tracer(&p.ctx)?;
         let traced = step("tracing", || tracer.trace(&rays, query))?;
         if a.common.stats {
-            let t = Instant::now();
-            std::hint::black_box(p.bvh.trace_cpu(&rays, a.any_hit));
-            print_throughput(
-                rays.len(),
-                traced.timing.gpu_ms,
-                traced.timing.wall_ms,
-                t.elapsed().as_secs_f64() * 1e3,
-            );
+            report_throughput(&p, &rays, query, &traced)?;
         }
         traced.hits
     };

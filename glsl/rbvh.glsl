@@ -1,0 +1,381 @@
+// RBVH traversal and height-field march: the GLSL twin of src/rbvh/march.rs, step for step, on the
+// packed data of src/rbvh/layout.rs. Includes bvh.glsl for the node and triangle buffers.
+//
+// The includer chooses where the buffers live by defining, before the #include:
+//   RBVH_BVH_SET, RBVH_BVH_NODES_BINDING, RBVH_BVH_TRIS_BINDING   (see bvh.glsl; defaults 0, 0, 1)
+//   RBVH_LEAVES_BINDING  binding of the height-field leaves (default 2)
+//   RBVH_ATLAS_BINDING   binding of the texel atlas         (default 3)
+#ifndef RBVH_RBVH_GLSL
+#define RBVH_RBVH_GLSL
+
+#include "bvh.glsl"
+
+#ifndef RBVH_LEAVES_BINDING
+#define RBVH_LEAVES_BINDING 2
+#endif
+#ifndef RBVH_ATLAS_BINDING
+#define RBVH_ATLAS_BINDING 3
+#endif
+
+// Must equal MARCH_SLACK, MARCH_EDGE_PAD and Texel::MAX_CODE / HOLE_CODE (tests/layout.rs checks).
+#define RBVH_MARCH_SLACK 1e-5
+#define RBVH_MARCH_EDGE_PAD 0.015625
+#define RBVH_MAX_CODE 65534u
+#define RBVH_HOLE_CODE 65535u
+const uint RBVH_HEIGHTFIELD_COUNT = 0xFFFFFFFFu;
+
+// 64 bytes: see GpuHeightfield.
+struct RbvhLeaf {
+    vec3 origin;
+    uint atlas_base;
+    vec3 axis_u;
+    uint res_u;
+    vec3 axis_v;
+    uint res_v;
+    vec3 axis_w;
+    float h_scale;
+};
+
+layout(std430, set = RBVH_BVH_SET, binding = RBVH_LEAVES_BINDING) readonly buffer RbvhLeaves {
+    RbvhLeaf rbvh_leaves[];
+};
+// Bits 0-15 height code (0xFFFF = hole), bits 16-31 the 8:8 octahedral normal.
+layout(std430, set = RBVH_BVH_SET, binding = RBVH_ATLAS_BINDING) readonly buffer RbvhAtlas {
+    uint rbvh_atlas[];
+};
+
+// Sizes the march needs to bound its reads.
+struct RbvhSizes {
+    uint node_count;
+    uint tri_count;
+    uint leaf_count;
+    uint atlas_pitch;
+    uint atlas_len;
+};
+
+vec3 rbvh_decode_normal(uint texel) {
+    uint code = texel >> 16;
+    float x = float(code & 0xFFu) / 255.0 * 2.0 - 1.0;
+    float y = float((code >> 8) & 0xFFu) / 255.0 * 2.0 - 1.0;
+    float z = 1.0 - abs(x) - abs(y);
+    float t = max(-z, 0.0);
+    x += x >= 0.0 ? -t : t;
+    y += y >= 0.0 ? -t : t;
+    return normalize(vec3(x, y, z));
+}
+
+bool rbvh_is_hole(uint texel) {
+    return (texel & 0xFFFFu) == RBVH_HOLE_CODE;
+}
+
+uint rbvh_texel(RbvhLeaf leaf, RbvhSizes sz, int i, int j) {
+    uint index = leaf.atlas_base + uint(j) * sz.atlas_pitch + uint(i);
+    return index < sz.atlas_len ? rbvh_atlas[index] : RBVH_HOLE_CODE;
+}
+
+float rbvh_height_at(float o, float d, float t) {
+    precise float h = o + d * t;
+    return d == 0.0 ? o : h;
+}
+
+float rbvh_boundary_t(int c, int step, float o, float inv) {
+    precise float far_side = (float(c + 1) + 0.5 - o) * inv;
+    precise float near_side = (float(c) + 0.5 - o) * inv;
+    return step > 0 ? far_side : (step < 0 ? near_side : RBVH_INF);
+}
+
+// Frame-space ray of one leaf.
+struct RbvhFrameRay {
+    vec3 o;
+    vec3 d;
+    float tmin;
+    float tmax;
+    RbvhShear shear;
+};
+
+// Steps 4 and 5 of march.rs: the cell's two (or one) triangles; returns t (< 0 on a miss) and the
+// normal of the nearest corner sample.
+float rbvh_cell_hit(RbvhLeaf leaf, RbvhSizes sz, RbvhFrameRay fr, float slack, int ci, int cj,
+                    float t_in, float t_out, out vec3 normal) {
+    uint corner[4];
+    vec3 pos[4];
+    int valid = 0;
+    float lo = RBVH_INF;
+    float hi = -RBVH_INF;
+    for (int k = 0; k < 4; ++k) {
+        int i = ci + (k & 1);
+        int j = cj + (k >> 1);
+        uint c = rbvh_texel(leaf, sz, i, j);
+        corner[k] = c;
+        pos[k] = vec3(0.0);
+        if (!rbvh_is_hole(c)) {
+            precise float h = float(c & 0xFFFFu) * leaf.h_scale;
+            pos[k] = vec3(float(i) + 0.5, float(j) + 0.5, h);
+            valid += 1;
+            lo = min(lo, h);
+            hi = max(hi, h);
+        }
+    }
+    if (valid < 3) {
+        return -1.0;
+    }
+    float h_a = rbvh_height_at(fr.o.z, fr.d.z, t_in);
+    float h_b = rbvh_height_at(fr.o.z, fr.d.z, t_out);
+    precise float lo_s = lo - slack;
+    precise float hi_s = hi + slack;
+    if (max(h_a, h_b) < lo_s || min(h_a, h_b) > hi_s) {
+        return -1.0;
+    }
+    ivec3 first = ivec3(0, 1, 3);
+    bool two = valid == 4;
+    if (!two) {
+        int cycle[4] = int[4](0, 1, 3, 2);
+        int n = 0;
+        for (int m = 0; m < 4; ++m) {
+            int k = cycle[m];
+            if (!rbvh_is_hole(corner[k]) && n < 3) {
+                first[n] = k;
+                n += 1;
+            }
+        }
+    }
+    float t_hit = rbvh_intersect_triangle(fr.shear, pos[first.x], pos[first.y], pos[first.z], fr.tmin, fr.tmax);
+    if (two) {
+        float t_max = t_hit >= 0.0 ? t_hit : fr.tmax;
+        float t = rbvh_intersect_triangle(fr.shear, pos[0], pos[3], pos[2], fr.tmin, t_max);
+        if (t >= 0.0) {
+            t_hit = t;
+        }
+    }
+    if (t_hit < 0.0) {
+        return -1.0;
+    }
+    precise float s = fr.o.x + fr.d.x * t_hit;
+    precise float r = fr.o.y + fr.d.y * t_hit;
+    int di = int(clamp(floor(s), float(ci), float(ci + 1))) - ci;
+    int dj = int(clamp(floor(r), float(cj), float(cj + 1))) - cj;
+    uint nearest = corner[di + 2 * dj];
+    if (rbvh_is_hole(nearest)) {
+        for (int k = 0; k < 4; ++k) {
+            if (!rbvh_is_hole(corner[k])) {
+                nearest = corner[k];
+                break;
+            }
+        }
+    }
+    normal = rbvh_decode_normal(nearest);
+    return t_hit;
+}
+
+// Marches leaf `li` over [tmin, t_closest); returns t (< 0 on a miss). `cells` counts cells visited.
+float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cells, out vec3 normal) {
+    normal = vec3(0.0);
+    if (li >= sz.leaf_count) {
+        return -1.0;
+    }
+    RbvhLeaf leaf = rbvh_leaves[li];
+    if (leaf.res_u < 2u || leaf.res_v < 2u || leaf.res_u > sz.atlas_pitch) {
+        return -1.0;
+    }
+    uint last_texel = leaf.atlas_base + (leaf.res_v - 1u) * sz.atlas_pitch + (leaf.res_u - 1u);
+    if (last_texel >= sz.atlas_len || last_texel < leaf.atlas_base) {
+        return -1.0;
+    }
+    // 1. Frame.
+    precise vec3 rel = ray.origin - leaf.origin;
+    precise vec3 ru = rel * leaf.axis_u;
+    precise vec3 rv = rel * leaf.axis_v;
+    precise vec3 rw = rel * leaf.axis_w;
+    precise vec3 du = ray.dir * leaf.axis_u;
+    precise vec3 dv = ray.dir * leaf.axis_v;
+    precise vec3 dw = ray.dir * leaf.axis_w;
+    RbvhFrameRay fr;
+    fr.o = vec3((ru.x + ru.y) + ru.z, (rv.x + rv.y) + rv.z, (rw.x + rw.y) + rw.z);
+    fr.d = vec3((du.x + du.y) + du.z, (dv.x + dv.y) + dv.z, (dw.x + dw.y) + dw.z);
+    fr.tmin = ray.tmin;
+    fr.tmax = t_closest;
+    Ray frame = Ray(fr.o, fr.tmin, fr.d, fr.tmax);
+    if (!rbvh_ray_valid(frame)) {
+        return -1.0;
+    }
+    vec3 o = fr.o;
+    vec3 d = fr.d;
+    vec3 inv = rbvh_safe_inverse(d);
+    // 2. Clip to the padded tile box.
+    precise float h_top = float(RBVH_MAX_CODE) * leaf.h_scale;
+    precise float slack = RBVH_MARCH_SLACK * (abs(o.z) + abs(h_top)) + abs(leaf.h_scale);
+    vec3 bmin = vec3(0.5 - RBVH_MARCH_EDGE_PAD, 0.5 - RBVH_MARCH_EDGE_PAD, -slack);
+    precise vec3 bmax = vec3(float(leaf.res_u) - 0.5 + RBVH_MARCH_EDGE_PAD,
+                             float(leaf.res_v) - 0.5 + RBVH_MARCH_EDGE_PAD, h_top + slack);
+    float t0;
+    if (!rbvh_intersect_box(bmin, bmax, o, inv, fr.tmin, fr.tmax, t0)) {
+        return -1.0;
+    }
+    precise vec3 e0 = (bmin - o) * inv;
+    precise vec3 e1 = (bmax - o) * inv;
+    vec3 e = max(e0, e1);
+    float t1 = min(min(min(e.x, e.y), e.z), fr.tmax);
+    fr.shear = rbvh_shear(frame);
+
+    // 3. Walk.
+    int last_i = int(leaf.res_u) - 2;
+    int last_j = int(leaf.res_v) - 2;
+    precise vec3 entry = o + d * t0;
+    int ci = int(clamp(floor(entry.x - 0.5), 0.0, float(last_i)));
+    int cj = int(clamp(floor(entry.y - 0.5), 0.0, float(last_j)));
+    int step_i = d.x > 0.0 ? 1 : (d.x < 0.0 ? -1 : 0);
+    int step_j = d.y > 0.0 ? 1 : (d.y < 0.0 ? -1 : 0);
+    float next_i = rbvh_boundary_t(ci, step_i, o.x, inv.x);
+    float next_j = rbvh_boundary_t(cj, step_j, o.y, inv.y);
+    precise float corner_slack = RBVH_MARCH_SLACK * (((abs(o.x) + abs(o.y)) + float(leaf.res_u)) + float(leaf.res_v));
+    uint max_steps = (leaf.res_u - 1u) + (leaf.res_v - 1u) - 1u;
+    float t_in = t0;
+    for (uint n = 0u; n < max_steps; ++n) {
+        if (t_in > t1) {
+            break;
+        }
+        cells += 1u;
+        float t_out = min(min(next_i, next_j), t1);
+        float t = rbvh_cell_hit(leaf, sz, fr, slack, ci, cj, t_in, t_out, normal);
+        if (t >= 0.0) {
+            return t;
+        }
+        bool across_s = next_i <= next_j;
+        if (step_i != 0 && step_j != 0) {
+            precise float gap = across_s ? (next_j - next_i) * abs(d.y) : (next_i - next_j) * abs(d.x);
+            int xi = across_s ? ci : ci + step_i;
+            int xj = across_s ? cj + step_j : cj;
+            if (gap <= corner_slack && xi >= 0 && xi <= last_i && xj >= 0 && xj <= last_j) {
+                cells += 1u;
+                float t_x = min(max(next_i, next_j), t1);
+                t = rbvh_cell_hit(leaf, sz, fr, slack, xi, xj, t_out, t_x, normal);
+                if (t >= 0.0) {
+                    return t;
+                }
+            }
+        }
+        if (across_s) {
+            if (step_i == 0) {
+                break;
+            }
+            ci += step_i;
+            t_in = next_i;
+            if (ci < 0 || ci > last_i) {
+                break;
+            }
+            next_i = rbvh_boundary_t(ci, step_i, o.x, inv.x);
+        } else {
+            cj += step_j;
+            t_in = next_j;
+            if (cj < 0 || cj > last_j) {
+                break;
+            }
+            next_j = rbvh_boundary_t(cj, step_j, o.y, inv.y);
+        }
+    }
+    return -1.0;
+}
+
+// Nearest-first stack traversal of the RBVH (as rbvh_trace_bvh), marching height-field leaves and
+// testing triangle leaves exactly. Height-field hits report id = LEAF_BIT | leaf index.
+Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out bool overflow) {
+    steps = 0u;
+    overflow = false;
+    if (!rbvh_ray_valid(ray)) {
+        return rbvh_miss();
+    }
+    vec3 inv_dir = rbvh_safe_inverse(ray.dir);
+    RbvhShear sh = rbvh_shear(ray);
+    float t_closest = ray.tmax;
+    Hit best = rbvh_miss();
+    uint stack[RBVH_STACK_SIZE];
+    uint sp = 0u;
+    uint node = 0u;
+    uint visits = 0u;
+    bool done = false;
+    for (uint iter = 0u; iter <= sz.node_count; ++iter) {
+        uint next = RBVH_INVALID;
+        if (node < sz.node_count) {
+            if (visits >= sz.node_count) {
+                overflow = true;
+                break;
+            }
+            visits += 1u;
+            steps += 1u;
+            BvhNode n = rbvh_bvh_nodes[node];
+            float ta;
+            float tb;
+            bool ha = rbvh_intersect_box(n.a_min, n.a_max, ray.origin, inv_dir, ray.tmin, t_closest, ta);
+            bool hb = rbvh_intersect_box(n.b_min, n.b_max, ray.origin, inv_dir, ray.tmin, t_closest, tb);
+            bool b_first = ha && hb && tb < ta;
+            for (int k = 0; k < 2; ++k) {
+                bool use_b = (k == 0) == b_first;
+                bool h = use_b ? hb : ha;
+                float t_entry = use_b ? tb : ta;
+                uint child = use_b ? n.b_child : n.a_child;
+                uint count = use_b ? n.b_count : n.a_count;
+                if (!h || t_entry > t_closest) {
+                    continue;
+                }
+                if ((child & RBVH_LEAF_BIT) == 0u) {
+                    if (next == RBVH_INVALID) {
+                        next = child;
+                    } else if (sp < RBVH_STACK_SIZE) {
+                        stack[sp] = child;
+                        sp += 1u;
+                    } else {
+                        overflow = true;
+                    }
+                } else if (count == RBVH_HEIGHTFIELD_COUNT) {
+                    uint leaf = child & ~RBVH_LEAF_BIT;
+                    vec3 normal;
+                    uint cells = 0u;
+                    float t = rbvh_march(leaf, sz, ray, t_closest, cells, normal);
+                    steps += cells;
+                    if (t >= 0.0) {
+                        t_closest = t;
+                        best = Hit(t, normal.x, normal.y, normal.z, child, 0u, 0u, 0u);
+                        if (any_hit) {
+                            done = true;
+                            break;
+                        }
+                    }
+                } else {
+                    uint first = child & ~RBVH_LEAF_BIT;
+                    uint end = min(first + count, sz.tri_count);
+                    for (uint slot = first; slot < end; ++slot) {
+                        steps += 1u;
+                        BvhTriangle tri = rbvh_bvh_triangles[slot];
+                        float t = rbvh_intersect_triangle(sh, tri.v0, tri.v1, tri.v2, ray.tmin, t_closest);
+                        if (t >= 0.0) {
+                            t_closest = t;
+                            vec3 nrm = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
+                            best = Hit(t, nrm.x, nrm.y, nrm.z, tri.prim, 0u, 0u, 0u);
+                            if (any_hit) {
+                                done = true;
+                                break;
+                            }
+                        }
+                    }
+                    if (done) {
+                        break;
+                    }
+                }
+            }
+        }
+        if (done) {
+            break;
+        }
+        if (next == RBVH_INVALID) {
+            if (sp == 0u) {
+                break;
+            }
+            sp -= 1u;
+            next = stack[sp];
+        }
+        node = next;
+    }
+    return best;
+}
+
+#endif

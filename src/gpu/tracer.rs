@@ -1,0 +1,223 @@
+//! Traces rays on the device: through the exact BVH (`glsl/trace_exact.comp`) or an RBVH
+//! (`glsl/trace_rbvh.comp`). Both shaders share the push constants ([`TraceParams`]) and the
+//! bindings after the structure's own buffers: rays, hits, status, per-ray steps.
+
+use bytemuck::{Pod, Zeroable};
+
+use super::{shaders, Buffer, ComputePipeline, Context, Timing};
+use crate::bvh::{Bvh, STACK_SIZE};
+use crate::geom::{Hit, Ray};
+use crate::rbvh::Rbvh;
+use crate::{Error, Result};
+
+/// What a ray asks for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Query {
+    /// The nearest hit in `[tmin, tmax)`.
+    Closest,
+    /// Any hit in `[tmin, tmax)` (occlusion): traversal stops at the first one found.
+    Any,
+}
+
+/// Hits of a batch, with the GPU time of the trace dispatches alone (uploads excluded).
+#[derive(Clone, Debug)]
+pub struct Traced {
+    pub hits: Vec<Hit>,
+    /// Per ray: nodes visited + triangles tested, when asked for.
+    pub steps: Option<Vec<u32>>,
+    /// Summed over batches; see [`Timing`].
+    pub timing: Timing,
+}
+
+/// Push constants of both trace shaders (32 bytes); the exact one ignores the last three.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct TraceParams {
+    pub ray_offset: u32,
+    pub ray_count: u32,
+    pub flags: u32,
+    pub node_count: u32,
+    pub tri_count: u32,
+    pub leaf_count: u32,
+    pub atlas_pitch: u32,
+    pub atlas_len: u32,
+}
+const _: () = assert!(std::mem::size_of::<TraceParams>() == 32);
+
+const FLAG_ANY_HIT: u32 = 1;
+const FLAG_STEPS: u32 = 2;
+
+/// An acceleration structure uploaded to the device, with its trace pipeline.
+pub struct Tracer {
+    ctx: Context,
+    pipeline: ComputePipeline,
+    /// The structure's buffers, bound first, in the shader's binding order.
+    structure: Vec<Buffer>,
+    /// Sizes the shader needs (`ray_offset`, `ray_count` and `flags` are set per dispatch).
+    sizes: TraceParams,
+}
+
+/// Bindings after the structure's own: rays, hits, status, per-ray steps.
+const PER_TRACE_BUFFERS: u32 = 4;
+
+impl Tracer {
+    /// Uploads the exact BVH (nodes and triangles, each checked against `maxStorageBufferRange`).
+    pub fn exact(ctx: &Context, bvh: &Bvh) -> Result<Self> {
+        if bvh.depth > STACK_SIZE {
+            return Err(Error::param(
+                "bvh",
+                format!("depth {} exceeds the traversal stack", bvh.depth),
+            ));
+        }
+        let structure = vec![
+            upload(ctx, "BVH nodes", &bvh.nodes)?,
+            upload(ctx, "BVH triangles", &bvh.triangles)?,
+        ];
+        let sizes = TraceParams {
+            node_count: bvh.nodes.len() as u32,
+            tri_count: bvh.triangles.len() as u32,
+            ..TraceParams::default()
+        };
+        Self::new(ctx, "trace_exact", shaders::TRACE_EXACT, structure, sizes)
+    }
+
+    /// Uploads an RBVH: nodes, triangle-leaf triangles, height-field leaves and the atlas.
+    pub fn rbvh(ctx: &Context, rbvh: &Rbvh) -> Result<Self> {
+        if rbvh.depth > STACK_SIZE {
+            return Err(Error::param(
+                "rbvh",
+                format!("depth {} exceeds the traversal stack", rbvh.depth),
+            ));
+        }
+        let structure = vec![
+            upload(ctx, "RBVH nodes", &rbvh.nodes)?,
+            upload(ctx, "RBVH triangles", &rbvh.triangles)?,
+            upload(ctx, "RBVH height-field leaves", &rbvh.leaves)?,
+            upload(ctx, "RBVH atlas", &rbvh.atlas.texels)?,
+        ];
+        let sizes = TraceParams {
+            node_count: rbvh.nodes.len() as u32,
+            tri_count: rbvh.triangles.len() as u32,
+            leaf_count: rbvh.leaves.len() as u32,
+            atlas_pitch: rbvh.atlas.pitch,
+            atlas_len: rbvh.atlas.texels.len() as u32,
+            ..TraceParams::default()
+        };
+        Self::new(ctx, "trace_rbvh", shaders::TRACE_RBVH, structure, sizes)
+    }
+
+    fn new(
+        ctx: &Context,
+        name: &str,
+        spirv: &[u8],
+        structure: Vec<Buffer>,
+        sizes: TraceParams,
+    ) -> Result<Self> {
+        let bindings = structure.len() as u32 + PER_TRACE_BUFFERS;
+        let push = std::mem::size_of::<TraceParams>() as u32;
+        Ok(Tracer {
+            ctx: ctx.clone(),
+            pipeline: ComputePipeline::new(ctx, name, spirv, bindings, push)?,
+            structure,
+            sizes,
+        })
+    }
+
+    /// Bytes of the structure on the device.
+    pub fn device_bytes(&self) -> u64 {
+        self.structure.iter().map(Buffer::size).sum()
+    }
+
+    pub fn trace(&self, rays: &[Ray], query: Query) -> Result<Traced> {
+        self.trace_with(rays, query, false)
+    }
+
+    /// Traces `rays`, in batches that fit `maxStorageBufferRange`; `steps` also returns the per-ray
+    /// traversal cost. Fails with [`Error::StackOverflow`] if any ray overflowed its stack.
+    pub fn trace_with(&self, rays: &[Ray], query: Query, steps: bool) -> Result<Traced> {
+        let ray_size = std::mem::size_of::<Ray>() as u64;
+        let batch =
+            (self.ctx.limits().max_storage_buffer_range / ray_size).clamp(1, 1 << 22) as usize;
+        let mut out = Traced {
+            hits: Vec::with_capacity(rays.len()),
+            steps: steps.then(|| Vec::with_capacity(rays.len())),
+            timing: Timing::default(),
+        };
+        for chunk in rays.chunks(batch) {
+            let (hits, chunk_steps, timing) = self.trace_batch(chunk, query, steps)?;
+            out.hits.extend(hits);
+            if let (Some(all), Some(s)) = (out.steps.as_mut(), chunk_steps) {
+                all.extend(s);
+            }
+            out.timing.wall_ms += timing.wall_ms;
+            out.timing.gpu_ms = match (out.timing.gpu_ms, timing.gpu_ms) {
+                (Some(a), Some(b)) => Some(a + b),
+                (None, b) if out.hits.len() == chunk.len() => b,
+                _ => None,
+            };
+        }
+        Ok(out)
+    }
+
+    fn trace_batch(
+        &self,
+        rays: &[Ray],
+        query: Query,
+        steps: bool,
+    ) -> Result<(Vec<Hit>, Option<Vec<u32>>, Timing)> {
+        let n = rays.len() as u32;
+        let ray_buf = self.ctx.upload_storage("rays", rays)?;
+        let mut hit_buf = self.ctx.zeroed_storage(
+            "hits",
+            rays.len() as u64 * std::mem::size_of::<Hit>() as u64,
+        )?;
+        let mut status = self.ctx.zeroed_storage("trace status", 4)?;
+        let mut steps_buf = self.ctx.zeroed_storage(
+            "per-ray steps",
+            if steps { rays.len() as u64 * 4 } else { 4 },
+        )?;
+        let flags = match query {
+            Query::Closest => 0,
+            Query::Any => FLAG_ANY_HIT,
+        } | if steps { FLAG_STEPS } else { 0 };
+        let mut buffers: Vec<&Buffer> = self.structure.iter().collect();
+        buffers.extend([&ray_buf, &hit_buf, &status, &steps_buf]);
+        let timing = self.pipeline.run(&buffers, n, |first| {
+            bytemuck::bytes_of(&TraceParams {
+                ray_offset: first,
+                ray_count: n,
+                flags,
+                ..self.sizes
+            })
+            .to_vec()
+        })?;
+        let overflow = self.ctx.read::<u32>(&mut status)?[0];
+        if overflow > 0 {
+            return Err(Error::StackOverflow {
+                resource: self.pipeline.name().into(),
+                depth: STACK_SIZE,
+                rays: overflow,
+            });
+        }
+        let mut hits: Vec<Hit> = self.ctx.read(&mut hit_buf)?;
+        hits.truncate(rays.len());
+        let steps = if steps {
+            let mut s: Vec<u32> = self.ctx.read(&mut steps_buf)?;
+            s.truncate(rays.len());
+            Some(s)
+        } else {
+            None
+        };
+        Ok((hits, steps, timing))
+    }
+}
+
+/// Uploads one structure array, checking `maxStorageBufferRange` with a hint at what to change.
+fn upload<T: bytemuck::Pod>(ctx: &Context, name: &str, data: &[T]) -> Result<Buffer> {
+    ctx.check_storage_range(
+        name,
+        std::mem::size_of_val(data) as u64,
+        "the scene is too large for one storage buffer on this device (for an RBVH, lower the quality)",
+    )?;
+    ctx.upload_storage(name, data)
+}
