@@ -26,6 +26,7 @@
 //! # Ok::<(), rbvh::Error>(())
 //! ```
 
+pub mod bench;
 pub mod bvh;
 pub mod error;
 pub mod geom;

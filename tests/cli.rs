@@ -135,3 +135,130 @@ fn errors_name_the_culprit_and_leave_no_output() {
         "only the bad ray file remains"
     );
 }
+
+#[test]
+fn rbvh_build_save_render_and_trace() {
+    let dir = tempfile::tempdir().unwrap();
+    let (file, png, heat) = (
+        dir.path().join("s.rbvh"),
+        dir.path().join("r.png"),
+        dir.path().join("h.png"),
+    );
+    let out = rbvh(&[
+        "build",
+        "--scene",
+        "sphere",
+        "--quality",
+        "Q0",
+        "--out",
+        arg(&file),
+        "--stats",
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("Q0") && stdout.contains("vs exact"),
+        "{stdout}"
+    );
+    let out = rbvh(&[
+        "render",
+        "--scene",
+        "sphere",
+        "--rbvh",
+        arg(&file),
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--out",
+        arg(&png),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = rbvh(&[
+        "render",
+        "--scene",
+        "default",
+        "--method",
+        "rbvh",
+        "--quality",
+        "1",
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--out",
+        arg(&png),
+        "--heatmap",
+        arg(&heat),
+        "--stats",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("RBVH speedup"), "{stderr}");
+    assert!(png.exists() && heat.exists());
+    let (rays_path, hits_path) = (dir.path().join("r.bin"), dir.path().join("h.bin"));
+    io::write_rays(
+        &rays_path,
+        &[Ray::new(
+            glam::Vec3::new(0.0, 0.0, -3.0),
+            glam::Vec3::Z,
+            0.0,
+            f32::INFINITY,
+        )],
+    )
+    .unwrap();
+    let out = rbvh(&[
+        "trace",
+        "--scene",
+        "sphere",
+        "--method",
+        "rbvh",
+        "--rays",
+        arg(&rays_path),
+        "--hits",
+        arg(&hits_path),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let hit = io::read_hits(&hits_path).unwrap()[0];
+    assert!(
+        hit.id & 0x8000_0000 != 0 && (hit.t - 2.0).abs() < 0.01,
+        "{hit:?}"
+    );
+}
+
+#[test]
+fn bad_quality_and_parameters_are_clear_errors() {
+    for args in [
+        &["build", "--scene", "sphere", "--quality", "7"][..],
+        &[
+            "build",
+            "--scene",
+            "sphere",
+            "--quality",
+            "2",
+            "--max-angle",
+            "95",
+        ][..],
+        &["render", "--method", "rbvh", "--quality", "1,2"][..],
+    ] {
+        let out = rbvh(args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} succeeded");
+        assert!(
+            stderr.contains("quality") || stderr.contains("max_angle_deg"),
+            "{args:?}: {stderr}"
+        );
+    }
+}

@@ -113,3 +113,80 @@ fn workgroup_size_is_reflected() {
     let size = r.local_size.expect("LocalSize");
     assert!(size[0] >= 1 && size[1] == 1 && size[2] == 1, "{size:?}");
 }
+
+#[test]
+fn rbvh_leaf_layout_matches() {
+    use rbvh::rbvh::GpuHeightfield as L;
+    let r = spirv::reflect(&shaders::words(shaders::TRACE_RBVH).unwrap());
+    check(
+        &r,
+        "RbvhLeaf",
+        size_of::<L>(),
+        &[
+            ("origin", offset_of!(L, origin)),
+            ("atlas_base", offset_of!(L, atlas_base)),
+            ("axis_u", offset_of!(L, axis_u)),
+            ("res_u", offset_of!(L, res_u)),
+            ("axis_v", offset_of!(L, axis_v)),
+            ("res_v", offset_of!(L, res_v)),
+            ("axis_w", offset_of!(L, axis_w)),
+            ("h_scale", offset_of!(L, h_scale)),
+        ],
+    );
+    // The RBVH shader shares the BVH node and triangle layouts.
+    assert_eq!(
+        r.array_strides.get("BvhNode"),
+        Some(&(size_of::<GpuNode>() as u32))
+    );
+    assert_eq!(
+        r.array_strides.get("BvhTriangle"),
+        Some(&(size_of::<GpuTriangle>() as u32))
+    );
+}
+
+#[test]
+fn push_constants_match_in_both_trace_shaders() {
+    use rbvh::gpu::TraceParams as P;
+    let expected = [
+        ("ray_offset", offset_of!(P, ray_offset)),
+        ("ray_count", offset_of!(P, ray_count)),
+        ("flags", offset_of!(P, flags)),
+        ("node_count", offset_of!(P, node_count)),
+        ("tri_count", offset_of!(P, tri_count)),
+        ("leaf_count", offset_of!(P, leaf_count)),
+        ("atlas_pitch", offset_of!(P, atlas_pitch)),
+        ("atlas_len", offset_of!(P, atlas_len)),
+    ];
+    for spv in [shaders::TRACE_EXACT, shaders::TRACE_RBVH] {
+        let r = spirv::reflect(&shaders::words(spv).unwrap());
+        let glsl = r.structs.get("Params").expect("push constant block Params");
+        let glsl: Vec<(&str, usize)> = glsl
+            .iter()
+            .map(|(m, o)| (m.as_str(), *o as usize))
+            .collect();
+        assert_eq!(glsl, expected);
+    }
+}
+
+#[test]
+fn march_constants_match() {
+    use rbvh::rbvh::layout::{MARCH_EDGE_PAD, MARCH_SLACK};
+    use rbvh::rbvh::Texel;
+    let header = include_str!("../glsl/rbvh.glsl");
+    let define = |name: &str| -> f64 {
+        let line = header
+            .lines()
+            .find(|l| l.starts_with(&format!("#define {name} ")))
+            .unwrap_or_else(|| panic!("glsl/rbvh.glsl lacks #define {name}"));
+        line.split_whitespace()
+            .nth(2)
+            .unwrap()
+            .trim_end_matches('u')
+            .parse()
+            .unwrap()
+    };
+    assert_eq!(define("RBVH_MARCH_SLACK") as f32, MARCH_SLACK);
+    assert_eq!(define("RBVH_MARCH_EDGE_PAD") as f32, MARCH_EDGE_PAD);
+    assert_eq!(define("RBVH_MAX_CODE") as u16, Texel::MAX_CODE);
+    assert_eq!(define("RBVH_HOLE_CODE") as u16, Texel::HOLE_CODE);
+}
