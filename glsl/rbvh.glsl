@@ -94,31 +94,28 @@ struct RbvhFrameRay {
 };
 
 // Steps 4 and 5 of march.rs: the cell's two (or one) triangles; returns t (< 0 on a miss) and the
-// normal of the nearest corner sample.
+// normal of the nearest corner sample. Written without local arrays: dynamically indexed arrays
+// become per-lane memory on SIMD implementations such as lavapipe.
 float rbvh_cell_hit(RbvhLeaf leaf, RbvhSizes sz, RbvhFrameRay fr, float slack, int ci, int cj,
                     float t_in, float t_out, out vec3 normal) {
-    uint corner[4];
-    vec3 pos[4];
-    int valid = 0;
-    float lo = RBVH_INF;
-    float hi = -RBVH_INF;
-    for (int k = 0; k < 4; ++k) {
-        int i = ci + (k & 1);
-        int j = cj + (k >> 1);
-        uint c = rbvh_texel(leaf, sz, i, j);
-        corner[k] = c;
-        pos[k] = vec3(0.0);
-        if (!rbvh_is_hole(c)) {
-            precise float h = float(c & 0xFFFFu) * leaf.h_scale;
-            pos[k] = vec3(float(i) + 0.5, float(j) + 0.5, h);
-            valid += 1;
-            lo = min(lo, h);
-            hi = max(hi, h);
-        }
-    }
+    uint c00 = rbvh_texel(leaf, sz, ci, cj);
+    uint c10 = rbvh_texel(leaf, sz, ci + 1, cj);
+    uint c01 = rbvh_texel(leaf, sz, ci, cj + 1);
+    uint c11 = rbvh_texel(leaf, sz, ci + 1, cj + 1);
+    bool v00 = !rbvh_is_hole(c00);
+    bool v10 = !rbvh_is_hole(c10);
+    bool v01 = !rbvh_is_hole(c01);
+    bool v11 = !rbvh_is_hole(c11);
+    int valid = int(v00) + int(v10) + int(v01) + int(v11);
     if (valid < 3) {
         return -1.0;
     }
+    precise float h00 = float(c00 & 0xFFFFu) * leaf.h_scale;
+    precise float h10 = float(c10 & 0xFFFFu) * leaf.h_scale;
+    precise float h01 = float(c01 & 0xFFFFu) * leaf.h_scale;
+    precise float h11 = float(c11 & 0xFFFFu) * leaf.h_scale;
+    float lo = min(min(v00 ? h00 : RBVH_INF, v10 ? h10 : RBVH_INF), min(v01 ? h01 : RBVH_INF, v11 ? h11 : RBVH_INF));
+    float hi = max(max(v00 ? h00 : -RBVH_INF, v10 ? h10 : -RBVH_INF), max(v01 ? h01 : -RBVH_INF, v11 ? h11 : -RBVH_INF));
     float h_a = rbvh_height_at(fr.o.z, fr.d.z, t_in);
     float h_b = rbvh_height_at(fr.o.z, fr.d.z, t_out);
     precise float lo_s = lo - slack;
@@ -126,23 +123,22 @@ float rbvh_cell_hit(RbvhLeaf leaf, RbvhSizes sz, RbvhFrameRay fr, float slack, i
     if (max(h_a, h_b) < lo_s || min(h_a, h_b) > hi_s) {
         return -1.0;
     }
-    ivec3 first = ivec3(0, 1, 3);
-    bool two = valid == 4;
-    if (!two) {
-        int cycle[4] = int[4](0, 1, 3, 2);
-        int n = 0;
-        for (int m = 0; m < 4; ++m) {
-            int k = cycle[m];
-            if (!rbvh_is_hole(corner[k]) && n < 3) {
-                first[n] = k;
-                n += 1;
-            }
-        }
-    }
-    float t_hit = rbvh_intersect_triangle(fr.shear, pos[first.x], pos[first.y], pos[first.z], fr.tmin, fr.tmax);
-    if (two) {
-        float t_max = t_hit >= 0.0 ? t_hit : fr.tmax;
-        float t = rbvh_intersect_triangle(fr.shear, pos[0], pos[3], pos[2], fr.tmin, t_max);
+    float s0 = float(ci) + 0.5;
+    float s1 = float(ci + 1) + 0.5;
+    float r0 = float(cj) + 0.5;
+    float r1 = float(cj + 1) + 0.5;
+    vec3 p00 = vec3(s0, r0, h00);
+    vec3 p10 = vec3(s1, r0, h10);
+    vec3 p01 = vec3(s0, r1, h01);
+    vec3 p11 = vec3(s1, r1, h11);
+    // The first triangle: (c00, c10, c11) with all four present, else the three present corners in
+    // the cycle order c00, c10, c11, c01.
+    vec3 a = v00 ? p00 : p10;
+    vec3 b = v00 ? (v10 ? p10 : p11) : p11;
+    vec3 c = (v00 && v10) ? (v11 ? p11 : p01) : p01;
+    float t_hit = rbvh_intersect_triangle(fr.shear, a, b, c, fr.tmin, fr.tmax);
+    if (valid == 4) {
+        float t = rbvh_intersect_triangle(fr.shear, p00, p11, p01, fr.tmin, t_hit >= 0.0 ? t_hit : fr.tmax);
         if (t >= 0.0) {
             t_hit = t;
         }
@@ -152,16 +148,12 @@ float rbvh_cell_hit(RbvhLeaf leaf, RbvhSizes sz, RbvhFrameRay fr, float slack, i
     }
     precise float s = fr.o.x + fr.d.x * t_hit;
     precise float r = fr.o.y + fr.d.y * t_hit;
-    int di = int(clamp(floor(s), float(ci), float(ci + 1))) - ci;
-    int dj = int(clamp(floor(r), float(cj), float(cj + 1))) - cj;
-    uint nearest = corner[di + 2 * dj];
-    if (rbvh_is_hole(nearest)) {
-        for (int k = 0; k < 4; ++k) {
-            if (!rbvh_is_hole(corner[k])) {
-                nearest = corner[k];
-                break;
-            }
-        }
+    bool right = clamp(floor(s), float(ci), float(ci + 1)) > float(ci);
+    bool up = clamp(floor(r), float(cj), float(cj + 1)) > float(cj);
+    uint nearest = up ? (right ? c11 : c01) : (right ? c10 : c00);
+    bool nearest_valid = up ? (right ? v11 : v01) : (right ? v10 : v00);
+    if (!nearest_valid) {
+        nearest = v00 ? c00 : (v10 ? c10 : (v01 ? c01 : c11));
     }
     normal = rbvh_decode_normal(nearest);
     return t_hit;
@@ -276,8 +268,12 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     return -1.0;
 }
 
-// Nearest-first stack traversal of the RBVH (as rbvh_trace_bvh), marching height-field leaves and
-// testing triangle leaves exactly. Height-field hits report id = LEAF_BIT | leaf index.
+// Nearest-first stack traversal of the RBVH (as rbvh_trace_bvh), testing triangle leaves in place
+// and treating height-field leaves like inner nodes: they take the same near-first/stack path and
+// are marched when they come up. One march call site at the top of the loop, instead of one
+// inside the per-child loop, keeps the traversal lean: inlined there, the march's registers
+// weighed on every node visit (4x slower traversal on lavapipe). Height-field hits report
+// id = LEAF_BIT | leaf index.
 Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out bool overflow) {
     steps = 0u;
     overflow = false;
@@ -292,10 +288,22 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
     uint sp = 0u;
     uint node = 0u;
     uint visits = 0u;
-    bool done = false;
-    for (uint iter = 0u; iter <= sz.node_count; ++iter) {
+    uint bound = sz.node_count + sz.leaf_count;
+    for (uint iter = 0u; iter <= bound; ++iter) {
         uint next = RBVH_INVALID;
-        if (node < sz.node_count) {
+        if ((node & RBVH_LEAF_BIT) != 0u) {
+            vec3 normal;
+            uint cells = 0u;
+            float t = rbvh_march(node & ~RBVH_LEAF_BIT, sz, ray, t_closest, cells, normal);
+            steps += cells;
+            if (t >= 0.0) {
+                t_closest = t;
+                best = Hit(t, normal.x, normal.y, normal.z, node, 0u, 0u, 0u);
+                if (any_hit) {
+                    break;
+                }
+            }
+        } else if (node < sz.node_count) {
             if (visits >= sz.node_count) {
                 overflow = true;
                 break;
@@ -308,6 +316,7 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
             bool ha = rbvh_intersect_box(n.a_min, n.a_max, ray.origin, inv_dir, ray.tmin, t_closest, ta);
             bool hb = rbvh_intersect_box(n.b_min, n.b_max, ray.origin, inv_dir, ray.tmin, t_closest, tb);
             bool b_first = ha && hb && tb < ta;
+            bool done = false;
             for (int k = 0; k < 2; ++k) {
                 bool use_b = (k == 0) == b_first;
                 bool h = use_b ? hb : ha;
@@ -317,7 +326,7 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
                 if (!h || t_entry > t_closest) {
                     continue;
                 }
-                if ((child & RBVH_LEAF_BIT) == 0u) {
+                if ((child & RBVH_LEAF_BIT) == 0u || count == RBVH_HEIGHTFIELD_COUNT) {
                     if (next == RBVH_INVALID) {
                         next = child;
                     } else if (sp < RBVH_STACK_SIZE) {
@@ -325,20 +334,6 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
                         sp += 1u;
                     } else {
                         overflow = true;
-                    }
-                } else if (count == RBVH_HEIGHTFIELD_COUNT) {
-                    uint leaf = child & ~RBVH_LEAF_BIT;
-                    vec3 normal;
-                    uint cells = 0u;
-                    float t = rbvh_march(leaf, sz, ray, t_closest, cells, normal);
-                    steps += cells;
-                    if (t >= 0.0) {
-                        t_closest = t;
-                        best = Hit(t, normal.x, normal.y, normal.z, child, 0u, 0u, 0u);
-                        if (any_hit) {
-                            done = true;
-                            break;
-                        }
                     }
                 } else {
                     uint first = child & ~RBVH_LEAF_BIT;
@@ -362,9 +357,9 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
                     }
                 }
             }
-        }
-        if (done) {
-            break;
+            if (done) {
+                break;
+            }
         }
         if (next == RBVH_INVALID) {
             if (sp == 0u) {

@@ -3,9 +3,10 @@
 //!
 //! **Tree**: the exact BVH's traversal (`crate::bvh`'s `traverse.rs`): nearest child first, the
 //! same tie rule, the same bounded stack, the same robust box test (Ize, "Robust BVH Ray
-//! Traversal", JCGT 2013). A leaf child is a triangle leaf, tested with the watertight test of
-//! Woop, Benthin & Wald ("Watertight Ray/Triangle Intersection", JCGT 2013), or a height-field
-//! leaf (Novák & Dachsbacher 2012), marched. The paper gives no detail of the march; this is our
+//! Traversal", JCGT 2013). A triangle-leaf child is tested in place with the watertight test of
+//! Woop, Benthin & Wald ("Watertight Ray/Triangle Intersection", JCGT 2013); a height-field leaf
+//! (Novák & Dachsbacher 2012) takes an inner node's near-first/stack path and is marched when it
+//! comes up — the order `glsl/rbvh.glsl` needs to keep its traversal loop lean. The paper gives no detail of the march; this is our
 //! reading (`docs/RBVH.md`):
 //!
 //! 1. **Frame**: the ray is moved into the leaf's frame `(s, t, h)`. The map is affine, so the ray
@@ -91,10 +92,25 @@ impl Rbvh {
         let mut node = 0u32;
         loop {
             let mut next = None;
-            // A missing node (an index out of range, in corrupt data) has no children.
-            if let Some(gpu_node) = self.nodes.get(node as usize) {
-                // In a tree every node is entered at most once per ray; more visits than nodes
-                // can only come from a cycle in corrupt data.
+            if node & LEAF_BIT != 0 {
+                // A height-field leaf that came up from the near-first order or the stack.
+                let leaf = node & !LEAF_BIT;
+                if let Some((t, normal)) = self.march(leaf, ray, t_closest, &mut stats) {
+                    t_closest = t;
+                    best = Hit {
+                        t,
+                        normal: normal.to_array(),
+                        id: node,
+                        reserved: [0; 3],
+                    };
+                    if any_hit {
+                        return (best, stats);
+                    }
+                }
+            } else if let Some(gpu_node) = self.nodes.get(node as usize) {
+                // A missing node (an index out of range, in corrupt data) has no children. In a
+                // tree every node is entered at most once per ray; more visits than nodes can
+                // only come from a cycle in corrupt data.
                 if stats.nodes as usize >= self.nodes.len() {
                     stats.overflow = true;
                     break;
@@ -114,7 +130,9 @@ impl Rbvh {
                     if t_entry > t_closest {
                         continue;
                     }
-                    if c.child & LEAF_BIT == 0 {
+                    if c.child & LEAF_BIT == 0 || c.count == HEIGHTFIELD_COUNT {
+                        // Inner nodes and height-field leaves take the near-first/stack path; a
+                        // leaf is marched when it comes up (see `glsl/rbvh.glsl` for why).
                         if next.is_none() {
                             next = Some(c.child);
                         } else if sp < STACK_SIZE as usize {
@@ -122,20 +140,6 @@ impl Rbvh {
                             sp += 1;
                         } else {
                             stats.overflow = true;
-                        }
-                    } else if c.count == HEIGHTFIELD_COUNT {
-                        let leaf = c.child & !LEAF_BIT;
-                        if let Some((t, normal)) = self.march(leaf, ray, t_closest, &mut stats) {
-                            t_closest = t;
-                            best = Hit {
-                                t,
-                                normal: normal.to_array(),
-                                id: LEAF_BIT | leaf,
-                                reserved: [0; 3],
-                            };
-                            if any_hit {
-                                return (best, stats);
-                            }
                         }
                     } else {
                         let first = (c.child & !LEAF_BIT) as usize;

@@ -195,6 +195,27 @@ pub fn report_throughput(p: &Prepared, rays: &[Ray], query: Query, traced: &Trac
     Ok(())
 }
 
+/// `--stats` with per-ray steps: their mean and maximum, and how well 8-wide SIMD (lavapipe's
+/// subgroup) would be used by consecutive rays — the mean over groups of 8 of mean/max steps,
+/// since a group runs as long as its longest ray.
+pub fn report_steps(steps: &[u32]) {
+    if steps.is_empty() {
+        return;
+    }
+    let mean = steps.iter().map(|&s| s as f64).sum::<f64>() / steps.len() as f64;
+    let max = steps.iter().copied().max().unwrap_or(0);
+    let (mut busy, mut total) = (0.0, 0.0);
+    for group in steps.chunks(8) {
+        let longest = group.iter().copied().max().unwrap_or(0) as f64;
+        busy += group.iter().map(|&s| s as f64).sum::<f64>();
+        total += longest * group.len() as f64;
+    }
+    eprintln!(
+        "steps per ray (nodes + triangles + cells): mean {mean:.1}, max {max}; SIMD-8 utilisation {:.0}%",
+        100.0 * busy / total.max(1.0)
+    );
+}
+
 /// RBVH quality: presets, optionally adjusted by free parameters (which make the level "custom").
 #[derive(Args, Clone, Debug)]
 pub struct Quality {

@@ -8,7 +8,7 @@ use clap::ValueEnum;
 use rbvh::gpu::Query;
 use rbvh::output;
 
-use crate::prepare::{prepare, report_throughput, step, Common};
+use crate::prepare::{prepare, report_steps, report_throughput, step, Common};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -55,6 +55,9 @@ pub fn run(a: Args) -> Result<()> {
     })?;
     if a.common.stats {
         report_throughput(&p, &rays, Query::Closest, &traced)?;
+        if let Some(steps) = &traced.steps {
+            report_steps(steps);
+        }
     }
     let image = match a.shading {
         Shading::Lambert => output::shade(
