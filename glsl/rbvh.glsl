@@ -136,9 +136,13 @@ float rbvh_cell_hit(RbvhLeaf leaf, RbvhSizes sz, RbvhFrameRay fr, float slack, i
     vec3 a = v00 ? p00 : p10;
     vec3 b = v00 ? (v10 ? p10 : p11) : p11;
     vec3 c = (v00 && v10) ? (v11 ? p11 : p01) : p01;
-    float t_hit = rbvh_intersect_triangle(fr.shear, a, b, c, fr.tmin, fr.tmax);
-    if (valid == 4) {
-        float t = rbvh_intersect_triangle(fr.shear, p00, p11, p01, fr.tmin, t_hit >= 0.0 ? t_hit : fr.tmax);
+    // Then, with all four, (c00, c11, c01) when nearer; one call site for both triangles.
+    float t_hit = -1.0;
+    int tris = valid == 4 ? 2 : 1;
+    for (int k = 0; k < tris; ++k) {
+        vec3 b_k = k == 0 ? b : p11;
+        vec3 c_k = k == 0 ? c : p01;
+        float t = rbvh_intersect_triangle(fr.shear, a, b_k, c_k, fr.tmin, t_hit >= 0.0 ? t_hit : fr.tmax);
         if (t >= 0.0) {
             t_hit = t;
         }
@@ -221,16 +225,38 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     float next_j = rbvh_boundary_t(cj, step_j, o.y, inv.y);
     precise float corner_slack = RBVH_MARCH_SLACK * (((abs(o.x) + abs(o.y)) + float(leaf.res_u)) + float(leaf.res_v));
     uint max_steps = (leaf.res_u - 1u) + (leaf.res_v - 1u) - 1u;
+    // The walk of march.rs with one cell test per iteration: a main cell, then (when the ray passes
+    // a grid vertex too closely to resolve) the extra cell across it, then the step. A single call
+    // site keeps the inlined cell test — the bulk of the shader — from being duplicated.
     float t_in = t0;
-    for (uint n = 0u; n < max_steps; ++n) {
-        if (t_in > t1) {
-            break;
+    int tci = ci;
+    int tcj = cj;
+    float ta = t0;
+    float tb = t0;
+    bool is_extra = false;
+    bool finished = false;
+    for (uint n = 0u; n < 2u * max_steps; ++n) {
+        float t_out = min(min(next_i, next_j), t1);
+        if (!is_extra) {
+            if (t_in > t1) {
+                break;
+            }
+            tci = ci;
+            tcj = cj;
+            ta = t_in;
+            tb = t_out;
         }
         cells += 1u;
-        float t_out = min(min(next_i, next_j), t1);
-        float t = rbvh_cell_hit(leaf, sz, fr, slack, ci, cj, t_in, t_out, normal);
+        float t = rbvh_cell_hit(leaf, sz, fr, slack, tci, tcj, ta, tb, normal);
         if (t >= 0.0) {
             return t;
+        }
+        if (is_extra) {
+            is_extra = false;
+            if (finished) {
+                break;
+            }
+            continue;
         }
         bool across_s = next_i <= next_j;
         if (step_i != 0 && step_j != 0) {
@@ -238,31 +264,36 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
             int xi = across_s ? ci : ci + step_i;
             int xj = across_s ? cj + step_j : cj;
             if (gap <= corner_slack && xi >= 0 && xi <= last_i && xj >= 0 && xj <= last_j) {
-                cells += 1u;
-                float t_x = min(max(next_i, next_j), t1);
-                t = rbvh_cell_hit(leaf, sz, fr, slack, xi, xj, t_out, t_x, normal);
-                if (t >= 0.0) {
-                    return t;
-                }
+                is_extra = true;
+                tci = xi;
+                tcj = xj;
+                ta = t_out;
+                tb = min(max(next_i, next_j), t1);
             }
         }
         if (across_s) {
             if (step_i == 0) {
-                break;
+                finished = true;
+            } else {
+                ci += step_i;
+                t_in = next_i;
+                if (ci < 0 || ci > last_i) {
+                    finished = true;
+                } else {
+                    next_i = rbvh_boundary_t(ci, step_i, o.x, inv.x);
+                }
             }
-            ci += step_i;
-            t_in = next_i;
-            if (ci < 0 || ci > last_i) {
-                break;
-            }
-            next_i = rbvh_boundary_t(ci, step_i, o.x, inv.x);
         } else {
             cj += step_j;
             t_in = next_j;
             if (cj < 0 || cj > last_j) {
-                break;
+                finished = true;
+            } else {
+                next_j = rbvh_boundary_t(cj, step_j, o.y, inv.y);
             }
-            next_j = rbvh_boundary_t(cj, step_j, o.y, inv.y);
+        }
+        if (finished && !is_extra) {
+            break;
         }
     }
     return -1.0;
