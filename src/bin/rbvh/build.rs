@@ -2,10 +2,12 @@
 //! bytes of tree, atlas and triangles, and the ratio to the exact BVH — optionally saving it.
 
 use std::path::PathBuf;
+use std::time::Instant;
 
 use anyhow::{Context as _, Result};
+use rayon::prelude::*;
 use rbvh::bvh::Bvh;
-use rbvh::rbvh::Rbvh;
+use rbvh::rbvh::{Rbvh, RbvhParams, RbvhTraceStats, Subdivision};
 use rbvh::scene::Scene;
 
 use crate::prepare::{step, Quality};
@@ -23,6 +25,11 @@ pub struct Args {
     /// Print the accounting table (printed anyway when there is no --out).
     #[arg(long)]
     stats: bool,
+    /// Also build every level with each subdivision strategy (spatial median, modified SAH, and
+    /// median without object split) and report build time and tracing cost: steps per ray and
+    /// CPU-reference MRays/s on the scene camera's primary rays.
+    #[arg(long)]
+    compare_splits: bool,
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -84,10 +91,49 @@ pub fn run(a: Args) -> Result<()> {
             exact_bytes as f64 / r.total_bytes().max(1) as f64
         );
         }
+        if a.compare_splits {
+            compare_splits(&scene, &name, &params)?;
+        }
         if let Some(path) = &a.out {
             r.save(path)?;
             eprintln!("wrote {}", path.display());
         }
+    }
+    Ok(())
+}
+
+/// Build time and tracing cost of each subdivision strategy at `params`' level, on primary rays
+/// (the paper measured construction seconds and MRays/s of spatial median against its SAH).
+fn compare_splits(scene: &Scene, level: &str, params: &RbvhParams) -> Result<()> {
+    let rays = scene.camera_or_framed(4.0 / 3.0).primary_rays(320, 240);
+    for (name, subdivision, object_split) in [
+        ("median", Subdivision::SpatialMedian, true),
+        ("sah", Subdivision::AreaSah, true),
+        ("median, no object split", Subdivision::SpatialMedian, false),
+    ] {
+        let p = RbvhParams {
+            subdivision,
+            object_split,
+            ..*params
+        };
+        let r = step(&format!("building {level} ({name})"), || {
+            Rbvh::build(scene, &p)
+        })?;
+        let start = Instant::now();
+        let stats: Vec<RbvhTraceStats> = rays.par_iter().map(|ray| r.closest_hit(ray).1).collect();
+        let ms = start.elapsed().as_secs_f64() * 1e3;
+        let steps: u64 = stats
+            .iter()
+            .map(|s| (s.nodes + s.triangles + s.cells) as u64)
+            .sum();
+        println!(
+            "{level:>6} {name:<24} build {:>8.0} ms, {:>6} nodes, {:>6} leaves, {:>6.2} steps/ray, CPU {:>6.2} MRays/s",
+            r.stats.build_ms,
+            r.nodes.len(),
+            r.stats.heightfield_leaves + r.stats.triangle_leaves,
+            steps as f64 / rays.len() as f64,
+            rays.len() as f64 / (ms * 1e3)
+        );
     }
     Ok(())
 }
