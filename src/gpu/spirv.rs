@@ -1,6 +1,6 @@
 //! Just enough SPIR-V reflection to avoid writing facts twice: a compute shader's workgroup size
-//! (used when dispatching) and the member offsets of its structs (which `tests/layout.rs` compares
-//! with the Rust `#[repr(C)]` mirrors). Instruction encoding per the SPIR-V specification §2.3.
+//! (used when dispatching), the member offsets of its structs (which `tests/layout.rs` compares
+//! with the Rust `#[repr(C)]` mirrors) and the set/binding of its buffers. Instruction encoding per the SPIR-V specification §2.3.
 
 use std::collections::HashMap;
 
@@ -8,6 +8,10 @@ const OP_NAME: u32 = 5;
 const OP_MEMBER_NAME: u32 = 6;
 const OP_EXECUTION_MODE: u32 = 16;
 const OP_TYPE_RUNTIME_ARRAY: u32 = 29;
+const OP_TYPE_POINTER: u32 = 32;
+const OP_VARIABLE: u32 = 59;
+const DECORATION_BINDING: u32 = 33;
+const DECORATION_DESCRIPTOR_SET: u32 = 34;
 const OP_DECORATE: u32 = 71;
 const OP_MEMBER_DECORATE: u32 = 72;
 const EXECUTION_MODE_LOCAL_SIZE: u32 = 17;
@@ -24,6 +28,8 @@ pub struct Reflection {
     pub structs: HashMap<String, Vec<(String, u32)>>,
     /// Element struct name → `ArrayStride` of the runtime arrays (`T buf[]`) holding it.
     pub array_strides: HashMap<String, u32>,
+    /// Block (struct type) name → (descriptor set, binding) of the variable declared with it.
+    pub bindings: HashMap<String, (u32, u32)>,
 }
 
 fn string_at(words: &[u32]) -> String {
@@ -39,6 +45,10 @@ pub fn reflect(words: &[u32]) -> Reflection {
     let mut offsets: HashMap<u32, Vec<(u32, u32)>> = HashMap::new();
     let mut strides: HashMap<u32, u32> = HashMap::new();
     let mut runtime_arrays: Vec<(u32, u32)> = Vec::new();
+    let mut pointee: HashMap<u32, u32> = HashMap::new();
+    let mut variables: Vec<(u32, u32)> = Vec::new();
+    let mut sets: HashMap<u32, u32> = HashMap::new();
+    let mut binding_of: HashMap<u32, u32> = HashMap::new();
     let mut out = Reflection::default();
     let mut i = 5;
     while i < words.len() {
@@ -64,7 +74,17 @@ pub fn reflect(words: &[u32]) -> Reflection {
             OP_DECORATE if args.len() >= 3 && args[1] == DECORATION_ARRAY_STRIDE => {
                 strides.insert(args[0], args[2]);
             }
+            OP_DECORATE if args.len() >= 3 && args[1] == DECORATION_DESCRIPTOR_SET => {
+                sets.insert(args[0], args[2]);
+            }
+            OP_DECORATE if args.len() >= 3 && args[1] == DECORATION_BINDING => {
+                binding_of.insert(args[0], args[2]);
+            }
             OP_TYPE_RUNTIME_ARRAY if args.len() >= 2 => runtime_arrays.push((args[0], args[1])),
+            OP_TYPE_POINTER if args.len() >= 3 => {
+                pointee.insert(args[0], args[2]);
+            }
+            OP_VARIABLE if args.len() >= 2 => variables.push((args[1], args[0])),
             _ => {}
         }
         i += count;
@@ -72,6 +92,14 @@ pub fn reflect(words: &[u32]) -> Reflection {
     for (array, element) in runtime_arrays {
         if let (Some(name), Some(&stride)) = (names.get(&element), strides.get(&array)) {
             out.array_strides.insert(name.clone(), stride);
+        }
+    }
+    for (variable, pointer) in variables {
+        let block = pointee.get(&pointer).and_then(|t| names.get(t));
+        if let (Some(block), Some(&set), Some(&binding)) =
+            (block, sets.get(&variable), binding_of.get(&variable))
+        {
+            out.bindings.insert(block.clone(), (set, binding));
         }
     }
     let mut ids: Vec<_> = offsets.keys().copied().collect();
