@@ -83,6 +83,12 @@ impl Tracer {
 
     /// Uploads an RBVH: nodes, triangle-leaf triangles, height-field leaves and the atlas.
     pub fn rbvh(ctx: &Context, rbvh: &Rbvh) -> Result<Self> {
+        Self::rbvh_with_shader(ctx, rbvh, shaders::TRACE_RBVH)
+    }
+
+    /// As [`Tracer::rbvh`], with another build of `trace_rbvh.comp` (same bindings and push
+    /// constants): for checking modified shaders, e.g. that image regression catches a broken one.
+    pub fn rbvh_with_shader(ctx: &Context, rbvh: &Rbvh, spirv: &[u8]) -> Result<Self> {
         if rbvh.depth > STACK_SIZE {
             return Err(Error::param(
                 "rbvh",
@@ -103,7 +109,7 @@ impl Tracer {
             atlas_len: rbvh.atlas.texels.len() as u32,
             ..TraceParams::default()
         };
-        Self::new(ctx, "trace_rbvh", shaders::TRACE_RBVH, structure, sizes)
+        Self::new(ctx, "trace_rbvh", spirv, structure, sizes)
     }
 
     fn new(
