@@ -8,23 +8,40 @@
 //! Data flows one way, and the modules follow it:
 //!
 //! ```text
-//! scene (load / built-in / camera) → bvh (exact build, GPU layout, CPU reference tracer)
-//!        → gpu (Vulkan context, uploads, pipelines, tracer) → output (shading, PNG, EXR)
+//! scene (load / built-in / camera) → bvh  (exact: build, GPU layout, CPU reference tracer)
+//!                                  → rbvh (build, raster, atlas, GPU layout, CPU reference caster)
+//!        → gpu (Vulkan context, own or embedded; uploads, pipelines, tracer) → output (PNG, EXR)
+//!        → bench, regress (measurement and image regression)
 //! ```
 //!
-//! ```no_run
-//! use rbvh::{bvh::Bvh, gpu::{Context, ContextOptions, Tracer}, scene::Scene};
+//! ```
+//! use rbvh::bvh::Bvh;
+//! use rbvh::gpu::{Context, ContextOptions, Query, Tracer};
+//! use rbvh::rbvh::{Rbvh, RbvhParams};
+//! use rbvh::scene::Scene;
 //!
 //! let scene = Scene::load("sphere")?;
-//! let bvh = Bvh::build(&scene)?;
+//! let rays = scene.camera_or_framed(1.0).primary_rays(64, 64);
 //! let ctx = Context::new(&ContextOptions::default())?;
-//! let tracer = Tracer::exact(&ctx, &bvh)?;
-//! let camera = scene.camera_or_framed(1.0);
-//! let rays = camera.primary_rays(64, 64);
-//! let traced = tracer.trace(&rays, rbvh::gpu::Query::Closest)?;
-//! assert_eq!(traced.hits.len(), 64 * 64);
+//!
+//! // The referee: the exact triangle BVH.
+//! let exact = Tracer::exact(&ctx, &Bvh::build(&scene)?)?.trace(&rays, Query::Closest)?;
+//! // The approximation: an RBVH at quality Q2.
+//! let rbvh = Rbvh::build(&scene, &RbvhParams::quality(2)?)?;
+//! let approx = Tracer::rbvh(&ctx, &rbvh)?.trace(&rays, Query::Closest)?;
+//!
+//! for (e, a) in exact.hits.iter().zip(&approx.hits) {
+//!     if e.is_hit() && a.is_hit() {
+//!         assert!((e.t - a.t).abs() < 0.01 * scene.bounds().diagonal());
+//!     }
+//! }
 //! # Ok::<(), rbvh::Error>(())
 //! ```
+//!
+//! Engines that own their Vulkan device use [`gpu::Context::embedded`] and record the trace
+//! into their own command buffers ([`gpu::Tracer::record_rbvh`], [`gpu::Tracer::bind`],
+//! [`gpu::Tracer::record`]); `examples/embed.rs` shows the whole contract, and
+//! `glsl/rbvh.glsl` can be included in an engine's own shaders.
 
 pub mod bench;
 pub mod bvh;

@@ -40,6 +40,11 @@ impl Buffer {
         &self.name
     }
 
+    /// The context the buffer belongs to.
+    pub fn context(&self) -> &Context {
+        &self.ctx
+    }
+
     /// Mapped, coherent memory of this buffer, when it has some.
     fn host_slice_mut(&mut self) -> Option<&mut [u8]> {
         let a = self.allocation.as_mut()?;
@@ -139,6 +144,64 @@ impl Context {
         let mut buffer =
             self.create_buffer(name, bytes.len() as u64, usage, MemoryLocation::GpuOnly)?;
         self.write(&mut buffer, bytes)?;
+        Ok(buffer)
+    }
+
+    /// A device-local storage buffer holding `data`, for an embedded context that never submits:
+    /// written directly where the memory is host-visible, otherwise through a staging buffer whose
+    /// copy is *recorded* into `cmd` (in the recording state). The staging buffer is returned and
+    /// must live until `cmd` has executed; the caller also orders the copy before its readers.
+    pub fn upload_storage_recorded<T: bytemuck::Pod>(
+        &self,
+        name: &str,
+        data: &[T],
+        cmd: vk::CommandBuffer,
+    ) -> Result<(Buffer, Option<Buffer>)> {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        self.check_storage_range(
+            name,
+            bytes.len() as u64,
+            "split the work into smaller batches or a smaller scene",
+        )?;
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_DST;
+        let mut buffer =
+            self.create_buffer(name, bytes.len() as u64, usage, MemoryLocation::GpuOnly)?;
+        if let Some(dst) = buffer.host_slice_mut() {
+            dst[..bytes.len()].copy_from_slice(bytes);
+            return Ok((buffer, None));
+        }
+        let staging_name = format!("staging for {name}");
+        let mut staging = self.create_buffer(
+            &staging_name,
+            bytes.len().max(4) as u64,
+            vk::BufferUsageFlags::TRANSFER_SRC,
+            MemoryLocation::CpuToGpu,
+        )?;
+        staging.host_slice_mut().ok_or_else(|| {
+            Error::NoDevice(format!("{staging_name}: no host-visible coherent memory"))
+        })?[..bytes.len()]
+            .copy_from_slice(bytes);
+        if !bytes.is_empty() {
+            let region = [vk::BufferCopy::default().size(bytes.len() as u64)];
+            // SAFETY: `cmd` is recording (the caller's contract); both buffers outlive it.
+            unsafe {
+                self.shared
+                    .device
+                    .cmd_copy_buffer(cmd, staging.raw, buffer.raw, &region)
+            };
+        }
+        Ok((buffer, Some(staging)))
+    }
+
+    /// A host-visible storage buffer of `size` bytes, zero-filled from the host (no submission):
+    /// small status words that the host reads back after the device wrote them.
+    pub fn host_storage(&self, name: &str, size: u64) -> Result<Buffer> {
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
+        let mut buffer = self.create_buffer(name, size, usage, MemoryLocation::GpuToCpu)?;
+        buffer
+            .host_slice_mut()
+            .ok_or_else(|| Error::NoDevice(format!("{name}: no host-visible coherent memory")))?
+            .fill(0);
         Ok(buffer)
     }
 

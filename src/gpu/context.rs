@@ -5,12 +5,15 @@
 //! instance are destroyed only after the last resource made from them — the correct order by
 //! construction, whatever order the user drops things in.
 
+#[cfg(feature = "loaded")]
 use std::ffi::{c_void, CStr, CString};
 use std::mem::ManuallyDrop;
 use std::sync::{Arc, Mutex};
 
 use ash::vk;
-use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
+use gpu_allocator::vulkan::Allocator;
+#[cfg(feature = "loaded")]
+use gpu_allocator::vulkan::AllocatorCreateDesc;
 
 use crate::{Error, Result};
 
@@ -63,26 +66,47 @@ pub struct DeviceLimits {
     pub max_storage_buffer_range: u64,
     pub max_compute_work_group_count: [u32; 3],
     pub max_push_constants_size: u32,
+    pub min_storage_buffer_offset_alignment: u64,
     /// Nanoseconds per timestamp tick; None when the queue cannot time.
     pub timestamp_period_ns: Option<f64>,
 }
 
 pub(crate) struct Shared {
-    /// Keeps libvulkan loaded for as long as any handle lives.
-    pub _entry: ash::Entry,
     pub instance: ash::Instance,
-    pub debug: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
-    /// Boxed so its address, handed to the messenger callback, stays put.
-    pub messages: Box<Mutex<Vec<String>>>,
     pub device: ash::Device,
-    pub queue: vk::Queue,
-    pub command_pool: vk::CommandPool,
-    /// Serialises use of `command_pool` and `queue` (both externally synchronised in Vulkan).
-    pub submit_lock: Mutex<()>,
+    /// Dropped first in `Drop`, before the device it allocates from.
     pub allocator: ManuallyDrop<Arc<Mutex<Allocator>>>,
     pub limits: DeviceLimits,
     pub device_name: String,
     pub driver: String,
+    /// What a standalone context created, and so destroys; None for an embedded context, which
+    /// borrows the engine's instance and device and never submits.
+    pub own: Option<Owned>,
+}
+
+/// The parts of a standalone context that an embedded one does not have.
+pub(crate) struct Owned {
+    /// Keeps libvulkan loaded for as long as any handle lives.
+    pub _entry: ash::Entry,
+    pub debug: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
+    /// Boxed so its address, handed to the messenger callback, stays put.
+    pub messages: Box<Mutex<Vec<String>>>,
+    pub queue: vk::Queue,
+    pub command_pool: vk::CommandPool,
+    /// Serialises use of `command_pool` and `queue` (both externally synchronised in Vulkan).
+    pub submit_lock: Mutex<()>,
+}
+
+/// An engine's own Vulkan objects, for [`Context::embedded`]. The engine keeps them alive (and
+/// destroys them) after every `rbvh` object made from the context is dropped.
+pub struct External {
+    pub instance: ash::Instance,
+    pub device: ash::Device,
+    pub physical_device: vk::PhysicalDevice,
+    /// The family of the queue the engine will submit the recorded commands on (it must support
+    /// compute).
+    pub queue_family: u32,
+    pub allocator: Arc<Mutex<Allocator>>,
 }
 
 /// A Vulkan device ready for compute. Cloning shares it.
@@ -100,8 +124,54 @@ impl std::fmt::Debug for Context {
     }
 }
 
+impl Context {
+    /// Wraps an engine's own instance, device and allocator. Nothing is created but what the
+    /// library's own objects need (buffers, pipelines, descriptor sets), all through the engine's
+    /// allocator and device; nothing is ever submitted — the tracer records into the engine's
+    /// command buffers ([`crate::gpu::Tracer::record_rbvh`], [`crate::gpu::Tracer::record`]) — and
+    /// nothing of the engine's is destroyed. Validation is the engine's business: its messenger
+    /// sees our calls like its own.
+    pub fn embedded(external: External) -> Result<Context> {
+        let families = unsafe {
+            external
+                .instance
+                .get_physical_device_queue_family_properties(external.physical_device)
+        };
+        let compute = families
+            .get(external.queue_family as usize)
+            .is_some_and(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE));
+        if !compute {
+            return Err(Error::param(
+                "queue_family",
+                format!(
+                    "{} is not a compute queue family of this device",
+                    external.queue_family
+                ),
+            ));
+        }
+        let (limits, device_name, driver) = describe(
+            &external.instance,
+            external.physical_device,
+            external.queue_family,
+        );
+        Ok(Context {
+            shared: Arc::new(Shared {
+                instance: external.instance,
+                device: external.device,
+                allocator: ManuallyDrop::new(external.allocator),
+                limits,
+                device_name,
+                driver,
+                own: None,
+            }),
+        })
+    }
+}
+
+#[cfg(feature = "loaded")]
 const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
 
+#[cfg(feature = "loaded")]
 unsafe extern "system" fn debug_callback(
     severity: vk::DebugUtilsMessageSeverityFlagsEXT,
     _types: vk::DebugUtilsMessageTypeFlagsEXT,
@@ -125,7 +195,8 @@ unsafe extern "system" fn debug_callback(
 }
 
 impl Context {
-    /// Creates an instance and device of its own, headless.
+    /// Creates an instance and device of its own, headless (feature `loaded`, on by default).
+    #[cfg(feature = "loaded")]
     pub fn new(options: &ContextOptions) -> Result<Context> {
         // SAFETY: loading libvulkan runs its initialisers; this is the documented way with ash.
         let entry = unsafe { ash::Entry::load() }.map_err(|e| Error::Loader(e.to_string()))?;
@@ -193,7 +264,13 @@ impl Context {
     }
 
     pub fn validation_enabled(&self) -> bool {
-        self.shared.debug.is_some()
+        self.shared.own.as_ref().is_some_and(|o| o.debug.is_some())
+    }
+
+    /// Whether this context borrows an engine's device ([`Context::embedded`]): it then never
+    /// submits, and work is recorded into the engine's command buffers instead.
+    pub fn is_embedded(&self) -> bool {
+        self.shared.own.is_none()
     }
 
     /// The raw device, for callers that record their own commands.
@@ -203,13 +280,10 @@ impl Context {
 
     /// Errors reported by the validation layer since the last call, as an error value.
     pub fn check_validation(&self) -> Result<()> {
-        let messages = std::mem::take(
-            &mut *self
-                .shared
-                .messages
-                .lock()
-                .unwrap_or_else(|p| p.into_inner()),
-        );
+        let Some(own) = &self.shared.own else {
+            return Ok(());
+        };
+        let messages = std::mem::take(&mut *own.messages.lock().unwrap_or_else(|p| p.into_inner()));
         if messages.is_empty() {
             Ok(())
         } else {
@@ -234,6 +308,7 @@ impl Context {
     }
 }
 
+#[cfg(feature = "loaded")]
 /// The instance-level half of a context under construction; cleans up on early return.
 struct Partial {
     entry: Option<ash::Entry>,
@@ -242,6 +317,7 @@ struct Partial {
     messages: Box<Mutex<Vec<String>>>,
 }
 
+#[cfg(feature = "loaded")]
 impl Drop for Partial {
     fn drop(&mut self) {
         // SAFETY: only reached on failure, when nothing else holds these handles.
@@ -256,6 +332,7 @@ impl Drop for Partial {
     }
 }
 
+#[cfg(feature = "loaded")]
 impl Partial {
     fn instance(&self) -> &ash::Instance {
         self.instance
@@ -290,22 +367,7 @@ impl Partial {
         let instance = self.instance().clone();
         let (physical_device, queue_family) =
             pick_device(&instance, options.device_name.as_deref())?;
-        let props = unsafe { instance.get_physical_device_properties(physical_device) };
-        let device_name = props
-            .device_name_as_c_str()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let driver = driver_string(&instance, physical_device, &props);
-        let families =
-            unsafe { instance.get_physical_device_queue_family_properties(physical_device) };
-        let timestamp_bits = families[queue_family as usize].timestamp_valid_bits;
-        let limits = DeviceLimits {
-            max_storage_buffer_range: props.limits.max_storage_buffer_range as u64,
-            max_compute_work_group_count: props.limits.max_compute_work_group_count,
-            max_push_constants_size: props.limits.max_push_constants_size,
-            timestamp_period_ns: (timestamp_bits > 0 && props.limits.timestamp_period > 0.0)
-                .then_some(props.limits.timestamp_period as f64),
-        };
+        let (limits, device_name, driver) = describe(&instance, physical_device, queue_family);
         let priorities = [1.0f32];
         let queue_info = [vk::DeviceQueueCreateInfo::default()
             .queue_family_index(queue_family)
@@ -347,23 +409,52 @@ impl Partial {
             }
         };
         let shared = Shared {
-            _entry: self.entry.take().expect("entry"),
             instance: self.instance.take().expect("instance"),
-            debug: self.debug.take(),
-            messages: std::mem::replace(&mut self.messages, Box::new(Mutex::new(Vec::new()))),
             device,
-            queue,
-            command_pool,
-            submit_lock: Mutex::new(()),
             allocator: ManuallyDrop::new(Arc::new(Mutex::new(allocator))),
             limits,
             device_name,
             driver,
+            own: Some(Owned {
+                _entry: self.entry.take().expect("entry"),
+                debug: self.debug.take(),
+                messages: std::mem::replace(&mut self.messages, Box::new(Mutex::new(Vec::new()))),
+                queue,
+                command_pool,
+                submit_lock: Mutex::new(()),
+            }),
         };
         Ok(Context {
             shared: Arc::new(shared),
         })
     }
+}
+
+/// Name, driver and the limits our code depends on, of `pd` with compute queue `family`.
+fn describe(
+    instance: &ash::Instance,
+    pd: vk::PhysicalDevice,
+    family: u32,
+) -> (DeviceLimits, String, String) {
+    let props = unsafe { instance.get_physical_device_properties(pd) };
+    let device_name = props
+        .device_name_as_c_str()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let driver = driver_string(instance, pd, &props);
+    let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
+    let timestamp_bits = families
+        .get(family as usize)
+        .map_or(0, |f| f.timestamp_valid_bits);
+    let limits = DeviceLimits {
+        max_storage_buffer_range: props.limits.max_storage_buffer_range as u64,
+        max_compute_work_group_count: props.limits.max_compute_work_group_count,
+        max_push_constants_size: props.limits.max_push_constants_size,
+        min_storage_buffer_offset_alignment: props.limits.min_storage_buffer_offset_alignment,
+        timestamp_period_ns: (timestamp_bits > 0 && props.limits.timestamp_period > 0.0)
+            .then_some(props.limits.timestamp_period as f64),
+    };
+    (limits, device_name, driver)
 }
 
 fn driver_string(
@@ -393,6 +484,7 @@ fn driver_string(
     .to_string()
 }
 
+#[cfg(feature = "loaded")]
 /// Chooses a device with a compute queue: by name when asked, else by type preference.
 fn pick_device(
     instance: &ash::Instance,
@@ -460,18 +552,22 @@ fn pick_device(
 
 impl Drop for Shared {
     fn drop(&mut self) {
-        // SAFETY: the last handle is gone, so no buffer, pipeline or submission is alive. The
-        // allocator must go before the device it allocates from; the messenger after everything
-        // that could still report, and the instance last.
+        // SAFETY: the last handle is gone, so no buffer, pipeline or submission of ours is alive.
+        // The allocator (our reference to it) goes before the device it allocates from; an owned
+        // context then destroys its pool, device, messenger and instance, in that order.
         unsafe {
-            let _ = self.device.device_wait_idle();
-            ManuallyDrop::drop(&mut self.allocator);
-            self.device.destroy_command_pool(self.command_pool, None);
-            self.device.destroy_device(None);
-            if let Some((loader, messenger)) = self.debug.take() {
-                loader.destroy_debug_utils_messenger(messenger, None);
+            if self.own.is_some() {
+                let _ = self.device.device_wait_idle();
             }
-            self.instance.destroy_instance(None);
+            ManuallyDrop::drop(&mut self.allocator);
+            if let Some(mut own) = self.own.take() {
+                self.device.destroy_command_pool(own.command_pool, None);
+                self.device.destroy_device(None);
+                if let Some((loader, messenger)) = own.debug.take() {
+                    loader.destroy_debug_utils_messenger(messenger, None);
+                }
+                self.instance.destroy_instance(None);
+            }
         }
     }
 }

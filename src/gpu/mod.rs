@@ -11,7 +11,7 @@ mod submit;
 mod tracer;
 
 pub use buffer::Buffer;
-pub use context::{Context, ContextOptions, Validation};
-pub use pipeline::ComputePipeline;
+pub use context::{Context, ContextOptions, DeviceLimits, External, Validation};
+pub use pipeline::{ComputePipeline, DescriptorSet};
 pub use submit::Timing;
-pub use tracer::{Query, TraceParams, Traced, Tracer};
+pub use tracer::{BufferView, Query, TraceBinding, TraceParams, Traced, Tracer};

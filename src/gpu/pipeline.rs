@@ -13,7 +13,6 @@ pub struct ComputePipeline {
     set_layout: vk::DescriptorSetLayout,
     layout: vk::PipelineLayout,
     pipeline: vk::Pipeline,
-    pool: vk::DescriptorPool,
     bindings: u32,
     push_size: u32,
     local_size_x: u32,
@@ -26,7 +25,6 @@ impl Drop for ComputePipeline {
         unsafe {
             d.destroy_pipeline(self.pipeline, None);
             d.destroy_pipeline_layout(self.layout, None);
-            d.destroy_descriptor_pool(self.pool, None);
             d.destroy_descriptor_set_layout(self.set_layout, None);
         }
     }
@@ -66,7 +64,6 @@ impl ComputePipeline {
             set_layout: vk::DescriptorSetLayout::null(),
             layout: vk::PipelineLayout::null(),
             pipeline: vk::Pipeline::null(),
-            pool: vk::DescriptorPool::null(),
             bindings,
             push_size,
             local_size_x,
@@ -111,19 +108,6 @@ impl ComputePipeline {
         let created = unsafe { d.create_compute_pipelines(vk::PipelineCache::null(), &info, None) };
         unsafe { d.destroy_shader_module(module, None) };
         p.pipeline = created.map_err(|(_, r)| Error::vk("vkCreateComputePipelines", name, r))?[0];
-        let sizes = [vk::DescriptorPoolSize::default()
-            .ty(vk::DescriptorType::STORAGE_BUFFER)
-            .descriptor_count(bindings.max(1) * 4)];
-        p.pool = unsafe {
-            d.create_descriptor_pool(
-                &vk::DescriptorPoolCreateInfo::default()
-                    .flags(vk::DescriptorPoolCreateFlags::FREE_DESCRIPTOR_SET)
-                    .max_sets(4)
-                    .pool_sizes(&sizes),
-                None,
-            )
-        }
-        .map_err(|r| Error::vk("vkCreateDescriptorPool", name, r))?;
         ctx.check_validation()?;
         Ok(p)
     }
@@ -137,15 +121,24 @@ impl ComputePipeline {
         self.local_size_x
     }
 
-    /// Binds `buffers` to bindings `0..n`, then dispatches `invocations` threads in as many
-    /// submissions-free dispatches as `maxComputeWorkGroupCount[0]` requires; `push` builds the
-    /// push constants for each dispatch from its first invocation. One submission, timed.
+    /// Binds `buffers` to bindings `0..n` and dispatches `invocations` threads (see
+    /// [`ComputePipeline::record`]) in one timed submission of the context's own.
     pub fn run(
         &self,
         buffers: &[&Buffer],
         invocations: u32,
         push: impl Fn(u32) -> Vec<u8>,
     ) -> Result<super::Timing> {
+        let ranges: Vec<(vk::Buffer, u64)> = buffers.iter().map(|b| (b.raw(), 0)).collect();
+        let set = self.descriptor_set(&ranges)?;
+        self.ctx.submit(&self.name, |device, cmd| {
+            self.record(device, cmd, &set, invocations, push)
+        })
+    }
+
+    /// A descriptor set (in a pool of its own, freed with it) binding `buffers` — each a buffer
+    /// and the offset its view starts at, to its end — to bindings `0..n`.
+    pub fn descriptor_set(&self, buffers: &[(vk::Buffer, u64)]) -> Result<DescriptorSet> {
         if buffers.len() != self.bindings as usize {
             return Err(Error::param(
                 "buffers",
@@ -158,21 +151,39 @@ impl ComputePipeline {
             ));
         }
         let d = &self.ctx.shared.device;
+        let sizes = [vk::DescriptorPoolSize::default()
+            .ty(vk::DescriptorType::STORAGE_BUFFER)
+            .descriptor_count(self.bindings.max(1))];
+        let pool = unsafe {
+            d.create_descriptor_pool(
+                &vk::DescriptorPoolCreateInfo::default()
+                    .max_sets(1)
+                    .pool_sizes(&sizes),
+                None,
+            )
+        }
+        .map_err(|r| Error::vk("vkCreateDescriptorPool", self.name.as_str(), r))?;
+        let mut owned = DescriptorSet {
+            ctx: self.ctx.clone(),
+            pool,
+            set: vk::DescriptorSet::null(),
+        };
         let set_layouts = [self.set_layout];
-        let set = unsafe {
+        owned.set = unsafe {
             d.allocate_descriptor_sets(
                 &vk::DescriptorSetAllocateInfo::default()
-                    .descriptor_pool(self.pool)
+                    .descriptor_pool(pool)
                     .set_layouts(&set_layouts),
             )
         }
         .map_err(|r| Error::vk("vkAllocateDescriptorSets", self.name.as_str(), r))?[0];
+        let set = owned.set;
         let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers
             .iter()
-            .map(|b| {
+            .map(|&(b, offset)| {
                 [vk::DescriptorBufferInfo::default()
-                    .buffer(b.raw())
-                    .offset(0)
+                    .buffer(b)
+                    .offset(offset)
                     .range(vk::WHOLE_SIZE)]
             })
             .collect();
@@ -188,16 +199,32 @@ impl ComputePipeline {
             })
             .collect();
         unsafe { d.update_descriptor_sets(&writes, &[]) };
+        Ok(owned)
+    }
+
+    /// Records into `cmd`: bind the pipeline and `set`, then dispatch `invocations` threads in as
+    /// many dispatches as `maxComputeWorkGroupCount[0]` requires; `push` builds the push constants
+    /// of each dispatch from its first invocation. No barriers: the caller orders the work.
+    pub fn record(
+        &self,
+        device: &ash::Device,
+        cmd: vk::CommandBuffer,
+        set: &DescriptorSet,
+        invocations: u32,
+        push: impl Fn(u32) -> Vec<u8>,
+    ) {
         let max_groups = self.ctx.limits().max_compute_work_group_count[0].max(1);
         let per_dispatch = max_groups.saturating_mul(self.local_size_x);
-        let result = self.ctx.submit(&self.name, |device, cmd| unsafe {
+        // SAFETY: `cmd` is in the recording state (the caller's contract) and every handle here
+        // lives at least as long as `self` and `set`.
+        unsafe {
             device.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.pipeline);
             device.cmd_bind_descriptor_sets(
                 cmd,
                 vk::PipelineBindPoint::COMPUTE,
                 self.layout,
                 0,
-                &[set],
+                &[set.set],
                 &[],
             );
             let mut first = 0u32;
@@ -217,10 +244,26 @@ impl ComputePipeline {
                 device.cmd_dispatch(cmd, n.div_ceil(self.local_size_x), 1, 1);
                 first += n;
             }
-        });
-        unsafe {
-            let _ = d.free_descriptor_sets(self.pool, &[set]);
         }
-        result
+    }
+}
+
+/// A descriptor set with the pool it came from; dropping it frees both, so it must outlive every
+/// command buffer that uses it.
+pub struct DescriptorSet {
+    ctx: Context,
+    pool: vk::DescriptorPool,
+    set: vk::DescriptorSet,
+}
+
+impl Drop for DescriptorSet {
+    fn drop(&mut self) {
+        // SAFETY: the owner guarantees no pending command buffer uses the set any more.
+        unsafe {
+            self.ctx
+                .shared
+                .device
+                .destroy_descriptor_pool(self.pool, None)
+        };
     }
 }

@@ -57,18 +57,24 @@ impl Context {
     ) -> Result<Timing> {
         let s = &self.shared;
         let device = &s.device;
+        let own = s.own.as_ref().ok_or_else(|| {
+            Error::param(
+                "context",
+                format!("{pass}: an embedded context never submits; record the work into your own command buffer"),
+            )
+        })?;
         // The command pool and the queue are externally synchronised objects shared by every clone
         // of the context: one submission at a time.
-        let _serial = s.submit_lock.lock().unwrap_or_else(|p| p.into_inner());
+        let _serial = own.submit_lock.lock().unwrap_or_else(|p| p.into_inner());
         let mut scratch = Scratch {
             device,
-            pool: s.command_pool,
+            pool: own.command_pool,
             cmd: vk::CommandBuffer::null(),
             fence: vk::Fence::null(),
             queries: vk::QueryPool::null(),
         };
         let alloc = vk::CommandBufferAllocateInfo::default()
-            .command_pool(s.command_pool)
+            .command_pool(own.command_pool)
             .level(vk::CommandBufferLevel::PRIMARY)
             .command_buffer_count(1);
         scratch.cmd = unsafe { device.allocate_command_buffers(&alloc) }
@@ -143,7 +149,7 @@ impl Context {
             let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
             let start = Instant::now();
             device
-                .queue_submit(s.queue, &submit, scratch.fence)
+                .queue_submit(own.queue, &submit, scratch.fence)
                 .map_err(|r| Error::vk("vkQueueSubmit", pass, r))?;
             device
                 .wait_for_fences(&[scratch.fence], true, FENCE_TIMEOUT_NS)

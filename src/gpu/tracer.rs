@@ -4,6 +4,9 @@
 
 use bytemuck::{Pod, Zeroable};
 
+use ash::vk;
+
+use super::pipeline::DescriptorSet;
 use super::{shaders, Buffer, ComputePipeline, Context, Timing};
 use crate::bvh::{Bvh, STACK_SIZE};
 use crate::geom::{Hit, Ray};
@@ -55,6 +58,38 @@ pub struct Tracer {
     structure: Vec<Buffer>,
     /// Sizes the shader needs (`ray_offset`, `ray_count` and `flags` are set per dispatch).
     sizes: TraceParams,
+    /// Staging buffers of recorded uploads ([`Tracer::record_rbvh`]), kept until released.
+    staging: Vec<Buffer>,
+}
+
+/// A view of an engine-owned buffer: the buffer and the byte offset the data starts at (a
+/// multiple of `minStorageBufferOffsetAlignment`).
+#[derive(Clone, Copy, Debug)]
+pub struct BufferView {
+    pub buffer: vk::Buffer,
+    pub offset: u64,
+}
+
+/// Engine-owned ray and hit buffers bound for [`Tracer::record`]. It owns the descriptor set and a
+/// small status buffer, so it must outlive every command buffer it was recorded into.
+pub struct TraceBinding {
+    set: DescriptorSet,
+    status: Buffer,
+    count: u32,
+    /// Keeps the (unused) per-ray steps binding valid.
+    _steps: Buffer,
+}
+
+impl TraceBinding {
+    /// Rays whose traversal overflowed its stack in the traces recorded with this binding since the
+    /// last call (0 for any tree built by this crate); resets the count. Call only once the
+    /// engine's submission has completed.
+    pub fn take_overflowed_rays(&mut self) -> Result<u32> {
+        let ctx = self.status.context().clone();
+        let count = ctx.read::<u32>(&mut self.status)?[0];
+        ctx.write(&mut self.status, &[0; 4])?;
+        Ok(count)
+    }
 }
 
 /// Bindings after the structure's own: rays, hits, status, per-ray steps.
@@ -112,6 +147,156 @@ impl Tracer {
         Self::new(ctx, "trace_rbvh", spirv, structure, sizes)
     }
 
+    /// Embedded use: uploads the exact BVH with the context's (the engine's) allocator, *recording*
+    /// any staging copies into `cmd`, followed by a barrier that makes them visible to compute
+    /// shaders. Nothing is submitted. Call [`Tracer::release_staging`] once `cmd` has executed.
+    pub fn record_exact(ctx: &Context, bvh: &Bvh, cmd: vk::CommandBuffer) -> Result<Self> {
+        let sizes = TraceParams {
+            node_count: bvh.nodes.len() as u32,
+            tri_count: bvh.triangles.len() as u32,
+            ..TraceParams::default()
+        };
+        let arrays: [(&str, &[u8]); 2] = [
+            ("BVH nodes", bytemuck::cast_slice(&bvh.nodes)),
+            ("BVH triangles", bytemuck::cast_slice(&bvh.triangles)),
+        ];
+        Self::recorded(
+            ctx,
+            "trace_exact",
+            shaders::TRACE_EXACT,
+            &arrays,
+            sizes,
+            cmd,
+        )
+    }
+
+    /// Embedded use: as [`Tracer::record_exact`], for an RBVH.
+    pub fn record_rbvh(ctx: &Context, rbvh: &Rbvh, cmd: vk::CommandBuffer) -> Result<Self> {
+        let sizes = TraceParams {
+            node_count: rbvh.nodes.len() as u32,
+            tri_count: rbvh.triangles.len() as u32,
+            leaf_count: rbvh.leaves.len() as u32,
+            atlas_pitch: rbvh.atlas.pitch,
+            atlas_len: rbvh.atlas.texels.len() as u32,
+            ..TraceParams::default()
+        };
+        let arrays: [(&str, &[u8]); 4] = [
+            ("RBVH nodes", bytemuck::cast_slice(&rbvh.nodes)),
+            ("RBVH triangles", bytemuck::cast_slice(&rbvh.triangles)),
+            (
+                "RBVH height-field leaves",
+                bytemuck::cast_slice(&rbvh.leaves),
+            ),
+            ("RBVH atlas", bytemuck::cast_slice(&rbvh.atlas.texels)),
+        ];
+        Self::recorded(ctx, "trace_rbvh", shaders::TRACE_RBVH, &arrays, sizes, cmd)
+    }
+
+    fn recorded(
+        ctx: &Context,
+        name: &str,
+        spirv: &[u8],
+        arrays: &[(&str, &[u8])],
+        sizes: TraceParams,
+        cmd: vk::CommandBuffer,
+    ) -> Result<Self> {
+        let mut structure = Vec::new();
+        let mut staging = Vec::new();
+        for (array, bytes) in arrays {
+            let (buffer, stage) = ctx.upload_storage_recorded(array, bytes, cmd)?;
+            structure.push(buffer);
+            staging.extend(stage);
+        }
+        if !staging.is_empty() {
+            let barrier = [vk::MemoryBarrier::default()
+                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+                .dst_access_mask(vk::AccessFlags::SHADER_READ)];
+            // SAFETY: `cmd` is recording (the caller's contract).
+            unsafe {
+                ctx.device().cmd_pipeline_barrier(
+                    cmd,
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::PipelineStageFlags::COMPUTE_SHADER,
+                    vk::DependencyFlags::empty(),
+                    &barrier,
+                    &[],
+                    &[],
+                )
+            };
+        }
+        let mut tracer = Self::new(ctx, name, spirv, structure, sizes)?;
+        tracer.staging = staging;
+        Ok(tracer)
+    }
+
+    /// Frees the staging buffers of a recorded upload; call once that command buffer has executed.
+    pub fn release_staging(&mut self) {
+        self.staging.clear();
+    }
+
+    /// Binds engine-owned buffers for [`Tracer::record`]: `count` rays (32 bytes each, the
+    /// [`Ray`] layout) read from `rays`, `count` hits (the [`Hit`] layout) written to `hits`.
+    pub fn bind(&self, rays: BufferView, hits: BufferView, count: u32) -> Result<TraceBinding> {
+        let align = self.ctx.limits().min_storage_buffer_offset_alignment.max(1);
+        for (what, view) in [("rays", rays), ("hits", hits)] {
+            if view.offset % align != 0 {
+                return Err(Error::param(
+                    what,
+                    format!(
+                        "offset {} is not a multiple of minStorageBufferOffsetAlignment ({align})",
+                        view.offset
+                    ),
+                ));
+            }
+        }
+        let status = self.ctx.host_storage("trace status", 4)?;
+        let steps = self.ctx.create_buffer(
+            "per-ray steps (unused)",
+            4,
+            vk::BufferUsageFlags::STORAGE_BUFFER,
+            gpu_allocator::MemoryLocation::GpuOnly,
+        )?;
+        let mut views: Vec<(vk::Buffer, u64)> =
+            self.structure.iter().map(|b| (b.raw(), 0)).collect();
+        views.extend([
+            (rays.buffer, rays.offset),
+            (hits.buffer, hits.offset),
+            (status.raw(), 0),
+            (steps.raw(), 0),
+        ]);
+        Ok(TraceBinding {
+            set: self.pipeline.descriptor_set(&views)?,
+            status,
+            count,
+            _steps: steps,
+        })
+    }
+
+    /// Records the trace of `binding`'s rays into the engine's `cmd` (in the recording state).
+    /// Nothing is submitted and no barrier is recorded; the engine orders the work:
+    /// * before: its writes of the rays must be made available to `COMPUTE_SHADER` /
+    ///   `SHADER_READ` (and a recorded upload, [`Tracer::record_rbvh`], must precede this in
+    ///   submission order — it ends with its own transfer-to-compute barrier);
+    /// * after: the hits are written at `COMPUTE_SHADER` with `SHADER_WRITE`; add a barrier from
+    ///   there to whatever reads them (a shader, a transfer, or `HOST` / `HOST_READ`).
+    pub fn record(&self, cmd: vk::CommandBuffer, binding: &TraceBinding, query: Query) {
+        let flags = match query {
+            Query::Closest => 0,
+            Query::Any => FLAG_ANY_HIT,
+        };
+        let n = binding.count;
+        self.pipeline
+            .record(self.ctx.device(), cmd, &binding.set, n, |first| {
+                bytemuck::bytes_of(&TraceParams {
+                    ray_offset: first,
+                    ray_count: n,
+                    flags,
+                    ..self.sizes
+                })
+                .to_vec()
+            });
+    }
+
     fn new(
         ctx: &Context,
         name: &str,
@@ -126,6 +311,7 @@ impl Tracer {
             pipeline: ComputePipeline::new(ctx, name, spirv, bindings, push)?,
             structure,
             sizes,
+            staging: Vec::new(),
         })
     }
 
