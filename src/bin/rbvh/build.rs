@@ -26,8 +26,8 @@ pub struct Args {
     #[arg(long)]
     stats: bool,
     /// Also build every level with each subdivision strategy (spatial median, modified SAH, and
-    /// median without object split) and report build time and tracing cost: steps per ray and
-    /// CPU-reference MRays/s on the scene camera's primary rays.
+    /// median without object split) and report build time and tracing cost: nodes, triangles and
+    /// height-field cells per ray, and CPU-reference MRays/s on the scene camera's primary rays.
     #[arg(long)]
     compare_splits: bool,
 }
@@ -122,16 +122,17 @@ fn compare_splits(scene: &Scene, level: &str, params: &RbvhParams) -> Result<()>
         let start = Instant::now();
         let stats: Vec<RbvhTraceStats> = rays.par_iter().map(|ray| r.closest_hit(ray).1).collect();
         let ms = start.elapsed().as_secs_f64() * 1e3;
-        let steps: u64 = stats
-            .iter()
-            .map(|s| (s.nodes + s.triangles + s.cells) as u64)
-            .sum();
+        let per_ray = |f: fn(&RbvhTraceStats) -> u32| {
+            stats.iter().map(|s| f(s) as f64).sum::<f64>() / rays.len() as f64
+        };
         println!(
-            "{level:>6} {name:<24} build {:>8.0} ms, {:>6} nodes, {:>6} leaves, {:>6.2} steps/ray, CPU {:>6.2} MRays/s",
+            "{level:>6} {name:<24} build {:>6.0} ms, {:>6} nodes, {:>6} leaves; per ray {:>5.2} nodes + {:>5.2} triangles + {:>5.2} cells; CPU {:>6.2} MRays/s",
             r.stats.build_ms,
             r.nodes.len(),
             r.stats.heightfield_leaves + r.stats.triangle_leaves,
-            steps as f64 / rays.len() as f64,
+            per_ray(|s| s.nodes),
+            per_ray(|s| s.triangles),
+            per_ray(|s| s.cells),
             rays.len() as f64 / (ms * 1e3)
         );
     }
