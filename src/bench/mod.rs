@@ -1,1 +1,181 @@
-//! Benchmark harness (in progress).
+//! The benchmark harness behind `rbvh bench`: how fast each method traces, what it costs in
+//! memory, and how wrong it is — measured together, on the same rays, in the same run.
+//!
+//! For every scene, the exact BVH and each RBVH quality level trace the same rays of each
+//! [`RayType`]: camera rays, and ambient-occlusion, shadow and diffuse rays that all start at the
+//! *exact* primary hits ([`rays`]), so that every method answers identical questions. Each method
+//! first traces once (warm-up), and those hits are compared with the exact BVH's
+//! ([`metrics`], following "Accuracy — how the trade is measured" in the design notes) and judged
+//! ([`validate`]): a method whose answers are wrong is flagged, loudly, rather than reported as
+//! fast — the check tinybvh's speed test runs before timing each layout. Then all methods trace the
+//! rays `runs` times, interleaved, so that machine noise hits all of them alike ([`harness`]).
+//!
+//! The result is a [`BenchReport`] ([`record`] documents its JSON and CSV schema), printed as a
+//! [`table()`], and optionally charts and error images ([`plot`], [`error_image`]).
+//!
+//! ```no_run
+//! use rbvh::bench::{self, BenchConfig, Device, Level};
+//! use rbvh::gpu::ContextOptions;
+//!
+//! let mut config = BenchConfig::new(vec!["sphere".into()], Device::Create(ContextOptions::default()));
+//! config.levels = vec![Level::Preset(0), Level::Preset(2)];
+//! let report = bench::run(&config)?;
+//! print!("{}", bench::table(&report));
+//! bench::write_json(std::path::Path::new("bench.json"), &report)?;
+//! # Ok::<(), rbvh::Error>(())
+//! ```
+
+pub mod error_image;
+pub mod harness;
+pub mod metrics;
+pub mod plot;
+pub mod provenance;
+pub mod rays;
+pub mod record;
+pub mod table;
+pub mod validate;
+
+use std::path::PathBuf;
+
+pub use harness::{run, run_observed, Event};
+pub use rays::RayType;
+pub use record::{write_csv, write_json, BenchReport, Record};
+pub use table::table;
+
+use crate::gpu::Context;
+#[cfg(feature = "loaded")]
+use crate::gpu::ContextOptions;
+use crate::rbvh::{RbvhParams, QUALITY_NAMES};
+use crate::{Error, Result};
+
+/// Where the benchmark's Vulkan device comes from.
+#[derive(Clone, Debug)]
+pub enum Device {
+    /// Trace on this context (tests pass theirs, created with validation).
+    Existing(Context),
+    /// Create a context with these options when the run starts.
+    #[cfg(feature = "loaded")]
+    Create(ContextOptions),
+}
+
+/// One RBVH quality level under test.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Level {
+    /// Preset `Q0`…`Q4` ([`RbvhParams::quality`]).
+    Preset(u32),
+    /// Free parameters; reported as quality `"custom"`.
+    Custom(RbvhParams),
+}
+
+impl Level {
+    /// `"Q0"`…`"Q4"` or `"custom"`: the `quality` of the records.
+    pub fn name(&self) -> String {
+        match self {
+            Level::Preset(level) => format!("Q{level}"),
+            Level::Custom(_) => "custom".into(),
+        }
+    }
+
+    /// The build parameters, validated.
+    pub fn params(&self) -> Result<RbvhParams> {
+        let params = match self {
+            Level::Preset(level) => RbvhParams::quality(*level)?,
+            Level::Custom(params) => *params,
+        };
+        params.validate()?;
+        Ok(params)
+    }
+
+    /// The level called `name` (`"Q0"`…`"Q4"`, as [`Level::name`] writes it), or `Custom(params)`
+    /// for any other name: how the CLI maps its `--quality` levels.
+    pub fn named(name: &str, params: RbvhParams) -> Level {
+        match QUALITY_NAMES.iter().position(|n| *n == name) {
+            Some(level) => Level::Preset(level as u32),
+            None => Level::Custom(params),
+        }
+    }
+}
+
+/// What to measure. [`BenchConfig::new`] gives the defaults of `rbvh bench`.
+#[derive(Clone, Debug)]
+pub struct BenchConfig {
+    /// Scene specs for [`crate::scene::Scene::load`]: built-in names, OBJ/glTF files, scene files.
+    pub scenes: Vec<String>,
+    /// RBVH levels, each measured against the exact BVH (which is always measured).
+    pub levels: Vec<Level>,
+    pub ray_types: Vec<RayType>,
+    /// Primary-ray image size; secondary rays start at its exact hits, one per hit pixel.
+    pub width: u32,
+    pub height: u32,
+    /// Timed dispatches per method and ray type, after one warm-up.
+    pub runs: u32,
+    /// Length of ambient-occlusion rays as a fraction of the scene's bounding-box diagonal.
+    pub ao_radius: f32,
+    /// Seed of the secondary rays' random directions.
+    pub seed: u64,
+    pub device: Device,
+    /// Write charts and error images under this directory, one subdirectory per scene.
+    pub plot_dir: Option<PathBuf>,
+}
+
+/// Largest image side accepted, as for `rbvh render`.
+const MAX_SIDE: u32 = 16384;
+
+impl BenchConfig {
+    /// The defaults of `rbvh bench`: all five presets, all ray types, 256×256 (small enough to
+    /// stay quick on lavapipe), 5 runs, AO rays 5% of the diagonal long.
+    pub fn new(scenes: Vec<String>, device: Device) -> BenchConfig {
+        BenchConfig {
+            scenes,
+            levels: (0..QUALITY_NAMES.len() as u32).map(Level::Preset).collect(),
+            ray_types: RayType::ALL.to_vec(),
+            width: 256,
+            height: 256,
+            runs: 5,
+            ao_radius: 0.05,
+            seed: 0x5EED_2012,
+            device,
+            plot_dir: None,
+        }
+    }
+
+    /// Checks every field; the error names the field and its allowed range.
+    pub fn validate(&self) -> Result<()> {
+        if self.scenes.is_empty() {
+            return Err(Error::param("scenes", "no scene to benchmark"));
+        }
+        if self.ray_types.is_empty() {
+            return Err(Error::param("rays", "no ray type to trace"));
+        }
+        for (name, side) in [("width", self.width), ("height", self.height)] {
+            if !(1..=MAX_SIDE).contains(&side) {
+                return Err(Error::param(
+                    name,
+                    format!("{side} is outside 1..={MAX_SIDE}"),
+                ));
+            }
+        }
+        if self.runs == 0 {
+            return Err(Error::param("runs", "needs at least one timed run"));
+        }
+        if !(self.ao_radius.is_finite() && self.ao_radius > 0.0) {
+            return Err(Error::param(
+                "ao_radius",
+                format!(
+                    "{} is not a positive fraction of the diagonal",
+                    self.ao_radius
+                ),
+            ));
+        }
+        for level in &self.levels {
+            level.params()?;
+        }
+        if self.plot_dir.is_some() && !self.ray_types.contains(&RayType::Primary) {
+            return Err(Error::param(
+                "plot",
+                "charts and error images are made from primary rays: add the primary ray type",
+            ));
+        }
+        Ok(())
+    }
+}

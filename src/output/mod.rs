@@ -11,6 +11,8 @@ mod png;
 mod shade;
 mod srgb;
 
+pub(crate) use srgb::encode_u8 as srgb_u8;
+
 pub use self::exr::write_exr;
 pub use self::heatmap::heatmap;
 pub use self::image::Image;

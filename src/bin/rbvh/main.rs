@@ -1,5 +1,6 @@
-//! `rbvh`: render scenes, answer ray files, and (later) build and benchmark RBVHs.
+//! `rbvh`: render scenes, answer ray files, build and benchmark RBVHs.
 
+mod bench;
 mod build;
 mod prepare;
 mod render;
@@ -26,6 +27,8 @@ enum Command {
     Build(build::Args),
     /// Trace a ray file and write a hit file (formats in README.md).
     Trace(trace::Args),
+    /// Benchmark the exact BVH and RBVH levels: speed, memory and error on the same rays.
+    Bench(bench::Args),
 }
 
 fn main() {
@@ -34,6 +37,7 @@ fn main() {
         Command::Render(a) => render::run(a),
         Command::Trace(a) => trace::run(a),
         Command::Build(a) => build::run(a),
+        Command::Bench(a) => bench::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e}");

@@ -1,0 +1,425 @@
+//! The run loop. Per scene: build the exact BVH and every RBVH level and upload them all; trace
+//! the primary rays through the exact BVH once, to place the secondary rays; then per ray type:
+//!
+//! 1. **warm-up and validation** — every method traces the rays once; those hits are compared
+//!    with the exact BVH's ([`metrics`]) and judged ([`validate`]). The exact BVH itself is judged
+//!    against the CPU reference tracer ([`Bvh::trace_cpu`]), so a broken referee is caught too;
+//! 2. **timing** — `runs` rounds, each tracing with every method in turn (A B C A B C …), so that
+//!    a slow spell of the machine lands on all methods alike instead of on whichever ran then.
+//!
+//! Throughput is `rays / time` per run, from GPU timestamps around the trace dispatches (uploads
+//! and read-back excluded). When a device cannot time, every method of that ray type falls back to
+//! host wall time (submit to fence) together, so that speedups always compare like with like.
+
+use std::collections::HashSet;
+use std::path::PathBuf;
+
+use super::error_image::error_image;
+use super::metrics::{self, HitErrors, Summary};
+use super::plot;
+use super::provenance;
+use super::rays::{self, RayType, Secondary, DEFAULT_LIGHT};
+use super::record::{BenchReport, Errors, Memory, Method, Params, Record, Spread, TimingSource};
+use super::validate;
+use super::{BenchConfig, Device, Level};
+use crate::bvh::Bvh;
+use crate::geom::{Hit, Ray};
+use crate::gpu::{Context, Query, Timing, Tracer};
+use crate::output::{self, Image};
+use crate::rbvh::{Rbvh, RbvhParams};
+use crate::scene::Scene;
+use crate::{Error, Result};
+
+/// What the run tells its caller while it works.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Event {
+    /// What it is doing now (for a progress display).
+    Progress(String),
+    /// Something the user must see: above all a method flagged invalid, as soon as it is found.
+    Warning(String),
+}
+
+/// Runs the benchmark `config` describes.
+pub fn run(config: &BenchConfig) -> Result<BenchReport> {
+    run_observed(config, &mut |_| {})
+}
+
+/// [`run`], reporting progress and warnings to `observe` as they happen.
+pub fn run_observed(config: &BenchConfig, observe: &mut dyn FnMut(Event)) -> Result<BenchReport> {
+    config.validate()?;
+    let date = provenance::utc_now();
+    let ctx = match &config.device {
+        Device::Existing(ctx) => ctx.clone(),
+        #[cfg(feature = "loaded")]
+        Device::Create(options) => {
+            observe(Event::Progress("creating the Vulkan device".into()));
+            Context::new(options)?
+        }
+    };
+    let mut report = BenchReport {
+        device: ctx.device_name().to_string(),
+        driver: ctx.driver().to_string(),
+        threads: provenance::lavapipe_threads(&ctx),
+        date,
+        git: provenance::git_commit(),
+        runs: config.runs,
+        width: config.width,
+        height: config.height,
+        ao_radius: config.ao_radius,
+        seed: config.seed,
+        results: Vec::new(),
+        written: Vec::new(),
+    };
+    let mut plot_dirs = HashSet::new();
+    for spec in &config.scenes {
+        let scene = {
+            observe(Event::Progress(format!("{spec}: loading")));
+            Scene::load(spec)?
+        };
+        let mut bench = SceneBench::new(&ctx, config, scene, observe)?;
+        for &ray_type in &config.ray_types {
+            bench.measure(ray_type, observe)?;
+        }
+        if let Some(dir) = &config.plot_dir {
+            let dir = dir.join(plot::scene_dir_name(&bench.scene.name, &mut plot_dirs));
+            report.written.extend(bench.write_plots(dir)?);
+        }
+        report.results.extend(bench.records);
+    }
+    Ok(report)
+}
+
+/// A structure under test, uploaded.
+struct Candidate {
+    method: Method,
+    /// None for the exact BVH.
+    level: Option<(Level, RbvhParams)>,
+    tracer: Tracer,
+    build_ms: f64,
+    memory: Memory,
+}
+
+impl Candidate {
+    /// "exact", "rbvh Q2", "rbvh custom": for messages.
+    fn label(&self) -> String {
+        match &self.level {
+            None => self.method.name().into(),
+            Some((level, _)) => format!("{} {}", self.method.name(), level.name()),
+        }
+    }
+
+    /// "exact", "q2", "custom": for file names.
+    fn file_stem(&self) -> String {
+        match &self.level {
+            None => "exact".into(),
+            Some((level, _)) => level.name().to_ascii_lowercase(),
+        }
+    }
+}
+
+/// One scene's structures, rays and records.
+struct SceneBench<'a> {
+    config: &'a BenchConfig,
+    scene: Scene,
+    diagonal: f32,
+    /// Kept for the CPU reference tracer that referees the exact BVH's GPU hits.
+    bvh: Bvh,
+    /// The exact BVH first.
+    candidates: Vec<Candidate>,
+    primary: Vec<Ray>,
+    exact_primary: Vec<Hit>,
+    secondary: Secondary,
+    /// Per candidate, the shaded primary image and primary hits, once primary rays are traced.
+    renders: Option<Vec<(Image, Vec<Hit>)>>,
+    records: Vec<Record>,
+}
+
+/// Rays, hits and times of one ray type.
+struct Measured {
+    rays: Vec<Ray>,
+    query: Query,
+    /// Per candidate, the warm-up's hits.
+    hits: Vec<Vec<Hit>>,
+    /// Per candidate, milliseconds of each timed run.
+    ms: Vec<Vec<f64>>,
+    source: TimingSource,
+}
+
+impl<'a> SceneBench<'a> {
+    /// Builds and uploads every structure and traces the exact primary hits.
+    fn new(
+        ctx: &Context,
+        config: &'a BenchConfig,
+        scene: Scene,
+        observe: &mut dyn FnMut(Event),
+    ) -> Result<SceneBench<'a>> {
+        let diagonal = scene.bounds().diagonal();
+        if scene.triangle_count() == 0 || !(diagonal.is_finite() && diagonal > 0.0) {
+            return Err(Error::param(
+                "scene",
+                format!(
+                    "{}: {} triangles and a bounding-box diagonal of {diagonal}; errors are \
+                     measured relative to the diagonal, so it needs an extent",
+                    scene.name,
+                    scene.triangle_count()
+                ),
+            ));
+        }
+        observe(Event::Progress(format!(
+            "{}: building the exact BVH",
+            scene.name
+        )));
+        let bvh = Bvh::build(&scene)?;
+        let mut candidates = vec![Candidate {
+            method: Method::Exact,
+            level: None,
+            tracer: Tracer::exact(ctx, &bvh)?,
+            build_ms: bvh.build_ms,
+            memory: Memory {
+                tree: bvh.tree_bytes(),
+                atlas: 0,
+                triangles: bvh.triangle_bytes(),
+                total: bvh.tree_bytes() + bvh.triangle_bytes(),
+            },
+        }];
+        // Secondary rays leave the exact surface by at least the coarsest RBVH's texel: an RBVH
+        // surface may lie up to a fraction of a texel off the exact one, and a ray starting
+        // closer would meet its own surface. One offset for all, so all trace identical rays.
+        let mut surface_offset = 0.0f32;
+        for level in &config.levels {
+            observe(Event::Progress(format!(
+                "{}: building RBVH {}",
+                scene.name,
+                level.name()
+            )));
+            let params = level.params()?;
+            let rbvh = Rbvh::build(&scene, &params)?;
+            surface_offset = surface_offset.max(rbvh.texel_size);
+            candidates.push(Candidate {
+                method: Method::Rbvh,
+                level: Some((*level, params)),
+                tracer: Tracer::rbvh(ctx, &rbvh)?,
+                build_ms: rbvh.stats.build_ms,
+                memory: Memory {
+                    tree: rbvh.tree_bytes(),
+                    atlas: rbvh.atlas_bytes(),
+                    triangles: rbvh.triangle_bytes(),
+                    total: rbvh.total_bytes(),
+                },
+            });
+        }
+        let (width, height) = (config.width, config.height);
+        let primary = scene
+            .camera_or_framed(width as f32 / height as f32)
+            .primary_rays(width, height);
+        let exact_primary = candidates[0].tracer.trace(&primary, Query::Closest)?.hits;
+        let secondary = Secondary {
+            diagonal,
+            surface_offset,
+            light: scene.light.unwrap_or(DEFAULT_LIGHT),
+            ao_radius: config.ao_radius,
+            seed: config.seed,
+        };
+        Ok(SceneBench {
+            config,
+            scene,
+            diagonal,
+            bvh,
+            candidates,
+            primary,
+            exact_primary,
+            secondary,
+            renders: None,
+            records: Vec::new(),
+        })
+    }
+
+    /// Measures every candidate on the rays of `ray_type` and appends their records.
+    fn measure(&mut self, ray_type: RayType, observe: &mut dyn FnMut(Event)) -> Result<()> {
+        let name = self.scene.name.clone();
+        let rays = rays::generate(
+            ray_type,
+            &self.primary,
+            &self.exact_primary,
+            &self.secondary,
+        );
+        if rays.is_empty() {
+            observe(Event::Warning(format!(
+                "{name}: no primary ray hits the scene, so there are no {} rays; skipped",
+                ray_type.name()
+            )));
+            return Ok(());
+        }
+        observe(Event::Progress(format!(
+            "{name}: {} rays × {} methods × (1 + {} runs)",
+            ray_type.name(),
+            self.candidates.len(),
+            self.config.runs
+        )));
+        let m = self.trace_all(rays, ray_type.query())?;
+        if m.source == TimingSource::Wall {
+            observe(Event::Warning(format!(
+                "{name}, {} rays: the device has no timestamp queries; timing with host wall time \
+                 (submit to fence), which includes submission overhead",
+                ray_type.name()
+            )));
+        }
+        if ray_type == RayType::Primary {
+            let renders = m
+                .hits
+                .iter()
+                .map(|hits| {
+                    let image = output::shade(
+                        &self.primary,
+                        hits,
+                        self.config.width,
+                        self.config.height,
+                        self.scene.light.as_ref(),
+                    )?;
+                    Ok((image, hits.clone()))
+                })
+                .collect::<Result<Vec<_>>>()?;
+            self.renders = Some(renders);
+        }
+        let rays_per_run = m.rays.len() as f64;
+        let speeds: Vec<Spread> =
+            m.ms.iter()
+                .map(|runs| {
+                    let mrays: Vec<f64> = runs.iter().map(|ms| rays_per_run / (ms * 1e3)).collect();
+                    Spread::of(&mrays)
+                })
+                .collect();
+        let exact_cpu = self.bvh.trace_cpu(&m.rays, m.query == Query::Any);
+        for (i, c) in self.candidates.iter().enumerate() {
+            let (errors, invalid) = if i == 0 {
+                let referee = self.hit_errors(&m, &exact_cpu, &m.hits[0])?;
+                (None, validate::invalid_reason(&referee))
+            } else {
+                let errors = self.hit_errors(&m, &m.hits[0], &m.hits[i])?;
+                let image = match (ray_type, &self.renders) {
+                    (RayType::Primary, Some(renders)) => {
+                        Some(metrics::image_errors(&renders[0].0, &renders[i].0)?)
+                    }
+                    _ => None,
+                };
+                let invalid = validate::invalid_reason(&errors);
+                let summary = |s: Option<Summary>, f: fn(&Summary) -> f64| s.as_ref().map(f);
+                let record = Errors {
+                    miss_mismatch_rate: errors.miss_mismatch_rate,
+                    t_err_mean: summary(errors.t_err, |s| s.mean),
+                    t_err_p99: summary(errors.t_err, |s| s.p99),
+                    t_err_max: summary(errors.t_err, |s| s.max),
+                    normal_err_deg_mean: summary(errors.normal_err_deg, |s| s.mean),
+                    normal_err_deg_p99: summary(errors.normal_err_deg, |s| s.p99),
+                    psnr_db: image.map(|e| e.psnr_db),
+                    flip_mean: image.map(|e| e.flip_mean),
+                };
+                (Some(record), invalid)
+            };
+            if let Some(reason) = &invalid {
+                let referee = if i == 0 {
+                    "the CPU reference tracer"
+                } else {
+                    "the exact BVH"
+                };
+                observe(Event::Warning(format!(
+                    "INVALID: {} on {name}, {} rays, against {referee}: {reason}. Wrong here, not \
+                     fast: do not compare its speed.",
+                    c.label(),
+                    ray_type.name()
+                )));
+            }
+            let exact = &self.candidates[0];
+            self.records.push(Record {
+                scene: name.clone(),
+                triangles: self.scene.triangle_count() as u64,
+                method: c.method,
+                quality: c.level.map(|(level, _)| level.name()),
+                params: c.level.map(|(_, params)| Params::from(&params)),
+                ray_type,
+                rays: m.rays.len() as u64,
+                mrays_per_s: speeds[i],
+                speedup_vs_exact: speeds[i].median / speeds[0].median,
+                build_ms: c.build_ms,
+                memory_bytes: c.memory,
+                memory_ratio_vs_exact: exact.memory.total as f64 / c.memory.total.max(1) as f64,
+                error: errors,
+                valid: invalid.is_none(),
+                invalid_reason: invalid,
+                timing_source: m.source,
+            });
+        }
+        Ok(())
+    }
+
+    /// One warm-up trace per candidate (whose hits are kept), then `runs` interleaved rounds.
+    fn trace_all(&self, rays: Vec<Ray>, query: Query) -> Result<Measured> {
+        let hits = self
+            .candidates
+            .iter()
+            .map(|c| Ok(c.tracer.trace(&rays, query)?.hits))
+            .collect::<Result<Vec<_>>>()?;
+        let runs = self.config.runs as usize;
+        let mut timings: Vec<Vec<Timing>> = vec![Vec::with_capacity(runs); self.candidates.len()];
+        for _ in 0..runs {
+            for (c, times) in self.candidates.iter().zip(&mut timings) {
+                times.push(c.tracer.trace(&rays, query)?.timing);
+            }
+        }
+        let gpu = timings.iter().flatten().all(|t| t.gpu_ms.is_some());
+        let ms = timings
+            .iter()
+            .map(|times| {
+                times
+                    .iter()
+                    .map(|t| t.gpu_ms.filter(|_| gpu).unwrap_or(t.wall_ms))
+                    .collect()
+            })
+            .collect();
+        Ok(Measured {
+            rays,
+            query,
+            hits,
+            ms,
+            source: if gpu {
+                TimingSource::GpuTimestamps
+            } else {
+                TimingSource::Wall
+            },
+        })
+    }
+
+    fn hit_errors(&self, m: &Measured, reference: &[Hit], test: &[Hit]) -> Result<HitErrors> {
+        metrics::hit_errors(&m.rays, reference, test, self.diagonal, m.query)
+    }
+
+    /// Writes into `dir` the exact render (`exact.png`), each level's render and error image
+    /// (`q2.png`, `q2_error.png`, …) and the charts; returns the files written.
+    fn write_plots(&self, dir: PathBuf) -> Result<Vec<PathBuf>> {
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+        let mut written = Vec::new();
+        if let Some(renders) = &self.renders {
+            let (exact_image, exact_hits) = &renders[0];
+            for (c, (image, hits)) in self.candidates.iter().zip(renders) {
+                let path = dir.join(format!("{}.png", c.file_stem()));
+                output::write_png(&path, image)?;
+                written.push(path);
+                if c.level.is_some() {
+                    let errors = error_image(
+                        &self.primary,
+                        exact_hits,
+                        hits,
+                        self.diagonal,
+                        exact_image.width,
+                        exact_image.height,
+                    )?;
+                    let path = dir.join(format!("{}_error.png", c.file_stem()));
+                    output::write_png(&path, &errors)?;
+                    written.push(path);
+                }
+            }
+        }
+        written.extend(plot::write_charts(&dir, &self.records)?);
+        Ok(written)
+    }
+}

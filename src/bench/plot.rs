@@ -1,0 +1,171 @@
+//! The trade at a glance: per scene, SVG charts of speed and memory against accuracy, one point
+//! per RBVH level with the exact BVH marked at zero error — the curves the paper's evaluation
+//! draws (Novák & Dachsbacher 2012, §6).
+//!
+//! * `speed_vs_error.svg`: primary-ray MRays/s (median) against the hit-distance error p99;
+//! * `memory_vs_error.svg`: total bytes of the structure against the same error.
+//!
+//! Accuracy is measured on primary rays (closest hits), since the distance error of occlusion
+//! rays is not defined (see `bench::metrics`). Levels that failed validation are labelled
+//! "(invalid)". SVG text needs no fonts at draw time, so the charts render the same anywhere.
+
+use std::collections::HashSet;
+use std::io::{self, Write};
+use std::path::{Path, PathBuf};
+
+use plotters::prelude::*;
+
+use super::rays::RayType;
+use super::record::{Method, Record};
+use crate::io::write_atomically;
+use crate::{Error, Result};
+
+/// One marker of a chart.
+struct Point {
+    label: String,
+    /// Hit-distance error p99, in percent of the scene diagonal.
+    x: f64,
+    y: f64,
+    exact: bool,
+}
+
+/// Writes both charts for one scene's `records` into `dir`, returning the files written. Records
+/// of other ray types are ignored; a level without a defined error (no ray hit by both) is left
+/// out of the charts.
+pub fn write_charts(dir: &Path, records: &[Record]) -> Result<Vec<PathBuf>> {
+    let primary: Vec<&Record> = records
+        .iter()
+        .filter(|r| r.ray_type == RayType::Primary)
+        .collect();
+    let scene = primary.first().map_or("", |r| r.scene.as_str());
+    let points = |y: &dyn Fn(&Record) -> f64| -> Vec<Point> {
+        primary
+            .iter()
+            .filter_map(|r| {
+                let exact = r.method == Method::Exact;
+                let x = if exact {
+                    0.0
+                } else {
+                    100.0 * r.error.as_ref()?.t_err_p99?
+                };
+                let level = r.quality.clone().unwrap_or_else(|| "exact".into());
+                Some(Point {
+                    label: if r.valid {
+                        level
+                    } else {
+                        format!("{level} (invalid)")
+                    },
+                    x,
+                    y: y(r),
+                    exact,
+                })
+            })
+            .collect()
+    };
+    let charts = [
+        (
+            "speed_vs_error.svg",
+            format!("{scene}: primary-ray speed vs accuracy"),
+            "MRays/s (median)",
+            points(&|r| r.mrays_per_s.median),
+        ),
+        (
+            "memory_vs_error.svg",
+            format!("{scene}: memory vs accuracy"),
+            "memory (MB)",
+            points(&|r| r.memory_bytes.total as f64 / 1e6),
+        ),
+    ];
+    let mut written = Vec::new();
+    for (file, title, y_desc, points) in charts {
+        let path = dir.join(file);
+        let mut svg = String::new();
+        draw(&mut svg, &title, y_desc, &points)
+            .map_err(|e| Error::io(&path, io::Error::other(e.to_string())))?;
+        write_atomically(&path, |w| w.write_all(svg.as_bytes()))?;
+        written.push(path);
+    }
+    Ok(written)
+}
+
+/// Draws one chart into `svg`.
+fn draw(
+    svg: &mut String,
+    title: &str,
+    y_desc: &str,
+    points: &[Point],
+) -> std::result::Result<(), Box<dyn std::error::Error>> {
+    let root = SVGBackend::with_string(svg, (720, 480)).into_drawing_area();
+    root.fill(&WHITE)?;
+    // Room above the largest values for their labels; a floor keeps an all-zero axis drawable.
+    let top = |v: f64| (1.15 * v).max(1e-3);
+    let x_max = top(points.iter().map(|p| p.x).fold(0.0, f64::max));
+    let y_max = top(points.iter().map(|p| p.y).fold(0.0, f64::max));
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(16)
+        .x_label_area_size(48)
+        .y_label_area_size(72)
+        .build_cartesian_2d(0.0..x_max, 0.0..y_max)?;
+    chart
+        .configure_mesh()
+        .x_desc("hit distance error, p99 (% of scene diagonal)")
+        .y_desc(y_desc)
+        .draw()?;
+    let mut levels: Vec<&Point> = points.iter().filter(|p| !p.exact).collect();
+    levels.sort_by(|a, b| a.x.total_cmp(&b.x));
+    chart.draw_series(LineSeries::new(levels.iter().map(|p| (p.x, p.y)), &BLUE))?;
+    let font = ("sans-serif", 13).into_font();
+    chart.draw_series(points.iter().map(|p| {
+        let marker = if p.exact {
+            TriangleMarker::new((0, 0), 7, RED.filled()).into_dyn()
+        } else {
+            Circle::new((0, 0), 4, BLUE.filled()).into_dyn()
+        };
+        EmptyElement::at((p.x, p.y)) + marker + Text::new(p.label.clone(), (8, -16), font.clone())
+    }))?;
+    root.present()?;
+    Ok(())
+}
+
+/// A directory name for scene `name` that is not in `used` (which it joins): letters, digits,
+/// `-`, `_` and `.` kept, anything else (path separators included) as `_`, and `-2`, `-3`, …
+/// appended when two scenes share a name.
+pub fn scene_dir_name(name: &str, used: &mut HashSet<String>) -> String {
+    let base: String = name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    let base = if base.trim_matches('.').is_empty() {
+        "scene".to_string()
+    } else {
+        base
+    };
+    let mut candidate = base.clone();
+    let mut n = 2;
+    while !used.insert(candidate.clone()) {
+        candidate = format!("{base}-{n}");
+        n += 1;
+    }
+    candidate
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scene_directories_are_safe_and_distinct() {
+        let mut used = HashSet::new();
+        assert_eq!(scene_dir_name("sphere", &mut used), "sphere");
+        assert_eq!(scene_dir_name("sphere", &mut used), "sphere-2");
+        assert_eq!(scene_dir_name("../a b.obj", &mut used), ".._a_b.obj");
+        assert_eq!(scene_dir_name("..", &mut used), "scene");
+    }
+}

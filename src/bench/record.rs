@@ -1,0 +1,365 @@
+//! What a benchmark run produces, and its two file formats.
+//!
+//! # JSON (`--json`)
+//!
+//! One object: the run's provenance, then one record per (scene, method, level, ray type).
+//!
+//! | key | type | meaning |
+//! |---|---|---|
+//! | `device`, `driver` | string | the Vulkan device and driver, as they report themselves |
+//! | `threads` | int \| null | lavapipe's worker threads (`LP_NUM_THREADS`, else one per CPU); null on other devices |
+//! | `date` | string | start of the run, UTC, ISO 8601 (`2025-01-31T12:00:00Z`) |
+//! | `git` | string \| null | `git rev-parse HEAD` in the working directory, null outside a repository |
+//! | `runs` | int | timed dispatches per record, after one warm-up |
+//! | `width`, `height` | int | primary-ray image size |
+//! | `ao_radius` | number | AO ray length, fraction of the scene diagonal |
+//! | `seed` | int | seed of the secondary rays' directions |
+//! | `results` | array | the records below |
+//!
+//! Each record:
+//!
+//! | key | type | meaning |
+//! |---|---|---|
+//! | `scene` | string | scene name (built-in name, file name, or the scene file's `name`) |
+//! | `triangles` | int | triangles in the scene |
+//! | `method` | `"exact"` \| `"rbvh"` | exact triangle BVH, or RBVH |
+//! | `quality` | null \| `"Q0"`…`"Q4"` \| `"custom"` | RBVH level; null for exact |
+//! | `params` | object \| null | RBVH build parameters (below); null for exact |
+//! | `ray_type` | `"primary"` \| `"ao"` \| `"shadow"` \| `"diffuse"` | see `bench::rays` |
+//! | `rays` | int | rays per dispatch |
+//! | `mrays_per_s` | {`median`,`min`,`max`} | million rays per second over the timed runs |
+//! | `speedup_vs_exact` | number | median MRays/s over the exact BVH's, same rays, same run (1 for exact) |
+//! | `build_ms` | number | CPU build time of the structure |
+//! | `memory_bytes` | {`tree`,`atlas`,`triangles`,`total`} | bytes uploaded: nodes (+ height-field leaf records for RBVH), atlas texels, triangles |
+//! | `memory_ratio_vs_exact` | number | exact total / this total (above 1: smaller than exact) |
+//! | `error` | object \| null | errors against the exact BVH on the same rays (below); null for exact |
+//! | `valid` | bool | false when the hits are wrong rather than approximate (`bench::validate`); for exact: whether the GPU agrees with the CPU reference tracer |
+//! | `invalid_reason` | string \| null | why `valid` is false |
+//! | `timing_source` | `"gpu_timestamps"` \| `"wall"` | GPU timestamp queries, or host wall time (submit to fence) when the device cannot time |
+//!
+//! `params`: `texels_per_diagonal`, `refinement` (`"normal_cone"` \| `"projected_area"`),
+//! `max_angle_deg` (normal cone, else null), `min_ratio` (projected area, else null),
+//! `subdivision` (`"spatial_median"` \| `"area_sah"`), `object_split`, `max_tile`,
+//! `min_leaf_texels` — the fields of [`RbvhParams`].
+//!
+//! `error` (definitions in `bench::metrics`): `miss_mismatch_rate` (fraction of rays hit by one
+//! side only); `t_err_mean`, `t_err_p99`, `t_err_max` (`|t − t_exact|` over rays both hit, as a
+//! fraction of the scene's bounding-box diagonal); `normal_err_deg_mean`, `normal_err_deg_p99`
+//! (degrees); `psnr_db`, `flip_mean` (shaded primary images, 8-bit sRGB). The distance and normal
+//! errors are null for any-hit ray types (ao, shadow) and when no ray was hit by both; the image
+//! metrics are null except for primary rays, and `psnr_db` is also null for identical images
+//! (+∞ dB; `flip_mean` is then 0).
+//!
+//! # CSV (`--csv`)
+//!
+//! RFC 4180: a header line, then one line per record with the same fields flattened (`params.*`,
+//! `mrays_per_s.*`, `memory_bytes.*` and `error.*` without their prefix, except
+//! `mrays_median`/`mrays_min`/`mrays_max` and `*_bytes`). Null is an empty cell; an infinite PSNR is
+//! `inf`.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+use super::rays::RayType;
+use crate::io::write_atomically;
+use crate::rbvh::{RbvhParams, Refinement, Subdivision};
+use crate::Result;
+
+/// A whole run: provenance and records.
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchReport {
+    pub device: String,
+    pub driver: String,
+    pub threads: Option<u32>,
+    pub date: String,
+    pub git: Option<String>,
+    pub runs: u32,
+    pub width: u32,
+    pub height: u32,
+    pub ao_radius: f32,
+    pub seed: u64,
+    pub results: Vec<Record>,
+    /// Charts and images written under the plot directory (not part of the JSON).
+    #[serde(skip)]
+    pub written: Vec<PathBuf>,
+}
+
+/// One (scene, method, level, ray type).
+#[derive(Clone, Debug, Serialize)]
+pub struct Record {
+    pub scene: String,
+    pub triangles: u64,
+    pub method: Method,
+    pub quality: Option<String>,
+    pub params: Option<Params>,
+    pub ray_type: RayType,
+    pub rays: u64,
+    pub mrays_per_s: Spread,
+    pub speedup_vs_exact: f64,
+    pub build_ms: f64,
+    pub memory_bytes: Memory,
+    pub memory_ratio_vs_exact: f64,
+    pub error: Option<Errors>,
+    pub valid: bool,
+    pub invalid_reason: Option<String>,
+    pub timing_source: TimingSource,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    Exact,
+    Rbvh,
+}
+
+impl Method {
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Exact => "exact",
+            Method::Rbvh => "rbvh",
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TimingSource {
+    GpuTimestamps,
+    Wall,
+}
+
+impl TimingSource {
+    pub fn name(self) -> &'static str {
+        match self {
+            TimingSource::GpuTimestamps => "gpu_timestamps",
+            TimingSource::Wall => "wall",
+        }
+    }
+}
+
+/// Median, minimum and maximum over the timed runs.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Spread {
+    pub median: f64,
+    pub min: f64,
+    pub max: f64,
+}
+
+impl Spread {
+    /// Of non-empty `values` (the harness times at least one run); the median of an even count
+    /// is the mean of the middle two.
+    pub(crate) fn of(values: &[f64]) -> Spread {
+        let mut v = values.to_vec();
+        v.sort_by(f64::total_cmp);
+        let n = v.len();
+        let median = if n % 2 == 1 {
+            v[n / 2]
+        } else {
+            0.5 * (v[n / 2 - 1] + v[n / 2])
+        };
+        Spread {
+            median,
+            min: v[0],
+            max: v[n - 1],
+        }
+    }
+}
+
+/// Bytes of one structure, as uploaded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct Memory {
+    pub tree: u64,
+    pub atlas: u64,
+    pub triangles: u64,
+    pub total: u64,
+}
+
+/// [`RbvhParams`] with named enums, for the records.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Params {
+    pub texels_per_diagonal: f32,
+    pub refinement: &'static str,
+    pub max_angle_deg: Option<f32>,
+    pub min_ratio: Option<f32>,
+    pub subdivision: &'static str,
+    pub object_split: bool,
+    pub max_tile: u32,
+    pub min_leaf_texels: f32,
+}
+
+impl From<&RbvhParams> for Params {
+    fn from(p: &RbvhParams) -> Params {
+        let (refinement, max_angle_deg, min_ratio) = match p.refinement {
+            Refinement::NormalCone { max_angle_deg } => ("normal_cone", Some(max_angle_deg), None),
+            Refinement::ProjectedArea { min_ratio } => ("projected_area", None, Some(min_ratio)),
+        };
+        Params {
+            texels_per_diagonal: p.texels_per_diagonal,
+            refinement,
+            max_angle_deg,
+            min_ratio,
+            subdivision: match p.subdivision {
+                Subdivision::SpatialMedian => "spatial_median",
+                Subdivision::AreaSah => "area_sah",
+            },
+            object_split: p.object_split,
+            max_tile: p.max_tile,
+            min_leaf_texels: p.min_leaf_texels,
+        }
+    }
+}
+
+/// Errors against the exact BVH (see the module docs for which are null when).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Errors {
+    pub miss_mismatch_rate: f64,
+    pub t_err_mean: Option<f64>,
+    pub t_err_p99: Option<f64>,
+    pub t_err_max: Option<f64>,
+    pub normal_err_deg_mean: Option<f64>,
+    pub normal_err_deg_p99: Option<f64>,
+    /// +∞ for identical images, which JSON writes as null.
+    pub psnr_db: Option<f64>,
+    pub flip_mean: Option<f64>,
+}
+
+/// Writes `report` as pretty-printed JSON, atomically.
+pub fn write_json(path: &Path, report: &BenchReport) -> Result<()> {
+    write_atomically(path, |w| {
+        serde_json::to_writer_pretty(&mut *w, report)?;
+        writeln!(w)
+    })
+}
+
+/// The CSV header: one column per field of a [`Record`], flattened.
+pub const CSV_COLUMNS: [&str; 35] = [
+    "scene",
+    "triangles",
+    "method",
+    "quality",
+    "texels_per_diagonal",
+    "refinement",
+    "max_angle_deg",
+    "min_ratio",
+    "subdivision",
+    "object_split",
+    "max_tile",
+    "min_leaf_texels",
+    "ray_type",
+    "rays",
+    "mrays_median",
+    "mrays_min",
+    "mrays_max",
+    "speedup_vs_exact",
+    "build_ms",
+    "tree_bytes",
+    "atlas_bytes",
+    "triangle_bytes",
+    "total_bytes",
+    "memory_ratio_vs_exact",
+    "miss_mismatch_rate",
+    "t_err_mean",
+    "t_err_p99",
+    "t_err_max",
+    "normal_err_deg_mean",
+    "normal_err_deg_p99",
+    "psnr_db",
+    "flip_mean",
+    "valid",
+    "invalid_reason",
+    "timing_source",
+];
+
+/// One record's CSV cells, in the order of [`CSV_COLUMNS`], unquoted.
+fn csv_row(r: &Record) -> [String; CSV_COLUMNS.len()] {
+    fn opt<T: ToString>(v: Option<T>) -> String {
+        v.map(|v| v.to_string()).unwrap_or_default()
+    }
+    let p = r.params.as_ref();
+    let e = r.error.as_ref();
+    [
+        r.scene.clone(),
+        r.triangles.to_string(),
+        r.method.name().into(),
+        opt(r.quality.as_ref()),
+        opt(p.map(|p| p.texels_per_diagonal)),
+        opt(p.map(|p| p.refinement)),
+        opt(p.and_then(|p| p.max_angle_deg)),
+        opt(p.and_then(|p| p.min_ratio)),
+        opt(p.map(|p| p.subdivision)),
+        opt(p.map(|p| p.object_split)),
+        opt(p.map(|p| p.max_tile)),
+        opt(p.map(|p| p.min_leaf_texels)),
+        r.ray_type.name().into(),
+        r.rays.to_string(),
+        r.mrays_per_s.median.to_string(),
+        r.mrays_per_s.min.to_string(),
+        r.mrays_per_s.max.to_string(),
+        r.speedup_vs_exact.to_string(),
+        r.build_ms.to_string(),
+        r.memory_bytes.tree.to_string(),
+        r.memory_bytes.atlas.to_string(),
+        r.memory_bytes.triangles.to_string(),
+        r.memory_bytes.total.to_string(),
+        r.memory_ratio_vs_exact.to_string(),
+        opt(e.map(|e| e.miss_mismatch_rate)),
+        opt(e.and_then(|e| e.t_err_mean)),
+        opt(e.and_then(|e| e.t_err_p99)),
+        opt(e.and_then(|e| e.t_err_max)),
+        opt(e.and_then(|e| e.normal_err_deg_mean)),
+        opt(e.and_then(|e| e.normal_err_deg_p99)),
+        opt(e.and_then(|e| e.psnr_db)),
+        opt(e.and_then(|e| e.flip_mean)),
+        r.valid.to_string(),
+        opt(r.invalid_reason.as_ref()),
+        r.timing_source.name().into(),
+    ]
+}
+
+/// A CSV cell: quoted, with inner quotes doubled, when it holds a comma, quote or line break.
+fn csv_cell(s: &str) -> String {
+    if s.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+/// Writes `report`'s records as CSV, atomically.
+pub fn write_csv(path: &Path, report: &BenchReport) -> Result<()> {
+    write_atomically(path, |w| {
+        writeln!(w, "{}", CSV_COLUMNS.join(","))?;
+        for record in &report.results {
+            let cells = csv_row(record).map(|c| csv_cell(&c));
+            writeln!(w, "{}", cells.join(","))?;
+        }
+        Ok(())
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn medians_of_odd_and_even_counts() {
+        assert_eq!(
+            Spread::of(&[3.0, 1.0, 2.0]),
+            Spread {
+                median: 2.0,
+                min: 1.0,
+                max: 3.0
+            }
+        );
+        assert_eq!(Spread::of(&[4.0, 1.0, 2.0, 3.0]).median, 2.5);
+    }
+
+    #[test]
+    fn cells_are_quoted_only_when_needed() {
+        assert_eq!(csv_cell("sphere"), "sphere");
+        assert_eq!(csv_cell("a,b"), "\"a,b\"");
+        assert_eq!(csv_cell("say \"hi\""), "\"say \"\"hi\"\"\"");
+    }
+}

@@ -1,0 +1,141 @@
+//! `rbvh bench`: speed, memory and accuracy of the exact BVH and RBVH levels on the same rays,
+//! as a table, JSON, CSV, charts and error images (the library's `rbvh::bench`).
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{Context as _, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use rbvh::bench::{self, BenchConfig, Device, Event, Level, RayType};
+use rbvh::gpu::{ContextOptions, Validation};
+
+use crate::prepare::Quality;
+
+#[derive(clap::Args, Debug)]
+#[command(mut_arg("quality", |a| a.default_value("all")))]
+pub struct Args {
+    /// Scenes: built-in names, OBJ/glTF/GLB files or scene files (.toml); repeat or comma-separate.
+    #[arg(long, default_value = "default", value_delimiter = ',')]
+    scene: Vec<String>,
+    #[command(flatten)]
+    quality: Quality,
+    /// Ray types to trace, comma-separated: primary, ao, shadow, diffuse.
+    #[arg(
+        long,
+        default_value = "primary,ao,shadow,diffuse",
+        value_delimiter = ','
+    )]
+    rays: Vec<RayType>,
+    /// Primary-ray image width (secondary rays start at its exact hits).
+    #[arg(long, default_value_t = 256)]
+    width: u32,
+    #[arg(long, default_value_t = 256)]
+    height: u32,
+    /// Timed dispatches per method and ray type, after one warm-up.
+    #[arg(long, default_value_t = 5)]
+    runs: u32,
+    /// Ambient-occlusion ray length, as a fraction of the scene's bounding-box diagonal.
+    #[arg(long, default_value_t = 0.05)]
+    ao_radius: f32,
+    /// Seed of the secondary rays' random directions (default: a fixed seed, so runs repeat).
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Lavapipe worker threads (sets LP_NUM_THREADS; default: Mesa's, one per CPU).
+    #[arg(long)]
+    threads: Option<u32>,
+    /// Vulkan device to use: any part of its name (default: $RBVH_DEVICE, else the best GPU, else lavapipe).
+    #[arg(long)]
+    device: Option<String>,
+    /// Run the Vulkan validation layer and fail on any error it reports.
+    #[arg(long)]
+    validate: bool,
+    /// Write the report as JSON (schema in README.md).
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Write the records as CSV.
+    #[arg(long)]
+    csv: Option<PathBuf>,
+    /// Write per-scene charts (SVG) and renders and error images (PNG) under this directory.
+    #[arg(long)]
+    plot: Option<PathBuf>,
+}
+
+pub fn run(a: Args) -> Result<()> {
+    if let Some(threads) = a.threads {
+        anyhow::ensure!(threads >= 1, "--threads must be at least 1");
+        // Mesa reads LP_NUM_THREADS when the Vulkan device is created, so it must be set before
+        // that. It is set here, first, while the process is still single-threaded: nothing has
+        // started rayon's pool or the driver's threads yet, and setenv racing a getenv in another
+        // thread is undefined behaviour in C.
+        std::env::set_var("LP_NUM_THREADS", threads.to_string());
+    }
+    let levels = a
+        .quality
+        .levels()?
+        .into_iter()
+        .map(|(name, params)| Level::named(&name, params))
+        .collect();
+    let mut config = BenchConfig::new(
+        a.scene.iter().map(|s| s.trim().to_string()).collect(),
+        Device::Create(ContextOptions {
+            device_name: a
+                .device
+                .clone()
+                .or_else(|| ContextOptions::default().device_name),
+            validation: if a.validate {
+                Validation::Required
+            } else {
+                Validation::from_env()
+            },
+        }),
+    );
+    config.levels = levels;
+    config.ray_types = a.rays.clone();
+    config.width = a.width;
+    config.height = a.height;
+    config.runs = a.runs;
+    config.ao_radius = a.ao_radius;
+    if let Some(seed) = a.seed {
+        config.seed = seed;
+    }
+    config.plot_dir = a.plot.clone();
+
+    let bar = ProgressBar::new_spinner();
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} {msg} {elapsed}").expect("static template"),
+    );
+    bar.enable_steady_tick(Duration::from_millis(120));
+    let mut invalid = 0usize;
+    let result = bench::run_observed(&config, &mut |event| match event {
+        Event::Progress(what) => bar.set_message(what),
+        Event::Warning(what) => bar.suspend(|| {
+            if what.starts_with("INVALID") {
+                invalid += 1;
+                eprintln!("!!!!!!!! {what}");
+            } else {
+                eprintln!("warning: {what}");
+            }
+        }),
+    });
+    bar.finish_and_clear();
+    let report = result.context("benchmark")?;
+
+    print!("{}", bench::table(&report));
+    if invalid > 0 {
+        eprintln!(
+            "!!!!!!!! {invalid} measurement(s) INVALID: their hits are wrong (see above); their speeds mean nothing"
+        );
+    }
+    if let Some(path) = &a.json {
+        bench::write_json(path, &report)?;
+        eprintln!("wrote {}", path.display());
+    }
+    if let Some(path) = &a.csv {
+        bench::write_csv(path, &report)?;
+        eprintln!("wrote {}", path.display());
+    }
+    for path in &report.written {
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
+}

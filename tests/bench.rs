@@ -1,0 +1,348 @@
+//! The benchmark harness (`rbvh::bench`, `rbvh bench`): a small run on the sphere has every record
+//! and field, writes JSON and CSV that parse back and plots that exist; secondary rays start at the
+//! exact hits; the validator catches a method that is wrong rather than fast.
+
+mod common;
+
+use std::collections::HashSet;
+use std::path::Path;
+use std::process::Command;
+
+use rbvh::bench::metrics::hit_errors;
+use rbvh::bench::rays::{generate, offset_origin, Secondary, DEFAULT_LIGHT};
+use rbvh::bench::record::{Method, CSV_COLUMNS};
+use rbvh::bench::validate::invalid_reason;
+use rbvh::bench::{self, BenchConfig, Device, Level, RayType};
+use rbvh::bvh::Bvh;
+use rbvh::geom::Hit;
+use rbvh::gpu::Query;
+use rbvh::scene::{Light, Scene};
+
+fn small_config(plot: Option<&Path>) -> BenchConfig {
+    let mut config = BenchConfig::new(vec!["sphere".into()], Device::Existing(common::context()));
+    config.levels = vec![Level::Preset(0), Level::Preset(2)];
+    config.width = 32;
+    config.height = 32;
+    config.runs = 2;
+    config.plot_dir = plot.map(Path::to_path_buf);
+    config
+}
+
+fn keys(v: &serde_json::Value) -> HashSet<&str> {
+    v.as_object()
+        .expect("an object")
+        .keys()
+        .map(String::as_str)
+        .collect()
+}
+
+fn set<'a>(names: &[&'a str]) -> HashSet<&'a str> {
+    names.iter().copied().collect()
+}
+
+#[test]
+fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
+    let dir = tempfile::tempdir().unwrap();
+    let plots = dir.path().join("plots");
+    let report = bench::run(&small_config(Some(&plots))).unwrap();
+
+    // Every method × ray type, in ray-type order, the exact BVH first in each.
+    assert_eq!(report.results.len(), 3 * 4);
+    for (chunk, ray_type) in report.results.chunks(3).zip(RayType::ALL) {
+        let levels: Vec<_> = chunk.iter().map(|r| r.quality.as_deref()).collect();
+        assert_eq!(levels, [None, Some("Q0"), Some("Q2")]);
+        for r in chunk {
+            assert_eq!(r.ray_type, ray_type);
+            assert_eq!(r.scene, "sphere");
+            assert!(r.rays > 0 && r.triangles > 0);
+            let s = r.mrays_per_s;
+            assert!(
+                s.min > 0.0 && s.min <= s.median && s.median <= s.max,
+                "{s:?}"
+            );
+            assert!(r.build_ms > 0.0);
+            let m = r.memory_bytes;
+            assert_eq!(m.total, m.tree + m.atlas + m.triangles);
+        }
+        let exact = &chunk[0];
+        assert_eq!(exact.method, Method::Exact);
+        assert!(exact.error.is_none() && exact.params.is_none());
+        assert_eq!(exact.speedup_vs_exact, 1.0);
+        assert_eq!(exact.memory_ratio_vs_exact, 1.0);
+        assert_eq!(exact.memory_bytes.atlas, 0);
+        assert!(exact.valid, "{:?}", exact.invalid_reason);
+        for r in &chunk[1..] {
+            assert_eq!(r.method, Method::Rbvh);
+            assert!(r.params.is_some());
+            assert!(r.memory_bytes.atlas > 0);
+            assert_eq!(r.valid, r.invalid_reason.is_none());
+            let e = r.error.expect("rbvh records carry errors");
+            assert!((0.0..=1.0).contains(&e.miss_mismatch_rate));
+            let primary = ray_type == RayType::Primary;
+            assert_eq!(e.psnr_db.is_some(), primary, "{ray_type:?}");
+            assert_eq!(e.flip_mean.is_some(), primary, "{ray_type:?}");
+            if primary {
+                assert!(e.t_err_p99.is_some() && e.normal_err_deg_mean.is_some());
+            }
+            if ray_type.query() == Query::Any {
+                assert!(e.t_err_mean.is_none() && e.normal_err_deg_p99.is_none());
+            }
+        }
+    }
+
+    // JSON parses back with every key of the schema.
+    let json_path = dir.path().join("bench.json");
+    bench::write_json(&json_path, &report).unwrap();
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json_path).unwrap()).unwrap();
+    assert!(keys(&json).is_superset(&set(&[
+        "device", "driver", "threads", "date", "git", "runs", "results"
+    ])));
+    let date = json["date"].as_str().unwrap();
+    assert!(date.len() == 20 && date.ends_with('Z') && date.as_bytes()[10] == b'T');
+    let results = json["results"].as_array().unwrap();
+    assert_eq!(results.len(), report.results.len());
+    for r in results {
+        assert!(keys(r).is_superset(&set(&[
+            "scene",
+            "triangles",
+            "method",
+            "quality",
+            "params",
+            "ray_type",
+            "rays",
+            "mrays_per_s",
+            "speedup_vs_exact",
+            "build_ms",
+            "memory_bytes",
+            "memory_ratio_vs_exact",
+            "error",
+            "valid",
+            "timing_source",
+        ])));
+        assert_eq!(
+            keys(&r["mrays_per_s"]),
+            set(&["median", "min", "max"]),
+            "{r}"
+        );
+        assert_eq!(
+            keys(&r["memory_bytes"]),
+            set(&["tree", "atlas", "triangles", "total"])
+        );
+        assert!(matches!(
+            r["timing_source"].as_str(),
+            Some("gpu_timestamps" | "wall")
+        ));
+        match r["method"].as_str().unwrap() {
+            "exact" => {
+                assert!(r["error"].is_null() && r["params"].is_null() && r["quality"].is_null());
+            }
+            "rbvh" => {
+                assert!(keys(&r["error"]).is_superset(&set(&[
+                    "miss_mismatch_rate",
+                    "t_err_mean",
+                    "t_err_p99",
+                    "t_err_max",
+                    "normal_err_deg_mean",
+                    "normal_err_deg_p99",
+                    "psnr_db",
+                    "flip_mean",
+                ])));
+                assert!(keys(&r["params"]).contains("texels_per_diagonal"));
+                assert!(matches!(r["quality"].as_str(), Some("Q0" | "Q2")));
+            }
+            other => panic!("method {other}"),
+        }
+    }
+
+    // CSV: the header, then one line per record with as many cells.
+    let csv_path = dir.path().join("bench.csv");
+    bench::write_csv(&csv_path, &report).unwrap();
+    let csv = std::fs::read_to_string(&csv_path).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines[0], CSV_COLUMNS.join(","));
+    assert_eq!(lines.len(), 1 + report.results.len());
+    for line in &lines[1..] {
+        assert_eq!(line.split(',').count(), CSV_COLUMNS.len(), "{line}");
+    }
+
+    // Plots: charts and, per level, the render and its error image beside the exact render.
+    let scene_dir = plots.join("sphere");
+    for file in [
+        "speed_vs_error.svg",
+        "memory_vs_error.svg",
+        "exact.png",
+        "q0.png",
+        "q0_error.png",
+        "q2.png",
+        "q2_error.png",
+    ] {
+        let path = scene_dir.join(file);
+        assert!(
+            report.written.contains(&path),
+            "{} not listed",
+            path.display()
+        );
+        let bytes = std::fs::read(&path).unwrap();
+        if file.ends_with(".svg") {
+            assert!(bytes.starts_with(b"<svg"), "{file}");
+        } else {
+            assert!(bytes.starts_with(b"\x89PNG"), "{file}");
+        }
+    }
+
+    let table = bench::table(&report);
+    assert_eq!(
+        table.lines().count(),
+        1 + report.results.len() + 1,
+        "{table}"
+    );
+}
+
+#[test]
+fn secondary_rays_start_at_the_exact_primary_hits() {
+    let scene = Scene::load("sphere").unwrap();
+    let diagonal = scene.bounds().diagonal();
+    let bvh = Bvh::build(&scene).unwrap();
+    let primary = scene.camera_or_framed(1.0).primary_rays(24, 24);
+    let exact = bvh.trace_cpu(&primary, false);
+    let setup = Secondary {
+        diagonal,
+        surface_offset: 0.0,
+        light: DEFAULT_LIGHT,
+        ao_radius: 0.05,
+        seed: 9,
+    };
+    let hit_pixels: Vec<usize> = (0..exact.len()).filter(|&i| exact[i].is_hit()).collect();
+    assert!(hit_pixels.len() > 100);
+    let Light::Directional { direction } = DEFAULT_LIGHT else {
+        panic!("the default light is directional")
+    };
+    for kind in [RayType::Ao, RayType::Shadow, RayType::Diffuse] {
+        let rays = generate(kind, &primary, &exact, &setup);
+        assert_eq!(rays.len(), hit_pixels.len());
+        for (ray, &pixel) in rays.iter().zip(&hit_pixels).step_by(17) {
+            let (p_ray, hit) = (&primary[pixel], &exact[pixel]);
+            let point = p_ray.origin() + hit.t * p_ray.dir();
+            let mut n = hit.normal().normalize();
+            if n.dot(p_ray.dir()) > 0.0 {
+                n = -n;
+            }
+            let expected = offset_origin(point, n, diagonal, 0.0);
+            assert!((ray.origin() - expected).length() < 1e-6, "{kind:?}");
+            // The offset is small and towards the camera's side of the surface.
+            let off = ray.origin() - point;
+            assert!(
+                off.dot(n) > 0.0 && off.length() < 2e-4 * diagonal,
+                "{kind:?}"
+            );
+            match kind {
+                RayType::Ao => {
+                    assert!((ray.tmax - 0.05 * diagonal).abs() < 1e-6);
+                    assert!(ray.dir().dot(n) > 0.0);
+                }
+                RayType::Shadow => {
+                    assert!((ray.dir() + direction.normalize()).length() < 1e-6);
+                    assert_eq!(ray.tmax, f32::INFINITY);
+                }
+                _ => assert!(ray.dir().dot(n) > 0.0 && ray.tmax == f32::INFINITY),
+            }
+        }
+    }
+}
+
+#[test]
+fn the_validator_flags_a_method_that_is_wrong_rather_than_fast() {
+    let scene = Scene::load("sphere").unwrap();
+    let diagonal = scene.bounds().diagonal();
+    let bvh = Bvh::build(&scene).unwrap();
+    let rays = scene.camera_or_framed(1.0).primary_rays(24, 24);
+    let exact = bvh.trace_cpu(&rays, false);
+    let same = hit_errors(&rays, &exact, &exact, diagonal, Query::Closest).unwrap();
+    assert_eq!(invalid_reason(&same), None);
+
+    let doubled: Vec<Hit> = exact
+        .iter()
+        .map(|h| Hit {
+            t: if h.is_hit() { 2.0 * h.t } else { h.t },
+            ..*h
+        })
+        .collect();
+    let wrong = hit_errors(&rays, &exact, &doubled, diagonal, Query::Closest).unwrap();
+    let reason = invalid_reason(&wrong).expect("doubled distances are invalid");
+    assert!(reason.contains("distance"), "{reason}");
+
+    let all_miss = vec![Hit::MISS; rays.len()];
+    let blind = hit_errors(&rays, &exact, &all_miss, diagonal, Query::Any).unwrap();
+    assert!(invalid_reason(&blind).unwrap().contains("hit/miss"));
+}
+
+#[test]
+fn bad_configurations_are_errors_naming_the_field() {
+    let base = BenchConfig::new(vec!["sphere".into()], Device::Create(Default::default()));
+    type Break = fn(&mut BenchConfig);
+    let cases: [(&str, Break); 6] = [
+        ("scenes", |c| c.scenes.clear()),
+        ("width", |c| c.width = 0),
+        ("runs", |c| c.runs = 0),
+        ("ao_radius", |c| c.ao_radius = f32::NAN),
+        ("quality", |c| c.levels = vec![Level::Preset(7)]),
+        ("plot", |c| {
+            c.ray_types = vec![RayType::Ao];
+            c.plot_dir = Some("p".into());
+        }),
+    ];
+    for (field, break_it) in cases {
+        let mut config = base.clone();
+        break_it(&mut config);
+        let err = config.validate().unwrap_err().to_string();
+        assert!(err.contains(field), "{field}: {err}");
+    }
+}
+
+#[test]
+fn the_cli_writes_json_and_csv_and_rejects_unknown_ray_types() {
+    let dir = tempfile::tempdir().unwrap();
+    let (json, csv) = (dir.path().join("b.json"), dir.path().join("b.csv"));
+    let out = Command::new(env!("CARGO_BIN_EXE_rbvh"))
+        .args(["bench", "--scene", "plane,sphere", "--quality", "Q0"])
+        .args([
+            "--rays",
+            "primary,shadow",
+            "--width",
+            "16",
+            "--height",
+            "16",
+        ])
+        .args(["--runs", "1", "--threads", "1", "--json"])
+        .arg(&json)
+        .arg("--csv")
+        .arg(&csv)
+        .env("RBVH_VALIDATION", "auto")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(table.starts_with("scene"), "{table}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(report["results"].as_array().unwrap().len(), 2 * 2 * 2);
+    if report["device"].as_str().unwrap().contains("llvmpipe") {
+        assert_eq!(report["threads"], 1);
+    }
+    assert_eq!(
+        std::fs::read_to_string(&csv).unwrap().lines().count(),
+        1 + 8
+    );
+
+    let bad = Command::new(env!("CARGO_BIN_EXE_rbvh"))
+        .args(["bench", "--scene", "sphere", "--rays", "primary,bounce"])
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("bounce"));
+}
