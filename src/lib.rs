@@ -51,6 +51,7 @@ pub mod gpu;
 pub mod io;
 pub mod output;
 pub mod rbvh;
+pub mod regress;
 pub mod scene;
 
 pub use error::{Error, Result};

@@ -1,8 +1,9 @@
-//! `rbvh`: render scenes, answer ray files, build and benchmark RBVHs.
+//! `rbvh`: render scenes, answer ray files, and (later) build and benchmark RBVHs.
 
 mod bench;
 mod build;
 mod prepare;
+mod regress;
 mod render;
 mod trace;
 
@@ -29,6 +30,8 @@ enum Command {
     Trace(trace::Args),
     /// Benchmark the exact BVH and RBVH levels: speed, memory and error on the same rays.
     Bench(bench::Args),
+    /// Render the regression cases and compare them with golden images (FLIP and depth).
+    Regress(regress::Args),
 }
 
 fn main() {
@@ -38,6 +41,7 @@ fn main() {
         Command::Trace(a) => trace::run(a),
         Command::Build(a) => build::run(a),
         Command::Bench(a) => bench::run(a),
+        Command::Regress(a) => regress::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e}");

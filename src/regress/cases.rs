@@ -1,0 +1,187 @@
+//! What a regression case is — a scene traced by one method — and how it is rendered: the same
+//! camera, rays and preview shading as `rbvh render`, so a golden image is what a user of the CLI
+//! would see.
+
+use std::fmt;
+use std::path::Path;
+
+use crate::bvh::Bvh;
+use crate::geom::Hit;
+use crate::gpu::{Context, Query, Tracer};
+use crate::output::{shade, Image};
+use crate::rbvh::{Rbvh, RbvhParams};
+use crate::scene::Scene;
+use crate::{Error, Result};
+
+/// The acceleration structure a case traces through.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Method {
+    /// The exact triangle BVH, the referee.
+    Exact,
+    /// An RBVH at quality preset `Q0`…`Q4` (the level, 0..=4).
+    Rbvh(u32),
+}
+
+impl Method {
+    /// `exact` or `rbvh_q<level>`: the method's part of a golden file's name.
+    pub fn file_tag(&self) -> String {
+        match self {
+            Method::Exact => "exact".into(),
+            Method::Rbvh(level) => format!("rbvh_q{level}"),
+        }
+    }
+}
+
+impl fmt::Display for Method {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Method::Exact => f.write_str("exact"),
+            Method::Rbvh(level) => write!(f, "RBVH Q{level}"),
+        }
+    }
+}
+
+/// One scene traced by one method: one golden image (and one golden depth).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Case {
+    /// What [`Scene::load`] takes: a built-in name or a scene/mesh file.
+    pub scene: String,
+    pub method: Method,
+}
+
+impl Case {
+    pub fn new(scene: impl Into<String>, method: Method) -> Case {
+        Case {
+            scene: scene.into(),
+            method,
+        }
+    }
+
+    /// The stem of the case's golden files, `<scene>_<method>` (`default_exact`,
+    /// `blob_rbvh_q2`). A scene given as a path contributes its file stem, with anything but
+    /// ASCII letters, digits, `-` and `_` replaced by `_`, so that the name is a safe file name on
+    /// every system and the golden folder can move between machines.
+    pub fn name(&self) -> String {
+        let stem = Path::new(&self.scene)
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let stem: String = stem
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect();
+        let stem = if stem.is_empty() {
+            "scene".into()
+        } else {
+            stem
+        };
+        format!("{stem}_{}", self.method.file_tag())
+    }
+}
+
+/// Every scene traced by every method, scene by scene (so each scene is loaded once).
+pub fn cross(scenes: &[String], methods: &[Method]) -> Vec<Case> {
+    scenes
+        .iter()
+        .flat_map(|s| methods.iter().map(move |&m| Case::new(s.clone(), m)))
+        .collect()
+}
+
+/// A case's structure, built and ready to upload: what a custom tracer factory receives (see
+/// [`super::run_with`]), so that a caller can trace it with its own shader.
+pub enum Structure {
+    Exact(Bvh),
+    Rbvh(Box<Rbvh>),
+}
+
+impl Structure {
+    /// Builds the structure `method` traces through, for `scene`.
+    pub fn build(scene: &Scene, method: Method) -> Result<Structure> {
+        Ok(match method {
+            Method::Exact => Structure::Exact(Bvh::build(scene)?),
+            Method::Rbvh(level) => {
+                Structure::Rbvh(Box::new(Rbvh::build(scene, &RbvhParams::quality(level)?)?))
+            }
+        })
+    }
+
+    /// The tracer `rbvh render` would use: the crate's own shaders.
+    pub fn tracer(ctx: &Context, structure: &Structure) -> Result<Tracer> {
+        match structure {
+            Structure::Exact(bvh) => Tracer::exact(ctx, bvh),
+            Structure::Rbvh(rbvh) => Tracer::rbvh(ctx, rbvh),
+        }
+    }
+}
+
+/// A case rendered: the shaded image and the primary hits it was shaded from.
+pub struct Render {
+    pub image: Image,
+    pub hits: Vec<Hit>,
+}
+
+/// Renders `scene` through `tracer` as `rbvh render` does: the scene's camera (or the framing
+/// one) at `width` × `height`, one primary ray per pixel centre, preview shading under the scene's
+/// light. Nothing here is random, so a render depends only on the scene, the structure and the
+/// device's arithmetic.
+pub fn render(tracer: &Tracer, scene: &Scene, width: u32, height: u32) -> Result<Render> {
+    let camera = scene.camera_or_framed(width as f32 / height as f32);
+    let rays = camera.primary_rays(width, height);
+    let hits = tracer.trace(&rays, Query::Closest)?.hits;
+    let image = shade(&rays, &hits, width, height, scene.light.as_ref())?;
+    Ok(Render { image, hits })
+}
+
+/// Checks that no two cases share a golden file: two scene files with the same stem (or the same
+/// case given twice) would otherwise silently compare against, or bless, each other's goldens.
+pub fn check_unique_names(cases: &[Case]) -> Result<()> {
+    let mut seen = std::collections::HashMap::new();
+    for case in cases {
+        if let Some(other) = seen.insert(case.name(), &case.scene) {
+            return Err(Error::param(
+                "scene",
+                format!(
+                    "{:?} and {:?} ({}) would share the golden files {}.*; rename one of the files",
+                    other,
+                    case.scene,
+                    case.method,
+                    case.name()
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_are_safe_file_stems() {
+        assert_eq!(Case::new("default", Method::Exact).name(), "default_exact");
+        assert_eq!(Case::new("blob", Method::Rbvh(2)).name(), "blob_rbvh_q2");
+        assert_eq!(
+            Case::new("../data/my dragon.v2.obj", Method::Rbvh(4)).name(),
+            "my_dragon_v2_rbvh_q4"
+        );
+    }
+
+    #[test]
+    fn clashing_names_are_an_error_naming_both() {
+        let cases = cross(&["a/x.obj".into(), "b/x.obj".into()], &[Method::Exact]);
+        let err = check_unique_names(&cases).unwrap_err().to_string();
+        assert!(err.contains("a/x.obj") && err.contains("b/x.obj"), "{err}");
+        check_unique_names(&cross(
+            &["sphere".into()],
+            &[Method::Exact, Method::Rbvh(0)],
+        ))
+        .unwrap();
+    }
+}
