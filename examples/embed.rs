@@ -2,8 +2,9 @@
 //! generates camera rays with its own compute shader, records the library's RBVH trace into its own
 //! command buffer between its own barriers, submits, and shades the hits into a PNG.
 //!
-//! `cargo run --release --example embed -- [out.png] [scene]` (defaults: `embed.png`, `default`).
-//! Runs under the validation layer when it is installed and fails on any error it reports.
+//! `cargo run --release --example embed -- [out.png] [scene]` (defaults: `rbvh-embed.png` in the
+//! temporary directory, `default`). Runs under the validation layer when it is installed and fails
+//! on any error it reports; `cargo test` runs it too (see Cargo.toml).
 
 use std::error::Error;
 use std::ffi::{c_void, CStr};
@@ -68,7 +69,10 @@ struct CameraPush {
 
 fn main() -> Result<(), Box<dyn Error>> {
     let args: Vec<String> = std::env::args().collect();
-    let out = args.get(1).cloned().unwrap_or_else(|| "embed.png".into());
+    let out = args
+        .get(1)
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| std::env::temp_dir().join("rbvh-embed.png"));
     let scene = Scene::load(args.get(2).map_or("default", String::as_str))?;
     let rbvh = Rbvh::build(&scene, &RbvhParams::quality(2)?)?;
 
@@ -320,8 +324,11 @@ fn main() -> Result<(), Box<dyn Error>> {
             .to_vec();
     let hit_count = hits.iter().filter(|h| h.is_hit()).count();
     let image = rbvh::output::shade(&rays, &hits, WIDTH, HEIGHT, scene.light.as_ref())?;
-    rbvh::output::write_png(std::path::Path::new(&out), &image)?;
-    println!("{hit_count} of {count} rays hit; {overflowed} overflowed; wrote {out}");
+    rbvh::output::write_png(&out, &image)?;
+    println!(
+        "{hit_count} of {count} rays hit; {overflowed} overflowed; wrote {}",
+        out.display()
+    );
 
     // --- Teardown, engine style: the library's objects first, then the engine's --------------
     drop(trace);

@@ -430,8 +430,9 @@ impl SahSplit {
     }
 }
 
-/// In-place partition; returns the number of elements for which `pred` holds (now first).
-fn partition(order: &mut [u32], pred: impl Fn(u32) -> bool) -> usize {
+/// In-place partition; returns the number of elements for which `pred` holds (now first). Shared
+/// with the RBVH's splitter.
+pub(crate) fn partition(order: &mut [u32], pred: impl Fn(u32) -> bool) -> usize {
     let mut i = 0;
     for j in 0..order.len() {
         if pred(order[j]) {

@@ -92,28 +92,51 @@ impl TraceBinding {
     }
 }
 
+/// The shader sizes and the arrays (name, bytes) of the exact BVH, in binding order.
+fn exact_parts(bvh: &Bvh) -> (TraceParams, [(&'static str, &[u8]); 2]) {
+    let sizes = TraceParams {
+        node_count: bvh.nodes.len() as u32,
+        tri_count: bvh.triangles.len() as u32,
+        ..TraceParams::default()
+    };
+    let arrays = [
+        ("BVH nodes", bytemuck::cast_slice(&bvh.nodes)),
+        ("BVH triangles", bytemuck::cast_slice(&bvh.triangles)),
+    ];
+    (sizes, arrays)
+}
+
+/// The shader sizes and the arrays (name, bytes) of an RBVH, in binding order.
+fn rbvh_parts(rbvh: &Rbvh) -> (TraceParams, [(&'static str, &[u8]); 4]) {
+    let sizes = TraceParams {
+        node_count: rbvh.nodes.len() as u32,
+        tri_count: rbvh.triangles.len() as u32,
+        leaf_count: rbvh.leaves.len() as u32,
+        atlas_pitch: rbvh.atlas.pitch,
+        atlas_len: rbvh.atlas.texels.len() as u32,
+        ..TraceParams::default()
+    };
+    let arrays = [
+        ("RBVH nodes", bytemuck::cast_slice(&rbvh.nodes)),
+        ("RBVH triangles", bytemuck::cast_slice(&rbvh.triangles)),
+        (
+            "RBVH height-field leaves",
+            bytemuck::cast_slice(&rbvh.leaves),
+        ),
+        ("RBVH atlas", bytemuck::cast_slice(&rbvh.atlas.texels)),
+    ];
+    (sizes, arrays)
+}
+
 /// Bindings after the structure's own: rays, hits, status, per-ray steps.
 const PER_TRACE_BUFFERS: u32 = 4;
 
 impl Tracer {
     /// Uploads the exact BVH (nodes and triangles, each checked against `maxStorageBufferRange`).
     pub fn exact(ctx: &Context, bvh: &Bvh) -> Result<Self> {
-        if bvh.depth > STACK_SIZE {
-            return Err(Error::param(
-                "bvh",
-                format!("depth {} exceeds the traversal stack", bvh.depth),
-            ));
-        }
-        let structure = vec![
-            upload(ctx, "BVH nodes", &bvh.nodes)?,
-            upload(ctx, "BVH triangles", &bvh.triangles)?,
-        ];
-        let sizes = TraceParams {
-            node_count: bvh.nodes.len() as u32,
-            tri_count: bvh.triangles.len() as u32,
-            ..TraceParams::default()
-        };
-        Self::new(ctx, "trace_exact", shaders::TRACE_EXACT, structure, sizes)
+        check_depth("bvh", bvh.depth)?;
+        let (sizes, arrays) = exact_parts(bvh);
+        Self::uploaded(ctx, "trace_exact", shaders::TRACE_EXACT, &arrays, sizes)
     }
 
     /// Uploads an RBVH: nodes, triangle-leaf triangles, height-field leaves and the atlas.
@@ -124,42 +147,17 @@ impl Tracer {
     /// As [`Tracer::rbvh`], with another build of `trace_rbvh.comp` (same bindings and push
     /// constants): for checking modified shaders, e.g. that image regression catches a broken one.
     pub fn rbvh_with_shader(ctx: &Context, rbvh: &Rbvh, spirv: &[u8]) -> Result<Self> {
-        if rbvh.depth > STACK_SIZE {
-            return Err(Error::param(
-                "rbvh",
-                format!("depth {} exceeds the traversal stack", rbvh.depth),
-            ));
-        }
-        let structure = vec![
-            upload(ctx, "RBVH nodes", &rbvh.nodes)?,
-            upload(ctx, "RBVH triangles", &rbvh.triangles)?,
-            upload(ctx, "RBVH height-field leaves", &rbvh.leaves)?,
-            upload(ctx, "RBVH atlas", &rbvh.atlas.texels)?,
-        ];
-        let sizes = TraceParams {
-            node_count: rbvh.nodes.len() as u32,
-            tri_count: rbvh.triangles.len() as u32,
-            leaf_count: rbvh.leaves.len() as u32,
-            atlas_pitch: rbvh.atlas.pitch,
-            atlas_len: rbvh.atlas.texels.len() as u32,
-            ..TraceParams::default()
-        };
-        Self::new(ctx, "trace_rbvh", spirv, structure, sizes)
+        check_depth("rbvh", rbvh.depth)?;
+        let (sizes, arrays) = rbvh_parts(rbvh);
+        Self::uploaded(ctx, "trace_rbvh", spirv, &arrays, sizes)
     }
 
     /// Embedded use: uploads the exact BVH with the context's (the engine's) allocator, *recording*
     /// any staging copies into `cmd`, followed by a barrier that makes them visible to compute
     /// shaders. Nothing is submitted. Call [`Tracer::release_staging`] once `cmd` has executed.
     pub fn record_exact(ctx: &Context, bvh: &Bvh, cmd: vk::CommandBuffer) -> Result<Self> {
-        let sizes = TraceParams {
-            node_count: bvh.nodes.len() as u32,
-            tri_count: bvh.triangles.len() as u32,
-            ..TraceParams::default()
-        };
-        let arrays: [(&str, &[u8]); 2] = [
-            ("BVH nodes", bytemuck::cast_slice(&bvh.nodes)),
-            ("BVH triangles", bytemuck::cast_slice(&bvh.triangles)),
-        ];
+        check_depth("bvh", bvh.depth)?;
+        let (sizes, arrays) = exact_parts(bvh);
         Self::recorded(
             ctx,
             "trace_exact",
@@ -172,24 +170,23 @@ impl Tracer {
 
     /// Embedded use: as [`Tracer::record_exact`], for an RBVH.
     pub fn record_rbvh(ctx: &Context, rbvh: &Rbvh, cmd: vk::CommandBuffer) -> Result<Self> {
-        let sizes = TraceParams {
-            node_count: rbvh.nodes.len() as u32,
-            tri_count: rbvh.triangles.len() as u32,
-            leaf_count: rbvh.leaves.len() as u32,
-            atlas_pitch: rbvh.atlas.pitch,
-            atlas_len: rbvh.atlas.texels.len() as u32,
-            ..TraceParams::default()
-        };
-        let arrays: [(&str, &[u8]); 4] = [
-            ("RBVH nodes", bytemuck::cast_slice(&rbvh.nodes)),
-            ("RBVH triangles", bytemuck::cast_slice(&rbvh.triangles)),
-            (
-                "RBVH height-field leaves",
-                bytemuck::cast_slice(&rbvh.leaves),
-            ),
-            ("RBVH atlas", bytemuck::cast_slice(&rbvh.atlas.texels)),
-        ];
+        check_depth("rbvh", rbvh.depth)?;
+        let (sizes, arrays) = rbvh_parts(rbvh);
         Self::recorded(ctx, "trace_rbvh", shaders::TRACE_RBVH, &arrays, sizes, cmd)
+    }
+
+    fn uploaded(
+        ctx: &Context,
+        name: &str,
+        spirv: &[u8],
+        arrays: &[(&str, &[u8])],
+        sizes: TraceParams,
+    ) -> Result<Self> {
+        let structure = arrays
+            .iter()
+            .map(|(array, bytes)| upload(ctx, array, bytes))
+            .collect::<Result<Vec<_>>>()?;
+        Self::new(ctx, name, spirv, structure, sizes)
     }
 
     fn recorded(
@@ -402,6 +399,17 @@ impl Tracer {
         };
         Ok((hits, steps, timing))
     }
+}
+
+/// Our trees never exceed the traversal stack; a hand-made or corrupt one is refused up front.
+fn check_depth(what: &str, depth: u32) -> Result<()> {
+    if depth > STACK_SIZE {
+        return Err(Error::param(
+            what,
+            format!("depth {depth} exceeds the {STACK_SIZE}-entry traversal stack"),
+        ));
+    }
+    Ok(())
 }
 
 /// Uploads one structure array, checking `maxStorageBufferRange` with a hint at what to change.

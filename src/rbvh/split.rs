@@ -7,6 +7,7 @@ use std::collections::BTreeMap;
 use glam::Vec3;
 
 use super::params::Subdivision;
+use crate::bvh::partition;
 use crate::geom::Aabb;
 
 /// What the splitter needs of one triangle.
@@ -148,18 +149,6 @@ fn object_median(prims: &[SplitPrim], order: &mut [u32], axis: usize) -> usize {
             .then(a.cmp(&b))
     });
     mid
-}
-
-/// In-place partition; returns how many satisfy `pred` (now first).
-fn partition(order: &mut [u32], pred: impl Fn(u32) -> bool) -> usize {
-    let mut i = 0;
-    for j in 0..order.len() {
-        if pred(order[j]) {
-            order.swap(i, j);
-            i += 1;
-        }
-    }
-    i
 }
 
 #[cfg(test)]

@@ -7,9 +7,8 @@ use std::time::Duration;
 use anyhow::{Context as _, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use rbvh::bench::{self, BenchConfig, Device, Event, Level, RayType};
-use rbvh::gpu::{ContextOptions, Validation};
 
-use crate::prepare::Quality;
+use crate::prepare::{context_options, Quality};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("quality", |a| a.default_value("all")))]
@@ -77,17 +76,7 @@ pub fn run(a: Args) -> Result<()> {
         .collect();
     let mut config = BenchConfig::new(
         a.scene.iter().map(|s| s.trim().to_string()).collect(),
-        Device::Create(ContextOptions {
-            device_name: a
-                .device
-                .clone()
-                .or_else(|| ContextOptions::default().device_name),
-            validation: if a.validate {
-                Validation::Required
-            } else {
-                Validation::from_env()
-            },
-        }),
+        Device::Create(context_options(a.device.as_deref(), a.validate)),
     );
     config.levels = levels;
     config.ray_types = a.rays.clone();

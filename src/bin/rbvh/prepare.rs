@@ -75,6 +75,21 @@ pub struct Prepared {
     pub ctx: Context,
 }
 
+/// The device the user named (`--device`, else `RBVH_DEVICE`), with validation required by
+/// `--validate` or set by `RBVH_VALIDATION`.
+pub fn context_options(device: Option<&str>, validate: bool) -> ContextOptions {
+    ContextOptions {
+        device_name: device
+            .map(str::to_string)
+            .or_else(|| ContextOptions::default().device_name),
+        validation: if validate {
+            Validation::Required
+        } else {
+            Validation::from_env()
+        },
+    }
+}
+
 /// Runs `f` under a spinner labelled `what`.
 pub fn step<T>(what: &str, f: impl FnOnce() -> T) -> T {
     let bar = ProgressBar::new_spinner().with_message(what.to_string());
@@ -107,18 +122,8 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
             })?))
         }
     };
-    let ctx = Context::new(&ContextOptions {
-        device_name: c
-            .device
-            .clone()
-            .or_else(|| ContextOptions::default().device_name),
-        validation: if c.validate {
-            Validation::Required
-        } else {
-            Validation::from_env()
-        },
-    })
-    .context("creating the Vulkan device")?;
+    let ctx = Context::new(&context_options(c.device.as_deref(), c.validate))
+        .context("creating the Vulkan device")?;
     if c.stats {
         eprintln!(
             "scene {}: {} triangles, loaded in {load_ms:.1} ms",

@@ -5,10 +5,10 @@ use std::path::PathBuf;
 
 use anyhow::{bail, ensure, Context as _, Result};
 use clap::ValueEnum;
-use rbvh::gpu::{Context, ContextOptions, Validation};
+use rbvh::gpu::Context;
 use rbvh::regress::{self, Config, Method, Mode, Tolerance};
 
-use crate::prepare::step;
+use crate::prepare::{context_options, step};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -115,18 +115,8 @@ pub fn run(a: Args) -> Result<()> {
         mode: if a.bless { Mode::Bless } else { Mode::Compare },
     };
     config.validate()?;
-    let ctx = Context::new(&ContextOptions {
-        device_name: a
-            .device
-            .clone()
-            .or_else(|| ContextOptions::default().device_name),
-        validation: if a.validate {
-            Validation::Required
-        } else {
-            Validation::from_env()
-        },
-    })
-    .context("creating the Vulkan device")?;
+    let ctx = Context::new(&context_options(a.device.as_deref(), a.validate))
+        .context("creating the Vulkan device")?;
     eprintln!(
         "{} {} case(s) at {}×{} on {} ({})",
         if a.bless { "blessing" } else { "comparing" },
