@@ -54,8 +54,15 @@ layout(std430, set = RBVH_BVH_SET, binding = RBVH_BVH_TRIS_BINDING) readonly buf
 };
 
 // Traverses nearest child first with a bounded stack. `node_count` bounds the loop (a tree visits
-// each node at most once). `overflow` is set when the stack or the loop bound was exceeded; the hit is
-// then not trustworthy, and the caller reports it. `steps` = nodes visited + triangles tested.
+// each node at most once). `overflow` is set when the stack or the loop bound was exceeded, or when
+// the device ended a loop early; the hit is then not trustworthy, and the caller reports it.
+// `steps` = nodes visited + triangles tested.
+//
+// Ended early: lavapipe (llvmpipe) stops any shader loop once the loops of an invocation's SIMD
+// group have run LP_MAX_TGSI_LOOP_ITERATIONS (65535) iterations in all, silently, as if the loop
+// condition had failed; a traversal of ~4000 nodes reaches that. So every loop below records how
+// it ended, and one that stopped with its condition still true and no break of its own flags
+// `overflow`. This adds no arithmetic: the hit is computed exactly as in src/bvh/traverse.rs.
 Hit rbvh_trace_bvh(Ray ray, bool any_hit, uint node_count, out uint steps, out bool overflow) {
     steps = 0u;
     overflow = false;
@@ -70,6 +77,7 @@ Hit rbvh_trace_bvh(Ray ray, bool any_hit, uint node_count, out uint steps, out b
     uint sp = 0u;
     uint node = 0u;
     bool done = false;
+    bool finished = false;
     for (uint visit = 0u; visit <= node_count; ++visit) {
         steps += 1u;
         BvhNode n = rbvh_bvh_nodes[node];
@@ -79,7 +87,8 @@ Hit rbvh_trace_bvh(Ray ray, bool any_hit, uint node_count, out uint steps, out b
         bool hb = rbvh_intersect_box(n.b_min, n.b_max, ray.origin, inv_dir, ray.tmin, t_closest, tb);
         bool b_first = ha && hb && tb < ta;
         uint next = RBVH_INVALID;
-        for (int k = 0; k < 2; ++k) {
+        int k = 0;
+        for (; k < 2; ++k) {
             bool use_b = (k == 0) == b_first;
             bool h = use_b ? hb : ha;
             float t_entry = use_b ? tb : ta;
@@ -90,7 +99,8 @@ Hit rbvh_trace_bvh(Ray ray, bool any_hit, uint node_count, out uint steps, out b
             }
             if ((child & RBVH_LEAF_BIT) != 0u) {
                 uint first = child & ~RBVH_LEAF_BIT;
-                for (uint slot = first; slot < first + count; ++slot) {
+                uint slot = first;
+                for (; slot < first + count; ++slot) {
                     steps += 1u;
                     BvhTriangle tri = rbvh_bvh_triangles[slot];
                     float t = rbvh_intersect_triangle(sh, tri.v0, tri.v1, tri.v2, ray.tmin, t_closest);
@@ -106,6 +116,9 @@ Hit rbvh_trace_bvh(Ray ray, bool any_hit, uint node_count, out uint steps, out b
                     done = true;
                     break;
                 }
+                if (slot < first + count) {
+                    overflow = true;  // ended early by the device
+                }
             } else if (next == RBVH_INVALID) {
                 next = child;
             } else if (sp < RBVH_STACK_SIZE) {
@@ -116,10 +129,15 @@ Hit rbvh_trace_bvh(Ray ray, bool any_hit, uint node_count, out uint steps, out b
             }
         }
         if (done) {
+            finished = true;
             break;
+        }
+        if (k < 2) {
+            overflow = true;  // ended early by the device
         }
         if (next == RBVH_INVALID) {
             if (sp == 0u) {
+                finished = true;
                 break;
             }
             sp -= 1u;
@@ -129,6 +147,9 @@ Hit rbvh_trace_bvh(Ray ray, bool any_hit, uint node_count, out uint steps, out b
         if (visit == node_count) {
             overflow = true;
         }
+    }
+    if (!finished) {
+        overflow = true;  // the loop bound, or ended early by the device
     }
     if (best == RBVH_INVALID) {
         return rbvh_miss();

@@ -95,9 +95,10 @@ struct RbvhFrameRay {
 
 // Steps 4 and 5 of march.rs: the cell's two (or one) triangles; returns t (< 0 on a miss) and the
 // normal of the nearest corner sample. Written without local arrays: dynamically indexed arrays
-// become per-lane memory on SIMD implementations such as lavapipe.
+// become per-lane memory on SIMD implementations such as lavapipe. `cut` is set when the device
+// ended the loop early (see rbvh_trace_bvh in bvh.glsl).
 float rbvh_cell_hit(RbvhLeaf leaf, RbvhSizes sz, RbvhFrameRay fr, float slack, int ci, int cj,
-                    float t_in, float t_out, out vec3 normal) {
+                    float t_in, float t_out, out vec3 normal, inout bool cut) {
     uint c00 = rbvh_texel(leaf, sz, ci, cj);
     uint c10 = rbvh_texel(leaf, sz, ci + 1, cj);
     uint c01 = rbvh_texel(leaf, sz, ci, cj + 1);
@@ -139,13 +140,17 @@ float rbvh_cell_hit(RbvhLeaf leaf, RbvhSizes sz, RbvhFrameRay fr, float slack, i
     // Then, with all four, (c00, c11, c01) when nearer; one call site for both triangles.
     float t_hit = -1.0;
     int tris = valid == 4 ? 2 : 1;
-    for (int k = 0; k < tris; ++k) {
+    int k = 0;
+    for (; k < tris; ++k) {
         vec3 b_k = k == 0 ? b : p11;
         vec3 c_k = k == 0 ? c : p01;
         float t = rbvh_intersect_triangle(fr.shear, a, b_k, c_k, fr.tmin, t_hit >= 0.0 ? t_hit : fr.tmax);
         if (t >= 0.0) {
             t_hit = t;
         }
+    }
+    if (k < tris) {
+        cut = true;
     }
     if (t_hit < 0.0) {
         return -1.0;
@@ -164,7 +169,9 @@ float rbvh_cell_hit(RbvhLeaf leaf, RbvhSizes sz, RbvhFrameRay fr, float slack, i
 }
 
 // Marches leaf `li` over [tmin, t_closest); returns t (< 0 on a miss). `cells` counts cells visited.
-float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cells, out vec3 normal) {
+// `cut` is set when the device ended a loop early (see rbvh_trace_bvh in bvh.glsl).
+float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cells, out vec3 normal,
+                 inout bool cut) {
     normal = vec3(0.0);
     if (li >= sz.leaf_count) {
         return -1.0;
@@ -235,10 +242,13 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     float tb = t0;
     bool is_extra = false;
     bool finished = false;
-    for (uint n = 0u; n < 2u * max_steps; ++n) {
+    bool stopped = false;
+    uint n = 0u;
+    for (; n < 2u * max_steps; ++n) {
         float t_out = min(min(next_i, next_j), t1);
         if (!is_extra) {
             if (t_in > t1) {
+                stopped = true;
                 break;
             }
             tci = ci;
@@ -247,13 +257,14 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
             tb = t_out;
         }
         cells += 1u;
-        float t = rbvh_cell_hit(leaf, sz, fr, slack, tci, tcj, ta, tb, normal);
+        float t = rbvh_cell_hit(leaf, sz, fr, slack, tci, tcj, ta, tb, normal, cut);
         if (t >= 0.0) {
             return t;
         }
         if (is_extra) {
             is_extra = false;
             if (finished) {
+                stopped = true;
                 break;
             }
             continue;
@@ -293,8 +304,12 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
             }
         }
         if (finished && !is_extra) {
+            stopped = true;
             break;
         }
+    }
+    if (!stopped && n < 2u * max_steps) {
+        cut = true;
     }
     return -1.0;
 }
@@ -320,23 +335,29 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
     uint node = 0u;
     uint visits = 0u;
     uint bound = sz.node_count + sz.leaf_count;
-    for (uint iter = 0u; iter <= bound; ++iter) {
+    // Loops the device ended early (see rbvh_trace_bvh in bvh.glsl) flag `overflow` too.
+    bool cut = false;
+    bool finished = false;
+    uint iter = 0u;
+    for (; iter <= bound; ++iter) {
         uint next = RBVH_INVALID;
         if ((node & RBVH_LEAF_BIT) != 0u) {
             vec3 normal;
             uint cells = 0u;
-            float t = rbvh_march(node & ~RBVH_LEAF_BIT, sz, ray, t_closest, cells, normal);
+            float t = rbvh_march(node & ~RBVH_LEAF_BIT, sz, ray, t_closest, cells, normal, cut);
             steps += cells;
             if (t >= 0.0) {
                 t_closest = t;
                 best = Hit(t, normal.x, normal.y, normal.z, node, 0u, 0u, 0u);
                 if (any_hit) {
+                    finished = true;
                     break;
                 }
             }
         } else if (node < sz.node_count) {
             if (visits >= sz.node_count) {
                 overflow = true;
+                finished = true;
                 break;
             }
             visits += 1u;
@@ -348,7 +369,8 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
             bool hb = rbvh_intersect_box(n.b_min, n.b_max, ray.origin, inv_dir, ray.tmin, t_closest, tb);
             bool b_first = ha && hb && tb < ta;
             bool done = false;
-            for (int k = 0; k < 2; ++k) {
+            int k = 0;
+            for (; k < 2; ++k) {
                 bool use_b = (k == 0) == b_first;
                 bool h = use_b ? hb : ha;
                 float t_entry = use_b ? tb : ta;
@@ -369,7 +391,8 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
                 } else {
                     uint first = child & ~RBVH_LEAF_BIT;
                     uint end = min(first + count, sz.tri_count);
-                    for (uint slot = first; slot < end; ++slot) {
+                    uint slot = first;
+                    for (; slot < end; ++slot) {
                         steps += 1u;
                         BvhTriangle tri = rbvh_bvh_triangles[slot];
                         float t = rbvh_intersect_triangle(sh, tri.v0, tri.v1, tri.v2, ray.tmin, t_closest);
@@ -386,20 +409,31 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
                     if (done) {
                         break;
                     }
+                    if (slot < end) {
+                        cut = true;
+                    }
                 }
             }
             if (done) {
+                finished = true;
                 break;
+            }
+            if (k < 2) {
+                cut = true;
             }
         }
         if (next == RBVH_INVALID) {
             if (sp == 0u) {
+                finished = true;
                 break;
             }
             sp -= 1u;
             next = stack[sp];
         }
         node = next;
+    }
+    if (cut || (!finished && iter <= bound)) {
+        overflow = true;
     }
     return best;
 }

@@ -67,8 +67,10 @@ pub enum Error {
     /// The Vulkan validation layers reported errors (only when they are enabled).
     #[error("Vulkan validation reported {} error(s):\n{}", messages.len(), messages.join("\n"))]
     Validation { messages: Vec<String> },
-    /// A traversal stack overflowed on the GPU for some rays; their hits are not trustworthy.
-    #[error("traversal stack ({depth} entries) overflowed on {rays} ray(s) in {resource}; the tree is deeper than the stack")]
+    /// A traversal was cut short on the GPU for some rays — its stack overflowed, or the device
+    /// ended a shader loop early (lavapipe stops an invocation's loops after 65535 iterations) —
+    /// so their hits are not trustworthy.
+    #[error("traversal of {rays} ray(s) in {resource} was cut short: the stack ({depth} entries) overflowed because the tree is deeper than the stack, or the device ended the traversal loop early (lavapipe stops shader loops after 65535 iterations; trace such rays with the CPU reference)")]
     StackOverflow {
         resource: String,
         depth: u32,

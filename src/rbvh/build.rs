@@ -11,8 +11,8 @@
 //! "Can be represented" means: one connected part (with object split on), a projection axis
 //! exists, the refinement criterion holds along it, and the rasterization is single-valued.
 //! A representable set larger than `max_tile` samples per side is cut into several tiles (the
-//! paper's "subdivide large height fields") that share their border samples, so they meet without
-//! gaps. A set that is not representable and spans fewer than `min_leaf_texels` texels stays as
+//! paper's "subdivide large height fields") that overlap by one cell, so they meet without gaps.
+//! A set that is not representable and spans fewer than `min_leaf_texels` texels stays as
 //! triangles, traced exactly (the hybrid leaves).
 //!
 //! Parallel with `rayon::join` over subtrees; every per-node computation is sequential and ordered,
@@ -24,7 +24,7 @@ use std::time::Instant;
 use glam::Vec3;
 
 use super::atlas;
-use super::frame::{fit, passes, projection_axis};
+use super::frame::{fit, passes, projection_axis, rounding_pad};
 use super::layout::HEIGHTFIELD_COUNT;
 use super::raster::{rasterize, Frame, Tile};
 use super::split::{split, SplitPrim};
@@ -240,27 +240,43 @@ impl Builder<'_> {
     }
 }
 
-/// Cuts `frame` into windows of at most `max` samples per side that share their border samples
-/// (window k starts at sample k·(max − 1)), so the cells of neighbouring tiles meet exactly.
+/// Cuts `frame` into windows of at most `max` samples per side. Neighbouring windows overlap by
+/// one cell (window k starts at sample k·(max − 2)): each window's origin is rounded to f32 on its
+/// own, so samples that two windows would share in exact arithmetic lie up to an ulp apart, and a
+/// ray aimed exactly at a seam of shared samples could slip between the two tiles. Far from the
+/// world origin, where rounding moves grids by a noticeable part of a texel, the overlap grows
+/// by [`rounding_pad`] cells (at most `(max − 2) / 2`).
 fn windows(frame: &Frame, max: u32) -> Vec<Frame> {
+    let reach =
+        frame.origin.abs().max_element() + (frame.res_u as f32 + frame.res_v as f32) * frame.texel;
+    let overlap = rounding_pad(2.0 * reach, frame.texel)
+        .max(1)
+        .min((max - 2) / 2);
     let starts = |res: u32| -> Vec<(u32, u32)> {
         if res <= max {
             return vec![(0, res)];
         }
-        let step = max - 1;
-        (0..)
-            .map(|k| k * step)
-            .take_while(|&s| s + 1 < res)
-            .map(|s| (s, max.min(res - s)))
-            .collect()
+        let step = max - 1 - overlap;
+        let mut out = Vec::new();
+        let mut s = 0;
+        loop {
+            let n = max.min(res - s);
+            out.push((s, n));
+            if s + n >= res {
+                break;
+            }
+            s += step;
+        }
+        out
     };
     let mut out = Vec::new();
     for &(sv, nv) in &starts(frame.res_v) {
         for &(su, nu) in &starts(frame.res_u) {
             out.push(Frame {
-                origin: frame.origin
-                    + (su as f32 * frame.texel) * frame.u
-                    + (sv as f32 * frame.texel) * frame.v,
+                origin: (frame.origin.as_dvec3()
+                    + (su as f64 * frame.texel as f64) * frame.u.as_dvec3()
+                    + (sv as f64 * frame.texel as f64) * frame.v.as_dvec3())
+                .as_vec3(),
                 res_u: nu,
                 res_v: nv,
                 ..*frame

@@ -3,7 +3,7 @@
 //! the tightest enclosing rectangle so that elongated leaves get narrow tiles, and an extent that
 //! just encloses the leaf's triangles plus the texel margin that dilation fills.
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
 use super::params::Refinement;
 use super::raster::Frame;
@@ -59,6 +59,26 @@ fn basis(w: Vec3) -> (Vec3, Vec3) {
     )
 }
 
+/// Samples by which f32 rounding may move a tile's grid, for a tile whose points reach
+/// `magnitude` (largest absolute world coordinate) at `texel` size. Rounding a point to f32 moves
+/// it by at most half an ulp per coordinate, less than `magnitude · ε` along any direction; a
+/// tile's origin is rounded twice (placed, then moved to its lowest height), hence twice that.
+/// Zero when this is below a thousandth of a texel, as for any scene near the world origin; far
+/// from it, where an ulp approaches a texel, margins and the overlap of neighbouring tiles must
+/// be widened by this much, or tiles crack apart. Capped at [`MAX_ROUNDING_PAD`]: beyond it f32
+/// cannot resolve the texels at all.
+pub(crate) fn rounding_pad(magnitude: f32, texel: f32) -> u32 {
+    let shift = 2.0 * magnitude * f32::EPSILON;
+    if shift > 1e-3 * texel {
+        (shift / texel).ceil().min(MAX_ROUNDING_PAD as f32) as u32
+    } else {
+        0
+    }
+}
+
+/// Most samples [`rounding_pad`] adds.
+pub(crate) const MAX_ROUNDING_PAD: u32 = 4;
+
 /// Tangent orientations tried per leaf: every 5° over a quarter turn (a rectangle repeats after 90°).
 const ORIENTATIONS: u32 = 18;
 
@@ -67,35 +87,48 @@ const ORIENTATIONS: u32 = 18;
 /// memory, so an elongated leaf gets a narrow tile — with `res = ceil(extent / texel) + 2` samples
 /// per side, centred, so that the samples reach at least half a texel beyond the triangles on every
 /// side (dilation then fills that rim and neighbouring leaves overlap instead of cracking).
+/// Projections are taken in f64 relative to a vertex of the leaf, and the origin rounded to f32
+/// once; far from the world origin the margin grows by [`rounding_pad`] samples per side.
 pub(crate) fn fit(tris: &[[Vec3; 3]], w: Vec3, texel: f32) -> Frame {
     let (b1, b2) = basis(w);
-    let res = |extent: f32| ((extent / texel).ceil().max(0.0) as u32).saturating_add(2);
-    let extents = |u: Vec3, v: Vec3| {
-        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    let reference = tris.first().map_or(DVec3::ZERO, |t| t[0].as_dvec3());
+    let texel64 = f64::from(texel);
+    let res = |extent: f64| ((extent / texel64).ceil().max(0.0) as u32).saturating_add(2);
+    let wd = w.as_dvec3();
+    let extents = |u: DVec3, v: DVec3| {
+        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
         for p in tris.iter().flatten() {
-            let q = Vec3::new(p.dot(u), p.dot(v), p.dot(w));
+            let d = p.as_dvec3() - reference;
+            let q = DVec3::new(d.dot(u), d.dot(v), d.dot(wd));
             lo = lo.min(q);
             hi = hi.max(q);
         }
         (lo, hi)
     };
-    let mut best: Option<(u64, Vec3, Vec3, Vec3, Vec3)> = None;
+    let mut best: Option<(u64, Vec3, Vec3, DVec3, DVec3)> = None;
     for k in 0..ORIENTATIONS {
         let theta = (k as f32 * 90.0 / ORIENTATIONS as f32).to_radians();
         let u = (theta.cos() * b1 + theta.sin() * b2).normalize();
         let v = w.cross(u);
-        let (lo, hi) = extents(u, v);
+        let (lo, hi) = extents(u.as_dvec3(), v.as_dvec3());
         let samples = res(hi.x - lo.x) as u64 * res(hi.y - lo.y) as u64;
         if best.is_none_or(|b| samples < b.0) {
             best = Some((samples, u, v, lo, hi));
         }
     }
     let (_, u, v, lo, hi) = best.expect("at least one orientation");
-    let (res_u, res_v) = (res(hi.x - lo.x), res(hi.y - lo.y));
-    let cu = 0.5 * (lo.x + hi.x) - 0.5 * res_u as f32 * texel;
-    let cv = 0.5 * (lo.y + hi.y) - 0.5 * res_v as f32 * texel;
+    let (mut res_u, mut res_v) = (res(hi.x - lo.x), res(hi.y - lo.y));
+    // Far from the world origin the f32 origin cannot be placed to within a texel: widen the
+    // margin by what rounding may take from it (nothing near the origin).
+    let reach = reference.abs().max_element() + (hi - lo).max_element();
+    let pad = rounding_pad(reach as f32, texel);
+    res_u = res_u.saturating_add(2 * pad);
+    res_v = res_v.saturating_add(2 * pad);
+    let cu = 0.5 * (lo.x + hi.x) - 0.5 * res_u as f64 * texel64;
+    let cv = 0.5 * (lo.y + hi.y) - 0.5 * res_v as f64 * texel64;
+    let origin = reference + cu * u.as_dvec3() + cv * v.as_dvec3() + lo.z * wd;
     Frame {
-        origin: cu * u + cv * v + lo.z * w,
+        origin: origin.as_vec3(),
         u,
         v,
         w,
