@@ -34,8 +34,10 @@
 //! the magic and version, the length (counts × record sizes must be exactly what follows the
 //! header), `X = pitch × rows`, no NaN in the header's floats, enum tags and flags in range, every
 //! node's children (inner: a node index, with count 0; triangle leaf: a range within `triangles`;
-//! height-field leaf: an index into `leaves`), and every leaf's tile inside the atlas with finite
-//! frame and a non-negative height scale. Every failure is an [`Error::Parse`] naming the file.
+//! height-field leaf: an index into `leaves`), every leaf's tile inside the atlas with finite
+//! frame and a non-negative height scale, and every triangle's scene index below 2³¹ (hit ids with
+//! bit 31 set are height-field hits, `u32::MAX` a miss). Every failure is an [`Error::Parse`]
+//! naming the file.
 
 use std::io::Write;
 use std::path::Path;
@@ -286,6 +288,18 @@ impl Rbvh {
         for (index, leaf) in leaves.iter().enumerate() {
             check_leaf(leaf, &atlas)
                 .map_err(|why| err(format!("height-field leaf {index}: {why}")))?;
+        }
+        // A triangle's `prim` is its hit id: bit 31 marks height-field hits, and u32::MAX a miss.
+        if let Some((index, t)) = triangles
+            .iter()
+            .enumerate()
+            .find(|(_, t)| t.prim & LEAF_BIT != 0)
+        {
+            return Err(err(format!(
+                "triangle {index} has scene index {:#x}, which has bit 31 set: such ids are \
+                 reserved for height-field hits and misses",
+                t.prim
+            )));
         }
 
         Ok(Rbvh {

@@ -22,6 +22,20 @@ use crate::{Error, Result};
 /// Each primitive instance becomes an object named `mesh/primN`.
 pub(super) fn load(path: &Path) -> Result<Scene> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    // gltf 1.4 subtracts the 12-byte header from the GLB's declared length unchecked (a panic in
+    // debug builds, a misleading error in release ones): a shorter length is refused here.
+    if let Some(length) = bytes
+        .strip_prefix(b"glTF")
+        .and_then(|rest| rest.get(4..8))
+        .map(|l| u32::from_le_bytes([l[0], l[1], l[2], l[3]]))
+        .filter(|&length| length < 12)
+    {
+        return Err(Error::parse(
+            path,
+            None,
+            format!("GLB header declares a length of {length} bytes, less than the header itself"),
+        ));
+    }
     let ::gltf::Gltf { document, blob } =
         ::gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| open_error(path, e))?;
     drop(bytes);

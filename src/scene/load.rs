@@ -73,15 +73,27 @@ impl Scene {
 }
 
 /// Loads an OBJ, glTF or GLB file. Scene files refer to meshes through this, which is why it
-/// refuses scene files: one level of arrangement keeps them simple and free of cycles.
+/// refuses scene files: one level of arrangement keeps them simple and free of cycles. A file
+/// with nothing to trace (empty, or only vertices, points or lines) is an error, as an empty
+/// scene file is: it is almost certainly the wrong file, and would render a blank image.
 pub(super) fn load_mesh_file(path: &Path) -> Result<Scene> {
-    match FileType::of(path)? {
-        FileType::Obj => obj::load(path),
-        FileType::Gltf => gltf::load(path),
-        FileType::SceneFile => Err(Error::parse(
+    let scene = match FileType::of(path)? {
+        FileType::Obj => obj::load(path)?,
+        FileType::Gltf => gltf::load(path)?,
+        FileType::SceneFile => {
+            return Err(Error::parse(
+                path,
+                None,
+                "a scene file cannot be used as a mesh: expected .obj, .gltf or .glb",
+            ))
+        }
+    };
+    if scene.triangle_count() == 0 {
+        return Err(Error::parse(
             path,
             None,
-            "a scene file cannot be used as a mesh: expected .obj, .gltf or .glb",
-        )),
+            "no triangles: nothing in the file can be traced (no faces, or only points and lines)",
+        ));
     }
+    Ok(scene)
 }

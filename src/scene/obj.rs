@@ -15,6 +15,7 @@ use crate::{Error, Result};
 /// Loads the OBJ file at `path`: polygons are fan-triangulated, points and lines ignored.
 pub(super) fn load(path: &Path) -> Result<Scene> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    check_face_indices(path, &bytes)?;
     let options = tobj::LoadOptions {
         triangulate: true,
         single_index: false,
@@ -58,6 +59,63 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
         .validate()
         .map_err(|e| non_finite_vertex(path, &bytes).unwrap_or(e))?;
     Ok(scene)
+}
+
+/// Refuses face indices that `tobj` cannot take safely, naming their line. `tobj` 4 turns an
+/// index into a `usize` without checking and multiplies texture-coordinate and normal indices
+/// unchecked: a zero, a relative index reaching before the first element, or an index beyond the
+/// elements of its kind overflows (a panic in debug builds, a wrapped index in release builds).
+/// So every `f` index is checked against the `v`, `vt` and `vn` lines: a positive one against
+/// those in the whole file, a negative (relative) one against those before its line. Malformed
+/// numbers are left to `tobj`, which reports them.
+fn check_face_indices(path: &Path, bytes: &[u8]) -> Result<()> {
+    const KINDS: [&str; 3] = ["v", "vt", "vn"];
+    const NAMES: [&str; 3] = ["vertex", "texture coordinate", "normal"];
+    let text = String::from_utf8_lossy(bytes);
+    let kind = |line: &str| {
+        let first = line.split_whitespace().next()?;
+        KINDS.iter().position(|&k| k == first)
+    };
+    let mut total = [0i64; 3];
+    for line in text.lines() {
+        if let Some(k) = kind(line) {
+            total[k] += 1;
+        }
+    }
+    let mut seen = [0i64; 3];
+    for (n, line) in text.lines().enumerate() {
+        if let Some(k) = kind(line) {
+            seen[k] += 1;
+            continue;
+        }
+        let mut words = line.split_whitespace();
+        if words.next() != Some("f") {
+            continue;
+        }
+        for word in words {
+            for (k, part) in word.split('/').take(3).enumerate() {
+                let Ok(x) = part.parse::<i64>() else {
+                    continue;
+                };
+                let fine = if x < 0 {
+                    seen[k] + x >= 0
+                } else {
+                    x >= 1 && x <= total[k]
+                };
+                if !fine {
+                    return Err(Error::parse(
+                        path,
+                        Some(n + 1),
+                        format!(
+                            "face index {part} refers to no {}: the file has {} ({} before this line)",
+                            NAMES[k], total[k], seen[k]
+                        ),
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The 1-based line that a parser stopped in after consuming `pos` bytes: `tobj` reads line by
