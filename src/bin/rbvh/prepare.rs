@@ -54,11 +54,11 @@ pub enum Structure {
 
 impl Structure {
     pub fn tracer(&self, ctx: &Context) -> Result<Tracer> {
-        Ok(match self {
+        match self {
             Structure::Exact(b) => Tracer::exact(ctx, b),
             Structure::Rbvh(r) => Tracer::rbvh(ctx, r),
         }
-        .context("uploading the acceleration structure")?)
+        .context("uploading the acceleration structure")
     }
 
     pub fn trace_cpu(&self, rays: &[Ray], any_hit: bool) -> Vec<Hit> {
