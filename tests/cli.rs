@@ -262,3 +262,32 @@ fn bad_quality_and_parameters_are_clear_errors() {
         );
     }
 }
+
+#[test]
+fn a_scene_far_from_the_origin_is_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("far.toml");
+    std::fs::write(
+        &scene,
+        "[[mesh]]\nbuiltin = \"sphere\"\ntranslate = [1.0e6, 0.0, 0.0]\n",
+    )
+    .unwrap();
+    let png = dir.path().join("far.png");
+    let out = rbvh(&[
+        "render",
+        "--scene",
+        arg(&scene),
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--out",
+        arg(&png),
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("warning") && stderr.contains("recentre"),
+        "{stderr}"
+    );
+}

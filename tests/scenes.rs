@@ -706,3 +706,22 @@ fn scenes_without_a_camera_are_framed() {
     let scene = load(&repo("scenes/mesh.toml")).unwrap();
     assert_eq!(scene.camera_or_framed(1.0), scene.camera.unwrap());
 }
+
+#[test]
+fn scenes_far_from_the_origin_get_a_precision_warning() {
+    let sphere = Scene::builtin("sphere").unwrap();
+    assert!(sphere.precision_warning().is_none());
+    assert!(sphere.coordinate_resolution() < 1e-6);
+    for (offset, warned) in [(1.0e3, false), (1.0e6, true), (1.0e7, true)] {
+        let mut far = Scene::new("far sphere");
+        far.append(
+            &sphere,
+            glam::Mat4::from_translation(glam::Vec3::splat(offset)),
+        );
+        let warning = far.precision_warning();
+        assert_eq!(warning.is_some(), warned, "offset {offset}: {warning:?}");
+        if let Some(w) = warning {
+            assert!(w.contains("far sphere") && w.contains("recentre"), "{w}");
+        }
+    }
+}

@@ -165,6 +165,9 @@ impl<'a> SceneBench<'a> {
                 ),
             ));
         }
+        if let Some(warning) = scene.precision_warning() {
+            observe(Event::Warning(warning));
+        }
         observe(Event::Progress(format!(
             "{}: building the exact BVH",
             scene.name

@@ -8,6 +8,10 @@ use super::{Camera, Light};
 use crate::geom::Aabb;
 use crate::{Error, Result};
 
+/// Coarsest float32 resolution, as a fraction of the scene diagonal, that
+/// [`Scene::precision_warning`] accepts silently: a quarter of a Q0 texel (1/256 of the diagonal).
+pub const COORDINATE_RESOLUTION_LIMIT: f32 = 1.0 / 1024.0;
+
 /// Triangles, their objects, and optionally the camera and light of a scene file.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Scene {
@@ -63,6 +67,36 @@ impl Scene {
             .flatten()
             .filter_map(|&i| self.positions.get(i as usize))
             .fold(Aabb::EMPTY, |b, &p| b.grow(p))
+    }
+
+    /// How finely float32 resolves this scene: the spacing of representable coordinates at the
+    /// scene's largest coordinate (`max |x| · 2⁻²³`) as a fraction of its bounding-box diagonal.
+    /// Near the origin this is ~1e-7; a scene far from the origin loses precision in its vertices,
+    /// hits and (for RBVHs) leaf frames — `tests/stability.rs` measures the consequences.
+    pub fn coordinate_resolution(&self) -> f32 {
+        let b = self.bounds();
+        let diagonal = b.diagonal();
+        if b.is_empty() || diagonal <= 0.0 {
+            return 0.0;
+        }
+        let largest = b.min.abs().max(b.max.abs()).max_element();
+        largest * f32::EPSILON / diagonal
+    }
+
+    /// A warning for the user when float32 resolves the scene coarser than
+    /// [`COORDINATE_RESOLUTION_LIMIT`] of its diagonal (about a quarter of the coarsest RBVH
+    /// preset's texel): hits then err by that much, and RBVH leaves may crack. Recentring the
+    /// scene near the origin removes the loss.
+    pub fn precision_warning(&self) -> Option<String> {
+        let r = self.coordinate_resolution();
+        (r > COORDINATE_RESOLUTION_LIMIT).then(|| {
+            let c = self.bounds().center();
+            format!(
+                "{}: the scene lies far from the origin (centre {c}); float32 resolves only {r:.1e} of its \
+                 diagonal there, so hits may err by that much and RBVH leaves may crack; recentre the scene",
+                self.name
+            )
+        })
     }
 
     /// The three corners of triangle `i`.

@@ -35,6 +35,9 @@ pub struct Args {
 pub fn run(a: Args) -> Result<()> {
     let scene = step("loading scene", || Scene::load(&a.scene))
         .with_context(|| format!("loading scene {:?}", a.scene))?;
+    if let Some(warning) = scene.precision_warning() {
+        eprintln!("warning: {warning}");
+    }
     let levels = a.quality.levels()?;
     anyhow::ensure!(
         a.out.is_none() || levels.len() == 1,

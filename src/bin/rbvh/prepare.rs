@@ -107,6 +107,9 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
     let scene = step("loading scene", || Scene::load(&c.scene))
         .with_context(|| format!("loading scene {:?}", c.scene))?;
     let load_ms = t.elapsed().as_secs_f64() * 1e3;
+    if let Some(warning) = scene.precision_warning() {
+        eprintln!("warning: {warning}");
+    }
     let structure = match (&c.rbvh, c.method) {
         (Some(path), _) => Structure::Rbvh(Box::new(
             step("loading RBVH", || Rbvh::load(path))
