@@ -706,7 +706,8 @@ fn placed_errors(rays: &[Ray], truth: &[f64], hits: &[Hit]) -> (f64, usize) {
 ///     (asserted < 10%); hits are within 2 ulp (2 units) of the sphere. The RBVH is meaningless
 ///     there: ~60% of the rays miss or leak; only well-formedness and the box are asserted.
 ///
-///   Neither the builder nor the tracers report this loss of precision: the user is not told.
+///   The tracers cannot fix this loss of precision; `Scene::precision_warning` tells the user
+///   (tests/scenes.rs, tests/cli.rs).
 /// * A large sphere far away (s = 1e4 at 1e7: `u`/s = 1e-4) is as accurate as at the origin.
 #[test]
 fn scale_and_offset_keep_their_bounds_or_degrade_as_measured() {
