@@ -725,3 +725,32 @@ fn scenes_far_from_the_origin_get_a_precision_warning() {
         }
     }
 }
+
+#[test]
+fn devices_and_directories_are_refused_not_read_forever() {
+    let dir = tempfile::tempdir().unwrap();
+    let folder = dir.path().join("folder.obj");
+    std::fs::create_dir(&folder).unwrap();
+    let err = Scene::load(folder.to_str().unwrap())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("folder.obj") && err.contains("not a regular file"),
+        "{err}"
+    );
+    let gltf = dir.path().join("zero.gltf");
+    std::fs::write(
+        &gltf,
+        r#"{"asset":{"version":"2.0"},"buffers":[{"uri":"/dev/zero","byteLength":36}],
+            "bufferViews":[{"buffer":0,"byteLength":36}],
+            "accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[0,0,0]}],
+            "meshes":[{"primitives":[{"attributes":{"POSITION":0}}]}],
+            "nodes":[{"mesh":0}],"scenes":[{"nodes":[0]}],"scene":0}"#,
+    )
+    .unwrap();
+    let err = Scene::load(gltf.to_str().unwrap()).unwrap_err().to_string();
+    assert!(
+        err.contains("/dev/zero") && err.contains("not a regular file"),
+        "{err}"
+    );
+}

@@ -47,6 +47,15 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
         Some(dir) if !dir.as_os_str().is_empty() => dir,
         _ => Path::new("."),
     };
+    // Buffers named by relative URI must be regular files too (`/dev/zero` would be read forever).
+    for buffer in document.buffers() {
+        if let ::gltf::buffer::Source::Uri(uri) = buffer.source() {
+            let file = base.join(uri);
+            if let (false, Ok(metadata)) = (uri.starts_with("data:"), std::fs::metadata(&file)) {
+                super::load::regular_file(&file, &metadata)?;
+            }
+        }
+    }
     let buffers = ::gltf::import_buffers(&document, Some(base), blob).map_err(|e| {
         Error::parse(
             path,

@@ -44,7 +44,11 @@ impl Scene {
             return Scene::builtin(spec);
         }
         let path = Path::new(spec);
-        if let Err(e) = std::fs::metadata(path) {
+        let metadata = std::fs::metadata(path);
+        if let Ok(m) = &metadata {
+            regular_file(path, m)?;
+        }
+        if let Err(e) = metadata {
             let looks_like_path = path.extension().is_some() || spec.contains(['/', '\\']);
             return Err(if looks_like_path {
                 Error::io(path, e)
@@ -77,16 +81,20 @@ impl Scene {
 /// with nothing to trace (empty, or only vertices, points or lines) is an error, as an empty
 /// scene file is: it is almost certainly the wrong file, and would render a blank image.
 pub(super) fn load_mesh_file(path: &Path) -> Result<Scene> {
-    let scene = match FileType::of(path)? {
-        FileType::Obj => obj::load(path)?,
-        FileType::Gltf => gltf::load(path)?,
-        FileType::SceneFile => {
-            return Err(Error::parse(
-                path,
-                None,
-                "a scene file cannot be used as a mesh: expected .obj, .gltf or .glb",
-            ))
-        }
+    let file_type = FileType::of(path)?;
+    if file_type == FileType::SceneFile {
+        return Err(Error::parse(
+            path,
+            None,
+            "a scene file cannot be used as a mesh: expected .obj, .gltf or .glb",
+        ));
+    }
+    let metadata = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    regular_file(path, &metadata)?;
+    let scene = if file_type == FileType::Obj {
+        obj::load(path)?
+    } else {
+        gltf::load(path)?
     };
     if scene.triangle_count() == 0 {
         return Err(Error::parse(
@@ -96,4 +104,18 @@ pub(super) fn load_mesh_file(path: &Path) -> Result<Scene> {
         ));
     }
     Ok(scene)
+}
+
+/// Refuses anything but a regular file: a device such as `/dev/zero` or a FIFO would be read
+/// forever, and a directory is a mistake. Every file a scene names goes through this.
+pub(super) fn regular_file(path: &Path, metadata: &std::fs::Metadata) -> Result<()> {
+    if metadata.is_file() {
+        Ok(())
+    } else {
+        Err(Error::parse(
+            path,
+            None,
+            "not a regular file (a directory, device or pipe)",
+        ))
+    }
 }
