@@ -15,7 +15,7 @@ use glam::Vec3;
 use super::validate::MAX_T_ERR_P99;
 use crate::geom::{Hit, Ray};
 use crate::output::{heatmap, Image};
-use crate::{Error, Result};
+use crate::Result;
 
 /// The relative distance error shown as the end of the map: the validator's p99 limit, so red
 /// means "as far off as a valid method may be for its worst 1% of rays".
@@ -41,17 +41,7 @@ pub fn error_image(
     width: u32,
     height: u32,
 ) -> Result<Image> {
-    if exact.len() != rays.len() || test.len() != rays.len() {
-        return Err(Error::param(
-            "hits",
-            format!(
-                "{} rays but {} exact and {} tested hits",
-                rays.len(),
-                exact.len(),
-                test.len()
-            ),
-        ));
-    }
+    super::metrics::check_lengths(rays, exact, test)?;
     let steps: Vec<u32> = rays
         .iter()
         .zip(exact.iter().zip(test))

@@ -67,15 +67,8 @@ pub struct HitErrors {
     pub non_finite: usize,
 }
 
-/// Compares `test` with `exact`, both answers to `rays` for `query`; `diagonal` is the scene's
-/// bounding-box diagonal.
-pub fn hit_errors(
-    rays: &[Ray],
-    exact: &[Hit],
-    test: &[Hit],
-    diagonal: f32,
-    query: Query,
-) -> Result<HitErrors> {
+/// Both hit lists must answer every ray.
+pub(crate) fn check_lengths(rays: &[Ray], exact: &[Hit], test: &[Hit]) -> Result<()> {
     if exact.len() != rays.len() || test.len() != rays.len() {
         return Err(Error::param(
             "hits",
@@ -87,6 +80,19 @@ pub fn hit_errors(
             ),
         ));
     }
+    Ok(())
+}
+
+/// Compares `test` with `exact`, both answers to `rays` for `query`; `diagonal` is the scene's
+/// bounding-box diagonal.
+pub fn hit_errors(
+    rays: &[Ray],
+    exact: &[Hit],
+    test: &[Hit],
+    diagonal: f32,
+    query: Query,
+) -> Result<HitErrors> {
+    check_lengths(rays, exact, test)?;
     if !(diagonal.is_finite() && diagonal > 0.0) {
         return Err(Error::param(
             "diagonal",
