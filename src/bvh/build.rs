@@ -274,17 +274,11 @@ impl Builder<'_> {
             None => self.median_split(order, &centroids),
         };
         let (left, right) = order.split_at_mut(mid);
-        let (a, b) = if n >= PARALLEL_THRESHOLD {
-            rayon::join(
-                || self.build(left, offset, depth + 1),
-                || self.build(right, offset + mid as u32, depth + 1),
-            )
-        } else {
-            (
-                self.build(left, offset, depth + 1),
-                self.build(right, offset + mid as u32, depth + 1),
-            )
-        };
+        let (a, b) = join_halves(
+            n >= PARALLEL_THRESHOLD,
+            || self.build(left, offset, depth + 1),
+            || self.build(right, offset + mid as u32, depth + 1),
+        );
         BuildNode::Inner {
             bounds,
             children: Box::new([a, b]),
@@ -427,6 +421,20 @@ struct SahSplit {
 impl SahSplit {
     fn bin_of(&self, p: &Prim) -> usize {
         (((p.centroid[self.axis] - self.lo) * self.scale) as usize).min(self.bins - 1)
+    }
+}
+
+/// Builds both halves of a split, in parallel when the node is large enough to pay for a task.
+/// Shared with the RBVH builder.
+pub(crate) fn join_halves<T: Send>(
+    parallel: bool,
+    a: impl FnOnce() -> T + Send,
+    b: impl FnOnce() -> T + Send,
+) -> (T, T) {
+    if parallel {
+        rayon::join(a, b)
+    } else {
+        (a(), b())
     }
 }
 

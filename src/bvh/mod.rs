@@ -13,7 +13,7 @@ pub mod layout;
 mod traverse;
 mod validate;
 
-pub(crate) use build::partition;
+pub(crate) use build::{join_halves, partition};
 pub use build::{BuildParams, Bvh};
 pub use layout::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
 pub use traverse::TraceStats;

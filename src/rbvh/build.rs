@@ -29,7 +29,7 @@ use super::layout::HEIGHTFIELD_COUNT;
 use super::raster::{rasterize, Frame, Tile};
 use super::split::{split, SplitPrim};
 use super::{Rbvh, RbvhParams, RbvhStats};
-use crate::bvh::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
+use crate::bvh::{join_halves, ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
 use crate::geom::Aabb;
 use crate::scene::Scene;
 use crate::{Error, Result};
@@ -207,17 +207,11 @@ impl Builder<'_> {
             depth >= MEDIAN_BELOW_DEPTH,
         );
         let (left, right) = order.split_at_mut(mid);
-        let (a, b) = if n >= PARALLEL_THRESHOLD {
-            rayon::join(
-                || self.build(left, offset, depth + 1),
-                || self.build(right, offset + mid as u32, depth + 1),
-            )
-        } else {
-            (
-                self.build(left, offset, depth + 1),
-                self.build(right, offset + mid as u32, depth + 1),
-            )
-        };
+        let (a, b) = join_halves(
+            n >= PARALLEL_THRESHOLD,
+            || self.build(left, offset, depth + 1),
+            || self.build(right, offset + mid as u32, depth + 1),
+        );
         Node::Inner(Box::new([a, b]))
     }
 
