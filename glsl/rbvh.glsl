@@ -5,6 +5,8 @@
 //   RBVH_BVH_SET, RBVH_BVH_NODES_BINDING, RBVH_BVH_TRIS_BINDING   (see bvh.glsl; defaults 0, 0, 1)
 //   RBVH_LEAVES_BINDING  binding of the height-field leaves (default 2)
 //   RBVH_ATLAS_BINDING   binding of the texel atlas         (default 3)
+// and, to trace with level of detail, RBVH_LOD (see lod.glsl for its two bindings): the traversal
+// is then rbvh_trace_rbvh_lod, taking each ray's cone and the LOD array sizes.
 #ifndef RBVH_RBVH_GLSL
 #define RBVH_RBVH_GLSL
 
@@ -314,13 +316,26 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     return -1.0;
 }
 
+#ifdef RBVH_LOD
+#include "lod.glsl"
+#endif
+
 // Nearest-first stack traversal of the RBVH (as rbvh_trace_bvh), testing triangle leaves in place
 // and treating height-field leaves like inner nodes: they take the same near-first/stack path and
 // are marched when they come up. One march call site at the top of the loop, instead of one
 // inside the per-child loop, keeps the traversal lean: inlined there, the march's registers
 // weighed on every node visit (4x slower traversal on lavapipe). Height-field hits report
 // id = LEAF_BIT | leaf index.
+//
+// With RBVH_LOD (src/lod, src/rbvh/march.rs): an inner child whose coarse representation the ray's
+// cone selects at the child's box entry is pushed as LOD_BIT | node and its columns are marched
+// when it comes up, instead of descending; such hits report id = LEAF_BIT | LOD_BIT | node.
+#ifdef RBVH_LOD
+Hit rbvh_trace_rbvh_lod(Ray ray, vec2 cone, bool any_hit, RbvhSizes sz, RbvhLodSizes lsz,
+                        out uint steps, out bool overflow) {
+#else
 Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out bool overflow) {
+#endif
     steps = 0u;
     overflow = false;
     if (!rbvh_ray_valid(ray)) {
@@ -354,6 +369,21 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
                     break;
                 }
             }
+#ifdef RBVH_LOD
+        } else if ((node & RBVH_LOD_BIT) != 0u) {
+            vec3 normal;
+            uint columns = 0u;
+            float t = rbvh_lod_march(node & ~RBVH_LOD_BIT, lsz, ray, t_closest, columns, normal);
+            steps += columns;
+            if (t >= 0.0) {
+                t_closest = t;
+                best = Hit(t, normal.x, normal.y, normal.z, RBVH_LEAF_BIT | node, 0u, 0u, 0u);
+                if (any_hit) {
+                    finished = true;
+                    break;
+                }
+            }
+#endif
         } else if (node < sz.node_count) {
             if (visits >= sz.node_count) {
                 overflow = true;
@@ -380,6 +410,12 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
                     continue;
                 }
                 if ((child & RBVH_LEAF_BIT) == 0u || count == RBVH_HEIGHTFIELD_COUNT) {
+#ifdef RBVH_LOD
+                    if ((child & RBVH_LEAF_BIT) == 0u && child < lsz.node_count &&
+                        rbvh_lod_selects(rbvh_lods[child].texel_size, cone, t_entry)) {
+                        child |= RBVH_LOD_BIT;
+                    }
+#endif
                     if (next == RBVH_INVALID) {
                         next = child;
                     } else if (sp < RBVH_STACK_SIZE) {

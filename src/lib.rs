@@ -49,6 +49,7 @@ pub mod error;
 pub mod geom;
 pub mod gpu;
 pub mod io;
+pub mod lod;
 pub mod output;
 pub mod rbvh;
 pub mod regress;

@@ -156,8 +156,14 @@ fn push_constants_match_in_both_trace_shaders() {
         ("leaf_count", offset_of!(P, leaf_count)),
         ("atlas_pitch", offset_of!(P, atlas_pitch)),
         ("atlas_len", offset_of!(P, atlas_len)),
+        ("lod_node_count", offset_of!(P, lod_node_count)),
+        ("lod_texel_len", offset_of!(P, lod_texel_len)),
     ];
-    for spv in [shaders::TRACE_EXACT, shaders::TRACE_RBVH] {
+    for spv in [
+        shaders::TRACE_EXACT,
+        shaders::TRACE_RBVH,
+        shaders::TRACE_RBVH_LOD,
+    ] {
         let r = spirv::reflect(&shaders::words(spv).unwrap());
         let glsl = r.structs.get("Params").expect("push constant block Params");
         let glsl: Vec<(&str, usize)> = glsl
@@ -189,4 +195,35 @@ fn march_constants_match() {
     assert_eq!(define("RBVH_MARCH_EDGE_PAD") as f32, MARCH_EDGE_PAD);
     assert_eq!(define("RBVH_MAX_CODE") as u16, Texel::MAX_CODE);
     assert_eq!(define("RBVH_HOLE_CODE") as u16, Texel::HOLE_CODE);
+}
+
+#[test]
+fn lod_layout_matches() {
+    use rbvh::lod::{GpuLod, RayCone, LOD_BIT};
+    let r = spirv::reflect(&shaders::words(shaders::TRACE_RBVH_LOD).unwrap());
+    check(
+        &r,
+        "RbvhLod",
+        size_of::<GpuLod>(),
+        &[
+            ("origin", offset_of!(GpuLod, origin)),
+            ("texel_size", offset_of!(GpuLod, texel_size)),
+            ("axis", offset_of!(GpuLod, axis)),
+            ("res_u", offset_of!(GpuLod, res_u)),
+            ("res_v", offset_of!(GpuLod, res_v)),
+            ("base", offset_of!(GpuLod, base)),
+            ("h_scale", offset_of!(GpuLod, h_scale)),
+            ("inv_texel", offset_of!(GpuLod, inv_texel)),
+            ("pad0", offset_of!(GpuLod, pad)),
+            ("pad1", offset_of!(GpuLod, pad) + 4),
+        ],
+    );
+    // The cone buffer is an array of vec2: (width, spread).
+    assert_eq!(size_of::<RayCone>(), 8);
+    assert_eq!(offset_of!(RayCone, spread), 4);
+    let header = include_str!("../glsl/lod.glsl");
+    assert!(
+        header.contains(&format!("const uint RBVH_LOD_BIT = 0x{LOD_BIT:08X}u;")),
+        "glsl/lod.glsl's RBVH_LOD_BIT differs from LOD_BIT"
+    );
 }

@@ -1,6 +1,8 @@
-//! Traces rays on the device: through the exact BVH (`glsl/trace_exact.comp`) or an RBVH
-//! (`glsl/trace_rbvh.comp`). Both shaders share the push constants ([`TraceParams`]) and the
-//! bindings after the structure's own buffers: rays, hits, status, per-ray steps.
+//! Traces rays on the device: through the exact BVH (`glsl/trace_exact.comp`), an RBVH
+//! (`glsl/trace_rbvh.comp`), or an RBVH with level of detail (`glsl/trace_rbvh_lod.comp`). All
+//! share the push constants ([`TraceParams`]) and the bindings after the structure's own buffers:
+//! rays, hits, status, per-ray steps; the LOD trace then binds the LOD records and columns and the
+//! per-ray cones.
 
 use bytemuck::{Pod, Zeroable};
 
@@ -10,6 +12,8 @@ use super::pipeline::DescriptorSet;
 use super::{shaders, Buffer, ComputePipeline, Context, Timing};
 use crate::bvh::{Bvh, STACK_SIZE};
 use crate::geom::{Hit, Ray};
+use crate::lod::cone::check_cones;
+use crate::lod::{Lod, RayCone};
 use crate::rbvh::Rbvh;
 use crate::{Error, Result};
 
@@ -32,7 +36,8 @@ pub struct Traced {
     pub timing: Timing,
 }
 
-/// Push constants of both trace shaders (32 bytes); the exact one ignores the last three.
+/// Push constants of the trace shaders (40 bytes); the exact one ignores the last five, the plain
+/// RBVH one the last two.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct TraceParams {
@@ -44,8 +49,12 @@ pub struct TraceParams {
     pub leaf_count: u32,
     pub atlas_pitch: u32,
     pub atlas_len: u32,
+    /// LOD records (one per node; 0 without LOD).
+    pub lod_node_count: u32,
+    /// LOD column words.
+    pub lod_texel_len: u32,
 }
-const _: () = assert!(std::mem::size_of::<TraceParams>() == 32);
+const _: () = assert!(std::mem::size_of::<TraceParams>() == 40);
 
 const FLAG_ANY_HIT: u32 = 1;
 const FLAG_STEPS: u32 = 2;
@@ -56,6 +65,9 @@ pub struct Tracer {
     pipeline: ComputePipeline,
     /// The structure's buffers, bound first, in the shader's binding order.
     structure: Vec<Buffer>,
+    /// Level of detail: the LOD records and columns, bound after the per-trace buffers and
+    /// followed by the per-ray cones.
+    lod: Option<[Buffer; 2]>,
     /// Sizes the shader needs (`ray_offset`, `ray_count` and `flags` are set per dispatch).
     sizes: TraceParams,
     /// Staging buffers of recorded uploads ([`Tracer::record_rbvh`]), kept until released.
@@ -152,6 +164,29 @@ impl Tracer {
         Self::uploaded(ctx, "trace_rbvh", spirv, &arrays, sizes)
     }
 
+    /// Uploads an RBVH with its levels of detail (`lod`, built for it by [`Lod::build`]): traces
+    /// then take one [`RayCone`] per ray ([`Tracer::trace_lod`]).
+    pub fn rbvh_lod(ctx: &Context, rbvh: &Rbvh, lod: &Lod) -> Result<Self> {
+        check_depth("rbvh", rbvh.depth)?;
+        lod.check_for(rbvh)?;
+        let (mut sizes, arrays) = rbvh_parts(rbvh);
+        sizes.lod_node_count = lod.nodes.len() as u32;
+        sizes.lod_texel_len = u32::try_from(lod.texels.len())
+            .map_err(|_| Error::param("lod", "more than 2^32 column words"))?;
+        let mut tracer = Self::uploaded(
+            ctx,
+            "trace_rbvh_lod",
+            shaders::TRACE_RBVH_LOD,
+            &arrays,
+            sizes,
+        )?;
+        tracer.lod = Some([
+            upload(ctx, "LOD records", &lod.nodes)?,
+            upload(ctx, "LOD columns", &lod.texels)?,
+        ]);
+        Ok(tracer)
+    }
+
     /// Embedded use: uploads the exact BVH with the context's (the engine's) allocator, *recording*
     /// any staging copies into `cmd`, followed by a barrier that makes them visible to compute
     /// shaders. Nothing is submitted. Call [`Tracer::release_staging`] once `cmd` has executed.
@@ -234,6 +269,12 @@ impl Tracer {
     /// Binds engine-owned buffers for [`Tracer::record`]: `count` rays (32 bytes each, the
     /// [`Ray`] layout) read from `rays`, `count` hits (the [`Hit`] layout) written to `hits`.
     pub fn bind(&self, rays: BufferView, hits: BufferView, count: u32) -> Result<TraceBinding> {
+        if self.lod.is_some() {
+            return Err(Error::param(
+                "trace binding",
+                "a level-of-detail tracer traces through Tracer::trace_lod",
+            ));
+        }
         let align = self.ctx.limits().min_storage_buffer_offset_alignment.max(1);
         for (what, view) in [("rays", rays), ("hits", hits)] {
             if view.offset % align != 0 {
@@ -301,20 +342,31 @@ impl Tracer {
         structure: Vec<Buffer>,
         sizes: TraceParams,
     ) -> Result<Self> {
-        let bindings = structure.len() as u32 + PER_TRACE_BUFFERS;
+        // The LOD shader binds its records, columns and cones after the per-trace buffers.
+        let lod_bindings = if spirv == shaders::TRACE_RBVH_LOD {
+            3
+        } else {
+            0
+        };
+        let bindings = structure.len() as u32 + PER_TRACE_BUFFERS + lod_bindings;
         let push = std::mem::size_of::<TraceParams>() as u32;
         Ok(Tracer {
             ctx: ctx.clone(),
             pipeline: ComputePipeline::new(ctx, name, spirv, bindings, push)?,
             structure,
+            lod: None,
             sizes,
             staging: Vec::new(),
         })
     }
 
-    /// Bytes of the structure on the device.
+    /// Bytes of the structure (and its levels of detail) on the device.
     pub fn device_bytes(&self) -> u64 {
-        self.structure.iter().map(Buffer::size).sum()
+        self.structure
+            .iter()
+            .chain(self.lod.iter().flatten())
+            .map(Buffer::size)
+            .sum()
     }
 
     pub fn trace(&self, rays: &[Ray], query: Query) -> Result<Traced> {
@@ -324,6 +376,42 @@ impl Tracer {
     /// Traces `rays`, in batches that fit `maxStorageBufferRange`; `steps` also returns the per-ray
     /// traversal cost. Fails with [`Error::StackOverflow`] if any ray overflowed its stack.
     pub fn trace_with(&self, rays: &[Ray], query: Query, steps: bool) -> Result<Traced> {
+        if self.lod.is_some() {
+            return Err(Error::param(
+                "trace",
+                "a level-of-detail tracer needs one cone per ray: use Tracer::trace_lod",
+            ));
+        }
+        self.trace_batches(rays, None, query, steps)
+    }
+
+    /// Traces `rays` with level of detail, `cones[i]` the footprint of `rays[i]` (see
+    /// [`crate::lod`]); only for a tracer made by [`Tracer::rbvh_lod`]. Otherwise as
+    /// [`Tracer::trace_with`].
+    pub fn trace_lod(
+        &self,
+        rays: &[Ray],
+        cones: &[RayCone],
+        query: Query,
+        steps: bool,
+    ) -> Result<Traced> {
+        if self.lod.is_none() {
+            return Err(Error::param(
+                "trace",
+                "this tracer has no levels of detail: make it with Tracer::rbvh_lod",
+            ));
+        }
+        check_cones(rays, cones)?;
+        self.trace_batches(rays, Some(cones), query, steps)
+    }
+
+    fn trace_batches(
+        &self,
+        rays: &[Ray],
+        cones: Option<&[RayCone]>,
+        query: Query,
+        steps: bool,
+    ) -> Result<Traced> {
         let ray_size = std::mem::size_of::<Ray>() as u64;
         let batch =
             (self.ctx.limits().max_storage_buffer_range / ray_size).clamp(1, 1 << 22) as usize;
@@ -332,8 +420,9 @@ impl Tracer {
             steps: steps.then(|| Vec::with_capacity(rays.len())),
             timing: Timing::default(),
         };
-        for chunk in rays.chunks(batch) {
-            let (hits, chunk_steps, timing) = self.trace_batch(chunk, query, steps)?;
+        for (k, chunk) in rays.chunks(batch).enumerate() {
+            let chunk_cones = cones.map(|c| &c[k * batch..k * batch + chunk.len()]);
+            let (hits, chunk_steps, timing) = self.trace_batch(chunk, chunk_cones, query, steps)?;
             out.hits.extend(hits);
             if let (Some(all), Some(s)) = (out.steps.as_mut(), chunk_steps) {
                 all.extend(s);
@@ -351,6 +440,7 @@ impl Tracer {
     fn trace_batch(
         &self,
         rays: &[Ray],
+        cones: Option<&[RayCone]>,
         query: Query,
         steps: bool,
     ) -> Result<(Vec<Hit>, Option<Vec<u32>>, Timing)> {
@@ -369,8 +459,16 @@ impl Tracer {
             Query::Closest => 0,
             Query::Any => FLAG_ANY_HIT,
         } | if steps { FLAG_STEPS } else { 0 };
+        let cone_buf = match cones {
+            Some(c) => Some(self.ctx.upload_storage("ray cones", c)?),
+            None => None,
+        };
         let mut buffers: Vec<&Buffer> = self.structure.iter().collect();
         buffers.extend([&ray_buf, &hit_buf, &status, &steps_buf]);
+        if let (Some(lod), Some(cone_buf)) = (&self.lod, &cone_buf) {
+            buffers.extend(lod.iter());
+            buffers.push(cone_buf);
+        }
         let timing = self.pipeline.run(&buffers, n, |first| {
             bytemuck::bytes_of(&TraceParams {
                 ray_offset: first,

@@ -37,6 +37,10 @@ use super::layout::{
 use super::Rbvh;
 use crate::bvh::{ChildRef, STACK_SIZE};
 use crate::geom::{intersect_triangle, safe_inverse, Aabb, Hit, Ray, RayShear};
+use crate::lod::cone::check_cones;
+use crate::lod::march::march as lod_march;
+use crate::lod::{selects, GpuLod, Lod, RayCone, LOD_BIT};
+use crate::Result;
 
 /// What one ray cost. The heat map shows `nodes + triangles + cells`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -61,23 +65,61 @@ impl Rbvh {
     /// (world-space, dilated, octahedral-quantized) normal of the sample nearest the hit; a
     /// triangle's is its geometric normal as wound.
     pub fn closest_hit(&self, ray: &Ray) -> (Hit, RbvhTraceStats) {
-        self.traverse(ray, false)
+        self.traverse(ray, false, None)
     }
 
     /// Whether anything is hit in `[tmin, tmax)`: the hit returned is *some* hit, not the closest.
     /// Ids and normals as in [`Rbvh::closest_hit`].
     pub fn any_hit(&self, ray: &Ray) -> (Hit, RbvhTraceStats) {
-        self.traverse(ray, true)
+        self.traverse(ray, true, None)
+    }
+
+    /// As [`Rbvh::closest_hit`] (or [`Rbvh::any_hit`]) with level of detail: an inner child whose
+    /// coarse representation in `lod` (built for this RBVH) is selected by `cone` at the child's
+    /// box entry ([`crate::lod::selects`]) is marched instead of descended into. A hit on a
+    /// coarse representation reports `id = LEAF_BIT | LOD_BIT | node`. The columns it visits
+    /// count as `cells`.
+    pub fn hit_lod(
+        &self,
+        lod: &Lod,
+        ray: &Ray,
+        cone: &RayCone,
+        any_hit: bool,
+    ) -> (Hit, RbvhTraceStats) {
+        self.traverse(ray, any_hit, Some((lod, cone)))
     }
 
     /// Traces many rays in parallel with `rayon`; hits in ray order.
     pub fn trace_cpu(&self, rays: &[Ray], any_hit: bool) -> Vec<Hit> {
         rays.par_iter()
-            .map(|r| self.traverse(r, any_hit).0)
+            .map(|r| self.traverse(r, any_hit, None).0)
             .collect()
     }
 
-    fn traverse(&self, ray: &Ray, any_hit: bool) -> (Hit, RbvhTraceStats) {
+    /// [`Rbvh::hit_lod`] for many rays, one cone each, in parallel; hits in ray order. Fails when
+    /// `lod` was built for another tree or the cones do not match the rays.
+    pub fn trace_cpu_lod(
+        &self,
+        lod: &Lod,
+        rays: &[Ray],
+        cones: &[RayCone],
+        any_hit: bool,
+    ) -> Result<Vec<Hit>> {
+        lod.check_for(self)?;
+        check_cones(rays, cones)?;
+        Ok(rays
+            .par_iter()
+            .zip(cones)
+            .map(|(r, c)| self.traverse(r, any_hit, Some((lod, c))).0)
+            .collect())
+    }
+
+    fn traverse(
+        &self,
+        ray: &Ray,
+        any_hit: bool,
+        lod: Option<(&Lod, &RayCone)>,
+    ) -> (Hit, RbvhTraceStats) {
         let mut stats = RbvhTraceStats::default();
         if !ray.is_valid() {
             return (Hit::MISS, stats);
@@ -107,6 +149,26 @@ impl Rbvh {
                         return (best, stats);
                     }
                 }
+            } else if node & LOD_BIT != 0 {
+                // A coarse representation chosen for this ray (only with `lod`).
+                let n = node & !LOD_BIT;
+                if let Some((l, _)) = lod {
+                    let record = l.nodes.get(n as usize).unwrap_or(&GpuLod::NONE);
+                    if let Some((t, normal)) =
+                        lod_march(record, &l.texels, ray, t_closest, &mut stats.cells)
+                    {
+                        t_closest = t;
+                        best = Hit {
+                            t,
+                            normal: normal.to_array(),
+                            id: LEAF_BIT | node,
+                            reserved: [0; 3],
+                        };
+                        if any_hit {
+                            return (best, stats);
+                        }
+                    }
+                }
             } else if let Some(gpu_node) = self.nodes.get(node as usize) {
                 // A missing node (an index out of range, in corrupt data) has no children. In a
                 // tree every node is entered at most once per ray; more visits than nodes can
@@ -133,10 +195,17 @@ impl Rbvh {
                     if c.child & LEAF_BIT == 0 || c.count == HEIGHTFIELD_COUNT {
                         // Inner nodes and height-field leaves take the near-first/stack path; a
                         // leaf is marched when it comes up (see `glsl/rbvh.glsl` for why).
+                        let coarse = c.child & LEAF_BIT == 0
+                            && lod.is_some_and(|(l, cone)| {
+                                l.nodes
+                                    .get(c.child as usize)
+                                    .is_some_and(|r| selects(r.texel_size, cone, t_entry))
+                            });
+                        let entry = if coarse { LOD_BIT | c.child } else { c.child };
                         if next.is_none() {
-                            next = Some(c.child);
+                            next = Some(entry);
                         } else if sp < STACK_SIZE as usize {
-                            stack[sp] = c.child;
+                            stack[sp] = entry;
                             sp += 1;
                         } else {
                             stats.overflow = true;

@@ -23,6 +23,7 @@ pub const NAMES: &[&str] = &[
     "cone",
     "bumpy-sphere",
     "blob",
+    "grove",
 ];
 
 /// Subdivision level of the "sphere" scene: 20·4⁵ = 20480 triangles.
@@ -65,6 +66,7 @@ pub(super) fn build(name: &str) -> Option<Scene> {
         "cone" => vec![("cone", shapes::cone(96))],
         "bumpy-sphere" => vec![("bumpy-sphere", bumpy_sphere())],
         "blob" => vec![("blob", blob())],
+        "grove" => return Some(grove()),
         _ => return None,
     };
     let mut scene = Scene::new(name);
@@ -99,12 +101,67 @@ fn bumpy_sphere() -> Shape {
 /// by a few low-frequency sinusoids and stretched (20480 triangles). Smooth everywhere, so the
 /// error of a height-field approximation depends only on resolution.
 fn blob() -> Shape {
-    let radius = |d: DVec3| {
-        1.0 + 0.20 * (2.0 * d.x + 0.5).sin()
-            + 0.12 * (3.0 * d.y + 1.0).sin() * (2.0 * d.z).cos()
-            + 0.08 * (4.0 * d.z + 2.0 * d.x).sin()
-    };
-    shapes::displaced_sphere(5, radius).transformed(Mat4::from_scale(Vec3::new(1.1, 0.9, 0.8)))
+    shapes::displaced_sphere(5, blob_radius).transformed(Mat4::from_scale(Vec3::new(1.1, 0.9, 0.8)))
+}
+
+/// The radius of "blob" in direction `d`.
+fn blob_radius(d: DVec3) -> f64 {
+    1.0 + 0.20 * (2.0 * d.x + 0.5).sin()
+        + 0.12 * (3.0 * d.y + 1.0).sin() * (2.0 * d.z).cos()
+        + 0.08 * (4.0 * d.z + 2.0 * d.x).sin()
+}
+
+/// Copies across and along "grove".
+const GROVE_ACROSS: usize = 10;
+const GROVE_ALONG: usize = 40;
+/// Spacing of the copies in "grove".
+const GROVE_SPACING: f32 = 3.0;
+
+/// The level-of-detail scene: a grove of 400 blobs (1280 triangles each, about 510k in all) in a
+/// 10 × 40 grid on a ground plane, jittered and turned, seen from one end at eye height, so that
+/// the same mesh appears at every distance from a few units to 120 and distant copies crowd the
+/// upper half of the image. Its camera looks along the grove.
+fn grove() -> Scene {
+    let mut scene = Scene::new("grove");
+    let (width, depth) = (
+        GROVE_ACROSS as f32 * GROVE_SPACING,
+        GROVE_ALONG as f32 * GROVE_SPACING,
+    );
+    let ground = shapes::grid_plane(1.0, 32).transformed(Mat4::from_scale_rotation_translation(
+        Vec3::new(0.5 * width + 2.0, 1.0, 0.5 * depth + 2.0),
+        Quat::IDENTITY,
+        Vec3::new(0.0, 0.0, -0.5 * depth + GROVE_SPACING),
+    ));
+    scene.push_object("ground", &ground.positions, &ground.triangles);
+    let blob = shapes::displaced_sphere(3, blob_radius)
+        .transformed(Mat4::from_scale(Vec3::new(1.1, 0.9, 0.8)));
+    let mut copy = Scene::new("");
+    copy.push_object("blob", &blob.positions, &blob.triangles);
+    for row in 0..GROVE_ALONG {
+        for col in 0..GROVE_ACROSS {
+            // A fixed hash of the cell, for jitter and turn: deterministic, no RNG needed.
+            let h = ((row * 131 + col * 71) as u32).wrapping_mul(2_654_435_761);
+            let unit = |shift: u32| ((h >> shift) & 0xFF) as f32 / 255.0 - 0.5;
+            let at = Vec3::new(
+                (col as f32 - 0.5 * (GROVE_ACROSS - 1) as f32 + unit(0)) * GROVE_SPACING,
+                0.72,
+                -(row as f32 + unit(8)) * GROVE_SPACING,
+            );
+            copy.name = format!("r{row}c{col}");
+            let turn = Quat::from_rotation_y(unit(16) * std::f32::consts::TAU);
+            scene.append(
+                &copy,
+                Mat4::from_scale_rotation_translation(Vec3::splat(0.8), turn, at),
+            );
+        }
+    }
+    scene.camera = Some(super::Camera {
+        eye: Vec3::new(0.0, 2.2, 8.0),
+        target: Vec3::new(0.0, 0.0, -60.0),
+        up: Vec3::Y,
+        vfov_deg: 50.0,
+    });
+    scene
 }
 
 /// The "default" scene: smooth, flat and sharp-edged solids standing on a ground square, close

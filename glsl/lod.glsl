@@ -1,0 +1,168 @@
+// Coarse representations of inner nodes for level-of-detail traversal: the GLSL twin of
+// src/lod/march.rs, step for step, on the packed data of src/lod/layout.rs. Included by rbvh.glsl
+// (after its march helpers, which it uses) when RBVH_LOD is defined (trace_rbvh_lod.comp); shaders
+// that do not define it are unchanged.
+//
+// The includer chooses where the buffers live by defining, before the #include:
+//   RBVH_LODS_BINDING       binding of the per-node records (default 8)
+//   RBVH_LOD_TEXELS_BINDING binding of the column words     (default 9)
+#ifndef RBVH_LOD_GLSL
+#define RBVH_LOD_GLSL
+
+#ifndef RBVH_LODS_BINDING
+#define RBVH_LODS_BINDING 8
+#endif
+#ifndef RBVH_LOD_TEXELS_BINDING
+#define RBVH_LOD_TEXELS_BINDING 9
+#endif
+
+// Must equal LOD_BIT (tests/layout.rs checks).
+const uint RBVH_LOD_BIT = 0x40000000u;
+
+// 48 bytes: see GpuLod.
+struct RbvhLod {
+    vec3 origin;
+    float texel_size;   // +inf: the node has no coarse representation
+    uint axis;
+    uint res_u;
+    uint res_v;
+    uint base;
+    float h_scale;
+    float inv_texel;
+    uint pad0;
+    uint pad1;
+};
+
+layout(std430, set = RBVH_BVH_SET, binding = RBVH_LODS_BINDING) readonly buffer RbvhLods {
+    RbvhLod rbvh_lods[];
+};
+// Two words per column: top, bottom; each bits 0-15 height code (top 0xFFFF = empty), 16-31 normal.
+layout(std430, set = RBVH_BVH_SET, binding = RBVH_LOD_TEXELS_BINDING) readonly buffer RbvhLodTexels {
+    uint rbvh_lod_texels[];
+};
+
+// Sizes of the two arrays.
+struct RbvhLodSizes {
+    uint node_count;
+    uint texel_len;
+};
+
+// The selection rule of src/lod/cone.rs (`selects`): cone = (width, spread).
+bool rbvh_lod_selects(float texel_size, vec2 cone, float t_entry) {
+    precise float footprint = cone.x + cone.y * t_entry;
+    return texel_size <= footprint;
+}
+
+int rbvh_lod_step(float d) {
+    return d > 0.0 ? 1 : (d < 0.0 ? -1 : 0);
+}
+
+float rbvh_lod_boundary_t(int c, int step, float o, float inv) {
+    precise float far_side = (float(c + 1) - o) * inv;
+    precise float near_side = (float(c) - o) * inv;
+    return step > 0 ? far_side : (step < 0 ? near_side : RBVH_INF);
+}
+
+// Marches the columns of node `node`'s record over [tmin, t_closest); returns t (< 0 on a miss).
+// `columns` counts the columns visited.
+float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inout uint columns,
+                     out vec3 normal) {
+    normal = vec3(0.0);
+    if (node >= lsz.node_count) {
+        return -1.0;
+    }
+    RbvhLod lod = rbvh_lods[node];
+    if (isinf(lod.texel_size) || isnan(lod.texel_size) || lod.res_u == 0u || lod.res_v == 0u || lod.axis > 2u) {
+        return -1.0;
+    }
+    uint cells = lod.res_u * lod.res_v;
+    if (lod.res_v != 0u && cells / lod.res_v != lod.res_u) {
+        return -1.0;
+    }
+    if (cells > (0xFFFFFFFFu - lod.base) / 2u || lod.base + 2u * cells > lsz.texel_len) {
+        return -1.0;
+    }
+    // 1. Grid space.
+    uint w = lod.axis;
+    uint u = (w + 1u) % 3u;
+    uint v = (w + 2u) % 3u;
+    precise vec3 go = vec3((ray.origin[u] - lod.origin[u]) * lod.inv_texel,
+                           (ray.origin[v] - lod.origin[v]) * lod.inv_texel,
+                           ray.origin[w] - lod.origin[w]);
+    precise vec3 gd = vec3(ray.dir[u] * lod.inv_texel, ray.dir[v] * lod.inv_texel, ray.dir[w]);
+    vec3 inv = rbvh_safe_inverse(gd);
+    // 2. Clip.
+    precise float h_top = float(RBVH_MAX_CODE) * lod.h_scale;
+    precise float slack = RBVH_MARCH_SLACK * (abs(go.z) + h_top) + lod.h_scale;
+    vec3 bmin = vec3(0.0, 0.0, -slack);
+    precise vec3 bmax = vec3(float(lod.res_u), float(lod.res_v), h_top + slack);
+    float t0;
+    if (!rbvh_intersect_box(bmin, bmax, go, inv, ray.tmin, t_closest, t0)) {
+        return -1.0;
+    }
+    precise vec3 e0 = (bmin - go) * inv;
+    precise vec3 e1 = (bmax - go) * inv;
+    vec3 e = max(e0, e1);
+    float t1 = min(min(min(e.x, e.y), e.z), t_closest);
+    // 3. Walk.
+    precise vec3 entry = go + gd * t0;
+    int ci = int(clamp(floor(entry.x), 0.0, float(lod.res_u - 1u)));
+    int cj = int(clamp(floor(entry.y), 0.0, float(lod.res_v - 1u)));
+    int step_i = rbvh_lod_step(gd.x);
+    int step_j = rbvh_lod_step(gd.y);
+    float next_i = rbvh_lod_boundary_t(ci, step_i, go.x, inv.x);
+    float next_j = rbvh_lod_boundary_t(cj, step_j, go.y, inv.y);
+    float t_in = t0;
+    uint limit = lod.res_u + lod.res_v;
+    for (uint n = 0u; n < limit; ++n) {
+        if (t_in > t1) {
+            break;
+        }
+        columns += 1u;
+        float t_out = min(min(next_i, next_j), t1);
+        // 4. Column.
+        uint index = lod.base + 2u * (uint(cj) * lod.res_u + uint(ci));
+        bool inside = index + 1u < lsz.texel_len;
+        uint top_word = inside ? rbvh_lod_texels[index] : RBVH_HOLE_CODE;
+        uint bottom_word = inside ? rbvh_lod_texels[index + 1u] : RBVH_HOLE_CODE;
+        if (!rbvh_is_hole(top_word)) {
+            precise float top = float(top_word & 0xFFFFu) * lod.h_scale;
+            precise float bottom = float(bottom_word & 0xFFFFu) * lod.h_scale;
+            float za = rbvh_height_at(go.z, gd.z, t_in);
+            float zb = rbvh_height_at(go.z, gd.z, t_out);
+            if (max(za, zb) >= bottom && min(za, zb) <= top) {
+                precise float t_top = (top - go.z) * inv.z;
+                precise float t_bottom = (bottom - go.z) * inv.z;
+                precise float to_top = top - za;
+                precise float to_bottom = za - bottom;
+                float t = za > top ? t_top : (za < bottom ? t_bottom : t_in);
+                bool use_top = za > top || (za >= bottom && to_top <= to_bottom);
+                normal = rbvh_decode_normal(use_top ? top_word : bottom_word);
+                return min(max(t, t_in), t_out);
+            }
+        }
+        bool across_i = next_i <= next_j;
+        int step = across_i ? step_i : step_j;
+        if (step == 0) {
+            break;
+        }
+        if (across_i) {
+            ci += step_i;
+            t_in = next_i;
+            if (ci < 0 || ci >= int(lod.res_u)) {
+                break;
+            }
+            next_i = rbvh_lod_boundary_t(ci, step_i, go.x, inv.x);
+        } else {
+            cj += step_j;
+            t_in = next_j;
+            if (cj < 0 || cj >= int(lod.res_v)) {
+                break;
+            }
+            next_j = rbvh_lod_boundary_t(cj, step_j, go.y, inv.y);
+        }
+    }
+    return -1.0;
+}
+
+#endif

@@ -1,0 +1,353 @@
+//! Building the coarse representations: every inner node's columns are filled by *splatting* the
+//! surface samples of its subtree — the height-field samples of its height-field leaves and points
+//! spread over its triangle-leaf triangles — into the column grid over the node's box.
+//!
+//! A sample covers a square patch about one fine texel wide, so it is splatted into every column
+//! its patch overlaps; since columns are at least two fine texels wide, a surface crossing a
+//! column leaves samples in it and the coarse level has no pinholes. A column keeps the lowest and
+//! highest sample along the grid's axis, with their normals, and is solid in between.
+
+use std::time::Instant;
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::layout::{Column, GpuLod, LOD_BIT};
+use super::{Lod, LodParams, LodStats};
+use crate::geom::Aabb;
+use crate::rbvh::{layout::HEIGHTFIELD_COUNT, layout::LEAF_BIT, Rbvh, Texel};
+use crate::{Error, Result};
+
+/// Most points spread along a triangle edge; bounds the work of a huge triangle in a triangle
+/// leaf (its samples are then sparser than a texel, which coarse columns tolerate).
+const MAX_TRIANGLE_DIVISIONS: u32 = 1024;
+
+/// Half the side of the patch a sample stands for, in fine texels. Height-field samples are one
+/// texel apart in their leaf's plane, which is tilted against the column grid, so the patch is
+/// taken a little larger than half a texel.
+const SPLAT_RADIUS: f32 = 0.75;
+
+/// A surface point and its 8:8 octahedral normal.
+#[derive(Clone, Copy)]
+struct Sample {
+    p: Vec3,
+    normal: u16,
+}
+
+impl Lod {
+    /// Builds the coarse representation of every inner node of `rbvh` (see the module docs).
+    pub fn build(rbvh: &Rbvh, params: &LodParams) -> Result<Lod> {
+        params.validate()?;
+        let start = Instant::now();
+        let fine = rbvh.texel_size;
+        if !(fine.is_finite() && fine > 0.0) {
+            return Err(Error::param(
+                "rbvh",
+                format!("texel size {fine} must be finite and positive to build levels of detail"),
+            ));
+        }
+        if rbvh.nodes.len() >= LOD_BIT as usize {
+            return Err(Error::param(
+                "rbvh",
+                format!(
+                    "{} nodes; levels of detail need fewer than {LOD_BIT}",
+                    rbvh.nodes.len()
+                ),
+            ));
+        }
+        let order = subtree_order(rbvh);
+        let sources: Vec<Vec<Sample>> = order.sources.par_iter().map(|s| s.samples(rbvh)).collect();
+        let column_sizes = column_sizes(rbvh, &order);
+        let records: Vec<(GpuLod, Vec<u32>)> = (0..rbvh.nodes.len())
+            .into_par_iter()
+            .map(|n| match order.span[n] {
+                Some((bounds, range)) => coarse_node(
+                    &bounds,
+                    &sources[range.0..range.1],
+                    fine,
+                    column_sizes[n],
+                    params.columns,
+                ),
+                None => (GpuLod::NONE, Vec::new()),
+            })
+            .collect();
+        let mut nodes = Vec::with_capacity(records.len());
+        let mut texels = Vec::new();
+        let mut stats = LodStats::default();
+        for (mut record, words) in records {
+            if record.is_some() {
+                record.base = u32::try_from(texels.len()).map_err(|_| {
+                    Error::param("lod", "more than 2^32 column words; use fewer columns")
+                })?;
+                stats.coarse_nodes += 1;
+                stats.columns += u64::from(record.res_u) * u64::from(record.res_v);
+            }
+            texels.extend(words);
+            nodes.push(record);
+        }
+        stats.build_ms = start.elapsed().as_secs_f64() * 1e3;
+        Ok(Lod {
+            params: *params,
+            nodes,
+            texels,
+            stats,
+        })
+    }
+}
+
+/// Where a node's subtree lies: its box, and the range of [`SubtreeOrder::sources`] below it.
+type Span = Option<(Aabb, (usize, usize))>;
+
+/// The leaves of the tree in depth-first order, so that every node's subtree is one contiguous
+/// range of them.
+struct SubtreeOrder {
+    sources: Vec<Source>,
+    span: Vec<Span>,
+    /// Nodes in the order the walk left them: every child before its parent.
+    post_order: Vec<u32>,
+}
+
+/// A leaf whose surface is splatted.
+#[derive(Clone, Copy)]
+enum Source {
+    Heightfield(u32),
+    Triangles { first: u32, count: u32 },
+}
+
+/// Walks the tree depth first from the root. Every node is entered at most once (a corrupt tree
+/// with shared or cyclic children is cut there), so the walk is bounded by the node count.
+fn subtree_order(rbvh: &Rbvh) -> SubtreeOrder {
+    let n = rbvh.nodes.len();
+    let mut span: Vec<Span> = vec![None; n];
+    let mut sources = Vec::new();
+    let mut entered = vec![false; n];
+    let mut post_order = Vec::with_capacity(n);
+    if n == 0 {
+        return SubtreeOrder {
+            sources,
+            span,
+            post_order,
+        };
+    }
+    // (node, its box, first source) on the way down; the node's span closes on the way up.
+    enum Step {
+        Enter(u32, Aabb),
+        Leave(u32, Aabb, usize),
+    }
+    let mut stack = vec![Step::Enter(0, rbvh.bounds)];
+    while let Some(step) = stack.pop() {
+        match step {
+            Step::Leave(node, bounds, first) => {
+                span[node as usize] = Some((bounds, (first, sources.len())));
+                post_order.push(node);
+            }
+            Step::Enter(node, bounds) => {
+                let Some(gpu) = rbvh.nodes.get(node as usize) else {
+                    continue;
+                };
+                if std::mem::replace(&mut entered[node as usize], true) {
+                    continue;
+                }
+                stack.push(Step::Leave(node, bounds, sources.len()));
+                for c in gpu.children().iter().rev() {
+                    if c.child & LEAF_BIT == 0 {
+                        stack.push(Step::Enter(c.child, c.bounds));
+                    } else if c.count == HEIGHTFIELD_COUNT {
+                        sources.push(Source::Heightfield(c.child & !LEAF_BIT));
+                    } else if c.count > 0 {
+                        sources.push(Source::Triangles {
+                            first: c.child & !LEAF_BIT,
+                            count: c.count,
+                        });
+                    }
+                }
+            }
+        }
+    }
+    SubtreeOrder {
+        sources,
+        span,
+        post_order,
+    }
+}
+
+/// The column width of every node, children first: twice the widest of its inner children's
+/// (leaves count as the fine texel). Each level is thus half as sharp as the one below — a
+/// pyramid, as mip maps are, so that some level fits every footprint between the fine texel and
+/// the whole scene.
+fn column_sizes(rbvh: &Rbvh, order: &SubtreeOrder) -> Vec<f32> {
+    let fine = rbvh.texel_size;
+    let mut size = vec![fine; rbvh.nodes.len()];
+    for &node in &order.post_order {
+        let below = rbvh.nodes[node as usize]
+            .children()
+            .iter()
+            .filter(|c| c.child & LEAF_BIT == 0)
+            .filter_map(|c| size.get(c.child as usize).copied())
+            .fold(fine, f32::max);
+        size[node as usize] = 2.0 * below;
+    }
+    size
+}
+
+impl Source {
+    /// The leaf's surface samples: every sample of a height field (holes excepted) at its world
+    /// position, or points spread over each triangle no further apart than a fine texel.
+    fn samples(&self, rbvh: &Rbvh) -> Vec<Sample> {
+        match *self {
+            Source::Heightfield(leaf) => heightfield_samples(rbvh, leaf),
+            Source::Triangles { first, count } => {
+                let first = first as usize;
+                let end = first
+                    .saturating_add(count as usize)
+                    .min(rbvh.triangles.len());
+                rbvh.triangles
+                    .get(first..end)
+                    .unwrap_or_default()
+                    .iter()
+                    .flat_map(|t| triangle_samples(t.vertices(), rbvh.texel_size))
+                    .collect()
+            }
+        }
+    }
+}
+
+fn heightfield_samples(rbvh: &Rbvh, leaf: u32) -> Vec<Sample> {
+    let Some(hf) = rbvh.leaves.get(leaf as usize) else {
+        return Vec::new();
+    };
+    let (au, av) = (Vec3::from(hf.axis_u), Vec3::from(hf.axis_v));
+    // axis_u = u / texel for a unit u, so u · texel = axis_u / |axis_u|².
+    let (step_u, step_v) = (au / au.length_squared(), av / av.length_squared());
+    let (origin, w) = (Vec3::from(hf.origin), Vec3::from(hf.axis_w) * hf.h_scale);
+    let pitch = rbvh.atlas.pitch as usize;
+    let mut out = Vec::new();
+    for j in 0..hf.res_v as usize {
+        for i in 0..hf.res_u as usize {
+            let index = hf.atlas_base as usize + j * pitch + i;
+            let Some(&texel) = rbvh.atlas.texels.get(index) else {
+                continue;
+            };
+            if texel.is_hole() {
+                continue;
+            }
+            let p = origin
+                + (i as f32 + 0.5) * step_u
+                + (j as f32 + 0.5) * step_v
+                + f32::from(texel.height_code()) * w;
+            if p.is_finite() {
+                out.push(Sample {
+                    p,
+                    normal: (texel.0 >> 16) as u16,
+                });
+            }
+        }
+    }
+    out
+}
+
+fn triangle_samples([a, b, c]: [Vec3; 3], spacing: f32) -> Vec<Sample> {
+    let normal = crate::rbvh::layout::encode_octahedral((b - a).cross(c - a).normalize_or(Vec3::Z));
+    let longest = (b - a).length().max((c - b).length()).max((a - c).length());
+    let divisions = ((longest / spacing).ceil() as u32).clamp(1, MAX_TRIANGLE_DIVISIONS);
+    let mut out = Vec::new();
+    for i in 0..=divisions {
+        for j in 0..=divisions - i {
+            let (s, t) = (i as f32 / divisions as f32, j as f32 / divisions as f32);
+            let p = a + s * (b - a) + t * (c - a);
+            if p.is_finite() {
+                out.push(Sample { p, normal });
+            }
+        }
+    }
+    out
+}
+
+/// The column record of one node over `bounds` and its packed column words, or
+/// [`GpuLod::NONE`] when its subtree has no surface.
+fn coarse_node(
+    bounds: &Aabb,
+    sources: &[Vec<Sample>],
+    fine: f32,
+    texel_size: f32,
+    columns: u32,
+) -> (GpuLod, Vec<u32>) {
+    if bounds.is_empty() || sources.iter().all(Vec::is_empty) {
+        return (GpuLod::NONE, Vec::new());
+    }
+    let extent = bounds.extent();
+    let w = if extent.x <= extent.y && extent.x <= extent.z {
+        0
+    } else if extent.y <= extent.z {
+        1
+    } else {
+        2
+    };
+    let (u, v) = ((w + 1) % 3, (w + 2) % 3);
+    if !(texel_size.is_finite() && texel_size > 0.0) {
+        return (GpuLod::NONE, Vec::new());
+    }
+    let res = |axis: usize| ((extent[axis] / texel_size).ceil() as u32).max(1);
+    let (res_u, res_v) = (res(u), res(v));
+    // A grid does not skip empty space as a tree does: a ray may walk all its columns. Only a node
+    // that the ray sees at most `columns` footprints wide is worth marching instead of descending.
+    if res_u > columns || res_v > columns {
+        return (GpuLod::NONE, Vec::new());
+    }
+    let origin = bounds.min;
+    let radius = SPLAT_RADIUS * fine;
+    // Per column: (lowest height, its normal, highest height, its normal).
+    let mut acc = vec![(f32::INFINITY, 0u16, f32::NEG_INFINITY, 0u16); (res_u * res_v) as usize];
+    let cell = |x: f32, res: u32| ((x / texel_size).floor().max(0.0) as u32).min(res - 1);
+    for s in sources.iter().flatten() {
+        let rel = s.p - origin;
+        let (i0, i1) = (cell(rel[u] - radius, res_u), cell(rel[u] + radius, res_u));
+        let (j0, j1) = (cell(rel[v] - radius, res_v), cell(rel[v] + radius, res_v));
+        let h = rel[w];
+        for j in j0..=j1 {
+            for i in i0..=i1 {
+                let a = &mut acc[(j * res_u + i) as usize];
+                if h < a.0 {
+                    (a.0, a.1) = (h, s.normal);
+                }
+                if h > a.2 {
+                    (a.2, a.3) = (h, s.normal);
+                }
+            }
+        }
+    }
+    let h_scale = extent[w] / f32::from(Texel::MAX_CODE);
+    let code = |h: f32, up: bool| -> u16 {
+        if h_scale > 0.0 {
+            let q = h / h_scale;
+            let q = if up { q.ceil() } else { q.floor() };
+            q.clamp(0.0, f32::from(Texel::MAX_CODE)) as u16
+        } else {
+            0
+        }
+    };
+    let mut words = Vec::with_capacity(acc.len() * 2);
+    for &(lo, lo_n, hi, hi_n) in &acc {
+        let column = if lo <= hi {
+            Column {
+                top: Texel(u32::from(code(hi, true)) | u32::from(hi_n) << 16),
+                bottom: Texel(u32::from(code(lo, false)) | u32::from(lo_n) << 16),
+            }
+        } else {
+            Column::EMPTY
+        };
+        words.extend([column.top.0, column.bottom.0]);
+    }
+    let record = GpuLod {
+        origin: origin.to_array(),
+        texel_size,
+        axis: w as u32,
+        res_u,
+        res_v,
+        base: 0,
+        h_scale,
+        inv_texel: 1.0 / texel_size,
+        pad: [0; 2],
+    };
+    (record, words)
+}

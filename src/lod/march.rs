@@ -1,0 +1,154 @@
+//! CPU reference of the column march of a coarse representation (`glsl/lod.glsl` mirrors it step
+//! for step):
+//!
+//! 1. **Grid space**: `x`, `y` in columns from the record's origin along `u`, `v`; `z` in world
+//!    units along `w`. The map is affine, so `t` is shared with the world ray.
+//! 2. **Clip** to the grid's box `[0, res_u] × [0, res_v] × [0, MAX_CODE·h_scale]`, padded in `z`.
+//! 3. **Walk** the columns the ray crosses with the 2D DDA of Amanatides & Woo (1987).
+//! 4. **Column**: solid between its bottom and top; the ray hits it where its height over the
+//!    column's stretch `[t_in, t_out]` first lies in that range — through the top (top normal),
+//!    the bottom (bottom normal) or a side (the normal of the nearer of the two).
+//!
+//! Every index is checked (out of range = empty) and the walk is bounded by the column count.
+
+use glam::Vec3;
+
+use super::layout::GpuLod;
+use crate::geom::{safe_inverse, Aabb, Ray};
+use crate::rbvh::layout::{decode_octahedral, MARCH_SLACK};
+use crate::rbvh::Texel;
+
+/// Marches `lod`'s columns (words in `texels`) over `[tmin, t_closest)`; returns the hit distance
+/// and world normal. `columns` counts the columns visited.
+pub(crate) fn march(
+    lod: &GpuLod,
+    texels: &[u32],
+    ray: &Ray,
+    t_closest: f32,
+    columns: &mut u32,
+) -> Option<(f32, Vec3)> {
+    if !lod.is_some() || lod.res_u == 0 || lod.res_v == 0 || lod.axis > 2 {
+        return None;
+    }
+    let last = u64::from(lod.base) + 2 * u64::from(lod.res_u) * u64::from(lod.res_v);
+    if last > texels.len() as u64 {
+        return None;
+    }
+    // 1. Grid space.
+    let [u, v, w] = lod.axes();
+    let (o, d, origin) = (ray.origin(), ray.dir(), Vec3::from(lod.origin));
+    let go = Vec3::new(
+        (o[u] - origin[u]) * lod.inv_texel,
+        (o[v] - origin[v]) * lod.inv_texel,
+        o[w] - origin[w],
+    );
+    let gd = Vec3::new(d[u] * lod.inv_texel, d[v] * lod.inv_texel, d[w]);
+    let inv = safe_inverse(gd);
+    // 2. Clip.
+    let h_top = f32::from(Texel::MAX_CODE) * lod.h_scale;
+    let slack = MARCH_SLACK * (go.z.abs() + h_top) + lod.h_scale;
+    let grid = Aabb {
+        min: Vec3::new(0.0, 0.0, -slack),
+        max: Vec3::new(lod.res_u as f32, lod.res_v as f32, h_top + slack),
+    };
+    let t0 = grid.intersect(go, inv, ray.tmin, t_closest)?;
+    let e0 = (grid.min - go) * inv;
+    let e1 = (grid.max - go) * inv;
+    let t1 = e0.max(e1).min_element().min(t_closest);
+    // 3. Walk.
+    let entry = go + gd * t0;
+    let mut ci = start_column(entry.x, lod.res_u);
+    let mut cj = start_column(entry.y, lod.res_v);
+    let step_i = step_of(gd.x);
+    let step_j = step_of(gd.y);
+    let mut next_i = boundary_t(ci, step_i, go.x, inv.x);
+    let mut next_j = boundary_t(cj, step_j, go.y, inv.y);
+    let mut t_in = t0;
+    for _ in 0..lod.res_u + lod.res_v {
+        if t_in > t1 {
+            break;
+        }
+        *columns += 1;
+        let t_out = next_i.min(next_j).min(t1);
+        // 4. Column.
+        if let Some(column) = lod.column(texels, ci as u32, cj as u32) {
+            if !column.is_empty() {
+                let top = f32::from(column.top.height_code()) * lod.h_scale;
+                let bottom = f32::from(column.bottom.height_code()) * lod.h_scale;
+                let za = height_at(go.z, gd.z, t_in);
+                let zb = height_at(go.z, gd.z, t_out);
+                if za.max(zb) >= bottom && za.min(zb) <= top {
+                    let (t, texel) = if za > top {
+                        ((top - go.z) * inv.z, column.top)
+                    } else if za < bottom {
+                        ((bottom - go.z) * inv.z, column.bottom)
+                    } else if top - za <= za - bottom {
+                        (t_in, column.top)
+                    } else {
+                        (t_in, column.bottom)
+                    };
+                    return Some((
+                        t.max(t_in).min(t_out),
+                        decode_octahedral((texel.0 >> 16) as u16),
+                    ));
+                }
+            }
+        }
+        let across_i = next_i <= next_j;
+        let step = if across_i { step_i } else { step_j };
+        if step == 0 {
+            break;
+        }
+        if across_i {
+            ci += step_i;
+            t_in = next_i;
+            if ci < 0 || ci >= i64::from(lod.res_u) {
+                break;
+            }
+            next_i = boundary_t(ci, step_i, go.x, inv.x);
+        } else {
+            cj += step_j;
+            t_in = next_j;
+            if cj < 0 || cj >= i64::from(lod.res_v) {
+                break;
+            }
+            next_j = boundary_t(cj, step_j, go.y, inv.y);
+        }
+    }
+    None
+}
+
+/// The column holding grid coordinate `x`, clamped to the grid (NaN → 0).
+fn start_column(x: f32, res: u32) -> i64 {
+    (x.floor() as i64).clamp(0, i64::from(res) - 1)
+}
+
+fn step_of(d: f32) -> i64 {
+    if d > 0.0 {
+        1
+    } else if d < 0.0 {
+        -1
+    } else {
+        0
+    }
+}
+
+/// Where the ray leaves column `c` along one axis; `+inf` along an axis it never steps.
+fn boundary_t(c: i64, step: i64, o: f32, inv: f32) -> f32 {
+    if step > 0 {
+        ((c + 1) as f32 - o) * inv
+    } else if step < 0 {
+        (c as f32 - o) * inv
+    } else {
+        f32::INFINITY
+    }
+}
+
+/// The ray's height at `t`; exactly `o` for a ray parallel to the grid (no `0 · ∞`).
+fn height_at(o: f32, d: f32, t: f32) -> f32 {
+    if d == 0.0 {
+        o
+    } else {
+        o + d * t
+    }
+}

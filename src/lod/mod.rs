@@ -1,0 +1,105 @@
+//! Per-ray level of detail for an RBVH: coarse representations at inner nodes, chosen per ray by its
+//! footprint (a ray cone), so that distant geometry ends traversal early.
+//!
+//! The talk of Novák & Dachsbacher (2012) shows level of detail as an application of RBVHs; this is
+//! our reading of it. An inner node of the RBVH may carry a *coarse* representation: a grid of
+//! solid columns along the node box's thinnest world axis, each filled between the lowest and the
+//! highest surface sample of the node's subtree that falls into it (two height fields back to
+//! back, see [`layout::GpuLod`]). Column widths form a pyramid over the leaves, as mip maps do:
+//! a node's columns are twice as wide as the widest of its children's (leaves: the RBVH's texel).
+//! Only nodes whose grid has at most [`LodParams::columns`] columns a side get one, because a grid
+//! does not skip empty space the way the tree does. While traversing, an inner child whose column
+//! is no wider than the ray's cone at the child's box entry ([`cone::selects`]) is not descended
+//! into: its columns are marched instead (`glsl/lod.glsl`, `march`). Subtrees a ray sees at less
+//! than a column per footprint thus cost one short march instead of a descent through many leaves.
+//!
+//! The data is built from a finished RBVH ([`Lod::build`]), not from the scene: it approximates the
+//! RBVH's own surface (height-field samples and triangle-leaf triangles), works for RBVHs loaded
+//! from files, and exists only when asked for — a trace without `--lod` allocates nothing.
+//!
+//! * [`cone`]: ray cones and the selection rule;
+//! * `build`: splatting the subtree's surface samples into each node's columns;
+//! * [`layout`]: the records the GPU reads;
+//! * `march`: the CPU reference of the column march (the traversal hook is in `rbvh::march`).
+
+mod build;
+pub mod cone;
+pub mod layout;
+pub(crate) mod march;
+
+pub use cone::{selects, RayCone};
+pub use layout::{Column, GpuLod, LOD_BIT};
+
+use crate::{Error, Result};
+
+/// How the coarse levels are made.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LodParams {
+    /// Most columns along a side of a node's grid: a node whose grid would be wider gets no
+    /// coarse representation (rays descend to its children). A grid does not skip empty space as
+    /// the tree does, so marching a wide one costs more than it saves; fewer columns also cost
+    /// less memory, but select coarse nodes only for smaller footprints-per-node.
+    pub columns: u32,
+}
+
+impl Default for LodParams {
+    fn default() -> Self {
+        LodParams { columns: 8 }
+    }
+}
+
+impl LodParams {
+    pub fn validate(&self) -> Result<()> {
+        if !(1..=256).contains(&self.columns) {
+            return Err(Error::param(
+                "lod columns",
+                format!("{} is outside 1..=256", self.columns),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The coarse representations of one RBVH's inner nodes, in the packed form the GPU reads.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Lod {
+    pub params: LodParams,
+    /// One record per RBVH node, in node order ([`GpuLod::NONE`] for a node without one).
+    pub nodes: Vec<GpuLod>,
+    /// Column words of all records, two per column.
+    pub texels: Vec<u32>,
+    pub stats: LodStats,
+}
+
+/// Accounting of one build.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LodStats {
+    pub build_ms: f64,
+    /// Nodes with a coarse representation.
+    pub coarse_nodes: u32,
+    /// Columns over all nodes.
+    pub columns: u64,
+}
+
+impl Lod {
+    /// Bytes on the device: the per-node records and the columns.
+    /// Checks that this was built for `rbvh` (one record per node).
+    pub fn check_for(&self, rbvh: &crate::rbvh::Rbvh) -> Result<()> {
+        if self.nodes.len() != rbvh.nodes.len() {
+            return Err(Error::param(
+                "lod",
+                format!(
+                    "built for a tree of {} nodes, used with one of {}",
+                    self.nodes.len(),
+                    rbvh.nodes.len()
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    pub fn bytes(&self) -> u64 {
+        (std::mem::size_of_val(self.nodes.as_slice())
+            + std::mem::size_of_val(self.texels.as_slice())) as u64
+    }
+}

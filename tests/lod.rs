@@ -1,0 +1,283 @@
+//! Level of detail (`src/lod`): GPU and CPU casters agree with LOD on; LOD with point cones is the
+//! plain RBVH bit for bit; on the many-distances scene "grove" the LOD render stays near the fine
+//! render and is never worse than the coarse preset; bad input is refused with typed errors.
+//! (Speed is measured by `rbvh bench --lod`, not here.)
+
+mod common;
+
+use rbvh::bench::metrics::image_errors;
+use rbvh::bvh::Bvh;
+use rbvh::geom::{Hit, Ray};
+use rbvh::gpu::{Query, Tracer};
+use rbvh::lod::{Lod, LodParams, RayCone};
+use rbvh::output;
+use rbvh::rbvh::{Rbvh, RbvhParams};
+use rbvh::scene::Scene;
+use rbvh::Error;
+
+const W: u32 = 160;
+const H: u32 = 120;
+
+fn view(scene: &Scene) -> (Vec<Ray>, Vec<RayCone>) {
+    let camera = scene.camera_or_framed(W as f32 / H as f32);
+    let rays = camera.primary_rays(W, H);
+    let cones = vec![RayCone::pixel(&camera, H); rays.len()];
+    (rays, cones)
+}
+
+fn shade(rays: &[Ray], hits: &[Hit]) -> output::Image {
+    output::shade(rays, hits, W, H, None).unwrap()
+}
+
+fn mean(v: &[u32]) -> f64 {
+    v.iter().map(|&x| f64::from(x)).sum::<f64>() / v.len() as f64
+}
+
+/// A fine level four times sharper than Q4, where distant copies are oversampled many times over.
+fn fine_params() -> RbvhParams {
+    RbvhParams {
+        texels_per_diagonal: 4096.0,
+        ..RbvhParams::quality(4).unwrap()
+    }
+}
+
+#[test]
+fn grove_lod_is_near_fine_never_worse_than_coarse_and_ends_traversal_sooner() {
+    let ctx = common::context();
+    let scene = Scene::builtin("grove").unwrap();
+    let (rays, cones) = view(&scene);
+    let exact = Tracer::exact(&ctx, &Bvh::build(&scene).unwrap())
+        .unwrap()
+        .trace(&rays, Query::Closest)
+        .unwrap();
+    let fine = Rbvh::build(&scene, &fine_params()).unwrap();
+    let coarse = Rbvh::build(&scene, &RbvhParams::quality(0).unwrap()).unwrap();
+    let lod = Lod::build(&fine, &LodParams::default()).unwrap();
+    let fine_traced = Tracer::rbvh(&ctx, &fine)
+        .unwrap()
+        .trace_with(&rays, Query::Closest, true)
+        .unwrap();
+    let coarse_traced = Tracer::rbvh(&ctx, &coarse)
+        .unwrap()
+        .trace(&rays, Query::Closest)
+        .unwrap();
+    let lod_traced = Tracer::rbvh_lod(&ctx, &fine, &lod)
+        .unwrap()
+        .trace_lod(&rays, &cones, Query::Closest, true)
+        .unwrap();
+    let reference = shade(&rays, &exact.hits);
+    let fine_image = shade(&rays, &fine_traced.hits);
+    let lod_image = shade(&rays, &lod_traced.hits);
+    let lod_vs_fine = image_errors(&fine_image, &lod_image).unwrap().flip_mean;
+    let lod_vs_exact = image_errors(&reference, &lod_image).unwrap().flip_mean;
+    let coarse_vs_exact = image_errors(&reference, &shade(&rays, &coarse_traced.hits))
+        .unwrap()
+        .flip_mean;
+    let (fine_steps, lod_steps) = (
+        mean(fine_traced.steps.as_ref().unwrap()),
+        mean(lod_traced.steps.as_ref().unwrap()),
+    );
+    let coarse_hits = lod_traced
+        .hits
+        .iter()
+        .filter(|h| h.is_hit() && h.id & rbvh::lod::LOD_BIT != 0)
+        .count();
+    println!(
+        "grove {W}x{H}: FLIP vs exact: LOD {lod_vs_exact:.4}, coarse Q0 {coarse_vs_exact:.4}; LOD vs \
+         fine {lod_vs_fine:.4}; steps/ray fine {fine_steps:.1}, LOD {lod_steps:.1}; {coarse_hits} \
+         pixels on coarse nodes; LOD {} nodes, {} KiB beside the RBVH's {} KiB",
+        lod.stats.coarse_nodes,
+        lod.bytes() / 1024,
+        fine.total_bytes() / 1024,
+    );
+    if let Ok(dir) = std::env::var("RBVH_LOD_IMAGES") {
+        let dir = std::path::Path::new(&dir);
+        output::write_png(&dir.join("grove_fine.png"), &fine_image).unwrap();
+        output::write_png(&dir.join("grove_lod.png"), &lod_image).unwrap();
+        output::write_png(&dir.join("grove_exact.png"), &reference).unwrap();
+        let heat = |s: &[u32]| output::heatmap(s, W, H, Some(120)).unwrap();
+        output::write_png(
+            &dir.join("grove_fine_steps.png"),
+            &heat(fine_traced.steps.as_ref().unwrap()),
+        )
+        .unwrap();
+        output::write_png(
+            &dir.join("grove_lod_steps.png"),
+            &heat(lod_traced.steps.as_ref().unwrap()),
+        )
+        .unwrap();
+    }
+    // Measured: 304 pixels, LOD vs fine 0.0096, LOD vs exact 0.0205, Q0 vs exact 0.0792, steps
+    // 23.3 vs 23.8.
+    assert!(coarse_hits > 150, "the footprint picks coarse nodes");
+    assert!(lod_vs_fine < 0.015, "LOD vs fine FLIP {lod_vs_fine}");
+    assert!(
+        lod_vs_exact <= coarse_vs_exact,
+        "LOD ({lod_vs_exact}) looks worse than Q0 ({coarse_vs_exact})"
+    );
+    assert!(lod_steps < fine_steps, "{lod_steps} vs {fine_steps}");
+}
+
+/// Primary rays with cones 1, 8 and 64 pixels wide, and random rays with random cones.
+fn rays_and_cones(scene: &Scene, side: u32, random: usize, seed: u64) -> (Vec<Ray>, Vec<RayCone>) {
+    let camera = scene.camera_or_framed(1.0);
+    let primary = camera.primary_rays(side, side);
+    let pixel = RayCone::pixel(&camera, side);
+    let mut rays = Vec::new();
+    let mut cones = Vec::new();
+    for scale in [1.0, 8.0, 64.0] {
+        rays.extend_from_slice(&primary);
+        cones.extend(std::iter::repeat_n(
+            RayCone {
+                width: 0.0,
+                spread: pixel.spread * scale,
+            },
+            primary.len(),
+        ));
+    }
+    let b = scene.bounds();
+    let (c, r) = (b.center(), 0.5 * b.diagonal());
+    let mut rng = common::Rng(seed);
+    for _ in 0..random {
+        let origin = c + rng.unit_vector() * r * (0.3 + 1.5 * rng.next_f32());
+        let target = c + rng.unit_vector() * r * 0.5;
+        rays.push(Ray::new(origin, target - origin, 0.0, f32::INFINITY));
+        cones.push(RayCone {
+            width: rng.next_f32() * 0.05 * r,
+            spread: rng.next_f32() * 0.05,
+        });
+    }
+    (rays, cones)
+}
+
+#[test]
+fn gpu_and_cpu_agree_with_lod_and_point_cones_change_nothing() {
+    let ctx = common::context();
+    let (mut total, mut hit_miss, mut coarse) = (0usize, 0usize, 0usize);
+    for (k, (name, level)) in [("default", 2), ("blob", 4), ("default", 4), ("sphere", 0)]
+        .into_iter()
+        .enumerate()
+    {
+        let scene = Scene::builtin(name).unwrap();
+        let r = Rbvh::build(&scene, &RbvhParams::quality(level).unwrap()).unwrap();
+        let lod = Lod::build(&r, &LodParams::default()).unwrap();
+        let tracer = Tracer::rbvh_lod(&ctx, &r, &lod).unwrap();
+        let (rays, cones) = rays_and_cones(&scene, 96, 4000, k as u64);
+        for (query, any) in [(Query::Closest, false), (Query::Any, true)] {
+            let gpu = tracer.trace_lod(&rays, &cones, query, false).unwrap().hits;
+            let cpu = r.trace_cpu_lod(&lod, &rays, &cones, any).unwrap();
+            for (i, (g, c)) in gpu.iter().zip(&cpu).enumerate() {
+                total += 1;
+                coarse += usize::from(c.is_hit() && c.id & rbvh::lod::LOD_BIT != 0);
+                if g.is_hit() != c.is_hit() {
+                    hit_miss += 1;
+                    continue;
+                }
+                if !g.is_hit() || any {
+                    continue;
+                }
+                let rel = (g.t - c.t).abs() / c.t.abs().max(1e-30);
+                assert!(
+                    rel <= 1e-4,
+                    "{name} Q{level} ray {i}: t GPU {} vs CPU {}",
+                    g.t,
+                    c.t
+                );
+                assert!(
+                    g.normal().dot(c.normal()) > 1.0 - 1e-3,
+                    "{name} Q{level} ray {i}: normals"
+                );
+            }
+        }
+        // With point cones nothing is coarse: the plain RBVH's hits, bit for bit.
+        let points = vec![RayCone::POINT; rays.len()];
+        let plain = Tracer::rbvh(&ctx, &r)
+            .unwrap()
+            .trace(&rays, Query::Closest)
+            .unwrap()
+            .hits;
+        let pointed = tracer
+            .trace_lod(&rays, &points, Query::Closest, false)
+            .unwrap()
+            .hits;
+        assert_eq!(plain, pointed, "{name} Q{level}: GPU");
+        assert_eq!(
+            r.trace_cpu(&rays, false),
+            r.trace_cpu_lod(&lod, &rays, &points, false).unwrap(),
+            "{name} Q{level}: CPU"
+        );
+    }
+    println!(
+        "GPU/CPU LOD agreement: {total} rays, {hit_miss} hit/miss disagreements ({:.2e}), {coarse} hits on coarse nodes",
+        hit_miss as f64 / total as f64
+    );
+    assert!(total >= 100_000);
+    assert!(coarse > 1000, "the cones pick coarse nodes");
+    assert!(
+        (hit_miss as f64) < 1e-4 * total as f64,
+        "{hit_miss} of {total}"
+    );
+}
+
+#[test]
+fn lod_refuses_mismatched_input() {
+    let ctx = common::context();
+    let scene = Scene::builtin("sphere").unwrap();
+    let r = Rbvh::build(&scene, &RbvhParams::quality(1).unwrap()).unwrap();
+    let other = Rbvh::build(
+        &Scene::builtin("blob").unwrap(),
+        &RbvhParams::quality(1).unwrap(),
+    )
+    .unwrap();
+    let lod = Lod::build(&r, &LodParams::default()).unwrap();
+    let (rays, cones) = rays_and_cones(&scene, 8, 0, 1);
+    let is_param = |e: Error, what: &str| {
+        assert!(
+            matches!(e, Error::InvalidParameter { .. }) && e.to_string().contains(what),
+            "{e}"
+        )
+    };
+    is_param(Tracer::rbvh_lod(&ctx, &other, &lod).err().unwrap(), "nodes");
+    is_param(
+        other.trace_cpu_lod(&lod, &rays, &cones, false).unwrap_err(),
+        "nodes",
+    );
+    let tracer = Tracer::rbvh_lod(&ctx, &r, &lod).unwrap();
+    is_param(
+        tracer
+            .trace_lod(&rays, &cones[1..], Query::Closest, false)
+            .unwrap_err(),
+        "cones",
+    );
+    let mut bad = cones.clone();
+    bad[3].spread = f32::NAN;
+    is_param(
+        tracer
+            .trace_lod(&rays, &bad, Query::Closest, false)
+            .unwrap_err(),
+        "cone 3",
+    );
+    bad[3] = RayCone {
+        width: -1.0,
+        spread: 0.0,
+    };
+    is_param(
+        r.trace_cpu_lod(&lod, &rays, &bad, false).unwrap_err(),
+        "cone 3",
+    );
+    is_param(
+        tracer.trace(&rays, Query::Closest).unwrap_err(),
+        "trace_lod",
+    );
+    let plain = Tracer::rbvh(&ctx, &r).unwrap();
+    is_param(
+        plain
+            .trace_lod(&rays, &cones, Query::Closest, false)
+            .unwrap_err(),
+        "levels of detail",
+    );
+    is_param(
+        Lod::build(&r, &LodParams { columns: 0 }).unwrap_err(),
+        "columns",
+    );
+}
