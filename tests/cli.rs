@@ -291,3 +291,82 @@ fn a_scene_far_from_the_origin_is_reported() {
         "{stderr}"
     );
 }
+
+#[test]
+fn render_and_trace_with_level_of_detail() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("lod.png");
+    let out = rbvh(&[
+        "render",
+        "--scene",
+        "blob",
+        "--method",
+        "rbvh",
+        "--quality",
+        "3",
+        "--lod",
+        "--stats",
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--out",
+        arg(&png),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(png.exists());
+    assert!(
+        err.contains("levels of detail:") && err.contains("LOD speedup"),
+        "{err}"
+    );
+
+    let (rays_path, hits_path) = (dir.path().join("r.bin"), dir.path().join("h.bin"));
+    let rays: Vec<Ray> = (0..50)
+        .map(|i| {
+            let x = -1.0 + i as f32 * 0.04;
+            Ray::new(
+                glam::Vec3::new(x, 0.1, 20.0),
+                glam::Vec3::NEG_Z,
+                0.0,
+                f32::INFINITY,
+            )
+        })
+        .collect();
+    io::write_rays(&rays_path, &rays).unwrap();
+    for cpu in [false, true] {
+        let mut args = vec![
+            "trace",
+            "--scene",
+            "blob",
+            "--method",
+            "rbvh",
+            "--lod",
+            "--lod-spread",
+            "0.05",
+            "--rays",
+            arg(&rays_path),
+            "--hits",
+            arg(&hits_path),
+        ];
+        if cpu {
+            args.push("--cpu");
+        }
+        let out = rbvh(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let hits: Vec<Hit> = io::read_hits(&hits_path).unwrap();
+        assert!(
+            hits.iter()
+                .any(|h| h.is_hit() && h.id & rbvh::lod::LOD_BIT != 0),
+            "cpu {cpu}"
+        );
+    }
+
+    let out = rbvh(&["render", "--scene", "blob", "--lod", "--out", arg(&png)]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--lod needs an RBVH"));
+}

@@ -10,6 +10,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rbvh::bvh::Bvh;
 use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{Context, ContextOptions, Query, Traced, Tracer, Validation};
+use rbvh::lod::{Lod, LodParams, RayCone};
 use rbvh::rbvh::Rbvh;
 use rbvh::scene::Scene;
 
@@ -36,6 +37,23 @@ pub struct Common {
     /// Print timings and ray throughput (for --method rbvh also the exact BVH's on the same rays).
     #[arg(long)]
     pub stats: bool,
+    #[command(flatten)]
+    pub lod: LodArgs,
+}
+
+/// Level of detail (RBVH only): coarse column grids at inner nodes, chosen per ray by its cone.
+#[derive(Args, Clone, Debug)]
+pub struct LodArgs {
+    /// Trace with level of detail: each ray uses the coarsest representation whose texel fits its
+    /// footprint (a pixel's cone for render; --lod-spread for trace).
+    #[arg(long)]
+    pub lod: bool,
+    /// Most columns along a side of a coarse node's grid.
+    #[arg(long, default_value_t = LodParams::default().columns, requires = "lod")]
+    pub lod_columns: u32,
+    /// Cone spread of rays from a file (radians per unit of t; their width at t = 0 is 0).
+    #[arg(long, default_value_t = 1e-3, requires = "lod")]
+    pub lod_spread: f32,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -72,7 +90,45 @@ impl Structure {
 pub struct Prepared {
     pub scene: Scene,
     pub structure: Structure,
+    /// Levels of detail of the RBVH, with `--lod`.
+    pub lod: Option<Lod>,
     pub ctx: Context,
+}
+
+impl Prepared {
+    /// The structure uploaded, with its levels of detail when there are any.
+    pub fn tracer(&self) -> Result<Tracer> {
+        match (&self.structure, &self.lod) {
+            (Structure::Rbvh(r), Some(lod)) => Tracer::rbvh_lod(&self.ctx, r, lod)
+                .context("uploading the RBVH and its levels of detail"),
+            _ => self.structure.tracer(&self.ctx),
+        }
+    }
+
+    /// Traces `rays` through `tracer` (from [`Prepared::tracer`]); `cones` gives their footprints
+    /// when tracing with level of detail.
+    pub fn trace(
+        &self,
+        tracer: &Tracer,
+        rays: &[Ray],
+        cones: impl FnOnce() -> Vec<RayCone>,
+        query: Query,
+        steps: bool,
+    ) -> Result<Traced> {
+        Ok(if self.lod.is_some() {
+            tracer.trace_lod(rays, &cones(), query, steps)?
+        } else {
+            tracer.trace_with(rays, query, steps)?
+        })
+    }
+
+    /// The CPU reference of [`Prepared::trace`].
+    pub fn trace_cpu(&self, rays: &[Ray], cones: &[RayCone], any_hit: bool) -> Result<Vec<Hit>> {
+        match (&self.structure, &self.lod) {
+            (Structure::Rbvh(r), Some(lod)) => Ok(r.trace_cpu_lod(lod, rays, cones, any_hit)?),
+            _ => Ok(self.structure.trace_cpu(rays, any_hit)),
+        }
+    }
 }
 
 /// The device the user named (`--device`, else `RBVH_DEVICE`), with validation required by
@@ -125,6 +181,20 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
             })?))
         }
     };
+    let lod = match (&structure, c.lod.lod) {
+        (_, false) => None,
+        (Structure::Exact(_), true) => {
+            anyhow::bail!("--lod needs an RBVH: add --method rbvh (or --rbvh FILE)")
+        }
+        (Structure::Rbvh(r), true) => {
+            let params = LodParams {
+                columns: c.lod.lod_columns,
+            };
+            Some(step("building levels of detail", || {
+                Lod::build(r, &params)
+            })?)
+        }
+    };
     let ctx = Context::new(&context_options(c.device.as_deref(), c.validate))
         .context("creating the Vulkan device")?;
     if c.stats {
@@ -155,22 +225,39 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
                 r.triangle_bytes()
             ),
         }
+        if let Some(lod) = &lod {
+            eprintln!(
+                "levels of detail: {} coarse nodes, {} columns, built in {:.1} ms, {} bytes",
+                lod.stats.coarse_nodes,
+                lod.stats.columns,
+                lod.stats.build_ms,
+                lod.bytes()
+            );
+        }
         eprintln!("device: {} ({})", ctx.device_name(), ctx.driver());
     }
     Ok(Prepared {
         scene,
         structure,
+        lod,
         ctx,
     })
 }
 
 /// `--stats` after a trace: GPU MRays/s, the CPU reference's on the same rays and their ratio;
-/// for an RBVH also the exact BVH's GPU MRays/s on the same rays, and the speedup.
-pub fn report_throughput(p: &Prepared, rays: &[Ray], query: Query, traced: &Traced) -> Result<()> {
+/// for an RBVH also the exact BVH's GPU MRays/s on the same rays, and the speedup; with level of
+/// detail also the RBVH's without it.
+pub fn report_throughput(
+    p: &Prepared,
+    rays: &[Ray],
+    cones: &[RayCone],
+    query: Query,
+    traced: &Traced,
+) -> Result<()> {
     let mrays = |ms: f64| rays.len() as f64 / (ms * 1e3);
     let any = query == Query::Any;
     let t = Instant::now();
-    std::hint::black_box(p.structure.trace_cpu(rays, any));
+    std::hint::black_box(p.trace_cpu(rays, cones, any)?);
     let cpu_ms = t.elapsed().as_secs_f64() * 1e3;
     let Some(gpu_ms) = traced.timing.gpu_ms else {
         eprintln!(
@@ -189,6 +276,16 @@ pub fn report_throughput(p: &Prepared, rays: &[Ray], query: Query, traced: &Trac
         mrays(cpu_ms),
         cpu_ms / gpu_ms
     );
+    if let (Structure::Rbvh(r), Some(_)) = (&p.structure, &p.lod) {
+        let plain = Tracer::rbvh(&p.ctx, r)?.trace(rays, query)?;
+        if let Some(plain_ms) = plain.timing.gpu_ms {
+            eprintln!(
+                "same RBVH without level of detail: GPU {plain_ms:.2} ms = {:.2} MRays/s; LOD speedup {:.2}x",
+                mrays(plain_ms),
+                plain_ms / gpu_ms
+            );
+        }
+    }
     if let Structure::Rbvh(_) = p.structure {
         let bvh = Bvh::build(&p.scene)?;
         let exact = Tracer::exact(&p.ctx, &bvh)?.trace(rays, query)?;

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::{ensure, Result};
 use clap::ValueEnum;
 use rbvh::gpu::Query;
+use rbvh::lod::RayCone;
 use rbvh::output;
 
 use crate::prepare::{prepare, report_steps, report_throughput, step, Common};
@@ -49,12 +50,13 @@ pub fn run(a: Args) -> Result<()> {
     let p = prepare(&a.common)?;
     let camera = p.scene.camera_or_framed(a.width as f32 / a.height as f32);
     let rays = camera.primary_rays(a.width, a.height);
-    let tracer = p.structure.tracer(&p.ctx)?;
+    let tracer = p.tracer()?;
+    let cones = || vec![RayCone::pixel(&camera, a.height); rays.len()];
     let traced = step("tracing", || {
-        tracer.trace_with(&rays, Query::Closest, a.heatmap.is_some())
+        p.trace(&tracer, &rays, cones, Query::Closest, a.heatmap.is_some())
     })?;
     if a.common.stats {
-        report_throughput(&p, &rays, Query::Closest, &traced)?;
+        report_throughput(&p, &rays, &cones(), Query::Closest, &traced)?;
         if let Some(steps) = &traced.steps {
             report_steps(steps);
         }

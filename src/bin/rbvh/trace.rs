@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use rbvh::gpu::Query;
 use rbvh::io;
+use rbvh::lod::RayCone;
 
 use crate::prepare::{prepare, report_throughput, step, Common};
 
@@ -34,13 +35,22 @@ pub fn run(a: Args) -> Result<()> {
     } else {
         Query::Closest
     };
+    let cones = vec![
+        RayCone {
+            width: 0.0,
+            spread: a.common.lod.lod_spread,
+        };
+        if p.lod.is_some() { rays.len() } else { 0 }
+    ];
     let hits = if a.cpu {
-        p.structure.trace_cpu(&rays, a.any_hit)
+        p.trace_cpu(&rays, &cones, a.any_hit)?
     } else {
-        let tracer = p.structure.tracer(&p.ctx)?;
-        let traced = step("tracing", || tracer.trace(&rays, query))?;
+        let tracer = p.tracer()?;
+        let traced = step("tracing", || {
+            p.trace(&tracer, &rays, || cones.clone(), query, false)
+        })?;
         if a.common.stats {
-            report_throughput(&p, &rays, query, &traced)?;
+            report_throughput(&p, &rays, &cones, query, &traced)?;
         }
         traced.hits
     };
