@@ -200,6 +200,29 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
 }
 
 #[test]
+fn lod_adds_a_valid_rbvh_lod_record_per_level_and_ray_type() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut config = small_config(Some(dir.path()));
+    config.levels = vec![Level::Preset(4)];
+    config.lod = Some(rbvh::lod::LodParams::default());
+    let report = bench::run(&config).unwrap();
+    assert_eq!(report.results.len(), 3 * 4);
+    for (chunk, ray_type) in report.results.chunks(3).zip(RayType::ALL) {
+        let methods: Vec<_> = chunk.iter().map(|r| r.method.name()).collect();
+        assert_eq!(methods, ["exact", "rbvh", "rbvh-lod"], "{ray_type:?}");
+        let (plain, lod) = (&chunk[1], &chunk[2]);
+        assert!(lod.valid, "{:?}", lod.invalid_reason);
+        assert_eq!(lod.quality.as_deref(), Some("Q4"));
+        // The coarse columns are counted with the tree.
+        assert!(lod.memory_bytes.tree > plain.memory_bytes.tree);
+        assert_eq!(lod.memory_bytes.atlas, plain.memory_bytes.atlas);
+    }
+    assert!(dir.path().join("sphere").join("q4_lod.png").exists());
+    let text = bench::table(&report);
+    assert!(text.contains("rbvh-lod"), "{text}");
+}
+
+#[test]
 fn secondary_rays_start_at_the_exact_primary_hits() {
     let scene = Scene::load("sphere").unwrap();
     let diagonal = scene.bounds().diagonal();
@@ -281,12 +304,15 @@ fn the_validator_flags_a_method_that_is_wrong_rather_than_fast() {
 fn bad_configurations_are_errors_naming_the_field() {
     let base = BenchConfig::new(vec!["sphere".into()], Device::Create(Default::default()));
     type Break = fn(&mut BenchConfig);
-    let cases: [(&str, Break); 6] = [
+    let cases: [(&str, Break); 7] = [
         ("scenes", |c| c.scenes.clear()),
         ("width", |c| c.width = 0),
         ("runs", |c| c.runs = 0),
         ("ao_radius", |c| c.ao_radius = f32::NAN),
         ("quality", |c| c.levels = vec![Level::Preset(7)]),
+        ("lod columns", |c| {
+            c.lod = Some(rbvh::lod::LodParams { columns: 0 })
+        }),
         ("plot", |c| {
             c.ray_types = vec![RayType::Ao];
             c.plot_dir = Some("p".into());

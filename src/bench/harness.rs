@@ -24,7 +24,8 @@ use super::validate;
 use super::{BenchConfig, Device, Level};
 use crate::bvh::Bvh;
 use crate::geom::{Hit, Ray};
-use crate::gpu::{Context, Query, Timing, Tracer};
+use crate::gpu::{Context, Query, Timing, Traced, Tracer};
+use crate::lod::{Lod, RayCone};
 use crate::output::{self, Image};
 use crate::rbvh::{Rbvh, RbvhParams};
 use crate::scene::Scene;
@@ -108,11 +109,23 @@ impl Candidate {
         }
     }
 
-    /// "exact", "q2", "custom": for file names.
+    /// "exact", "q2", "q2_lod", "custom": for file names.
     fn file_stem(&self) -> String {
         match &self.level {
             None => "exact".into(),
+            Some((level, _)) if self.method == Method::RbvhLod => {
+                format!("{}_lod", level.name().to_ascii_lowercase())
+            }
             Some((level, _)) => level.name().to_ascii_lowercase(),
+        }
+    }
+
+    /// Traces `rays`; a level-of-detail candidate with `cones`.
+    fn trace(&self, rays: &[Ray], cones: &[RayCone], query: Query) -> Result<Traced> {
+        if self.method == Method::RbvhLod {
+            self.tracer.trace_lod(rays, cones, query, false)
+        } else {
+            self.tracer.trace(rays, query)
         }
     }
 }
@@ -127,6 +140,8 @@ struct SceneBench<'a> {
     /// The exact BVH first.
     candidates: Vec<Candidate>,
     primary: Vec<Ray>,
+    /// The cone of every primary ray (its pixel's), for level-of-detail candidates.
+    pixel_cone: RayCone,
     exact_primary: Vec<Hit>,
     secondary: Secondary,
     /// Per candidate, the shaded primary image and primary hits, once primary rays are traced.
@@ -198,23 +213,44 @@ impl<'a> SceneBench<'a> {
             let params = level.params()?;
             let rbvh = Rbvh::build(&scene, &params)?;
             surface_offset = surface_offset.max(rbvh.texel_size);
+            let memory = Memory {
+                tree: rbvh.tree_bytes(),
+                atlas: rbvh.atlas_bytes(),
+                triangles: rbvh.triangle_bytes(),
+                total: rbvh.total_bytes(),
+            };
             candidates.push(Candidate {
                 method: Method::Rbvh,
                 level: Some((*level, params)),
                 tracer: Tracer::rbvh(ctx, &rbvh)?,
                 build_ms: rbvh.stats.build_ms,
-                memory: Memory {
-                    tree: rbvh.tree_bytes(),
-                    atlas: rbvh.atlas_bytes(),
-                    triangles: rbvh.triangle_bytes(),
-                    total: rbvh.total_bytes(),
-                },
+                memory,
             });
+            if let Some(lod_params) = &config.lod {
+                observe(Event::Progress(format!(
+                    "{}: building levels of detail of {}",
+                    scene.name,
+                    level.name()
+                )));
+                let lod = Lod::build(&rbvh, lod_params)?;
+                // The coarse columns are counted with the tree: they are traversal data.
+                candidates.push(Candidate {
+                    method: Method::RbvhLod,
+                    level: Some((*level, params)),
+                    tracer: Tracer::rbvh_lod(ctx, &rbvh, &lod)?,
+                    build_ms: rbvh.stats.build_ms + lod.stats.build_ms,
+                    memory: Memory {
+                        tree: memory.tree + lod.bytes(),
+                        total: memory.total + lod.bytes(),
+                        ..memory
+                    },
+                });
+            }
         }
         let (width, height) = (config.width, config.height);
-        let primary = scene
-            .camera_or_framed(width as f32 / height as f32)
-            .primary_rays(width, height);
+        let camera = scene.camera_or_framed(width as f32 / height as f32);
+        let primary = camera.primary_rays(width, height);
+        let pixel_cone = RayCone::pixel(&camera, height);
         let exact_primary = candidates[0].tracer.trace(&primary, Query::Closest)?.hits;
         let secondary = Secondary {
             diagonal,
@@ -230,6 +266,7 @@ impl<'a> SceneBench<'a> {
             bvh,
             candidates,
             primary,
+            pixel_cone,
             exact_primary,
             secondary,
             renders: None,
@@ -259,7 +296,19 @@ impl<'a> SceneBench<'a> {
             self.candidates.len(),
             self.config.runs
         )));
-        let m = self.trace_all(rays, ray_type.query())?;
+        let cone = match ray_type {
+            RayType::Primary => self.pixel_cone,
+            _ => RayCone {
+                width: 0.0,
+                spread: self.pixel_cone.spread,
+            },
+        };
+        let cones = if self.config.lod.is_some() {
+            vec![cone; rays.len()]
+        } else {
+            Vec::new()
+        };
+        let m = self.trace_all(rays, &cones, ray_type.query())?;
         if m.source == TimingSource::Wall {
             observe(Event::Warning(format!(
                 "{name}, {} rays: the device has no timestamp queries; timing with host wall time \
@@ -356,17 +405,17 @@ impl<'a> SceneBench<'a> {
     }
 
     /// One warm-up trace per candidate (whose hits are kept), then `runs` interleaved rounds.
-    fn trace_all(&self, rays: Vec<Ray>, query: Query) -> Result<Measured> {
+    fn trace_all(&self, rays: Vec<Ray>, cones: &[RayCone], query: Query) -> Result<Measured> {
         let hits = self
             .candidates
             .iter()
-            .map(|c| Ok(c.tracer.trace(&rays, query)?.hits))
+            .map(|c| Ok(c.trace(&rays, cones, query)?.hits))
             .collect::<Result<Vec<_>>>()?;
         let runs = self.config.runs as usize;
         let mut timings: Vec<Vec<Timing>> = vec![Vec::with_capacity(runs); self.candidates.len()];
         for _ in 0..runs {
             for (c, times) in self.candidates.iter().zip(&mut timings) {
-                times.push(c.tracer.trace(&rays, query)?.timing);
+                times.push(c.trace(&rays, cones, query)?.timing);
             }
         }
         let gpu = timings.iter().flatten().all(|t| t.gpu_ms.is_some());

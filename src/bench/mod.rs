@@ -45,6 +45,7 @@ pub use table::table;
 use crate::gpu::Context;
 #[cfg(feature = "loaded")]
 use crate::gpu::ContextOptions;
+use crate::lod::LodParams;
 use crate::rbvh::{RbvhParams, QUALITY_NAMES};
 use crate::{Error, Result};
 
@@ -116,6 +117,10 @@ pub struct BenchConfig {
     pub device: Device,
     /// Write charts and error images under this directory, one subdirectory per scene.
     pub plot_dir: Option<PathBuf>,
+    /// Also measure every level traced with level of detail, built with these parameters. Primary
+    /// rays get their pixel's cone; secondary rays a cone from their origin with the pixel's
+    /// spread (no width, so that the surface a ray leaves is never coarsened under it).
+    pub lod: Option<LodParams>,
 }
 
 /// Largest image side accepted, as for `rbvh render`.
@@ -136,6 +141,7 @@ impl BenchConfig {
             seed: 0x5EED_2012,
             device,
             plot_dir: None,
+            lod: None,
         }
     }
 
@@ -169,6 +175,9 @@ impl BenchConfig {
         }
         for level in &self.levels {
             level.params()?;
+        }
+        if let Some(lod) = &self.lod {
+            lod.validate()?;
         }
         if self.plot_dir.is_some() && !self.ray_types.contains(&RayType::Primary) {
             return Err(Error::param(

@@ -22,7 +22,7 @@
 //! |---|---|---|
 //! | `scene` | string | scene name (built-in name, file name, or the scene file's `name`) |
 //! | `triangles` | int | triangles in the scene |
-//! | `method` | `"exact"` \| `"rbvh"` | exact triangle BVH, or RBVH |
+//! | `method` | `"exact"` \| `"rbvh"` \| `"rbvh-lod"` | exact triangle BVH, RBVH, or RBVH traced with level of detail |
 //! | `quality` | null \| `"Q0"`…`"Q4"` \| `"custom"` | RBVH level; null for exact |
 //! | `params` | object \| null | RBVH build parameters (below); null for exact |
 //! | `ray_type` | `"primary"` \| `"ao"` \| `"shadow"` \| `"diffuse"` | see `bench::rays` |
@@ -112,6 +112,9 @@ pub struct Record {
 pub enum Method {
     Exact,
     Rbvh,
+    /// The RBVH of the same level traced with level of detail ([`crate::lod`]).
+    #[serde(rename = "rbvh-lod")]
+    RbvhLod,
 }
 
 impl Method {
@@ -119,6 +122,7 @@ impl Method {
         match self {
             Method::Exact => "exact",
             Method::Rbvh => "rbvh",
+            Method::RbvhLod => "rbvh-lod",
         }
     }
 }

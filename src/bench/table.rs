@@ -9,7 +9,7 @@ use super::record::{BenchReport, Record};
 /// Columns after the scene's: header, width, and whether values are left-aligned (names) rather
 /// than right-aligned (numbers).
 const COLUMNS: [(&str, usize, bool); 13] = [
-    ("method", 6, true),
+    ("method", 8, true),
     ("level", 6, true),
     ("ray type", 8, true),
     ("MRays/s", 8, false),

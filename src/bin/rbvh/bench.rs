@@ -7,6 +7,7 @@ use std::time::Duration;
 use anyhow::{Context as _, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use rbvh::bench::{self, BenchConfig, Device, Event, Level, RayType};
+use rbvh::lod::LodParams;
 
 use crate::prepare::{context_options, Quality};
 
@@ -57,6 +58,12 @@ pub struct Args {
     /// Write per-scene charts (SVG) and renders and error images (PNG) under this directory.
     #[arg(long)]
     plot: Option<PathBuf>,
+    /// Also measure every level traced with level of detail (method rbvh-lod).
+    #[arg(long)]
+    lod: bool,
+    /// Most columns along a side of a coarse node's grid (with --lod).
+    #[arg(long, default_value_t = LodParams::default().columns, requires = "lod")]
+    lod_columns: u32,
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -88,6 +95,9 @@ pub fn run(a: Args) -> Result<()> {
         config.seed = seed;
     }
     config.plot_dir = a.plot.clone();
+    config.lod = a.lod.then_some(LodParams {
+        columns: a.lod_columns,
+    });
 
     let bar = ProgressBar::new_spinner();
     bar.set_style(
