@@ -61,9 +61,11 @@ impl Environment {
 /// L(d) = base + SUN · max(0, d · sun)^SUN_EXPONENT
 /// ```
 ///
-/// Both halves meet at `HORIZON`, so the sky is continuous. The sun is a broad lobe rather than a
-/// disk: with exponent 64 it carries `2π/65 ≈ 0.1 sr × SUN` of irradiance at normal incidence,
-/// about a third of the sky's, and cosine sampling finds it often enough to converge quickly.
+/// Both halves meet at `HORIZON`, so the sky is continuous. The sun is a broad glow rather than a
+/// disk: with exponent 16 it carries `2π/17 ≈ 0.37 sr × SUN` of irradiance at normal incidence,
+/// about half the sky's, and at most a few times the sky's radiance, so that shading still shows
+/// its direction while 16 cosine-weighted samples per pixel stay free of bright speckles (a small
+/// bright disk would need importance sampling of the light to converge).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Sky {
     /// Unit direction towards the sun.
@@ -74,8 +76,8 @@ impl Sky {
     pub const ZENITH: Vec3 = Vec3::new(0.25, 0.45, 0.95);
     pub const HORIZON: Vec3 = Vec3::new(0.9, 0.9, 0.95);
     pub const GROUND: Vec3 = Vec3::new(0.35, 0.3, 0.25);
-    pub const SUN: Vec3 = Vec3::new(8.0, 7.0, 5.5);
-    pub const SUN_EXPONENT: i32 = 64;
+    pub const SUN: Vec3 = Vec3::new(3.0, 2.7, 2.2);
+    pub const SUN_EXPONENT: i32 = 16;
 
     /// A sky with its sun towards `sun` (normalised here), or straight up when `sun` is zero or
     /// not finite.
