@@ -7,7 +7,7 @@
 use std::f32::consts::{PI, TAU};
 use std::fs::File;
 use std::io::{BufReader, Seek};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use ::exr::prelude::{read, MetaData, ReadChannels, ReadLayers};
 use glam::Vec3;
@@ -38,7 +38,8 @@ impl Environment {
     }
 
     /// The radiance arriving from direction `dir` (travelling along `-dir`); `dir` need not be
-    /// unit length but must not be zero.
+    /// unit length. A zero or non-finite `dir` (from an invalid primary ray) is looked up as the
+    /// zero vector, which every variant answers with a finite radiance.
     pub fn radiance(&self, dir: Vec3) -> Vec3 {
         let dir = dir.normalize_or_zero();
         match self {
@@ -263,11 +264,6 @@ fn check_size(width: usize, height: usize, source: &Path) -> Result<()> {
     Ok(())
 }
 
-/// The name used for maps built in memory, in their errors.
-pub fn in_memory() -> PathBuf {
-    PathBuf::from("<environment map in memory>")
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -277,7 +273,7 @@ mod tests {
             .flat_map(|y| (0..width).map(move |x| (x, y)))
             .map(|(x, y)| f(x, y))
             .collect();
-        LatLongMap::new(width, height, texels, &in_memory()).unwrap()
+        LatLongMap::new(width, height, texels, Path::new("in memory")).unwrap()
     }
 
     #[test]
@@ -331,21 +327,21 @@ mod tests {
 
     #[test]
     fn bad_maps_are_refused_with_the_texel_named() {
-        let source = in_memory();
-        let err = LatLongMap::new(0, 4, vec![], &source)
+        let source = Path::new("in memory");
+        let err = LatLongMap::new(0, 4, vec![], source)
             .unwrap_err()
             .to_string();
         assert!(err.contains("0×4"), "{err}");
         let mut texels = vec![Vec3::ONE; 6];
         texels[4] = Vec3::new(1.0, f32::NAN, 1.0);
-        let err = LatLongMap::new(3, 2, texels, &source)
+        let err = LatLongMap::new(3, 2, texels, source)
             .unwrap_err()
             .to_string();
         assert!(err.contains("texel (1, 1)"), "{err}");
-        let err = LatLongMap::new(3, 2, vec![Vec3::NEG_ONE; 6], &source)
+        let err = LatLongMap::new(3, 2, vec![Vec3::NEG_ONE; 6], source)
             .unwrap_err()
             .to_string();
         assert!(err.contains("non-negative"), "{err}");
-        assert!(LatLongMap::new(3, 2, vec![Vec3::ONE; 5], &source).is_err());
+        assert!(LatLongMap::new(3, 2, vec![Vec3::ONE; 5], source).is_err());
     }
 }

@@ -5,7 +5,7 @@
 //!
 //! * [`environment`]: where the light comes from;
 //! * [`sampling`]: reproducible cosine-distributed directions;
-//! * [`render`]: the progressive integrator over sample passes.
+//! * [`mod@render`]: the progressive integrator over sample passes.
 //!
 //! ```no_run
 //! use glam::Vec3;

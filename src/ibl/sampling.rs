@@ -10,7 +10,7 @@
 //! Directions are cosine-distributed about the surface normal by Malley's method: uniform points
 //! on the unit disk, lifted to the hemisphere (Pharr, Jakob & Humphreys, *Physically Based
 //! Rendering*, 4th ed., §A.5.3). Their density `cos θ / π` cancels the cosine of the Lambertian
-//! reflection integral, see [`super::render`].
+//! reflection integral, see [`mod@super::render`].
 
 use std::f32::consts::TAU;
 
@@ -27,7 +27,7 @@ fn mix64(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
-/// A SplitMix64 stream: a counter stepped by [`GOLDEN_GAMMA`] and passed through [`mix64`].
+/// A SplitMix64 stream: a counter stepped by `GOLDEN_GAMMA` and passed through `mix64`.
 #[derive(Clone, Debug)]
 pub struct SampleRng(u64);
 
