@@ -137,8 +137,7 @@ fn sky_of(light: Option<&Light>) -> Sky {
     }
 }
 
-/// The IBL render of `hits` through `tracer`; with `--stats` and an RBVH, also the exact BVH's
-/// render at the same samples and seed, both times, and the RBVH image's error against it.
+/// The IBL render of `hits` through `tracer`, with its `--stats` (see [`compare_with_exact`]).
 fn render_ibl(
     a: &Args,
     p: &Prepared,
@@ -174,42 +173,56 @@ fn render_ibl(
     })?;
     if a.common.stats {
         report_ibl("this render", &rendered);
-    }
-    if let (true, Structure::Rbvh(_)) = (a.common.stats, &p.structure) {
-        let t = Instant::now();
-        let bvh = step("building BVH", || Bvh::build(&p.scene))?;
-        let exact = Tracer::exact(&p.ctx, &bvh).context("uploading the exact BVH")?;
-        let setup_ms = t.elapsed().as_secs_f64() * 1e3;
-        let exact_hits = exact.trace(rays, Query::Closest)?.hits;
-        let exact_frame = Frame {
-            hits: &exact_hits,
-            ..frame
-        };
-        let exact_settings = Settings {
-            surface_offset: 0.0,
-            ..settings
-        };
-        let reference = progressive("IBL (exact reference)", a.samples, |on_pass| {
-            ibl::render(&exact, &exact_frame, env, &exact_settings, on_pass)
-        })?;
-        eprintln!("exact BVH built and uploaded in {setup_ms:.1} ms");
-        report_ibl("exact reference", &reference);
-        let errors = image_errors(&reference.image, &rendered.image)?;
-        let ratio = |exact: f64, rbvh: f64| exact / rbvh.max(f64::MIN_POSITIVE);
-        let gpu = match (reference.timing.gpu_ms, rendered.timing.gpu_ms) {
-            (Some(e), Some(r)) => format!("GPU {:.2}x, ", ratio(e, r)),
-            _ => String::new(),
-        };
-        eprintln!(
-            "IBL RBVH vs exact at {} samples, seed {}: speed {gpu}wall {:.2}x; FLIP {:.4}, PSNR {:.2} dB",
-            a.samples,
-            a.seed,
-            ratio(reference.wall_ms, rendered.wall_ms),
-            errors.flip_mean,
-            errors.psnr_db
-        );
+        if let Structure::Rbvh(_) = p.structure {
+            compare_with_exact(p, env, &frame, &settings, &rendered)?;
+        }
     }
     Ok(rendered.image)
+}
+
+/// `--stats` for an RBVH's IBL render: the exact BVH renders the same frame, samples and seed
+/// from its own primary hits (and without the texel offset), then both times, their ratio, and
+/// the RBVH image's FLIP and PSNR against the exact one are printed.
+fn compare_with_exact(
+    p: &Prepared,
+    env: &Environment,
+    frame: &Frame,
+    settings: &Settings,
+    rendered: &ibl::Rendered,
+) -> Result<()> {
+    let t = Instant::now();
+    let bvh = step("building BVH", || Bvh::build(&p.scene))?;
+    let exact = Tracer::exact(&p.ctx, &bvh).context("uploading the exact BVH")?;
+    let setup_ms = t.elapsed().as_secs_f64() * 1e3;
+    let exact_hits = exact.trace(frame.rays, Query::Closest)?.hits;
+    let exact_frame = Frame {
+        hits: &exact_hits,
+        ..*frame
+    };
+    let exact_settings = Settings {
+        surface_offset: 0.0,
+        ..*settings
+    };
+    let reference = progressive("IBL (exact reference)", settings.samples, |on_pass| {
+        ibl::render(&exact, &exact_frame, env, &exact_settings, on_pass)
+    })?;
+    eprintln!("exact BVH built and uploaded in {setup_ms:.1} ms");
+    report_ibl("exact reference", &reference);
+    let errors = image_errors(&reference.image, &rendered.image)?;
+    let ratio = |exact: f64, rbvh: f64| exact / rbvh.max(f64::MIN_POSITIVE);
+    let gpu = match (reference.timing.gpu_ms, rendered.timing.gpu_ms) {
+        (Some(e), Some(r)) => format!("GPU {:.2}x, ", ratio(e, r)),
+        _ => String::new(),
+    };
+    eprintln!(
+        "IBL RBVH vs exact at {} samples, seed {}: speed {gpu}wall {:.2}x; FLIP {:.4}, PSNR {:.2} dB",
+        settings.samples,
+        settings.seed,
+        ratio(reference.wall_ms, rendered.wall_ms),
+        errors.flip_mean,
+        errors.psnr_db
+    );
+    Ok(())
 }
 
 /// Runs `render` under a progress bar over its `samples` passes (hidden when stderr is not a
@@ -230,7 +243,8 @@ fn progressive<T>(
     Ok(out?)
 }
 
-/// `--stats` of one IBL render: its visibility rays, trace time and host time.
+/// `--stats` of one IBL render: its visibility rays, their trace time, and the host time of the
+/// sample passes (ray generation, traces, accumulation; the primary trace is not included).
 fn report_ibl(what: &str, r: &ibl::Rendered) {
     let gpu = match r.timing.gpu_ms {
         Some(ms) => format!(
@@ -240,7 +254,7 @@ fn report_ibl(what: &str, r: &ibl::Rendered) {
         None => "no GPU timestamps".to_string(),
     };
     eprintln!(
-        "IBL {what}: {} visibility rays, {gpu}; render wall {:.1} ms",
+        "IBL {what}: {} visibility rays, {gpu}; passes wall {:.1} ms",
         r.rays, r.wall_ms
     );
 }
