@@ -375,6 +375,23 @@ fn bad_environment_maps_are_refused_with_the_file_named() {
     exr::prelude::write_rgb_file(&infinite, 8, 4, |_, _| (f32::INFINITY, 1.0f32, 1.0f32)).unwrap();
     assert!(load_error(&infinite).1.contains("texel (0, 0)"));
 
+    let luminance = dir.path().join("luminance.exr");
+    {
+        use exr::prelude::*;
+        let y = AnyChannel::new("Y", FlatSamples::F32(vec![1.0; 8]));
+        let channels = AnyChannels::sort(SmallVec::from_vec(vec![y]));
+        let layer = Layer::new(
+            (4, 2),
+            LayerAttributes::default(),
+            Encoding::FAST_LOSSLESS,
+            channels,
+        );
+        Image::from_layer(layer).write().to_file(&luminance).unwrap();
+    }
+    let (err, text) = load_error(&luminance);
+    assert!(matches!(err, Error::Parse { .. }), "{text}");
+    assert!(text.contains("R, G and B"), "{text}");
+
     let (err, text) = load_error(dir.path());
     assert!(matches!(err, Error::Parse { .. }), "{text}");
 

@@ -175,8 +175,8 @@ impl LatLongMap {
     /// [`MAX_MAP_SIDE`] / [`MAX_MAP_TEXELS`], or holds a texel that is not finite and
     /// non-negative.
     pub fn load(path: &Path) -> Result<LatLongMap> {
-        let file = File::open(path).map_err(|e| Error::io(path, e))?;
-        let metadata = file.metadata().map_err(|e| Error::io(path, e))?;
+        // Checked before opening: opening a pipe would block until something writes to it.
+        let metadata = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
         if !metadata.is_file() {
             return Err(Error::parse(
                 path,
@@ -184,9 +184,14 @@ impl LatLongMap {
                 "not a regular file (a directory, device or pipe)",
             ));
         }
+        let file = File::open(path).map_err(|e| Error::io(path, e))?;
         let mut reader = BufReader::new(file);
         let malformed = |e: ::exr::error::Error| {
-            Error::parse(path, None, format!("not a readable OpenEXR image: {e}"))
+            Error::parse(
+                path,
+                None,
+                format!("not a readable OpenEXR image with R, G and B channels: {e}"),
+            )
         };
         // The header first, so that a corrupt or hostile size is refused before allocating.
         let meta = MetaData::read_from_buffered(&mut reader, false).map_err(malformed)?;
