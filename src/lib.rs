@@ -11,6 +11,7 @@
 //! scene (load / built-in / camera) → bvh  (exact: build, GPU layout, CPU reference tracer)
 //!                                  → rbvh (build, raster, atlas, GPU layout, CPU reference caster)
 //!        → gpu (Vulkan context, own or embedded; uploads, pipelines, tracer) → output (PNG, EXR)
+//!        → ibl (image-based lighting: environment light, visibility through either structure)
 //!        → bench, regress (measurement and image regression)
 //! ```
 //!
@@ -48,6 +49,7 @@ pub mod bvh;
 pub mod error;
 pub mod geom;
 pub mod gpu;
+pub mod ibl;
 pub mod io;
 pub mod lod;
 pub mod output;

@@ -370,3 +370,96 @@ fn render_and_trace_with_level_of_detail() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--lod needs an RBVH"));
 }
+
+#[test]
+fn render_ibl_writes_png_and_exr_and_compares_with_the_exact_render() {
+    let dir = tempfile::tempdir().unwrap();
+    let (env, png, exr) = (
+        dir.path().join("env.exr"),
+        dir.path().join("ibl.png"),
+        dir.path().join("ibl.exr"),
+    );
+    // Bright above the horizon, dark below.
+    exr::prelude::write_rgb_file(&env, 32, 16, |_, y| {
+        let v = if y < 8 { 1.5f32 } else { 0.1 };
+        (v, v, v)
+    })
+    .unwrap();
+    let out = rbvh(&[
+        "render",
+        "--shading",
+        "ibl",
+        "--env",
+        arg(&env),
+        "--samples",
+        "2",
+        "--seed",
+        "9",
+        "--method",
+        "rbvh",
+        "--quality",
+        "0",
+        "--width",
+        "48",
+        "--height",
+        "32",
+        "--out",
+        arg(&png),
+        "--exr",
+        arg(&exr),
+        "--stats",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    for needle in ["IBL exact reference", "FLIP", "PSNR", "wall"] {
+        assert!(stderr.contains(needle), "{needle:?} not in:\n{stderr}");
+    }
+    let img = image::open(&png).unwrap();
+    assert_eq!((img.width(), img.height()), (48, 32));
+    let layers = exr::prelude::read_all_flat_layers_from_file(&exr).unwrap();
+    let names: Vec<String> = layers.layer_data[0]
+        .channel_data
+        .list
+        .iter()
+        .map(|c| c.name.to_string())
+        .collect();
+    for name in ["R", "G", "B", "Z", "N.X", "N.Y", "N.Z"] {
+        assert!(names.iter().any(|n| n == name), "{name} not in {names:?}");
+    }
+}
+
+#[test]
+fn render_ibl_refuses_bad_environments_and_samples() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("never.png");
+    let bad = dir.path().join("bad.exr");
+    std::fs::write(&bad, b"not an exr").unwrap();
+    let missing = dir.path().join("missing.exr");
+    let cases: [(Vec<&str>, &str); 4] = [
+        (
+            vec!["--shading", "ibl", "--env", arg(&missing)],
+            "missing.exr",
+        ),
+        (vec!["--shading", "ibl", "--env", arg(&bad)], "bad.exr"),
+        (vec!["--shading", "ibl", "--samples", "0"], "--samples"),
+        (vec!["--env", arg(&bad)], "--shading ibl"),
+    ];
+    for (extra, needle) in cases {
+        let mut args = vec![
+            "render",
+            "--width",
+            "16",
+            "--height",
+            "16",
+            "--out",
+            arg(&png),
+        ];
+        args.extend(extra);
+        let out = rbvh(&args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} succeeded");
+        assert_ne!(out.status.code(), Some(101), "{args:?} panicked:\n{stderr}");
+        assert!(stderr.contains(needle), "{needle:?} not in:\n{stderr}");
+        assert!(!png.exists(), "{args:?} wrote {}", png.display());
+    }
+}

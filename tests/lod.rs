@@ -281,3 +281,76 @@ fn lod_refuses_mismatched_input() {
         "columns",
     );
 }
+
+#[test]
+fn ibl_visibility_rays_trace_with_level_of_detail() {
+    use rbvh::ibl::{self, Environment, Frame, Settings, Sky};
+    let ctx = common::context();
+    let scene = Scene::builtin("default").unwrap();
+    let (w, h) = (64, 48);
+    let camera = scene.camera_or_framed(w as f32 / h as f32);
+    let rays = camera.primary_rays(w, h);
+    let cone = RayCone::pixel(&camera, h);
+    let r = Rbvh::build(&scene, &RbvhParams::quality(4).unwrap()).unwrap();
+    let lod = Lod::build(&r, &LodParams::default()).unwrap();
+    let env = Environment::Sky(Sky::default());
+    let render = |tracer: &Tracer, hits: &[Hit], surface_offset: f32, cone: Option<RayCone>| {
+        let albedo = vec![glam::Vec3::splat(ibl::GREY); rays.len()];
+        let frame = Frame {
+            width: w,
+            height: h,
+            rays: &rays,
+            hits,
+            albedo: &albedo,
+        };
+        let settings = Settings {
+            samples: 4,
+            seed: 7,
+            diagonal: scene.bounds().diagonal(),
+            surface_offset,
+            cone,
+        };
+        ibl::render(tracer, &frame, &env, &settings, |_| {})
+            .unwrap()
+            .image
+    };
+    let exact = Tracer::exact(&ctx, &Bvh::build(&scene).unwrap()).unwrap();
+    let exact_hits = exact.trace(&rays, Query::Closest).unwrap().hits;
+    let reference = render(&exact, &exact_hits, 0.0, None);
+    let tracer = Tracer::rbvh_lod(&ctx, &r, &lod).unwrap();
+    let cones = vec![cone; rays.len()];
+    let hits = tracer
+        .trace_lod(&rays, &cones, Query::Closest, false)
+        .unwrap()
+        .hits;
+    let image = render(&tracer, &hits, r.texel_size, Some(cone));
+    let flip = image_errors(&reference, &image).unwrap().flip_mean;
+    let plain = Tracer::rbvh(&ctx, &r).unwrap();
+    let plain_hits = plain.trace(&rays, Query::Closest).unwrap().hits;
+    let plain_flip = image_errors(&reference, &render(&plain, &plain_hits, r.texel_size, None))
+        .unwrap()
+        .flip_mean;
+    println!(
+        "IBL default Q4 {w}x{h}, 4 samples: FLIP vs exact with LOD {flip:.4}, without {plain_flip:.4}"
+    );
+    // Measured 0.0161 with LOD and 0.0068 without: solid coarse columns occlude a little more
+    // than the surfaces they stand for (README, "Level of detail"). Bounded so it cannot grow.
+    assert!(flip < 2.5 * plain_flip + 0.002, "{flip} vs {plain_flip}");
+    // A plain tracer cannot take cones.
+    let albedo = vec![glam::Vec3::splat(ibl::GREY); rays.len()];
+    let frame = Frame {
+        width: w,
+        height: h,
+        rays: &rays,
+        hits: &hits,
+        albedo: &albedo,
+    };
+    let settings = Settings {
+        samples: 1,
+        seed: 7,
+        diagonal: scene.bounds().diagonal(),
+        surface_offset: r.texel_size,
+        cone: Some(cone),
+    };
+    assert!(ibl::render(&plain, &frame, &env, &settings, |_| {}).is_err());
+}

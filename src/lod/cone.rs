@@ -44,24 +44,6 @@ impl RayCone {
         self.width + self.spread * t
     }
 
-    /// The cone of a ray leaving a surface hit at distance `t` along this one: it starts as wide
-    /// as this cone is there and spreads by this cone's spread plus `widen` (radians; what the
-    /// bounce adds: surface curvature for a mirror, the sampling lobe for a diffuse bounce —
-    /// e.g. [`RayCone::diffuse_widening`]).
-    pub fn bounce(&self, t: f32, widen: f32) -> RayCone {
-        RayCone {
-            width: self.width_at(t),
-            spread: self.spread + widen,
-        }
-    }
-
-    /// The widening of a diffuse bounce sampled with `samples` rays per hit: the cone angle whose
-    /// solid angle is the hemisphere's share per sample, `2π / samples`, i.e.
-    /// `2·acos(1 − 1/samples)` (a cone of half-angle θ covers `2π(1 − cos θ)`).
-    pub fn diffuse_widening(samples: u32) -> f32 {
-        2.0 * (1.0 - 1.0 / samples.max(1) as f32).acos()
-    }
-
     /// Checks that the cone is finite and not negative, naming it `what`.
     pub fn validate(&self, what: &str) -> Result<()> {
         if self.width.is_finite()
@@ -141,9 +123,6 @@ mod tests {
         let cone = RayCone::pixel(&camera, 100);
         // The image plane at distance 1 is 2 units tall: one pixel is 0.02 there.
         assert!((cone.width_at(1.0) - 0.02).abs() < 1e-4, "{cone:?}");
-        let bounced = cone.bounce(10.0, RayCone::diffuse_widening(4));
-        assert!((bounced.width - cone.width_at(10.0)).abs() < 1e-6);
-        assert!(bounced.spread > cone.spread);
         assert!(RayCone {
             width: -1.0,
             spread: 0.0

@@ -1,15 +1,24 @@
 //! `rbvh render`: primary rays from the scene's (or a framing) camera, shaded to PNG; EXR with
-//! depth and normals; a traversal-cost heat map.
+//! depth and normals; a traversal-cost heat map. `--shading ibl` lights the picture by an
+//! environment through [`rbvh::ibl`], with a progress bar over the sample passes.
 
 use std::path::PathBuf;
+use std::time::{Duration, Instant};
 
-use anyhow::{ensure, Result};
+use anyhow::{ensure, Context as _, Result};
 use clap::ValueEnum;
-use rbvh::gpu::Query;
+use glam::Vec3;
+use indicatif::{ProgressBar, ProgressStyle};
+use rbvh::bench::metrics::image_errors;
+use rbvh::bvh::Bvh;
+use rbvh::geom::{Hit, Ray};
+use rbvh::gpu::{Query, Tracer};
+use rbvh::ibl::{self, Environment, Frame, Settings, Sky};
 use rbvh::lod::RayCone;
-use rbvh::output;
+use rbvh::output::{self, Image};
+use rbvh::scene::Light;
 
-use crate::prepare::{prepare, report_steps, report_throughput, step, Common};
+use crate::prepare::{prepare, report_steps, report_throughput, step, Common, Prepared, Structure};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -30,6 +39,16 @@ pub struct Args {
     height: u32,
     #[arg(long, value_enum, default_value_t = Shading::Lambert)]
     shading: Shading,
+    /// With --shading ibl: an HDR environment map (EXR, latitude-longitude, +y up) instead of the
+    /// procedural sky.
+    #[arg(long)]
+    env: Option<PathBuf>,
+    /// With --shading ibl: visibility rays per pixel, one per progressive pass.
+    #[arg(long, default_value_t = 16)]
+    samples: u32,
+    /// With --shading ibl: random seed; the same seed gives the same image.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -38,6 +57,10 @@ enum Shading {
     Lambert,
     /// Geometric normals as colours.
     Normals,
+    /// Image-based lighting: diffuse under --env (or a procedural sky), --samples visibility rays
+    /// per pixel through --method; with --stats and --method rbvh also the exact reference's time
+    /// and the RBVH image's FLIP and PSNR against it.
+    Ibl,
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -47,11 +70,31 @@ pub fn run(a: Args) -> Result<()> {
         a.width,
         a.height
     );
+    ensure!(
+        a.env.is_none() || a.shading == Shading::Ibl,
+        "--env lights an image-based render: add --shading ibl"
+    );
+    ensure!(
+        (1..=ibl::MAX_SAMPLES).contains(&a.samples),
+        "--samples must be within 1..={} (got {})",
+        ibl::MAX_SAMPLES,
+        a.samples
+    );
+    // Read the environment before the (possibly long) build, so a bad file fails at once.
+    let env = a
+        .env
+        .as_ref()
+        .map(|path| {
+            step("loading environment map", || Environment::load(path))
+                .with_context(|| format!("loading environment map {}", path.display()))
+        })
+        .transpose()?;
     let p = prepare(&a.common)?;
     let camera = p.scene.camera_or_framed(a.width as f32 / a.height as f32);
     let rays = camera.primary_rays(a.width, a.height);
     let tracer = p.tracer()?;
-    let cones = || vec![RayCone::pixel(&camera, a.height); rays.len()];
+    let cone = RayCone::pixel(&camera, a.height);
+    let cones = || vec![cone; rays.len()];
     let traced = step("tracing", || {
         p.trace(&tracer, &rays, cones, Query::Closest, a.heatmap.is_some())
     })?;
@@ -70,6 +113,10 @@ pub fn run(a: Args) -> Result<()> {
             p.scene.light.as_ref(),
         )?,
         Shading::Normals => output::shade_normals(&rays, &traced.hits, a.width, a.height)?,
+        Shading::Ibl => {
+            let env = env.unwrap_or_else(|| Environment::Sky(sky_of(p.scene.light.as_ref())));
+            render_ibl(&a, &p, &tracer, &rays, &traced.hits, &env, cone)?
+        }
     };
     output::write_png(&a.out, &image)?;
     eprintln!("wrote {}", a.out.display());
@@ -82,4 +129,138 @@ pub fn run(a: Args) -> Result<()> {
         eprintln!("wrote {}", path.display());
     }
     Ok(())
+}
+
+/// The procedural sky with its sun where the scene's directional light comes from, else where
+/// the default light does.
+fn sky_of(light: Option<&Light>) -> Sky {
+    match light {
+        Some(Light::Directional { direction }) => Sky::towards(-*direction),
+        _ => Sky::default(),
+    }
+}
+
+/// The IBL render of `hits` through `tracer`, with its `--stats` (see [`compare_with_exact`]).
+fn render_ibl(
+    a: &Args,
+    p: &Prepared,
+    tracer: &Tracer,
+    rays: &[Ray],
+    hits: &[Hit],
+    env: &Environment,
+    cone: RayCone,
+) -> Result<Image> {
+    let surface_offset = match &p.structure {
+        Structure::Exact(_) => 0.0,
+        Structure::Rbvh(r) => r.texel_size,
+    };
+    let albedo = vec![Vec3::splat(ibl::GREY); rays.len()];
+    let settings = Settings {
+        samples: a.samples,
+        seed: a.seed,
+        diagonal: p.scene.bounds().diagonal(),
+        surface_offset,
+        cone: p.lod.as_ref().map(|_| cone),
+    };
+    let frame = Frame {
+        width: a.width,
+        height: a.height,
+        rays,
+        hits,
+        albedo: &albedo,
+    };
+    let label = match &p.structure {
+        Structure::Exact(_) => "IBL (exact BVH)",
+        Structure::Rbvh(_) => "IBL (RBVH)",
+    };
+    let rendered = progressive(label, a.samples, |on_pass| {
+        ibl::render(tracer, &frame, env, &settings, on_pass)
+    })?;
+    if a.common.stats {
+        report_ibl("this render", &rendered);
+        if let Structure::Rbvh(_) = p.structure {
+            compare_with_exact(p, env, &frame, &settings, &rendered)?;
+        }
+    }
+    Ok(rendered.image)
+}
+
+/// `--stats` for an RBVH's IBL render: the exact BVH renders the same frame, samples and seed
+/// from its own primary hits (and without the texel offset), then both times, their ratio, and
+/// the RBVH image's FLIP and PSNR against the exact one are printed.
+fn compare_with_exact(
+    p: &Prepared,
+    env: &Environment,
+    frame: &Frame,
+    settings: &Settings,
+    rendered: &ibl::Rendered,
+) -> Result<()> {
+    let t = Instant::now();
+    let bvh = step("building BVH", || Bvh::build(&p.scene))?;
+    let exact = Tracer::exact(&p.ctx, &bvh).context("uploading the exact BVH")?;
+    let setup_ms = t.elapsed().as_secs_f64() * 1e3;
+    let exact_hits = exact.trace(frame.rays, Query::Closest)?.hits;
+    let exact_frame = Frame {
+        hits: &exact_hits,
+        ..*frame
+    };
+    let exact_settings = Settings {
+        surface_offset: 0.0,
+        cone: None,
+        ..*settings
+    };
+    let reference = progressive("IBL (exact reference)", settings.samples, |on_pass| {
+        ibl::render(&exact, &exact_frame, env, &exact_settings, on_pass)
+    })?;
+    eprintln!("exact BVH built and uploaded in {setup_ms:.1} ms");
+    report_ibl("exact reference", &reference);
+    let errors = image_errors(&reference.image, &rendered.image)?;
+    let ratio = |exact: f64, rbvh: f64| exact / rbvh.max(f64::MIN_POSITIVE);
+    let gpu = match (reference.timing.gpu_ms, rendered.timing.gpu_ms) {
+        (Some(e), Some(r)) => format!("GPU {:.2}x, ", ratio(e, r)),
+        _ => String::new(),
+    };
+    eprintln!(
+        "IBL RBVH vs exact at {} samples, seed {}: speed {gpu}wall {:.2}x; FLIP {:.4}, PSNR {:.2} dB",
+        settings.samples,
+        settings.seed,
+        ratio(reference.wall_ms, rendered.wall_ms),
+        errors.flip_mean,
+        errors.psnr_db
+    );
+    Ok(())
+}
+
+/// Runs `render` under a progress bar over its `samples` passes (hidden when stderr is not a
+/// terminal).
+fn progressive<T>(
+    label: &str,
+    samples: u32,
+    render: impl FnOnce(&mut dyn FnMut(&ibl::Pass)) -> rbvh::Result<T>,
+) -> Result<T> {
+    let bar = ProgressBar::new(u64::from(samples)).with_message(label.to_string());
+    bar.set_style(
+        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} samples {elapsed}")
+            .expect("static template"),
+    );
+    bar.enable_steady_tick(Duration::from_millis(120));
+    let out = render(&mut |pass: &ibl::Pass| bar.set_position(u64::from(pass.done)));
+    bar.finish_and_clear();
+    Ok(out?)
+}
+
+/// `--stats` of one IBL render: its visibility rays, their trace time, and the host time of the
+/// sample passes (ray generation, traces, accumulation; the primary trace is not included).
+fn report_ibl(what: &str, r: &ibl::Rendered) {
+    let gpu = match r.timing.gpu_ms {
+        Some(ms) => format!(
+            "GPU {ms:.2} ms = {:.2} MRays/s",
+            r.rays as f64 / (ms.max(f64::MIN_POSITIVE) * 1e3)
+        ),
+        None => "no GPU timestamps".to_string(),
+    };
+    eprintln!(
+        "IBL {what}: {} visibility rays, {gpu}; passes wall {:.1} ms",
+        r.rays, r.wall_ms
+    );
 }
