@@ -11,6 +11,7 @@ mod png;
 mod shade;
 mod srgb;
 
+pub(crate) use srgb::decode as srgb_decode;
 pub(crate) use srgb::encode_u8 as srgb_u8;
 
 pub use self::exr::write_exr;
