@@ -87,6 +87,7 @@ fn sample() -> Rbvh {
         bounds: unit,
         depth: 2,
         texel_size: 0.5,
+        colours: None,
         stats: RbvhStats {
             build_ms: 12.25,
             heightfield_leaves: 2,
@@ -122,11 +123,13 @@ fn save_load_round_trips_exactly() {
     loaded.save(&again).unwrap();
     assert_eq!(std::fs::read(&again).unwrap(), bytes);
 
-    // The documented framing: magic, version 1, then the arrays after a 136-byte header.
+    // The documented framing: magic, version 2, then the arrays after a 136-byte header, then
+    // the colour section (an empty one: a count of 0).
     assert_eq!(&bytes[..8], b"RBVHv\0\0\0");
-    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 1);
+    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 2);
     let arrays = 2 * 64 + 2 * 48 + 2 * 64 + 72 * 4;
-    assert_eq!(bytes.len(), HEADER_BYTES + arrays);
+    assert_eq!(bytes.len(), HEADER_BYTES + arrays + 8);
+    assert_eq!(bytes[HEADER_BYTES + arrays..], [0; 8]);
     let first_texel = HEADER_BYTES + arrays - 72 * 4;
     let word = u32::from_le_bytes(bytes[first_texel..first_texel + 4].try_into().unwrap());
     assert_eq!(word, original.atlas.texels[0].0);
@@ -178,10 +181,10 @@ fn bad_magic_and_unknown_versions_are_rejected() {
     assert!(message.contains("not an RBVH file"), "{message}");
 
     let mut bytes = sample().to_bytes();
-    bytes[8..12].copy_from_slice(&2u32.to_le_bytes());
+    bytes[8..12].copy_from_slice(&3u32.to_le_bytes());
     let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
-    assert!(message.contains("unsupported version 2"), "{message}");
-    assert!(message.contains("reads version 1"), "{message}");
+    assert!(message.contains("unsupported version 3"), "{message}");
+    assert!(message.contains("reads versions 1 and 2"), "{message}");
 }
 
 #[test]
@@ -241,6 +244,32 @@ fn inconsistent_contents_are_rejected_with_the_reason() {
         message.contains("params.subdivision has tag 7"),
         "{message}"
     );
+}
+
+#[test]
+fn colours_round_trip_and_version_1_files_still_load() {
+    let path = Path::new("painted.rbvh");
+    let mut painted = sample();
+    painted.colours = Some((0..72u32).map(|k| k.wrapping_mul(0x0101_0107)).collect());
+    let bytes = painted.to_bytes();
+    assert_eq!(Rbvh::from_bytes(&bytes, path).unwrap(), painted);
+    assert_eq!(bytes.len(), sample().to_bytes().len() + 72 * 4);
+
+    // Version 1: the same bytes without the colour section.
+    let mut v1 = sample().to_bytes();
+    v1.truncate(v1.len() - 8);
+    v1[8..12].copy_from_slice(&1u32.to_le_bytes());
+    assert_eq!(Rbvh::from_bytes(&v1, path).unwrap(), sample());
+
+    // A colour section cut short, or with a count that is neither 0 nor one per texel.
+    for cut in [1, 4, 72 * 4, 72 * 4 + 7] {
+        let message = parse_error(Rbvh::from_bytes(&bytes[..bytes.len() - cut], path), path);
+        assert!(message.contains("truncated"), "{cut}: {message}");
+    }
+    let mut odd = painted.clone();
+    odd.colours.as_mut().unwrap().pop();
+    let message = parse_error(Rbvh::from_bytes(&odd.to_bytes(), path), path);
+    assert!(message.contains("71 colours for 72 texels"), "{message}");
 }
 
 #[test]

@@ -260,11 +260,13 @@ fn read_texcoords(
             let c = |k: usize| f32::from(u16::from_le_bytes([b[k], b[k + 1]]));
             Vec2::new(c(0), c(2)) / 65535.0
         })?,
-        (other, normalized) => return Err(format!(
+        (other, normalized) => {
+            return Err(format!(
             "TEXCOORD_{set} accessor {} has component type {other:?} (normalized: {normalized}); \
                  expected float or normalized unsigned byte/short",
             accessor.index()
-        )),
+        ))
+        }
     };
     if uvs.len() != n {
         return Err(format!(
