@@ -18,4 +18,4 @@ pub use self::exr::write_exr;
 pub use self::heatmap::heatmap;
 pub use self::image::Image;
 pub use self::png::write_png;
-pub use self::shade::{shade, shade_normals};
+pub use self::shade::{shade, shade_normals, shade_with_albedo};

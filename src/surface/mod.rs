@@ -8,6 +8,8 @@
 //! * `strokes`: the text file of brush strokes that `rbvh paint` reads.
 
 mod bake;
+mod query;
 pub mod rgba;
 
 pub(crate) use bake::bake;
+pub use query::{hit_albedo, SurfaceLocation};

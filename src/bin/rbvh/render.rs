@@ -5,10 +5,13 @@ use std::path::PathBuf;
 
 use anyhow::{ensure, Result};
 use clap::ValueEnum;
+use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::Query;
-use rbvh::output;
+use rbvh::output::{self, Image};
+use rbvh::scene::Scene;
+use rbvh::surface::hit_albedo;
 
-use crate::prepare::{prepare, report_steps, report_throughput, step, Common};
+use crate::prepare::{prepare, report_steps, report_throughput, step, Common, Structure};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -60,13 +63,7 @@ pub fn run(a: Args) -> Result<()> {
         }
     }
     let image = match a.shading {
-        Shading::Lambert => output::shade(
-            &rays,
-            &traced.hits,
-            a.width,
-            a.height,
-            p.scene.light.as_ref(),
-        )?,
+        Shading::Lambert => lambert(&p.scene, &p.structure, &rays, &traced.hits, a.width, a.height)?,
         Shading::Normals => output::shade_normals(&rays, &traced.hits, a.width, a.height)?,
     };
     output::write_png(&a.out, &image)?;
@@ -80,4 +77,25 @@ pub fn run(a: Args) -> Result<()> {
         eprintln!("wrote {}", path.display());
     }
     Ok(())
+}
+
+/// The preview shading, with the base colour of the hit surfaces as albedo when the scene has
+/// materials or the RBVH a colour channel (`rbvh::surface::hit_albedo`), else plain grey.
+pub fn lambert(
+    scene: &Scene,
+    structure: &Structure,
+    rays: &[Ray],
+    hits: &[Hit],
+    width: u32,
+    height: u32,
+) -> Result<Image> {
+    let rbvh = match structure {
+        Structure::Rbvh(r) => Some(&**r),
+        Structure::Exact(_) => None,
+    };
+    let light = scene.light.as_ref();
+    Ok(match hit_albedo(scene, rbvh, rays, hits) {
+        Some(albedo) => output::shade_with_albedo(rays, hits, width, height, light, &albedo)?,
+        None => output::shade(rays, hits, width, height, light)?,
+    })
 }
