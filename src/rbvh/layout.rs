@@ -76,20 +76,21 @@ impl GpuHeightfield {
         )
     }
 
-    /// World position of sample `(i, j)` with height code `code`: `origin + (i + ½)·u·texel +
-    /// (j + ½)·v·texel + code·h_scale·w`, where `u·texel = axis_u / |axis_u|²` (the axes are
-    /// orthogonal). Evaluated term by term in this order; the GLSL twin does the same with
-    /// `precise`, so both give the same bits.
+    /// The world-space sample grid of the leaf (see [`SampleGrid`]).
+    pub fn grid(&self) -> SampleGrid {
+        let (u, v) = (Vec3::from(self.axis_u), Vec3::from(self.axis_v));
+        SampleGrid {
+            origin: Vec3::from(self.origin),
+            step_u: u / u.dot(u),
+            step_v: v / v.dot(v),
+            axis_w: Vec3::from(self.axis_w),
+            h_scale: self.h_scale,
+        }
+    }
+
+    /// World position of sample `(i, j)` with height code `code` ([`SampleGrid::point`]).
     pub fn sample_point(&self, i: u32, j: u32, code: u16) -> Vec3 {
-        let (u, v, w) = (
-            Vec3::from(self.axis_u),
-            Vec3::from(self.axis_v),
-            Vec3::from(self.axis_w),
-        );
-        let su = (i as f32 + 0.5) / u.dot(u);
-        let sv = (j as f32 + 0.5) / v.dot(v);
-        let sh = code as f32 * self.h_scale;
-        Vec3::from(self.origin) + u * su + v * sv + w * sh
+        self.grid().point(i, j, code)
     }
 
     /// World box of the tile's box (`s, t` over the sample centres, `h ∈ [0, MAX_CODE·h_scale]`),
@@ -148,6 +149,30 @@ impl Texel {
 
     pub fn normal(self) -> Vec3 {
         decode_octahedral((self.0 >> 16) as u16)
+    }
+}
+
+/// A leaf's samples in world space: `step_u = axis_u / |axis_u|²` (= `u · texel`, the axes being
+/// orthogonal) and likewise `step_v` are the world vectors of one texel step. Computed once per
+/// leaf, on the host, for the CPU and for `glsl/paint.comp` alike.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SampleGrid {
+    pub origin: Vec3,
+    pub step_u: Vec3,
+    pub step_v: Vec3,
+    pub axis_w: Vec3,
+    pub h_scale: f32,
+}
+
+impl SampleGrid {
+    /// Sample `(i, j)` at height code `code`: `origin + (i + ½)·step_u + (j + ½)·step_v +
+    /// (code·h_scale)·axis_w`, evaluated in this order. `glsl/paint.comp` does the same with
+    /// `precise` (no fused multiply-add), so both give the same bits.
+    pub fn point(&self, i: u32, j: u32, code: u16) -> Vec3 {
+        let s = i as f32 + 0.5;
+        let t = j as f32 + 0.5;
+        let h = code as f32 * self.h_scale;
+        self.origin + self.step_u * s + self.step_v * t + self.axis_w * h
     }
 }
 

@@ -8,8 +8,10 @@
 //! * `strokes`: the text file of brush strokes that `rbvh paint` reads.
 
 mod bake;
+mod paint;
 mod query;
 pub mod rgba;
 
 pub(crate) use bake::bake;
-pub use query::{hit_albedo, SurfaceLocation};
+pub use paint::{candidate_leaves, Brush};
+pub use query::{blank_colours, hit_albedo, SurfaceLocation};

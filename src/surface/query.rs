@@ -8,10 +8,10 @@ use glam::{Vec3, Vec4};
 use rayon::prelude::*;
 
 use super::rgba;
-use crate::geom::{Hit, Ray};
 use crate::bvh::LEAF_BIT;
-use crate::rbvh::Rbvh;
+use crate::geom::{Hit, Ray};
 use crate::rbvh::layout::Texel;
+use crate::rbvh::Rbvh;
 use crate::scene::Scene;
 
 /// A texel of a height-field leaf: sample `(i, j)` of leaf `leaf`, at `atlas_index` in
@@ -42,7 +42,8 @@ impl Rbvh {
         let f = leaf.to_frame(ray.origin() + ray.dir() * hit.t);
         let clamp = |x: f32, res: u32| (x.floor() as i64).clamp(0, i64::from(res) - 1);
         let (i, j) = (clamp(f.x, leaf.res_u), clamp(f.y, leaf.res_v));
-        let cell = |x: f32, res: u32| ((x - 0.5).floor() as i64).clamp(0, (i64::from(res) - 2).max(0));
+        let cell =
+            |x: f32, res: u32| ((x - 0.5).floor() as i64).clamp(0, (i64::from(res) - 2).max(0));
         let (ci, cj) = (cell(f.x, leaf.res_u), cell(f.y, leaf.res_v));
         let index = |i: i64, j: i64| -> Option<u32> {
             if i >= i64::from(leaf.res_u) || j >= i64::from(leaf.res_v) {
@@ -88,14 +89,17 @@ impl Rbvh {
     /// white on every surface texel (so shading is unchanged until painted), 0 at holes.
     pub fn colour_channel(&mut self) -> &mut Vec<u32> {
         let texels = &self.atlas.texels;
-        self.colours.get_or_insert_with(|| {
-            let white = rgba::from_bytes([255; 4]);
-            texels
-                .iter()
-                .map(|t: &Texel| if t.is_hole() { 0 } else { white })
-                .collect()
-        })
+        self.colours.get_or_insert_with(|| blank_colours(texels))
     }
+}
+
+/// A fresh colour channel for `texels`: opaque white on surface texels, 0 at holes.
+pub fn blank_colours(texels: &[Texel]) -> Vec<u32> {
+    let white = rgba::from_bytes([255; 4]);
+    texels
+        .iter()
+        .map(|t| if t.is_hole() { 0 } else { white })
+        .collect()
 }
 
 /// Per pixel, the linear RGB base colour of the hit (white for misses and for surfaces without
@@ -104,7 +108,12 @@ impl Rbvh {
 /// exactly as they were without surface data. Hit ids: a height-field hit (`LEAF_BIT` set) reads
 /// the RBVH's texel ([`Rbvh::locate`]); any other hit is a scene triangle, coloured by its
 /// material at the hit point's barycentrics.
-pub fn hit_albedo(scene: &Scene, rbvh: Option<&Rbvh>, rays: &[Ray], hits: &[Hit]) -> Option<Vec<Vec3>> {
+pub fn hit_albedo(
+    scene: &Scene,
+    rbvh: Option<&Rbvh>,
+    rays: &[Ray],
+    hits: &[Hit],
+) -> Option<Vec<Vec3>> {
     let channel = rbvh.filter(|r| r.colours.is_some());
     if scene.surface.is_none() && channel.is_none() {
         return None;
@@ -117,8 +126,7 @@ pub fn hit_albedo(scene: &Scene, rbvh: Option<&Rbvh>, rays: &[Ray], hits: &[Hit]
                 return Vec3::ONE;
             }
             let colour = if hit.id & LEAF_BIT != 0 {
-                channel
-                    .and_then(|r| r.surface_colour(r.locate(ray, hit)?))
+                channel.and_then(|r| r.surface_colour(r.locate(ray, hit)?))
             } else {
                 scene.colour_at(hit.id as usize, ray.origin() + ray.dir() * hit.t)
             };

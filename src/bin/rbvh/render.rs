@@ -63,7 +63,14 @@ pub fn run(a: Args) -> Result<()> {
         }
     }
     let image = match a.shading {
-        Shading::Lambert => lambert(&p.scene, &p.structure, &rays, &traced.hits, a.width, a.height)?,
+        Shading::Lambert => lambert(
+            &p.scene,
+            &p.structure,
+            &rays,
+            &traced.hits,
+            a.width,
+            a.height,
+        )?,
         Shading::Normals => output::shade_normals(&rays, &traced.hits, a.width, a.height)?,
     };
     output::write_png(&a.out, &image)?;
