@@ -11,6 +11,7 @@ mod bake;
 mod paint;
 mod query;
 pub mod rgba;
+pub mod strokes;
 
 pub(crate) use bake::bake;
 pub use paint::{candidate_leaves, Brush};
