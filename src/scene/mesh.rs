@@ -409,6 +409,47 @@ mod tests {
     }
 
     #[test]
+    fn surface_stays_parallel_through_push_and_append() {
+        let uv = [Vec2::ZERO, Vec2::X, Vec2::Y];
+        let mut textured = Scene::new("tex");
+        let red = textured.add_material(Material::constant("red", glam::Vec4::X));
+        textured.push_textured_object(
+            "t",
+            &[Vec3::ZERO, Vec3::X, Vec3::Z],
+            &[[0, 2, 1]],
+            ObjectSurface {
+                material_of_triangle: vec![red],
+                uv_of_triangle: vec![uv],
+            },
+        );
+        // A plain object first, then two instances of the textured one, one mirrored.
+        let mut s = unit_triangle();
+        assert!(s.surface.is_none());
+        s.append(&textured, Mat4::IDENTITY);
+        s.append(&textured, Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0)));
+        s.push_object("plain", &[Vec3::ZERO, Vec3::X, Vec3::Y], &[[0, 1, 2]]);
+        s.validate().unwrap();
+        let surface = s.surface.as_ref().unwrap();
+        assert_eq!(surface.materials.len(), 2);
+        assert_eq!(
+            surface.material_of_triangle,
+            vec![NO_MATERIAL, 0, 1, NO_MATERIAL]
+        );
+        assert_eq!(surface.uv_of_triangle[1], uv);
+        assert_eq!(surface.uv_of_triangle[2], [uv[0], uv[2], uv[1]]);
+        // The mirrored copy keeps each corner's texture coordinate with its vertex.
+        let corner = |t: usize, c: usize| s.positions[s.triangles[t][c] as usize];
+        assert_eq!(corner(2, 1).x, -corner(1, 2).x);
+        let mut bad = s.clone();
+        bad.surface.as_mut().unwrap().material_of_triangle[1] = 5;
+        assert!(bad
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("material 5"));
+    }
+
+    #[test]
     fn bounds_ignore_unreferenced_vertices() {
         let mut s = unit_triangle();
         s.positions.push(Vec3::splat(100.0));
