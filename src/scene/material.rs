@@ -90,7 +90,7 @@ pub fn barycentrics(tri: [Vec3; 3], p: Vec3) -> Vec3 {
     let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
     let (dp1, dp2) = (d.dot(e1), d.dot(e2));
     let det = d11 * d22 - d12 * d12;
-    if !(det > 0.0) || !det.is_finite() {
+    if det.is_nan() || det <= 0.0 || det.is_infinite() {
         return Vec3::X;
     }
     let v = (d22 * dp1 - d12 * dp2) / det;
