@@ -123,13 +123,12 @@ fn save_load_round_trips_exactly() {
     loaded.save(&again).unwrap();
     assert_eq!(std::fs::read(&again).unwrap(), bytes);
 
-    // The documented framing: magic, version 2, then the arrays after a 136-byte header, then
-    // the colour section (an empty one: a count of 0).
+    // The documented framing: magic, version 1 (no colour channel), then the arrays after a
+    // 136-byte header.
     assert_eq!(&bytes[..8], b"RBVHv\0\0\0");
-    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 2);
+    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 1);
     let arrays = 2 * 64 + 2 * 48 + 2 * 64 + 72 * 4;
-    assert_eq!(bytes.len(), HEADER_BYTES + arrays + 8);
-    assert_eq!(bytes[HEADER_BYTES + arrays..], [0; 8]);
+    assert_eq!(bytes.len(), HEADER_BYTES + arrays);
     let first_texel = HEADER_BYTES + arrays - 72 * 4;
     let word = u32::from_le_bytes(bytes[first_texel..first_texel + 4].try_into().unwrap());
     assert_eq!(word, original.atlas.texels[0].0);
@@ -247,19 +246,18 @@ fn inconsistent_contents_are_rejected_with_the_reason() {
 }
 
 #[test]
-fn colours_round_trip_and_version_1_files_still_load() {
+fn colours_round_trip_as_version_2() {
     let path = Path::new("painted.rbvh");
     let mut painted = sample();
     painted.colours = Some((0..72u32).map(|k| k.wrapping_mul(0x0101_0107)).collect());
     let bytes = painted.to_bytes();
     assert_eq!(Rbvh::from_bytes(&bytes, path).unwrap(), painted);
-    assert_eq!(bytes.len(), sample().to_bytes().len() + 72 * 4);
-
-    // Version 1: the same bytes without the colour section.
-    let mut v1 = sample().to_bytes();
-    v1.truncate(v1.len() - 8);
-    v1[8..12].copy_from_slice(&1u32.to_le_bytes());
-    assert_eq!(Rbvh::from_bytes(&v1, path).unwrap(), sample());
+    // Version 2: version 1's bytes, then the colour count and the colours.
+    let v1 = sample().to_bytes();
+    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 2);
+    assert_eq!(bytes.len(), v1.len() + 8 + 72 * 4);
+    assert_eq!(bytes[12..v1.len()], v1[12..]);
+    assert_eq!(bytes[v1.len()..v1.len() + 8], 72u64.to_le_bytes());
 
     // A colour section cut short, or with a count that is neither 0 nor one per texel.
     for cut in [1, 4, 72 * 4, 72 * 4 + 7] {

@@ -164,8 +164,6 @@ impl Rbvh {
                 atlas.texels.len(),
             )
         });
-        // An empty channel (no height-field texel at all) is no channel, as a loaded file has it.
-        let colours = colours.filter(|c| !c.is_empty());
         let stats = RbvhStats {
             build_ms: start.elapsed().as_secs_f64() * 1e3,
             heightfield_leaves: out.leaves.len() as u32,

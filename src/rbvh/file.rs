@@ -10,7 +10,7 @@
 //! | bytes | type | field |
 //! |---|---|---|
 //! | 0..8 | `[u8; 8]` | magic `RBVHv` followed by three zero bytes |
-//! | 8..12 | u32 | format version, 2 (version 1 files, without the colour section, still load) |
+//! | 8..12 | u32 | format version: 1 without a colour channel, 2 with one |
 //! | 12..16 | f32 | `params.texels_per_diagonal` |
 //! | 16..20, 20..24 | u32, f32 | `params.refinement`: tag (0 = `NormalCone`, 1 = `ProjectedArea`), its value (`max_angle_deg` or `min_ratio`) |
 //! | 24..28 | u32 | `params.subdivision`: 0 = `SpatialMedian`, 1 = `AreaSah` |
@@ -29,12 +29,14 @@
 //! | then | `T` × 48 bytes | `triangles` ([`crate::bvh::GpuTriangle`], 12 words each) |
 //! | then | `L` × 64 bytes | `leaves` ([`super::GpuHeightfield`], 16 words each) |
 //! | then | `X` × 4 bytes | `atlas.texels` ([`super::Texel`], one word each), row by row |
-//! | then | u64 | colour count `C`: 0 (no colour channel) or `X` (version 2 only) |
-//! | then | `C` × 4 bytes | `colours` (packed RGBA8, see [`crate::surface::rgba`]), parallel to the texels (version 2 only) |
+//! | then | u64 | version 2 only: colour count `C`, which must equal `X` |
+//! | then | `C` × 4 bytes | version 2 only: `colours` (packed RGBA8, see [`crate::surface::rgba`]), parallel to the texels |
 //!
-//! Version 2 only appended the colour section (painting, `crate::surface`); a version 1 file is
-//! the same bytes without it and loads with `colours: None`. A colour section that is cut short,
-//! or whose count is neither 0 nor `X`, is an [`Error::Parse`] like any other malformation.
+//! Version 2 appended the optional colour channel (`crate::surface`). An RBVH without one is
+//! written as version 1, byte for byte as before the channel existed, so old files load and
+//! every file round-trips exactly; an RBVH with one is written as version 2. A colour section
+//! that is cut short, or whose count is not `X`, is an [`Error::Parse`] like any other
+//! malformation.
 //!
 //! Loading checks everything a tracer relies on, so a loaded RBVH is safe to trace and to upload:
 //! the magic and version, the length (counts × record sizes must be exactly what follows the
@@ -61,9 +63,9 @@ use crate::{Error, Result};
 
 /// The first eight bytes of every RBVH file.
 const MAGIC: [u8; 8] = *b"RBVHv\0\0\0";
-/// The format version this build writes; it also reads [`VERSION_WITHOUT_COLOURS`].
+/// The format version of files with a colour channel.
 const VERSION: u32 = 2;
-/// The first version, identical to the current one but for the colour section.
+/// The format version of files without one: the same bytes without the colour section.
 const VERSION_WITHOUT_COLOURS: u32 = 1;
 /// Bytes before the arrays (see the table in the module docs).
 const HEADER_BYTES: usize = 136;
@@ -90,11 +92,17 @@ impl Rbvh {
             + std::mem::size_of_val(self.triangles.as_slice())
             + std::mem::size_of_val(self.leaves.as_slice())
             + std::mem::size_of_val(self.atlas.texels.as_slice())
-            + 8
+            + self.colours.as_ref().map_or(0, |_| 8)
             + self.colour_bytes() as usize;
         let mut out = Vec::with_capacity(HEADER_BYTES + arrays);
         out.extend_from_slice(&MAGIC);
-        put_u32(&mut out, VERSION);
+        put_u32(
+            &mut out,
+            match self.colours {
+                Some(_) => VERSION,
+                None => VERSION_WITHOUT_COLOURS,
+            },
+        );
 
         let p = &self.params;
         put_f32(&mut out, p.texels_per_diagonal);
@@ -143,9 +151,10 @@ impl Rbvh {
         put_records(&mut out, &self.triangles);
         put_records(&mut out, &self.leaves);
         put_records(&mut out, &self.atlas.texels);
-        let colours = self.colours.as_deref().unwrap_or_default();
-        out.extend_from_slice(&(colours.len() as u64).to_le_bytes());
-        put_records(&mut out, colours);
+        if let Some(colours) = &self.colours {
+            out.extend_from_slice(&(colours.len() as u64).to_le_bytes());
+            put_records(&mut out, colours);
+        }
         out
     }
 
@@ -297,10 +306,10 @@ impl Rbvh {
                  {verdict}"
             )));
         }
-        if n_colours != 0 && n_colours != n_texels {
+        if version == VERSION && n_colours != n_texels {
             return Err(err(format!(
                 "the colour section has {n_colours} colours for {n_texels} texels (it must have \
-                 none or one per texel)"
+                 one per texel)"
             )));
         }
         if n_texels != u64::from(pitch) * u64::from(rows) {
@@ -316,8 +325,7 @@ impl Rbvh {
         let texels: Vec<Texel> = r.records(n_texels as usize)?;
         let colours = if version == VERSION {
             r.u64("the colour count")?;
-            let colours: Vec<u32> = r.records(n_colours as usize)?;
-            (n_colours > 0).then_some(colours)
+            Some(r.records(n_colours as usize)?)
         } else {
             None
         };
