@@ -56,5 +56,6 @@ pub mod output;
 pub mod rbvh;
 pub mod regress;
 pub mod scene;
+pub mod surface;
 
 pub use error::{Error, Result};

@@ -162,6 +162,7 @@ fn empty_scene_and_empty_batch() {
         object_names: vec![],
         camera: None,
         light: None,
+        surface: None,
     };
     let bvh = Bvh::build(&empty).unwrap();
     let tracer = Tracer::exact(&ctx, &bvh).unwrap();

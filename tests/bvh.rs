@@ -17,6 +17,7 @@ fn scene_from(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Scene {
         triangles,
         camera: None,
         light: None,
+        surface: None,
     }
 }
 

@@ -228,3 +228,48 @@ fn lod_layout_matches() {
         "glsl/lod.glsl's RBVH_LOD_BIT differs from LOD_BIT"
     );
 }
+
+#[test]
+fn paint_brush_and_push_constants_match() {
+    use rbvh::gpu::PaintParams as P;
+    use rbvh::surface::Brush as B;
+    let r = spirv::reflect(&shaders::words(shaders::PAINT).unwrap());
+    check(
+        &r,
+        "PaintBrush",
+        size_of::<B>(),
+        &[
+            ("centre", offset_of!(B, centre)),
+            ("radius", offset_of!(B, radius)),
+            ("colour", offset_of!(B, colour)),
+            ("pad0", offset_of!(B, pad)),
+            ("pad1", offset_of!(B, pad) + 4),
+            ("pad2", offset_of!(B, pad) + 8),
+        ],
+    );
+    let glsl = r
+        .structs
+        .get("PaintParams")
+        .expect("push constant block PaintParams");
+    let glsl: Vec<(&str, usize)> = glsl
+        .iter()
+        .map(|(m, o)| (m.as_str(), *o as usize))
+        .collect();
+    assert_eq!(
+        glsl,
+        [
+            ("origin", offset_of!(P, origin)),
+            ("atlas_base", offset_of!(P, atlas_base)),
+            ("step_u", offset_of!(P, step_u)),
+            ("res_u", offset_of!(P, res_u)),
+            ("step_v", offset_of!(P, step_v)),
+            ("res_v", offset_of!(P, res_v)),
+            ("axis_w", offset_of!(P, axis_w)),
+            ("h_scale", offset_of!(P, h_scale)),
+            ("texel_offset", offset_of!(P, texel_offset)),
+            ("brush_count", offset_of!(P, brush_count)),
+            ("atlas_pitch", offset_of!(P, atlas_pitch)),
+            ("atlas_len", offset_of!(P, atlas_len)),
+        ]
+    );
+}

@@ -87,6 +87,7 @@ fn sample() -> Rbvh {
         bounds: unit,
         depth: 2,
         texel_size: 0.5,
+        colours: None,
         stats: RbvhStats {
             build_ms: 12.25,
             heightfield_leaves: 2,
@@ -122,7 +123,8 @@ fn save_load_round_trips_exactly() {
     loaded.save(&again).unwrap();
     assert_eq!(std::fs::read(&again).unwrap(), bytes);
 
-    // The documented framing: magic, version 1, then the arrays after a 136-byte header.
+    // The documented framing: magic, version 1 (no colour channel), then the arrays after a
+    // 136-byte header.
     assert_eq!(&bytes[..8], b"RBVHv\0\0\0");
     assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 1);
     let arrays = 2 * 64 + 2 * 48 + 2 * 64 + 72 * 4;
@@ -178,10 +180,10 @@ fn bad_magic_and_unknown_versions_are_rejected() {
     assert!(message.contains("not an RBVH file"), "{message}");
 
     let mut bytes = sample().to_bytes();
-    bytes[8..12].copy_from_slice(&2u32.to_le_bytes());
+    bytes[8..12].copy_from_slice(&3u32.to_le_bytes());
     let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
-    assert!(message.contains("unsupported version 2"), "{message}");
-    assert!(message.contains("reads version 1"), "{message}");
+    assert!(message.contains("unsupported version 3"), "{message}");
+    assert!(message.contains("reads versions 1 and 2"), "{message}");
 }
 
 #[test]
@@ -241,6 +243,31 @@ fn inconsistent_contents_are_rejected_with_the_reason() {
         message.contains("params.subdivision has tag 7"),
         "{message}"
     );
+}
+
+#[test]
+fn colours_round_trip_as_version_2() {
+    let path = Path::new("painted.rbvh");
+    let mut painted = sample();
+    painted.colours = Some((0..72u32).map(|k| k.wrapping_mul(0x0101_0107)).collect());
+    let bytes = painted.to_bytes();
+    assert_eq!(Rbvh::from_bytes(&bytes, path).unwrap(), painted);
+    // Version 2: version 1's bytes, then the colour count and the colours.
+    let v1 = sample().to_bytes();
+    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 2);
+    assert_eq!(bytes.len(), v1.len() + 8 + 72 * 4);
+    assert_eq!(bytes[12..v1.len()], v1[12..]);
+    assert_eq!(bytes[v1.len()..v1.len() + 8], 72u64.to_le_bytes());
+
+    // A colour section cut short, or with a count that is neither 0 nor one per texel.
+    for cut in [1, 4, 72 * 4, 72 * 4 + 7] {
+        let message = parse_error(Rbvh::from_bytes(&bytes[..bytes.len() - cut], path), path);
+        assert!(message.contains("truncated"), "{cut}: {message}");
+    }
+    let mut odd = painted.clone();
+    odd.colours.as_mut().unwrap().pop();
+    let message = parse_error(Rbvh::from_bytes(&odd.to_bytes(), path), path);
+    assert!(message.contains("71 colours for 72 texels"), "{message}");
 }
 
 #[test]

@@ -4,6 +4,7 @@
 
 mod buffer;
 mod context;
+mod painter;
 mod pipeline;
 pub mod shaders;
 pub mod spirv;
@@ -12,6 +13,7 @@ mod tracer;
 
 pub use buffer::Buffer;
 pub use context::{Context, ContextOptions, DeviceLimits, External, Validation};
+pub use painter::{PaintParams, PaintStats, Painter, MAX_BRUSHES_PER_PASS};
 pub use pipeline::{ComputePipeline, DescriptorSet};
 pub use submit::Timing;
 pub use tracer::{BufferView, Query, TraceBinding, TraceParams, Traced, Tracer};

@@ -44,7 +44,34 @@ pub fn shade(
     let pixels = rays
         .par_iter()
         .zip(hits)
-        .map(|(ray, hit)| shade_one(ray, hit, light))
+        .map(|(ray, hit)| shade_one(ray, hit, light, Vec3::ONE))
+        .collect();
+    Ok(Image {
+        width,
+        height,
+        pixels,
+    })
+}
+
+/// As [`shade`], with the grey albedo multiplied per pixel by `albedo` (linear RGB, e.g. the base
+/// colours of [`crate::surface::hit_albedo`]); `albedo` must have `width × height` entries. An
+/// all-white `albedo` gives exactly the image of [`shade`].
+pub fn shade_with_albedo(
+    rays: &[Ray],
+    hits: &[Hit],
+    width: u32,
+    height: u32,
+    light: Option<&Light>,
+    albedo: &[Vec3],
+) -> crate::Result<Image> {
+    check_per_pixel("rays", rays.len(), width, height)?;
+    check_per_pixel("hits", hits.len(), width, height)?;
+    check_per_pixel("albedo", albedo.len(), width, height)?;
+    let pixels = rays
+        .par_iter()
+        .zip(hits)
+        .zip(albedo)
+        .map(|((ray, hit), &a)| shade_one(ray, hit, light, a))
         .collect();
     Ok(Image {
         width,
@@ -78,7 +105,7 @@ pub fn shade_normals(rays: &[Ray], hits: &[Hit], width: u32, height: u32) -> cra
     })
 }
 
-fn shade_one(ray: &Ray, hit: &Hit, light: Option<&Light>) -> Vec3 {
+fn shade_one(ray: &Ray, hit: &Hit, light: Option<&Light>, albedo: Vec3) -> Vec3 {
     let dir = ray.dir().normalize_or_zero();
     if !hit.is_hit() {
         return sky(dir);
@@ -95,7 +122,7 @@ fn shade_one(ray: &Ray, hit: &Hit, light: Option<&Light>) -> Vec3 {
         }
         None => -dir,
     };
-    Vec3::splat(ALBEDO * (AMBIENT + KEY * normal.dot(to_light).max(0.0)))
+    albedo * (ALBEDO * (AMBIENT + KEY * normal.dot(to_light).max(0.0)))
 }
 
 fn sky(dir: Vec3) -> Vec3 {

@@ -238,6 +238,7 @@ mod tests {
                     .collect(),
                 h_scale: 1.0,
                 covered: u * v,
+                sources: Vec::new(),
             })
             .collect();
         let p = pack(&s).unwrap();

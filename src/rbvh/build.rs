@@ -26,7 +26,7 @@ use glam::Vec3;
 use super::atlas;
 use super::frame::{fit, passes, projection_axis, rounding_pad};
 use super::layout::HEIGHTFIELD_COUNT;
-use super::raster::{rasterize, Frame, Tile};
+use super::raster::{rasterize, Frame, Tile, NO_SOURCE};
 use super::split::{split, SplitPrim};
 use super::{Rbvh, RbvhParams, RbvhStats};
 use crate::bvh::{join_halves, ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
@@ -52,6 +52,8 @@ enum Node {
 
 struct Builder<'a> {
     tris: &'a [[Vec3; 3]],
+    /// Keep [`Tile::sources`] (as scene triangle indices) for baking surface data.
+    keep_sources: bool,
     prims: &'a [SplitPrim],
     params: &'a RbvhParams,
     texel: f32,
@@ -109,6 +111,7 @@ impl Rbvh {
             .collect();
         let builder = Builder {
             tris: &tris,
+            keep_sources: scene.surface.is_some(),
             prims: &prims,
             params,
             texel,
@@ -151,6 +154,16 @@ impl Rbvh {
             leaf.atlas_base = base;
         }
         let atlas = atlas::assemble(&out.tiles, &packing);
+        let colours = scene.surface.as_ref().map(|surface| {
+            crate::surface::bake(
+                scene,
+                surface,
+                &out.tiles,
+                &packing.bases,
+                packing.pitch,
+                atlas.texels.len(),
+            )
+        });
         let stats = RbvhStats {
             build_ms: start.elapsed().as_secs_f64() * 1e3,
             heightfield_leaves: out.leaves.len() as u32,
@@ -171,6 +184,7 @@ impl Rbvh {
             depth,
             texel_size: texel,
             stats,
+            colours,
         })
     }
 }
@@ -185,7 +199,18 @@ impl Builder<'_> {
                 .all(|&i| self.prims[i as usize].component == first.component);
         if one_part {
             let tris: Vec<[Vec3; 3]> = order.iter().map(|&i| self.tris[i as usize]).collect();
-            if let Some(tiles) = self.heightfield(&tris) {
+            if let Some(mut tiles) = self.heightfield(&tris) {
+                for tile in &mut tiles {
+                    tile.sources = if self.keep_sources {
+                        let scene_index = |s: u32| order.get(s as usize).copied();
+                        tile.sources
+                            .iter()
+                            .map(|&s| scene_index(s).unwrap_or(NO_SOURCE))
+                            .collect()
+                    } else {
+                        Vec::new()
+                    };
+                }
                 return tiles_subtree(tiles);
             }
         }

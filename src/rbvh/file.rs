@@ -10,7 +10,7 @@
 //! | bytes | type | field |
 //! |---|---|---|
 //! | 0..8 | `[u8; 8]` | magic `RBVHv` followed by three zero bytes |
-//! | 8..12 | u32 | format version, 1 |
+//! | 8..12 | u32 | format version: 1 without a colour channel, 2 with one |
 //! | 12..16 | f32 | `params.texels_per_diagonal` |
 //! | 16..20, 20..24 | u32, f32 | `params.refinement`: tag (0 = `NormalCone`, 1 = `ProjectedArea`), its value (`max_angle_deg` or `min_ratio`) |
 //! | 24..28 | u32 | `params.subdivision`: 0 = `SpatialMedian`, 1 = `AreaSah` |
@@ -29,6 +29,14 @@
 //! | then | `T` × 48 bytes | `triangles` ([`crate::bvh::GpuTriangle`], 12 words each) |
 //! | then | `L` × 64 bytes | `leaves` ([`super::GpuHeightfield`], 16 words each) |
 //! | then | `X` × 4 bytes | `atlas.texels` ([`super::Texel`], one word each), row by row |
+//! | then | u64 | version 2 only: colour count `C`, which must equal `X` |
+//! | then | `C` × 4 bytes | version 2 only: `colours` (packed RGBA8, see [`crate::surface::rgba`]), parallel to the texels |
+//!
+//! Version 2 appended the optional colour channel (`crate::surface`). An RBVH without one is
+//! written as version 1, byte for byte as before the channel existed, so old files load and
+//! every file round-trips exactly; an RBVH with one is written as version 2. A colour section
+//! that is cut short, or whose count is not `X`, is an [`Error::Parse`] like any other
+//! malformation.
 //!
 //! Loading checks everything a tracer relies on, so a loaded RBVH is safe to trace and to upload:
 //! the magic and version, the length (counts × record sizes must be exactly what follows the
@@ -55,8 +63,10 @@ use crate::{Error, Result};
 
 /// The first eight bytes of every RBVH file.
 const MAGIC: [u8; 8] = *b"RBVHv\0\0\0";
-/// The format version this build writes and reads.
-const VERSION: u32 = 1;
+/// The format version of files with a colour channel.
+const VERSION: u32 = 2;
+/// The format version of files without one: the same bytes without the colour section.
+const VERSION_WITHOUT_COLOURS: u32 = 1;
 /// Bytes before the arrays (see the table in the module docs).
 const HEADER_BYTES: usize = 136;
 
@@ -81,10 +91,18 @@ impl Rbvh {
         let arrays = std::mem::size_of_val(self.nodes.as_slice())
             + std::mem::size_of_val(self.triangles.as_slice())
             + std::mem::size_of_val(self.leaves.as_slice())
-            + std::mem::size_of_val(self.atlas.texels.as_slice());
+            + std::mem::size_of_val(self.atlas.texels.as_slice())
+            + self.colours.as_ref().map_or(0, |_| 8)
+            + self.colour_bytes() as usize;
         let mut out = Vec::with_capacity(HEADER_BYTES + arrays);
         out.extend_from_slice(&MAGIC);
-        put_u32(&mut out, VERSION);
+        put_u32(
+            &mut out,
+            match self.colours {
+                Some(_) => VERSION,
+                None => VERSION_WITHOUT_COLOURS,
+            },
+        );
 
         let p = &self.params;
         put_f32(&mut out, p.texels_per_diagonal);
@@ -133,6 +151,10 @@ impl Rbvh {
         put_records(&mut out, &self.triangles);
         put_records(&mut out, &self.leaves);
         put_records(&mut out, &self.atlas.texels);
+        if let Some(colours) = &self.colours {
+            out.extend_from_slice(&(colours.len() as u64).to_le_bytes());
+            put_records(&mut out, colours);
+        }
         out
     }
 
@@ -153,9 +175,10 @@ impl Rbvh {
         };
         r.take(MAGIC.len(), "the magic")?;
         let version = r.u32("the version")?;
-        if version != VERSION {
+        if version != VERSION && version != VERSION_WITHOUT_COLOURS {
             return Err(err(format!(
-                "unsupported version {version} (this build reads version {VERSION})"
+                "unsupported version {version} (this build reads versions \
+                 {VERSION_WITHOUT_COLOURS} and {VERSION})"
             )));
         }
 
@@ -246,6 +269,30 @@ impl Rbvh {
         }
         let remaining = (bytes.len() - r.pos) as u64;
         let [n_nodes, n_triangles, n_leaves, n_texels] = counts;
+        // Version 2: the colour section follows the arrays; its length is checked below.
+        let colour_section = if version == VERSION {
+            let colour_count = needed.and_then(|n| {
+                let at = usize::try_from(n).ok()?.checked_add(r.pos)?;
+                let b = bytes.get(at..at.checked_add(8)?)?;
+                Some(u64::from_le_bytes(b.try_into().ok()?))
+            });
+            match colour_count {
+                Some(c) => c
+                    .checked_mul(4)
+                    .and_then(|b| b.checked_add(8))
+                    .map(|b| (c, b)),
+                // The arrays or the count itself are cut off: reported as truncation below.
+                None => Some((0, 8)),
+            }
+        } else {
+            Some((0, 0))
+        };
+        let Some((n_colours, colour_bytes)) = colour_section else {
+            return Err(err(
+                "the colour section's count is corrupt (more than 2^64 bytes)".to_string(),
+            ));
+        };
+        let needed = needed.and_then(|n| n.checked_add(colour_bytes));
         if needed != Some(remaining) {
             let (needed, verdict) = match needed {
                 Some(n) if n < remaining => (n.to_string(), "trailing bytes after the arrays"),
@@ -254,8 +301,15 @@ impl Rbvh {
             };
             return Err(err(format!(
                 "the header counts {n_nodes} nodes, {n_triangles} triangles, {n_leaves} leaves and \
-                 {n_texels} texels, which take {needed} bytes, but {remaining} bytes follow the \
-                 {HEADER_BYTES}-byte header: {verdict}"
+                 {n_texels} texels (and the colour section {n_colours} colours), which take \
+                 {needed} bytes, but {remaining} bytes follow the {HEADER_BYTES}-byte header: \
+                 {verdict}"
+            )));
+        }
+        if version == VERSION && n_colours != n_texels {
+            return Err(err(format!(
+                "the colour section has {n_colours} colours for {n_texels} texels (it must have \
+                 one per texel)"
             )));
         }
         if n_texels != u64::from(pitch) * u64::from(rows) {
@@ -269,6 +323,12 @@ impl Rbvh {
         let triangles: Vec<GpuTriangle> = r.records(n_triangles as usize)?;
         let leaves: Vec<GpuHeightfield> = r.records(n_leaves as usize)?;
         let texels: Vec<Texel> = r.records(n_texels as usize)?;
+        let colours = if version == VERSION {
+            r.u64("the colour count")?;
+            Some(r.records(n_colours as usize)?)
+        } else {
+            None
+        };
         let atlas = Atlas {
             pitch,
             rows,
@@ -312,6 +372,7 @@ impl Rbvh {
             depth,
             texel_size,
             stats,
+            colours,
         })
     }
 }

@@ -63,6 +63,62 @@ pub struct GpuHeightfield {
 }
 const _: () = assert!(std::mem::size_of::<GpuHeightfield>() == 64);
 
+/// The leaf frame's maps, in one place for every user outside the march (which inlines the same
+/// dot products: `march.rs` step 1; `glsl/paint.comp` mirrors [`GpuHeightfield::sample_point`]).
+impl GpuHeightfield {
+    /// Frame coordinates `(s, t, h)` of world point `p`: `s`, `t` in texels, `h` in world units.
+    pub fn to_frame(&self, p: Vec3) -> Vec3 {
+        let rel = p - Vec3::from(self.origin);
+        Vec3::new(
+            rel.dot(Vec3::from(self.axis_u)),
+            rel.dot(Vec3::from(self.axis_v)),
+            rel.dot(Vec3::from(self.axis_w)),
+        )
+    }
+
+    /// The world-space sample grid of the leaf (see [`SampleGrid`]).
+    pub fn grid(&self) -> SampleGrid {
+        let (u, v) = (Vec3::from(self.axis_u), Vec3::from(self.axis_v));
+        SampleGrid {
+            origin: Vec3::from(self.origin),
+            step_u: u / u.dot(u),
+            step_v: v / v.dot(v),
+            axis_w: Vec3::from(self.axis_w),
+            h_scale: self.h_scale,
+        }
+    }
+
+    /// World position of sample `(i, j)` with height code `code` ([`SampleGrid::point`]).
+    pub fn sample_point(&self, i: u32, j: u32, code: u16) -> Vec3 {
+        self.grid().point(i, j, code)
+    }
+
+    /// World box of the tile's box (`s, t` over the sample centres, `h ∈ [0, MAX_CODE·h_scale]`),
+    /// widened by a few ulps: every sample point, and the surface between them, lies inside.
+    pub fn world_bounds(&self) -> crate::geom::Aabb {
+        let top = Texel::MAX_CODE;
+        let (i1, j1) = (self.res_u.max(1) - 1, self.res_v.max(1) - 1);
+        let mut b = crate::geom::Aabb::EMPTY;
+        for (i, j, code) in [
+            (0, 0, 0),
+            (i1, 0, 0),
+            (0, j1, 0),
+            (i1, j1, 0),
+            (0, 0, top),
+            (i1, 0, top),
+            (0, j1, top),
+            (i1, j1, top),
+        ] {
+            b = b.grow(self.sample_point(i, j, code));
+        }
+        let margin = b.min.abs().max(b.max.abs()) * (8.0 * f32::EPSILON);
+        crate::geom::Aabb {
+            min: b.min - margin,
+            max: b.max + margin,
+        }
+    }
+}
+
 /// A 32-bit atlas texel: bits 0–15 the quantized height (`HOLE` = no surface), bits 16–31 the
 /// world-space unit normal in 8:8 octahedral encoding (Cigolle et al., "A Survey of Efficient
 /// Representations for Independent Unit Vectors", JCGT 2014), worst-case error about 1.2°.
@@ -93,6 +149,30 @@ impl Texel {
 
     pub fn normal(self) -> Vec3 {
         decode_octahedral((self.0 >> 16) as u16)
+    }
+}
+
+/// A leaf's samples in world space: `step_u = axis_u / |axis_u|²` (= `u · texel`, the axes being
+/// orthogonal) and likewise `step_v` are the world vectors of one texel step. Computed once per
+/// leaf, on the host, for the CPU and for `glsl/paint.comp` alike.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SampleGrid {
+    pub origin: Vec3,
+    pub step_u: Vec3,
+    pub step_v: Vec3,
+    pub axis_w: Vec3,
+    pub h_scale: f32,
+}
+
+impl SampleGrid {
+    /// Sample `(i, j)` at height code `code`: `origin + (i + ½)·step_u + (j + ½)·step_v +
+    /// (code·h_scale)·axis_w`, evaluated in this order. `glsl/paint.comp` does the same with
+    /// `precise` (no fused multiply-add), so both give the same bits.
+    pub fn point(&self, i: u32, j: u32, code: u16) -> Vec3 {
+        let s = i as f32 + 0.5;
+        let t = j as f32 + 0.5;
+        let h = code as f32 * self.h_scale;
+        self.origin + self.step_u * s + self.step_v * t + self.axis_w * h
     }
 }
 

@@ -648,6 +648,7 @@ mod tests {
             depth: 1,
             texel_size: TS,
             stats: RbvhStats::default(),
+            colours: None,
         }
     }
 

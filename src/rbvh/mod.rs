@@ -16,7 +16,7 @@ mod frame;
 pub mod layout;
 mod march;
 pub mod params;
-mod raster;
+pub(crate) mod raster;
 mod split;
 
 pub use layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT};
@@ -43,6 +43,11 @@ pub struct Rbvh {
     /// World-space size of one texel (scene diagonal / texels_per_diagonal).
     pub texel_size: f32,
     pub stats: RbvhStats,
+    /// Optional per-texel surface colour, parallel to `atlas.texels` (same index): RGBA8 packed
+    /// as in [`crate::surface::rgba`] (red in the low byte, RGB sRGB-encoded, alpha linear), 0 at
+    /// holes. Baked at build time when the scene has materials, created on first paint otherwise;
+    /// `None` costs nothing. See `crate::surface`.
+    pub colours: Option<Vec<u32>>,
 }
 
 /// Accounting of one build.
@@ -67,6 +72,14 @@ impl Rbvh {
 
     pub fn triangle_bytes(&self) -> u64 {
         std::mem::size_of_val(self.triangles.as_slice()) as u64
+    }
+
+    /// Bytes of the optional colour channel (0 without one). Not part of [`Rbvh::total_bytes`],
+    /// which is the geometry that the exact BVH is compared with.
+    pub fn colour_bytes(&self) -> u64 {
+        self.colours
+            .as_ref()
+            .map_or(0, |c| std::mem::size_of_val(c.as_slice()) as u64)
     }
 
     pub fn total_bytes(&self) -> u64 {

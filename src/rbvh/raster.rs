@@ -93,7 +93,15 @@ pub struct Tile {
     pub h_scale: f32,
     /// Samples covered by triangles (before dilation).
     pub covered: u32,
+    /// Per texel, the index (into the triangles given to [`rasterize`]) of the triangle whose
+    /// surface the texel samples — the first writer of step 2, or for a dilated texel the
+    /// triangle its normal came from in step 4 — and [`NO_SOURCE`] for a hole. Baking surface
+    /// data (`crate::surface`) evaluates that triangle at the texel centre.
+    pub sources: Vec<u32>,
 }
+
+/// [`Tile::sources`] of a hole.
+pub const NO_SOURCE: u32 = u32::MAX;
 
 impl Tile {
     /// The packed record: `axis_u = u / texel`, `axis_v = v / texel`, `axis_w = w`, resolution and
@@ -152,9 +160,11 @@ pub fn rasterize(triangles: &[[Vec3; 3]], frame: &Frame, fold_tolerance: f32) ->
     // Index into `normals` of the triangle that wrote each sample, NONE for a hole.
     let mut source = vec![NONE; n];
     let mut normals = Vec::new();
+    // Per id (index into `normals`), the index of its triangle in `triangles`.
+    let mut input_index = Vec::new();
     let mut covered = 0u32;
 
-    for tri in triangles {
+    for (input, tri) in triangles.iter().enumerate() {
         let Some(normal) = (tri[1] - tri[0]).cross(tri[2] - tri[0]).try_normalize() else {
             continue;
         };
@@ -177,6 +187,7 @@ pub fn rasterize(triangles: &[[Vec3; 3]], frame: &Frame, fold_tolerance: f32) ->
         }
         let id = normals.len() as u32;
         normals.push(normal);
+        input_index.push(input as u32);
         for j in lo.y as usize..=hi.y as usize {
             for i in lo.x as usize..=hi.x as usize {
                 let s = DVec2::new(i as f64, j as f64);
@@ -200,7 +211,12 @@ pub fn rasterize(triangles: &[[Vec3; 3]], frame: &Frame, fold_tolerance: f32) ->
     }
 
     let (height, source) = dilate(&height, &source, res_u, res_v);
-    Some(quantize(frame, &height, &source, &normals, covered))
+    let mut tile = quantize(frame, &height, &source, &normals, covered);
+    tile.sources = source
+        .iter()
+        .map(|&s| input_index.get(s as usize).copied().unwrap_or(NO_SOURCE))
+        .collect();
+    Some(tile)
 }
 
 /// Marks a hole in the per-sample source index.
@@ -304,6 +320,7 @@ fn quantize(frame: &Frame, height: &[f32], source: &[u32], normals: &[Vec3], cov
         texels,
         h_scale,
         covered,
+        sources: Vec::new(),
     }
 }
 

@@ -1,20 +1,29 @@
 //! glTF 2.0 meshes (`.gltf` with `.bin` files or data URIs, and binary `.glb`).
 //!
-//! The `gltf` crate parses and validates the document and loads the buffers; images are never
-//! decoded, since a ray caster needs none of them. Accessors are read here rather than through
+//! The `gltf` crate parses and validates the document and loads the buffers. Of the materials,
+//! the base colour is read (`pbrMetallicRoughness.baseColorFactor` times `baseColorTexture`,
+//! glTF 2.0 §3.9.2, with the texture's `TEXCOORD_n` set and its sampler's wrap modes); images are
+//! decoded only when a material uses them, from a buffer view (GLB), a data URI or a file next to
+//! the glTF. A missing image file is [`Error::Io`] and an undecodable one [`Error::Parse`], both
+//! naming the image. Primitives without a material stay material-less (white), and a file without
+//! materials gives a scene without a surface table. Accessors are read here rather than through
 //! the crate's reader, which trusts the file's strides and types and panics on some malformed
 //! ones: every range is checked, so a broken file is an error naming it, never a crash.
 
+use std::collections::HashMap;
 use std::path::Path;
+use std::sync::Arc;
 
 use ::gltf::accessor::{DataType, Dimensions};
 use ::gltf::buffer::{Data, View};
 use ::gltf::json::validation::Checked;
 use ::gltf::mesh::{Mode, Semantic};
 use ::gltf::{Accessor, Document, Node, Primitive};
-use glam::{Mat4, Vec3};
+use glam::{Mat4, Vec2, Vec3, Vec4};
 
-use super::Scene;
+use super::material::{Material, NO_MATERIAL};
+use super::texture::{Texture, Wrap};
+use super::{ObjectSurface, Scene};
 use crate::{Error, Result};
 
 /// Loads the glTF or GLB file at `path`: every triangle primitive of every mesh instance in the
@@ -65,6 +74,13 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
     })?;
 
     let mut scene = Scene::new(path.display().to_string());
+    let mut materials = Materials {
+        path,
+        base,
+        buffers: &buffers,
+        ids: HashMap::new(),
+        images: HashMap::new(),
+    };
     for (node, transform) in mesh_instances(&document).map_err(fail)? {
         let Some(mesh) = node.mesh() else { continue };
         let mesh_name = mesh
@@ -86,15 +102,179 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
                 .iter()
                 .map(|&p| transform.transform_point3(p))
                 .collect();
-            let triangles: Vec<[u32; 3]> = triangles
+            let material = primitive.material();
+            if material.index().is_none() {
+                let triangles: Vec<[u32; 3]> = triangles
+                    .into_iter()
+                    .map(|[a, b, c]| if mirror { [a, c, b] } else { [a, b, c] })
+                    .collect();
+                scene.push_object(object, &positions, &triangles);
+                continue;
+            }
+            let id = materials.id(&mut scene, &material)?;
+            let set = material
+                .pbr_metallic_roughness()
+                .base_color_texture()
+                .map(|info| info.tex_coord());
+            let uvs = match set {
+                Some(set) => read_texcoords(&primitive, set, positions.len(), &buffers)
+                    .map_err(|e| fail(format!("mesh {object:?}: {e}")))?,
+                None => vec![Vec2::ZERO; positions.len()],
+            };
+            let (triangles, uv_of_triangle): (Vec<[u32; 3]>, Vec<[Vec2; 3]>) = triangles
                 .into_iter()
-                .map(|[a, b, c]| if mirror { [a, c, b] } else { [a, b, c] })
-                .collect();
-            scene.push_object(object, &positions, &triangles);
+                .map(|[a, b, c]| {
+                    let t = if mirror { [a, c, b] } else { [a, b, c] };
+                    (t, t.map(|v| uvs[v as usize]))
+                })
+                .unzip();
+            let surface = ObjectSurface {
+                material_of_triangle: vec![id; triangles.len()],
+                uv_of_triangle,
+            };
+            scene.push_textured_object(object, &positions, &triangles, surface);
         }
     }
     scene.validate()?;
     Ok(scene)
+}
+
+/// The file's materials as scene materials, each added once, its image decoded once.
+struct Materials<'a> {
+    path: &'a Path,
+    base: &'a Path,
+    buffers: &'a [Data],
+    /// glTF material index → scene material id.
+    ids: HashMap<usize, u32>,
+    /// glTF image index → decoded image.
+    images: HashMap<usize, Arc<Texture>>,
+}
+
+impl Materials<'_> {
+    /// The scene id of `material` (which has an index), adding it on first use.
+    fn id(&mut self, scene: &mut Scene, material: &::gltf::Material) -> Result<u32> {
+        let Some(index) = material.index() else {
+            return Ok(NO_MATERIAL);
+        };
+        if let Some(&id) = self.ids.get(&index) {
+            return Ok(id);
+        }
+        let pbr = material.pbr_metallic_roughness();
+        let mut m = Material::constant(
+            material
+                .name()
+                .map_or_else(|| format!("material{index}"), str::to_owned),
+            Vec4::from(pbr.base_color_factor()),
+        );
+        if let Some(info) = pbr.base_color_texture() {
+            let texture = info.texture();
+            let sampler = texture.sampler();
+            m.wrap = [wrap(sampler.wrap_s()), wrap(sampler.wrap_t())];
+            m.texture = Some(self.image(&texture.source())?);
+        }
+        let id = scene.add_material(m);
+        self.ids.insert(index, id);
+        Ok(id)
+    }
+
+    fn image(&mut self, image: &::gltf::Image) -> Result<Arc<Texture>> {
+        if let Some(t) = self.images.get(&image.index()) {
+            return Ok(t.clone());
+        }
+        let what = format!("image {}", image.index());
+        let texture = match image.source() {
+            ::gltf::image::Source::View { view, .. } => {
+                let bytes = self
+                    .buffers
+                    .get(view.buffer().index())
+                    .and_then(|b| b.get(view.offset()..view.offset().checked_add(view.length())?))
+                    .ok_or_else(|| {
+                        Error::parse(
+                            self.path,
+                            None,
+                            format!(
+                                "{what}: buffer view {} lies outside its buffer",
+                                view.index()
+                            ),
+                        )
+                    })?;
+                Texture::decode(bytes, self.path, &what)?
+            }
+            ::gltf::image::Source::Uri { uri, .. } => match uri.strip_prefix("data:") {
+                Some(data) => {
+                    let payload = data.split_once(";base64,").map(|(_, p)| p).ok_or_else(|| {
+                        Error::parse(
+                            self.path,
+                            None,
+                            format!("{what}: a data URI that is not base64"),
+                        )
+                    })?;
+                    let bytes = base64::decode(payload).map_err(|e| {
+                        Error::parse(self.path, None, format!("{what}: bad base64 data URI: {e}"))
+                    })?;
+                    Texture::decode(&bytes, self.path, &what)?
+                }
+                None => Texture::load(&self.base.join(uri))?,
+            },
+        };
+        let texture = Arc::new(texture);
+        self.images.insert(image.index(), texture.clone());
+        Ok(texture)
+    }
+}
+
+fn wrap(mode: ::gltf::texture::WrappingMode) -> Wrap {
+    match mode {
+        ::gltf::texture::WrappingMode::ClampToEdge => Wrap::ClampToEdge,
+        ::gltf::texture::WrappingMode::MirroredRepeat => Wrap::MirroredRepeat,
+        ::gltf::texture::WrappingMode::Repeat => Wrap::Repeat,
+    }
+}
+
+/// `TEXCOORD_<set>` of a primitive with `n` vertices: float, or normalized unsigned byte or short
+/// (glTF 2.0 §3.7.2.1).
+fn read_texcoords(
+    primitive: &Primitive,
+    set: u32,
+    n: usize,
+    buffers: &[Data],
+) -> std::result::Result<Vec<Vec2>, String> {
+    let accessor = primitive
+        .get(&Semantic::TexCoords(set))
+        .ok_or_else(|| format!("its base colour texture uses TEXCOORD_{set}, which it lacks"))?;
+    if accessor.dimensions() != Dimensions::Vec2 {
+        return Err(format!(
+            "TEXCOORD_{set} accessor {} is {:?}, not VEC2",
+            accessor.index(),
+            accessor.dimensions()
+        ));
+    }
+    let uvs = match (accessor.data_type(), accessor.normalized()) {
+        (DataType::F32, _) => read_accessor(&accessor, buffers, 8, |b| {
+            Vec2::new(f32_le(&b[0..4]), f32_le(&b[4..8]))
+        })?,
+        (DataType::U8, true) => read_accessor(&accessor, buffers, 2, |b| {
+            Vec2::new(f32::from(b[0]), f32::from(b[1])) / 255.0
+        })?,
+        (DataType::U16, true) => read_accessor(&accessor, buffers, 4, |b| {
+            let c = |k: usize| f32::from(u16::from_le_bytes([b[k], b[k + 1]]));
+            Vec2::new(c(0), c(2)) / 65535.0
+        })?,
+        (other, normalized) => {
+            return Err(format!(
+            "TEXCOORD_{set} accessor {} has component type {other:?} (normalized: {normalized}); \
+                 expected float or normalized unsigned byte/short",
+            accessor.index()
+        ))
+        }
+    };
+    if uvs.len() != n {
+        return Err(format!(
+            "TEXCOORD_{set} has {} elements for {n} positions",
+            uvs.len()
+        ));
+    }
+    Ok(uvs)
 }
 
 /// gltf-json 1.4's validator looks up each primitive's POSITION accessor before checking that

@@ -2,8 +2,9 @@
 //! to. A flat list (rather than a tree of instances) is what both BVH builders consume, and the
 //! object ids keep enough structure for per-object statistics and false-colour renders.
 
-use glam::{Mat4, Vec3};
+use glam::{Mat4, Vec2, Vec3};
 
+use super::material::{Material, SurfaceMaterials, NO_MATERIAL};
 use super::{Camera, Light};
 use crate::geom::Aabb;
 use crate::{Error, Result};
@@ -27,6 +28,17 @@ pub struct Scene {
     pub camera: Option<Camera>,
     /// The light a scene file asked for.
     pub light: Option<Light>,
+    /// Materials and texture coordinates, only when some loaded file had materials.
+    pub surface: Option<SurfaceMaterials>,
+}
+
+/// The surface data of one object for [`Scene::push_textured_object`]: per triangle, a material
+/// id returned by [`Scene::add_material`] (or [`NO_MATERIAL`]) and its corners' texture
+/// coordinates.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ObjectSurface {
+    pub material_of_triangle: Vec<u32>,
+    pub uv_of_triangle: Vec<[Vec2; 3]>,
 }
 
 impl Scene {
@@ -47,12 +59,77 @@ impl Scene {
         positions: &[Vec3],
         triangles: &[[u32; 3]],
     ) {
+        let before = self.triangles.len();
         self.append_parts(
             positions.iter().copied(),
             triangles.iter().copied(),
             std::iter::once(name.into()),
             std::iter::repeat_n(0, triangles.len()),
         );
+        self.extend_surface(before, None);
+    }
+
+    /// Adds a material to the scene's table (creating the table, with every existing triangle
+    /// material-less, on first use) and returns its id for [`Scene::push_textured_object`].
+    pub fn add_material(&mut self, material: Material) -> u32 {
+        let surface = self.surface_mut();
+        surface.materials.push(material);
+        saturating_u32(surface.materials.len() - 1)
+    }
+
+    /// As [`Scene::push_object`], with a material and texture coordinates per triangle. Lengths
+    /// that do not match `triangles` and unknown ids are reported by [`Scene::validate`].
+    pub fn push_textured_object(
+        &mut self,
+        name: impl Into<String>,
+        positions: &[Vec3],
+        triangles: &[[u32; 3]],
+        surface: ObjectSurface,
+    ) {
+        let before = self.triangles.len();
+        self.surface_mut();
+        self.append_parts(
+            positions.iter().copied(),
+            triangles.iter().copied(),
+            std::iter::once(name.into()),
+            std::iter::repeat_n(0, triangles.len()),
+        );
+        self.extend_surface(before, Some(surface));
+    }
+
+    /// The surface table, created on first use with every existing triangle material-less.
+    fn surface_mut(&mut self) -> &mut SurfaceMaterials {
+        let n = self.triangles.len();
+        self.surface.get_or_insert_with(|| SurfaceMaterials {
+            materials: Vec::new(),
+            material_of_triangle: vec![NO_MATERIAL; n],
+            uv_of_triangle: vec![[Vec2::ZERO; 3]; n],
+        })
+    }
+
+    /// Keeps the surface table parallel to the triangles after triangles from index `before` on
+    /// were appended: with `added`, its entries; without, material-less ones (only when the scene
+    /// has a table at all: scenes without materials get none).
+    fn extend_surface(&mut self, before: usize, added: Option<ObjectSurface>) {
+        let new = self.triangles.len() - before;
+        if added.is_none() && self.surface.is_none() {
+            return;
+        }
+        let surface = self.surface_mut();
+        match added {
+            Some(o) => {
+                surface.material_of_triangle.extend(o.material_of_triangle);
+                surface.uv_of_triangle.extend(o.uv_of_triangle);
+            }
+            None => {
+                surface
+                    .material_of_triangle
+                    .extend(std::iter::repeat_n(NO_MATERIAL, new));
+                surface
+                    .uv_of_triangle
+                    .extend(std::iter::repeat_n([Vec2::ZERO; 3], new));
+            }
+        }
     }
 
     pub fn triangle_count(&self) -> usize {
@@ -156,6 +233,39 @@ impl Scene {
                 "triangle {t} belongs to object {o}, but there are only {object_count} objects"
             )));
         }
+        if let Some(surface) = &self.surface {
+            let n = self.triangles.len();
+            let (m, u) = (
+                surface.material_of_triangle.len(),
+                surface.uv_of_triangle.len(),
+            );
+            if m != n || u != n {
+                return Err(invalid(format!(
+                    "{m} material ids and {u} texture-coordinate triples for {n} triangles"
+                )));
+            }
+            let count = surface.materials.len();
+            if let Some((t, id)) = surface
+                .material_of_triangle
+                .iter()
+                .enumerate()
+                .find(|(_, &id)| id != NO_MATERIAL && id as usize >= count)
+            {
+                return Err(invalid(format!(
+                    "triangle {t} has material {id}, but there are only {count} materials"
+                )));
+            }
+            if let Some(t) = surface
+                .uv_of_triangle
+                .iter()
+                .position(|uv| !uv.iter().all(|c| c.is_finite()))
+            {
+                return Err(invalid(format!(
+                    "triangle {t} has non-finite texture coordinates {:?}",
+                    surface.uv_of_triangle[t]
+                )));
+            }
+        }
         Ok(())
     }
 
@@ -165,6 +275,13 @@ impl Scene {
     /// winding.
     pub fn append(&mut self, other: &Scene, m: Mat4) {
         let mirror = m.determinant() < 0.0;
+        let before = self.triangles.len();
+        // The table must exist before the triangles are appended, so that it pads only the
+        // triangles already here.
+        let material_base = match other.surface {
+            Some(_) => saturating_u32(self.surface_mut().materials.len()),
+            None => 0,
+        };
         let prefix = if other.name.is_empty() {
             String::new()
         } else {
@@ -179,6 +296,43 @@ impl Scene {
             other.object_names.iter().map(|n| format!("{prefix}{n}")),
             other.object_of_triangle.iter().copied(),
         );
+        let added = other.surface.as_ref().map(|o| {
+            self.surface_mut()
+                .materials
+                .extend(o.materials.iter().cloned());
+            ObjectSurface {
+                material_of_triangle: o
+                    .material_of_triangle
+                    .iter()
+                    .map(|&id| {
+                        if id == NO_MATERIAL {
+                            id
+                        } else {
+                            material_base.saturating_add(id)
+                        }
+                    })
+                    .collect(),
+                uv_of_triangle: o
+                    .uv_of_triangle
+                    .iter()
+                    .map(|&[a, b, c]| if mirror { [a, c, b] } else { [a, b, c] })
+                    .collect(),
+            }
+        });
+        self.extend_surface(before, added);
+    }
+
+    /// Linear RGBA base colour of triangle `triangle` at world point `p` (on or near it), or
+    /// `None` when the scene has no materials or the triangle does not exist.
+    pub fn colour_at(&self, triangle: usize, p: Vec3) -> Option<glam::Vec4> {
+        let surface = self.surface.as_ref()?;
+        let tri = self.triangles.get(triangle)?;
+        let corners = tri.map(|v| self.positions.get(v as usize).copied());
+        let [Some(a), Some(b), Some(c)] = corners else {
+            return None;
+        };
+        let bary = super::material::barycentrics([a, b, c], p);
+        Some(surface.colour(triangle, bary))
     }
 
     /// The scene file's camera, or one that frames [`Scene::bounds`] for `aspect` (width/height).
@@ -252,6 +406,47 @@ mod tests {
         s.positions[1].y = f32::INFINITY;
         let e = s.validate().unwrap_err().to_string();
         assert!(e.contains("vertex 1") && e.contains("inf"), "{e}");
+    }
+
+    #[test]
+    fn surface_stays_parallel_through_push_and_append() {
+        let uv = [Vec2::ZERO, Vec2::X, Vec2::Y];
+        let mut textured = Scene::new("tex");
+        let red = textured.add_material(Material::constant("red", glam::Vec4::X));
+        textured.push_textured_object(
+            "t",
+            &[Vec3::ZERO, Vec3::X, Vec3::Z],
+            &[[0, 2, 1]],
+            ObjectSurface {
+                material_of_triangle: vec![red],
+                uv_of_triangle: vec![uv],
+            },
+        );
+        // A plain object first, then two instances of the textured one, one mirrored.
+        let mut s = unit_triangle();
+        assert!(s.surface.is_none());
+        s.append(&textured, Mat4::IDENTITY);
+        s.append(&textured, Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0)));
+        s.push_object("plain", &[Vec3::ZERO, Vec3::X, Vec3::Y], &[[0, 1, 2]]);
+        s.validate().unwrap();
+        let surface = s.surface.as_ref().unwrap();
+        assert_eq!(surface.materials.len(), 2);
+        assert_eq!(
+            surface.material_of_triangle,
+            vec![NO_MATERIAL, 0, 1, NO_MATERIAL]
+        );
+        assert_eq!(surface.uv_of_triangle[1], uv);
+        assert_eq!(surface.uv_of_triangle[2], [uv[0], uv[2], uv[1]]);
+        // The mirrored copy keeps each corner's texture coordinate with its vertex.
+        let corner = |t: usize, c: usize| s.positions[s.triangles[t][c] as usize];
+        assert_eq!(corner(2, 1).x, -corner(1, 2).x);
+        let mut bad = s.clone();
+        bad.surface.as_mut().unwrap().material_of_triangle[1] = 5;
+        assert!(bad
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("material 5"));
     }
 
     #[test]

@@ -5,16 +5,24 @@
 //! light), or built procedurally ([`builtin`]) so that tests and benchmarks need no files.
 //! Every loader validates before returning, so later stages may assume finite vertices and
 //! in-range indices.
+//!
+//! Scenes whose files carry materials (OBJ `Kd`/`map_Kd`, glTF `baseColorFactor`/
+//! `baseColorTexture`) also get [`SurfaceMaterials`]: a base colour per triangle and texture
+//! coordinates per corner. Scenes without them get none, so they cost nothing.
 
 pub mod builtin;
 mod camera;
 mod gltf;
 mod light;
 mod load;
+pub mod material;
 mod mesh;
 mod obj;
 mod scene_file;
+pub mod texture;
 
 pub use camera::Camera;
 pub use light::Light;
-pub use mesh::Scene;
+pub use material::{Material, SurfaceMaterials, NO_MATERIAL};
+pub use mesh::{ObjectSurface, Scene};
+pub use texture::{Texture, Wrap};

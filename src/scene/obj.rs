@@ -1,15 +1,25 @@
 //! Wavefront OBJ meshes, parsed by `tobj`. Each model (`o` or `g` group) becomes an object.
 //!
-//! Only positions and faces matter to a ray caster, so materials are never read: a missing or
-//! malformed MTL file must not stop a mesh from loading. The file is read into memory first so
-//! that a parse error can be given the line it happened on, which `tobj` does not report.
+//! Materials give the base colour only: `Kd` (taken as linear, like every renderer that reads
+//! MTL) times the `map_Kd` image (sRGB, see `texture.rs`), with texture coordinates from `vt`
+//! (whose origin is the image's bottom-left corner, so `v` is flipped). A missing or malformed MTL
+//! file does not stop the mesh from loading: it then has no materials, as before materials were
+//! read. But an image that a loaded material names must exist and decode: a missing one is
+//! [`Error::Io`] and a corrupt one [`Error::Parse`], both naming the image — a silently grey
+//! surface would hide the mistake. Relative MTL and image paths resolve against the OBJ's folder.
+//! The file is read into memory first so that a parse error can be given the line it happened on,
+//! which `tobj` does not report.
 
-use std::io::Cursor;
-use std::path::Path;
+use std::collections::HashMap;
+use std::io::{BufReader, Cursor};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
-use glam::Vec3;
+use glam::{Vec2, Vec3, Vec4};
 
-use super::Scene;
+use super::material::{Material, NO_MATERIAL};
+use super::texture::Texture;
+use super::{ObjectSurface, Scene};
 use crate::{Error, Result};
 
 /// Loads the OBJ file at `path`: polygons are fan-triangulated, points and lines ignored.
@@ -22,9 +32,19 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
         ignore_points: true,
         ignore_lines: true,
     };
+    let base = match path.parent() {
+        Some(dir) if !dir.as_os_str().is_empty() => dir.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
     let mut cursor = Cursor::new(bytes.as_slice());
-    let (models, _materials) = tobj::load_obj_buf(&mut cursor, &options, |_| {
-        Err(tobj::LoadError::GenericFailure)
+    let (models, materials) = tobj::load_obj_buf(&mut cursor, &options, |mtl| {
+        let file = base.join(mtl);
+        let regular = std::fs::metadata(&file).is_ok_and(|m| m.is_file());
+        if !regular {
+            return Err(tobj::LoadError::OpenFileFailed);
+        }
+        let f = std::fs::File::open(&file).map_err(|_| tobj::LoadError::OpenFileFailed)?;
+        tobj::load_mtl_buf(&mut BufReader::new(f))
     })
     .map_err(|e| {
         let line = line_at(&bytes, cursor.position() as usize);
@@ -32,6 +52,7 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
     })?;
 
     let mut scene = Scene::new(path.display().to_string());
+    let ids = add_materials(&mut scene, &models, &materials.unwrap_or_default(), &base)?;
     for (i, model) in models.iter().enumerate() {
         let mesh = &model.mesh;
         if mesh.indices.is_empty() {
@@ -52,13 +73,93 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
         } else {
             model.name.clone()
         };
-        scene.push_object(name, &positions, &triangles);
+        match (ids.is_empty(), mesh.material_id) {
+            (true, _) => scene.push_object(name, &positions, &triangles),
+            (false, material) => {
+                let id = material
+                    .and_then(|m| ids.get(&m).copied())
+                    .unwrap_or(NO_MATERIAL);
+                let surface = ObjectSurface {
+                    material_of_triangle: vec![id; triangles.len()],
+                    uv_of_triangle: corner_uvs(mesh, triangles.len()),
+                };
+                scene.push_textured_object(name, &positions, &triangles, surface);
+            }
+        }
     }
     // `tobj` renumbers vertices per model, so point at the file's own line instead when we can.
     scene
         .validate()
         .map_err(|e| non_finite_vertex(path, &bytes).unwrap_or(e))?;
     Ok(scene)
+}
+
+/// Adds the materials that some model uses to `scene` (none when no model uses one, so that a
+/// mesh without materials gets no surface table), loading each image once; returns the scene's
+/// id of each used `tobj` material index.
+fn add_materials(
+    scene: &mut Scene,
+    models: &[tobj::Model],
+    materials: &[tobj::Material],
+    base: &Path,
+) -> Result<HashMap<usize, u32>> {
+    let mut used: Vec<usize> = models
+        .iter()
+        .filter_map(|m| m.mesh.material_id)
+        .filter(|&m| m < materials.len())
+        .collect();
+    used.sort_unstable();
+    used.dedup();
+    let mut images: HashMap<PathBuf, Arc<Texture>> = HashMap::new();
+    let mut ids = HashMap::new();
+    for m in used {
+        let mtl = &materials[m];
+        let kd = mtl.diffuse.unwrap_or([1.0; 3]);
+        let texture = match mtl.diffuse_texture.as_deref().and_then(texture_file) {
+            Some(file) => {
+                let file = base.join(file);
+                let t = match images.get(&file) {
+                    Some(t) => t.clone(),
+                    None => Arc::new(Texture::load(&file)?),
+                };
+                images.insert(file, t.clone());
+                Some(t)
+            }
+            None => None,
+        };
+        let material = Material {
+            texture,
+            ..Material::constant(mtl.name.clone(), Vec4::new(kd[0], kd[1], kd[2], 1.0))
+        };
+        ids.insert(m, scene.add_material(material));
+    }
+    Ok(ids)
+}
+
+/// The file name of a `map_Kd` statement: the whole argument, or its last word when it starts
+/// with options (`-s 1 1 1 wood.png`).
+fn texture_file(argument: &str) -> Option<&str> {
+    let argument = argument.trim();
+    let file = if argument.starts_with('-') {
+        argument.split_whitespace().last()?
+    } else {
+        argument
+    };
+    (!file.is_empty()).then_some(file)
+}
+
+/// Per triangle of `mesh`, its corners' texture coordinates with `v` flipped to the image's
+/// top-left origin; zero where the mesh has none.
+fn corner_uvs(mesh: &tobj::Mesh, triangles: usize) -> Vec<[Vec2; 3]> {
+    let uv = |corner: usize| {
+        mesh.texcoord_indices
+            .get(corner)
+            .and_then(|&i| mesh.texcoords.get(2 * i as usize..2 * i as usize + 2))
+            .map_or(Vec2::ZERO, |t| Vec2::new(t[0], 1.0 - t[1]))
+    };
+    (0..triangles)
+        .map(|t| [uv(3 * t), uv(3 * t + 1), uv(3 * t + 2)])
+        .collect()
 }
 
 /// Refuses face indices that `tobj` cannot take safely, naming their line. `tobj` 4 turns an

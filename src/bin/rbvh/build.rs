@@ -93,6 +93,13 @@ pub fn run(a: Args) -> Result<()> {
             mb(r.total_bytes()),
             exact_bytes as f64 / r.total_bytes().max(1) as f64
         );
+            if r.colours.is_some() {
+                println!(
+                    "{:>6} colour channel (baked from the scene's materials): {:.3} MB, not in total",
+                    name,
+                    mb(r.colour_bytes())
+                );
+            }
         }
         if a.compare_splits {
             compare_splits(&scene, &name, &params)?;

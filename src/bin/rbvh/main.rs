@@ -2,6 +2,7 @@
 
 mod bench;
 mod build;
+mod paint;
 mod prepare;
 mod regress;
 mod render;
@@ -30,6 +31,8 @@ enum Command {
     Trace(trace::Args),
     /// Benchmark the exact BVH and RBVH levels: speed, memory and error on the same rays.
     Bench(bench::Args),
+    /// Paint brush strokes onto an RBVH's surface on the device, and save it (with its colours).
+    Paint(paint::Args),
     /// Render the regression cases and compare them with golden images (FLIP and depth).
     Regress(regress::Args),
 }
@@ -42,6 +45,7 @@ fn main() {
         Command::Build(a) => build::run(a),
         Command::Bench(a) => bench::run(a),
         Command::Regress(a) => regress::run(a),
+        Command::Paint(a) => paint::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e}");

@@ -16,7 +16,8 @@ use rbvh::gpu::{Query, Tracer};
 use rbvh::ibl::{self, Environment, Frame, Settings, Sky};
 use rbvh::lod::RayCone;
 use rbvh::output::{self, Image};
-use rbvh::scene::Light;
+use rbvh::scene::{Light, Scene};
+use rbvh::surface::hit_albedo;
 
 use crate::prepare::{prepare, report_steps, report_throughput, step, Common, Prepared, Structure};
 
@@ -105,12 +106,13 @@ pub fn run(a: Args) -> Result<()> {
         }
     }
     let image = match a.shading {
-        Shading::Lambert => output::shade(
+        Shading::Lambert => lambert(
+            &p.scene,
+            &p.structure,
             &rays,
             &traced.hits,
             a.width,
             a.height,
-            p.scene.light.as_ref(),
         )?,
         Shading::Normals => output::shade_normals(&rays, &traced.hits, a.width, a.height)?,
         Shading::Ibl => {
@@ -154,7 +156,13 @@ fn render_ibl(
         Structure::Exact(_) => 0.0,
         Structure::Rbvh(r) => r.texel_size,
     };
-    let albedo = vec![Vec3::splat(ibl::GREY); rays.len()];
+    // The surfaces' base colour where the scene or RBVH has one, else the neutral grey.
+    let rbvh = match &p.structure {
+        Structure::Rbvh(r) => Some(&**r),
+        Structure::Exact(_) => None,
+    };
+    let albedo = hit_albedo(&p.scene, rbvh, rays, hits)
+        .unwrap_or_else(|| vec![Vec3::splat(ibl::GREY); rays.len()]);
     let settings = Settings {
         samples: a.samples,
         seed: a.seed,
@@ -200,8 +208,11 @@ fn compare_with_exact(
     let exact = Tracer::exact(&p.ctx, &bvh).context("uploading the exact BVH")?;
     let setup_ms = t.elapsed().as_secs_f64() * 1e3;
     let exact_hits = exact.trace(frame.rays, Query::Closest)?.hits;
+    let exact_albedo = hit_albedo(&p.scene, None, frame.rays, &exact_hits)
+        .unwrap_or_else(|| vec![Vec3::splat(ibl::GREY); frame.rays.len()]);
     let exact_frame = Frame {
         hits: &exact_hits,
+        albedo: &exact_albedo,
         ..*frame
     };
     let exact_settings = Settings {
@@ -263,4 +274,25 @@ fn report_ibl(what: &str, r: &ibl::Rendered) {
         "IBL {what}: {} visibility rays, {gpu}; passes wall {:.1} ms",
         r.rays, r.wall_ms
     );
+}
+
+/// The preview shading, with the base colour of the hit surfaces as albedo when the scene has
+/// materials or the RBVH a colour channel (`rbvh::surface::hit_albedo`), else plain grey.
+pub fn lambert(
+    scene: &Scene,
+    structure: &Structure,
+    rays: &[Ray],
+    hits: &[Hit],
+    width: u32,
+    height: u32,
+) -> Result<Image> {
+    let rbvh = match structure {
+        Structure::Rbvh(r) => Some(&**r),
+        Structure::Exact(_) => None,
+    };
+    let light = scene.light.as_ref();
+    Ok(match hit_albedo(scene, rbvh, rays, hits) {
+        Some(albedo) => output::shade_with_albedo(rays, hits, width, height, light, &albedo)?,
+        None => output::shade(rays, hits, width, height, light)?,
+    })
 }

@@ -1,0 +1,85 @@
+// Paints brush dabs into an RBVH's colour channel: one dispatch per candidate height-field leaf,
+// one invocation per texel of its tile. A surface texel whose world-space sample point lies
+// within a brush's radius takes that brush's colour (the last such brush wins). The rule, and the
+// arithmetic order, are those of src/surface/paint.rs (the CPU reference) and
+// GpuHeightfield::sample_point in src/rbvh/layout.rs; `precise` forbids fused multiply-adds, so
+// that both decide every texel identically. Painting in world space, not per tile, is what lets
+// a stroke cross leaf borders without a seam.
+#version 460
+
+layout(local_size_x = 64) in;
+
+// Bits 0-15 height code (0xFFFF = hole), as in glsl/rbvh.glsl.
+layout(std430, set = 0, binding = 0) readonly buffer Atlas {
+    uint atlas[];
+};
+
+// 32 bytes: see src/surface/paint.rs (Brush).
+struct PaintBrush {
+    vec3 centre;
+    float radius;
+    uint colour;    // packed RGBA8 (src/surface/rgba.rs)
+    uint pad0;
+    uint pad1;
+    uint pad2;
+};
+layout(std430, set = 0, binding = 1) readonly buffer Brushes {
+    PaintBrush brushes[];
+};
+layout(std430, set = 0, binding = 2) buffer Colours {
+    uint colours[];
+};
+
+// 80 bytes: see src/gpu/painter.rs (PaintParams). The leaf's frame comes with each dispatch:
+// step_u = axis_u / |axis_u|^2 and step_v likewise (world vectors of one texel), computed once on
+// the host for the GPU and the CPU reference alike.
+layout(push_constant) uniform PaintParams {
+    vec3 origin;
+    uint atlas_base;
+    vec3 step_u;
+    uint res_u;
+    vec3 step_v;
+    uint res_v;
+    vec3 axis_w;
+    float h_scale;
+    uint texel_offset;  // first texel of this dispatch (dispatches are split at maxComputeWorkGroupCount)
+    uint brush_count;   // at most MAX_BRUSHES_PER_PASS (src/gpu/painter.rs), so the loop is bounded
+    uint atlas_pitch;
+    uint atlas_len;
+} pc;
+
+void main() {
+    uint k = pc.texel_offset + gl_GlobalInvocationID.x;
+    if (k >= pc.res_u * pc.res_v) {
+        return;
+    }
+    uint i = k % pc.res_u;
+    uint j = k / pc.res_u;
+    uint index = pc.atlas_base + j * pc.atlas_pitch + i;
+    if (index >= pc.atlas_len) {
+        return;
+    }
+    uint code = atlas[index] & 0xFFFFu;
+    if (code == 0xFFFFu) {
+        return;
+    }
+    float s = float(i) + 0.5;
+    float t = float(j) + 0.5;
+    precise float h = float(code) * pc.h_scale;
+    precise vec3 p = pc.origin + pc.step_u * s + pc.step_v * t + pc.axis_w * h;
+    bool painted = false;
+    uint colour = 0u;
+    for (uint b = 0u; b < pc.brush_count; ++b) {
+        PaintBrush brush = brushes[b];
+        precise vec3 d = p - brush.centre;
+        precise float d2 = d.x * d.x + d.y * d.y + d.z * d.z;
+        precise float r2 = brush.radius * brush.radius;
+        if (d2 <= r2) {
+            painted = true;
+            colour = brush.colour;
+        }
+    }
+    if (painted) {
+        colours[index] = colour;
+    }
+}

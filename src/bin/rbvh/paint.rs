@@ -1,0 +1,128 @@
+//! `rbvh paint`: brush strokes aimed through the scene's render camera, traced with the RBVH on
+//! the device, painted into its colour channel on the device (`glsl/paint.comp`), saved; with
+//! optional renders before and after.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{bail, ensure, Context as _, Result};
+use rbvh::gpu::{Painter, Query, Tracer};
+use rbvh::output;
+use rbvh::surface::{strokes, Brush};
+
+use crate::prepare::{prepare, step, Common, Method, Structure};
+use crate::render::lambert;
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    #[command(flatten)]
+    common: Common,
+    /// Strokes file (format in README.md, "Surface data and painting").
+    #[arg(long)]
+    strokes: PathBuf,
+    /// The painted RBVH file to write.
+    #[arg(long, short)]
+    out: PathBuf,
+    /// Also render the RBVH before painting to this PNG.
+    #[arg(long)]
+    before: Option<PathBuf>,
+    /// Also render the RBVH after painting to this PNG.
+    #[arg(long)]
+    after: Option<PathBuf>,
+    /// Image size that the strokes' screen positions and the renders use.
+    #[arg(long, default_value_t = 800)]
+    width: u32,
+    #[arg(long, default_value_t = 600)]
+    height: u32,
+}
+
+pub fn run(a: Args) -> Result<()> {
+    ensure!(
+        (1..=16384).contains(&a.width) && (1..=16384).contains(&a.height),
+        "--width and --height must be within 1..=16384 (got {}x{})",
+        a.width,
+        a.height
+    );
+    let dabs = strokes::load(&a.strokes)?;
+    let common = Common {
+        method: Method::Rbvh,
+        ..a.common.clone()
+    };
+    let mut p = prepare(&common)?;
+    let camera = p.scene.camera_or_framed(a.width as f32 / a.height as f32);
+    let Structure::Rbvh(rbvh) = &p.structure else {
+        bail!("painting needs an RBVH");
+    };
+    let tracer = Tracer::rbvh(&p.ctx, rbvh).context("uploading the RBVH")?;
+
+    let (rays, hits) = if a.before.is_some() || a.after.is_some() {
+        let rays = camera.primary_rays(a.width, a.height);
+        let hits = step("tracing", || tracer.trace(&rays, Query::Closest))?.hits;
+        (rays, hits)
+    } else {
+        (Vec::new(), Vec::new())
+    };
+    if let Some(path) = &a.before {
+        let image = lambert(&p.scene, &p.structure, &rays, &hits, a.width, a.height)?;
+        output::write_png(path, &image)?;
+        eprintln!("wrote {}", path.display());
+    }
+
+    // Aim: one ray per dab through the same camera; a dab whose ray misses paints nothing.
+    let stroke_rays: Vec<_> = dabs
+        .iter()
+        .map(|d| {
+            camera.ray(
+                d.screen.x * a.width as f32,
+                d.screen.y * a.height as f32,
+                a.width,
+                a.height,
+            )
+        })
+        .collect();
+    let stroke_hits = tracer.trace(&stroke_rays, Query::Closest)?.hits;
+    let diagonal = p.scene.bounds().diagonal();
+    let brushes: Vec<Brush> = dabs
+        .iter()
+        .zip(&stroke_rays)
+        .zip(&stroke_hits)
+        .filter(|(_, h)| h.is_hit())
+        .map(|((d, r), h)| Brush::new(r.origin() + r.dir() * h.t, d.radius * diagonal, d.colour))
+        .collect();
+    let missed = dabs.len() - brushes.len();
+    if missed > 0 {
+        eprintln!(
+            "warning: {missed} of {} dabs aim past the surface and paint nothing",
+            dabs.len()
+        );
+    }
+
+    let Structure::Rbvh(rbvh) = &mut p.structure else {
+        bail!("painting needs an RBVH");
+    };
+    let start = Instant::now();
+    let mut painter = Painter::new(&p.ctx, rbvh)?;
+    let stats = painter.paint(&brushes)?;
+    rbvh.colours = Some(painter.colours()?);
+    let wall_ms = start.elapsed().as_secs_f64() * 1e3;
+    eprintln!(
+        "painted {} dabs: {} leaves, {} texels visited; GPU {}, {wall_ms:.1} ms with upload and download",
+        brushes.len(),
+        stats.leaves,
+        stats.texels,
+        stats
+            .timing
+            .gpu_ms
+            .map_or_else(|| "untimed".to_string(), |ms| format!("{ms:.2} ms")),
+    );
+    rbvh.save(&a.out)
+        .with_context(|| format!("saving {}", a.out.display()))?;
+    eprintln!("wrote {}", a.out.display());
+
+    if let Some(path) = &a.after {
+        let image = lambert(&p.scene, &p.structure, &rays, &hits, a.width, a.height)?;
+        output::write_png(path, &image)?;
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
+}

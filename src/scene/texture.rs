@@ -1,0 +1,179 @@
+//! Base-colour textures: decoded once at load time (PNG or JPEG through the `image` crate) into
+//! 8-bit RGBA, and sampled bilinearly in linear space.
+//!
+//! Texels stay 8-bit sRGB-encoded in memory (a quarter of the size of linear floats: the damaged
+//! helmet's 2048² base colour is 16 MiB, not 64) and are decoded through a 256-entry table when
+//! sampled. glTF 2.0 defines `baseColorTexture` as sRGB-encoded (§3.9.2); OBJ's `map_Kd` has no
+//! colour space in its specification, and image files for it are sRGB in practice, so both are
+//! decoded the same way. Alpha is linear in both.
+
+use std::path::Path;
+use std::sync::OnceLock;
+
+use glam::{Vec2, Vec4};
+
+use crate::{Error, Result};
+
+/// How texture coordinates outside `[0, 1]` wrap (glTF samplers' `wrapS`/`wrapT`; OBJ repeats).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Wrap {
+    #[default]
+    Repeat,
+    ClampToEdge,
+    MirroredRepeat,
+}
+
+/// A decoded image: `width × height` texels, row-major, top row first; RGB sRGB-encoded, alpha
+/// linear.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Texture {
+    /// Where it came from (a file, or a glTF file and image index), for messages.
+    pub name: String,
+    pub width: u32,
+    pub height: u32,
+    pub texels: Vec<[u8; 4]>,
+}
+
+impl Texture {
+    /// Decodes PNG or JPEG bytes (the format is sniffed from the bytes, not the name). A failure
+    /// is an [`Error::Parse`] naming `file` and saying what `what` (e.g. "image 2") was.
+    pub fn decode(bytes: &[u8], file: &Path, what: &str) -> Result<Texture> {
+        let image = image::load_from_memory(bytes).map_err(|e| {
+            Error::parse(file, None, format!("{what}: cannot decode the image: {e}"))
+        })?;
+        let rgba = image.to_rgba8();
+        let (width, height) = rgba.dimensions();
+        if width == 0 || height == 0 {
+            return Err(Error::parse(
+                file,
+                None,
+                format!("{what}: the image is empty"),
+            ));
+        }
+        Ok(Texture {
+            name: format!("{} ({what})", file.display()),
+            width,
+            height,
+            texels: rgba.pixels().map(|p| p.0).collect(),
+        })
+    }
+
+    /// Reads and decodes the image file at `path`: a missing file is [`Error::Io`] naming it, a
+    /// corrupt one [`Error::Parse`] naming it.
+    pub fn load(path: &Path) -> Result<Texture> {
+        let metadata = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+        super::load::regular_file(path, &metadata)?;
+        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        Self::decode(&bytes, path, "texture")
+    }
+
+    /// Bilinear sample at `uv` (`(0, 0)` = the top-left corner of the image, texel centres at
+    /// `(x + ½) / width`), in linear RGBA. Filtering happens after the sRGB decode, so that
+    /// blending two texels averages light, not codes.
+    pub fn sample(&self, uv: Vec2, wrap: [Wrap; 2]) -> Vec4 {
+        let x = uv.x * self.width as f32 - 0.5;
+        let y = uv.y * self.height as f32 - 0.5;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let (fx, fy) = if fx.is_finite() && fy.is_finite() {
+            (fx, fy)
+        } else {
+            (0.0, 0.0)
+        };
+        // `as` saturates and maps NaN to 0, so any coordinate gives an index that wraps in range.
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let at = |i: i64, j: i64| {
+            let i = wrap_index(i, self.width, wrap[0]);
+            let j = wrap_index(j, self.height, wrap[1]);
+            linear(self.texels[j * self.width as usize + i])
+        };
+        let top = at(x0, y0).lerp(at(x0 + 1, y0), fx);
+        let bottom = at(x0, y0 + 1).lerp(at(x0 + 1, y0 + 1), fx);
+        top.lerp(bottom, fy)
+    }
+}
+
+/// Index `i` wrapped into `0..n` (`n` ≥ 1).
+fn wrap_index(i: i64, n: u32, wrap: Wrap) -> usize {
+    let n = i64::from(n);
+    let k = match wrap {
+        Wrap::Repeat => i.rem_euclid(n),
+        Wrap::ClampToEdge => i.clamp(0, n - 1),
+        Wrap::MirroredRepeat => {
+            let k = i.rem_euclid(2 * n);
+            if k < n {
+                k
+            } else {
+                2 * n - 1 - k
+            }
+        }
+    };
+    k as usize
+}
+
+/// An 8-bit sRGB-encoded RGB, linear alpha texel as linear RGBA.
+pub fn linear(rgba: [u8; 4]) -> Vec4 {
+    let table = srgb_table();
+    Vec4::new(
+        table[rgba[0] as usize],
+        table[rgba[1] as usize],
+        table[rgba[2] as usize],
+        rgba[3] as f32 / 255.0,
+    )
+}
+
+/// The sRGB decode of every 8-bit code (IEC 61966-2-1).
+fn srgb_table() -> &'static [f32; 256] {
+    static TABLE: OnceLock<[f32; 256]> = OnceLock::new();
+    TABLE.get_or_init(|| std::array::from_fn(|c| crate::output::srgb_decode(c as f32 / 255.0)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn checker() -> Texture {
+        Texture {
+            name: "checker".into(),
+            width: 2,
+            height: 2,
+            texels: vec![
+                [255, 0, 0, 255],
+                [0, 255, 0, 255],
+                [0, 0, 255, 255],
+                [255, 255, 255, 255],
+            ],
+        }
+    }
+
+    #[test]
+    fn texel_centres_sample_exactly_and_wrap() {
+        let t = checker();
+        let w = [Wrap::Repeat; 2];
+        assert_eq!(
+            t.sample(Vec2::new(0.25, 0.25), w),
+            Vec4::new(1.0, 0.0, 0.0, 1.0)
+        );
+        assert_eq!(
+            t.sample(Vec2::new(0.75, 0.25), w),
+            Vec4::new(0.0, 1.0, 0.0, 1.0)
+        );
+        assert_eq!(
+            t.sample(Vec2::new(0.25, 0.75), w),
+            Vec4::new(0.0, 0.0, 1.0, 1.0)
+        );
+        assert_eq!(
+            t.sample(Vec2::new(1.25, -0.25), w),
+            Vec4::new(0.0, 0.0, 1.0, 1.0)
+        );
+        // Half way between red and green, in linear light.
+        let mid = t.sample(Vec2::new(0.5, 0.25), [Wrap::ClampToEdge; 2]);
+        assert!((mid - Vec4::new(0.5, 0.5, 0.0, 1.0)).abs().max_element() < 1e-6);
+        assert_eq!(wrap_index(-1, 4, Wrap::MirroredRepeat), 0);
+        assert_eq!(wrap_index(4, 4, Wrap::MirroredRepeat), 3);
+        assert_eq!(wrap_index(-3, 4, Wrap::ClampToEdge), 0);
+        // Non-finite coordinates sample some texel instead of panicking.
+        assert!(t.sample(Vec2::splat(f32::NAN), w).is_finite());
+        assert!(t.sample(Vec2::splat(f32::INFINITY), w).is_finite());
+    }
+}

@@ -1,0 +1,137 @@
+//! From a hit to the surface data under it: the height-field texel it landed on
+//! ([`SurfaceLocation`]), that texel's colour, painting one texel, and a per-pixel albedo for
+//! renders that colours hits of either structure (height-field hits from the RBVH's colour
+//! channel; triangle hits, of the exact BVH or an RBVH's triangle leaves, from the scene's
+//! material at the hit's barycentrics).
+
+use glam::{Vec3, Vec4};
+use rayon::prelude::*;
+
+use super::rgba;
+use crate::bvh::LEAF_BIT;
+use crate::geom::{Hit, Ray};
+use crate::rbvh::layout::Texel;
+use crate::rbvh::Rbvh;
+use crate::scene::Scene;
+
+/// A texel of a height-field leaf: sample `(i, j)` of leaf `leaf`, at `atlas_index` in
+/// [`Rbvh::atlas`] (and in [`Rbvh::colours`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SurfaceLocation {
+    pub leaf: u32,
+    pub i: u32,
+    pub j: u32,
+    pub atlas_index: u32,
+}
+
+impl Rbvh {
+    /// The texel a height-field hit landed on: the hit point moved into the leaf's frame, and the
+    /// sample nearest it (sample `i` sits at `s = i + ½`, so the nearest is `⌊s⌋`), falling back,
+    /// when that sample is a hole, to the first present corner of the cell holding the point in the
+    /// order c00, c10, c01, c11 (the march picks the hit's normal the same way). `None` for misses,
+    /// triangle hits, and leaves or atlas indices out of range.
+    pub fn locate(&self, ray: &Ray, hit: &Hit) -> Option<SurfaceLocation> {
+        if !hit.is_hit() || hit.id & LEAF_BIT == 0 {
+            return None;
+        }
+        let leaf_index = hit.id & !LEAF_BIT;
+        let leaf = self.leaves.get(leaf_index as usize)?;
+        if leaf.res_u == 0 || leaf.res_v == 0 {
+            return None;
+        }
+        let f = leaf.to_frame(ray.origin() + ray.dir() * hit.t);
+        let clamp = |x: f32, res: u32| (x.floor() as i64).clamp(0, i64::from(res) - 1);
+        let (i, j) = (clamp(f.x, leaf.res_u), clamp(f.y, leaf.res_v));
+        let cell =
+            |x: f32, res: u32| ((x - 0.5).floor() as i64).clamp(0, (i64::from(res) - 2).max(0));
+        let (ci, cj) = (cell(f.x, leaf.res_u), cell(f.y, leaf.res_v));
+        let index = |i: i64, j: i64| -> Option<u32> {
+            if i >= i64::from(leaf.res_u) || j >= i64::from(leaf.res_v) {
+                return None;
+            }
+            let k = i64::from(leaf.atlas_base) + j * i64::from(self.atlas.pitch) + i;
+            let k = u32::try_from(k).ok()?;
+            let texel = self.atlas.texels.get(k as usize)?;
+            (!texel.is_hole()).then_some(k)
+        };
+        let corners = [(ci, cj), (ci + 1, cj), (ci, cj + 1), (ci + 1, cj + 1)];
+        let (i, j, atlas_index) = std::iter::once((i, j))
+            .chain(corners)
+            .find_map(|(i, j)| index(i, j).map(|k| (i, j, k)))?;
+        Some(SurfaceLocation {
+            leaf: leaf_index,
+            i: i as u32,
+            j: j as u32,
+            atlas_index,
+        })
+    }
+
+    /// Linear RGBA of the texel at `loc`; `None` without a colour channel or out of range.
+    pub fn surface_colour(&self, loc: SurfaceLocation) -> Option<Vec4> {
+        let word = *self.colours.as_ref()?.get(loc.atlas_index as usize)?;
+        Some(rgba::unpack(word))
+    }
+
+    /// Sets the texel at `loc` to `colour` (linear RGBA), creating the colour channel
+    /// ([`Rbvh::colour_channel`]) if there is none. Returns whether `loc` was in range.
+    pub fn paint_texel(&mut self, loc: SurfaceLocation, colour: Vec4) -> bool {
+        let word = rgba::pack(colour);
+        match self.colour_channel().get_mut(loc.atlas_index as usize) {
+            Some(c) => {
+                *c = word;
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// The colour channel, created on first use for an RBVH built without materials: opaque
+    /// white on every surface texel (so shading is unchanged until painted), 0 at holes.
+    pub fn colour_channel(&mut self) -> &mut Vec<u32> {
+        let texels = &self.atlas.texels;
+        self.colours.get_or_insert_with(|| blank_colours(texels))
+    }
+}
+
+/// A fresh colour channel for `texels`: opaque white on surface texels, 0 at holes.
+pub fn blank_colours(texels: &[Texel]) -> Vec<u32> {
+    let white = rgba::from_bytes([255; 4]);
+    texels
+        .iter()
+        .map(|t| if t.is_hole() { 0 } else { white })
+        .collect()
+}
+
+/// Per pixel, the linear RGB base colour of the hit (white for misses and for surfaces without
+/// colour), or `None` when there is no colour to show: neither the scene has materials nor
+/// `rbvh` (the structure traced, if it was an RBVH) a colour channel — renders then stay
+/// exactly as they were without surface data. Hit ids: a height-field hit (`LEAF_BIT` set) reads
+/// the RBVH's texel ([`Rbvh::locate`]); any other hit is a scene triangle, coloured by its
+/// material at the hit point's barycentrics.
+pub fn hit_albedo(
+    scene: &Scene,
+    rbvh: Option<&Rbvh>,
+    rays: &[Ray],
+    hits: &[Hit],
+) -> Option<Vec<Vec3>> {
+    let channel = rbvh.filter(|r| r.colours.is_some());
+    if scene.surface.is_none() && channel.is_none() {
+        return None;
+    }
+    let albedo = rays
+        .par_iter()
+        .zip(hits)
+        .map(|(ray, hit)| {
+            if !hit.is_hit() {
+                return Vec3::ONE;
+            }
+            let colour = if hit.id & LEAF_BIT != 0 {
+                channel.and_then(|r| r.surface_colour(r.locate(ray, hit)?))
+            } else {
+                scene.colour_at(hit.id as usize, ray.origin() + ray.dir() * hit.t)
+            };
+            colour.map_or(Vec3::ONE, |c| c.truncate())
+        })
+        .collect();
+    Some(albedo)
+}

@@ -1,0 +1,49 @@
+//! The 32-bit colour of a texel of [`crate::rbvh::Rbvh::colours`]: red in bits 0–7, green 8–15,
+//! blue 16–23, alpha 24–31 (the byte order of an RGBA8 image, read as a little-endian word).
+//! RGB are sRGB-encoded, so that 8 bits per channel spend their precision where the eye resolves
+//! differences (IEC 61966-2-1), as 8-bit textures do; alpha is linear. In memory everything else
+//! is linear: [`pack`] encodes and [`unpack`] decodes.
+
+use glam::Vec4;
+
+use crate::output::srgb_u8;
+use crate::scene::texture::linear;
+
+/// Linear RGBA (each clamped to `[0, 1]`, NaN as 0) → packed RGBA8.
+pub fn pack(rgba: Vec4) -> u32 {
+    let alpha = if rgba.w.is_nan() {
+        0.0
+    } else {
+        rgba.w.clamp(0.0, 1.0)
+    };
+    from_bytes([
+        srgb_u8(rgba.x),
+        srgb_u8(rgba.y),
+        srgb_u8(rgba.z),
+        (alpha * 255.0).round() as u8,
+    ])
+}
+
+/// Packed RGBA8 → linear RGBA.
+pub fn unpack(word: u32) -> Vec4 {
+    linear(word.to_le_bytes())
+}
+
+/// Four bytes (sRGB RGB, linear alpha) → packed RGBA8.
+pub fn from_bytes(rgba: [u8; 4]) -> u32 {
+    u32::from_le_bytes(rgba)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn packing_round_trips_codes() {
+        for word in [0u32, 0xFFFF_FFFF, 0x8040_20FF, 0x0102_0304] {
+            assert_eq!(pack(unpack(word)), word);
+        }
+        assert_eq!(pack(Vec4::new(1.0, 0.0, 0.0, 1.0)), 0xFF00_00FF);
+        assert_eq!(pack(Vec4::splat(f32::NAN)), 0);
+    }
+}

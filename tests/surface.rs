@@ -1,0 +1,339 @@
+//! Surface data end to end, on inputs generated here: a textured OBJ (MTL + PNG) and glTF, a
+//! Kd-only OBJ, colours baked into the RBVH and read back at hits of both structures, the
+//! `rbvh paint` command, and typed errors for bad textures and strokes.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use glam::{Vec3, Vec4};
+use rbvh::bvh::Bvh;
+use rbvh::geom::Ray;
+use rbvh::gpu::{Query, Tracer};
+use rbvh::rbvh::{Rbvh, RbvhParams};
+use rbvh::scene::Scene;
+use rbvh::surface::hit_albedo;
+use rbvh::Error;
+
+/// The checker's texels, top-left, top-right, bottom-left, bottom-right (sRGB codes); chosen so
+/// that each is 0 or 255 per channel and so exact in linear light.
+const CHECKER: [[u8; 3]; 4] = [[255, 0, 0], [0, 255, 0], [0, 0, 255], [255, 255, 0]];
+
+/// World points at the centres of the quad's quadrants, in the order of [`CHECKER`] (the quad is
+/// `[-1, 1]²` at z = 0, seen from +z with +y up).
+const QUADRANTS: [(f32, f32); 4] = [(-0.5, 0.5), (0.5, 0.5), (-0.5, -0.5), (0.5, -0.5)];
+
+fn write_checker(path: &Path) {
+    let mut img = image::RgbaImage::new(2, 2);
+    for (k, c) in CHECKER.iter().enumerate() {
+        img.put_pixel(
+            k as u32 % 2,
+            k as u32 / 2,
+            image::Rgba([c[0], c[1], c[2], 255]),
+        );
+    }
+    img.save(path).unwrap();
+}
+
+fn write(dir: &Path, name: &str, content: &str) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, content).unwrap();
+    path
+}
+
+/// A quad whose `vt` put the image's top-left texel at the top-left quadrant (OBJ's `v` points up).
+fn textured_obj(dir: &Path, texture_line: &str) -> PathBuf {
+    write(
+        dir,
+        "quad.mtl",
+        &format!("newmtl checker\nKd 1 1 1\n{texture_line}\n"),
+    );
+    write(
+        dir,
+        "quad.obj",
+        "mtllib quad.mtl\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\n\
+         vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nusemtl checker\nf 1/1 2/2 3/3 4/4\n",
+    )
+}
+
+fn down_ray(x: f32, y: f32) -> Ray {
+    Ray::new(Vec3::new(x, y, 5.0), -Vec3::Z, 0.0, f32::INFINITY)
+}
+
+/// The base colour at each quadrant centre, through the exact BVH and an RBVH (both traced on the
+/// device), checked against `expect` (linear RGB).
+fn check_quadrants(scene: &Scene, expect: [Vec3; 4]) {
+    let ctx = common::context();
+    let rays: Vec<Ray> = QUADRANTS.iter().map(|&(x, y)| down_ray(x, y)).collect();
+    let exact = Tracer::exact(&ctx, &Bvh::build(scene).unwrap())
+        .unwrap()
+        .trace(&rays, Query::Closest)
+        .unwrap()
+        .hits;
+    let rbvh = Rbvh::build(scene, &RbvhParams::quality(4).unwrap()).unwrap();
+    assert!(rbvh.colours.is_some());
+    assert!(rbvh.stats.heightfield_leaves > 0);
+    let approx = Tracer::rbvh(&ctx, &rbvh)
+        .unwrap()
+        .trace(&rays, Query::Closest)
+        .unwrap()
+        .hits;
+    for (name, hits, structure) in [("exact", &exact, None), ("rbvh", &approx, Some(&rbvh))] {
+        let albedo = hit_albedo(scene, structure, &rays, hits).unwrap();
+        for (k, (&got, want)) in albedo.iter().zip(expect).enumerate() {
+            assert!(
+                (got - want).abs().max_element() < 0.05,
+                "{name}, quadrant {k}: {got} instead of {want}"
+            );
+        }
+    }
+}
+
+fn checker_linear() -> [Vec3; 4] {
+    CHECKER.map(|c| Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32) / 255.0)
+}
+
+#[test]
+fn obj_with_mtl_and_png_texture_colours_both_structures() {
+    let dir = tempfile::tempdir().unwrap();
+    write_checker(&dir.path().join("checker.png"));
+    let scene = Scene::load(
+        textured_obj(dir.path(), "map_Kd checker.png")
+            .to_str()
+            .unwrap(),
+    )
+    .unwrap();
+    let surface = scene.surface.as_ref().unwrap();
+    assert_eq!(surface.materials.len(), 1);
+    assert!(surface.materials[0].texture.is_some());
+    check_quadrants(&scene, checker_linear());
+}
+
+#[test]
+fn kd_only_obj_colours_objects_and_leaves_plain_meshes_without_materials() {
+    let dir = tempfile::tempdir().unwrap();
+    write(
+        dir.path(),
+        "kd.mtl",
+        "newmtl a\nKd 1 0 0\nnewmtl b\nKd 0 0.5 1\n",
+    );
+    let obj = write(
+        dir.path(),
+        "kd.obj",
+        "mtllib kd.mtl\nv -1 -1 0\nv 0 -1 0\nv 0 1 0\nv -1 1 0\nv 1 -1 0\nv 1 1 0\n\
+         o left\nusemtl a\nf 1 2 3 4\no right\nusemtl b\nf 2 5 6 3\n",
+    );
+    let scene = Scene::load(obj.to_str().unwrap()).unwrap();
+    let red = Vec3::X;
+    let blue = Vec3::new(0.0, 0.5, 1.0);
+    check_quadrants(&scene, [red, blue, red, blue]);
+
+    // No materials: no surface table, no colour channel, no albedo (renders stay grey).
+    let plain = Scene::load("cube").unwrap();
+    assert!(plain.surface.is_none());
+    let r = Rbvh::build(&plain, &RbvhParams::quality(1).unwrap()).unwrap();
+    assert!(r.colours.is_none() && r.colour_bytes() == 0);
+    let rays = [down_ray(0.0, 0.0)];
+    let hits = r.trace_cpu(&rays, false);
+    assert!(hit_albedo(&plain, Some(&r), &rays, &hits).is_none());
+}
+
+/// A glTF quad with its buffer as a data URI, its base colour texture `image` (a JSON image
+/// object) and `factor`; `uv` put the image's top-left texel at the top-left quadrant.
+fn gltf_quad(image: &str, factor: [f32; 4]) -> String {
+    use base64::encode;
+    let positions: [[f32; 3]; 4] = [
+        [-1.0, 1.0, 0.0],
+        [1.0, 1.0, 0.0],
+        [1.0, -1.0, 0.0],
+        [-1.0, -1.0, 0.0],
+    ];
+    let uvs: [[f32; 2]; 4] = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
+    let indices: [u16; 6] = [3, 2, 1, 3, 1, 0];
+    let mut bytes: Vec<u8> = bytemuck::cast_slice(&positions).to_vec();
+    bytes.extend_from_slice(bytemuck::cast_slice(&uvs));
+    bytes.extend_from_slice(bytemuck::cast_slice(&indices));
+    format!(
+        r#"{{
+  "asset": {{"version": "2.0"}},
+  "scene": 0, "scenes": [{{"nodes": [0]}}], "nodes": [{{"mesh": 0}}],
+  "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0, "TEXCOORD_0": 1}}, "indices": 2, "material": 0}}]}}],
+  "materials": [{{"pbrMetallicRoughness": {{"baseColorFactor": {factor:?}, "baseColorTexture": {{"index": 0}}}}}}],
+  "textures": [{{"source": 0, "sampler": 0}}],
+  "samplers": [{{"wrapS": 33071, "wrapT": 33071}}],
+  "images": [{image}],
+  "buffers": [{{"byteLength": {len}, "uri": "data:application/octet-stream;base64,{data}"}}],
+  "bufferViews": [
+    {{"buffer": 0, "byteOffset": 0, "byteLength": 48}},
+    {{"buffer": 0, "byteOffset": 48, "byteLength": 32}},
+    {{"buffer": 0, "byteOffset": 80, "byteLength": 12}}],
+  "accessors": [
+    {{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [-1, -1, 0], "max": [1, 1, 0]}},
+    {{"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC2"}},
+    {{"bufferView": 2, "componentType": 5123, "count": 6, "type": "SCALAR"}}]
+}}"#,
+        len = bytes.len(),
+        data = encode(&bytes),
+    )
+}
+
+#[test]
+fn gltf_base_colour_texture_times_factor_from_a_file_and_a_data_uri() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("checker.png");
+    write_checker(&png);
+    let factor = [1.0, 0.5, 1.0, 1.0];
+    let expect = checker_linear().map(|c| c * Vec3::new(1.0, 0.5, 1.0));
+
+    let external = write(
+        dir.path(),
+        "file.gltf",
+        &gltf_quad(r#"{"uri": "checker.png"}"#, factor),
+    );
+    let scene = Scene::load(external.to_str().unwrap()).unwrap();
+    check_quadrants(&scene, expect);
+
+    let uri = format!(
+        r#"{{"uri": "data:image/png;base64,{}"}}"#,
+        base64::encode(std::fs::read(&png).unwrap())
+    );
+    let embedded = write(dir.path(), "embedded.gltf", &gltf_quad(&uri, factor));
+    let scene = Scene::load(embedded.to_str().unwrap()).unwrap();
+    assert_eq!(
+        scene.surface.as_ref().unwrap().materials[0].factor,
+        Vec4::from(factor)
+    );
+    check_quadrants(&scene, expect);
+}
+
+#[test]
+fn missing_and_corrupt_textures_are_typed_errors_naming_the_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = textured_obj(dir.path(), "map_Kd nowhere.png");
+    match Scene::load(obj.to_str().unwrap()) {
+        Err(e @ Error::Io { .. }) => assert!(e.to_string().contains("nowhere.png"), "{e}"),
+        other => panic!("expected an I/O error, got {other:?}"),
+    }
+    std::fs::write(
+        dir.path().join("broken.png"),
+        b"\x89PNG\r\n\x1a\nnot really",
+    )
+    .unwrap();
+    let obj = textured_obj(dir.path(), "map_Kd broken.png");
+    match Scene::load(obj.to_str().unwrap()) {
+        Err(e @ Error::Parse { .. }) => assert!(e.to_string().contains("broken.png"), "{e}"),
+        other => panic!("expected a parse error, got {other:?}"),
+    }
+    let gltf = write(
+        dir.path(),
+        "lost.gltf",
+        &gltf_quad(r#"{"uri": "lost.png"}"#, [1.0; 4]),
+    );
+    match Scene::load(gltf.to_str().unwrap()) {
+        Err(e @ Error::Io { .. }) => assert!(e.to_string().contains("lost.png"), "{e}"),
+        other => panic!("expected an I/O error, got {other:?}"),
+    }
+    let gltf = write(
+        dir.path(),
+        "garbage.gltf",
+        &gltf_quad(r#"{"uri": "data:image/png;base64,AAAA"}"#, [1.0; 4]),
+    );
+    match Scene::load(gltf.to_str().unwrap()) {
+        Err(e @ Error::Parse { .. }) => {
+            let s = e.to_string();
+            assert!(s.contains("garbage.gltf") && s.contains("image 0"), "{s}");
+        }
+        other => panic!("expected a parse error, got {other:?}"),
+    }
+}
+
+fn rbvh_cli(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_rbvh"))
+        .args(args)
+        .env("RBVH_VALIDATION", "auto")
+        .output()
+        .expect("run rbvh")
+}
+
+#[test]
+fn paint_command_saves_colours_that_render_shows() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    std::fs::write(
+        p("s.txt"),
+        "# centre of the view\ndab 0.5 0.5 0.05 #ff0000\n",
+    )
+    .unwrap();
+    let out = rbvh_cli(&[
+        "paint",
+        "--scene",
+        "cube",
+        "--quality",
+        "2",
+        "--strokes",
+        &p("s.txt"),
+        "--out",
+        &p("painted.rbvh"),
+        "--before",
+        &p("before.png"),
+        "--after",
+        &p("after.png"),
+        "--width",
+        "64",
+        "--height",
+        "48",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let painted = Rbvh::load(Path::new(&p("painted.rbvh"))).unwrap();
+    assert!(painted.colours.unwrap().contains(&0xFF00_00FF));
+    let out = rbvh_cli(&[
+        "render",
+        "--scene",
+        "cube",
+        "--rbvh",
+        &p("painted.rbvh"),
+        "--out",
+        &p("again.png"),
+        "--width",
+        "64",
+        "--height",
+        "48",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let pixel = |name: &str| *image::open(p(name)).unwrap().to_rgb8().get_pixel(32, 24);
+    let (before, after) = (pixel("before.png"), pixel("after.png"));
+    assert_eq!(after, pixel("again.png"));
+    assert!(
+        before[0] == before[1] && before[1] == before[2],
+        "{before:?} is grey"
+    );
+    assert!(
+        after[0] > 100 && after[1] < 10 && after[2] < 10,
+        "{after:?} is red"
+    );
+
+    // A bad strokes file: the error names file and line, and nothing is written.
+    std::fs::write(p("bad.txt"), "dab 0.5 0.5 0.05 #ff0000\ndab 0.5 0.5\n").unwrap();
+    let out = rbvh_cli(&[
+        "paint",
+        "--scene",
+        "cube",
+        "--strokes",
+        &p("bad.txt"),
+        "--out",
+        &p("bad.rbvh"),
+    ]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("bad.txt:2"), "{stderr}");
+    assert!(!Path::new(&p("bad.rbvh")).exists());
+}
