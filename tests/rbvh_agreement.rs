@@ -14,21 +14,14 @@ use rbvh::scene::Scene;
 
 fn rays_for(scene: &Scene, side: u32, random: usize, seed: u64) -> Vec<Ray> {
     let mut rays = scene.camera_or_framed(1.0).primary_rays(side, side);
-    let b = scene.bounds();
-    let (c, r) = (b.center(), 0.5 * b.diagonal());
-    let mut rng = common::Rng(seed);
-    for _ in 0..random {
-        let origin = c + rng.unit_vector() * r * (0.3 + 1.5 * rng.next_f32());
-        let target = c + rng.unit_vector() * r * 0.5;
-        rays.push(Ray::new(origin, target - origin, 0.0, f32::INFINITY));
-    }
+    rays.extend(common::random_rays(scene, random, &mut common::Rng(seed)));
     rays
 }
 
 #[test]
 fn gpu_and_cpu_rbvh_casters_agree_at_every_level() {
     let ctx = common::context();
-    let (mut total, mut hit_miss, mut worst_t) = (0usize, 0usize, 0.0f32);
+    let mut agreement = common::Agreement::default();
     for (k, name) in ["default", "blob", "sphere"].into_iter().enumerate() {
         let scene = Scene::builtin(name).unwrap();
         for level in 0..5 {
@@ -38,38 +31,19 @@ fn gpu_and_cpu_rbvh_casters_agree_at_every_level() {
             for (query, any) in [(Query::Closest, false), (Query::Any, true)] {
                 let gpu = tracer.trace(&rays, query).unwrap().hits;
                 let cpu = r.trace_cpu(&rays, any);
-                for (i, (g, c)) in gpu.iter().zip(&cpu).enumerate() {
-                    total += 1;
-                    if g.is_hit() != c.is_hit() {
-                        hit_miss += 1;
-                        continue;
-                    }
-                    if !g.is_hit() || any {
-                        continue;
-                    }
-                    let rel = (g.t - c.t).abs() / c.t.abs().max(1e-30);
-                    worst_t = worst_t.max(rel);
-                    assert!(
-                        rel <= 1e-4,
-                        "{name} Q{level} ray {i}: t GPU {} vs CPU {}",
-                        g.t,
-                        c.t
-                    );
-                    assert!(
-                        g.normal().dot(c.normal()) > 1.0 - 1e-3,
-                        "{name} Q{level} ray {i}: normals"
-                    );
-                }
+                agreement.add(&format!("{name} Q{level}"), &gpu, &cpu, any);
             }
         }
     }
+    let common::Agreement {
+        total,
+        hit_miss,
+        worst_t,
+    } = agreement;
     println!(
         "GPU/CPU RBVH agreement: {total} rays, {hit_miss} hit/miss disagreements ({:.2e}), worst relative t difference {worst_t:.2e}",
-        hit_miss as f64 / total as f64
+        agreement.rate()
     );
     assert!(total >= 100_000);
-    assert!(
-        (hit_miss as f64) < 1e-4 * total as f64,
-        "{hit_miss} of {total}"
-    );
+    assert!(agreement.rate() < 1e-4, "{hit_miss} of {total}");
 }

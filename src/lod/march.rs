@@ -16,6 +16,7 @@ use glam::Vec3;
 use super::layout::GpuLod;
 use crate::geom::{safe_inverse, Aabb, Ray};
 use crate::rbvh::layout::{decode_octahedral, MARCH_SLACK};
+use crate::rbvh::march::{height_at, step_of};
 use crate::rbvh::Texel;
 
 /// Marches `lod`'s columns (words in `texels`) over `[tmin, t_closest)`; returns the hit distance
@@ -123,16 +124,6 @@ fn start_column(x: f32, res: u32) -> i64 {
     (x.floor() as i64).clamp(0, i64::from(res) - 1)
 }
 
-fn step_of(d: f32) -> i64 {
-    if d > 0.0 {
-        1
-    } else if d < 0.0 {
-        -1
-    } else {
-        0
-    }
-}
-
 /// Where the ray leaves column `c` along one axis; `+inf` along an axis it never steps.
 fn boundary_t(c: i64, step: i64, o: f32, inv: f32) -> f32 {
     if step > 0 {
@@ -141,14 +132,5 @@ fn boundary_t(c: i64, step: i64, o: f32, inv: f32) -> f32 {
         (c as f32 - o) * inv
     } else {
         f32::INFINITY
-    }
-}
-
-/// The ray's height at `t`; exactly `o` for a ray parallel to the grid (no `0 · ∞`).
-fn height_at(o: f32, d: f32, t: f32) -> f32 {
-    if d == 0.0 {
-        o
-    } else {
-        o + d * t
     }
 }

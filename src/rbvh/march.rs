@@ -421,8 +421,8 @@ fn start_cell(x: f32, last: i64) -> i64 {
 }
 
 /// The DDA's step along one axis: the sign of the frame-space direction; a zero component never
-/// steps.
-fn step_of(d: f32) -> i64 {
+/// steps. Shared with the column march of `crate::lod`.
+pub(crate) fn step_of(d: f32) -> i64 {
     if d > 0.0 {
         1
     } else if d < 0.0 {
@@ -447,8 +447,8 @@ fn boundary_t(c: i64, step: i64, o: f32, inv: f32) -> f32 {
 }
 
 /// The ray's height at `t`; exactly `o` for a ray parallel to the tile, so that `0 · ∞` cannot make
-/// a NaN when the cell's exit distance is infinite.
-fn height_at(o: f32, d: f32, t: f32) -> f32 {
+/// a NaN when the cell's exit distance is infinite. Shared with the column march of `crate::lod`.
+pub(crate) fn height_at(o: f32, d: f32, t: f32) -> f32 {
     if d == 0.0 {
         o
     } else {

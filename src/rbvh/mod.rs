@@ -14,7 +14,7 @@ mod build;
 mod file;
 mod frame;
 pub mod layout;
-mod march;
+pub(crate) mod march;
 pub mod params;
 pub(crate) mod raster;
 mod split;

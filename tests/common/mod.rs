@@ -46,3 +46,58 @@ impl Rng {
         }
     }
 }
+
+/// `n` rays from random points around `scene` (0.3 to 1.8 times its half-diagonal from the centre)
+/// towards random points inside its bounding sphere's inner half: hits and misses at every angle.
+pub fn random_rays(scene: &rbvh::scene::Scene, n: usize, rng: &mut Rng) -> Vec<rbvh::geom::Ray> {
+    let b = scene.bounds();
+    let (c, r) = (b.center(), 0.5 * b.diagonal());
+    (0..n)
+        .map(|_| {
+            let origin = c + rng.unit_vector() * r * (0.3 + 1.5 * rng.next_f32());
+            let target = c + rng.unit_vector() * r * 0.5;
+            rbvh::geom::Ray::new(origin, target - origin, 0.0, f32::INFINITY)
+        })
+        .collect()
+}
+
+/// A running comparison of GPU hits with the CPU reference's on the same rays.
+#[derive(Debug, Default)]
+pub struct Agreement {
+    pub total: usize,
+    /// Rays one side hits and the other misses.
+    pub hit_miss: usize,
+    /// Worst relative difference of a shared closest hit's `t`.
+    pub worst_t: f32,
+}
+
+impl Agreement {
+    /// Adds one batch. Hit/miss disagreements are counted (the caller bounds their rate); for
+    /// closest hits (`any` false) a hit both report must agree in `t` to 1e-4 relative and in its
+    /// normal to 1e-3, or the test fails naming `what` and the ray.
+    pub fn add(&mut self, what: &str, gpu: &[rbvh::geom::Hit], cpu: &[rbvh::geom::Hit], any: bool) {
+        assert_eq!(gpu.len(), cpu.len(), "{what}: hit counts");
+        for (i, (g, c)) in gpu.iter().zip(cpu).enumerate() {
+            self.total += 1;
+            if g.is_hit() != c.is_hit() {
+                self.hit_miss += 1;
+                continue;
+            }
+            if !g.is_hit() || any {
+                continue;
+            }
+            let rel = (g.t - c.t).abs() / c.t.abs().max(1e-30);
+            self.worst_t = self.worst_t.max(rel);
+            assert!(rel <= 1e-4, "{what} ray {i}: t GPU {} vs CPU {}", g.t, c.t);
+            assert!(
+                g.normal().dot(c.normal()) > 1.0 - 1e-3,
+                "{what} ray {i}: normals"
+            );
+        }
+    }
+
+    /// The rate of hit/miss disagreements.
+    pub fn rate(&self) -> f64 {
+        self.hit_miss as f64 / self.total.max(1) as f64
+    }
+}
