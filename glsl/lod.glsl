@@ -41,12 +41,10 @@ layout(std430, set = RBVH_BVH_SET, binding = RBVH_LOD_TEXELS_BINDING) readonly b
     uint rbvh_lod_texels[];
 };
 
-// Sizes of the two arrays, and the narrowest column of any record: a cone narrower than that at a
-// node's entry selects nothing, so the traversal need not read the node's record.
+// Sizes of the two arrays.
 struct RbvhLodSizes {
     uint node_count;
     uint texel_len;
-    float min_texel;
 };
 
 // The selection rule of src/lod/cone.rs (`selects`): cone = (width, spread).

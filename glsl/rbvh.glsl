@@ -411,9 +411,10 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
                 }
                 if ((child & RBVH_LEAF_BIT) == 0u || count == RBVH_HEIGHTFIELD_COUNT) {
 #ifdef RBVH_LOD
-                    if ((child & RBVH_LEAF_BIT) == 0u && child < lsz.node_count &&
-                        rbvh_lod_selects(lsz.min_texel, cone, t_entry) &&
-                        rbvh_lod_selects(rbvh_lods[child].texel_size, cone, t_entry)) {
+                    // The LOD trace's tree carries an inner child's column width in its `count`
+                    // (Lod::annotated_nodes), so choosing needs no further read.
+                    if ((child & RBVH_LEAF_BIT) == 0u &&
+                        rbvh_lod_selects(uintBitsToFloat(count), cone, t_entry)) {
                         child |= RBVH_LOD_BIT;
                     }
 #endif

@@ -21,7 +21,7 @@ layout(std430, set = 0, binding = 5) writeonly buffer Steps {
     uint steps_out[];
 };
 
-// Shared with trace_rbvh.comp and src/gpu/tracer.rs (TraceParams); the last six are unused here.
+// Shared with trace_rbvh.comp and src/gpu/tracer.rs (TraceParams); the last five are unused here.
 layout(push_constant) uniform Params {
     uint ray_offset;  // first ray of this dispatch (dispatches are split at maxComputeWorkGroupCount)
     uint ray_count;   // rays in the whole batch
@@ -33,7 +33,6 @@ layout(push_constant) uniform Params {
     uint atlas_len;
     uint lod_node_count;
     uint lod_texel_len;
-    float lod_min_texel;
 } pc;
 
 void main() {

@@ -41,7 +41,6 @@ layout(push_constant) uniform Params {
     uint atlas_len;
     uint lod_node_count;  // LOD records (0 without LOD)
     uint lod_texel_len;   // LOD column words
-    float lod_min_texel;  // narrowest LOD column (+inf without LOD)
 } pc;
 
 void main() {
@@ -53,7 +52,7 @@ void main() {
     uint steps;
     bool overflow;
 #ifdef RBVH_LOD
-    RbvhLodSizes lsz = RbvhLodSizes(pc.lod_node_count, pc.lod_texel_len, pc.lod_min_texel);
+    RbvhLodSizes lsz = RbvhLodSizes(pc.lod_node_count, pc.lod_texel_len);
     Hit h = rbvh_trace_rbvh_lod(rays[i], cones[i], (pc.flags & 1u) != 0u, sz, lsz, steps, overflow);
 #else
     Hit h = rbvh_trace_rbvh(rays[i], (pc.flags & 1u) != 0u, sz, steps, overflow);

@@ -158,7 +158,6 @@ fn push_constants_match_in_both_trace_shaders() {
         ("atlas_len", offset_of!(P, atlas_len)),
         ("lod_node_count", offset_of!(P, lod_node_count)),
         ("lod_texel_len", offset_of!(P, lod_texel_len)),
-        ("lod_min_texel", offset_of!(P, lod_min_texel)),
     ];
     for spv in [
         shaders::TRACE_EXACT,

@@ -36,8 +36,8 @@ pub struct Traced {
     pub timing: Timing,
 }
 
-/// Push constants of the trace shaders (44 bytes); the exact one ignores the last six, the plain
-/// RBVH one the last three.
+/// Push constants of the trace shaders (40 bytes); the exact one ignores the last five, the plain
+/// RBVH one the last two.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct TraceParams {
@@ -53,11 +53,8 @@ pub struct TraceParams {
     pub lod_node_count: u32,
     /// LOD column words.
     pub lod_texel_len: u32,
-    /// The narrowest column of any LOD record (+inf without any): a footprint below it selects
-    /// nothing, so the shader skips reading records for it.
-    pub lod_min_texel: f32,
 }
-const _: () = assert!(std::mem::size_of::<TraceParams>() == 44);
+const _: () = assert!(std::mem::size_of::<TraceParams>() == 40);
 
 const FLAG_ANY_HIT: u32 = 1;
 const FLAG_STEPS: u32 = 2;
@@ -172,15 +169,12 @@ impl Tracer {
     pub fn rbvh_lod(ctx: &Context, rbvh: &Rbvh, lod: &Lod) -> Result<Self> {
         check_depth("rbvh", rbvh.depth)?;
         lod.check_for(rbvh)?;
-        let (mut sizes, arrays) = rbvh_parts(rbvh);
+        let (mut sizes, mut arrays) = rbvh_parts(rbvh);
+        let nodes = lod.annotated_nodes(rbvh);
+        arrays[0].1 = bytemuck::cast_slice(&nodes);
         sizes.lod_node_count = lod.nodes.len() as u32;
         sizes.lod_texel_len = u32::try_from(lod.texels.len())
             .map_err(|_| Error::param("lod", "more than 2^32 column words"))?;
-        sizes.lod_min_texel = lod
-            .nodes
-            .iter()
-            .map(|r| r.texel_size)
-            .fold(f32::INFINITY, f32::min);
         let mut tracer = Self::uploaded(
             ctx,
             "trace_rbvh_lod",

@@ -98,6 +98,31 @@ impl Lod {
         Ok(())
     }
 
+    /// The RBVH's nodes as the LOD trace reads them: every inner child's `count` (0, unused, in
+    /// the plain tree) holds the bits of that child's column width (`+inf` without a coarse
+    /// representation), so that choosing a coarse node needs no read beyond the node itself.
+    pub fn annotated_nodes(&self, rbvh: &crate::rbvh::Rbvh) -> Vec<crate::bvh::GpuNode> {
+        let width = |child: u32| {
+            self.nodes
+                .get(child as usize)
+                .map_or(f32::INFINITY, |r| r.texel_size)
+                .to_bits()
+        };
+        rbvh.nodes
+            .iter()
+            .map(|n| {
+                let mut n = *n;
+                if n.a_child & crate::bvh::LEAF_BIT == 0 {
+                    n.a_count = width(n.a_child);
+                }
+                if n.b_child & crate::bvh::LEAF_BIT == 0 {
+                    n.b_count = width(n.b_child);
+                }
+                n
+            })
+            .collect()
+    }
+
     pub fn bytes(&self) -> u64 {
         (std::mem::size_of_val(self.nodes.as_slice())
             + std::mem::size_of_val(self.texels.as_slice())) as u64
