@@ -85,7 +85,7 @@ fn run_with_shader(case: Case, spirv: &[u8], out: &Path) -> regress::Report {
         &config,
         |ctx, structure| match structure {
             Structure::Rbvh(rbvh) => Tracer::rbvh_with_shader(ctx, rbvh, spirv),
-            Structure::Exact(_) => panic!("only RBVH cases here"),
+            _ => panic!("only plain RBVH cases here"),
         },
     )
     .unwrap()

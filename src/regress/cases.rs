@@ -8,9 +8,11 @@ use std::path::Path;
 use crate::bvh::Bvh;
 use crate::geom::Hit;
 use crate::gpu::{Context, Query, Tracer};
-use crate::output::{shade, Image};
+use crate::lod::{Lod, LodParams, RayCone};
+use crate::output::{shade, shade_with_albedo, Image};
 use crate::rbvh::{Rbvh, RbvhParams};
 use crate::scene::Scene;
+use crate::surface::hit_albedo;
 use crate::{Error, Result};
 
 /// The acceleration structure a case traces through.
@@ -20,6 +22,9 @@ pub enum Method {
     Exact,
     /// An RBVH at quality preset `Q0`…`Q4` (the level, 0..=4).
     Rbvh(u32),
+    /// The RBVH of that preset traced with level of detail ([`crate::lod`], default parameters),
+    /// every primary ray carrying its pixel's cone.
+    RbvhLod(u32),
 }
 
 impl Method {
@@ -28,6 +33,15 @@ impl Method {
         match self {
             Method::Exact => "exact".into(),
             Method::Rbvh(level) => format!("rbvh_q{level}"),
+            Method::RbvhLod(level) => format!("rbvh_lod_q{level}"),
+        }
+    }
+
+    /// The RBVH preset the method traces, if any.
+    pub fn level(&self) -> Option<u32> {
+        match *self {
+            Method::Exact => None,
+            Method::Rbvh(level) | Method::RbvhLod(level) => Some(level),
         }
     }
 }
@@ -37,6 +51,7 @@ impl fmt::Display for Method {
         match self {
             Method::Exact => f.write_str("exact"),
             Method::Rbvh(level) => write!(f, "RBVH Q{level}"),
+            Method::RbvhLod(level) => write!(f, "RBVH Q{level} with LOD"),
         }
     }
 }
@@ -98,6 +113,8 @@ pub fn cross(scenes: &[String], methods: &[Method]) -> Vec<Case> {
 pub enum Structure {
     Exact(Bvh),
     Rbvh(Box<Rbvh>),
+    /// An RBVH with its levels of detail.
+    RbvhLod(Box<Rbvh>, Box<Lod>),
 }
 
 impl Structure {
@@ -108,7 +125,20 @@ impl Structure {
             Method::Rbvh(level) => {
                 Structure::Rbvh(Box::new(Rbvh::build(scene, &RbvhParams::quality(level)?)?))
             }
+            Method::RbvhLod(level) => {
+                let rbvh = Rbvh::build(scene, &RbvhParams::quality(level)?)?;
+                let lod = Lod::build(&rbvh, &LodParams::default())?;
+                Structure::RbvhLod(Box::new(rbvh), Box::new(lod))
+            }
         })
+    }
+
+    /// The RBVH traced, if any (for the colour of its hits).
+    pub fn rbvh(&self) -> Option<&Rbvh> {
+        match self {
+            Structure::Exact(_) => None,
+            Structure::Rbvh(rbvh) | Structure::RbvhLod(rbvh, _) => Some(rbvh),
+        }
     }
 
     /// The tracer `rbvh render` would use: the crate's own shaders.
@@ -116,6 +146,7 @@ impl Structure {
         match structure {
             Structure::Exact(bvh) => Tracer::exact(ctx, bvh),
             Structure::Rbvh(rbvh) => Tracer::rbvh(ctx, rbvh),
+            Structure::RbvhLod(rbvh, lod) => Tracer::rbvh_lod(ctx, rbvh, lod),
         }
     }
 }
@@ -126,15 +157,32 @@ pub struct Render {
     pub hits: Vec<Hit>,
 }
 
-/// Renders `scene` through `tracer` as `rbvh render` does: the scene's camera (or the framing
-/// one) at `width` × `height`, one primary ray per pixel centre, preview shading under the scene's
-/// light. Nothing here is random, so a render depends only on the scene, the structure and the
-/// device's arithmetic.
-pub fn render(tracer: &Tracer, scene: &Scene, width: u32, height: u32) -> Result<Render> {
+/// Renders `scene` through `tracer` (made for `structure`) as `rbvh render` does: the scene's
+/// camera (or the framing one) at `width` × `height`, one primary ray per pixel centre (with its
+/// pixel's cone for level of detail), preview shading under the scene's light with the surfaces'
+/// base colour where the scene or RBVH has one. Nothing here is random, so a render depends only
+/// on the scene, the structure and the device's arithmetic.
+pub fn render(
+    tracer: &Tracer,
+    structure: &Structure,
+    scene: &Scene,
+    width: u32,
+    height: u32,
+) -> Result<Render> {
     let camera = scene.camera_or_framed(width as f32 / height as f32);
     let rays = camera.primary_rays(width, height);
-    let hits = tracer.trace(&rays, Query::Closest)?.hits;
-    let image = shade(&rays, &hits, width, height, scene.light.as_ref())?;
+    let hits = match structure {
+        Structure::RbvhLod(..) => {
+            let cones = vec![RayCone::pixel(&camera, height); rays.len()];
+            tracer.trace_lod(&rays, &cones, Query::Closest, false)?.hits
+        }
+        _ => tracer.trace(&rays, Query::Closest)?.hits,
+    };
+    let light = scene.light.as_ref();
+    let image = match hit_albedo(scene, structure.rbvh(), &rays, &hits) {
+        Some(albedo) => shade_with_albedo(&rays, &hits, width, height, light, &albedo)?,
+        None => shade(&rays, &hits, width, height, light)?,
+    };
     Ok(Render { image, hits })
 }
 

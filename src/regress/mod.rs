@@ -47,16 +47,20 @@ use crate::{Error, Result};
 pub const SCENES: [&str; 3] = ["default", "sphere", "blob"];
 
 /// The methods of the shipped suite: the exact BVH, and RBVH levels from coarsest to finest,
-/// every other one, so that a change in how the sampling rate scales shows.
-pub const METHODS: [Method; 4] = [
+/// every other one, so that a change in how the sampling rate scales shows, without and with level
+/// of detail (the default of `rbvh regress`).
+pub const METHODS: [Method; 7] = [
     Method::Exact,
     Method::Rbvh(0),
     Method::Rbvh(2),
     Method::Rbvh(4),
+    Method::RbvhLod(0),
+    Method::RbvhLod(2),
+    Method::RbvhLod(4),
 ];
 
 /// Image size of the shipped suite: large enough that an RBVH's texel-sized steps cover several
-/// pixels, small enough that the twelve cases render in about a second on lavapipe and the
+/// pixels, small enough that the 21 cases render in about a second on lavapipe and the
 /// goldens stay small.
 pub const WIDTH: u32 = 160;
 pub const HEIGHT: u32 = 120;
@@ -122,7 +126,7 @@ impl Config {
             return Err(Error::param("cases", "no case to run"));
         }
         for case in &self.cases {
-            if let Method::Rbvh(level) = case.method {
+            if let Some(level) = case.method.level() {
                 crate::rbvh::RbvhParams::quality(level)?;
             }
         }
@@ -159,7 +163,7 @@ pub fn run_with(
         loaded_spec = &case.scene;
         let structure = Structure::build(&scene, case.method)?;
         let tracer = make_tracer(ctx, &structure)?;
-        let render = cases::render(&tracer, &scene, config.width, config.height)?;
+        let render = cases::render(&tracer, &structure, &scene, config.width, config.height)?;
         results.push(match config.mode {
             Mode::Compare => compare_case(config, &case.name(), &render)?,
             Mode::Bless => bless_case(config, &case.name(), &render)?,

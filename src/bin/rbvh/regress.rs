@@ -17,7 +17,7 @@ pub struct Args {
     #[arg(long, value_delimiter = ',')]
     scene: Vec<String>,
     /// Methods, comma-separated; `rbvh` runs every --quality level.
-    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [MethodArg::Exact, MethodArg::Rbvh])]
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [MethodArg::Exact, MethodArg::Rbvh, MethodArg::RbvhLod])]
     method: Vec<MethodArg>,
     /// RBVH quality presets: 0..4 or Q0..Q4, comma-separated, or `all`.
     #[arg(long, value_delimiter = ',', default_values_t = ["0".to_string(), "2".to_string(), "4".to_string()])]
@@ -63,6 +63,8 @@ enum MethodArg {
     Exact,
     /// Rasterized BVH, at each --quality level.
     Rbvh,
+    /// Rasterized BVH traced with level of detail, at each --quality level.
+    RbvhLod,
 }
 
 /// The methods asked for, in the order given: each `rbvh` expands to the --quality levels.
@@ -87,6 +89,13 @@ fn methods(a: &Args) -> Result<Vec<Method>> {
             MethodArg::Rbvh => {
                 ensure!(!levels.is_empty(), "--method rbvh needs a --quality level");
                 methods.extend(levels.iter().map(|&l| Method::Rbvh(l)));
+            }
+            MethodArg::RbvhLod => {
+                ensure!(
+                    !levels.is_empty(),
+                    "--method rbvh-lod needs a --quality level"
+                );
+                methods.extend(levels.iter().map(|&l| Method::RbvhLod(l)));
             }
         }
     }
