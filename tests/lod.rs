@@ -332,3 +332,54 @@ fn ibl_visibility_rays_trace_with_level_of_detail() {
     };
     assert!(ibl::render(&plain, &frame, &env, &settings, |_| {}).is_err());
 }
+
+#[test]
+fn recorded_lod_trace_matches_the_submitted_one() {
+    use rbvh::gpu::BufferView;
+    let ctx = common::context();
+    let scene = Scene::builtin("blob").unwrap();
+    let r = Rbvh::build(&scene, &RbvhParams::quality(3).unwrap()).unwrap();
+    let lod = Lod::build(&r, &LodParams::default()).unwrap();
+    let (rays, cones) = rays_and_cones(&scene, 48, 500, 11);
+    let n = rays.len() as u32;
+    let expected = Tracer::rbvh_lod(&ctx, &r, &lod)
+        .unwrap()
+        .trace_lod(&rays, &cones, Query::Closest, false)
+        .unwrap()
+        .hits;
+    let ray_buf = ctx.upload_storage("rays", &rays).unwrap();
+    let cone_buf = ctx.upload_storage("cones", &cones).unwrap();
+    let mut hit_buf = ctx
+        .zeroed_storage("hits", u64::from(n) * std::mem::size_of::<Hit>() as u64)
+        .unwrap();
+    let view = |b: &rbvh::gpu::Buffer| BufferView {
+        buffer: b.raw(),
+        offset: 0,
+    };
+    let mut made = None;
+    ctx.submit("recorded LOD trace", |_, cmd| {
+        made = Some(
+            Tracer::record_rbvh_lod(&ctx, &r, &lod, cmd).and_then(|tracer| {
+                let binding =
+                    tracer.bind_with_cones(view(&ray_buf), view(&hit_buf), view(&cone_buf), n)?;
+                // A plain binding is refused: the LOD trace needs the cones.
+                assert!(tracer.bind(view(&ray_buf), view(&hit_buf), n).is_err());
+                tracer.record(cmd, &binding, Query::Closest);
+                Ok((tracer, binding))
+            }),
+        );
+    })
+    .unwrap();
+    let (mut tracer, mut binding) = made.unwrap().unwrap();
+    tracer.release_staging();
+    assert_eq!(binding.take_overflowed_rays().unwrap(), 0);
+    let hits: Vec<Hit> = ctx.read(&mut hit_buf).unwrap();
+    assert_eq!(&hits[..rays.len()], &expected[..]);
+    assert!(expected
+        .iter()
+        .any(|h| h.is_hit() && h.id & rbvh::lod::LOD_BIT != 0));
+    let plain = Tracer::rbvh(&ctx, &r).unwrap();
+    assert!(plain
+        .bind_with_cones(view(&ray_buf), view(&hit_buf), view(&cone_buf), n)
+        .is_err());
+}

@@ -105,7 +105,7 @@ impl TraceBinding {
 }
 
 /// The shader sizes and the arrays (name, bytes) of the exact BVH, in binding order.
-fn exact_parts(bvh: &Bvh) -> (TraceParams, [(&'static str, &[u8]); 2]) {
+fn exact_parts(bvh: &Bvh) -> (TraceParams, Arrays<'_, 2>) {
     let sizes = TraceParams {
         node_count: bvh.nodes.len() as u32,
         tri_count: bvh.triangles.len() as u32,
@@ -119,7 +119,7 @@ fn exact_parts(bvh: &Bvh) -> (TraceParams, [(&'static str, &[u8]); 2]) {
 }
 
 /// The shader sizes and the arrays (name, bytes) of an RBVH, in binding order.
-fn rbvh_parts(rbvh: &Rbvh) -> (TraceParams, [(&'static str, &[u8]); 4]) {
+fn rbvh_parts(rbvh: &Rbvh) -> (TraceParams, Arrays<'_, 4>) {
     let sizes = TraceParams {
         node_count: rbvh.nodes.len() as u32,
         tri_count: rbvh.triangles.len() as u32,
@@ -138,6 +138,32 @@ fn rbvh_parts(rbvh: &Rbvh) -> (TraceParams, [(&'static str, &[u8]); 4]) {
         ("RBVH atlas", bytemuck::cast_slice(&rbvh.atlas.texels)),
     ];
     (sizes, arrays)
+}
+
+/// Named byte arrays of a structure, in binding order.
+type Arrays<'a, const N: usize> = [(&'static str, &'a [u8]); N];
+
+/// The shader sizes and the arrays (name, bytes) of an RBVH traced with levels of detail: the
+/// RBVH's, with `nodes` ([`Lod::annotated_nodes`]) for its nodes, then the LOD records and columns.
+fn lod_parts<'a>(
+    rbvh: &'a Rbvh,
+    lod: &'a Lod,
+    nodes: &'a [crate::bvh::GpuNode],
+) -> Result<(TraceParams, Arrays<'a, 6>)> {
+    lod.check_for(rbvh)?;
+    let (mut sizes, [_, tris, leaves, atlas]) = rbvh_parts(rbvh);
+    sizes.lod_node_count = lod.nodes.len() as u32;
+    sizes.lod_texel_len = u32::try_from(lod.texels.len())
+        .map_err(|_| Error::param("lod", "more than 2^32 column words"))?;
+    let arrays = [
+        ("RBVH nodes (LOD-annotated)", bytemuck::cast_slice(nodes)),
+        tris,
+        leaves,
+        atlas,
+        ("LOD records", bytemuck::cast_slice(&lod.nodes)),
+        ("LOD columns", bytemuck::cast_slice(&lod.texels)),
+    ];
+    Ok((sizes, arrays))
 }
 
 /// Bindings after the structure's own: rays, hits, status, per-ray steps.
@@ -168,25 +194,15 @@ impl Tracer {
     /// then take one [`RayCone`] per ray ([`Tracer::trace_lod`]).
     pub fn rbvh_lod(ctx: &Context, rbvh: &Rbvh, lod: &Lod) -> Result<Self> {
         check_depth("rbvh", rbvh.depth)?;
-        lod.check_for(rbvh)?;
-        let (mut sizes, mut arrays) = rbvh_parts(rbvh);
         let nodes = lod.annotated_nodes(rbvh);
-        arrays[0].1 = bytemuck::cast_slice(&nodes);
-        sizes.lod_node_count = lod.nodes.len() as u32;
-        sizes.lod_texel_len = u32::try_from(lod.texels.len())
-            .map_err(|_| Error::param("lod", "more than 2^32 column words"))?;
-        let mut tracer = Self::uploaded(
+        let (sizes, arrays) = lod_parts(rbvh, lod, &nodes)?;
+        Self::uploaded(
             ctx,
             "trace_rbvh_lod",
             shaders::TRACE_RBVH_LOD,
             &arrays,
             sizes,
-        )?;
-        tracer.lod = Some([
-            upload(ctx, "LOD records", &lod.nodes)?,
-            upload(ctx, "LOD columns", &lod.texels)?,
-        ]);
-        Ok(tracer)
+        )
     }
 
     /// Embedded use: uploads the exact BVH with the context's (the engine's) allocator, *recording*
@@ -210,6 +226,27 @@ impl Tracer {
         check_depth("rbvh", rbvh.depth)?;
         let (sizes, arrays) = rbvh_parts(rbvh);
         Self::recorded(ctx, "trace_rbvh", shaders::TRACE_RBVH, &arrays, sizes, cmd)
+    }
+
+    /// Embedded use: as [`Tracer::record_exact`], for an RBVH with its levels of detail; bind the
+    /// engine's rays, hits and cones with [`Tracer::bind_with_cones`].
+    pub fn record_rbvh_lod(
+        ctx: &Context,
+        rbvh: &Rbvh,
+        lod: &Lod,
+        cmd: vk::CommandBuffer,
+    ) -> Result<Self> {
+        check_depth("rbvh", rbvh.depth)?;
+        let nodes = lod.annotated_nodes(rbvh);
+        let (sizes, arrays) = lod_parts(rbvh, lod, &nodes)?;
+        Self::recorded(
+            ctx,
+            "trace_rbvh_lod",
+            shaders::TRACE_RBVH_LOD,
+            &arrays,
+            sizes,
+            cmd,
+        )
     }
 
     fn uploaded(
@@ -274,11 +311,40 @@ impl Tracer {
         if self.lod.is_some() {
             return Err(Error::param(
                 "trace binding",
-                "a level-of-detail tracer traces through Tracer::trace_lod",
+                "a level-of-detail tracer needs the rays' cones: use Tracer::bind_with_cones",
             ));
         }
+        self.bind_views(rays, hits, None, count)
+    }
+
+    /// As [`Tracer::bind`], for a level-of-detail tracer ([`Tracer::record_rbvh_lod`]): also
+    /// `count` cones (the [`RayCone`] layout, 8 bytes each) read from `cones`.
+    pub fn bind_with_cones(
+        &self,
+        rays: BufferView,
+        hits: BufferView,
+        cones: BufferView,
+        count: u32,
+    ) -> Result<TraceBinding> {
+        if self.lod.is_none() {
+            return Err(Error::param(
+                "trace binding",
+                "this tracer has no levels of detail: bind without cones",
+            ));
+        }
+        self.bind_views(rays, hits, Some(cones), count)
+    }
+
+    fn bind_views(
+        &self,
+        rays: BufferView,
+        hits: BufferView,
+        cones: Option<BufferView>,
+        count: u32,
+    ) -> Result<TraceBinding> {
         let align = self.ctx.limits().min_storage_buffer_offset_alignment.max(1);
-        for (what, view) in [("rays", rays), ("hits", hits)] {
+        for (what, view) in [("rays", Some(rays)), ("hits", Some(hits)), ("cones", cones)] {
+            let Some(view) = view else { continue };
             if view.offset % align != 0 {
                 return Err(Error::param(
                     what,
@@ -304,6 +370,8 @@ impl Tracer {
             (status.raw(), 0),
             (steps.raw(), 0),
         ]);
+        views.extend(self.lod.iter().flatten().map(|b| (b.raw(), 0)));
+        views.extend(cones.map(|c| (c.buffer, c.offset)));
         Ok(TraceBinding {
             set: self.pipeline.descriptor_set(&views)?,
             status,
@@ -341,22 +409,28 @@ impl Tracer {
         ctx: &Context,
         name: &str,
         spirv: &[u8],
-        structure: Vec<Buffer>,
+        mut structure: Vec<Buffer>,
         sizes: TraceParams,
     ) -> Result<Self> {
-        // The LOD shader binds its records, columns and cones after the per-trace buffers.
-        let lod_bindings = if spirv == shaders::TRACE_RBVH_LOD {
-            3
+        // The LOD shader binds the last two structure arrays (records and columns) and the cones
+        // after the per-trace buffers.
+        let lod = if spirv == shaders::TRACE_RBVH_LOD {
+            let tail = structure.split_off(structure.len().saturating_sub(2));
+            let [records, columns]: [Buffer; 2] = tail
+                .try_into()
+                .map_err(|_| Error::param("lod", "the LOD trace needs its two arrays"))?;
+            Some([records, columns])
         } else {
-            0
+            None
         };
+        let lod_bindings = if lod.is_some() { 3 } else { 0 };
         let bindings = structure.len() as u32 + PER_TRACE_BUFFERS + lod_bindings;
         let push = std::mem::size_of::<TraceParams>() as u32;
         Ok(Tracer {
             ctx: ctx.clone(),
             pipeline: ComputePipeline::new(ctx, name, spirv, bindings, push)?,
             structure,
-            lod: None,
+            lod,
             sizes,
             staging: Vec::new(),
         })
