@@ -77,6 +77,49 @@ fn header_compiles_in_a_foreign_shader_with_its_own_bindings() {
     assert_eq!(r.bindings.get("EngineDepth"), Some(&(0, 0)));
 }
 
+/// The same engine shader tracing with level of detail, LOD buffers at its own bindings.
+const FOREIGN_LOD: &str = r#"
+#version 460
+#extension GL_GOOGLE_include_directive : require
+layout(local_size_x = 32) in;
+
+#define RBVH_BVH_SET 1
+#define RBVH_LOD 1
+#define RBVH_LODS_BINDING 11
+#define RBVH_LOD_TEXELS_BINDING 12
+#include "rbvh.glsl"
+
+layout(std430, set = 0, binding = 0) writeonly buffer EngineDepth { float depth[]; };
+layout(push_constant) uniform EnginePush { RbvhSizes sizes; RbvhLodSizes lod_sizes; float spread; } push;
+
+void main() {
+    Ray ray = Ray(vec3(gl_GlobalInvocationID.x, 0.0, -10.0), 0.0, vec3(0.0, 0.0, 1.0), 1e30);
+    uint steps;
+    bool overflow;
+    Hit hit = rbvh_trace_rbvh_lod(ray, vec2(0.0, push.spread), false, push.sizes, push.lod_sizes,
+                                  steps, overflow);
+    depth[gl_GlobalInvocationID.x] = overflow ? -1.0 : hit.t;
+}
+"#;
+
+#[test]
+fn lod_header_compiles_in_a_foreign_shader_with_its_own_bindings() {
+    let r = spirv::reflect(&compile(FOREIGN_LOD).unwrap());
+    for (block, binding) in [
+        ("RbvhBvhNodes", 0),
+        ("RbvhAtlas", 3),
+        ("RbvhLods", 11),
+        ("RbvhLodTexels", 12),
+    ] {
+        assert_eq!(
+            r.bindings.get(block),
+            Some(&(1, binding)),
+            "{block}: {:?}",
+            r.bindings
+        );
+    }
+}
+
 #[test]
 fn each_header_compiles_on_its_own() {
     for header in ["common.glsl", "intersect.glsl", "bvh.glsl", "rbvh.glsl"] {
