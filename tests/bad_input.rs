@@ -844,3 +844,17 @@ fn fuzz_regressions_replay() {
         root.display()
     );
 }
+
+/// Writes the seeds of `fuzz/src/lib.rs` into cargo-fuzz's corpus folders
+/// (`fuzz/corpus/<target>/seed-<n>`), so that a fuzzing run starts from valid inputs; run it with
+/// `cargo test --release --test bad_input -- --ignored write_fuzz_seeds`.
+#[test]
+#[ignore = "writes into fuzz/corpus; run by hand before fuzzing"]
+fn write_fuzz_seeds() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus");
+    for (n, (target, seed)) in fuzz::seeds().into_iter().enumerate() {
+        let dir = root.join(target);
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join(format!("seed-{n}")), seed).unwrap();
+    }
+}

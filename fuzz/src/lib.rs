@@ -8,14 +8,18 @@
 //! byte-identically and trace without overflow, hits are well formed. A failed check panics,
 //! which libFuzzer reports as a crash.
 //!
-//! The loaders take paths, so file inputs go through a per-thread scratch directory.
+//! The loaders take paths, so file inputs go through a per-thread scratch directory. A load
+//! that fails must fail with an error that names a file ([`check_error`]).
 
+use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
 use rbvh::bvh::{BuildParams, Bvh, STACK_SIZE};
 use rbvh::geom::{Hit, Ray};
+use rbvh::ibl::Environment;
 use rbvh::rbvh::{Rbvh, RbvhParams, Refinement, Subdivision};
 use rbvh::scene::Scene;
+use rbvh::surface::strokes;
 
 /// Scenes loaded from fuzzed files with more triangles than this are not built (a fuzzed scene
 /// file can name the 120k-triangle built-ins; loading them is tested, building them is slow).
@@ -330,6 +334,291 @@ pub fn builders(data: &[u8]) {
     }
 }
 
+/// A failed load must say what and where: an I/O or parse error naming a file (`file`, when
+/// given, is the one it must name), or invalid geometry naming its source.
+fn check_error(e: &rbvh::Error, file: Option<&Path>) {
+    let named = match e {
+        rbvh::Error::Io { path, .. } | rbvh::Error::Parse { path, .. } => {
+            file.is_none_or(|f| path == f) && !path.as_os_str().is_empty()
+        }
+        rbvh::Error::InvalidGeometry { source_name, .. } => !source_name.is_empty(),
+        _ => false,
+    };
+    assert!(named, "the error does not name the file: {e:?}");
+}
+
+/// Fuzz target: a strokes file of `rbvh paint`. Loaded dabs are finite with a positive radius.
+pub fn strokes(data: &[u8]) {
+    let path = scratch_file("fuzz.strokes", data);
+    match strokes::load(&path) {
+        Ok(dabs) => {
+            for d in &dabs {
+                assert!(
+                    d.screen.is_finite() && d.radius.is_finite() && d.radius > 0.0,
+                    "{d:?}"
+                );
+            }
+        }
+        Err(e) => check_error(&e, Some(&path)),
+    }
+}
+
+/// Fuzz target: an OpenEXR environment map. A loaded map has texels and finite, non-negative
+/// radiance in every direction.
+pub fn environment(data: &[u8]) {
+    let path = scratch_file("fuzz.exr", data);
+    match Environment::load(&path) {
+        Ok(Environment::Map(map)) => {
+            assert!(map.width() > 0 && map.height() > 0);
+            for dir in [
+                glam::Vec3::Y,
+                glam::Vec3::NEG_Y,
+                glam::Vec3::NEG_Z,
+                glam::Vec3::new(0.3, -0.2, 0.9),
+                glam::Vec3::NAN,
+            ] {
+                let l = map.radiance(dir.normalize_or_zero());
+                assert!(l.is_finite() && l.min_element() >= 0.0, "{dir}: {l}");
+            }
+        }
+        Ok(other) => panic!("Environment::load gave {other:?}"),
+        Err(e) => check_error(&e, Some(&path)),
+    }
+}
+
+/// Separates the parts of a `textures` input: mesh, MTL, image.
+pub const PART_SEPARATOR: &[u8] = b"\0--\0";
+
+/// Fuzz target: a textured mesh. The first byte picks the kind (modulo 3) and the rest is up to
+/// three parts separated by [`PART_SEPARATOR`] (the last part may contain it):
+///
+/// * 0: `tex.obj`, `tex.mtl`, `tex.png` (OBJ with `mtllib tex.mtl` and `map_Kd tex.png`);
+/// * 1: `tex.gltf` (its images a data URI or `tex.png`), unused, `tex.png`;
+/// * 2: a GLB assembled here from the JSON part and, as its binary chunk, the image part (for
+///   images in buffer views).
+///
+/// Whatever loads must also have usable materials: every texture's texels match its size, and
+/// every triangle's colour is finite.
+pub fn textures(data: &[u8]) {
+    let Some((&selector, body)) = data.split_first() else {
+        return;
+    };
+    let mut parts = split_parts(body);
+    let image = parts.pop().unwrap_or_default();
+    let mtl = parts.pop().unwrap_or_default();
+    let mesh = parts.pop().unwrap_or_default();
+    // As in `gltf` and `scene_file`: no paths out of the scratch directory (device files would
+    // be read forever). The image part is never a path.
+    let forbidden: [&[u8]; 7] = [b"/dev", b"/proc", b"/sys", b"..", b"\\u", b"\\/", b"\\"];
+    let absolute = |text: &[u8]| {
+        text.split(|&b| b.is_ascii_whitespace())
+            .any(|w| w.starts_with(b"/"))
+    };
+    if [mesh, mtl].iter().any(|text| {
+        absolute(text)
+            || forbidden
+                .iter()
+                .any(|f| text.windows(f.len()).any(|w| w == *f))
+    }) {
+        return;
+    }
+    scratch_file("tex.png", image);
+    scratch_file("tex.mtl", mtl);
+    let path = match selector % 3 {
+        0 => scratch_file("tex.obj", mesh),
+        1 => scratch_file("tex.gltf", mesh),
+        _ => scratch_file("tex.glb", &glb(mesh, image)),
+    };
+    match Scene::load(path.to_str().expect("utf-8 path")) {
+        Ok(scene) => {
+            check_scene(&scene);
+            if let Some(surface) = &scene.surface {
+                for m in &surface.materials {
+                    if let Some(t) = &m.texture {
+                        assert!(t.width > 0 && t.height > 0);
+                        assert_eq!(
+                            t.texels.len() as u64,
+                            u64::from(t.width) * u64::from(t.height)
+                        );
+                    }
+                }
+                for t in 0..scene.triangle_count().min(64) {
+                    let c = surface.colour(t, glam::Vec3::splat(1.0 / 3.0));
+                    assert!(!c.is_nan(), "triangle {t}: colour {c}");
+                }
+            }
+        }
+        Err(e) => check_error(&e, None),
+    }
+}
+
+/// `body` split at the first two [`PART_SEPARATOR`]s.
+fn split_parts(body: &[u8]) -> Vec<&[u8]> {
+    let mut parts = Vec::new();
+    let mut rest = body;
+    while parts.len() < 2 {
+        let Some(at) = rest
+            .windows(PART_SEPARATOR.len())
+            .position(|w| w == PART_SEPARATOR)
+        else {
+            break;
+        };
+        parts.push(&rest[..at]);
+        rest = &rest[at + PART_SEPARATOR.len()..];
+    }
+    parts.push(rest);
+    parts
+}
+
+/// A GLB container of `json` and the binary chunk `bin`, each padded to 4 bytes.
+fn glb(json: &[u8], bin: &[u8]) -> Vec<u8> {
+    let mut json = json.to_vec();
+    json.resize(json.len().next_multiple_of(4), b' ');
+    let mut bin = bin.to_vec();
+    bin.resize(bin.len().next_multiple_of(4), 0);
+    let mut glb = b"glTF".to_vec();
+    glb.extend(2u32.to_le_bytes());
+    glb.extend(((12 + 8 + json.len() + 8 + bin.len()) as u32).to_le_bytes());
+    glb.extend((json.len() as u32).to_le_bytes());
+    glb.extend(b"JSON");
+    glb.extend(&json);
+    glb.extend((bin.len() as u32).to_le_bytes());
+    glb.extend(b"BIN\0");
+    glb.extend(&bin);
+    glb
+}
+
+/// A tiny PNG: 2×2 RGBA.
+fn seed_png() -> Vec<u8> {
+    let img = image::RgbaImage::from_fn(2, 2, |x, y| {
+        image::Rgba([255 * x as u8, 200, 60 * y as u8, 255 - 100 * y as u8])
+    });
+    let mut out = Cursor::new(Vec::new());
+    img.write_to(&mut out, image::ImageFormat::Png)
+        .expect("PNG seed");
+    out.into_inner()
+}
+
+/// A tiny JPEG: 8×8 RGB.
+fn seed_jpeg() -> Vec<u8> {
+    let img = image::RgbImage::from_fn(8, 8, |x, y| image::Rgb([30 * x as u8, 30 * y as u8, 128]));
+    let mut out = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, 50)
+        .encode_image(&img)
+        .expect("JPEG seed");
+    out
+}
+
+/// A tiny lat-long EXR: `width × height` RGB texels, written with `encoding`, as `f32`
+/// (`half` false) or `f16`.
+fn seed_exr(width: usize, height: usize, encoding: exr::prelude::Encoding, half: bool) -> Vec<u8> {
+    use exr::prelude::{f16, Image, Layer, LayerAttributes, SpecificChannels, WritableImage};
+    let value = |x: usize, y: usize| (x as f32 * 0.5, y as f32 + 0.25, 2.0);
+    let mut out = Cursor::new(Vec::new());
+    if half {
+        let channels = SpecificChannels::rgb(|p: exr::math::Vec2<usize>| {
+            let (r, g, b) = value(p.0, p.1);
+            (f16::from_f32(r), f16::from_f32(g), f16::from_f32(b))
+        });
+        let layer = Layer::new(
+            (width, height),
+            LayerAttributes::named("sky"),
+            encoding,
+            channels,
+        );
+        Image::from_layer(layer).write().to_buffered(&mut out)
+    } else {
+        let channels = SpecificChannels::rgb(|p: exr::math::Vec2<usize>| value(p.0, p.1));
+        let layer = Layer::new(
+            (width, height),
+            LayerAttributes::default(),
+            encoding,
+            channels,
+        );
+        Image::from_layer(layer).write().to_buffered(&mut out)
+    }
+    .expect("EXR seed");
+    out.into_inner()
+}
+
+/// The seeds of `textures`: an OBJ set with a PNG and one with a JPEG, a glTF with a data-URI
+/// PNG, and a GLB with the PNG in a buffer view.
+fn texture_seeds() -> Vec<Vec<u8>> {
+    let png = seed_png();
+    let obj = b"mtllib tex.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl wood\nf 1/1 2/2 3/3\n";
+    let mtl = b"newmtl wood\nKd 1 0.5 0.25\nmap_Kd -s 1 1 1 tex.png\n";
+    let obj_set = |image: &[u8]| {
+        let mut d = vec![0u8];
+        for (k, part) in [&obj[..], &mtl[..], image].into_iter().enumerate() {
+            if k > 0 {
+                d.extend(PART_SEPARATOR);
+            }
+            d.extend(part);
+        }
+        d
+    };
+    // One triangle with texture coordinates: positions (36 bytes), then uvs (24 bytes).
+    let mut geometry = Vec::new();
+    for v in [0f32, 0., 0., 1., 0., 0., 0., 1., 0., 0., 0., 1., 0., 0., 1.] {
+        geometry.extend(v.to_le_bytes());
+    }
+    let geometry = base64_encode(&geometry);
+    let gltf_json = |buffers: &str, image: &str| {
+        format!(
+            r#"{{"asset":{{"version":"2.0"}},"meshes":[{{"primitives":[{{"attributes":{{"POSITION":0,"TEXCOORD_0":1}},"material":0}}]}}],"nodes":[{{"mesh":0}}],"buffers":[{buffers}],"bufferViews":[{{"buffer":0,"byteLength":36}},{{"buffer":0,"byteOffset":36,"byteLength":24}}],"accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}},{{"bufferView":1,"componentType":5126,"count":3,"type":"VEC2"}}],"materials":[{{"pbrMetallicRoughness":{{"baseColorFactor":[1,1,1,1],"baseColorTexture":{{"index":0}}}}}}],"samplers":[{{"wrapS":33648}}],"textures":[{{"source":0,"sampler":0}}],"images":[{image}]}}"#
+        )
+    };
+    let data_buffer =
+        format!(r#"{{"uri":"data:application/octet-stream;base64,{geometry}","byteLength":60}}"#);
+    let mut gltf = vec![1u8];
+    gltf.extend(
+        gltf_json(
+            &data_buffer,
+            &format!(
+                r#"{{"uri":"data:image/png;base64,{}"}}"#,
+                base64_encode(&png)
+            ),
+        )
+        .as_bytes(),
+    );
+    // In the GLB, buffer 0 is the binary chunk (the image) and buffer 1 the geometry.
+    let glb_json = gltf_json(
+        &format!(r#"{data_buffer},{{"byteLength":{}}}"#, png.len()),
+        r#"{"bufferView":2,"mimeType":"image/png"}"#,
+    )
+    .replace(r#"{"buffer":0,"#, r#"{"buffer":1,"#)
+    .replace(
+        r#"],"accessors""#,
+        &format!(r#",{{"buffer":2,"byteLength":{}}}],"accessors""#, png.len()),
+    );
+    let mut glb_input = vec![2u8];
+    glb_input.extend(glb_json.as_bytes());
+    glb_input.extend(PART_SEPARATOR);
+    glb_input.extend(PART_SEPARATOR);
+    glb_input.extend(&png);
+    vec![obj_set(&png), obj_set(&seed_jpeg()), gltf, glb_input]
+}
+
+/// Standard base64 with padding (for the seeds' data URIs).
+fn base64_encode(bytes: &[u8]) -> String {
+    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = String::new();
+    for chunk in bytes.chunks(3) {
+        let n = chunk
+            .iter()
+            .enumerate()
+            .fold(0u32, |n, (k, &b)| n | u32::from(b) << (16 - 8 * k));
+        for k in 0..4 {
+            if k <= chunk.len() {
+                out.push(ALPHABET[(n >> (18 - 6 * k) & 63) as usize] as char);
+            } else {
+                out.push('=');
+            }
+        }
+    }
+    out
+}
+
 /// Inputs that the deterministic replay mutates: one valid example per target.
 pub fn seeds() -> Vec<(&'static str, Vec<u8>)> {
     let obj = b"# a quad and a triangle\no quad\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n\
@@ -392,14 +681,32 @@ pub fn seeds() -> Vec<(&'static str, Vec<u8>)> {
     for k in 0..120u8 {
         geometry.push(k.wrapping_mul(37).wrapping_add(11));
     }
-    vec![
+    let strokes = b"# aim x y, radius, colour\ndab 0.5 0.4 0.02 #ff0000\n\n\
+                    line 0.2 0.6 0.21 0.61 0.01 #2060ffcc # a short line\n"
+        .to_vec();
+    use exr::prelude::{Blocks, Compression, Encoding};
+    let tiled_rle = Encoding {
+        compression: Compression::RLE,
+        blocks: Blocks::Tiles(exr::math::Vec2(2, 2)),
+        ..Encoding::UNCOMPRESSED
+    };
+    let mut seeds = vec![
         ("obj", obj),
         ("gltf", gltf),
         ("gltf", glb),
         ("scene_file", toml),
         ("rbvh_file", rbvh),
         ("builders", geometry),
-    ]
+        ("strokes", strokes),
+        ("environment", seed_exr(4, 2, Encoding::UNCOMPRESSED, false)),
+        ("environment", seed_exr(3, 3, tiled_rle, true)),
+        (
+            "environment",
+            seed_exr(2, 17, Encoding::SMALL_LOSSLESS, true),
+        ),
+    ];
+    seeds.extend(texture_seeds().into_iter().map(|s| ("textures", s)));
+    seeds
 }
 
 /// Runs target `name` on `data`.
@@ -410,9 +717,21 @@ pub fn run(name: &str, data: &[u8]) {
         "scene_file" => scene_file(data),
         "rbvh_file" => rbvh_file(data),
         "builders" => builders(data),
+        "strokes" => strokes(data),
+        "environment" => environment(data),
+        "textures" => textures(data),
         other => panic!("no fuzz target {other:?}"),
     }
 }
 
 /// The target names, as the binaries in `fuzz_targets/` are called.
-pub const TARGETS: [&str; 5] = ["obj", "gltf", "scene_file", "rbvh_file", "builders"];
+pub const TARGETS: [&str; 8] = [
+    "obj",
+    "gltf",
+    "scene_file",
+    "rbvh_file",
+    "builders",
+    "strokes",
+    "environment",
+    "textures",
+];

@@ -199,13 +199,20 @@ impl LatLongMap {
             check_size(header.layer_size.0, header.layer_size.1, path)?;
         }
         reader.rewind().map_err(|e| Error::io(path, e))?;
+        // Each row is allocated when the first of its texels is decoded, not all of them up
+        // front: a header of a few hundred bytes may claim MAX_MAP_TEXELS (768 MiB of texels),
+        // and only texels that the file really holds should cost memory.
         let image = read()
             .no_deep_data()
             .largest_resolution_level()
             .rgb_channels(
-                |size, _| (size.0, vec![Vec3::ZERO; size.0 * size.1]),
-                |(width, texels): &mut (usize, Vec<Vec3>), pos, (r, g, b): (f32, f32, f32)| {
-                    texels[pos.1 * *width + pos.0] = Vec3::new(r, g, b);
+                |size, _| (size.0, vec![Vec::new(); size.1]),
+                |(width, rows): &mut (usize, Vec<Vec<Vec3>>), pos, (r, g, b): (f32, f32, f32)| {
+                    let row = &mut rows[pos.1];
+                    if row.is_empty() {
+                        row.resize(*width, Vec3::ZERO);
+                    }
+                    row[pos.0] = Vec3::new(r, g, b);
                 },
             )
             .first_valid_layer()
@@ -213,7 +220,18 @@ impl LatLongMap {
             .from_buffered(reader)
             .map_err(malformed)?;
         let size = image.layer_data.size;
-        let (_, texels) = image.layer_data.channel_data.pixels;
+        let (_, rows) = image.layer_data.channel_data.pixels;
+        if let Some(y) = rows.iter().position(Vec::is_empty) {
+            return Err(Error::parse(
+                path,
+                None,
+                format!("environment map row {y} has no texels (is the file truncated?)"),
+            ));
+        }
+        let mut texels = Vec::with_capacity(size.0 * size.1);
+        for row in rows {
+            texels.extend(row);
+        }
         // check_size bounded both sides by MAX_MAP_SIDE, so they fit in u32.
         LatLongMap::new(size.0 as u32, size.1 as u32, texels, path)
     }

@@ -11,7 +11,7 @@
 //! which `tobj` does not report.
 
 use std::collections::HashMap;
-use std::io::{BufReader, Cursor};
+use std::io::Cursor;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -43,8 +43,12 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
         if !regular {
             return Err(tobj::LoadError::OpenFileFailed);
         }
-        let f = std::fs::File::open(&file).map_err(|_| tobj::LoadError::OpenFileFailed)?;
-        tobj::load_mtl_buf(&mut BufReader::new(f))
+        let text = std::fs::read(&file).map_err(|_| tobj::LoadError::OpenFileFailed)?;
+        let text = String::from_utf8(text).map_err(|_| tobj::LoadError::ReadError)?;
+        if !mtl_is_safe(&text) {
+            return Err(tobj::LoadError::MaterialParseError);
+        }
+        tobj::load_mtl_buf(&mut text.as_bytes())
     })
     .map_err(|e| {
         let line = line_at(&bytes, cursor.position() as usize);
@@ -134,6 +138,21 @@ fn add_materials(
         ids.insert(m, scene.add_material(material));
     }
     Ok(ids)
+}
+
+/// Whether `tobj` 4 parses the MTL `text` without panicking: it unwraps the colour of a `Ka`,
+/// `Kd`, `Ks` or `Ke` statement as three numbers without checking that there are three, and
+/// slices a `newmtl` line at byte 6 whatever whitespace precedes the keyword. A file it would
+/// panic on is malformed, like one it refuses (the mesh then loads without materials).
+fn mtl_is_safe(text: &str) -> bool {
+    text.lines().all(|line| {
+        let mut words = line.split_whitespace();
+        match words.next() {
+            Some("Ka" | "Kd" | "Ks" | "Ke") => words.count() >= 3,
+            Some("newmtl") => line.is_char_boundary(6),
+            _ => true,
+        }
+    })
 }
 
 /// The file name of a `map_Kd` statement: the whole argument, or its last word when it starts

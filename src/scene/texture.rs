@@ -7,12 +7,21 @@
 //! colour space in its specification, and image files for it are sRGB in practice, so both are
 //! decoded the same way. Alpha is linear in both.
 
+use std::io::Cursor;
 use std::path::Path;
 use std::sync::OnceLock;
 
 use glam::{Vec2, Vec4};
+use image::{DynamicImage, ImageDecoder, ImageReader, Limits};
 
 use crate::{Error, Result};
+
+/// Largest side of a texture, in texels (the largest 2D image that Vulkan devices commonly take).
+pub const MAX_TEXTURE_SIDE: u32 = 16_384;
+/// Largest texel count of a texture (2²⁶ texels are 256 MiB as RGBA8): a bound on what an image
+/// header may make us allocate, checked before decoding. The `image` crate's own default bound
+/// (512 MiB for the decoded buffer) still lets a grey-scale image grow fourfold into RGBA.
+pub const MAX_TEXTURE_TEXELS: u64 = 1 << 26;
 
 /// How texture coordinates outside `[0, 1]` wrap (glTF samplers' `wrapS`/`wrapT`; OBJ repeats).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -37,23 +46,35 @@ pub struct Texture {
 impl Texture {
     /// Decodes PNG or JPEG bytes (the format is sniffed from the bytes, not the name). A failure
     /// is an [`Error::Parse`] naming `file` and saying what `what` (e.g. "image 2") was.
+    /// Images larger than [`MAX_TEXTURE_SIDE`] or [`MAX_TEXTURE_TEXELS`] are refused from their
+    /// header, before any texel is allocated.
     pub fn decode(bytes: &[u8], file: &Path, what: &str) -> Result<Texture> {
-        let image = image::load_from_memory(bytes).map_err(|e| {
-            Error::parse(file, None, format!("{what}: cannot decode the image: {e}"))
-        })?;
-        let rgba = image.to_rgba8();
-        let (width, height) = rgba.dimensions();
+        let fail = |message: String| Error::parse(file, None, format!("{what}: {message}"));
+        let undecodable = |e: image::ImageError| fail(format!("cannot decode the image: {e}"));
+        let mut reader = ImageReader::new(Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(|e| fail(format!("cannot decode the image: {e}")))?;
+        let mut limits = Limits::default();
+        limits.max_image_width = Some(MAX_TEXTURE_SIDE);
+        limits.max_image_height = Some(MAX_TEXTURE_SIDE);
+        reader.limits(limits);
+        let decoder = reader.into_decoder().map_err(undecodable)?;
+        let (width, height) = decoder.dimensions();
         if width == 0 || height == 0 {
-            return Err(Error::parse(
-                file,
-                None,
-                format!("{what}: the image is empty"),
-            ));
+            return Err(fail("the image is empty".into()));
         }
+        if u64::from(width) * u64::from(height) > MAX_TEXTURE_TEXELS {
+            return Err(fail(format!(
+                "the image is {width}×{height}: at most {MAX_TEXTURE_TEXELS} texels"
+            )));
+        }
+        let rgba = DynamicImage::from_decoder(decoder)
+            .map_err(undecodable)?
+            .into_rgba8();
         Ok(Texture {
             name: format!("{} ({what})", file.display()),
-            width,
-            height,
+            width: rgba.width(),
+            height: rgba.height(),
             texels: rgba.pixels().map(|p| p.0).collect(),
         })
     }

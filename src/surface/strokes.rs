@@ -30,6 +30,9 @@ use crate::{Error, Result};
 pub const LINE_SPACING: f32 = 0.004;
 /// Most dabs one `line` may place (a line across the whole screen takes ~350).
 const MAX_LINE_DABS: usize = 100_000;
+/// Most dabs one file may place (20 MiB of dabs): without it, each 30-byte `line` could place
+/// [`MAX_LINE_DABS`], and a few kilobytes of text would ask for gigabytes and minutes of painting.
+pub const MAX_DABS: usize = 1 << 20;
 
 /// One brush dab on the screen.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -102,6 +105,11 @@ pub fn parse(text: &str, path: &Path) -> Result<Vec<Dab>> {
                 "the line would place {steps} dabs (at most {MAX_LINE_DABS})"
             )));
         }
+        if dabs.len() + steps + 1 > MAX_DABS {
+            return Err(err(format!(
+                "the file would place more than {MAX_DABS} dabs in all"
+            )));
+        }
         for k in 0..=steps {
             let f = if steps == 0 {
                 0.0
@@ -160,6 +168,8 @@ mod tests {
 
     #[test]
     fn errors_name_file_and_line() {
+        // Ten lines of 100 001 dabs fit in MAX_DABS, the eleventh does not.
+        let long = "line 0 0 400 0 1 #ffffff\n".repeat(11);
         for (text, expect) in [
             ("dab 0.5 0.5 0.1 #ff0000\ndab 0.5 x 0.1 #ff0000", "y \"x\""),
             ("\n\nsplat 1 2", "unknown statement"),
@@ -167,6 +177,7 @@ mod tests {
             ("dab 0.5 0.5 -1 #ffffff", "must be positive"),
             ("dab 0.5 0.5 0.1 #fff", "not #rrggbb"),
             ("line 0 0 1e30 0 0.1 #ffffff", "dabs"),
+            (long.as_str(), "in all"),
         ] {
             let e = parse(text, Path::new("s.txt")).unwrap_err();
             let line = text.lines().count();
