@@ -47,10 +47,11 @@ struct RbvhLodSizes {
     uint texel_len;
 };
 
-// The selection rule of src/lod/cone.rs (`selects`): cone = (width, spread).
+// The selection rule of src/lod/cone.rs (`selects`): cone = (width, spread). A width of +inf (no
+// coarse representation) or 0 (nodes not annotated by Lod::annotated_nodes) never selects.
 bool rbvh_lod_selects(float texel_size, vec2 cone, float t_entry) {
     precise float footprint = cone.x + cone.y * t_entry;
-    return texel_size <= footprint;
+    return !isinf(texel_size) && texel_size > 0.0 && texel_size <= footprint;
 }
 
 int rbvh_lod_step(float d) {

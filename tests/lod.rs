@@ -383,3 +383,40 @@ fn recorded_lod_trace_matches_the_submitted_one() {
         .bind_with_cones(view(&ray_buf), view(&hit_buf), view(&cone_buf), n)
         .is_err());
 }
+
+#[test]
+fn coarse_hits_carry_the_colour_of_the_surface_they_stand_for() {
+    use rbvh::surface::{hit_albedo, rgba};
+    let ctx = common::context();
+    let scene = Scene::builtin("blob").unwrap();
+    let mut r = Rbvh::build(&scene, &RbvhParams::quality(3).unwrap()).unwrap();
+    let red = rgba::from_bytes([255, 0, 0, 255]);
+    r.colours = Some(vec![red; r.atlas.texels.len()]);
+    let lod = Lod::build(&r, &LodParams::default()).unwrap();
+    assert_eq!(lod.colours.as_ref().map(Vec::len), Some(lod.texels.len()));
+    let (rays, cones) = rays_and_cones(&scene, 64, 0, 3);
+    let hits = Tracer::rbvh_lod(&ctx, &r, &lod)
+        .unwrap()
+        .trace_lod(&rays, &cones, Query::Closest, false)
+        .unwrap()
+        .hits;
+    let albedo = hit_albedo(&scene, Some(&r), Some(&lod), &rays, &hits).unwrap();
+    let mut coarse = 0;
+    for (hit, colour) in hits.iter().zip(&albedo) {
+        if hit.is_hit() {
+            coarse += usize::from(hit.id & rbvh::lod::LOD_BIT != 0);
+            assert!(
+                (*colour - glam::Vec3::X).abs().max_element() < 1e-3,
+                "hit {:#x}: {colour}",
+                hit.id
+            );
+        }
+    }
+    assert!(coarse > 100, "{coarse} coarse hits");
+    // Without a colour channel the levels of detail carry none either.
+    r.colours = None;
+    assert!(Lod::build(&r, &LodParams::default())
+        .unwrap()
+        .colours
+        .is_none());
+}

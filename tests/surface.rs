@@ -80,7 +80,7 @@ fn check_quadrants(scene: &Scene, expect: [Vec3; 4]) {
         .unwrap()
         .hits;
     for (name, hits, structure) in [("exact", &exact, None), ("rbvh", &approx, Some(&rbvh))] {
-        let albedo = hit_albedo(scene, structure, &rays, hits).unwrap();
+        let albedo = hit_albedo(scene, structure, None, &rays, hits).unwrap();
         for (k, (&got, want)) in albedo.iter().zip(expect).enumerate() {
             assert!(
                 (got - want).abs().max_element() < 0.05,
@@ -136,7 +136,7 @@ fn kd_only_obj_colours_objects_and_leaves_plain_meshes_without_materials() {
     assert!(r.colours.is_none() && r.colour_bytes() == 0);
     let rays = [down_ray(0.0, 0.0)];
     let hits = r.trace_cpu(&rays, false);
-    assert!(hit_albedo(&plain, Some(&r), &rays, &hits).is_none());
+    assert!(hit_albedo(&plain, Some(&r), None, &rays, &hits).is_none());
 }
 
 /// A glTF quad with its buffer as a data URI, its base colour texture `image` (a JSON image
@@ -336,4 +336,29 @@ fn paint_command_saves_colours_that_render_shows() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("bad.txt:2"), "{stderr}");
     assert!(!Path::new(&p("bad.rbvh")).exists());
+}
+
+#[test]
+fn gltf_uris_are_percent_decoded_and_file_uris_to_special_files_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("tex base.png");
+    image::RgbaImage::from_pixel(2, 2, image::Rgba([0, 255, 0, 255]))
+        .save(&png)
+        .unwrap();
+    let quad = |uri: &str| gltf_quad(&format!(r#"{{"uri": "{uri}"}}"#), [1.0; 4]);
+    let ok = dir.path().join("encoded.gltf");
+    std::fs::write(&ok, quad("tex%20base.png")).unwrap();
+    let scene = Scene::load(ok.to_str().unwrap()).unwrap();
+    assert!(scene.surface.is_some());
+    let bad = dir.path().join("scheme.gltf");
+    std::fs::write(&bad, quad("http://example.com/tex.png")).unwrap();
+    let e = Scene::load(bad.to_str().unwrap()).unwrap_err().to_string();
+    assert!(
+        e.contains("scheme.gltf") && e.contains("unsupported URI scheme"),
+        "{e}"
+    );
+    let dev = dir.path().join("device.gltf");
+    std::fs::write(&dev, quad("file:///dev/zero")).unwrap();
+    let e = Scene::load(dev.to_str().unwrap()).unwrap_err().to_string();
+    assert!(e.contains("/dev/zero"), "{e}");
 }

@@ -30,7 +30,7 @@ pub const MAX_SAMPLES: u32 = 1 << 16;
 
 /// The picture to light: one primary ray per pixel (row-major, top row first), its closest hit
 /// through the structure being rendered, and the surface's albedo at that pixel (ignored where
-/// the ray missed; a constant grey until surfaces carry a base colour).
+/// the ray missed; `rbvh render` passes the surfaces' base colour times [`super::GREY`]).
 #[derive(Clone, Copy, Debug)]
 pub struct Frame<'a> {
     pub width: u32,

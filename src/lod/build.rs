@@ -5,7 +5,8 @@
 //! A sample covers a square patch about one fine texel wide, so it is splatted into every column
 //! its patch overlaps; since columns are at least two fine texels wide, a surface crossing a
 //! column leaves samples in it and the coarse level has no pinholes. A column keeps the lowest and
-//! highest sample along the grid's axis, with their normals, and is solid in between.
+//! highest sample along the grid's axis, with their normals (and colours, where the RBVH has a
+//! colour channel), and is solid in between.
 
 use std::time::Instant;
 
@@ -27,11 +28,17 @@ const MAX_TRIANGLE_DIVISIONS: u32 = 1024;
 /// taken a little larger than half a texel.
 const SPLAT_RADIUS: f32 = 0.75;
 
+/// One node's record, its column words and their colour words (parallel to the words).
+type Coarse = (GpuLod, Vec<u32>, Vec<u32>);
+
 /// A surface point and its 8:8 octahedral normal.
 #[derive(Clone, Copy)]
 struct Sample {
     p: Vec3,
     normal: u16,
+    /// The RBVH's colour word at the sample (RGBA8; 0 where it has none: triangle leaves, or an
+    /// RBVH without a colour channel).
+    colour: u32,
 }
 
 impl Lod {
@@ -58,7 +65,7 @@ impl Lod {
         let order = subtree_order(rbvh);
         let sources: Vec<Vec<Sample>> = order.sources.par_iter().map(|s| s.samples(rbvh)).collect();
         let column_sizes = column_sizes(rbvh, &order);
-        let records: Vec<(GpuLod, Vec<u32>)> = (0..rbvh.nodes.len())
+        let records: Vec<Coarse> = (0..rbvh.nodes.len())
             .into_par_iter()
             .map(|n| match order.span[n] {
                 Some((bounds, range)) => coarse_node(
@@ -68,13 +75,14 @@ impl Lod {
                     column_sizes[n],
                     params.columns,
                 ),
-                None => (GpuLod::NONE, Vec::new()),
+                None => (GpuLod::NONE, Vec::new(), Vec::new()),
             })
             .collect();
         let mut nodes = Vec::with_capacity(records.len());
         let mut texels = Vec::new();
         let mut stats = LodStats::default();
-        for (mut record, words) in records {
+        let mut colours = Vec::new();
+        for (mut record, words, column_colours) in records {
             if record.is_some() {
                 record.base = u32::try_from(texels.len()).map_err(|_| {
                     Error::param("lod", "more than 2^32 column words; use fewer columns")
@@ -83,6 +91,7 @@ impl Lod {
                 stats.columns += u64::from(record.res_u) * u64::from(record.res_v);
             }
             texels.extend(words);
+            colours.extend(column_colours);
             nodes.push(record);
         }
         stats.build_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -90,6 +99,7 @@ impl Lod {
             params: *params,
             nodes,
             texels,
+            colours: rbvh.colours.is_some().then_some(colours),
             stats,
         })
     }
@@ -216,29 +226,29 @@ fn heightfield_samples(rbvh: &Rbvh, leaf: u32) -> Vec<Sample> {
     let Some(hf) = rbvh.leaves.get(leaf as usize) else {
         return Vec::new();
     };
-    let (au, av) = (Vec3::from(hf.axis_u), Vec3::from(hf.axis_v));
-    // axis_u = u / texel for a unit u, so u · texel = axis_u / |axis_u|².
-    let (step_u, step_v) = (au / au.length_squared(), av / av.length_squared());
-    let (origin, w) = (Vec3::from(hf.origin), Vec3::from(hf.axis_w) * hf.h_scale);
+    let grid = hf.grid();
     let pitch = rbvh.atlas.pitch as usize;
     let mut out = Vec::new();
-    for j in 0..hf.res_v as usize {
-        for i in 0..hf.res_u as usize {
-            let index = hf.atlas_base as usize + j * pitch + i;
+    for j in 0..hf.res_v {
+        for i in 0..hf.res_u {
+            let index = hf.atlas_base as usize + j as usize * pitch + i as usize;
             let Some(&texel) = rbvh.atlas.texels.get(index) else {
                 continue;
             };
             if texel.is_hole() {
                 continue;
             }
-            let p = origin
-                + (i as f32 + 0.5) * step_u
-                + (j as f32 + 0.5) * step_v
-                + f32::from(texel.height_code()) * w;
+            let p = grid.point(i, j, texel.height_code());
             if p.is_finite() {
                 out.push(Sample {
                     p,
                     normal: (texel.0 >> 16) as u16,
+                    colour: rbvh
+                        .colours
+                        .as_ref()
+                        .and_then(|c| c.get(index))
+                        .copied()
+                        .unwrap_or(0),
                 });
             }
         }
@@ -256,7 +266,11 @@ fn triangle_samples([a, b, c]: [Vec3; 3], spacing: f32) -> Vec<Sample> {
             let (s, t) = (i as f32 / divisions as f32, j as f32 / divisions as f32);
             let p = a + s * (b - a) + t * (c - a);
             if p.is_finite() {
-                out.push(Sample { p, normal });
+                out.push(Sample {
+                    p,
+                    normal,
+                    colour: 0,
+                });
             }
         }
     }
@@ -271,9 +285,9 @@ fn coarse_node(
     fine: f32,
     texel_size: f32,
     columns: u32,
-) -> (GpuLod, Vec<u32>) {
+) -> Coarse {
     if bounds.is_empty() || sources.iter().all(Vec::is_empty) {
-        return (GpuLod::NONE, Vec::new());
+        return (GpuLod::NONE, Vec::new(), Vec::new());
     }
     let extent = bounds.extent();
     let w = if extent.x <= extent.y && extent.x <= extent.z {
@@ -285,19 +299,24 @@ fn coarse_node(
     };
     let (u, v) = ((w + 1) % 3, (w + 2) % 3);
     if !(texel_size.is_finite() && texel_size > 0.0) {
-        return (GpuLod::NONE, Vec::new());
+        return (GpuLod::NONE, Vec::new(), Vec::new());
     }
     let res = |axis: usize| ((extent[axis] / texel_size).ceil() as u32).max(1);
     let (res_u, res_v) = (res(u), res(v));
     // A grid does not skip empty space as a tree does: a ray may walk all its columns. Only a node
     // that the ray sees at most `columns` footprints wide is worth marching instead of descending.
     if res_u > columns || res_v > columns {
-        return (GpuLod::NONE, Vec::new());
+        return (GpuLod::NONE, Vec::new(), Vec::new());
     }
     let origin = bounds.min;
     let radius = SPLAT_RADIUS * fine;
-    // Per column: (lowest height, its normal, highest height, its normal).
-    let mut acc = vec![(f32::INFINITY, 0u16, f32::NEG_INFINITY, 0u16); (res_u * res_v) as usize];
+    // Per column: (lowest height, its sample, highest height, its sample).
+    let none = Sample {
+        p: Vec3::ZERO,
+        normal: 0,
+        colour: 0,
+    };
+    let mut acc = vec![(f32::INFINITY, none, f32::NEG_INFINITY, none); (res_u * res_v) as usize];
     let cell = |x: f32, res: u32| ((x / texel_size).floor().max(0.0) as u32).min(res - 1);
     for s in sources.iter().flatten() {
         let rel = s.p - origin;
@@ -308,10 +327,10 @@ fn coarse_node(
             for i in i0..=i1 {
                 let a = &mut acc[(j * res_u + i) as usize];
                 if h < a.0 {
-                    (a.0, a.1) = (h, s.normal);
+                    (a.0, a.1) = (h, *s);
                 }
                 if h > a.2 {
-                    (a.2, a.3) = (h, s.normal);
+                    (a.2, a.3) = (h, *s);
                 }
             }
         }
@@ -327,16 +346,18 @@ fn coarse_node(
         }
     };
     let mut words = Vec::with_capacity(acc.len() * 2);
-    for &(lo, lo_n, hi, hi_n) in &acc {
+    let mut colours = Vec::with_capacity(acc.len() * 2);
+    for &(lo, bottom, hi, top) in &acc {
         let column = if lo <= hi {
             Column {
-                top: Texel(u32::from(code(hi, true)) | u32::from(hi_n) << 16),
-                bottom: Texel(u32::from(code(lo, false)) | u32::from(lo_n) << 16),
+                top: Texel(u32::from(code(hi, true)) | u32::from(top.normal) << 16),
+                bottom: Texel(u32::from(code(lo, false)) | u32::from(bottom.normal) << 16),
             }
         } else {
             Column::EMPTY
         };
         words.extend([column.top.0, column.bottom.0]);
+        colours.extend([top.colour, bottom.colour]);
     }
     let record = GpuLod {
         origin: origin.to_array(),
@@ -349,5 +370,5 @@ fn coarse_node(
         inv_texel: 1.0 / texel_size,
         pad: [0; 2],
     };
-    (record, words)
+    (record, words, colours)
 }

@@ -68,9 +68,11 @@ impl RayCone {
 /// representation with columns `texel_size` wide is used for a ray that enters it at `t_entry`
 /// when its texel is no wider than the cone there. The cone only widens with `t`, so for one ray
 /// the selection is monotone: whatever is chosen at some distance is chosen at every larger one.
+/// A node without a coarse representation (`texel_size` +inf, or 0 in a tree whose nodes were not
+/// annotated, see [`crate::lod::Lod::annotated_nodes`]) is never chosen, whatever the cone.
 #[inline]
 pub fn selects(texel_size: f32, cone: &RayCone, t_entry: f32) -> bool {
-    texel_size <= cone.width + cone.spread * t_entry
+    texel_size.is_finite() && texel_size > 0.0 && texel_size <= cone.width + cone.spread * t_entry
 }
 
 /// Checks that there is one valid cone per ray.
@@ -110,6 +112,12 @@ mod tests {
             }
         }
         assert!(!selects(0.5, &RayCone::POINT, 1e30));
+        let huge = RayCone {
+            width: 0.0,
+            spread: 1e38,
+        };
+        assert!(!selects(f32::INFINITY, &huge, 10.0));
+        assert!(!selects(0.0, &huge, 10.0));
     }
 
     #[test]

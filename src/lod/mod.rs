@@ -68,6 +68,10 @@ pub struct Lod {
     pub nodes: Vec<GpuLod>,
     /// Column words of all records, two per column.
     pub texels: Vec<u32>,
+    /// Where the RBVH has a colour channel: the colour (RGBA8, as [`crate::rbvh::Rbvh::colours`])
+    /// of each column word's surface sample, parallel to `texels` (0: none). Host-side only: the
+    /// colour of a coarse hit is looked up after the trace ([`Lod::colour_at`]).
+    pub colours: Option<Vec<u32>>,
     pub stats: LodStats,
 }
 
@@ -82,7 +86,6 @@ pub struct LodStats {
 }
 
 impl Lod {
-    /// Bytes on the device: the per-node records and the columns.
     /// Checks that this was built for `rbvh` (one record per node).
     pub fn check_for(&self, rbvh: &crate::rbvh::Rbvh) -> Result<()> {
         if self.nodes.len() != rbvh.nodes.len() {
@@ -123,6 +126,53 @@ impl Lod {
             .collect()
     }
 
+    /// The colour word of the coarse surface of `node` nearest `point` (a coarse hit's point): the
+    /// column holding it — or, for a hit on a column's side, which lies on the border with an
+    /// empty neighbour, the nearest non-empty column around it — and there its top or bottom
+    /// surface, whichever is nearer along the grid's axis. `None` without colours, for a node
+    /// without a coarse representation, or where the surface has no colour (triangle leaves).
+    pub fn colour_at(&self, node: u32, point: glam::Vec3) -> Option<u32> {
+        let colours = self.colours.as_ref()?;
+        let record = self.nodes.get(node as usize).filter(|r| r.is_some())?;
+        let [u, v, w] = record.axes();
+        let rel = point - glam::Vec3::from(record.origin);
+        let (x, y) = (rel[u] * record.inv_texel, rel[v] * record.inv_texel);
+        let h = rel[w];
+        let clamp = |c: f32, res: u32| (c.floor().max(0.0) as u32).min(res.saturating_sub(1));
+        let (ci, cj) = (clamp(x, record.res_u), clamp(y, record.res_v));
+        let mut best: Option<(f32, u32)> = None;
+        for j in cj.saturating_sub(1)..=(cj + 1).min(record.res_v.saturating_sub(1)) {
+            for i in ci.saturating_sub(1)..=(ci + 1).min(record.res_u.saturating_sub(1)) {
+                let Some(column) = record.column(&self.texels, i, j).filter(|c| !c.is_empty())
+                else {
+                    continue;
+                };
+                // Distance from the point to the column's footprint, in columns.
+                let dx = (i as f32 - x).max(x - (i + 1) as f32).max(0.0);
+                let dy = (j as f32 - y).max(y - (j + 1) as f32).max(0.0);
+                let distance = dx.max(dy);
+                if best.is_some_and(|(d, _)| d <= distance) {
+                    continue;
+                }
+                let top = f32::from(column.top.height_code()) * record.h_scale;
+                let bottom = f32::from(column.bottom.height_code()) * record.h_scale;
+                let word = u64::from(record.base)
+                    + 2 * (u64::from(j) * u64::from(record.res_u) + u64::from(i))
+                    + u64::from(top - h > h - bottom);
+                let colour = usize::try_from(word)
+                    .ok()
+                    .and_then(|k| colours.get(k))
+                    .copied()
+                    .filter(|&c| c != 0);
+                if let Some(colour) = colour {
+                    best = Some((distance, colour));
+                }
+            }
+        }
+        best.map(|(_, colour)| colour)
+    }
+
+    /// Bytes on the device: the per-node records and the columns.
     pub fn bytes(&self) -> u64 {
         (std::mem::size_of_val(self.nodes.as_slice())
             + std::mem::size_of_val(self.texels.as_slice())) as u64

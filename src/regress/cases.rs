@@ -179,7 +179,11 @@ pub fn render(
         _ => tracer.trace(&rays, Query::Closest)?.hits,
     };
     let light = scene.light.as_ref();
-    let image = match hit_albedo(scene, structure.rbvh(), &rays, &hits) {
+    let lod = match structure {
+        Structure::RbvhLod(_, lod) => Some(&**lod),
+        _ => None,
+    };
+    let image = match hit_albedo(scene, structure.rbvh(), lod, &rays, &hits) {
         Some(albedo) => shade_with_albedo(&rays, &hits, width, height, light, &albedo)?,
         None => shade(&rays, &hits, width, height, light)?,
     };

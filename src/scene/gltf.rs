@@ -56,11 +56,21 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
         Some(dir) if !dir.as_os_str().is_empty() => dir,
         _ => Path::new("."),
     };
-    // Buffers named by relative URI must be regular files too (`/dev/zero` would be read forever).
+    // Buffers named by URI must be regular files too (`/dev/zero` would be read forever), found
+    // where the gltf crate's importer will look for them.
     for buffer in document.buffers() {
         if let ::gltf::buffer::Source::Uri(uri) = buffer.source() {
-            let file = base.join(uri);
-            if let (false, Ok(metadata)) = (uri.starts_with("data:"), std::fs::metadata(&file)) {
+            if !uri.starts_with("data:") {
+                let file = resolve_uri(base, uri).map_err(|m| {
+                    Error::parse(path, None, format!("buffer {}: {m}", buffer.index()))
+                })?;
+                let metadata = std::fs::metadata(&file).map_err(|e| {
+                    Error::parse(
+                        path,
+                        None,
+                        format!("buffer {}: {}: {e}", buffer.index(), file.display()),
+                    )
+                })?;
                 super::load::regular_file(&file, &metadata)?;
             }
         }
@@ -214,13 +224,35 @@ impl Materials<'_> {
                     })?;
                     Texture::decode(&bytes, self.path, &what)?
                 }
-                None => Texture::load(&self.base.join(uri))?,
+                None => Texture::load(
+                    &resolve_uri(self.base, uri)
+                        .map_err(|m| Error::parse(self.path, None, format!("{what}: {m}")))?,
+                )?,
             },
         };
         let texture = Arc::new(texture);
         self.images.insert(image.index(), texture.clone());
         Ok(texture)
     }
+}
+
+/// The file a glTF URI (not a data URI) names, resolved as the `gltf` crate's importer resolves
+/// buffer URIs: `file:` and `file://` give a path as written; any other scheme is unsupported; a
+/// relative reference is percent-decoded (RFC 3986 §2.1: exporters write `tex%20base.png`) and
+/// taken from the glTF's folder `base`. Errors say what is wrong with the URI.
+fn resolve_uri(base: &Path, uri: &str) -> std::result::Result<std::path::PathBuf, String> {
+    if let Some(rest) = uri
+        .strip_prefix("file://")
+        .or_else(|| uri.strip_prefix("file:"))
+    {
+        return Ok(rest.into());
+    }
+    if uri.contains(':') {
+        return Err(format!("unsupported URI scheme in {uri:?}"));
+    }
+    let decoded = urlencoding::decode(uri)
+        .map_err(|_| format!("URI {uri:?} percent-decodes to invalid UTF-8"))?;
+    Ok(base.join(&*decoded))
 }
 
 fn wrap(mode: ::gltf::texture::WrappingMode) -> Wrap {

@@ -101,8 +101,13 @@ impl Texture {
         } else {
             (0.0, 0.0)
         };
-        // `as` saturates and maps NaN to 0, so any coordinate gives an index that wraps in range.
-        let (x0, y0) = (x0 as i64, y0 as i64);
+        // `as` saturates and maps NaN to 0; clamping to ±2⁴⁰ keeps `x0 + 1` from overflowing
+        // while leaving every texel index reachable (f32 cannot resolve texels beyond 2²⁴ anyway).
+        let limit = 1i64 << 40;
+        let (x0, y0) = (
+            (x0 as i64).clamp(-limit, limit),
+            (y0 as i64).clamp(-limit, limit),
+        );
         let at = |i: i64, j: i64| {
             let i = wrap_index(i, self.width, wrap[0]);
             let j = wrap_index(j, self.height, wrap[1]);

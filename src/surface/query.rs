@@ -10,6 +10,7 @@ use rayon::prelude::*;
 use super::rgba;
 use crate::bvh::LEAF_BIT;
 use crate::geom::{Hit, Ray};
+use crate::lod::{Lod, LOD_BIT};
 use crate::rbvh::layout::Texel;
 use crate::rbvh::Rbvh;
 use crate::scene::Scene;
@@ -105,12 +106,14 @@ pub fn blank_colours(texels: &[Texel]) -> Vec<u32> {
 /// Per pixel, the linear RGB base colour of the hit (white for misses and for surfaces without
 /// colour), or `None` when there is no colour to show: neither the scene has materials nor
 /// `rbvh` (the structure traced, if it was an RBVH) a colour channel — renders then stay
-/// exactly as they were without surface data. Hit ids: a height-field hit (`LEAF_BIT` set) reads
-/// the RBVH's texel ([`Rbvh::locate`]); any other hit is a scene triangle, coloured by its
-/// material at the hit point's barycentrics.
+/// exactly as they were without surface data. Hit ids: a coarse level-of-detail hit (`LEAF_BIT |
+/// LOD_BIT`) reads the colour of the column it hit in `lod` ([`Lod::colour_at`]); a height-field
+/// hit (`LEAF_BIT`) reads the RBVH's texel ([`Rbvh::locate`]); any other hit is a scene triangle,
+/// coloured by its material at the hit point's barycentrics.
 pub fn hit_albedo(
     scene: &Scene,
     rbvh: Option<&Rbvh>,
+    lod: Option<&Lod>,
     rays: &[Ray],
     hits: &[Hit],
 ) -> Option<Vec<Vec3>> {
@@ -125,10 +128,15 @@ pub fn hit_albedo(
             if !hit.is_hit() {
                 return Vec3::ONE;
             }
-            let colour = if hit.id & LEAF_BIT != 0 {
+            let point = ray.origin() + ray.dir() * hit.t;
+            let coarse = LEAF_BIT | LOD_BIT;
+            let colour = if hit.id & coarse == coarse {
+                lod.and_then(|l| l.colour_at(hit.id & !coarse, point))
+                    .map(rgba::unpack)
+            } else if hit.id & LEAF_BIT != 0 {
                 channel.and_then(|r| r.surface_colour(r.locate(ray, hit)?))
             } else {
-                scene.colour_at(hit.id as usize, ray.origin() + ray.dir() * hit.t)
+                scene.colour_at(hit.id as usize, point)
             };
             colour.map_or(Vec3::ONE, |c| c.truncate())
         })

@@ -43,6 +43,10 @@ pub fn run(a: Args) -> Result<()> {
         a.width,
         a.height
     );
+    ensure!(
+        !a.common.lod.lod,
+        "--lod: painting writes the RBVH's texels; coarse levels of detail have none to paint"
+    );
     let dabs = strokes::load(&a.strokes)?;
     let common = Common {
         method: Method::Rbvh,
@@ -63,7 +67,15 @@ pub fn run(a: Args) -> Result<()> {
         (Vec::new(), Vec::new())
     };
     if let Some(path) = &a.before {
-        let image = lambert(&p.scene, &p.structure, &rays, &hits, a.width, a.height)?;
+        let image = lambert(
+            &p.scene,
+            &p.structure,
+            None,
+            &rays,
+            &hits,
+            a.width,
+            a.height,
+        )?;
         output::write_png(path, &image)?;
         eprintln!("wrote {}", path.display());
     }
@@ -120,7 +132,15 @@ pub fn run(a: Args) -> Result<()> {
     eprintln!("wrote {}", a.out.display());
 
     if let Some(path) = &a.after {
-        let image = lambert(&p.scene, &p.structure, &rays, &hits, a.width, a.height)?;
+        let image = lambert(
+            &p.scene,
+            &p.structure,
+            None,
+            &rays,
+            &hits,
+            a.width,
+            a.height,
+        )?;
         output::write_png(path, &image)?;
         eprintln!("wrote {}", path.display());
     }

@@ -14,8 +14,9 @@ use rbvh::bvh::Bvh;
 use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{Query, Tracer};
 use rbvh::ibl::{self, Environment, Frame, Settings, Sky};
-use rbvh::lod::RayCone;
+use rbvh::lod::{Lod, RayCone};
 use rbvh::output::{self, Image};
+use rbvh::rbvh::Rbvh;
 use rbvh::scene::{Light, Scene};
 use rbvh::surface::hit_albedo;
 
@@ -109,6 +110,7 @@ pub fn run(a: Args) -> Result<()> {
         Shading::Lambert => lambert(
             &p.scene,
             &p.structure,
+            p.lod.as_ref(),
             &rays,
             &traced.hits,
             a.width,
@@ -131,6 +133,22 @@ pub fn run(a: Args) -> Result<()> {
         eprintln!("wrote {}", path.display());
     }
     Ok(())
+}
+
+/// The IBL albedo per pixel: the neutral grey ([`ibl::GREY`]) times the surfaces' base colour
+/// where the scene or RBVH has one, as the Lambert preview shades.
+fn ibl_albedo(
+    scene: &Scene,
+    rbvh: Option<&Rbvh>,
+    lod: Option<&Lod>,
+    rays: &[Ray],
+    hits: &[Hit],
+) -> Vec<Vec3> {
+    let grey = Vec3::splat(ibl::GREY);
+    match hit_albedo(scene, rbvh, lod, rays, hits) {
+        Some(colours) => colours.into_iter().map(|c| grey * c).collect(),
+        None => vec![grey; rays.len()],
+    }
 }
 
 /// The procedural sky with its sun where the scene's directional light comes from, else where
@@ -161,8 +179,7 @@ fn render_ibl(
         Structure::Rbvh(r) => Some(&**r),
         Structure::Exact(_) => None,
     };
-    let albedo = hit_albedo(&p.scene, rbvh, rays, hits)
-        .unwrap_or_else(|| vec![Vec3::splat(ibl::GREY); rays.len()]);
+    let albedo = ibl_albedo(&p.scene, rbvh, p.lod.as_ref(), rays, hits);
     let settings = Settings {
         samples: a.samples,
         seed: a.seed,
@@ -208,8 +225,7 @@ fn compare_with_exact(
     let exact = Tracer::exact(&p.ctx, &bvh).context("uploading the exact BVH")?;
     let setup_ms = t.elapsed().as_secs_f64() * 1e3;
     let exact_hits = exact.trace(frame.rays, Query::Closest)?.hits;
-    let exact_albedo = hit_albedo(&p.scene, None, frame.rays, &exact_hits)
-        .unwrap_or_else(|| vec![Vec3::splat(ibl::GREY); frame.rays.len()]);
+    let exact_albedo = ibl_albedo(&p.scene, None, None, frame.rays, &exact_hits);
     let exact_frame = Frame {
         hits: &exact_hits,
         albedo: &exact_albedo,
@@ -281,6 +297,7 @@ fn report_ibl(what: &str, r: &ibl::Rendered) {
 pub fn lambert(
     scene: &Scene,
     structure: &Structure,
+    lod: Option<&Lod>,
     rays: &[Ray],
     hits: &[Hit],
     width: u32,
@@ -291,7 +308,7 @@ pub fn lambert(
         Structure::Exact(_) => None,
     };
     let light = scene.light.as_ref();
-    Ok(match hit_albedo(scene, rbvh, rays, hits) {
+    Ok(match hit_albedo(scene, rbvh, lod, rays, hits) {
         Some(albedo) => output::shade_with_albedo(rays, hits, width, height, light, &albedo)?,
         None => output::shade(rays, hits, width, height, light)?,
     })
