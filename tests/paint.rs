@@ -144,3 +144,19 @@ fn painted_colours_survive_save_and_load() {
     assert_eq!(back.colours, r.colours);
     assert!(back.colours.unwrap().contains(&RED));
 }
+
+#[test]
+fn a_colour_channel_that_does_not_match_the_atlas_is_refused() {
+    let ctx = common::context();
+    let scene = Scene::builtin("cube").unwrap();
+    let mut r = Rbvh::build(&scene, &RbvhParams::quality(1).unwrap()).unwrap();
+    r.colours = Some(vec![0; 3]);
+    let e = Painter::new(&ctx, &r).err().unwrap().to_string();
+    assert!(
+        e.contains("colour words") && e.contains("atlas texels"),
+        "{e}"
+    );
+    // The CPU reference loses the paint past the channel's end instead of panicking.
+    let brush = Brush::new(Vec3::ZERO, 10.0, 0xFF00_00FF);
+    r.paint_cpu(&[brush]);
+}

@@ -9,7 +9,7 @@ use super::{shaders, Buffer, ComputePipeline, Context, Timing};
 use crate::rbvh::GpuHeightfield;
 use crate::rbvh::{Rbvh, Texel};
 use crate::surface::{blank_colours, candidate_leaves, Brush};
-use crate::Result;
+use crate::{Error, Result};
 
 /// Brushes per pass: the shader loops over them per texel, and lavapipe ends a shader loop after
 /// 65535 iterations; more brushes are painted in further passes, in order.
@@ -60,6 +60,20 @@ impl Painter {
     /// Uploads the atlas and the colour channel of `rbvh` (white on every surface texel when it
     /// has none, as [`Rbvh::colour_channel`] creates it).
     pub fn new(ctx: &Context, rbvh: &Rbvh) -> Result<Painter> {
+        if let Some(c) = rbvh
+            .colours
+            .as_ref()
+            .filter(|c| c.len() != rbvh.atlas.texels.len())
+        {
+            return Err(Error::param(
+                "rbvh colours",
+                format!(
+                    "{} colour words for {} atlas texels: the channel must match the atlas",
+                    c.len(),
+                    rbvh.atlas.texels.len()
+                ),
+            ));
+        }
         let blank;
         let colours = match &rbvh.colours {
             Some(c) => c.as_slice(),

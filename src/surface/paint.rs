@@ -93,8 +93,11 @@ impl Rbvh {
                         continue;
                     }
                     let p = grid.point(i, j, texel.height_code());
-                    if let Some(brush) = brushes.iter().rev().find(|b| b.covers(p)) {
-                        colours[index as usize] = brush.colour;
+                    // A channel shorter than the atlas (set by hand) loses the paint past its end
+                    // rather than panicking; `Painter::new` refuses one outright.
+                    let brush = brushes.iter().rev().find(|b| b.covers(p));
+                    if let (Some(brush), Some(c)) = (brush, colours.get_mut(index as usize)) {
+                        *c = brush.colour;
                         painted += 1;
                     }
                 }

@@ -7,13 +7,15 @@
 //! # x y radius colour
 //! dab  0.50 0.40 0.02 #ff0000
 //! # x0 y0 x1 y1 radius colour
-//! line 0.20 0.60 0.80 0.60 0.01 #2060ffcc
+//! line 0.20 0.60 0.80 0.60 0.01 #2060ff
 //! ```
 //!
 //! * `x`, `y`: the aim as fractions of the image's width and height, `(0, 0)` its top-left
-//!   corner, so that a file does not depend on the resolution it is rendered at;
+//!   corner, so that a file does not depend on the resolution it is rendered at (`0..=1`: an aim
+//!   off the screen is an error);
 //! * `radius`: world-space brush radius as a fraction of the scene's bounding-box diagonal (> 0);
-//! * `colour`: `#rrggbb` or `#rrggbbaa`, sRGB-encoded like CSS colours (alpha linear, default ff);
+//! * `colour`: `#rrggbb`, sRGB-encoded like CSS colours. Paint is opaque: a dab replaces the
+//!   colour of the texels it covers (the last dab wins), so there is no alpha to give;
 //! * `line` places dabs along the segment, one per [`LINE_SPACING`] of the screen (and at both
 //!   ends).
 //!
@@ -28,10 +30,8 @@ use crate::{Error, Result};
 
 /// Spacing of the dabs of a `line`, as a fraction of the screen.
 pub const LINE_SPACING: f32 = 0.004;
-/// Most dabs one `line` may place (a line across the whole screen takes ~350).
-const MAX_LINE_DABS: usize = 100_000;
-/// Most dabs one file may place (20 MiB of dabs): without it, each 30-byte `line` could place
-/// [`MAX_LINE_DABS`], and a few kilobytes of text would ask for gigabytes and minutes of painting.
+/// Most dabs one file may place (20 MiB of dabs): a `line` across the screen places ~350, so
+/// without a cap a megabyte of text would ask for gigabytes and minutes of painting.
 pub const MAX_DABS: usize = 1 << 20;
 
 /// One brush dab on the screen.
@@ -84,9 +84,22 @@ pub fn parse(text: &str, path: &Path) -> Result<Vec<Dab>> {
                 .filter(|x| x.is_finite())
                 .ok_or_else(|| err(format!("{what} {:?} is not a finite number", rest[k])))
         };
+        let on_screen = |k: usize, what: &str| -> Result<f32> {
+            let x = number(k, what)?;
+            if (0.0..=1.0).contains(&x) {
+                Ok(x)
+            } else {
+                Err(err(format!(
+                    "{what} {x} is off the screen: positions are fractions of the image, 0..1"
+                )))
+            }
+        };
         let mut ends = Vec::new();
         for p in 0..points {
-            ends.push(Vec2::new(number(2 * p, "x")?, number(2 * p + 1, "y")?));
+            ends.push(Vec2::new(
+                on_screen(2 * p, "x")?,
+                on_screen(2 * p + 1, "y")?,
+            ));
         }
         let radius = number(2 * points, "radius")?;
         if radius <= 0.0 {
@@ -94,17 +107,13 @@ pub fn parse(text: &str, path: &Path) -> Result<Vec<Dab>> {
         }
         let colour = parse_colour(rest[2 * points + 1]).ok_or_else(|| {
             err(format!(
-                "colour {:?} is not #rrggbb or #rrggbbaa",
+                "colour {:?} is not #rrggbb (paint is opaque: no alpha)",
                 rest[2 * points + 1]
             ))
         })?;
         let (a, b) = (ends[0], *ends.last().unwrap_or(&ends[0]));
+        // Both ends are on the screen, so a line is at most √2 long: ~354 steps.
         let steps = ((b - a).length() / LINE_SPACING).ceil() as usize;
-        if steps > MAX_LINE_DABS {
-            return Err(err(format!(
-                "the line would place {steps} dabs (at most {MAX_LINE_DABS})"
-            )));
-        }
         if dabs.len() + steps + 1 > MAX_DABS {
             return Err(err(format!(
                 "the file would place more than {MAX_DABS} dabs in all"
@@ -142,12 +151,11 @@ fn strip_comment(line: &str) -> &str {
 /// `#rrggbb` or `#rrggbbaa` as packed RGBA8.
 fn parse_colour(word: &str) -> Option<u32> {
     let hex = word.strip_prefix('#')?;
-    if !(hex.len() == 6 || hex.len() == 8) || !hex.chars().all(|c| c.is_ascii_hexdigit()) {
+    if hex.len() != 6 || !hex.chars().all(|c| c.is_ascii_hexdigit()) {
         return None;
     }
     let byte = |k: usize| u8::from_str_radix(hex.get(2 * k..2 * k + 2)?, 16).ok();
-    let alpha = if hex.len() == 8 { byte(3)? } else { 255 };
-    Some(rgba::from_bytes([byte(0)?, byte(1)?, byte(2)?, alpha]))
+    Some(rgba::from_bytes([byte(0)?, byte(1)?, byte(2)?, 255]))
 }
 
 #[cfg(test)]
@@ -157,26 +165,27 @@ mod tests {
     #[test]
     fn dabs_lines_colours_and_comments() {
         let text =
-            "# strokes\n\ndab 0.5 0.25 0.02 #ff0000 # red\nline 0 0.5 0.008 0.5 0.01 #00ff0080\n";
+            "# strokes\n\ndab 0.5 0.25 0.02 #ff0000 # red\nline 0 0.5 0.008 0.5 0.01 #00ff00\n";
         let dabs = parse(text, Path::new("s.txt")).unwrap();
         assert_eq!(dabs.len(), 1 + 3);
         assert_eq!(dabs[0].screen, Vec2::new(0.5, 0.25));
         assert_eq!(dabs[0].colour, 0xFF00_00FF);
-        assert_eq!(dabs[1].colour, 0x8000_FF00);
+        assert_eq!(dabs[1].colour, 0xFF00_FF00);
         assert_eq!(dabs[3].screen, Vec2::new(0.008, 0.5));
     }
 
     #[test]
     fn errors_name_file_and_line() {
-        // Ten lines of 100 001 dabs fit in MAX_DABS, the eleventh does not.
-        let long = "line 0 0 400 0 1 #ffffff\n".repeat(11);
+        // A diagonal line places 355 dabs: 2953 fit in MAX_DABS, the 2954th does not.
+        let long = "line 0 0 1 1 0.1 #ffffff\n".repeat(2954);
         for (text, expect) in [
             ("dab 0.5 0.5 0.1 #ff0000\ndab 0.5 x 0.1 #ff0000", "y \"x\""),
             ("\n\nsplat 1 2", "unknown statement"),
             ("dab 0.5 0.5 0.1", "takes 4 values"),
             ("dab 0.5 0.5 -1 #ffffff", "must be positive"),
             ("dab 0.5 0.5 0.1 #fff", "not #rrggbb"),
-            ("line 0 0 1e30 0 0.1 #ffffff", "dabs"),
+            ("line 0 0 1.5 0 0.1 #ffffff", "off the screen"),
+            ("dab 0.5 0.5 0.1 #ff000080", "no alpha"),
             (long.as_str(), "in all"),
         ] {
             let e = parse(text, Path::new("s.txt")).unwrap_err();

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{bail, ensure, Context as _, Result};
+use rbvh::bvh::LEAF_BIT;
 use rbvh::gpu::{Painter, Query, Tracer};
 use rbvh::output;
 use rbvh::surface::{strokes, Brush};
@@ -105,6 +106,17 @@ pub fn run(a: Args) -> Result<()> {
     if missed > 0 {
         eprintln!(
             "warning: {missed} of {} dabs aim past the surface and paint nothing",
+            dabs.len()
+        );
+    }
+    // Triangle leaves (where height fields did not fit) have no texels to hold paint.
+    let on_triangles = stroke_hits
+        .iter()
+        .filter(|h| h.is_hit() && h.id & LEAF_BIT == 0)
+        .count();
+    if on_triangles > 0 {
+        eprintln!(
+            "warning: {on_triangles} of {} dabs land on triangle leaves, which have no texels:              paint shows only on the height-field surface around them",
             dabs.len()
         );
     }
