@@ -23,6 +23,10 @@ use crate::{Error, Result};
 /// leaf (its samples are then sparser than a texel, which coarse columns tolerate).
 const MAX_TRIANGLE_DIVISIONS: u32 = 1024;
 
+/// Most surface samples a build may gather (about 1.5 GB): the samples of all leaves are held at
+/// once, so a hand-made RBVH file with huge triangle leaves must not ask for unbounded memory.
+const MAX_SAMPLES: u64 = 1 << 26;
+
 /// Half the side of the patch a sample stands for, in fine texels. Height-field samples are one
 /// texel apart in their leaf's plane, which is tilted against the column grid, so the patch is
 /// taken a little larger than half a texel.
@@ -63,6 +67,16 @@ impl Lod {
             ));
         }
         let order = subtree_order(rbvh);
+        let estimate: u64 = order.sources.iter().map(|s| s.sample_count(rbvh)).sum();
+        if estimate > MAX_SAMPLES {
+            return Err(Error::param(
+                "rbvh",
+                format!(
+                    "its leaves would give {estimate} surface samples to build levels of detail \
+                     from (at most {MAX_SAMPLES}); use fewer texels per diagonal"
+                ),
+            ));
+        }
         let sources: Vec<Vec<Sample>> = order.sources.par_iter().map(|s| s.samples(rbvh)).collect();
         let column_sizes = column_sizes(rbvh, &order);
         let records: Vec<Coarse> = (0..rbvh.nodes.len())
@@ -201,6 +215,31 @@ fn column_sizes(rbvh: &Rbvh, order: &SubtreeOrder) -> Vec<f32> {
 }
 
 impl Source {
+    /// At most how many samples [`Source::samples`] gives, without making them.
+    fn sample_count(&self, rbvh: &Rbvh) -> u64 {
+        match *self {
+            Source::Heightfield(leaf) => rbvh
+                .leaves
+                .get(leaf as usize)
+                .map_or(0, |hf| u64::from(hf.res_u) * u64::from(hf.res_v)),
+            Source::Triangles { first, count } => {
+                let first = first as usize;
+                let end = first
+                    .saturating_add(count as usize)
+                    .min(rbvh.triangles.len());
+                rbvh.triangles
+                    .get(first..end)
+                    .unwrap_or_default()
+                    .iter()
+                    .map(|t| {
+                        let d = u64::from(divisions(t.vertices(), rbvh.texel_size));
+                        (d + 1) * (d + 2) / 2
+                    })
+                    .sum()
+            }
+        }
+    }
+
     /// The leaf's surface samples: every sample of a height field (holes excepted) at its world
     /// position, or points spread over each triangle no further apart than a fine texel.
     fn samples(&self, rbvh: &Rbvh) -> Vec<Sample> {
@@ -256,10 +295,15 @@ fn heightfield_samples(rbvh: &Rbvh, leaf: u32) -> Vec<Sample> {
     out
 }
 
+/// Divisions of a triangle's edges so that its samples lie no further apart than `spacing`.
+fn divisions([a, b, c]: [Vec3; 3], spacing: f32) -> u32 {
+    let longest = (b - a).length().max((c - b).length()).max((a - c).length());
+    ((longest / spacing).ceil() as u32).clamp(1, MAX_TRIANGLE_DIVISIONS)
+}
+
 fn triangle_samples([a, b, c]: [Vec3; 3], spacing: f32) -> Vec<Sample> {
     let normal = crate::rbvh::layout::encode_octahedral((b - a).cross(c - a).normalize_or(Vec3::Z));
-    let longest = (b - a).length().max((c - b).length()).max((a - c).length());
-    let divisions = ((longest / spacing).ceil() as u32).clamp(1, MAX_TRIANGLE_DIVISIONS);
+    let divisions = divisions([a, b, c], spacing);
     let mut out = Vec::new();
     for i in 0..=divisions {
         for j in 0..=divisions - i {

@@ -181,6 +181,15 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
             })?))
         }
     };
+    if let (Structure::Rbvh(r), Some(_)) = (&structure, &c.rbvh) {
+        if scene.surface.is_some() && r.colours.is_none() {
+            eprintln!(
+                "warning: {} has materials but the RBVH file has no colour channel: its \
+                 height-field surfaces show white (rebuild it from this scene to bake colours)",
+                scene.name
+            );
+        }
+    }
     let lod = match (&structure, c.lod.lod) {
         (_, false) => None,
         (Structure::Exact(_), true) => {
