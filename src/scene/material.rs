@@ -95,7 +95,13 @@ pub fn barycentrics(tri: [Vec3; 3], p: Vec3) -> Vec3 {
     }
     let v = (d22 * dp1 - d12 * dp2) / det;
     let w = (d11 * dp2 - d12 * dp1) / det;
-    let bary = glam::DVec3::new(1.0 - v - w, v, w).max(glam::DVec3::ZERO);
+    clamp_to_triangle(glam::DVec3::new(1.0 - v - w, v, w))
+}
+
+/// Barycentrics of a point outside the triangle (some negative) moved onto it: negatives clamped
+/// to 0 and the rest renormalised; the first corner when nothing is left (or not finite).
+pub(crate) fn clamp_to_triangle(bary: glam::DVec3) -> Vec3 {
+    let bary = bary.max(glam::DVec3::ZERO);
     let sum = bary.x + bary.y + bary.z;
     if sum > 0.0 && sum.is_finite() {
         (bary / sum).as_vec3()

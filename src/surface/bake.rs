@@ -15,6 +15,7 @@ use rayon::prelude::*;
 
 use super::rgba;
 use crate::rbvh::raster::{Tile, NO_SOURCE};
+use crate::scene::material::clamp_to_triangle;
 use crate::scene::{Scene, SurfaceMaterials};
 
 /// The colour channel of an atlas of `atlas_len` texels and row `pitch` holding `tiles` at
@@ -93,11 +94,5 @@ fn barycentrics_2d(t: [DVec2; 3], p: DVec2) -> Vec3 {
     let wa = (c - b).perp_dot(p - b) / area;
     let wb = (a - c).perp_dot(p - c) / area;
     let wc = (b - a).perp_dot(p - a) / area;
-    let w = glam::DVec3::new(wa, wb, wc).max(glam::DVec3::ZERO);
-    let sum = w.x + w.y + w.z;
-    if sum > 0.0 && sum.is_finite() {
-        (w / sum).as_vec3()
-    } else {
-        Vec3::X
-    }
+    clamp_to_triangle(glam::DVec3::new(wa, wb, wc))
 }
