@@ -369,6 +369,32 @@ fn render_and_trace_with_level_of_detail() {
     let out = rbvh(&["render", "--scene", "blob", "--lod", "--out", arg(&png)]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--lod needs an RBVH"));
+    for (args, needle) in [
+        (vec!["--lod-spread", "NaN"], "--lod-spread"),
+        (vec!["--lod-spread=-1"], "--lod-spread"),
+        (vec!["--lod-columns", "0"], "lod columns"),
+    ] {
+        let mut all = vec![
+            "trace",
+            "--scene",
+            "blob",
+            "--method",
+            "rbvh",
+            "--lod",
+            "--rays",
+            arg(&rays_path),
+            "--hits",
+            arg(&hits_path),
+        ];
+        all.extend(args);
+        let out = rbvh(&all);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && err.contains(needle),
+            "{all:?}: {err}"
+        );
+        assert_ne!(out.status.code(), Some(101), "{all:?} panicked");
+    }
 }
 
 #[test]

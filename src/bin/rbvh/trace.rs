@@ -28,6 +28,11 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> Result<()> {
+    let spread = a.common.lod.lod_spread;
+    anyhow::ensure!(
+        spread.is_finite() && spread >= 0.0,
+        "--lod-spread must be a finite angle of at least 0 (got {spread})"
+    );
     let rays = io::read_rays(&a.rays)?;
     let p = prepare(&a.common)?;
     let query = if a.any_hit {
