@@ -10,7 +10,10 @@
 //! ```text
 //! scene (load / built-in / camera) → bvh  (exact: build, GPU layout, CPU reference tracer)
 //!                                  → rbvh (build, raster, atlas, GPU layout, CPU reference caster)
-//!        → gpu (Vulkan context, own or embedded; uploads, pipelines, tracer) → output (PNG, EXR)
+//!                                       → lod (coarse column grids at inner nodes, ray cones)
+//!                                       → surface (colour channel, hit → texel, painting)
+//!        → gpu (Vulkan context, own or embedded; uploads, pipelines, tracer, painter)
+//!        → output (PNG, EXR)
 //!        → ibl (image-based lighting: environment light, visibility through either structure)
 //!        → bench, regress (measurement and image regression)
 //! ```
