@@ -5,7 +5,7 @@
 //! * [`layout`]: the GPU node in the style of Aila & Laine, "Understanding the efficiency of ray
 //!   traversal on GPUs" (HPG 2009): one 64-byte node holds both children's boxes, so one fetch
 //!   answers "which children does the ray enter, and in which order".
-//! * [`traverse`]: the CPU reference tracer, operation for operation the same as
+//! * `traverse`: the CPU reference tracer, operation for operation the same as
 //!   `glsl/bvh_traverse.glsl`, on the same packed data.
 
 mod build;

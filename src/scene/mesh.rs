@@ -161,7 +161,7 @@ impl Scene {
     }
 
     /// A warning for the user when float32 resolves the scene coarser than
-    /// [`COORDINATE_RESOLUTION_LIMIT`] of its diagonal (about a quarter of the coarsest RBVH
+    /// `COORDINATE_RESOLUTION_LIMIT` (1/1024) of its diagonal (about a quarter of the coarsest RBVH
     /// preset's texel): hits then err by that much, and RBVH leaves may crack. Recentring the
     /// scene near the origin removes the loss.
     pub fn precision_warning(&self) -> Option<String> {
