@@ -222,21 +222,13 @@ impl Source {
                 .leaves
                 .get(leaf as usize)
                 .map_or(0, |hf| u64::from(hf.res_u) * u64::from(hf.res_v)),
-            Source::Triangles { first, count } => {
-                let first = first as usize;
-                let end = first
-                    .saturating_add(count as usize)
-                    .min(rbvh.triangles.len());
-                rbvh.triangles
-                    .get(first..end)
-                    .unwrap_or_default()
-                    .iter()
-                    .map(|t| {
-                        let d = u64::from(divisions(t.vertices(), rbvh.texel_size));
-                        (d + 1) * (d + 2) / 2
-                    })
-                    .sum()
-            }
+            Source::Triangles { first, count } => leaf_triangles(rbvh, first, count)
+                .iter()
+                .map(|t| {
+                    let d = u64::from(divisions(t.vertices(), rbvh.texel_size));
+                    (d + 1) * (d + 2) / 2
+                })
+                .sum(),
         }
     }
 
@@ -245,20 +237,21 @@ impl Source {
     fn samples(&self, rbvh: &Rbvh) -> Vec<Sample> {
         match *self {
             Source::Heightfield(leaf) => heightfield_samples(rbvh, leaf),
-            Source::Triangles { first, count } => {
-                let first = first as usize;
-                let end = first
-                    .saturating_add(count as usize)
-                    .min(rbvh.triangles.len());
-                rbvh.triangles
-                    .get(first..end)
-                    .unwrap_or_default()
-                    .iter()
-                    .flat_map(|t| triangle_samples(t.vertices(), rbvh.texel_size))
-                    .collect()
-            }
+            Source::Triangles { first, count } => leaf_triangles(rbvh, first, count)
+                .iter()
+                .flat_map(|t| triangle_samples(t.vertices(), rbvh.texel_size))
+                .collect(),
         }
     }
+}
+
+/// The triangles of a triangle leaf, cut to the array (corrupt ranges give fewer or none).
+fn leaf_triangles(rbvh: &Rbvh, first: u32, count: u32) -> &[crate::bvh::GpuTriangle] {
+    let first = first as usize;
+    let end = first
+        .saturating_add(count as usize)
+        .min(rbvh.triangles.len());
+    rbvh.triangles.get(first..end).unwrap_or_default()
 }
 
 fn heightfield_samples(rbvh: &Rbvh, leaf: u32) -> Vec<Sample> {

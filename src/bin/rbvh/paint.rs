@@ -2,16 +2,17 @@
 //! the device, painted into its colour channel on the device (`glsl/paint.comp`), saved; with
 //! optional renders before and after.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, ensure, Context as _, Result};
 use rbvh::bvh::LEAF_BIT;
+use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{Painter, Query, Tracer};
 use rbvh::output;
 use rbvh::surface::{strokes, Brush};
 
-use crate::prepare::{prepare, step, Common, Method, Structure};
+use crate::prepare::{prepare, step, Common, Method, Prepared, Structure};
 use crate::render::lambert;
 
 #[derive(clap::Args, Debug)]
@@ -68,17 +69,7 @@ pub fn run(a: Args) -> Result<()> {
         (Vec::new(), Vec::new())
     };
     if let Some(path) = &a.before {
-        let image = lambert(
-            &p.scene,
-            &p.structure,
-            None,
-            &rays,
-            &hits,
-            a.width,
-            a.height,
-        )?;
-        output::write_png(path, &image)?;
-        eprintln!("wrote {}", path.display());
+        write_render(path, &p, &rays, &hits, &a)?;
     }
 
     // Aim: one ray per dab through the same camera; a dab whose ray misses paints nothing.
@@ -144,17 +135,15 @@ pub fn run(a: Args) -> Result<()> {
     eprintln!("wrote {}", a.out.display());
 
     if let Some(path) = &a.after {
-        let image = lambert(
-            &p.scene,
-            &p.structure,
-            None,
-            &rays,
-            &hits,
-            a.width,
-            a.height,
-        )?;
-        output::write_png(path, &image)?;
-        eprintln!("wrote {}", path.display());
+        write_render(path, &p, &rays, &hits, &a)?;
     }
+    Ok(())
+}
+
+/// The before or after picture: the preview shading of `hits` with the RBVH's colours.
+fn write_render(path: &Path, p: &Prepared, rays: &[Ray], hits: &[Hit], a: &Args) -> Result<()> {
+    let image = lambert(&p.scene, &p.structure, None, rays, hits, a.width, a.height)?;
+    output::write_png(path, &image)?;
+    eprintln!("wrote {}", path.display());
     Ok(())
 }
