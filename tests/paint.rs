@@ -6,7 +6,7 @@ mod common;
 
 use glam::{Vec3, Vec4};
 use rbvh::geom::Ray;
-use rbvh::gpu::{Painter, Query, Tracer};
+use rbvh::gpu::{Painter, Query, Tracer, MAX_BRUSHES_PER_PASS};
 use rbvh::rbvh::{Rbvh, RbvhParams};
 use rbvh::scene::Scene;
 use rbvh::surface::{rgba, Brush};
@@ -159,4 +159,40 @@ fn a_colour_channel_that_does_not_match_the_atlas_is_refused() {
     // The CPU reference loses the paint past the channel's end instead of panicking.
     let brush = Brush::new(Vec3::ZERO, 10.0, 0xFF00_00FF);
     r.paint_cpu(&[brush]);
+}
+
+#[test]
+fn a_recorded_paint_matches_the_submitted_one() {
+    let ctx = common::context();
+    let r = cube();
+    let brushes = [
+        Brush::new(Vec3::new(1.0, 1.0, 0.1), 0.3, RED),
+        Brush::new(
+            Vec3::new(-1.0, 0.2, 0.5),
+            0.2,
+            rgba::from_bytes([0, 0, 255, 255]),
+        ),
+    ];
+    let mut submitted = Painter::new(&ctx, &r).unwrap();
+    submitted.paint(&brushes).unwrap();
+    let expected = submitted.colours().unwrap();
+
+    let mut made = None;
+    ctx.submit("recorded paint", |_, cmd| {
+        made = Some(
+            Painter::record_new(&ctx, &r, cmd).and_then(|(painter, staging)| {
+                let recording = painter.record(cmd, &brushes)?;
+                Ok((painter, staging, recording))
+            }),
+        );
+    })
+    .unwrap();
+    let (mut painter, staging, recording) = made.unwrap().unwrap();
+    drop((staging, recording));
+    assert_eq!(painter.colours().unwrap(), expected);
+    let too_many = vec![brushes[0]; MAX_BRUSHES_PER_PASS + 1];
+    ctx.submit("too many brushes", |_, cmd| {
+        assert!(painter.record(cmd, &too_many).is_err());
+    })
+    .unwrap();
 }

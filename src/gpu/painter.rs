@@ -5,7 +5,10 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::{shaders, Buffer, ComputePipeline, Context, Timing};
+use ash::vk;
+
+use super::pipeline::DescriptorSet;
+use super::{shaders, Buffer, BufferView, ComputePipeline, Context, Timing};
 use crate::rbvh::GpuHeightfield;
 use crate::rbvh::{Rbvh, Texel};
 use crate::surface::{blank_colours, candidate_leaves, Brush};
@@ -46,6 +49,64 @@ pub struct PaintStats {
     pub timing: Timing,
 }
 
+/// What [`Painter::record`] recorded and the device still reads: keep it until the command buffer
+/// has executed.
+pub struct PaintRecording {
+    _set: DescriptorSet,
+    _brushes: Buffer,
+    _staging: Option<Buffer>,
+}
+
+/// The atlas and colour channel of `rbvh` as the painter uploads them: the channel checked
+/// against the atlas (or white on every surface texel when there is none, as
+/// [`Rbvh::colour_channel`] creates it), and neither empty (a buffer cannot be; an empty atlas has
+/// no leaf to paint anyway).
+fn channel_data(rbvh: &Rbvh) -> Result<(Vec<Texel>, Vec<u32>)> {
+    if let Some(c) = rbvh
+        .colours
+        .as_ref()
+        .filter(|c| c.len() != rbvh.atlas.texels.len())
+    {
+        return Err(Error::param(
+            "rbvh colours",
+            format!(
+                "{} colour words for {} atlas texels: the channel must match the atlas",
+                c.len(),
+                rbvh.atlas.texels.len()
+            ),
+        ));
+    }
+    let mut colours = match &rbvh.colours {
+        Some(c) => c.clone(),
+        None => blank_colours(&rbvh.atlas.texels),
+    };
+    let mut atlas = rbvh.atlas.texels.clone();
+    if atlas.is_empty() {
+        atlas.push(Texel::HOLE);
+        colours.push(0);
+    }
+    Ok((atlas, colours))
+}
+
+/// Makes recorded transfers visible to compute shaders.
+fn transfer_to_compute(ctx: &Context, cmd: vk::CommandBuffer) {
+    let barrier = [vk::MemoryBarrier::default()
+        .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+        .dst_access_mask(vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE)];
+    // SAFETY: `cmd` is recording (the caller's contract).
+    unsafe {
+        ctx.device().cmd_pipeline_barrier(
+            cmd,
+            vk::PipelineStageFlags::TRANSFER,
+            vk::PipelineStageFlags::COMPUTE_SHADER,
+            vk::DependencyFlags::empty(),
+            &barrier,
+            &[],
+            &[],
+        )
+    };
+}
+
 /// An RBVH's atlas and colour channel on the device, ready to paint.
 pub struct Painter {
     pipeline: ComputePipeline,
@@ -60,35 +121,32 @@ impl Painter {
     /// Uploads the atlas and the colour channel of `rbvh` (white on every surface texel when it
     /// has none, as [`Rbvh::colour_channel`] creates it).
     pub fn new(ctx: &Context, rbvh: &Rbvh) -> Result<Painter> {
-        if let Some(c) = rbvh
-            .colours
-            .as_ref()
-            .filter(|c| c.len() != rbvh.atlas.texels.len())
-        {
-            return Err(Error::param(
-                "rbvh colours",
-                format!(
-                    "{} colour words for {} atlas texels: the channel must match the atlas",
-                    c.len(),
-                    rbvh.atlas.texels.len()
-                ),
-            ));
+        let (atlas, colours) = channel_data(rbvh)?;
+        let atlas = ctx.upload_storage("RBVH atlas (painting)", &atlas)?;
+        let colours = ctx.upload_storage("RBVH colours", &colours)?;
+        Self::with_buffers(ctx, rbvh, atlas, colours)
+    }
+
+    /// Embedded use: as [`Painter::new`] with the context's (the engine's) allocator, *recording*
+    /// any staging copies into `cmd`, followed by a barrier that makes them visible to compute
+    /// shaders; nothing is submitted. Paint with [`Painter::record`]. The staging buffers are
+    /// returned and must live until `cmd` has executed.
+    pub fn record_new(
+        ctx: &Context,
+        rbvh: &Rbvh,
+        cmd: vk::CommandBuffer,
+    ) -> Result<(Painter, Vec<Buffer>)> {
+        let (atlas, colours) = channel_data(rbvh)?;
+        let (atlas, stage_a) = ctx.upload_storage_recorded("RBVH atlas (painting)", &atlas, cmd)?;
+        let (colours, stage_c) = ctx.upload_storage_recorded("RBVH colours", &colours, cmd)?;
+        let staging: Vec<Buffer> = stage_a.into_iter().chain(stage_c).collect();
+        if !staging.is_empty() {
+            transfer_to_compute(ctx, cmd);
         }
-        let blank;
-        let colours = match &rbvh.colours {
-            Some(c) => c.as_slice(),
-            None => {
-                blank = blank_colours(&rbvh.atlas.texels);
-                blank.as_slice()
-            }
-        };
-        // A buffer cannot be empty; an empty atlas has no leaf to paint anyway.
-        let atlas: &[Texel] = if rbvh.atlas.texels.is_empty() {
-            &[Texel::HOLE]
-        } else {
-            &rbvh.atlas.texels
-        };
-        let colours = if colours.is_empty() { &[0] } else { colours };
+        Ok((Self::with_buffers(ctx, rbvh, atlas, colours)?, staging))
+    }
+
+    fn with_buffers(ctx: &Context, rbvh: &Rbvh, atlas: Buffer, colours: Buffer) -> Result<Painter> {
         Ok(Painter {
             pipeline: ComputePipeline::new(
                 ctx,
@@ -98,11 +156,94 @@ impl Painter {
                 std::mem::size_of::<PaintParams>() as u32,
             )?,
             leaves: rbvh.leaves.clone(),
-            atlas: ctx.upload_storage("RBVH atlas (painting)", atlas)?,
-            colours: ctx.upload_storage("RBVH colours", colours)?,
+            atlas,
+            colours,
             pitch: rbvh.atlas.pitch,
             atlas_len: rbvh.atlas.texels.len() as u32,
         })
+    }
+
+    /// The device buffer of the colour channel (one word per atlas texel, [`Rbvh::colours`]'s
+    /// layout), for an engine that reads the paint on the device. Painting writes it at
+    /// `COMPUTE_SHADER` with `SHADER_WRITE`.
+    pub fn colour_buffer(&self) -> BufferView {
+        BufferView {
+            buffer: self.colours.raw(),
+            offset: 0,
+        }
+    }
+
+    /// Embedded use: records the painting of `brushes` (at most [`MAX_BRUSHES_PER_PASS`]; in
+    /// order, the last covering brush wins) into the engine's `cmd`: a recorded upload of the
+    /// brushes, a transfer-to-compute barrier where one was needed, and one dispatch per leaf they
+    /// reach. No barrier follows: the engine orders its readers of [`Painter::colour_buffer`]. The
+    /// returned recording must live until `cmd` has executed.
+    pub fn record(&self, cmd: vk::CommandBuffer, brushes: &[Brush]) -> Result<PaintRecording> {
+        if brushes.len() > MAX_BRUSHES_PER_PASS {
+            return Err(Error::param(
+                "brushes",
+                format!(
+                    "{} brushes in one recording; record at most {MAX_BRUSHES_PER_PASS} at a time",
+                    brushes.len()
+                ),
+            ));
+        }
+        let ctx = self.atlas.context().clone();
+        let (brush_buf, staging) = ctx.upload_storage_recorded("paint brushes", brushes, cmd)?;
+        if staging.is_some() {
+            transfer_to_compute(&ctx, cmd);
+        }
+        let set = self.pipeline.descriptor_set(&[
+            (self.atlas.raw(), 0),
+            (brush_buf.raw(), 0),
+            (self.colours.raw(), 0),
+        ])?;
+        let leaves = candidate_leaves(&self.leaves, brushes);
+        self.record_leaves(ctx.device(), cmd, &set, &leaves, brushes.len() as u32);
+        Ok(PaintRecording {
+            _set: set,
+            _brushes: brush_buf,
+            _staging: staging,
+        })
+    }
+
+    /// One dispatch per leaf in `leaves`, one invocation per texel of its tile.
+    fn record_leaves(
+        &self,
+        device: &ash::Device,
+        cmd: vk::CommandBuffer,
+        set: &DescriptorSet,
+        leaves: &[u32],
+        brush_count: u32,
+    ) {
+        for &k in leaves {
+            let Some(leaf) = self.leaves.get(k as usize) else {
+                continue;
+            };
+            let grid = leaf.grid();
+            let params = PaintParams {
+                origin: grid.origin.to_array(),
+                atlas_base: leaf.atlas_base,
+                step_u: grid.step_u.to_array(),
+                res_u: leaf.res_u,
+                step_v: grid.step_v.to_array(),
+                res_v: leaf.res_v,
+                axis_w: grid.axis_w.to_array(),
+                h_scale: grid.h_scale,
+                texel_offset: 0,
+                brush_count,
+                atlas_pitch: self.pitch,
+                atlas_len: self.atlas_len,
+            };
+            let texels = leaf.res_u.saturating_mul(leaf.res_v);
+            self.pipeline.record(device, cmd, set, texels, |first| {
+                bytemuck::bytes_of(&PaintParams {
+                    texel_offset: first,
+                    ..params
+                })
+                .to_vec()
+            });
+        }
     }
 
     /// Paints `brushes` (in order: the last brush covering a texel wins).
@@ -121,32 +262,7 @@ impl Painter {
                 (self.colours.raw(), 0),
             ])?;
             let timing = ctx.submit("paint", |device, cmd| {
-                for &k in &leaves {
-                    let leaf = &self.leaves[k as usize];
-                    let grid = leaf.grid();
-                    let params = PaintParams {
-                        origin: grid.origin.to_array(),
-                        atlas_base: leaf.atlas_base,
-                        step_u: grid.step_u.to_array(),
-                        res_u: leaf.res_u,
-                        step_v: grid.step_v.to_array(),
-                        res_v: leaf.res_v,
-                        axis_w: grid.axis_w.to_array(),
-                        h_scale: grid.h_scale,
-                        texel_offset: 0,
-                        brush_count: batch.len() as u32,
-                        atlas_pitch: self.pitch,
-                        atlas_len: self.atlas_len,
-                    };
-                    let texels = leaf.res_u.saturating_mul(leaf.res_v);
-                    self.pipeline.record(device, cmd, &set, texels, |first| {
-                        bytemuck::bytes_of(&PaintParams {
-                            texel_offset: first,
-                            ..params
-                        })
-                        .to_vec()
-                    });
-                }
+                self.record_leaves(device, cmd, &set, &leaves, batch.len() as u32);
             })?;
             stats.leaves += leaves.len() as u32;
             stats.texels += leaves
