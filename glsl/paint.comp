@@ -1,6 +1,7 @@
 // Paints brush dabs into an RBVH's colour channel: one dispatch per candidate height-field leaf,
 // one invocation per texel of its tile. A surface texel whose world-space sample point lies
-// within a brush's radius takes that brush's colour (the last such brush wins). The rule, and the
+// within a brush's radius gets that brush's colour composited over its own (src/surface/rgba.rs
+// `over`, in integer arithmetic; opaque brushes replace, the last one wins). The rule, and the
 // arithmetic order, are those of src/surface/paint.rs (the CPU reference) and
 // GpuHeightfield::sample_point in src/rbvh/layout.rs; `precise` forbids fused multiply-adds, so
 // that both decide every texel identically. Painting in world space, not per tile, is what lets
@@ -48,6 +49,19 @@ layout(push_constant) uniform PaintParams {
     uint atlas_len;
 } pc;
 
+// rgba::over of src/surface/rgba.rs, byte for byte.
+uint paint_over(uint src, uint dst) {
+    uint a = src >> 24;
+    uint out_word = 0u;
+    for (uint k = 0u; k < 3u; ++k) {
+        uint s = (src >> (8u * k)) & 0xFFu;
+        uint d = (dst >> (8u * k)) & 0xFFu;
+        out_word |= ((s * a + d * (255u - a) + 127u) / 255u) << (8u * k);
+    }
+    uint alpha = (255u * a + (dst >> 24) * (255u - a) + 127u) / 255u;
+    return out_word | (alpha << 24);
+}
+
 void main() {
     uint k = pc.texel_offset + gl_GlobalInvocationID.x;
     if (k >= pc.res_u * pc.res_v) {
@@ -68,7 +82,7 @@ void main() {
     precise float h = float(code) * pc.h_scale;
     precise vec3 p = pc.origin + pc.step_u * s + pc.step_v * t + pc.axis_w * h;
     bool painted = false;
-    uint colour = 0u;
+    uint colour = colours[index];
     for (uint b = 0u; b < pc.brush_count; ++b) {
         PaintBrush brush = brushes[b];
         precise vec3 d = p - brush.centre;
@@ -76,7 +90,7 @@ void main() {
         precise float r2 = brush.radius * brush.radius;
         if (d2 <= r2) {
             painted = true;
-            colour = brush.colour;
+            colour = paint_over(brush.colour, colour);
         }
     }
     if (painted) {

@@ -196,3 +196,27 @@ fn a_recorded_paint_matches_the_submitted_one() {
     })
     .unwrap();
 }
+
+#[test]
+fn translucent_brushes_composite_in_order_on_the_device_as_on_the_cpu() {
+    let ctx = common::context();
+    let mut r = cube();
+    let half_blue = rgba::from_bytes([0, 0, 255, 128]);
+    let brushes = [
+        Brush::new(Vec3::new(1.0, 0.0, 0.0), 0.6, RED),
+        Brush::new(Vec3::new(1.0, 0.2, 0.0), 0.3, half_blue),
+        Brush::new(Vec3::new(1.0, -0.2, 0.0), 0.3, half_blue),
+    ];
+    let mut painter = Painter::new(&ctx, &r).unwrap();
+    painter.paint(&brushes).unwrap();
+    let gpu = painter.colours().unwrap();
+    r.paint_cpu(&brushes);
+    assert_eq!(Some(&gpu), r.colours.as_ref());
+    // Red under one half-blue dab, and under two where they overlap: distinct, in order.
+    let once = rgba::over(half_blue, RED);
+    let twice = rgba::over(half_blue, once);
+    for word in [RED, once, twice] {
+        assert!(gpu.contains(&word), "{word:#010x} nowhere");
+    }
+    assert_ne!(once, twice);
+}

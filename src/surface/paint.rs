@@ -2,11 +2,11 @@
 //! the CPU reference of the rule that `glsl/paint.comp` runs on the device
 //! ([`crate::gpu::Painter`]).
 //!
-//! **Rule.** A surface texel (not a hole) of any height-field leaf takes a brush's colour when its
+//! **Rule.** A surface texel (not a hole) of any height-field leaf is painted by a brush when its
 //! world-space sample point ([`crate::rbvh::layout::SampleGrid::point`]) lies within the brush's
-//! radius of the brush centre, `|p − c|² ≤ r²`; of several such brushes the last in the list
-//! wins. The colour replaces the texel's (alpha is stored, not blended), so that the device and
-//! the CPU agree bit for bit. Deciding in world space rather than per tile is what makes strokes
+//! radius of the brush centre, `|p − c|² ≤ r²`: the brush's colour is composited over the
+//! texel's ([`super::rgba::over`], integer arithmetic), brushes in list order, so that the device
+//! and the CPU agree bit for bit; an opaque brush replaces the colour. Deciding in world space rather than per tile is what makes strokes
 //! cross leaf borders without seams: neighbouring tiles that overlap (the builder's dilation and
 //! window overlap) paint their shared surface alike. Triangle leaves carry no texels and stay
 //! unpainted.
@@ -14,6 +14,7 @@
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
+use super::rgba;
 use crate::geom::Aabb;
 use crate::rbvh::{GpuHeightfield, Rbvh};
 
@@ -95,11 +96,15 @@ impl Rbvh {
                     let p = grid.point(i, j, texel.height_code());
                     // A channel shorter than the atlas (set by hand) loses the paint past its end
                     // rather than panicking; `Painter::new` refuses one outright.
-                    let brush = brushes.iter().rev().find(|b| b.covers(p));
-                    if let (Some(brush), Some(c)) = (brush, colours.get_mut(index as usize)) {
-                        *c = brush.colour;
-                        painted += 1;
+                    let Some(c) = colours.get_mut(index as usize) else {
+                        continue;
+                    };
+                    let mut covered = false;
+                    for brush in brushes.iter().filter(|b| b.covers(p)) {
+                        *c = rgba::over(brush.colour, *c);
+                        covered = true;
                     }
+                    painted += u64::from(covered);
                 }
             }
         }

@@ -29,6 +29,18 @@ pub fn unpack(word: u32) -> Vec4 {
     linear(word.to_le_bytes())
 }
 
+/// `src` composited over `dst` (Porter & Duff, "Compositing Digital Images", SIGGRAPH 1984), per
+/// byte in integer arithmetic, `(s·a + d·(255 − a) + 127) / 255`, so that `glsl/paint.comp` gets
+/// the same bytes: an opaque `src` (a = 255) gives `src` exactly. Colours blend in their sRGB
+/// encoding, as paint programs blend 8-bit layers.
+pub fn over(src: u32, dst: u32) -> u32 {
+    let (s, d) = (src.to_le_bytes(), dst.to_le_bytes());
+    let a = u32::from(s[3]);
+    let mix = |s: u8, d: u8| ((u32::from(s) * a + u32::from(d) * (255 - a) + 127) / 255) as u8;
+    let alpha = ((255 * a + u32::from(d[3]) * (255 - a) + 127) / 255) as u8;
+    from_bytes([mix(s[0], d[0]), mix(s[1], d[1]), mix(s[2], d[2]), alpha])
+}
+
 /// Four bytes (sRGB RGB, linear alpha) → packed RGBA8.
 pub fn from_bytes(rgba: [u8; 4]) -> u32 {
     u32::from_le_bytes(rgba)
@@ -37,6 +49,16 @@ pub fn from_bytes(rgba: [u8; 4]) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn over_is_exact_for_opaque_and_halves_for_half_alpha() {
+        let red = from_bytes([255, 0, 0, 255]);
+        let blue = from_bytes([0, 0, 255, 255]);
+        assert_eq!(over(red, blue), red);
+        let half_red = from_bytes([255, 0, 0, 128]);
+        assert_eq!(over(half_red, blue), from_bytes([128, 0, 127, 255]));
+        assert_eq!(over(from_bytes([9, 9, 9, 0]), blue), blue);
+    }
 
     #[test]
     fn packing_round_trips_codes() {

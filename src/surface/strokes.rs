@@ -7,15 +7,15 @@
 //! # x y radius colour
 //! dab  0.50 0.40 0.02 #ff0000
 //! # x0 y0 x1 y1 radius colour
-//! line 0.20 0.60 0.80 0.60 0.01 #2060ff
+//! line 0.20 0.60 0.80 0.60 0.01 #2060ffcc
 //! ```
 //!
 //! * `x`, `y`: the aim as fractions of the image's width and height, `(0, 0)` its top-left
 //!   corner, so that a file does not depend on the resolution it is rendered at (`0..=1`: an aim
 //!   off the screen is an error);
 //! * `radius`: world-space brush radius as a fraction of the scene's bounding-box diagonal (> 0);
-//! * `colour`: `#rrggbb`, sRGB-encoded like CSS colours. Paint is opaque: a dab replaces the
-//!   colour of the texels it covers (the last dab wins), so there is no alpha to give;
+//! * `colour`: `#rrggbb` or `#rrggbbaa`, sRGB-encoded like CSS colours, alpha linear (default
+//!   ff): a dab is composited over the texels it covers, in file order ([`rgba::over`]);
 //! * `line` places dabs along the segment, one per [`LINE_SPACING`] of the screen (and at both
 //!   ends).
 //!
@@ -107,7 +107,7 @@ pub fn parse(text: &str, path: &Path) -> Result<Vec<Dab>> {
         }
         let colour = parse_colour(rest[2 * points + 1]).ok_or_else(|| {
             err(format!(
-                "colour {:?} is not #rrggbb (paint is opaque: no alpha)",
+                "colour {:?} is not #rrggbb or #rrggbbaa",
                 rest[2 * points + 1]
             ))
         })?;
@@ -151,11 +151,12 @@ fn strip_comment(line: &str) -> &str {
 /// `#rrggbb` or `#rrggbbaa` as packed RGBA8.
 fn parse_colour(word: &str) -> Option<u32> {
     let hex = word.strip_prefix('#')?;
-    if hex.len() != 6 || !hex.chars().all(|c| c.is_ascii_hexdigit()) {
+    if !(hex.len() == 6 || hex.len() == 8) || !hex.chars().all(|c| c.is_ascii_hexdigit()) {
         return None;
     }
     let byte = |k: usize| u8::from_str_radix(hex.get(2 * k..2 * k + 2)?, 16).ok();
-    Some(rgba::from_bytes([byte(0)?, byte(1)?, byte(2)?, 255]))
+    let alpha = if hex.len() == 8 { byte(3)? } else { 255 };
+    Some(rgba::from_bytes([byte(0)?, byte(1)?, byte(2)?, alpha]))
 }
 
 #[cfg(test)]
@@ -165,12 +166,12 @@ mod tests {
     #[test]
     fn dabs_lines_colours_and_comments() {
         let text =
-            "# strokes\n\ndab 0.5 0.25 0.02 #ff0000 # red\nline 0 0.5 0.008 0.5 0.01 #00ff00\n";
+            "# strokes\n\ndab 0.5 0.25 0.02 #ff0000 # red\nline 0 0.5 0.008 0.5 0.01 #00ff0080\n";
         let dabs = parse(text, Path::new("s.txt")).unwrap();
         assert_eq!(dabs.len(), 1 + 3);
         assert_eq!(dabs[0].screen, Vec2::new(0.5, 0.25));
         assert_eq!(dabs[0].colour, 0xFF00_00FF);
-        assert_eq!(dabs[1].colour, 0xFF00_FF00);
+        assert_eq!(dabs[1].colour, 0x8000_FF00);
         assert_eq!(dabs[3].screen, Vec2::new(0.008, 0.5));
     }
 
@@ -185,7 +186,7 @@ mod tests {
             ("dab 0.5 0.5 -1 #ffffff", "must be positive"),
             ("dab 0.5 0.5 0.1 #fff", "not #rrggbb"),
             ("line 0 0 1.5 0 0.1 #ffffff", "off the screen"),
-            ("dab 0.5 0.5 0.1 #ff000080", "no alpha"),
+            ("dab 0.5 0.5 0.1 #ff0000800", "not #rrggbb"),
             (long.as_str(), "in all"),
         ] {
             let e = parse(text, Path::new("s.txt")).unwrap_err();
