@@ -308,12 +308,11 @@ impl Tracer {
     /// Binds engine-owned buffers for [`Tracer::record`]: `count` rays (32 bytes each, the
     /// [`Ray`] layout) read from `rays`, `count` hits (the [`Hit`] layout) written to `hits`.
     pub fn bind(&self, rays: BufferView, hits: BufferView, count: u32) -> Result<TraceBinding> {
-        if self.lod.is_some() {
-            return Err(Error::param(
-                "trace binding",
-                "a level-of-detail tracer needs the rays' cones: use Tracer::bind_with_cones",
-            ));
-        }
+        self.expect_lod(
+            false,
+            "trace binding",
+            "a level-of-detail tracer needs the rays' cones: use Tracer::bind_with_cones",
+        )?;
         self.bind_views(rays, hits, None, count)
     }
 
@@ -326,12 +325,11 @@ impl Tracer {
         cones: BufferView,
         count: u32,
     ) -> Result<TraceBinding> {
-        if self.lod.is_none() {
-            return Err(Error::param(
-                "trace binding",
-                "this tracer has no levels of detail: bind without cones",
-            ));
-        }
+        self.expect_lod(
+            true,
+            "trace binding",
+            "this tracer has no levels of detail: bind without cones",
+        )?;
         self.bind_views(rays, hits, Some(cones), count)
     }
 
@@ -436,6 +434,16 @@ impl Tracer {
         })
     }
 
+    /// Fails, naming `what` and saying `hint`, unless this tracer has levels of detail exactly
+    /// when `lod` says so: the two kinds take different inputs (cones or none).
+    fn expect_lod(&self, lod: bool, what: &str, hint: &str) -> Result<()> {
+        if self.lod.is_some() == lod {
+            Ok(())
+        } else {
+            Err(Error::param(what, hint))
+        }
+    }
+
     /// Bytes of the structure (and its levels of detail) on the device.
     pub fn device_bytes(&self) -> u64 {
         self.structure
@@ -452,12 +460,11 @@ impl Tracer {
     /// Traces `rays`, in batches that fit `maxStorageBufferRange`; `steps` also returns the per-ray
     /// traversal cost. Fails with [`Error::StackOverflow`] if any ray overflowed its stack.
     pub fn trace_with(&self, rays: &[Ray], query: Query, steps: bool) -> Result<Traced> {
-        if self.lod.is_some() {
-            return Err(Error::param(
-                "trace",
-                "a level-of-detail tracer needs one cone per ray: use Tracer::trace_lod",
-            ));
-        }
+        self.expect_lod(
+            false,
+            "trace",
+            "a level-of-detail tracer needs one cone per ray: use Tracer::trace_lod",
+        )?;
         self.trace_batches(rays, None, query, steps)
     }
 
@@ -471,12 +478,11 @@ impl Tracer {
         query: Query,
         steps: bool,
     ) -> Result<Traced> {
-        if self.lod.is_none() {
-            return Err(Error::param(
-                "trace",
-                "this tracer has no levels of detail: make it with Tracer::rbvh_lod",
-            ));
-        }
+        self.expect_lod(
+            true,
+            "trace",
+            "this tracer has no levels of detail: make it with Tracer::rbvh_lod",
+        )?;
         check_cones(rays, cones)?;
         self.trace_batches(rays, Some(cones), query, steps)
     }
