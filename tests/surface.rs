@@ -362,3 +362,51 @@ fn gltf_uris_are_percent_decoded_and_file_uris_to_special_files_are_refused() {
     let e = Scene::load(dev.to_str().unwrap()).unwrap_err().to_string();
     assert!(e.contains("/dev/zero"), "{e}");
 }
+
+#[test]
+fn height_field_colours_are_filtered_between_samples() {
+    use rbvh::surface::rgba;
+    let scene = Scene::load("plane").unwrap();
+    let mut r = Rbvh::build(&scene, &RbvhParams::quality(0).unwrap()).unwrap();
+    let (red, blue) = (
+        rgba::from_bytes([255, 0, 0, 255]),
+        rgba::from_bytes([0, 0, 255, 255]),
+    );
+    // Columns of samples alternate red and blue.
+    let pitch = r.atlas.pitch as usize;
+    r.colours = Some(
+        (0..r.atlas.texels.len())
+            .map(|k| if (k % pitch) % 2 == 0 { red } else { blue })
+            .collect(),
+    );
+    let (l, leaf) = r
+        .leaves
+        .iter()
+        .enumerate()
+        .find(|(_, l)| l.res_u > 4 && l.res_v > 4)
+        .unwrap();
+    let (i, j) = (2u32, 2u32);
+    let texel = |i: u32, j: u32| r.atlas.texels[(leaf.atlas_base + j * r.atlas.pitch + i) as usize];
+    let grid = leaf.grid();
+    let a = grid.point(i, j, texel(i, j).height_code());
+    let b = grid.point(i + 1, j, texel(i + 1, j).height_code());
+    let mid = (a + b) * 0.5;
+    let ray = Ray::new(mid + Vec3::Y, Vec3::NEG_Y, 0.0, f32::INFINITY);
+    let (hit, _) = r.closest_hit(&ray);
+    assert_eq!(hit.id, rbvh::bvh::LEAF_BIT | l as u32, "{hit:?}");
+    let c = r.filtered_colour(&ray, &hit).unwrap();
+    let expect = (rgba::unpack(red) + rgba::unpack(blue)) * 0.5;
+    assert!((c - expect).abs().max_element() < 0.02, "{c} vs {expect}");
+    // At a sample itself, its own colour.
+    let ray = Ray::new(a + Vec3::Y, Vec3::NEG_Y, 0.0, f32::INFINITY);
+    let (hit, _) = r.closest_hit(&ray);
+    let own = rgba::unpack(
+        r.colours.as_ref().unwrap()[(leaf.atlas_base + j * r.atlas.pitch + i) as usize],
+    );
+    assert!(
+        (r.filtered_colour(&ray, &hit).unwrap() - own)
+            .abs()
+            .max_element()
+            < 0.02
+    );
+}

@@ -67,6 +67,52 @@ impl Rbvh {
         })
     }
 
+    /// Linear RGBA at a height-field hit, filtered bilinearly (in linear light) between the four
+    /// samples of the cell holding the hit point, as the surface itself is interpolated between
+    /// them; holes are left out and the others' weights renormalised. Falls back to the texel of
+    /// [`Rbvh::locate`] where the cell has no colour. `None` without a colour channel, for misses
+    /// and triangle hits.
+    pub fn filtered_colour(&self, ray: &Ray, hit: &Hit) -> Option<Vec4> {
+        let colours = self.colours.as_ref()?;
+        let loc = self.locate(ray, hit)?;
+        let leaf = self.leaves.get(loc.leaf as usize)?;
+        if leaf.res_u < 2 || leaf.res_v < 2 {
+            return self.surface_colour(loc);
+        }
+        let f = leaf.to_frame(ray.origin() + ray.dir() * hit.t);
+        // Cell `c` lies between samples `c` and `c + 1`, at s = c + ½ … c + 3⁄2.
+        let axis = |x: f32, res: u32| {
+            let c = ((x - 0.5).floor().max(0.0) as u32).min(res - 2);
+            (c, (x - 0.5 - c as f32).clamp(0.0, 1.0))
+        };
+        let ((ci, fx), (cj, fy)) = (axis(f.x, leaf.res_u), axis(f.y, leaf.res_v));
+        let (mut sum, mut weight) = (Vec4::ZERO, 0.0);
+        for (di, dj, w) in [
+            (0, 0, (1.0 - fx) * (1.0 - fy)),
+            (1, 0, fx * (1.0 - fy)),
+            (0, 1, (1.0 - fx) * fy),
+            (1, 1, fx * fy),
+        ] {
+            let k = u64::from(leaf.atlas_base)
+                + u64::from(cj + dj) * u64::from(self.atlas.pitch)
+                + u64::from(ci + di);
+            let present = self
+                .atlas
+                .texels
+                .get(k as usize)
+                .is_some_and(|t| !t.is_hole());
+            if let (true, Some(&c)) = (present, colours.get(k as usize)) {
+                sum += w * rgba::unpack(c);
+                weight += w;
+            }
+        }
+        if weight > 0.0 {
+            Some(sum / weight)
+        } else {
+            self.surface_colour(loc)
+        }
+    }
+
     /// Linear RGBA of the texel at `loc`; `None` without a colour channel or out of range.
     pub fn surface_colour(&self, loc: SurfaceLocation) -> Option<Vec4> {
         let word = *self.colours.as_ref()?.get(loc.atlas_index as usize)?;
@@ -108,7 +154,8 @@ pub fn blank_colours(texels: &[Texel]) -> Vec<u32> {
 /// `rbvh` (the structure traced, if it was an RBVH) a colour channel — renders then stay
 /// exactly as they were without surface data. Hit ids: a coarse level-of-detail hit (`LEAF_BIT |
 /// LOD_BIT`) reads the colour of the column it hit in `lod` ([`Lod::colour_at`]); a height-field
-/// hit (`LEAF_BIT`) reads the RBVH's texel ([`Rbvh::locate`]); any other hit is a scene triangle,
+/// hit (`LEAF_BIT`) the RBVH's colours filtered at the hit ([`Rbvh::filtered_colour`]); any other
+/// hit is a scene triangle,
 /// coloured by its material at the hit point's barycentrics.
 pub fn hit_albedo(
     scene: &Scene,
@@ -134,7 +181,7 @@ pub fn hit_albedo(
                 lod.and_then(|l| l.colour_at(hit.id & !coarse, point))
                     .map(rgba::unpack)
             } else if hit.id & LEAF_BIT != 0 {
-                channel.and_then(|r| r.surface_colour(r.locate(ray, hit)?))
+                channel.and_then(|r| r.filtered_colour(ray, hit))
             } else {
                 scene.colour_at(hit.id as usize, point)
             };
