@@ -635,23 +635,13 @@ pub fn seeds() -> Vec<(&'static str, Vec<u8>)> {
     gltf.extend_from_slice(gltf_json);
     let glb = {
         let json = br#"{"asset":{"version":"2.0"},"meshes":[{"primitives":[{"attributes":{"POSITION":0}}]}],"nodes":[{"mesh":0}],"buffers":[{"byteLength":36}],"bufferViews":[{"buffer":0,"byteLength":36}],"accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}]}"#;
-        let mut json = json.to_vec();
-        json.resize(json.len().next_multiple_of(4), b' ');
         let mut bin = Vec::new();
         for v in [0f32, 0., 0., 1., 0., 0., 0., 1., 0.] {
             bin.extend(v.to_le_bytes());
         }
-        let mut glb = vec![1u8];
-        glb.extend(b"glTF");
-        glb.extend(2u32.to_le_bytes());
-        glb.extend(((12 + 8 + json.len() + 8 + bin.len()) as u32).to_le_bytes());
-        glb.extend((json.len() as u32).to_le_bytes());
-        glb.extend(b"JSON");
-        glb.extend(&json);
-        glb.extend((bin.len() as u32).to_le_bytes());
-        glb.extend(b"BIN\0");
-        glb.extend(&bin);
-        glb
+        let mut out = vec![1u8];
+        out.extend(glb(json, &bin));
+        out
     };
     let toml = b"name = \"fuzz\"\n[camera]\neye = [0, 1, 3]\ntarget = [0, 0, 0]\nvfov = 50\n\
                  [light]\ndirection = [0, -1, 0]\n[[mesh]]\npath = \"mesh.obj\"\nscale = 2\n\

@@ -147,6 +147,26 @@ impl Context {
         Ok(buffer)
     }
 
+    /// Records into `cmd` (in the recording state) a barrier that makes transfer writes (recorded
+    /// uploads) visible to compute shaders, which read and write what was uploaded.
+    pub fn record_transfer_to_compute(&self, cmd: vk::CommandBuffer) {
+        let barrier = [vk::MemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+            .dst_access_mask(vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE)];
+        // SAFETY: `cmd` is recording (the caller's contract).
+        unsafe {
+            self.device().cmd_pipeline_barrier(
+                cmd,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::DependencyFlags::empty(),
+                &barrier,
+                &[],
+                &[],
+            )
+        };
+    }
+
     /// A device-local storage buffer holding `data`, for an embedded context that never submits:
     /// written directly where the memory is host-visible, otherwise through a staging buffer whose
     /// copy is *recorded* into `cmd` (in the recording state). The staging buffer is returned and

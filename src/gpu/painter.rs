@@ -88,25 +88,6 @@ fn channel_data(rbvh: &Rbvh) -> Result<(Vec<Texel>, Vec<u32>)> {
     Ok((atlas, colours))
 }
 
-/// Makes recorded transfers visible to compute shaders.
-fn transfer_to_compute(ctx: &Context, cmd: vk::CommandBuffer) {
-    let barrier = [vk::MemoryBarrier::default()
-        .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-        .dst_access_mask(vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE)];
-    // SAFETY: `cmd` is recording (the caller's contract).
-    unsafe {
-        ctx.device().cmd_pipeline_barrier(
-            cmd,
-            vk::PipelineStageFlags::TRANSFER,
-            vk::PipelineStageFlags::COMPUTE_SHADER,
-            vk::DependencyFlags::empty(),
-            &barrier,
-            &[],
-            &[],
-        )
-    };
-}
-
 /// An RBVH's atlas and colour channel on the device, ready to paint.
 pub struct Painter {
     pipeline: ComputePipeline,
@@ -141,7 +122,7 @@ impl Painter {
         let (colours, stage_c) = ctx.upload_storage_recorded("RBVH colours", &colours, cmd)?;
         let staging: Vec<Buffer> = stage_a.into_iter().chain(stage_c).collect();
         if !staging.is_empty() {
-            transfer_to_compute(ctx, cmd);
+            ctx.record_transfer_to_compute(cmd);
         }
         Ok((Self::with_buffers(ctx, rbvh, atlas, colours)?, staging))
     }
@@ -191,7 +172,7 @@ impl Painter {
         let ctx = self.atlas.context().clone();
         let (brush_buf, staging) = ctx.upload_storage_recorded("paint brushes", brushes, cmd)?;
         if staging.is_some() {
-            transfer_to_compute(&ctx, cmd);
+            ctx.record_transfer_to_compute(cmd);
         }
         let set = self.pipeline.descriptor_set(&[
             (self.atlas.raw(), 0),

@@ -279,21 +279,7 @@ impl Tracer {
             staging.extend(stage);
         }
         if !staging.is_empty() {
-            let barrier = [vk::MemoryBarrier::default()
-                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                .dst_access_mask(vk::AccessFlags::SHADER_READ)];
-            // SAFETY: `cmd` is recording (the caller's contract).
-            unsafe {
-                ctx.device().cmd_pipeline_barrier(
-                    cmd,
-                    vk::PipelineStageFlags::TRANSFER,
-                    vk::PipelineStageFlags::COMPUTE_SHADER,
-                    vk::DependencyFlags::empty(),
-                    &barrier,
-                    &[],
-                    &[],
-                )
-            };
+            ctx.record_transfer_to_compute(cmd);
         }
         let mut tracer = Self::new(ctx, name, spirv, structure, sizes)?;
         tracer.staging = staging;

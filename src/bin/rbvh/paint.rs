@@ -12,7 +12,7 @@ use rbvh::gpu::{Painter, Query, Tracer};
 use rbvh::output;
 use rbvh::surface::{strokes, Brush};
 
-use crate::prepare::{prepare, step, Common, Method, Prepared, Structure};
+use crate::prepare::{check_image_size, prepare, step, Common, Method, Prepared, Structure};
 use crate::render::lambert;
 
 #[derive(clap::Args, Debug)]
@@ -39,12 +39,7 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    ensure!(
-        (1..=16384).contains(&a.width) && (1..=16384).contains(&a.height),
-        "--width and --height must be within 1..=16384 (got {}x{})",
-        a.width,
-        a.height
-    );
+    check_image_size(a.width, a.height)?;
     ensure!(
         !a.common.lod.lod,
         "--lod: painting writes the RBVH's texels; coarse levels of detail have none to paint"

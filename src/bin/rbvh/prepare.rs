@@ -146,6 +146,15 @@ pub fn context_options(device: Option<&str>, validate: bool) -> ContextOptions {
     }
 }
 
+/// Checks an image size given by `--width` and `--height`.
+pub fn check_image_size(width: u32, height: u32) -> Result<()> {
+    anyhow::ensure!(
+        (1..=16384).contains(&width) && (1..=16384).contains(&height),
+        "--width and --height must be within 1..=16384 (got {width}x{height})"
+    );
+    Ok(())
+}
+
 /// Runs `f` under a spinner labelled `what`.
 pub fn step<T>(what: &str, f: impl FnOnce() -> T) -> T {
     let bar = ProgressBar::new_spinner().with_message(what.to_string());

@@ -20,7 +20,9 @@ use rbvh::rbvh::Rbvh;
 use rbvh::scene::{Light, Scene};
 use rbvh::surface::hit_albedo;
 
-use crate::prepare::{prepare, report_steps, report_throughput, step, Common, Prepared, Structure};
+use crate::prepare::{
+    check_image_size, prepare, report_steps, report_throughput, step, Common, Prepared, Structure,
+};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -66,12 +68,7 @@ enum Shading {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    ensure!(
-        (1..=16384).contains(&a.width) && (1..=16384).contains(&a.height),
-        "--width and --height must be within 1..=16384 (got {}x{})",
-        a.width,
-        a.height
-    );
+    check_image_size(a.width, a.height)?;
     ensure!(
         a.env.is_none() || a.shading == Shading::Ibl,
         "--env lights an image-based render: add --shading ibl"
