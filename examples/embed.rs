@@ -250,6 +250,8 @@ fn main() -> Result<(), Box<dyn Error>> {
         physical_device,
         queue_family,
         allocator: allocator.clone(),
+        // This engine enabled no device addresses: structures must fit storage-buffer bindings.
+        buffer_device_address: false,
     })?;
     unsafe { device.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default())? };
     let mut tracer = Tracer::record_rbvh(&ctx, &rbvh, cmd)?;

@@ -5,6 +5,12 @@
 //   RBVH_BVH_SET            descriptor set              (default 0)
 //   RBVH_BVH_NODES_BINDING  binding of the node buffer  (default 0)
 //   RBVH_BVH_TRIS_BINDING   binding of the triangles    (default 1)
+// or, to read every array through buffer device addresses instead of bindings (for arrays over
+// maxStorageBufferRange; src/gpu/addressing.rs), RBVH_DEVICE_ADDRESS, having enabled
+// GL_EXT_buffer_reference and GL_EXT_buffer_reference_uvec2, with each array's address as a uvec2
+// expression: RBVH_BVH_NODES_ADDRESS, RBVH_BVH_TRIS_ADDRESS (and those of rbvh.glsl and lod.glsl).
+// The traversals read the arrays only through the accessor macros RBVH_BVH_NODE(i) and
+// RBVH_BVH_TRIANGLE(i), which hide the difference.
 #ifndef RBVH_BVH_GLSL
 #define RBVH_BVH_GLSL
 
@@ -46,12 +52,25 @@ struct BvhTriangle {
     uint pad2;
 };
 
+#ifdef RBVH_DEVICE_ADDRESS
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer RbvhBvhNodesRef {
+    BvhNode nodes[];
+};
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer RbvhBvhTrianglesRef {
+    BvhTriangle triangles[];
+};
+#define RBVH_BVH_NODE(i) RbvhBvhNodesRef(RBVH_BVH_NODES_ADDRESS).nodes[i]
+#define RBVH_BVH_TRIANGLE(i) RbvhBvhTrianglesRef(RBVH_BVH_TRIS_ADDRESS).triangles[i]
+#else
 layout(std430, set = RBVH_BVH_SET, binding = RBVH_BVH_NODES_BINDING) readonly buffer RbvhBvhNodes {
     BvhNode rbvh_bvh_nodes[];
 };
 layout(std430, set = RBVH_BVH_SET, binding = RBVH_BVH_TRIS_BINDING) readonly buffer RbvhBvhTriangles {
     BvhTriangle rbvh_bvh_triangles[];
 };
+#define RBVH_BVH_NODE(i) rbvh_bvh_nodes[i]
+#define RBVH_BVH_TRIANGLE(i) rbvh_bvh_triangles[i]
+#endif
 
 // Traverses nearest child first with a bounded stack. `node_count` bounds the loop (a tree visits
 // each node at most once). `overflow` is set when the stack or the loop bound was exceeded, or when
@@ -80,7 +99,7 @@ Hit rbvh_trace_bvh(Ray ray, bool any_hit, uint node_count, out uint steps, out b
     bool finished = false;
     for (uint visit = 0u; visit <= node_count; ++visit) {
         steps += 1u;
-        BvhNode n = rbvh_bvh_nodes[node];
+        BvhNode n = RBVH_BVH_NODE(node);
         float ta;
         float tb;
         bool ha = rbvh_intersect_box(n.a_min, n.a_max, ray.origin, inv_dir, ray.tmin, t_closest, ta);
@@ -102,7 +121,7 @@ Hit rbvh_trace_bvh(Ray ray, bool any_hit, uint node_count, out uint steps, out b
                 uint slot = first;
                 for (; slot < first + count; ++slot) {
                     steps += 1u;
-                    BvhTriangle tri = rbvh_bvh_triangles[slot];
+                    BvhTriangle tri = RBVH_BVH_TRIANGLE(slot);
                     float t = rbvh_intersect_triangle(sh, tri.v0, tri.v1, tri.v2, ray.tmin, t_closest);
                     if (t >= 0.0) {
                         t_closest = t;
@@ -154,7 +173,7 @@ Hit rbvh_trace_bvh(Ray ray, bool any_hit, uint node_count, out uint steps, out b
     if (best == RBVH_INVALID) {
         return rbvh_miss();
     }
-    BvhTriangle tri = rbvh_bvh_triangles[best];
+    BvhTriangle tri = RBVH_BVH_TRIANGLE(best);
     vec3 n = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
     return Hit(t_closest, n.x, n.y, n.z, tri.prim, 0u, 0u, 0u);
 }

@@ -6,6 +6,7 @@
 // The includer chooses where the buffers live by defining, before the #include:
 //   RBVH_LODS_BINDING       binding of the per-node records (default 8)
 //   RBVH_LOD_TEXELS_BINDING binding of the column words     (default 9)
+// or, with RBVH_DEVICE_ADDRESS (see bvh.glsl), RBVH_LODS_ADDRESS and RBVH_LOD_TEXELS_ADDRESS.
 #ifndef RBVH_LOD_GLSL
 #define RBVH_LOD_GLSL
 
@@ -33,13 +34,27 @@ struct RbvhLod {
     uint pad1;
 };
 
+// Columns: two words each, top and bottom; each bits 0-15 height code (top 0xFFFF = empty), 16-31
+// normal.
+#ifdef RBVH_DEVICE_ADDRESS
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer RbvhLodsRef {
+    RbvhLod lods[];
+};
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer RbvhLodTexelsRef {
+    uint texels[];
+};
+#define RBVH_LOD_RECORD(i) RbvhLodsRef(RBVH_LODS_ADDRESS).lods[i]
+#define RBVH_LOD_TEXEL(i) RbvhLodTexelsRef(RBVH_LOD_TEXELS_ADDRESS).texels[i]
+#else
 layout(std430, set = RBVH_BVH_SET, binding = RBVH_LODS_BINDING) readonly buffer RbvhLods {
     RbvhLod rbvh_lods[];
 };
-// Two words per column: top, bottom; each bits 0-15 height code (top 0xFFFF = empty), 16-31 normal.
 layout(std430, set = RBVH_BVH_SET, binding = RBVH_LOD_TEXELS_BINDING) readonly buffer RbvhLodTexels {
     uint rbvh_lod_texels[];
 };
+#define RBVH_LOD_RECORD(i) rbvh_lods[i]
+#define RBVH_LOD_TEXEL(i) rbvh_lod_texels[i]
+#endif
 
 // Sizes of the two arrays.
 struct RbvhLodSizes {
@@ -72,7 +87,7 @@ float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inou
     if (node >= lsz.node_count) {
         return -1.0;
     }
-    RbvhLod lod = rbvh_lods[node];
+    RbvhLod lod = RBVH_LOD_RECORD(node);
     if (isinf(lod.texel_size) || isnan(lod.texel_size) || lod.res_u == 0u || lod.res_v == 0u || lod.axis > 2u) {
         return -1.0;
     }
@@ -124,8 +139,8 @@ float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inou
         // 4. Column.
         uint index = lod.base + 2u * (uint(cj) * lod.res_u + uint(ci));
         bool inside = index + 1u < lsz.texel_len;
-        uint top_word = inside ? rbvh_lod_texels[index] : RBVH_HOLE_CODE;
-        uint bottom_word = inside ? rbvh_lod_texels[index + 1u] : RBVH_HOLE_CODE;
+        uint top_word = inside ? RBVH_LOD_TEXEL(index) : RBVH_HOLE_CODE;
+        uint bottom_word = inside ? RBVH_LOD_TEXEL(index + 1u) : RBVH_HOLE_CODE;
         if (!rbvh_is_hole(top_word)) {
             precise float top = float(top_word & 0xFFFFu) * lod.h_scale;
             precise float bottom = float(bottom_word & 0xFFFFu) * lod.h_scale;

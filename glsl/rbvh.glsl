@@ -5,6 +5,7 @@
 //   RBVH_BVH_SET, RBVH_BVH_NODES_BINDING, RBVH_BVH_TRIS_BINDING   (see bvh.glsl; defaults 0, 0, 1)
 //   RBVH_LEAVES_BINDING  binding of the height-field leaves (default 2)
 //   RBVH_ATLAS_BINDING   binding of the texel atlas         (default 3)
+// or, with RBVH_DEVICE_ADDRESS (see bvh.glsl), RBVH_LEAVES_ADDRESS and RBVH_ATLAS_ADDRESS.
 // and, to trace with level of detail, RBVH_LOD (see lod.glsl for its two bindings): the traversal
 // is then rbvh_trace_rbvh_lod, taking each ray's cone and the LOD array sizes.
 #ifndef RBVH_RBVH_GLSL
@@ -38,13 +39,26 @@ struct RbvhLeaf {
     float h_scale;
 };
 
+// Atlas texels: bits 0-15 height code (0xFFFF = hole), bits 16-31 the 8:8 octahedral normal.
+#ifdef RBVH_DEVICE_ADDRESS
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer RbvhLeavesRef {
+    RbvhLeaf leaves[];
+};
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer RbvhAtlasRef {
+    uint texels[];
+};
+#define RBVH_LEAF(i) RbvhLeavesRef(RBVH_LEAVES_ADDRESS).leaves[i]
+#define RBVH_ATLAS(i) RbvhAtlasRef(RBVH_ATLAS_ADDRESS).texels[i]
+#else
 layout(std430, set = RBVH_BVH_SET, binding = RBVH_LEAVES_BINDING) readonly buffer RbvhLeaves {
     RbvhLeaf rbvh_leaves[];
 };
-// Bits 0-15 height code (0xFFFF = hole), bits 16-31 the 8:8 octahedral normal.
 layout(std430, set = RBVH_BVH_SET, binding = RBVH_ATLAS_BINDING) readonly buffer RbvhAtlas {
     uint rbvh_atlas[];
 };
+#define RBVH_LEAF(i) rbvh_leaves[i]
+#define RBVH_ATLAS(i) rbvh_atlas[i]
+#endif
 
 // Sizes the march needs to bound its reads.
 struct RbvhSizes {
@@ -72,7 +86,7 @@ bool rbvh_is_hole(uint texel) {
 
 uint rbvh_texel(RbvhLeaf leaf, RbvhSizes sz, int i, int j) {
     uint index = leaf.atlas_base + uint(j) * sz.atlas_pitch + uint(i);
-    return index < sz.atlas_len ? rbvh_atlas[index] : RBVH_HOLE_CODE;
+    return index < sz.atlas_len ? RBVH_ATLAS(index) : RBVH_HOLE_CODE;
 }
 
 float rbvh_height_at(float o, float d, float t) {
@@ -178,7 +192,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     if (li >= sz.leaf_count) {
         return -1.0;
     }
-    RbvhLeaf leaf = rbvh_leaves[li];
+    RbvhLeaf leaf = RBVH_LEAF(li);
     if (leaf.res_u < 2u || leaf.res_v < 2u || leaf.res_u > sz.atlas_pitch) {
         return -1.0;
     }
@@ -392,7 +406,7 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
             }
             visits += 1u;
             steps += 1u;
-            BvhNode n = rbvh_bvh_nodes[node];
+            BvhNode n = RBVH_BVH_NODE(node);
             float ta;
             float tb;
             bool ha = rbvh_intersect_box(n.a_min, n.a_max, ray.origin, inv_dir, ray.tmin, t_closest, ta);
@@ -432,7 +446,7 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
                     uint slot = first;
                     for (; slot < end; ++slot) {
                         steps += 1u;
-                        BvhTriangle tri = rbvh_bvh_triangles[slot];
+                        BvhTriangle tri = RBVH_BVH_TRIANGLE(slot);
                         float t = rbvh_intersect_triangle(sh, tri.v0, tri.v1, tri.v2, ray.tmin, t_closest);
                         if (t >= 0.0) {
                             t_closest = t;

@@ -1,11 +1,14 @@
-// The body of trace_rbvh.comp and trace_rbvh_lod.comp (which defines RBVH_LOD): one invocation per
-// ray. Bindings: the RBVH's four arrays, rays, hits, status, steps; with RBVH_LOD also the LOD
-// records and columns (see lod.glsl) and the per-ray cones.
+// The body of trace_rbvh.comp and trace_rbvh_lod.comp (which defines RBVH_LOD), and of their
+// *_bda twins (which define RBVH_DEVICE_ADDRESS): one invocation per ray. Bindings: the RBVH's four
+// arrays (0-3), rays, hits, status, steps (4-7); with RBVH_LOD also the LOD records and columns
+// (8, 9; see lod.glsl) and the per-ray cones (10). The *_bda twins read the structure's arrays
+// (0-3, 8, 9) through the device addresses in the push constants instead.
 #ifndef RBVH_TRACE_RBVH_MAIN_GLSL
 #define RBVH_TRACE_RBVH_MAIN_GLSL
 
 layout(local_size_x = 64) in;
 
+#include "trace_params.glsl"
 #include "rbvh.glsl"
 
 layout(std430, set = 0, binding = 4) readonly buffer Rays {
@@ -28,20 +31,6 @@ layout(std430, set = 0, binding = 10) readonly buffer Cones {
     vec2 cones[];
 };
 #endif
-
-// Shared with trace_exact.comp and src/gpu/tracer.rs (TraceParams).
-layout(push_constant) uniform Params {
-    uint ray_offset;  // first ray of this dispatch (dispatches are split at maxComputeWorkGroupCount)
-    uint ray_count;   // rays in the whole batch
-    uint flags;       // bit 0: any hit; bit 1: write per-ray steps
-    uint node_count;
-    uint tri_count;
-    uint leaf_count;
-    uint atlas_pitch;
-    uint atlas_len;
-    uint lod_node_count;  // LOD records (0 without LOD)
-    uint lod_texel_len;   // LOD column words
-} pc;
 
 void main() {
     uint i = pc.ray_offset + gl_GlobalInvocationID.x;

@@ -120,6 +120,57 @@ fn lod_header_compiles_in_a_foreign_shader_with_its_own_bindings() {
     }
 }
 
+/// The engine shader reading the RBVH and its LOD through buffer device addresses it passes in its
+/// own push constants: no RBVH binding is left in the SPIR-V.
+const FOREIGN_ADDRESSED: &str = r#"
+#version 460
+#extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_buffer_reference_uvec2 : require
+layout(local_size_x = 32) in;
+
+layout(push_constant) uniform EnginePush {
+    uvec2 rbvh_arrays[6];
+    uint node_count, tri_count, leaf_count, atlas_pitch, atlas_len, lod_nodes, lod_texels;
+    float spread;
+} push;
+
+#define RBVH_DEVICE_ADDRESS 1
+#define RBVH_LOD 1
+#define RBVH_BVH_NODES_ADDRESS push.rbvh_arrays[0]
+#define RBVH_BVH_TRIS_ADDRESS push.rbvh_arrays[1]
+#define RBVH_LEAVES_ADDRESS push.rbvh_arrays[2]
+#define RBVH_ATLAS_ADDRESS push.rbvh_arrays[3]
+#define RBVH_LODS_ADDRESS push.rbvh_arrays[4]
+#define RBVH_LOD_TEXELS_ADDRESS push.rbvh_arrays[5]
+#include "rbvh.glsl"
+
+layout(std430, set = 0, binding = 0) writeonly buffer EngineDepth { float depth[]; };
+
+void main() {
+    Ray ray = Ray(vec3(gl_GlobalInvocationID.x, 0.0, -10.0), 0.0, vec3(0.0, 0.0, 1.0), 1e30);
+    RbvhSizes sz = RbvhSizes(push.node_count, push.tri_count, push.leaf_count, push.atlas_pitch,
+                             push.atlas_len);
+    uint steps;
+    bool overflow;
+    Hit hit = rbvh_trace_rbvh_lod(ray, vec2(0.0, push.spread), false, sz,
+                                  RbvhLodSizes(push.lod_nodes, push.lod_texels), steps, overflow);
+    depth[gl_GlobalInvocationID.x] = overflow ? -1.0 : hit.t;
+}
+"#;
+
+#[test]
+fn header_reads_through_device_addresses_the_includer_passes() {
+    let r = spirv::reflect(&compile(FOREIGN_ADDRESSED).unwrap());
+    assert_eq!(
+        r.bindings.len(),
+        1,
+        "only the engine's own buffer is bound: {:?}",
+        r.bindings
+    );
+    assert_eq!(r.bindings.get("EngineDepth"), Some(&(0, 0)));
+}
+
 #[test]
 fn each_header_compiles_on_its_own() {
     for header in ["common.glsl", "intersect.glsl", "bvh.glsl", "rbvh.glsl"] {

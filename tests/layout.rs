@@ -145,7 +145,7 @@ fn rbvh_leaf_layout_matches() {
 }
 
 #[test]
-fn push_constants_match_in_both_trace_shaders() {
+fn push_constants_match_in_every_trace_shader() {
     use rbvh::gpu::TraceParams as P;
     let expected = [
         ("ray_offset", offset_of!(P, ray_offset)),
@@ -158,11 +158,16 @@ fn push_constants_match_in_both_trace_shaders() {
         ("atlas_len", offset_of!(P, atlas_len)),
         ("lod_node_count", offset_of!(P, lod_node_count)),
         ("lod_texel_len", offset_of!(P, lod_texel_len)),
+        ("addresses", offset_of!(P, addresses)),
     ];
+    assert_eq!(size_of::<P>(), offset_of!(P, addresses) + 6 * 8);
     for spv in [
         shaders::TRACE_EXACT,
         shaders::TRACE_RBVH,
         shaders::TRACE_RBVH_LOD,
+        shaders::TRACE_EXACT_BDA,
+        shaders::TRACE_RBVH_BDA,
+        shaders::TRACE_RBVH_LOD_BDA,
     ] {
         let r = spirv::reflect(&shaders::words(spv).unwrap());
         let glsl = r.structs.get("Params").expect("push constant block Params");
@@ -246,29 +251,35 @@ fn paint_brush_and_push_constants_match() {
             ("pad2", offset_of!(B, pad) + 8),
         ],
     );
-    let glsl = r
-        .structs
-        .get("PaintParams")
-        .expect("push constant block PaintParams");
-    let glsl: Vec<(&str, usize)> = glsl
-        .iter()
-        .map(|(m, o)| (m.as_str(), *o as usize))
-        .collect();
-    assert_eq!(
-        glsl,
-        [
-            ("origin", offset_of!(P, origin)),
-            ("atlas_base", offset_of!(P, atlas_base)),
-            ("step_u", offset_of!(P, step_u)),
-            ("res_u", offset_of!(P, res_u)),
-            ("step_v", offset_of!(P, step_v)),
-            ("res_v", offset_of!(P, res_v)),
-            ("axis_w", offset_of!(P, axis_w)),
-            ("h_scale", offset_of!(P, h_scale)),
-            ("texel_offset", offset_of!(P, texel_offset)),
-            ("brush_count", offset_of!(P, brush_count)),
-            ("atlas_pitch", offset_of!(P, atlas_pitch)),
-            ("atlas_len", offset_of!(P, atlas_len)),
-        ]
-    );
+    assert_eq!(size_of::<P>(), offset_of!(P, colours_address) + 8);
+    for spv in [shaders::PAINT, shaders::PAINT_BDA] {
+        let r = spirv::reflect(&shaders::words(spv).unwrap());
+        let glsl = r
+            .structs
+            .get("PaintParams")
+            .expect("push constant block PaintParams");
+        let glsl: Vec<(&str, usize)> = glsl
+            .iter()
+            .map(|(m, o)| (m.as_str(), *o as usize))
+            .collect();
+        assert_eq!(
+            glsl,
+            [
+                ("origin", offset_of!(P, origin)),
+                ("atlas_base", offset_of!(P, atlas_base)),
+                ("step_u", offset_of!(P, step_u)),
+                ("res_u", offset_of!(P, res_u)),
+                ("step_v", offset_of!(P, step_v)),
+                ("res_v", offset_of!(P, res_v)),
+                ("axis_w", offset_of!(P, axis_w)),
+                ("h_scale", offset_of!(P, h_scale)),
+                ("texel_offset", offset_of!(P, texel_offset)),
+                ("brush_count", offset_of!(P, brush_count)),
+                ("atlas_pitch", offset_of!(P, atlas_pitch)),
+                ("atlas_len", offset_of!(P, atlas_len)),
+                ("atlas_address", offset_of!(P, atlas_address)),
+                ("colours_address", offset_of!(P, colours_address)),
+            ]
+        );
+    }
 }

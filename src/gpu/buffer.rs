@@ -40,6 +40,16 @@ impl Buffer {
         &self.name
     }
 
+    /// The buffer's device address, for shaders that read it through `GL_EXT_buffer_reference`;
+    /// None unless the context has device addresses ([`super::DeviceLimits::buffer_device_address`]).
+    pub fn device_address(&self) -> Option<u64> {
+        let get = self.ctx.shared.get_address?;
+        let info = vk::BufferDeviceAddressInfo::default().buffer(self.raw);
+        // SAFETY: the buffer is alive and was created with SHADER_DEVICE_ADDRESS usage (every
+        // storage buffer is, on a context with device addresses).
+        Some(unsafe { get(self.ctx.shared.device.handle(), &info) })
+    }
+
     /// The context the buffer belongs to.
     pub fn context(&self) -> &Context {
         &self.ctx
@@ -86,6 +96,13 @@ impl Context {
     ) -> Result<Buffer> {
         let size = size.max(4);
         let device = &self.shared.device;
+        let usage = if self.shared.get_address.is_some()
+            && usage.contains(vk::BufferUsageFlags::STORAGE_BUFFER)
+        {
+            usage | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS
+        } else {
+            usage
+        };
         let info = vk::BufferCreateInfo::default()
             .size(size)
             .usage(usage)
@@ -138,6 +155,12 @@ impl Context {
             bytes.len() as u64,
             "split the work into smaller batches or a smaller scene",
         )?;
+        self.upload_unchecked(name, bytes)
+    }
+
+    /// As [`Context::upload_storage`], without the range check: for arrays whose reach the caller
+    /// has checked ([`Context::reach`]).
+    pub(crate) fn upload_unchecked(&self, name: &str, bytes: &[u8]) -> Result<Buffer> {
         let usage = vk::BufferUsageFlags::STORAGE_BUFFER
             | vk::BufferUsageFlags::TRANSFER_DST
             | vk::BufferUsageFlags::TRANSFER_SRC;
@@ -183,6 +206,17 @@ impl Context {
             bytes.len() as u64,
             "split the work into smaller batches or a smaller scene",
         )?;
+        self.upload_unchecked_recorded(name, bytes, cmd)
+    }
+
+    /// As [`Context::upload_storage_recorded`], without the range check: for arrays whose reach
+    /// the caller has checked ([`Context::reach`]).
+    pub(crate) fn upload_unchecked_recorded(
+        &self,
+        name: &str,
+        bytes: &[u8],
+        cmd: vk::CommandBuffer,
+    ) -> Result<(Buffer, Option<Buffer>)> {
         let usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_DST;
         let mut buffer =
             self.create_buffer(name, bytes.len() as u64, usage, MemoryLocation::GpuOnly)?;

@@ -15,6 +15,7 @@ use gpu_allocator::vulkan::Allocator;
 #[cfg(feature = "loaded")]
 use gpu_allocator::vulkan::AllocatorCreateDesc;
 
+use super::Addressing;
 use crate::{Error, Result};
 
 /// Whether to run the Khronos validation layer.
@@ -49,6 +50,8 @@ pub struct ContextOptions {
     /// Without either, a discrete GPU is preferred, then integrated, virtual, and CPU (lavapipe).
     pub device_name: Option<String>,
     pub validation: Validation,
+    /// How shaders reach a structure's arrays; see [`Addressing`].
+    pub addressing: Addressing,
 }
 
 impl Default for ContextOptions {
@@ -56,6 +59,7 @@ impl Default for ContextOptions {
         ContextOptions {
             device_name: std::env::var("RBVH_DEVICE").ok().filter(|s| !s.is_empty()),
             validation: Validation::from_env(),
+            addressing: Addressing::default(),
         }
     }
 }
@@ -64,6 +68,11 @@ impl Default for ContextOptions {
 #[derive(Clone, Copy, Debug)]
 pub struct DeviceLimits {
     pub max_storage_buffer_range: u64,
+    /// The largest single allocation, which bounds a buffer read through its device address.
+    pub max_memory_allocation_size: u64,
+    /// Whether this context can read buffers through device addresses (the device has
+    /// `bufferDeviceAddress` and this context enabled it, or the engine said it did).
+    pub buffer_device_address: bool,
     pub max_compute_work_group_count: [u32; 3],
     pub max_push_constants_size: u32,
     pub min_storage_buffer_offset_alignment: u64,
@@ -79,6 +88,9 @@ pub(crate) struct Shared {
     pub limits: DeviceLimits,
     pub device_name: String,
     pub driver: String,
+    pub addressing: Addressing,
+    /// `vkGetBufferDeviceAddress` (core or KHR), when device addresses are enabled.
+    pub get_address: Option<vk::PFN_vkGetBufferDeviceAddress>,
     /// What a standalone context created, and so destroys; None for an embedded context, which
     /// borrows the engine's instance and device and never submits.
     pub own: Option<Owned>,
@@ -107,6 +119,11 @@ pub struct External {
     /// compute).
     pub queue_family: u32,
     pub allocator: Arc<Mutex<Allocator>>,
+    /// Whether the engine enabled the `bufferDeviceAddress` feature on `device` (Vulkan 1.2 or
+    /// `VK_KHR_buffer_device_address`) and created `allocator` with `buffer_device_address`: the
+    /// context then reads structures too large for a storage-buffer binding through device
+    /// addresses ([`Addressing::Auto`]); without, they are a [`Error::DeviceLimit`].
+    pub buffer_device_address: bool,
 }
 
 /// A Vulkan device ready for compute. Cloning shares it.
@@ -149,11 +166,25 @@ impl Context {
                 ),
             ));
         }
-        let (limits, device_name, driver) = describe(
+        let (mut limits, device_name, driver) = describe(
             &external.instance,
             external.physical_device,
             external.queue_family,
         );
+        let get_address = if external.buffer_device_address {
+            let found = address_function(&external.instance, &external.device);
+            if found.is_none() {
+                return Err(Error::param(
+                    "buffer_device_address",
+                    "the device has neither vkGetBufferDeviceAddress nor \
+                     vkGetBufferDeviceAddressKHR: enable Vulkan 1.2 or VK_KHR_buffer_device_address",
+                ));
+            }
+            found
+        } else {
+            None
+        };
+        limits.buffer_device_address = get_address.is_some();
         Ok(Context {
             shared: Arc::new(Shared {
                 instance: external.instance,
@@ -162,6 +193,8 @@ impl Context {
                 limits,
                 device_name,
                 driver,
+                addressing: Addressing::Auto,
+                get_address,
                 own: None,
             }),
         })
@@ -261,6 +294,11 @@ impl Context {
 
     pub fn limits(&self) -> &DeviceLimits {
         &self.shared.limits
+    }
+
+    /// How shaders reach structures made with this context.
+    pub fn addressing(&self) -> Addressing {
+        self.shared.addressing
     }
 
     pub fn validation_enabled(&self) -> bool {
@@ -367,14 +405,35 @@ impl Partial {
         let instance = self.instance().clone();
         let (physical_device, queue_family) =
             pick_device(&instance, options.device_name.as_deref())?;
-        let (limits, device_name, driver) = describe(&instance, physical_device, queue_family);
+        let (mut limits, device_name, driver) = describe(&instance, physical_device, queue_family);
+        let addresses = has_buffer_device_address(&instance, physical_device);
+        if options.addressing == Addressing::DeviceAddress && !addresses {
+            return Err(Error::NoDevice(format!(
+                "{device_name} has no bufferDeviceAddress (VK_KHR_buffer_device_address), which \
+                 Addressing::DeviceAddress needs"
+            )));
+        }
         let priorities = [1.0f32];
         let queue_info = [vk::DeviceQueueCreateInfo::default()
             .queue_family_index(queue_family)
             .queue_priorities(&priorities)];
-        let device_info = vk::DeviceCreateInfo::default().queue_create_infos(&queue_info);
+        let extensions = [ash::khr::buffer_device_address::NAME.as_ptr()];
+        let mut address_features =
+            vk::PhysicalDeviceBufferDeviceAddressFeatures::default().buffer_device_address(true);
+        let mut device_info = vk::DeviceCreateInfo::default().queue_create_infos(&queue_info);
+        if addresses {
+            device_info = device_info
+                .enabled_extension_names(&extensions)
+                .push_next(&mut address_features);
+        }
         let device = unsafe { instance.create_device(physical_device, &device_info, None) }
             .map_err(|r| Error::vk("vkCreateDevice", device_name.clone(), r))?;
+        let get_address = if addresses {
+            address_function(&instance, &device)
+        } else {
+            None
+        };
+        limits.buffer_device_address = get_address.is_some();
         let queue = unsafe { device.get_device_queue(queue_family, 0) };
         let pool_info = vk::CommandPoolCreateInfo::default()
             .queue_family_index(queue_family)
@@ -391,7 +450,7 @@ impl Partial {
             device: device.clone(),
             physical_device,
             debug_settings: Default::default(),
-            buffer_device_address: false,
+            buffer_device_address: get_address.is_some(),
             allocation_sizes: Default::default(),
         });
         let allocator = match allocator {
@@ -415,6 +474,8 @@ impl Partial {
             limits,
             device_name,
             driver,
+            addressing: options.addressing,
+            get_address,
             own: Some(Owned {
                 _entry: self.entry.take().expect("entry"),
                 debug: self.debug.take(),
@@ -446,8 +507,13 @@ fn describe(
     let timestamp_bits = families
         .get(family as usize)
         .map_or(0, |f| f.timestamp_valid_bits);
+    let mut maintenance3 = vk::PhysicalDeviceMaintenance3Properties::default();
+    let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut maintenance3);
+    unsafe { instance.get_physical_device_properties2(pd, &mut props2) };
     let limits = DeviceLimits {
         max_storage_buffer_range: props.limits.max_storage_buffer_range as u64,
+        max_memory_allocation_size: maintenance3.max_memory_allocation_size,
+        buffer_device_address: false,
         max_compute_work_group_count: props.limits.max_compute_work_group_count,
         max_push_constants_size: props.limits.max_push_constants_size,
         min_storage_buffer_offset_alignment: props.limits.min_storage_buffer_offset_alignment,
@@ -482,6 +548,40 @@ fn driver_string(
     )
     .trim()
     .to_string()
+}
+
+#[cfg(feature = "loaded")]
+/// Whether `pd` offers `VK_KHR_buffer_device_address` with its `bufferDeviceAddress` feature (every
+/// Vulkan 1.2 device does; a 1.1 device may). Extension and feature are what this crate's own
+/// context enables, so that a Vulkan 1.1 instance suffices.
+fn has_buffer_device_address(instance: &ash::Instance, pd: vk::PhysicalDevice) -> bool {
+    let extensions =
+        unsafe { instance.enumerate_device_extension_properties(pd) }.unwrap_or_default();
+    let listed = extensions
+        .iter()
+        .any(|e| e.extension_name_as_c_str() == Ok(ash::khr::buffer_device_address::NAME));
+    if !listed {
+        return false;
+    }
+    let mut address = vk::PhysicalDeviceBufferDeviceAddressFeatures::default();
+    let mut features = vk::PhysicalDeviceFeatures2::default().push_next(&mut address);
+    unsafe { instance.get_physical_device_features2(pd, &mut features) };
+    address.buffer_device_address == vk::TRUE
+}
+
+/// `vkGetBufferDeviceAddress` of `device`: the core command (Vulkan 1.2) or the KHR one, whichever
+/// the device's loader provides.
+fn address_function(
+    instance: &ash::Instance,
+    device: &ash::Device,
+) -> Option<vk::PFN_vkGetBufferDeviceAddress> {
+    [c"vkGetBufferDeviceAddress", c"vkGetBufferDeviceAddressKHR"]
+        .iter()
+        .find_map(|name| {
+            // SAFETY: both names have the signature of PFN_vkGetBufferDeviceAddress.
+            unsafe { instance.get_device_proc_addr(device.handle(), name.as_ptr()) }
+                .map(|f| unsafe { std::mem::transmute::<_, vk::PFN_vkGetBufferDeviceAddress>(f) })
+        })
 }
 
 #[cfg(feature = "loaded")]

@@ -2,6 +2,7 @@
 //! `gpu-allocator`, compute pipelines whose workgroup size is read from their SPIR-V, timed
 //! one-shot submissions, and the tracers built on them.
 
+mod addressing;
 mod buffer;
 mod context;
 mod painter;
@@ -11,6 +12,7 @@ pub mod spirv;
 mod submit;
 mod tracer;
 
+pub use addressing::{Addressing, Reach};
 pub use buffer::Buffer;
 pub use context::{Context, ContextOptions, DeviceLimits, External, Validation};
 pub use painter::{PaintParams, PaintRecording, PaintStats, Painter, MAX_BRUSHES_PER_PASS};

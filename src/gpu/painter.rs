@@ -1,5 +1,6 @@
 //! Painting on the device (`glsl/paint.comp`): the RBVH's atlas and colour channel live in
-//! storage buffers; each pass dispatches, per leaf that some brush reaches
+//! storage buffers, bound or — when one is over `maxStorageBufferRange` — read through their device
+//! addresses (`glsl/paint_bda.comp`, [`Reach`]); each pass dispatches, per leaf that some brush reaches
 //! ([`candidate_leaves`]), one invocation per texel of its tile. The rule is that of
 //! [`crate::surface`]'s CPU reference (`Rbvh::paint_cpu`), bit for bit.
 
@@ -8,7 +9,7 @@ use bytemuck::{Pod, Zeroable};
 use ash::vk;
 
 use super::pipeline::DescriptorSet;
-use super::{shaders, Buffer, BufferView, ComputePipeline, Context, Timing};
+use super::{shaders, Buffer, BufferView, ComputePipeline, Context, Reach, Timing};
 use crate::rbvh::GpuHeightfield;
 use crate::rbvh::{Rbvh, Texel};
 use crate::surface::{blank_colours, candidate_leaves, Brush};
@@ -18,8 +19,9 @@ use crate::{Error, Result};
 /// 65535 iterations; more brushes are painted in further passes, in order.
 pub const MAX_BRUSHES_PER_PASS: usize = 4096;
 
-/// Push constants of `glsl/paint.comp` (80 bytes): the leaf's sample grid
-/// ([`crate::rbvh::layout::SampleGrid`]) and where its tile lies.
+/// Push constants of `glsl/paint_main.glsl` (96 bytes): the leaf's sample grid
+/// ([`crate::rbvh::layout::SampleGrid`]), where its tile lies, and the device addresses of the
+/// atlas and the colours (zero where they are bound).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct PaintParams {
@@ -35,8 +37,10 @@ pub struct PaintParams {
     pub brush_count: u32,
     pub atlas_pitch: u32,
     pub atlas_len: u32,
+    pub atlas_address: u64,
+    pub colours_address: u64,
 }
-const _: () = assert!(std::mem::size_of::<PaintParams>() == 80);
+const _: () = assert!(std::mem::size_of::<PaintParams>() == 96);
 
 /// What one [`Painter::paint`] call did.
 #[derive(Clone, Copy, Debug, Default)]
@@ -88,9 +92,23 @@ fn channel_data(rbvh: &Rbvh) -> Result<(Vec<Texel>, Vec<u32>)> {
     Ok((atlas, colours))
 }
 
+const ATLAS: &str = "RBVH atlas (painting)";
+const COLOURS: &str = "RBVH colours";
+
+/// How the atlas and the colours reach the paint shader ([`Context::reach`]), both checked.
+fn reach_of(ctx: &Context, atlas: &[Texel], colours: &[u32]) -> Result<Reach> {
+    ctx.reach(&[
+        (ATLAS, std::mem::size_of_val(atlas) as u64),
+        (COLOURS, std::mem::size_of_val(colours) as u64),
+    ])
+}
+
 /// An RBVH's atlas and colour channel on the device, ready to paint.
 pub struct Painter {
     pipeline: ComputePipeline,
+    reach: Reach,
+    /// Device addresses of the atlas and the colours with [`Reach::DeviceAddresses`], else zero.
+    addresses: (u64, u64),
     leaves: Vec<GpuHeightfield>,
     atlas: Buffer,
     colours: Buffer,
@@ -103,9 +121,10 @@ impl Painter {
     /// has none, as [`Rbvh::colour_channel`] creates it).
     pub fn new(ctx: &Context, rbvh: &Rbvh) -> Result<Painter> {
         let (atlas, colours) = channel_data(rbvh)?;
-        let atlas = ctx.upload_storage("RBVH atlas (painting)", &atlas)?;
-        let colours = ctx.upload_storage("RBVH colours", &colours)?;
-        Self::with_buffers(ctx, rbvh, atlas, colours)
+        let reach = reach_of(ctx, &atlas, &colours)?;
+        let atlas = ctx.upload_unchecked(ATLAS, bytemuck::cast_slice(&atlas))?;
+        let colours = ctx.upload_unchecked(COLOURS, bytemuck::cast_slice(&colours))?;
+        Self::with_buffers(ctx, rbvh, reach, atlas, colours)
     }
 
     /// Embedded use: as [`Painter::new`] with the context's (the engine's) allocator, *recording*
@@ -118,30 +137,61 @@ impl Painter {
         cmd: vk::CommandBuffer,
     ) -> Result<(Painter, Vec<Buffer>)> {
         let (atlas, colours) = channel_data(rbvh)?;
-        let (atlas, stage_a) = ctx.upload_storage_recorded("RBVH atlas (painting)", &atlas, cmd)?;
-        let (colours, stage_c) = ctx.upload_storage_recorded("RBVH colours", &colours, cmd)?;
+        let reach = reach_of(ctx, &atlas, &colours)?;
+        let (atlas, stage_a) =
+            ctx.upload_unchecked_recorded(ATLAS, bytemuck::cast_slice(&atlas), cmd)?;
+        let (colours, stage_c) =
+            ctx.upload_unchecked_recorded(COLOURS, bytemuck::cast_slice(&colours), cmd)?;
         let staging: Vec<Buffer> = stage_a.into_iter().chain(stage_c).collect();
         if !staging.is_empty() {
             ctx.record_transfer_to_compute(cmd);
         }
-        Ok((Self::with_buffers(ctx, rbvh, atlas, colours)?, staging))
+        Ok((
+            Self::with_buffers(ctx, rbvh, reach, atlas, colours)?,
+            staging,
+        ))
     }
 
-    fn with_buffers(ctx: &Context, rbvh: &Rbvh, atlas: Buffer, colours: Buffer) -> Result<Painter> {
+    fn with_buffers(
+        ctx: &Context,
+        rbvh: &Rbvh,
+        reach: Reach,
+        atlas: Buffer,
+        colours: Buffer,
+    ) -> Result<Painter> {
+        let (spirv, bindings): (&[u8], &[u32]) = match reach {
+            Reach::Bindings => (shaders::PAINT, &[0, 1, 2]),
+            Reach::DeviceAddresses => (shaders::PAINT_BDA, &[1]),
+        };
+        let address = |b: &Buffer| {
+            b.device_address()
+                .ok_or_else(|| Error::NoDevice(format!("{}: no device address", b.name())))
+        };
+        let addresses = match reach {
+            Reach::Bindings => (0, 0),
+            Reach::DeviceAddresses => (address(&atlas)?, address(&colours)?),
+        };
         Ok(Painter {
             pipeline: ComputePipeline::new(
                 ctx,
                 "paint",
-                shaders::PAINT,
-                3,
+                spirv,
+                bindings,
                 std::mem::size_of::<PaintParams>() as u32,
             )?,
+            reach,
+            addresses,
             leaves: rbvh.leaves.clone(),
             atlas,
             colours,
             pitch: rbvh.atlas.pitch,
             atlas_len: rbvh.atlas.texels.len() as u32,
         })
+    }
+
+    /// How the atlas and the colours reach the shader (see [`Context::reach`]).
+    pub fn reach(&self) -> Reach {
+        self.reach
     }
 
     /// The device buffer of the colour channel (one word per atlas texel, [`Rbvh::colours`]'s
@@ -174,11 +224,7 @@ impl Painter {
         if staging.is_some() {
             ctx.record_transfer_to_compute(cmd);
         }
-        let set = self.pipeline.descriptor_set(&[
-            (self.atlas.raw(), 0),
-            (brush_buf.raw(), 0),
-            (self.colours.raw(), 0),
-        ])?;
+        let set = self.descriptor_set(&brush_buf)?;
         let leaves = candidate_leaves(&self.leaves, brushes);
         self.record_leaves(ctx.device(), cmd, &set, &leaves, brushes.len() as u32);
         Ok(PaintRecording {
@@ -186,6 +232,19 @@ impl Painter {
             _brushes: brush_buf,
             _staging: staging,
         })
+    }
+
+    /// The descriptor set of one pass: the atlas, `brushes` and the colours, or only `brushes`
+    /// where the other two are reached through their device addresses.
+    fn descriptor_set(&self, brushes: &Buffer) -> Result<DescriptorSet> {
+        match self.reach {
+            Reach::Bindings => self.pipeline.descriptor_set(&[
+                (self.atlas.raw(), 0),
+                (brushes.raw(), 0),
+                (self.colours.raw(), 0),
+            ]),
+            Reach::DeviceAddresses => self.pipeline.descriptor_set(&[(brushes.raw(), 0)]),
+        }
     }
 
     /// One dispatch per leaf in `leaves`, one invocation per texel of its tile.
@@ -197,6 +256,7 @@ impl Painter {
         leaves: &[u32],
         brush_count: u32,
     ) {
+        let (atlas_address, colours_address) = self.addresses;
         for &k in leaves {
             let Some(leaf) = self.leaves.get(k as usize) else {
                 continue;
@@ -215,6 +275,8 @@ impl Painter {
                 brush_count,
                 atlas_pitch: self.pitch,
                 atlas_len: self.atlas_len,
+                atlas_address,
+                colours_address,
             };
             let texels = leaf.res_u.saturating_mul(leaf.res_v);
             self.pipeline.record(device, cmd, set, texels, |first| {
@@ -238,11 +300,7 @@ impl Painter {
                 continue;
             }
             let brush_buf = ctx.upload_storage("paint brushes", batch)?;
-            let set = self.pipeline.descriptor_set(&[
-                (self.atlas.raw(), 0),
-                (brush_buf.raw(), 0),
-                (self.colours.raw(), 0),
-            ])?;
+            let set = self.descriptor_set(&brush_buf)?;
             let timing = ctx.submit("paint", |device, cmd| {
                 self.record_leaves(device, cmd, &set, &leaves, batch.len() as u32);
             })?;

@@ -1,9 +1,9 @@
-//! A compute pipeline over `n` storage buffers (bindings `0..n` of set 0) and a push-constant
+//! A compute pipeline over storage buffers (the bindings it names, of set 0) and a push-constant
 //! block. The workgroup size is read from the SPIR-V, so the shader is its one source of truth.
 
 use ash::vk;
 
-use super::{shaders, spirv, Buffer, Context};
+use super::{shaders, spirv, Context};
 use crate::{Error, Result};
 
 /// A compute pipeline with its layouts and a small descriptor pool.
@@ -13,7 +13,8 @@ pub struct ComputePipeline {
     set_layout: vk::DescriptorSetLayout,
     layout: vk::PipelineLayout,
     pipeline: vk::Pipeline,
-    bindings: u32,
+    /// The storage-buffer bindings, in the order [`ComputePipeline::descriptor_set`] takes buffers.
+    bindings: Vec<u32>,
     push_size: u32,
     local_size_x: u32,
 }
@@ -31,13 +32,14 @@ impl Drop for ComputePipeline {
 }
 
 impl ComputePipeline {
-    /// Creates the pipeline from SPIR-V bytes. `bindings` storage buffers, `push_size` bytes of
+    /// Creates the pipeline from SPIR-V bytes: storage buffers at `bindings` (a shader built to
+    /// read some arrays through device addresses leaves their bindings out), `push_size` bytes of
     /// push constants (checked against the device's `maxPushConstantsSize`).
     pub fn new(
         ctx: &Context,
         name: &str,
         spirv_bytes: &[u8],
-        bindings: u32,
+        bindings: &[u32],
         push_size: u32,
     ) -> Result<Self> {
         let words = shaders::words(spirv_bytes).map_err(|e| {
@@ -64,12 +66,13 @@ impl ComputePipeline {
             set_layout: vk::DescriptorSetLayout::null(),
             layout: vk::PipelineLayout::null(),
             pipeline: vk::Pipeline::null(),
-            bindings,
+            bindings: bindings.to_vec(),
             push_size,
             local_size_x,
         };
-        let layout_bindings: Vec<_> = (0..bindings)
-            .map(|b| {
+        let layout_bindings: Vec<_> = bindings
+            .iter()
+            .map(|&b| {
                 vk::DescriptorSetLayoutBinding::default()
                     .binding(b)
                     .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
@@ -121,31 +124,30 @@ impl ComputePipeline {
         self.local_size_x
     }
 
-    /// Binds `buffers` to bindings `0..n` and dispatches `invocations` threads (see
+    /// Binds `buffers` to the pipeline's bindings, in order, and dispatches `invocations` threads (see
     /// [`ComputePipeline::record`]) in one timed submission of the context's own.
     pub fn run(
         &self,
-        buffers: &[&Buffer],
+        buffers: &[(vk::Buffer, u64)],
         invocations: u32,
         push: impl Fn(u32) -> Vec<u8>,
     ) -> Result<super::Timing> {
-        let ranges: Vec<(vk::Buffer, u64)> = buffers.iter().map(|b| (b.raw(), 0)).collect();
-        let set = self.descriptor_set(&ranges)?;
+        let set = self.descriptor_set(buffers)?;
         self.ctx.submit(&self.name, |device, cmd| {
             self.record(device, cmd, &set, invocations, push)
         })
     }
 
     /// A descriptor set (in a pool of its own, freed with it) binding `buffers` — each a buffer
-    /// and the offset its view starts at, to its end — to bindings `0..n`.
+    /// and the offset its view starts at, to its end — to the pipeline's bindings, in order.
     pub fn descriptor_set(&self, buffers: &[(vk::Buffer, u64)]) -> Result<DescriptorSet> {
-        if buffers.len() != self.bindings as usize {
+        if buffers.len() != self.bindings.len() {
             return Err(Error::param(
                 "buffers",
                 format!(
                     "{} takes {} buffers, got {}",
                     self.name,
-                    self.bindings,
+                    self.bindings.len(),
                     buffers.len()
                 ),
             ));
@@ -153,7 +155,7 @@ impl ComputePipeline {
         let d = &self.ctx.shared.device;
         let sizes = [vk::DescriptorPoolSize::default()
             .ty(vk::DescriptorType::STORAGE_BUFFER)
-            .descriptor_count(self.bindings.max(1))];
+            .descriptor_count((self.bindings.len() as u32).max(1))];
         let pool = unsafe {
             d.create_descriptor_pool(
                 &vk::DescriptorPoolCreateInfo::default()
@@ -189,11 +191,11 @@ impl ComputePipeline {
             .collect();
         let writes: Vec<_> = infos
             .iter()
-            .enumerate()
-            .map(|(i, info)| {
+            .zip(&self.bindings)
+            .map(|(info, &binding)| {
                 vk::WriteDescriptorSet::default()
                     .dst_set(set)
-                    .dst_binding(i as u32)
+                    .dst_binding(binding)
                     .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
                     .buffer_info(info)
             })

@@ -2,14 +2,15 @@
 //! (`glsl/trace_rbvh.comp`), or an RBVH with level of detail (`glsl/trace_rbvh_lod.comp`). All
 //! share the push constants ([`TraceParams`]) and the bindings after the structure's own buffers:
 //! rays, hits, status, per-ray steps; the LOD trace then binds the LOD records and columns and the
-//! per-ray cones.
+//! per-ray cones. Each has a `_bda` twin that reads the structure's arrays through buffer device
+//! addresses rather than bindings, for arrays over `maxStorageBufferRange` ([`Reach`]).
 
 use bytemuck::{Pod, Zeroable};
 
 use ash::vk;
 
 use super::pipeline::DescriptorSet;
-use super::{shaders, Buffer, ComputePipeline, Context, Timing};
+use super::{shaders, Buffer, ComputePipeline, Context, Reach, Timing};
 use crate::bvh::{Bvh, STACK_SIZE};
 use crate::geom::{Hit, Ray};
 use crate::lod::cone::check_cones;
@@ -36,8 +37,8 @@ pub struct Traced {
     pub timing: Timing,
 }
 
-/// Push constants of the trace shaders (40 bytes); the exact one ignores the last five, the plain
-/// RBVH one the last two.
+/// Push constants of the trace shaders (`glsl/trace_params.glsl`, 88 bytes); the exact one ignores
+/// the sizes after `tri_count`, the plain RBVH one the LOD sizes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct TraceParams {
@@ -53,17 +54,76 @@ pub struct TraceParams {
     pub lod_node_count: u32,
     /// LOD column words.
     pub lod_texel_len: u32,
+    /// Device addresses of the structure's arrays in binding order (nodes, triangles, leaves,
+    /// atlas, LOD records, LOD columns), read by the `_bda` shaders; zero where arrays are bound.
+    pub addresses: [u64; 6],
 }
-const _: () = assert!(std::mem::size_of::<TraceParams>() == 40);
+const _: () = assert!(std::mem::size_of::<TraceParams>() == 88);
 
 const FLAG_ANY_HIT: u32 = 1;
 const FLAG_STEPS: u32 = 2;
 
+/// What a tracer traces, which fixes its shaders and bindings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kind {
+    Exact,
+    Rbvh,
+    RbvhLod,
+}
+
+impl Kind {
+    fn name(self) -> &'static str {
+        match self {
+            Kind::Exact => "trace_exact",
+            Kind::Rbvh => "trace_rbvh",
+            Kind::RbvhLod => "trace_rbvh_lod",
+        }
+    }
+
+    fn spirv(self, reach: Reach) -> &'static [u8] {
+        match (self, reach) {
+            (Kind::Exact, Reach::Bindings) => shaders::TRACE_EXACT,
+            (Kind::Exact, Reach::DeviceAddresses) => shaders::TRACE_EXACT_BDA,
+            (Kind::Rbvh, Reach::Bindings) => shaders::TRACE_RBVH,
+            (Kind::Rbvh, Reach::DeviceAddresses) => shaders::TRACE_RBVH_BDA,
+            (Kind::RbvhLod, Reach::Bindings) => shaders::TRACE_RBVH_LOD,
+            (Kind::RbvhLod, Reach::DeviceAddresses) => shaders::TRACE_RBVH_LOD_BDA,
+        }
+    }
+
+    /// The structure arrays bound before the per-trace buffers (the LOD's two come after them).
+    fn leading_arrays(self) -> u32 {
+        match self {
+            Kind::Exact => 2,
+            Kind::Rbvh | Kind::RbvhLod => 4,
+        }
+    }
+
+    /// The shader's bindings, in the order buffers are given: the leading structure arrays, the
+    /// per-trace buffers, then for LOD its two arrays and the cones; arrays reached through device
+    /// addresses have none.
+    fn bindings(self, reach: Reach) -> Vec<u32> {
+        let lead = self.leading_arrays();
+        let bound = reach == Reach::Bindings;
+        let mut b: Vec<u32> = if bound { (0..lead).collect() } else { vec![] };
+        b.extend(lead..lead + PER_TRACE_BUFFERS);
+        if self == Kind::RbvhLod {
+            let after = lead + PER_TRACE_BUFFERS;
+            if bound {
+                b.extend([after, after + 1]);
+            }
+            b.push(after + 2);
+        }
+        b
+    }
+}
+
 /// An acceleration structure uploaded to the device, with its trace pipeline.
 pub struct Tracer {
     ctx: Context,
+    reach: Reach,
     pipeline: ComputePipeline,
-    /// The structure's buffers, bound first, in the shader's binding order.
+    /// The structure's leading arrays, in the shader's binding order.
     structure: Vec<Buffer>,
     /// Level of detail: the LOD records and columns, bound after the per-trace buffers and
     /// followed by the per-ray cones.
@@ -119,13 +179,16 @@ fn exact_parts(bvh: &Bvh) -> (TraceParams, Arrays<'_, 2>) {
 }
 
 /// The shader sizes and the arrays (name, bytes) of an RBVH, in binding order.
-fn rbvh_parts(rbvh: &Rbvh) -> (TraceParams, Arrays<'_, 4>) {
+fn rbvh_parts(rbvh: &Rbvh) -> Result<(TraceParams, Arrays<'_, 4>)> {
+    let count = |what: &str, n: usize| {
+        u32::try_from(n).map_err(|_| Error::param("rbvh", format!("{n} {what}: more than 2^32")))
+    };
     let sizes = TraceParams {
-        node_count: rbvh.nodes.len() as u32,
-        tri_count: rbvh.triangles.len() as u32,
-        leaf_count: rbvh.leaves.len() as u32,
+        node_count: count("nodes", rbvh.nodes.len())?,
+        tri_count: count("triangles", rbvh.triangles.len())?,
+        leaf_count: count("leaves", rbvh.leaves.len())?,
         atlas_pitch: rbvh.atlas.pitch,
-        atlas_len: rbvh.atlas.texels.len() as u32,
+        atlas_len: count("atlas texels", rbvh.atlas.texels.len())?,
         ..TraceParams::default()
     };
     let arrays = [
@@ -137,7 +200,7 @@ fn rbvh_parts(rbvh: &Rbvh) -> (TraceParams, Arrays<'_, 4>) {
         ),
         ("RBVH atlas", bytemuck::cast_slice(&rbvh.atlas.texels)),
     ];
-    (sizes, arrays)
+    Ok((sizes, arrays))
 }
 
 /// Named byte arrays of a structure, in binding order.
@@ -151,7 +214,7 @@ fn lod_parts<'a>(
     nodes: &'a [crate::bvh::GpuNode],
 ) -> Result<(TraceParams, Arrays<'a, 6>)> {
     lod.check_for(rbvh)?;
-    let (mut sizes, [_, tris, leaves, atlas]) = rbvh_parts(rbvh);
+    let (mut sizes, [_, tris, leaves, atlas]) = rbvh_parts(rbvh)?;
     sizes.lod_node_count = lod.nodes.len() as u32;
     sizes.lod_texel_len = u32::try_from(lod.texels.len())
         .map_err(|_| Error::param("lod", "more than 2^32 column words"))?;
@@ -170,24 +233,27 @@ fn lod_parts<'a>(
 const PER_TRACE_BUFFERS: u32 = 4;
 
 impl Tracer {
-    /// Uploads the exact BVH (nodes and triangles, each checked against `maxStorageBufferRange`).
+    /// Uploads the exact BVH: nodes and triangles, reached as [`Context::reach`] decides.
     pub fn exact(ctx: &Context, bvh: &Bvh) -> Result<Self> {
         check_depth("bvh", bvh.depth)?;
         let (sizes, arrays) = exact_parts(bvh);
-        Self::uploaded(ctx, "trace_exact", shaders::TRACE_EXACT, &arrays, sizes)
+        Self::uploaded(ctx, Kind::Exact, None, &arrays, sizes)
     }
 
     /// Uploads an RBVH: nodes, triangle-leaf triangles, height-field leaves and the atlas.
     pub fn rbvh(ctx: &Context, rbvh: &Rbvh) -> Result<Self> {
-        Self::rbvh_with_shader(ctx, rbvh, shaders::TRACE_RBVH)
+        check_depth("rbvh", rbvh.depth)?;
+        let (sizes, arrays) = rbvh_parts(rbvh)?;
+        Self::uploaded(ctx, Kind::Rbvh, None, &arrays, sizes)
     }
 
     /// As [`Tracer::rbvh`], with another build of `trace_rbvh.comp` (same bindings and push
     /// constants): for checking modified shaders, e.g. that image regression catches a broken one.
+    /// Fails where the RBVH must be reached through device addresses, which that build cannot.
     pub fn rbvh_with_shader(ctx: &Context, rbvh: &Rbvh, spirv: &[u8]) -> Result<Self> {
         check_depth("rbvh", rbvh.depth)?;
-        let (sizes, arrays) = rbvh_parts(rbvh);
-        Self::uploaded(ctx, "trace_rbvh", spirv, &arrays, sizes)
+        let (sizes, arrays) = rbvh_parts(rbvh)?;
+        Self::uploaded(ctx, Kind::Rbvh, Some(spirv), &arrays, sizes)
     }
 
     /// Uploads an RBVH with its levels of detail (`lod`, built for it by [`Lod::build`]): traces
@@ -196,13 +262,7 @@ impl Tracer {
         check_depth("rbvh", rbvh.depth)?;
         let nodes = lod.annotated_nodes(rbvh);
         let (sizes, arrays) = lod_parts(rbvh, lod, &nodes)?;
-        Self::uploaded(
-            ctx,
-            "trace_rbvh_lod",
-            shaders::TRACE_RBVH_LOD,
-            &arrays,
-            sizes,
-        )
+        Self::uploaded(ctx, Kind::RbvhLod, None, &arrays, sizes)
     }
 
     /// Embedded use: uploads the exact BVH with the context's (the engine's) allocator, *recording*
@@ -211,21 +271,14 @@ impl Tracer {
     pub fn record_exact(ctx: &Context, bvh: &Bvh, cmd: vk::CommandBuffer) -> Result<Self> {
         check_depth("bvh", bvh.depth)?;
         let (sizes, arrays) = exact_parts(bvh);
-        Self::recorded(
-            ctx,
-            "trace_exact",
-            shaders::TRACE_EXACT,
-            &arrays,
-            sizes,
-            cmd,
-        )
+        Self::recorded(ctx, Kind::Exact, &arrays, sizes, cmd)
     }
 
     /// Embedded use: as [`Tracer::record_exact`], for an RBVH.
     pub fn record_rbvh(ctx: &Context, rbvh: &Rbvh, cmd: vk::CommandBuffer) -> Result<Self> {
         check_depth("rbvh", rbvh.depth)?;
-        let (sizes, arrays) = rbvh_parts(rbvh);
-        Self::recorded(ctx, "trace_rbvh", shaders::TRACE_RBVH, &arrays, sizes, cmd)
+        let (sizes, arrays) = rbvh_parts(rbvh)?;
+        Self::recorded(ctx, Kind::Rbvh, &arrays, sizes, cmd)
     }
 
     /// Embedded use: as [`Tracer::record_exact`], for an RBVH with its levels of detail; bind the
@@ -239,49 +292,61 @@ impl Tracer {
         check_depth("rbvh", rbvh.depth)?;
         let nodes = lod.annotated_nodes(rbvh);
         let (sizes, arrays) = lod_parts(rbvh, lod, &nodes)?;
-        Self::recorded(
-            ctx,
-            "trace_rbvh_lod",
-            shaders::TRACE_RBVH_LOD,
-            &arrays,
-            sizes,
-            cmd,
-        )
+        Self::recorded(ctx, Kind::RbvhLod, &arrays, sizes, cmd)
     }
 
+    /// How the structure's arrays reach the shader: bound, or through device addresses (when one
+    /// is over `maxStorageBufferRange`, or the context asks for them; see [`Context::reach`]).
+    pub fn reach(&self) -> Reach {
+        self.reach
+    }
+
+    /// Uploads `arrays` (every one checked before the first is uploaded) and makes the pipeline;
+    /// `spirv` replaces the bindings build of the kind's shader.
     fn uploaded(
         ctx: &Context,
-        name: &str,
-        spirv: &[u8],
+        kind: Kind,
+        spirv: Option<&[u8]>,
         arrays: &[(&str, &[u8])],
         sizes: TraceParams,
     ) -> Result<Self> {
+        let reach = reach_of(ctx, arrays)?;
+        let spirv =
+            match (spirv, reach) {
+                (None, _) => kind.spirv(reach),
+                (Some(s), Reach::Bindings) => s,
+                (Some(_), Reach::DeviceAddresses) => return Err(Error::param(
+                    "trace shader",
+                    "a replacement shader binds the RBVH's arrays, but this RBVH must be reached \
+                     through device addresses",
+                )),
+            };
         let structure = arrays
             .iter()
-            .map(|(array, bytes)| upload(ctx, array, bytes))
+            .map(|(array, bytes)| ctx.upload_unchecked(array, bytes))
             .collect::<Result<Vec<_>>>()?;
-        Self::new(ctx, name, spirv, structure, sizes)
+        Self::new(ctx, kind, reach, spirv, structure, sizes)
     }
 
     fn recorded(
         ctx: &Context,
-        name: &str,
-        spirv: &[u8],
+        kind: Kind,
         arrays: &[(&str, &[u8])],
         sizes: TraceParams,
         cmd: vk::CommandBuffer,
     ) -> Result<Self> {
+        let reach = reach_of(ctx, arrays)?;
         let mut structure = Vec::new();
         let mut staging = Vec::new();
         for (array, bytes) in arrays {
-            let (buffer, stage) = ctx.upload_storage_recorded(array, bytes, cmd)?;
+            let (buffer, stage) = ctx.upload_unchecked_recorded(array, bytes, cmd)?;
             structure.push(buffer);
             staging.extend(stage);
         }
         if !staging.is_empty() {
             ctx.record_transfer_to_compute(cmd);
         }
-        let mut tracer = Self::new(ctx, name, spirv, structure, sizes)?;
+        let mut tracer = Self::new(ctx, kind, reach, kind.spirv(reach), structure, sizes)?;
         tracer.staging = staging;
         Ok(tracer)
     }
@@ -346,16 +411,15 @@ impl Tracer {
             vk::BufferUsageFlags::STORAGE_BUFFER,
             gpu_allocator::MemoryLocation::GpuOnly,
         )?;
-        let mut views: Vec<(vk::Buffer, u64)> =
-            self.structure.iter().map(|b| (b.raw(), 0)).collect();
-        views.extend([
-            (rays.buffer, rays.offset),
-            (hits.buffer, hits.offset),
-            (status.raw(), 0),
-            (steps.raw(), 0),
-        ]);
-        views.extend(self.lod.iter().flatten().map(|b| (b.raw(), 0)));
-        views.extend(cones.map(|c| (c.buffer, c.offset)));
+        let views = self.views(
+            [
+                (rays.buffer, rays.offset),
+                (hits.buffer, hits.offset),
+                (status.raw(), 0),
+                (steps.raw(), 0),
+            ],
+            cones.map(|c| (c.buffer, c.offset)),
+        );
         Ok(TraceBinding {
             set: self.pipeline.descriptor_set(&views)?,
             status,
@@ -391,14 +455,22 @@ impl Tracer {
 
     fn new(
         ctx: &Context,
-        name: &str,
+        kind: Kind,
+        reach: Reach,
         spirv: &[u8],
         mut structure: Vec<Buffer>,
-        sizes: TraceParams,
+        mut sizes: TraceParams,
     ) -> Result<Self> {
+        if reach == Reach::DeviceAddresses {
+            for (slot, buffer) in sizes.addresses.iter_mut().zip(&structure) {
+                *slot = buffer.device_address().ok_or_else(|| {
+                    Error::NoDevice(format!("{}: no device address", buffer.name()))
+                })?;
+            }
+        }
         // The LOD shader binds the last two structure arrays (records and columns) and the cones
         // after the per-trace buffers.
-        let lod = if spirv == shaders::TRACE_RBVH_LOD {
+        let lod = if kind == Kind::RbvhLod {
             let tail = structure.split_off(structure.len().saturating_sub(2));
             let [records, columns]: [Buffer; 2] = tail
                 .try_into()
@@ -407,17 +479,38 @@ impl Tracer {
         } else {
             None
         };
-        let lod_bindings = if lod.is_some() { 3 } else { 0 };
-        let bindings = structure.len() as u32 + PER_TRACE_BUFFERS + lod_bindings;
         let push = std::mem::size_of::<TraceParams>() as u32;
+        let bindings = kind.bindings(reach);
         Ok(Tracer {
             ctx: ctx.clone(),
-            pipeline: ComputePipeline::new(ctx, name, spirv, bindings, push)?,
+            reach,
+            pipeline: ComputePipeline::new(ctx, kind.name(), spirv, &bindings, push)?,
             structure,
             lod,
             sizes,
             staging: Vec::new(),
         })
+    }
+
+    /// The buffers of one trace in the pipeline's binding order ([`Kind::bindings`]): the
+    /// structure's when bound, the per-trace four (rays, hits, status, steps), then the LOD arrays
+    /// when bound and the cones.
+    fn views(
+        &self,
+        per_trace: [(vk::Buffer, u64); 4],
+        cones: Option<(vk::Buffer, u64)>,
+    ) -> Vec<(vk::Buffer, u64)> {
+        let bound = self.reach == Reach::Bindings;
+        let mut views: Vec<(vk::Buffer, u64)> = Vec::new();
+        if bound {
+            views.extend(self.structure.iter().map(|b| (b.raw(), 0)));
+        }
+        views.extend(per_trace);
+        if bound {
+            views.extend(self.lod.iter().flatten().map(|b| (b.raw(), 0)));
+        }
+        views.extend(cones);
+        views
     }
 
     /// Fails, naming `what` and saying `hint`, unless this tracer has levels of detail exactly
@@ -531,13 +624,16 @@ impl Tracer {
             Some(c) => Some(self.ctx.upload_storage("ray cones", c)?),
             None => None,
         };
-        let mut buffers: Vec<&Buffer> = self.structure.iter().collect();
-        buffers.extend([&ray_buf, &hit_buf, &status, &steps_buf]);
-        if let (Some(lod), Some(cone_buf)) = (&self.lod, &cone_buf) {
-            buffers.extend(lod.iter());
-            buffers.push(cone_buf);
-        }
-        let timing = self.pipeline.run(&buffers, n, |first| {
+        let views = self.views(
+            [
+                (ray_buf.raw(), 0),
+                (hit_buf.raw(), 0),
+                (status.raw(), 0),
+                (steps_buf.raw(), 0),
+            ],
+            cone_buf.as_ref().map(|c| (c.raw(), 0)),
+        );
+        let timing = self.pipeline.run(&views, n, |first| {
             bytemuck::bytes_of(&TraceParams {
                 ray_offset: first,
                 ray_count: n,
@@ -578,12 +674,11 @@ fn check_depth(what: &str, depth: u32) -> Result<()> {
     Ok(())
 }
 
-/// Uploads one structure array, checking `maxStorageBufferRange` with a hint at what to change.
-fn upload<T: bytemuck::Pod>(ctx: &Context, name: &str, data: &[T]) -> Result<Buffer> {
-    ctx.check_storage_range(
-        name,
-        std::mem::size_of_val(data) as u64,
-        "the scene is too large for one storage buffer on this device (for an RBVH, lower the quality)",
-    )?;
-    ctx.upload_storage(name, data)
+/// How a structure's `arrays` reach the shader ([`Context::reach`]), every one checked.
+fn reach_of(ctx: &Context, arrays: &[(&str, &[u8])]) -> Result<Reach> {
+    let sizes: Vec<(&str, u64)> = arrays
+        .iter()
+        .map(|&(name, bytes)| (name, bytes.len() as u64))
+        .collect();
+    ctx.reach(&sizes)
 }

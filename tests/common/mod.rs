@@ -1,7 +1,7 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
-use rbvh::gpu::{Context, ContextOptions, Validation};
+use rbvh::gpu::{Addressing, Context, ContextOptions, Validation};
 
 /// A context with the validation layer on whenever it is installed: any error it reports fails the
 /// submission that caused it (see `Context::submit`), and so the test.
@@ -9,9 +9,15 @@ use rbvh::gpu::{Context, ContextOptions, Validation};
 const LAYER_MANIFEST: &str = "/usr/share/vulkan/explicit_layer.d/VkLayer_khronos_validation.json";
 
 pub fn context() -> Context {
+    context_with(Addressing::Auto)
+}
+
+/// As [`context`], with the given way for shaders to reach structures.
+pub fn context_with(addressing: Addressing) -> Context {
     let ctx = Context::new(&ContextOptions {
         device_name: None,
         validation: Validation::IfInstalled,
+        addressing,
     })
     .expect("a Vulkan device (lavapipe: apt-get install mesa-vulkan-drivers)");
     if std::path::Path::new(LAYER_MANIFEST).exists() {

@@ -9,7 +9,7 @@ use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use rbvh::bvh::Bvh;
 use rbvh::geom::{Hit, Ray};
-use rbvh::gpu::{Context, ContextOptions, Query, Traced, Tracer, Validation};
+use rbvh::gpu::{Context, ContextOptions, Query, Reach, Traced, Tracer, Validation};
 use rbvh::lod::{Lod, LodParams, RayCone};
 use rbvh::rbvh::Rbvh;
 use rbvh::scene::Scene;
@@ -97,12 +97,22 @@ pub struct Prepared {
 
 impl Prepared {
     /// The structure uploaded, with its levels of detail when there are any.
+    /// Says so on stderr when the structure is too large for storage-buffer bindings and is read
+    /// through buffer device addresses instead.
     pub fn tracer(&self) -> Result<Tracer> {
-        match (&self.structure, &self.lod) {
+        let tracer = match (&self.structure, &self.lod) {
             (Structure::Rbvh(r), Some(lod)) => Tracer::rbvh_lod(&self.ctx, r, lod)
                 .context("uploading the RBVH and its levels of detail"),
             _ => self.structure.tracer(&self.ctx),
+        }?;
+        if tracer.reach() == Reach::DeviceAddresses {
+            eprintln!(
+                "note: an array of the structure exceeds maxStorageBufferRange ({} bytes); it is \
+                 read through buffer device addresses",
+                self.ctx.limits().max_storage_buffer_range
+            );
         }
+        Ok(tracer)
     }
 
     /// Traces `rays` through `tracer` (from [`Prepared::tracer`]); `cones` gives their footprints
@@ -143,6 +153,7 @@ pub fn context_options(device: Option<&str>, validate: bool) -> ContextOptions {
         } else {
             Validation::from_env()
         },
+        ..ContextOptions::default()
     }
 }
 

@@ -1,0 +1,9 @@
+// As paint.comp, reading the atlas and the colour channel through buffer device addresses: for
+// channels over maxStorageBufferRange (src/gpu/addressing.rs).
+#version 460
+#extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_buffer_reference_uvec2 : require
+
+#define RBVH_DEVICE_ADDRESS 1
+#include "paint_main.glsl"

@@ -1,0 +1,31 @@
+// The push constants of every trace shader (src/gpu/tracer.rs, TraceParams; tests/layout.rs
+// checks that both sides agree). With RBVH_DEVICE_ADDRESS it also names, for the headers, where
+// each structure array lives: `addresses` in binding order — nodes, triangles, leaves, atlas, LOD
+// records, LOD columns (the exact BVH uses the first two).
+#ifndef RBVH_TRACE_PARAMS_GLSL
+#define RBVH_TRACE_PARAMS_GLSL
+
+layout(push_constant) uniform Params {
+    uint ray_offset;  // first ray of this dispatch (dispatches are split at maxComputeWorkGroupCount)
+    uint ray_count;   // rays in the whole batch
+    uint flags;       // bit 0: any hit; bit 1: write per-ray steps
+    uint node_count;
+    uint tri_count;
+    uint leaf_count;
+    uint atlas_pitch;
+    uint atlas_len;
+    uint lod_node_count;  // LOD records (0 without LOD)
+    uint lod_texel_len;   // LOD column words
+    uvec2 addresses[6];   // device addresses (low, high word); zero where arrays are bound
+} pc;
+
+#ifdef RBVH_DEVICE_ADDRESS
+#define RBVH_BVH_NODES_ADDRESS pc.addresses[0]
+#define RBVH_BVH_TRIS_ADDRESS pc.addresses[1]
+#define RBVH_LEAVES_ADDRESS pc.addresses[2]
+#define RBVH_ATLAS_ADDRESS pc.addresses[3]
+#define RBVH_LODS_ADDRESS pc.addresses[4]
+#define RBVH_LOD_TEXELS_ADDRESS pc.addresses[5]
+#endif
+
+#endif

@@ -1,0 +1,91 @@
+//! How shaders reach a structure's arrays: storage-buffer bindings, or buffer device addresses
+//! for arrays beyond `maxStorageBufferRange` (issue #4: "respect `maxStorageBufferRange` — split
+//! or use buffer device addresses for large scenes").
+//!
+//! Every trace and paint shader is built twice from one body: with bindings
+//! (`glsl/trace_rbvh.comp`, …) and with `RBVH_DEVICE_ADDRESS` (`glsl/trace_rbvh_bda.comp`, …), where
+//! the accessor macros of the GLSL headers read through `GL_EXT_buffer_reference` pointers whose
+//! addresses come in the push constants. The per-trace buffers (rays, hits, status, steps, cones)
+//! stay bound in both: the host splits them into batches that fit.
+
+use super::Context;
+use crate::{Error, Result};
+
+/// How the trace and paint shaders reach the arrays of a structure (nodes, triangles, leaves,
+/// atlas, LOD records and columns, colour channel).
+///
+/// A storage-buffer binding covers at most `maxStorageBufferRange` bytes — 128 MiB on lavapipe and
+/// on many mobile and integrated GPUs, 4 GiB on desktop GPUs — while a fine atlas can be larger.
+/// Buffer device addresses (Vulkan 1.2, `VK_KHR_buffer_device_address`; GLSL
+/// `GL_EXT_buffer_reference`) have no such range: one buffer can then be as large as
+/// `maxMemoryAllocationSize`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Addressing {
+    /// Bindings while every array fits `maxStorageBufferRange`, device addresses for a structure
+    /// where one does not (when the device has them; otherwise a [`Error::DeviceLimit`]).
+    #[default]
+    Auto,
+    /// Bindings only: an array over `maxStorageBufferRange` is a [`Error::DeviceLimit`].
+    Bindings,
+    /// Device addresses for every structure (an error on a device without `bufferDeviceAddress`).
+    DeviceAddress,
+}
+
+/// How one structure's arrays reach its shader, as [`Context::reach`] decided.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Reach {
+    /// Each array is a storage-buffer binding.
+    Bindings,
+    /// Each array is read through its buffer device address.
+    DeviceAddresses,
+}
+
+impl Context {
+    /// How a structure with `arrays` (name, bytes) reaches its shader under this context's
+    /// [`Addressing`], checked before anything is uploaded: an array too large for the chosen way
+    /// is a [`Error::DeviceLimit`] naming it, the limit and what would help.
+    pub fn reach(&self, arrays: &[(&str, u64)]) -> Result<Reach> {
+        let limits = self.limits();
+        let over_range = arrays
+            .iter()
+            .any(|&(_, bytes)| bytes > limits.max_storage_buffer_range);
+        let reach = match self.addressing() {
+            Addressing::DeviceAddress => Reach::DeviceAddresses,
+            Addressing::Auto if over_range && limits.buffer_device_address => {
+                Reach::DeviceAddresses
+            }
+            Addressing::Auto | Addressing::Bindings => Reach::Bindings,
+        };
+        for &(name, bytes) in arrays {
+            match reach {
+                Reach::Bindings => {
+                    let hint = match self.addressing() {
+                        Addressing::Bindings => {
+                            "the context was made with Addressing::Bindings; Addressing::Auto reads \
+                             such arrays through buffer device addresses"
+                        }
+                        _ => {
+                            "this device has no bufferDeviceAddress to read larger arrays through; \
+                             lower the quality or the scene's size"
+                        }
+                    };
+                    self.check_storage_range(name, bytes, hint)?;
+                }
+                Reach::DeviceAddresses => {
+                    if bytes > limits.max_memory_allocation_size {
+                        return Err(Error::DeviceLimit {
+                            resource: name.to_string(),
+                            limit: "maxMemoryAllocationSize",
+                            required: bytes,
+                            available: limits.max_memory_allocation_size,
+                            hint: "one array must fit one allocation: lower the quality or the \
+                                   scene's size"
+                                .into(),
+                        });
+                    }
+                }
+            }
+        }
+        Ok(reach)
+    }
+}
