@@ -31,6 +31,23 @@ pub enum Addressing {
     DeviceAddress,
 }
 
+impl Addressing {
+    /// From `RBVH_ADDRESSING`: unset, empty or `auto` → Auto, `bindings` → Bindings, `device` →
+    /// DeviceAddress (to try a device's address path, or to measure it against bindings).
+    pub fn from_env() -> Result<Addressing> {
+        let value = std::env::var("RBVH_ADDRESSING").unwrap_or_default();
+        match value.to_ascii_lowercase().as_str() {
+            "" | "auto" => Ok(Addressing::Auto),
+            "bindings" => Ok(Addressing::Bindings),
+            "device" => Ok(Addressing::DeviceAddress),
+            _ => Err(Error::param(
+                "RBVH_ADDRESSING",
+                format!("{value:?} is not one of auto, bindings, device"),
+            )),
+        }
+    }
+}
+
 /// How one structure's arrays reach its shader, as [`Context::reach`] decided.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Reach {

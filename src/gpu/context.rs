@@ -50,7 +50,8 @@ pub struct ContextOptions {
     /// Without either, a discrete GPU is preferred, then integrated, virtual, and CPU (lavapipe).
     pub device_name: Option<String>,
     pub validation: Validation,
-    /// How shaders reach a structure's arrays; see [`Addressing`].
+    /// How shaders reach a structure's arrays; see [`Addressing`]. `RBVH_ADDRESSING` by default
+    /// (Auto when it is unset or not understood; [`Addressing::from_env`] reports the latter).
     pub addressing: Addressing,
 }
 
@@ -59,7 +60,7 @@ impl Default for ContextOptions {
         ContextOptions {
             device_name: std::env::var("RBVH_DEVICE").ok().filter(|s| !s.is_empty()),
             validation: Validation::from_env(),
-            addressing: Addressing::default(),
+            addressing: Addressing::from_env().unwrap_or_default(),
         }
     }
 }

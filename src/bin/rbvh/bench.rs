@@ -83,7 +83,7 @@ pub fn run(a: Args) -> Result<()> {
         .collect();
     let mut config = BenchConfig::new(
         a.scene.iter().map(|s| s.trim().to_string()).collect(),
-        Device::Create(context_options(a.device.as_deref(), a.validate)),
+        Device::Create(context_options(a.device.as_deref(), a.validate)?),
     );
     config.levels = levels;
     config.ray_types = a.rays.clone();

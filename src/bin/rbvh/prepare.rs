@@ -9,7 +9,7 @@ use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use rbvh::bvh::Bvh;
 use rbvh::geom::{Hit, Ray};
-use rbvh::gpu::{Context, ContextOptions, Query, Reach, Traced, Tracer, Validation};
+use rbvh::gpu::{Addressing, Context, ContextOptions, Query, Reach, Traced, Tracer, Validation};
 use rbvh::lod::{Lod, LodParams, RayCone};
 use rbvh::rbvh::Rbvh;
 use rbvh::scene::Scene;
@@ -105,7 +105,7 @@ impl Prepared {
                 .context("uploading the RBVH and its levels of detail"),
             _ => self.structure.tracer(&self.ctx),
         }?;
-        if tracer.reach() == Reach::DeviceAddresses {
+        if tracer.reach() == Reach::DeviceAddresses && self.ctx.addressing() == Addressing::Auto {
             eprintln!(
                 "note: an array of the structure exceeds maxStorageBufferRange ({} bytes); it is \
                  read through buffer device addresses",
@@ -142,9 +142,9 @@ impl Prepared {
 }
 
 /// The device the user named (`--device`, else `RBVH_DEVICE`), with validation required by
-/// `--validate` or set by `RBVH_VALIDATION`.
-pub fn context_options(device: Option<&str>, validate: bool) -> ContextOptions {
-    ContextOptions {
+/// `--validate` or set by `RBVH_VALIDATION`, and addressing set by `RBVH_ADDRESSING`.
+pub fn context_options(device: Option<&str>, validate: bool) -> Result<ContextOptions> {
+    Ok(ContextOptions {
         device_name: device
             .map(str::to_string)
             .or_else(|| ContextOptions::default().device_name),
@@ -153,8 +153,8 @@ pub fn context_options(device: Option<&str>, validate: bool) -> ContextOptions {
         } else {
             Validation::from_env()
         },
-        ..ContextOptions::default()
-    }
+        addressing: Addressing::from_env()?,
+    })
 }
 
 /// Checks an image size given by `--width` and `--height`.
@@ -224,7 +224,7 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
             })?)
         }
     };
-    let ctx = Context::new(&context_options(c.device.as_deref(), c.validate))
+    let ctx = Context::new(&context_options(c.device.as_deref(), c.validate)?)
         .context("creating the Vulkan device")?;
     if c.stats {
         eprintln!(

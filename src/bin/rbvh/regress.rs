@@ -124,7 +124,7 @@ pub fn run(a: Args) -> Result<()> {
         mode: if a.bless { Mode::Bless } else { Mode::Compare },
     };
     config.validate()?;
-    let ctx = Context::new(&context_options(a.device.as_deref(), a.validate))
+    let ctx = Context::new(&context_options(a.device.as_deref(), a.validate)?)
         .context("creating the Vulkan device")?;
     eprintln!(
         "{} {} case(s) at {}×{} on {} ({})",
