@@ -489,3 +489,35 @@ fn render_ibl_refuses_bad_environments_and_samples() {
         assert!(!png.exists(), "{args:?} wrote {}", png.display());
     }
 }
+
+#[test]
+fn rbvh_addressing_forces_device_addresses_and_refuses_what_it_does_not_know() {
+    let dir = tempfile::tempdir().unwrap();
+    let render = |value: &str, name: &str| {
+        let png = dir.path().join(name);
+        let out = Command::new(env!("CARGO_BIN_EXE_rbvh"))
+            .args(["render", "--scene", "cube", "--method", "rbvh"])
+            .args(["--width", "48", "--height", "32", "--out", arg(&png)])
+            .env("RBVH_VALIDATION", "auto")
+            .env("RBVH_ADDRESSING", value)
+            .output()
+            .expect("run rbvh");
+        (out, png)
+    };
+    let (bound, bound_png) = render("bindings", "b.png");
+    let (addressed, addressed_png) = render("device", "d.png");
+    assert!(bound.status.success() && addressed.status.success());
+    assert_eq!(
+        std::fs::read(&bound_png).unwrap(),
+        std::fs::read(&addressed_png).unwrap(),
+        "the same image either way"
+    );
+    let (bad, bad_png) = render("sideways", "x.png");
+    let stderr = String::from_utf8_lossy(&bad.stderr);
+    assert!(!bad.status.success());
+    assert!(
+        stderr.contains("RBVH_ADDRESSING") && stderr.contains("sideways"),
+        "{stderr}"
+    );
+    assert!(!bad_png.exists());
+}
