@@ -2,9 +2,12 @@
 //! generates camera rays with its own compute shader, records the library's RBVH trace into its own
 //! command buffer between its own barriers, submits, and shades the hits into a PNG.
 //!
-//! `cargo run --release --example embed -- [out.png] [scene]` (defaults: `rbvh-embed.png` in the
-//! temporary directory, `default`). Runs under the validation layer when it is installed and fails
-//! on any error it reports; `cargo test` runs it too (see Cargo.toml).
+//! `cargo run --release --example embed -- [out.png] [scene] [device|bindings]` (defaults:
+//! `rbvh-embed.png` in the temporary directory, `default`, and `device`). With `device` the engine
+//! is "bindless": it enables buffer device addresses on its device and allocator, when the device
+//! has them, and asks the library to read its structures through them too; with `bindings` it
+//! enables nothing and the library binds storage buffers. Runs under the validation layer when it
+//! is installed and fails on any error it reports; `cargo test` runs it too (see Cargo.toml).
 
 use std::error::Error;
 use std::ffi::{c_void, CStr};
@@ -17,7 +20,7 @@ use gpu_allocator::vulkan::{
 };
 use gpu_allocator::MemoryLocation;
 use rbvh::geom::{Hit, Ray};
-use rbvh::gpu::{BufferView, Context, External, Query, Tracer};
+use rbvh::gpu::{Addressing, BufferView, Context, External, Query, Reach, Tracer};
 use rbvh::rbvh::{Rbvh, RbvhParams};
 use rbvh::scene::Scene;
 
@@ -75,6 +78,11 @@ fn main() -> Result<(), Box<dyn Error>> {
         .unwrap_or_else(|| std::env::temp_dir().join("rbvh-embed.png"));
     let scene = Scene::load(args.get(2).map_or("default", String::as_str))?;
     let rbvh = Rbvh::build(&scene, &RbvhParams::quality(2)?)?;
+    let bindless = match args.get(3).map_or("device", String::as_str) {
+        "device" => true,
+        "bindings" => false,
+        other => return Err(format!("{other:?}: expected device or bindings").into()),
+    };
 
     // --- The engine's own Vulkan setup -------------------------------------------------------
     let entry = unsafe { ash::Entry::load()? };
@@ -131,20 +139,28 @@ fn main() -> Result<(), Box<dyn Error>> {
     let queues = [vk::DeviceQueueCreateInfo::default()
         .queue_family_index(queue_family)
         .queue_priorities(&priorities)];
-    let device = unsafe {
-        instance.create_device(
-            physical_device,
-            &vk::DeviceCreateInfo::default().queue_create_infos(&queues),
-            None,
-        )?
-    };
+    // Device addresses through the KHR extension, so that a Vulkan 1.1 instance suffices.
+    let has_addresses = unsafe { instance.enumerate_device_extension_properties(physical_device)? }
+        .iter()
+        .any(|e| e.extension_name_as_c_str() == Ok(ash::khr::buffer_device_address::NAME));
+    let addresses = bindless && has_addresses;
+    let device_extensions = [ash::khr::buffer_device_address::NAME.as_ptr()];
+    let mut address_features =
+        vk::PhysicalDeviceBufferDeviceAddressFeatures::default().buffer_device_address(true);
+    let mut device_info = vk::DeviceCreateInfo::default().queue_create_infos(&queues);
+    if addresses {
+        device_info = device_info
+            .enabled_extension_names(&device_extensions)
+            .push_next(&mut address_features);
+    }
+    let device = unsafe { instance.create_device(physical_device, &device_info, None)? };
     let queue = unsafe { device.get_device_queue(queue_family, 0) };
     let allocator = Arc::new(Mutex::new(Allocator::new(&AllocatorCreateDesc {
         instance: instance.clone(),
         device: device.clone(),
         physical_device,
         debug_settings: Default::default(),
-        buffer_device_address: false,
+        buffer_device_address: addresses,
         allocation_sizes: Default::default(),
     })?));
 
@@ -250,11 +266,19 @@ fn main() -> Result<(), Box<dyn Error>> {
         physical_device,
         queue_family,
         allocator: allocator.clone(),
-        // This engine enabled no device addresses: structures must fit storage-buffer bindings.
-        buffer_device_address: false,
+        buffer_device_address: addresses,
+        addressing: if addresses {
+            Addressing::DeviceAddress
+        } else {
+            Addressing::Auto
+        },
     })?;
     unsafe { device.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default())? };
     let mut tracer = Tracer::record_rbvh(&ctx, &rbvh, cmd)?;
+    let reach = tracer.reach();
+    if addresses != (reach == Reach::DeviceAddresses) {
+        return Err(format!("the library chose {reach:?}").into());
+    }
     let mut trace = tracer.bind(
         BufferView {
             buffer: rays_buf,
@@ -328,7 +352,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     let image = rbvh::output::shade(&rays, &hits, WIDTH, HEIGHT, scene.light.as_ref())?;
     rbvh::output::write_png(&out, &image)?;
     println!(
-        "{hit_count} of {count} rays hit; {overflowed} overflowed; wrote {}",
+        "{hit_count} of {count} rays hit ({reach:?}); {overflowed} overflowed; wrote {}",
         out.display()
     );
 

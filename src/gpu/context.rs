@@ -125,6 +125,9 @@ pub struct External {
     /// context then reads structures too large for a storage-buffer binding through device
     /// addresses ([`Addressing::Auto`]); without, they are a [`Error::DeviceLimit`].
     pub buffer_device_address: bool,
+    /// How the library's shaders reach structures ([`Addressing::DeviceAddress`] needs
+    /// `buffer_device_address`).
+    pub addressing: Addressing,
 }
 
 /// A Vulkan device ready for compute. Cloning shares it.
@@ -172,6 +175,13 @@ impl Context {
             external.physical_device,
             external.queue_family,
         );
+        if external.addressing == Addressing::DeviceAddress && !external.buffer_device_address {
+            return Err(Error::param(
+                "addressing",
+                "Addressing::DeviceAddress needs buffer_device_address (the engine's device and \
+                 allocator with device addresses)",
+            ));
+        }
         let get_address = if external.buffer_device_address {
             let found = address_function(&external.instance, &external.device);
             if found.is_none() {
@@ -194,7 +204,7 @@ impl Context {
                 limits,
                 device_name,
                 driver,
-                addressing: Addressing::Auto,
+                addressing: external.addressing,
                 get_address,
                 own: None,
             }),
