@@ -9,20 +9,8 @@ layout(local_size_x = 64) in;
 #include "trace_params.glsl"
 #include "bvh.glsl"
 
-layout(std430, set = 0, binding = 2) readonly buffer Rays {
-    Ray rays[];
-};
-layout(std430, set = 0, binding = 3) writeonly buffer Hits {
-    Hit hits[];
-};
-// Rays whose traversal overflowed the stack or the visit bound.
-layout(std430, set = 0, binding = 4) buffer Status {
-    uint overflow_rays;
-};
-// Optional per-ray step counts for heat maps (binding may hold a 4-byte dummy when unused).
-layout(std430, set = 0, binding = 5) writeonly buffer Steps {
-    uint steps_out[];
-};
+#define RBVH_TRACE_IO_BINDING 2
+#include "trace_io.glsl"
 
 void main() {
     uint i = pc.ray_offset + gl_GlobalInvocationID.x;
@@ -32,13 +20,7 @@ void main() {
     uint steps;
     bool overflow;
     Hit h = rbvh_trace_bvh(rays[i], (pc.flags & 1u) != 0u, pc.node_count, steps, overflow);
-    hits[i] = h;
-    if ((pc.flags & 2u) != 0u) {
-        steps_out[i] = steps;
-    }
-    if (overflow) {
-        atomicAdd(overflow_rays, 1u);
-    }
+    rbvh_trace_store(i, pc.flags, h, steps, overflow);
 }
 
 #endif

@@ -11,20 +11,8 @@ layout(local_size_x = 64) in;
 #include "trace_params.glsl"
 #include "rbvh.glsl"
 
-layout(std430, set = 0, binding = 4) readonly buffer Rays {
-    Ray rays[];
-};
-layout(std430, set = 0, binding = 5) writeonly buffer Hits {
-    Hit hits[];
-};
-// Rays whose traversal overflowed the stack or the visit bound.
-layout(std430, set = 0, binding = 6) buffer Status {
-    uint overflow_rays;
-};
-// Per-ray steps (nodes + triangles + cells) for heat maps, when flag bit 1 is set.
-layout(std430, set = 0, binding = 7) writeonly buffer Steps {
-    uint steps_out[];
-};
+#define RBVH_TRACE_IO_BINDING 4
+#include "trace_io.glsl"
 #ifdef RBVH_LOD
 // Per-ray cones (width, spread): see RayCone in src/lod/cone.rs.
 layout(std430, set = 0, binding = 10) readonly buffer Cones {
@@ -46,13 +34,7 @@ void main() {
 #else
     Hit h = rbvh_trace_rbvh(rays[i], (pc.flags & 1u) != 0u, sz, steps, overflow);
 #endif
-    hits[i] = h;
-    if ((pc.flags & 2u) != 0u) {
-        steps_out[i] = steps;
-    }
-    if (overflow) {
-        atomicAdd(overflow_rays, 1u);
-    }
+    rbvh_trace_store(i, pc.flags, h, steps, overflow);
 }
 
 #endif
