@@ -220,3 +220,64 @@ fn translucent_brushes_composite_in_order_on_the_device_as_on_the_cpu() {
     }
     assert_ne!(once, twice);
 }
+
+#[test]
+fn a_painter_sharing_the_tracers_atlas_paints_the_same_and_uploads_only_colours() {
+    let ctx = common::context();
+    let r = cube();
+    let brushes = [
+        Brush::new(Vec3::new(1.0, 1.0, 0.1), 0.3, RED),
+        Brush::new(Vec3::new(-1.0, 0.2, 0.5), 0.4, 0x80FF_0000),
+    ];
+    let mut own = Painter::new(&ctx, &r).unwrap();
+    own.paint(&brushes).unwrap();
+    let expected = own.colours().unwrap();
+    let atlas_bytes = std::mem::size_of_val(r.atlas.texels.as_slice()) as u64;
+    let colour_bytes = 4 * r.atlas.texels.len() as u64;
+    assert_eq!(own.device_bytes(), atlas_bytes + colour_bytes);
+
+    let tracer = Tracer::rbvh(&ctx, &r).unwrap();
+    let mut shared = Painter::sharing(&tracer, &r).unwrap();
+    assert_eq!(shared.device_bytes(), colour_bytes, "no second atlas");
+    shared.paint(&brushes).unwrap();
+    assert_eq!(shared.colours().unwrap(), expected);
+
+    // Recorded into a command buffer, as an engine would.
+    let mut made = None;
+    ctx.submit("recorded shared paint", |_, cmd| {
+        made = Some(
+            Painter::record_sharing(&tracer, &r, cmd).and_then(|(painter, staging)| {
+                let recording = painter.record(cmd, &brushes)?;
+                Ok((painter, staging, recording))
+            }),
+        );
+    })
+    .unwrap();
+    let (mut recorded, staging, recording) = made.unwrap().unwrap();
+    drop((staging, recording));
+    assert_eq!(recorded.colours().unwrap(), expected);
+
+    // The painter keeps the atlas alive after the tracer is gone.
+    drop(tracer);
+    shared.paint(&brushes[..1]).unwrap();
+
+    // A tracer of another RBVH, or of the exact BVH, is refused.
+    let other = Rbvh::build(
+        &Scene::load("cube").unwrap(),
+        &RbvhParams::quality(0).unwrap(),
+    )
+    .unwrap();
+    let e = Painter::sharing(&Tracer::rbvh(&ctx, &other).unwrap(), &r)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("not this RBVH"), "{e}");
+    let exact = Tracer::exact(
+        &ctx,
+        &rbvh::bvh::Bvh::build(&Scene::load("cube").unwrap()).unwrap(),
+    )
+    .unwrap();
+    let e = Painter::sharing(&exact, &r).err().unwrap().to_string();
+    assert!(e.contains("no atlas"), "{e}");
+    ctx.check_validation().unwrap();
+}

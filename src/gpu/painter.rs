@@ -4,12 +4,14 @@
 //! ([`candidate_leaves`]), one invocation per texel of its tile. The rule is that of
 //! [`crate::surface`]'s CPU reference (`Rbvh::paint_cpu`), bit for bit.
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use ash::vk;
 
 use super::pipeline::DescriptorSet;
-use super::{shaders, Buffer, BufferView, ComputePipeline, Context, Reach, Timing};
+use super::{shaders, Buffer, BufferView, ComputePipeline, Context, Reach, Timing, Tracer};
 use crate::rbvh::GpuHeightfield;
 use crate::rbvh::{Rbvh, Texel};
 use crate::surface::{blank_colours, candidate_leaves, Brush};
@@ -103,6 +105,31 @@ fn reach_of(ctx: &Context, atlas: &[Texel], colours: &[u32]) -> Result<Reach> {
     ])
 }
 
+/// The context, shared atlas, colour words and reach of [`Painter::sharing`]: the tracer must hold
+/// `rbvh`'s atlas (same pitch and texel count).
+fn shared_parts(tracer: &Tracer, rbvh: &Rbvh) -> Result<(Context, Arc<Buffer>, Vec<u32>, Reach)> {
+    let Some((atlas, pitch, len)) = tracer.atlas() else {
+        return Err(Error::param(
+            "tracer",
+            "an exact-BVH tracer has no atlas to paint: share an RBVH tracer",
+        ));
+    };
+    if pitch != rbvh.atlas.pitch || len as usize != rbvh.atlas.texels.len() {
+        return Err(Error::param(
+            "tracer",
+            format!(
+                "its atlas ({len} texels, pitch {pitch}) is not this RBVH's ({} texels, pitch {})",
+                rbvh.atlas.texels.len(),
+                rbvh.atlas.pitch
+            ),
+        ));
+    }
+    let (texels, colours) = channel_data(rbvh)?;
+    let ctx = atlas.context().clone();
+    let reach = reach_of(&ctx, &texels, &colours)?;
+    Ok((ctx, atlas.clone(), colours, reach))
+}
+
 /// An RBVH's atlas and colour channel on the device, ready to paint.
 pub struct Painter {
     pipeline: ComputePipeline,
@@ -110,7 +137,8 @@ pub struct Painter {
     /// Device addresses of the atlas and the colours with [`Reach::DeviceAddresses`], else zero.
     addresses: (u64, u64),
     leaves: Vec<GpuHeightfield>,
-    atlas: Buffer,
+    /// Its own upload, or the atlas of the tracer it shares ([`Painter::sharing`]).
+    atlas: Arc<Buffer>,
     colours: Buffer,
     pitch: u32,
     atlas_len: u32,
@@ -124,7 +152,47 @@ impl Painter {
         let reach = reach_of(ctx, &atlas, &colours)?;
         let atlas = ctx.upload_unchecked(ATLAS, bytemuck::cast_slice(&atlas))?;
         let colours = ctx.upload_unchecked(COLOURS, bytemuck::cast_slice(&colours))?;
-        Self::with_buffers(ctx, rbvh, reach, atlas, colours)
+        Self::with_buffers(ctx, rbvh, reach, Arc::new(atlas), colours)
+    }
+
+    /// As [`Painter::new`], painting with the atlas `tracer` (made for `rbvh` by [`Tracer::rbvh`]
+    /// or [`Tracer::rbvh_lod`]) already holds on the device: only the colour channel is uploaded,
+    /// which saves the atlas's size again on the device.
+    pub fn sharing(tracer: &Tracer, rbvh: &Rbvh) -> Result<Painter> {
+        let (ctx, atlas, colours, reach) = shared_parts(tracer, rbvh)?;
+        let colours = ctx.upload_unchecked(COLOURS, bytemuck::cast_slice(&colours))?;
+        Self::with_buffers(&ctx, rbvh, reach, atlas, colours)
+    }
+
+    /// Embedded use: as [`Painter::sharing`], *recording* any staging copy of the colours into
+    /// `cmd` as [`Painter::record_new`] does; the returned staging buffers must live until `cmd`
+    /// has executed.
+    pub fn record_sharing(
+        tracer: &Tracer,
+        rbvh: &Rbvh,
+        cmd: vk::CommandBuffer,
+    ) -> Result<(Painter, Vec<Buffer>)> {
+        let (ctx, atlas, colours, reach) = shared_parts(tracer, rbvh)?;
+        let (colours, staging) =
+            ctx.upload_unchecked_recorded(COLOURS, bytemuck::cast_slice(&colours), cmd)?;
+        if staging.is_some() {
+            ctx.record_transfer_to_compute(cmd);
+        }
+        Ok((
+            Self::with_buffers(&ctx, rbvh, reach, atlas, colours)?,
+            staging.into_iter().collect(),
+        ))
+    }
+
+    /// Bytes this painter holds on the device: the colour channel, and the atlas unless it shares
+    /// a tracer's.
+    pub fn device_bytes(&self) -> u64 {
+        let own_atlas = if Arc::strong_count(&self.atlas) == 1 {
+            self.atlas.size()
+        } else {
+            0
+        };
+        self.colours.size() + own_atlas
     }
 
     /// Embedded use: as [`Painter::new`] with the context's (the engine's) allocator, *recording*
@@ -147,7 +215,7 @@ impl Painter {
             ctx.record_transfer_to_compute(cmd);
         }
         Ok((
-            Self::with_buffers(ctx, rbvh, reach, atlas, colours)?,
+            Self::with_buffers(ctx, rbvh, reach, Arc::new(atlas), colours)?,
             staging,
         ))
     }
@@ -156,7 +224,7 @@ impl Painter {
         ctx: &Context,
         rbvh: &Rbvh,
         reach: Reach,
-        atlas: Buffer,
+        atlas: Arc<Buffer>,
         colours: Buffer,
     ) -> Result<Painter> {
         let (spirv, bindings): (&[u8], &[u32]) = match reach {

@@ -5,6 +5,8 @@
 //! per-ray cones. Each has a `_bda` twin that reads the structure's arrays through buffer device
 //! addresses rather than bindings, for arrays over `maxStorageBufferRange` ([`Reach`]).
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 
 use ash::vk;
@@ -123,11 +125,12 @@ pub struct Tracer {
     ctx: Context,
     reach: Reach,
     pipeline: ComputePipeline,
-    /// The structure's leading arrays, in the shader's binding order.
-    structure: Vec<Buffer>,
+    /// The structure's leading arrays, in the shader's binding order (shared: a [`super::Painter`]
+    /// may paint with the RBVH's atlas).
+    structure: Vec<Arc<Buffer>>,
     /// Level of detail: the LOD records and columns, bound after the per-trace buffers and
     /// followed by the per-ray cones.
-    lod: Option<[Buffer; 2]>,
+    lod: Option<[Arc<Buffer>; 2]>,
     /// Sizes the shader needs (`ray_offset`, `ray_count` and `flags` are set per dispatch).
     sizes: TraceParams,
     /// Staging buffers of recorded uploads ([`Tracer::record_rbvh`]), kept until released.
@@ -323,7 +326,7 @@ impl Tracer {
             };
         let structure = arrays
             .iter()
-            .map(|(array, bytes)| ctx.upload_unchecked(array, bytes))
+            .map(|(array, bytes)| ctx.upload_unchecked(array, bytes).map(Arc::new))
             .collect::<Result<Vec<_>>>()?;
         Self::new(ctx, kind, reach, spirv, structure, sizes)
     }
@@ -340,7 +343,7 @@ impl Tracer {
         let mut staging = Vec::new();
         for (array, bytes) in arrays {
             let (buffer, stage) = ctx.upload_unchecked_recorded(array, bytes, cmd)?;
-            structure.push(buffer);
+            structure.push(Arc::new(buffer));
             staging.extend(stage);
         }
         if !staging.is_empty() {
@@ -458,7 +461,7 @@ impl Tracer {
         kind: Kind,
         reach: Reach,
         spirv: &[u8],
-        mut structure: Vec<Buffer>,
+        mut structure: Vec<Arc<Buffer>>,
         mut sizes: TraceParams,
     ) -> Result<Self> {
         if reach == Reach::DeviceAddresses {
@@ -472,7 +475,7 @@ impl Tracer {
         // after the per-trace buffers.
         let lod = if kind == Kind::RbvhLod {
             let tail = structure.split_off(structure.len().saturating_sub(2));
-            let [records, columns]: [Buffer; 2] = tail
+            let [records, columns]: [Arc<Buffer>; 2] = tail
                 .try_into()
                 .map_err(|_| Error::param("lod", "the LOD trace needs its two arrays"))?;
             Some([records, columns])
@@ -528,8 +531,16 @@ impl Tracer {
         self.structure
             .iter()
             .chain(self.lod.iter().flatten())
-            .map(Buffer::size)
+            .map(|b| b.size())
             .sum()
+    }
+
+    /// The RBVH atlas on the device with its pitch and texel count, for a painter that shares it
+    /// ([`super::Painter::sharing`]); None for the exact BVH.
+    pub(crate) fn atlas(&self) -> Option<(&Arc<Buffer>, u32, u32)> {
+        self.structure
+            .get(3)
+            .map(|b| (b, self.sizes.atlas_pitch, self.sizes.atlas_len))
     }
 
     pub fn trace(&self, rays: &[Ray], query: Query) -> Result<Traced> {

@@ -102,7 +102,7 @@ pub fn run(a: Args) -> Result<()> {
         .count();
     if on_triangles > 0 {
         eprintln!(
-            "warning: {on_triangles} of {} dabs land on triangle leaves, which have no texels:              paint shows only on the height-field surface around them",
+            "warning: {on_triangles} of {} dabs land on triangle leaves, which have no texels: paint shows only on the height-field surface around them",
             dabs.len()
         );
     }
@@ -111,7 +111,7 @@ pub fn run(a: Args) -> Result<()> {
         bail!("painting needs an RBVH");
     };
     let start = Instant::now();
-    let mut painter = Painter::new(&p.ctx, rbvh)?;
+    let mut painter = Painter::sharing(&tracer, rbvh)?;
     let stats = painter.paint(&brushes)?;
     rbvh.colours = Some(painter.colours()?);
     let wall_ms = start.elapsed().as_secs_f64() * 1e3;
