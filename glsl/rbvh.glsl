@@ -368,6 +368,36 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
     bool cut = false;
     bool finished = false;
     uint iter = 0u;
+#ifdef RBVH_LOD
+    // The traversal loop leaves this outer loop to march the columns of a chosen node: the column
+    // march sits outside the traversal loop, which stays as lean as the plain trace's (with a
+    // second march body inside it, the LOD trace cost about 15% more even where nothing was
+    // chosen). Each round marches one chosen node, so the node count bounds the rounds.
+    bool to_columns = false;
+    uint round = 0u;
+    for (; round <= bound; ++round) {
+        if (to_columns) {
+            to_columns = false;
+            vec3 normal;
+            uint columns = 0u;
+            float t = rbvh_lod_march(node & ~RBVH_LOD_BIT, lsz, ray, t_closest, columns, normal);
+            steps += columns;
+            if (t >= 0.0) {
+                t_closest = t;
+                best = Hit(t, normal.x, normal.y, normal.z, RBVH_LEAF_BIT | node, 0u, 0u, 0u);
+                if (any_hit) {
+                    finished = true;
+                    break;
+                }
+            }
+            if (sp == 0u) {
+                finished = true;
+                break;
+            }
+            sp -= 1u;
+            node = stack[sp];
+        }
+#endif
     for (; iter <= bound; ++iter) {
         uint next = RBVH_INVALID;
         if ((node & RBVH_LEAF_BIT) != 0u) {
@@ -385,18 +415,8 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
             }
 #ifdef RBVH_LOD
         } else if ((node & RBVH_LOD_BIT) != 0u) {
-            vec3 normal;
-            uint columns = 0u;
-            float t = rbvh_lod_march(node & ~RBVH_LOD_BIT, lsz, ray, t_closest, columns, normal);
-            steps += columns;
-            if (t >= 0.0) {
-                t_closest = t;
-                best = Hit(t, normal.x, normal.y, normal.z, RBVH_LEAF_BIT | node, 0u, 0u, 0u);
-                if (any_hit) {
-                    finished = true;
-                    break;
-                }
-            }
+            to_columns = true;
+            break;
 #endif
         } else if (node < sz.node_count) {
             if (visits >= sz.node_count) {
@@ -484,6 +504,12 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
         }
         node = next;
     }
+#ifdef RBVH_LOD
+        if (!to_columns) {
+            break;
+        }
+    }
+#endif
     if (cut || (!finished && iter <= bound)) {
         overflow = true;
     }
