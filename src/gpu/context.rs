@@ -580,13 +580,14 @@ fn has_buffer_device_address(instance: &ash::Instance, pd: vk::PhysicalDevice) -
     address.buffer_device_address == vk::TRUE
 }
 
-/// `vkGetBufferDeviceAddress` of `device`: the core command (Vulkan 1.2) or the KHR one, whichever
-/// the device's loader provides.
+/// `vkGetBufferDeviceAddress` of `device`: the KHR command where the extension is enabled (as this
+/// crate's own context does, on a Vulkan 1.1 instance), else the core one (an engine's Vulkan 1.2
+/// device without the extension).
 fn address_function(
     instance: &ash::Instance,
     device: &ash::Device,
 ) -> Option<vk::PFN_vkGetBufferDeviceAddress> {
-    [c"vkGetBufferDeviceAddress", c"vkGetBufferDeviceAddressKHR"]
+    [c"vkGetBufferDeviceAddressKHR", c"vkGetBufferDeviceAddress"]
         .iter()
         .find_map(|name| {
             // SAFETY: both names have the signature of PFN_vkGetBufferDeviceAddress.
