@@ -7,7 +7,6 @@ use glam::Vec3;
 use rbvh::bvh::Bvh;
 use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{Query, Tracer};
-use rbvh::scene::builtin::{self, Analytic};
 use rbvh::scene::Scene;
 
 fn trace_both(name: &str, rays: &[Ray]) -> [Vec<Hit>; 2] {
@@ -24,14 +23,7 @@ fn trace_both(name: &str, rays: &[Ray]) -> [Vec<Hit>; 2] {
 
 #[test]
 fn plane_depth_and_normal_are_exact() {
-    let Some(Analytic::Plane {
-        point,
-        normal,
-        half_extent,
-    }) = builtin::analytic("plane")
-    else {
-        panic!("plane oracle");
-    };
+    let (point, normal, half_extent) = common::plane_oracle();
     let mut rng = common::Rng(3);
     let rays: Vec<Ray> = (0..4096)
         .map(|_| {
@@ -66,14 +58,7 @@ fn plane_depth_and_normal_are_exact() {
 
 #[test]
 fn sphere_depth_and_normal_within_tessellation_error() {
-    let Some(Analytic::Sphere {
-        center,
-        radius,
-        max_chord_error,
-    }) = builtin::analytic("sphere")
-    else {
-        panic!("sphere oracle");
-    };
+    let (center, radius, max_chord_error) = common::sphere_oracle();
     let mut rng = common::Rng(5);
     let rays: Vec<Ray> = (0..4096)
         .map(|_| {

@@ -7,7 +7,6 @@ use glam::Vec3;
 use rbvh::bvh::Bvh;
 use rbvh::geom::Ray;
 use rbvh::rbvh::{Rbvh, RbvhParams, Refinement, Subdivision, HEIGHTFIELD_COUNT};
-use rbvh::scene::builtin::{self, Analytic};
 use rbvh::scene::Scene;
 
 fn q(level: u32) -> RbvhParams {
@@ -48,14 +47,7 @@ fn heightfield_leaf_count(r: &Rbvh) -> usize {
 #[test]
 fn plane_is_one_leaf_with_exact_heights() {
     let scene = Scene::builtin("plane").unwrap();
-    let Some(Analytic::Plane {
-        point,
-        normal,
-        half_extent,
-    }) = builtin::analytic("plane")
-    else {
-        panic!()
-    };
+    let (point, normal, half_extent) = common::plane_oracle();
     let params = RbvhParams {
         max_tile: 4096,
         ..q(2)
@@ -93,14 +85,7 @@ fn plane_is_one_leaf_with_exact_heights() {
 #[test]
 fn sphere_leaves_respect_the_cone_and_height_error_bound() {
     let scene = Scene::builtin("sphere").unwrap();
-    let Some(Analytic::Sphere {
-        center,
-        radius,
-        max_chord_error,
-    }) = builtin::analytic("sphere")
-    else {
-        panic!()
-    };
+    let (center, radius, max_chord_error) = common::sphere_oracle();
     for level in [0, 2, 4] {
         let params = q(level);
         let Refinement::NormalCone { max_angle_deg } = params.refinement else {

@@ -1,12 +1,14 @@
 //! Scene loading through the public API: built-ins and their analytic oracles, OBJ, glTF, GLB
 //! and scene files, the errors users see for broken input, and the camera.
 
+mod common;
+
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 use rbvh::geom::Aabb;
-use rbvh::scene::builtin::{self, Analytic};
+use rbvh::scene::builtin;
 use rbvh::scene::{Camera, Light, Scene};
 use rbvh::Error;
 
@@ -146,14 +148,7 @@ fn builtin_sizes_and_parts() {
 #[test]
 fn plane_matches_its_oracle() {
     let scene = Scene::builtin("plane").unwrap();
-    let Some(Analytic::Plane {
-        point,
-        normal: n,
-        half_extent,
-    }) = builtin::analytic("plane")
-    else {
-        panic!("plane has no plane oracle");
-    };
+    let (point, n, half_extent) = common::plane_oracle();
     for t in 0..scene.triangle_count() {
         let tri = scene.triangle(t);
         assert!(
@@ -172,14 +167,7 @@ fn plane_matches_its_oracle() {
 #[test]
 fn sphere_matches_its_oracle_within_the_computed_chord_error() {
     let scene = Scene::builtin("sphere").unwrap();
-    let Some(Analytic::Sphere {
-        center,
-        radius,
-        max_chord_error,
-    }) = builtin::analytic("sphere")
-    else {
-        panic!("sphere has no sphere oracle");
-    };
+    let (center, radius, max_chord_error) = common::sphere_oracle();
     assert_eq!((center, radius), (Vec3::ZERO, 1.0));
     for p in &scene.positions {
         assert!(

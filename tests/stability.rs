@@ -13,7 +13,6 @@ use rbvh::bvh::{BuildParams, Bvh, STACK_SIZE};
 use rbvh::geom::{intersect_triangle, Hit, Ray, RayShear};
 use rbvh::gpu::{Context, Query, Tracer};
 use rbvh::rbvh::{Rbvh, RbvhParams, Refinement};
-use rbvh::scene::builtin::{self, Analytic};
 use rbvh::scene::Scene;
 use rbvh::Error;
 
@@ -69,18 +68,6 @@ fn assert_well_formed(what: &str, ray: &Ray, h: &Hit) {
     } else {
         assert_eq!(*h, Hit::MISS, "{what}: {ray:?}");
     }
-}
-
-fn sphere_oracle() -> (Vec3, f32, f32) {
-    let Some(Analytic::Sphere {
-        center,
-        radius,
-        max_chord_error,
-    }) = builtin::analytic("sphere")
-    else {
-        panic!("sphere oracle");
-    };
-    (center, radius, max_chord_error)
 }
 
 /// First intersection of the ray `o + t d` with the sphere (`c`, `r`), in f64, in units of `d`.
@@ -373,7 +360,7 @@ fn signed_zero_and_tiny_direction_components_hit_the_analytic_surfaces() {
     }
 
     // --- Sphere.
-    let (center, radius, chord) = sphere_oracle();
+    let (center, radius, chord) = common::sphere_oracle();
     let sphere = Scene::builtin("sphere").unwrap();
     let bvh = Bvh::build(&sphere).unwrap();
     let mut rays = Vec::new();
@@ -574,7 +561,7 @@ fn plane_tiles_do_not_leak_at_seams_samples_or_grazing_angles() {
 #[test]
 fn sphere_silhouettes_and_leaf_seams_hold_their_bounds() {
     let ctx = common::context();
-    let (center, radius, chord) = sphere_oracle();
+    let (center, radius, chord) = common::sphere_oracle();
     let sphere = Scene::builtin("sphere").unwrap();
     let bvh = Bvh::build(&sphere).unwrap();
     let mut rng = common::Rng(31);
@@ -712,7 +699,7 @@ fn placed_errors(rays: &[Ray], truth: &[f64], hits: &[Hit]) -> (f64, usize) {
 #[test]
 fn scale_and_offset_keep_their_bounds_or_degrade_as_measured() {
     let ctx = common::context();
-    let (_, _, chord) = sphere_oracle();
+    let (_, _, chord) = common::sphere_oracle();
     let unit = Scene::builtin("sphere").unwrap();
     let cases = [
         Placement {

@@ -29,6 +29,30 @@ pub fn context_with(addressing: Addressing) -> Context {
     ctx
 }
 
+/// The built-in plane's oracle: a point on it, its normal and its half extent.
+pub fn plane_oracle() -> (glam::Vec3, glam::Vec3, f32) {
+    match rbvh::scene::builtin::analytic("plane") {
+        Some(rbvh::scene::builtin::Analytic::Plane {
+            point,
+            normal,
+            half_extent,
+        }) => (point, normal, half_extent),
+        _ => panic!("the built-in plane has no plane oracle"),
+    }
+}
+
+/// The built-in sphere's oracle: centre, radius and the worst chord error of its tessellation.
+pub fn sphere_oracle() -> (glam::Vec3, f32, f32) {
+    match rbvh::scene::builtin::analytic("sphere") {
+        Some(rbvh::scene::builtin::Analytic::Sphere {
+            center,
+            radius,
+            max_chord_error,
+        }) => (center, radius, max_chord_error),
+        _ => panic!("the built-in sphere has no sphere oracle"),
+    }
+}
+
 /// Deterministic pseudo-random numbers in [0, 1) (SplitMix64), so tests need no RNG crate.
 pub struct Rng(pub u64);
 
