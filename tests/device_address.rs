@@ -197,3 +197,40 @@ fn an_atlas_over_the_storage_buffer_range_is_traced_and_painted_through_device_a
     assert!(painted == *cpu_r.colours.as_ref().unwrap());
     ctx.check_validation().unwrap();
 }
+
+#[test]
+fn arrays_beyond_every_limit_are_refused_before_anything_is_uploaded() {
+    let auto = common::context();
+    let limits = *auto.limits();
+    let past_range = limits.max_storage_buffer_range + 4;
+    let past_allocation = limits.max_memory_allocation_size + 4;
+    assert_eq!(auto.reach(&[("small", 1024)]).unwrap(), Reach::Bindings);
+    assert_eq!(
+        auto.reach(&[("small", 1024), ("big", past_range)]).unwrap(),
+        Reach::DeviceAddresses
+    );
+    let limit_of = |r: rbvh::Result<Reach>| match r {
+        Err(Error::DeviceLimit {
+            resource,
+            limit,
+            required,
+            ..
+        }) => (resource, limit, required),
+        other => panic!("expected a DeviceLimit error, got {other:?}"),
+    };
+    assert_eq!(
+        limit_of(auto.reach(&[("huge", past_allocation)])),
+        (
+            "huge".to_string(),
+            "maxMemoryAllocationSize",
+            past_allocation
+        )
+    );
+    let bound = common::context_with(Addressing::Bindings);
+    let e = bound.reach(&[("big", past_range)]).unwrap_err();
+    assert!(e.to_string().contains("Addressing::Auto"), "{e}");
+    assert_eq!(
+        limit_of(Err(e)),
+        ("big".to_string(), "maxStorageBufferRange", past_range)
+    );
+}
