@@ -332,6 +332,10 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
 
 #ifdef RBVH_LOD
 #include "lod.glsl"
+// What the outer loop of the traversal marches: height-field leaves and chosen nodes.
+#define RBVH_MARCHED_BITS (RBVH_LEAF_BIT | RBVH_LOD_BIT)
+#else
+#define RBVH_MARCHED_BITS RBVH_LEAF_BIT
 #endif
 
 // Nearest-first stack traversal of the RBVH (as rbvh_trace_bvh), testing triangle leaves in place
@@ -368,28 +372,37 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
     bool cut = false;
     bool finished = false;
     uint iter = 0u;
-#ifdef RBVH_LOD
-    // The traversal loop leaves this outer loop to march the columns of a chosen node: the column
-    // march sits outside the traversal loop, which stays as lean as the plain trace's (with a
-    // second march body inside it, the LOD trace cost about 15% more even where nothing was
-    // chosen). Each round marches one chosen node, so the node count bounds the rounds.
-    bool to_columns = false;
+    // "While-while" (Aila & Laine 2009): the inner loop visits inner nodes only and leaves for the
+    // outer loop when it meets a height-field leaf (or, with LOD, a chosen node), which the outer
+    // loop marches before resuming it. On SIMD hardware the heavy march then runs for all lanes
+    // that reached a leaf together, instead of beside node visits in every iteration. Each round
+    // marches one leaf or chosen node, so the node and leaf counts bound the rounds too.
+    uint pending = RBVH_INVALID;
     uint round = 0u;
     for (; round <= bound; ++round) {
-        if (to_columns) {
-            to_columns = false;
+        if (pending != RBVH_INVALID) {
             vec3 normal;
-            uint columns = 0u;
-            float t = rbvh_lod_march(node & ~RBVH_LOD_BIT, lsz, ray, t_closest, columns, normal);
-            steps += columns;
+            uint cells = 0u;
+            float t;
+#ifdef RBVH_LOD
+            if ((pending & RBVH_LOD_BIT) != 0u) {
+                t = rbvh_lod_march(pending & ~(RBVH_LEAF_BIT | RBVH_LOD_BIT), lsz, ray, t_closest,
+                                   cells, normal);
+            } else
+#endif
+            {
+                t = rbvh_march(pending & ~RBVH_LEAF_BIT, sz, ray, t_closest, cells, normal, cut);
+            }
+            steps += cells;
             if (t >= 0.0) {
                 t_closest = t;
-                best = Hit(t, normal.x, normal.y, normal.z, RBVH_LEAF_BIT | node, 0u, 0u, 0u);
+                best = Hit(t, normal.x, normal.y, normal.z, RBVH_LEAF_BIT | pending, 0u, 0u, 0u);
                 if (any_hit) {
                     finished = true;
                     break;
                 }
             }
+            pending = RBVH_INVALID;
             if (sp == 0u) {
                 finished = true;
                 break;
@@ -397,120 +410,105 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
             sp -= 1u;
             node = stack[sp];
         }
-#endif
-    for (; iter <= bound; ++iter) {
-        uint next = RBVH_INVALID;
-        if ((node & RBVH_LEAF_BIT) != 0u) {
-            vec3 normal;
-            uint cells = 0u;
-            float t = rbvh_march(node & ~RBVH_LEAF_BIT, sz, ray, t_closest, cells, normal, cut);
-            steps += cells;
-            if (t >= 0.0) {
-                t_closest = t;
-                best = Hit(t, normal.x, normal.y, normal.z, node, 0u, 0u, 0u);
-                if (any_hit) {
+        for (; iter <= bound; ++iter) {
+            uint next = RBVH_INVALID;
+            if ((node & RBVH_MARCHED_BITS) != 0u) {
+                pending = node;
+                break;
+            }
+            if (node < sz.node_count) {
+                if (visits >= sz.node_count) {
+                    overflow = true;
                     finished = true;
                     break;
                 }
-            }
-#ifdef RBVH_LOD
-        } else if ((node & RBVH_LOD_BIT) != 0u) {
-            to_columns = true;
-            break;
-#endif
-        } else if (node < sz.node_count) {
-            if (visits >= sz.node_count) {
-                overflow = true;
-                finished = true;
-                break;
-            }
-            visits += 1u;
-            steps += 1u;
-            BvhNode n = RBVH_BVH_NODE(node);
-            float ta;
-            float tb;
-            bool ha = rbvh_intersect_box(n.a_min, n.a_max, ray.origin, inv_dir, ray.tmin, t_closest, ta);
-            bool hb = rbvh_intersect_box(n.b_min, n.b_max, ray.origin, inv_dir, ray.tmin, t_closest, tb);
-            bool b_first = ha && hb && tb < ta;
-            bool done = false;
-            int k = 0;
-            for (; k < 2; ++k) {
-                bool use_b = (k == 0) == b_first;
-                bool h = use_b ? hb : ha;
-                float t_entry = use_b ? tb : ta;
-                uint child = use_b ? n.b_child : n.a_child;
-                uint count = use_b ? n.b_count : n.a_count;
-                if (!h || t_entry > t_closest) {
-                    continue;
-                }
-                if ((child & RBVH_LEAF_BIT) == 0u || count == RBVH_HEIGHTFIELD_COUNT) {
-#ifdef RBVH_LOD
-                    // The LOD trace's tree carries an inner child's column width in its `count`
-                    // (Lod::annotated_nodes), so choosing needs no further read.
-                    if ((child & RBVH_LEAF_BIT) == 0u &&
-                        rbvh_lod_selects(uintBitsToFloat(count), cone, t_entry)) {
-                        child |= RBVH_LOD_BIT;
+                visits += 1u;
+                steps += 1u;
+                BvhNode n = RBVH_BVH_NODE(node);
+                float ta;
+                float tb;
+                bool ha = rbvh_intersect_box(n.a_min, n.a_max, ray.origin, inv_dir, ray.tmin, t_closest, ta);
+                bool hb = rbvh_intersect_box(n.b_min, n.b_max, ray.origin, inv_dir, ray.tmin, t_closest, tb);
+                bool b_first = ha && hb && tb < ta;
+                bool done = false;
+                int k = 0;
+                for (; k < 2; ++k) {
+                    bool use_b = (k == 0) == b_first;
+                    bool h = use_b ? hb : ha;
+                    float t_entry = use_b ? tb : ta;
+                    uint child = use_b ? n.b_child : n.a_child;
+                    uint count = use_b ? n.b_count : n.a_count;
+                    if (!h || t_entry > t_closest) {
+                        continue;
                     }
+                    if ((child & RBVH_LEAF_BIT) == 0u || count == RBVH_HEIGHTFIELD_COUNT) {
+#ifdef RBVH_LOD
+                        // The LOD trace's tree carries an inner child's column width in its `count`
+                        // (Lod::annotated_nodes), so choosing needs no further read.
+                        if ((child & RBVH_LEAF_BIT) == 0u &&
+                            rbvh_lod_selects(uintBitsToFloat(count), cone, t_entry)) {
+                            child |= RBVH_LOD_BIT;
+                        }
 #endif
-                    if (next == RBVH_INVALID) {
-                        next = child;
-                    } else if (sp < RBVH_STACK_SIZE) {
-                        stack[sp] = child;
-                        sp += 1u;
+                        if (next == RBVH_INVALID) {
+                            next = child;
+                        } else if (sp < RBVH_STACK_SIZE) {
+                            stack[sp] = child;
+                            sp += 1u;
+                        } else {
+                            overflow = true;
+                        }
                     } else {
-                        overflow = true;
-                    }
-                } else {
-                    uint first = child & ~RBVH_LEAF_BIT;
-                    uint end = min(first + count, sz.tri_count);
-                    uint slot = first;
-                    for (; slot < end; ++slot) {
-                        steps += 1u;
-                        BvhTriangle tri = RBVH_BVH_TRIANGLE(slot);
-                        float t = rbvh_intersect_triangle(sh, tri.v0, tri.v1, tri.v2, ray.tmin, t_closest);
-                        if (t >= 0.0) {
-                            t_closest = t;
-                            vec3 nrm = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
-                            best = Hit(t, nrm.x, nrm.y, nrm.z, tri.prim, 0u, 0u, 0u);
-                            if (any_hit) {
-                                done = true;
-                                break;
+                        uint first = child & ~RBVH_LEAF_BIT;
+                        uint end = min(first + count, sz.tri_count);
+                        uint slot = first;
+                        for (; slot < end; ++slot) {
+                            steps += 1u;
+                            BvhTriangle tri = RBVH_BVH_TRIANGLE(slot);
+                            float t = rbvh_intersect_triangle(sh, tri.v0, tri.v1, tri.v2, ray.tmin, t_closest);
+                            if (t >= 0.0) {
+                                t_closest = t;
+                                vec3 nrm = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
+                                best = Hit(t, nrm.x, nrm.y, nrm.z, tri.prim, 0u, 0u, 0u);
+                                if (any_hit) {
+                                    done = true;
+                                    break;
+                                }
                             }
                         }
-                    }
-                    if (done) {
-                        break;
-                    }
-                    if (slot < end) {
-                        cut = true;
+                        if (done) {
+                            break;
+                        }
+                        if (slot < end) {
+                            cut = true;
+                        }
                     }
                 }
+                if (done) {
+                    finished = true;
+                    break;
+                }
+                if (k < 2) {
+                    cut = true;
+                }
             }
-            if (done) {
-                finished = true;
-                break;
+            if (next == RBVH_INVALID) {
+                if (sp == 0u) {
+                    finished = true;
+                    break;
+                }
+                sp -= 1u;
+                next = stack[sp];
             }
-            if (k < 2) {
-                cut = true;
-            }
+            node = next;
         }
-        if (next == RBVH_INVALID) {
-            if (sp == 0u) {
-                finished = true;
-                break;
-            }
-            sp -= 1u;
-            next = stack[sp];
-        }
-        node = next;
-    }
-#ifdef RBVH_LOD
-        if (!to_columns) {
+        if (pending == RBVH_INVALID) {
             break;
         }
     }
-#endif
-    if (cut || (!finished && iter <= bound)) {
+    // Every normal ending (an empty stack, an any-hit, a visit bound) sets `finished`; a loop the
+    // device cut short, or bounds run out, does not.
+    if (cut || !finished) {
         overflow = true;
     }
     return best;

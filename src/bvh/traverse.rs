@@ -44,46 +44,51 @@ impl Bvh {
         let shear = RayShear::new(ray);
         let mut t_closest = ray.tmax;
         let mut best = None;
-        let mut stack = [0u32; STACK_SIZE as usize];
+        // Children as (reference, count); leaves are pushed and popped like inner nodes and
+        // tested when they come up, in the order of glsl/bvh.glsl's "while-while" traversal.
+        let mut stack = [(0u32, 0u32); STACK_SIZE as usize];
         let mut sp = 0usize;
-        let mut node = 0u32;
+        let mut node = (0u32, 0u32);
         loop {
-            stats.nodes += 1;
-            let children = self.nodes[node as usize].children();
-            let entry = |c: &ChildRef| c.bounds.intersect(origin, inv_dir, ray.tmin, t_closest);
-            let (ta, tb) = (entry(&children[0]), entry(&children[1]));
-            // Nearest child first; `b` only goes first when strictly nearer (same rule as GLSL).
-            let order = match (ta, tb) {
-                (Some(a), Some(b)) if b < a => [1, 0],
-                _ => [0, 1],
-            };
+            let (reference, count) = node;
             let mut next = None;
-            for k in order {
-                let c = &children[k];
-                let Some(t_entry) = [ta, tb][k] else { continue };
-                if t_entry > t_closest {
-                    continue;
-                }
-                if c.child & LEAF_BIT != 0 {
-                    let first = (c.child & !LEAF_BIT) as usize;
-                    for slot in first..first + c.count as usize {
-                        stats.triangles += 1;
-                        let [a, b, c] = self.triangles[slot].vertices();
-                        if let Some(t) = intersect_triangle(&shear, a, b, c, ray.tmin, t_closest) {
-                            t_closest = t;
-                            best = Some(slot);
-                            if any_hit {
-                                return (self.hit(slot, t_closest), stats);
-                            }
+            if reference & LEAF_BIT != 0 {
+                let first = (reference & !LEAF_BIT) as usize;
+                for slot in first..first + count as usize {
+                    stats.triangles += 1;
+                    let [a, b, c] = self.triangles[slot].vertices();
+                    if let Some(t) = intersect_triangle(&shear, a, b, c, ray.tmin, t_closest) {
+                        t_closest = t;
+                        best = Some(slot);
+                        if any_hit {
+                            return (self.hit(slot, t_closest), stats);
                         }
                     }
-                } else if next.is_none() {
-                    next = Some(c.child);
-                } else if sp < STACK_SIZE as usize {
-                    stack[sp] = c.child;
-                    sp += 1;
-                } else {
-                    stats.overflow = true;
+                }
+            } else {
+                stats.nodes += 1;
+                let children = self.nodes[reference as usize].children();
+                let entry = |c: &ChildRef| c.bounds.intersect(origin, inv_dir, ray.tmin, t_closest);
+                let (ta, tb) = (entry(&children[0]), entry(&children[1]));
+                // Nearest child first; `b` only goes first when strictly nearer (same rule as GLSL).
+                let order = match (ta, tb) {
+                    (Some(a), Some(b)) if b < a => [1, 0],
+                    _ => [0, 1],
+                };
+                for k in order {
+                    let c = &children[k];
+                    let Some(t_entry) = [ta, tb][k] else { continue };
+                    if t_entry > t_closest {
+                        continue;
+                    }
+                    if next.is_none() {
+                        next = Some((c.child, c.count));
+                    } else if sp < STACK_SIZE as usize {
+                        stack[sp] = (c.child, c.count);
+                        sp += 1;
+                    } else {
+                        stats.overflow = true;
+                    }
                 }
             }
             node = match next {
