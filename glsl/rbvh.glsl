@@ -340,9 +340,9 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
 
 // Nearest-first stack traversal of the RBVH (as rbvh_trace_bvh), testing triangle leaves in place
 // and treating height-field leaves like inner nodes: they take the same near-first/stack path and
-// are marched when they come up. One march call site at the top of the loop, instead of one
-// inside the per-child loop, keeps the traversal lean: inlined there, the march's registers
-// weighed on every node visit (4x slower traversal on lavapipe). Height-field hits report
+// are marched when they come up, by one march call site in the outer loop of a "while-while"
+// traversal (see below). Inlined in the per-child loop instead, the march's registers weighed on
+// every node visit (4x slower traversal on lavapipe). Height-field hits report
 // id = LEAF_BIT | leaf index.
 //
 // With RBVH_LOD (src/lod, src/rbvh/march.rs): an inner child whose coarse representation the ray's
