@@ -338,11 +338,11 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
 #define RBVH_MARCHED_BITS RBVH_LEAF_BIT
 #endif
 
-// Nearest-first stack traversal of the RBVH (as rbvh_trace_bvh), testing triangle leaves in place
-// and treating height-field leaves like inner nodes: they take the same near-first/stack path and
-// are marched when they come up, by one march call site in the outer loop of a "while-while"
-// traversal (see below). Inlined in the per-child loop instead, the march's registers weighed on
-// every node visit (4x slower traversal on lavapipe). Height-field hits report
+// Nearest-first stack traversal of the RBVH (as rbvh_trace_bvh): leaves of both kinds take the
+// same near-first/stack path as inner nodes and are marched (height fields) or tested (triangle
+// leaves) when they come up, in the outer loop of a "while-while" traversal (see below).
+// Inlined in the per-child loop instead, the march's registers weighed on every node visit (4x
+// slower traversal on lavapipe), and so, less, did the triangle tests. Height-field hits report
 // id = LEAF_BIT | leaf index.
 //
 // With RBVH_LOD (src/lod, src/rbvh/march.rs): an inner child whose coarse representation the ray's
@@ -373,33 +373,67 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
     bool finished = false;
     uint iter = 0u;
     // "While-while" (Aila & Laine 2009): the inner loop visits inner nodes only and leaves for the
-    // outer loop when it meets a height-field leaf (or, with LOD, a chosen node), which the outer
-    // loop marches before resuming it. On SIMD hardware the heavy march then runs for all lanes
+    // outer loop when it meets a leaf (or, with LOD, a chosen node), which the outer loop marches
+    // or tests before resuming it. On SIMD hardware the heavy march then runs for all lanes
     // that reached a leaf together, instead of beside node visits in every iteration. Each round
     // marches one leaf or chosen node, so the node and leaf counts bound the rounds too.
+    // Each stack entry is a child reference with its count (a triangle leaf's triangles).
+    uint stack_count[RBVH_STACK_SIZE];
+    uint count_of_node = 0u;
     uint pending = RBVH_INVALID;
+    uint pending_count = 0u;
     uint round = 0u;
     for (; round <= bound; ++round) {
         if (pending != RBVH_INVALID) {
-            vec3 normal;
-            uint cells = 0u;
-            float t;
-#ifdef RBVH_LOD
-            if ((pending & RBVH_LOD_BIT) != 0u) {
-                t = rbvh_lod_march(pending & ~(RBVH_LEAF_BIT | RBVH_LOD_BIT), lsz, ray, t_closest,
-                                   cells, normal);
-            } else
-#endif
-            {
-                t = rbvh_march(pending & ~RBVH_LEAF_BIT, sz, ray, t_closest, cells, normal, cut);
-            }
-            steps += cells;
-            if (t >= 0.0) {
-                t_closest = t;
-                best = Hit(t, normal.x, normal.y, normal.z, RBVH_LEAF_BIT | pending, 0u, 0u, 0u);
-                if (any_hit) {
+            bool triangles = (pending & RBVH_MARCHED_BITS) == RBVH_LEAF_BIT &&
+                             pending_count != RBVH_HEIGHTFIELD_COUNT;
+            if (triangles) {
+                uint first = pending & ~RBVH_LEAF_BIT;
+                uint end = min(first + pending_count, sz.tri_count);
+                uint slot = first;
+                bool found = false;
+                for (; slot < end; ++slot) {
+                    steps += 1u;
+                    BvhTriangle tri = RBVH_BVH_TRIANGLE(slot);
+                    float t = rbvh_intersect_triangle(sh, tri.v0, tri.v1, tri.v2, ray.tmin, t_closest);
+                    if (t >= 0.0) {
+                        t_closest = t;
+                        vec3 nrm = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
+                        best = Hit(t, nrm.x, nrm.y, nrm.z, tri.prim, 0u, 0u, 0u);
+                        if (any_hit) {
+                            found = true;
+                            break;
+                        }
+                    }
+                }
+                if (found) {
                     finished = true;
                     break;
+                }
+                if (slot < end) {
+                    cut = true;
+                }
+            } else {
+                vec3 normal;
+                uint cells = 0u;
+                float t;
+#ifdef RBVH_LOD
+                if ((pending & RBVH_LOD_BIT) != 0u) {
+                    t = rbvh_lod_march(pending & ~(RBVH_LEAF_BIT | RBVH_LOD_BIT), lsz, ray,
+                                       t_closest, cells, normal);
+                } else
+#endif
+                {
+                    t = rbvh_march(pending & ~RBVH_LEAF_BIT, sz, ray, t_closest, cells, normal, cut);
+                }
+                steps += cells;
+                if (t >= 0.0) {
+                    t_closest = t;
+                    best = Hit(t, normal.x, normal.y, normal.z, RBVH_LEAF_BIT | pending, 0u, 0u, 0u);
+                    if (any_hit) {
+                        finished = true;
+                        break;
+                    }
                 }
             }
             pending = RBVH_INVALID;
@@ -409,11 +443,14 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
             }
             sp -= 1u;
             node = stack[sp];
+            count_of_node = stack_count[sp];
         }
         for (; iter <= bound; ++iter) {
             uint next = RBVH_INVALID;
+            uint next_count = 0u;
             if ((node & RBVH_MARCHED_BITS) != 0u) {
                 pending = node;
+                pending_count = count_of_node;
                 break;
             }
             if (node < sz.node_count) {
@@ -430,7 +467,6 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
                 bool ha = rbvh_intersect_box(n.a_min, n.a_max, ray.origin, inv_dir, ray.tmin, t_closest, ta);
                 bool hb = rbvh_intersect_box(n.b_min, n.b_max, ray.origin, inv_dir, ray.tmin, t_closest, tb);
                 bool b_first = ha && hb && tb < ta;
-                bool done = false;
                 int k = 0;
                 for (; k < 2; ++k) {
                     bool use_b = (k == 0) == b_first;
@@ -441,52 +477,24 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
                     if (!h || t_entry > t_closest) {
                         continue;
                     }
-                    if ((child & RBVH_LEAF_BIT) == 0u || count == RBVH_HEIGHTFIELD_COUNT) {
 #ifdef RBVH_LOD
-                        // The LOD trace's tree carries an inner child's column width in its `count`
-                        // (Lod::annotated_nodes), so choosing needs no further read.
-                        if ((child & RBVH_LEAF_BIT) == 0u &&
-                            rbvh_lod_selects(uintBitsToFloat(count), cone, t_entry)) {
-                            child |= RBVH_LOD_BIT;
-                        }
-#endif
-                        if (next == RBVH_INVALID) {
-                            next = child;
-                        } else if (sp < RBVH_STACK_SIZE) {
-                            stack[sp] = child;
-                            sp += 1u;
-                        } else {
-                            overflow = true;
-                        }
-                    } else {
-                        uint first = child & ~RBVH_LEAF_BIT;
-                        uint end = min(first + count, sz.tri_count);
-                        uint slot = first;
-                        for (; slot < end; ++slot) {
-                            steps += 1u;
-                            BvhTriangle tri = RBVH_BVH_TRIANGLE(slot);
-                            float t = rbvh_intersect_triangle(sh, tri.v0, tri.v1, tri.v2, ray.tmin, t_closest);
-                            if (t >= 0.0) {
-                                t_closest = t;
-                                vec3 nrm = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
-                                best = Hit(t, nrm.x, nrm.y, nrm.z, tri.prim, 0u, 0u, 0u);
-                                if (any_hit) {
-                                    done = true;
-                                    break;
-                                }
-                            }
-                        }
-                        if (done) {
-                            break;
-                        }
-                        if (slot < end) {
-                            cut = true;
-                        }
+                    // The LOD trace's tree carries an inner child's column width in its `count`
+                    // (Lod::annotated_nodes), so choosing needs no further read.
+                    if ((child & RBVH_LEAF_BIT) == 0u &&
+                        rbvh_lod_selects(uintBitsToFloat(count), cone, t_entry)) {
+                        child |= RBVH_LOD_BIT;
                     }
-                }
-                if (done) {
-                    finished = true;
-                    break;
+#endif
+                    if (next == RBVH_INVALID) {
+                        next = child;
+                        next_count = count;
+                    } else if (sp < RBVH_STACK_SIZE) {
+                        stack[sp] = child;
+                        stack_count[sp] = count;
+                        sp += 1u;
+                    } else {
+                        overflow = true;
+                    }
                 }
                 if (k < 2) {
                     cut = true;
@@ -499,8 +507,10 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
                 }
                 sp -= 1u;
                 next = stack[sp];
+                next_count = stack_count[sp];
             }
             node = next;
+            count_of_node = next_count;
         }
         if (pending == RBVH_INVALID) {
             break;

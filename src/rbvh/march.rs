@@ -129,12 +129,41 @@ impl Rbvh {
         let shear = RayShear::new(ray);
         let mut t_closest = ray.tmax;
         let mut best = Hit::MISS;
-        let mut stack = [0u32; STACK_SIZE as usize];
+        // Children as (reference, count): leaves of both kinds are pushed and popped like inner
+        // nodes and handled when they come up, in the order of glsl/rbvh.glsl's "while-while"
+        // traversal.
+        let mut stack = [(0u32, 0u32); STACK_SIZE as usize];
         let mut sp = 0usize;
-        let mut node = 0u32;
+        let mut entry = (0u32, 0u32);
         loop {
+            let (node, count) = entry;
             let mut next = None;
-            if node & LEAF_BIT != 0 {
+            if node & LEAF_BIT != 0 && count != HEIGHTFIELD_COUNT {
+                // A triangle leaf (hybrid RBVH): tested exactly.
+                let first = (node & !LEAF_BIT) as usize;
+                let end = first
+                    .saturating_add(count as usize)
+                    .min(self.triangles.len());
+                for slot in first..end {
+                    let Some(tri) = self.triangles.get(slot) else {
+                        break;
+                    };
+                    stats.triangles += 1;
+                    let [a, b, v2] = tri.vertices();
+                    if let Some(t) = intersect_triangle(&shear, a, b, v2, ray.tmin, t_closest) {
+                        t_closest = t;
+                        best = Hit {
+                            t,
+                            normal: tri.normal().to_array(),
+                            id: tri.prim,
+                            reserved: [0; 3],
+                        };
+                        if any_hit {
+                            return (best, stats);
+                        }
+                    }
+                }
+            } else if node & LEAF_BIT != 0 {
                 // A height-field leaf that came up from the near-first order or the stack.
                 let leaf = node & !LEAF_BIT;
                 if let Some((t, normal)) = self.march(leaf, ray, t_closest, &mut stats) {
@@ -179,8 +208,8 @@ impl Rbvh {
                 }
                 stats.nodes += 1;
                 let children = gpu_node.children();
-                let entry = |c: &ChildRef| c.bounds.intersect(origin, inv_dir, ray.tmin, t_closest);
-                let (ta, tb) = (entry(&children[0]), entry(&children[1]));
+                let enter = |c: &ChildRef| c.bounds.intersect(origin, inv_dir, ray.tmin, t_closest);
+                let (ta, tb) = (enter(&children[0]), enter(&children[1]));
                 // Nearest child first; `b` only goes first when strictly nearer (as in the BVH).
                 let order = match (ta, tb) {
                     (Some(a), Some(b)) if b < a => [1, 0],
@@ -192,54 +221,26 @@ impl Rbvh {
                     if t_entry > t_closest {
                         continue;
                     }
-                    if c.child & LEAF_BIT == 0 || c.count == HEIGHTFIELD_COUNT {
-                        // Inner nodes and height-field leaves take the near-first/stack path; a
-                        // leaf is marched when it comes up (see `glsl/rbvh.glsl` for why).
-                        let coarse = c.child & LEAF_BIT == 0
-                            && lod.is_some_and(|(l, cone)| {
-                                l.nodes
-                                    .get(c.child as usize)
-                                    .is_some_and(|r| selects(r.texel_size, cone, t_entry))
-                            });
-                        let entry = if coarse { LOD_BIT | c.child } else { c.child };
-                        if next.is_none() {
-                            next = Some(entry);
-                        } else if sp < STACK_SIZE as usize {
-                            stack[sp] = entry;
-                            sp += 1;
-                        } else {
-                            stats.overflow = true;
-                        }
+                    // Inner nodes and leaves alike take the near-first/stack path; a leaf is
+                    // marched or tested when it comes up (see `glsl/rbvh.glsl` for why).
+                    let coarse = c.child & LEAF_BIT == 0
+                        && lod.is_some_and(|(l, cone)| {
+                            l.nodes
+                                .get(c.child as usize)
+                                .is_some_and(|r| selects(r.texel_size, cone, t_entry))
+                        });
+                    let child = if coarse { LOD_BIT | c.child } else { c.child };
+                    if next.is_none() {
+                        next = Some((child, c.count));
+                    } else if sp < STACK_SIZE as usize {
+                        stack[sp] = (child, c.count);
+                        sp += 1;
                     } else {
-                        let first = (c.child & !LEAF_BIT) as usize;
-                        let end = first
-                            .saturating_add(c.count as usize)
-                            .min(self.triangles.len());
-                        for slot in first..end {
-                            let Some(tri) = self.triangles.get(slot) else {
-                                break;
-                            };
-                            stats.triangles += 1;
-                            let [a, b, v2] = tri.vertices();
-                            if let Some(t) =
-                                intersect_triangle(&shear, a, b, v2, ray.tmin, t_closest)
-                            {
-                                t_closest = t;
-                                best = Hit {
-                                    t,
-                                    normal: tri.normal().to_array(),
-                                    id: tri.prim,
-                                    reserved: [0; 3],
-                                };
-                                if any_hit {
-                                    return (best, stats);
-                                }
-                            }
-                        }
+                        stats.overflow = true;
                     }
                 }
             }
-            node = match next {
+            entry = match next {
                 Some(n) => n,
                 None if sp > 0 => {
                     sp -= 1;
