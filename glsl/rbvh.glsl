@@ -251,6 +251,26 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     // The walk of march.rs with one cell test per iteration: a main cell, then (when the ray passes
     // a grid vertex too closely to resolve) the extra cell across it, then the step. A single call
     // site keeps the inlined cell test — the bulk of the shader — from being duplicated.
+    // Block jumps (src/rbvh/ranges.rs): the tile's corner in the atlas, and the blocks' height
+    // ranges after the texels.
+    // (The builder's pitch is a power of two, which spares the divisions; a loaded file's need
+    // not be.)
+    uint tile_u;
+    uint tile_v;
+    uint rows;
+    if ((sz.atlas_pitch & (sz.atlas_pitch - 1u)) == 0u) {
+        uint shift = uint(findLSB(sz.atlas_pitch));
+        tile_u = leaf.atlas_base & (sz.atlas_pitch - 1u);
+        tile_v = leaf.atlas_base >> shift;
+        rows = sz.atlas_len >> shift;
+    } else {
+        tile_u = leaf.atlas_base % sz.atlas_pitch;
+        tile_v = leaf.atlas_base / sz.atlas_pitch;
+        rows = sz.atlas_len / sz.atlas_pitch;
+    }
+    uint block_pitch = (sz.atlas_pitch + 7u) >> 3;
+    uint block_count = ((rows + 7u) >> 3) * block_pitch;
+    uint checked_block = 0xFFFFFFFFu;
     float t_in = t0;
     int tci = ci;
     int tcj = cj;
@@ -261,12 +281,69 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     bool stopped = false;
     uint n = 0u;
     for (; n < 2u * max_steps; ++n) {
-        float t_out = min(min(next_i, next_j), t1);
         if (!is_extra) {
             if (t_in > t1) {
                 stopped = true;
                 break;
             }
+            // On entering a block: if the ray passes wholly above or below its height range
+            // (with the cell test's slack), none of its cells can be hit, and the walk moves
+            // straight to the block's exit cell, as it would reach it cell by cell.
+            uint ax = tile_u + uint(ci);
+            uint ay = tile_v + uint(cj);
+            uint block = (ay >> 3) * block_pitch + (ax >> 3);
+            if (block != checked_block && block < block_count) {
+                checked_block = block;
+                int i0 = int(ax & ~7u) - int(tile_u);
+                int j0 = int(ay & ~7u) - int(tile_v);
+                int edge_i = step_i > 0 ? min(i0 + 7, last_i) : max(i0, 0);
+                int edge_j = step_j > 0 ? min(j0 + 7, last_j) : max(j0, 0);
+                float leave_i = rbvh_boundary_t(edge_i, step_i, o.x, inv.x);
+                float leave_j = rbvh_boundary_t(edge_j, step_j, o.y, inv.y);
+                uint range = RBVH_ATLAS(sz.atlas_len + block);
+                uint code_lo = range & 0xFFFFu;
+                uint code_hi = range >> 16;
+                precise float lo_s = float(code_lo) * leaf.h_scale - slack;
+                precise float hi_s = float(code_hi) * leaf.h_scale + slack;
+                float h_a = rbvh_height_at(o.z, d.z, t_in);
+                float h_b = rbvh_height_at(o.z, d.z, min(min(leave_i, leave_j), t1));
+                if (code_lo > code_hi || max(h_a, h_b) < lo_s || min(h_a, h_b) > hi_s) {
+                    if (t1 < min(leave_i, leave_j)) {
+                        stopped = true;
+                        break;
+                    }
+                    float t_last = t_in;
+                    if (leave_i <= leave_j) {
+                        // Leaving through the i side (first on a tie, as the walk steps i first):
+                        // the j steps before it, then the step into the edge column.
+                        for (int m = 0; m < 8 && step_j != 0 && next_j < leave_i; ++m) {
+                            t_last = next_j;
+                            cj += step_j;
+                            next_j = rbvh_boundary_t(cj, step_j, o.y, inv.y);
+                        }
+                        if (ci != edge_i) {
+                            t_last = max(t_last, rbvh_boundary_t(edge_i - step_i, step_i, o.x, inv.x));
+                            ci = edge_i;
+                            next_i = leave_i;
+                        }
+                    } else {
+                        for (int m = 0; m < 8 && step_i != 0 && next_i <= leave_j; ++m) {
+                            t_last = next_i;
+                            ci += step_i;
+                            next_i = rbvh_boundary_t(ci, step_i, o.x, inv.x);
+                        }
+                        if (cj != edge_j) {
+                            t_last = max(t_last, rbvh_boundary_t(edge_j - step_j, step_j, o.y, inv.y));
+                            cj = edge_j;
+                            next_j = leave_j;
+                        }
+                    }
+                    t_in = t_last;
+                }
+            }
+        }
+        float t_out = min(min(next_i, next_j), t1);
+        if (!is_extra) {
             tci = ci;
             tcj = cj;
             ta = t_in;

@@ -181,8 +181,10 @@ fn exact_parts(bvh: &Bvh) -> (TraceParams, Arrays<'_, 2>) {
     (sizes, arrays)
 }
 
-/// The shader sizes and the arrays (name, bytes) of an RBVH, in binding order.
-fn rbvh_parts(rbvh: &Rbvh) -> Result<(TraceParams, Arrays<'_, 4>)> {
+/// The shader sizes and the arrays (name, bytes) of an RBVH, in binding order; `atlas_words` is
+/// its atlas as the shaders read it ([`crate::rbvh::Atlas::device_words`]: texels, then the
+/// blocks' height ranges).
+fn rbvh_parts<'a>(rbvh: &'a Rbvh, atlas_words: &'a [u32]) -> Result<(TraceParams, Arrays<'a, 4>)> {
     let count = |what: &str, n: usize| {
         u32::try_from(n).map_err(|_| Error::param("rbvh", format!("{n} {what}: more than 2^32")))
     };
@@ -201,7 +203,7 @@ fn rbvh_parts(rbvh: &Rbvh) -> Result<(TraceParams, Arrays<'_, 4>)> {
             "RBVH height-field leaves",
             bytemuck::cast_slice(&rbvh.leaves),
         ),
-        ("RBVH atlas", bytemuck::cast_slice(&rbvh.atlas.texels)),
+        ("RBVH atlas", bytemuck::cast_slice(atlas_words)),
     ];
     Ok((sizes, arrays))
 }
@@ -213,11 +215,12 @@ type Arrays<'a, const N: usize> = [(&'static str, &'a [u8]); N];
 /// RBVH's, with `nodes` ([`Lod::annotated_nodes`]) for its nodes, then the LOD records and columns.
 fn lod_parts<'a>(
     rbvh: &'a Rbvh,
+    atlas_words: &'a [u32],
     lod: &'a Lod,
     nodes: &'a [crate::bvh::GpuNode],
 ) -> Result<(TraceParams, Arrays<'a, 6>)> {
     lod.check_for(rbvh)?;
-    let (mut sizes, [_, tris, leaves, atlas]) = rbvh_parts(rbvh)?;
+    let (mut sizes, [_, tris, leaves, atlas]) = rbvh_parts(rbvh, atlas_words)?;
     sizes.lod_node_count = lod.nodes.len() as u32;
     sizes.lod_texel_len = u32::try_from(lod.texels.len())
         .map_err(|_| Error::param("lod", "more than 2^32 column words"))?;
@@ -246,7 +249,8 @@ impl Tracer {
     /// Uploads an RBVH: nodes, triangle-leaf triangles, height-field leaves and the atlas.
     pub fn rbvh(ctx: &Context, rbvh: &Rbvh) -> Result<Self> {
         check_depth("rbvh", rbvh.depth)?;
-        let (sizes, arrays) = rbvh_parts(rbvh)?;
+        let words = rbvh.atlas.device_words();
+        let (sizes, arrays) = rbvh_parts(rbvh, &words)?;
         Self::uploaded(ctx, Kind::Rbvh, None, &arrays, sizes)
     }
 
@@ -255,7 +259,8 @@ impl Tracer {
     /// Fails where the RBVH must be reached through device addresses, which that build cannot.
     pub fn rbvh_with_shader(ctx: &Context, rbvh: &Rbvh, spirv: &[u8]) -> Result<Self> {
         check_depth("rbvh", rbvh.depth)?;
-        let (sizes, arrays) = rbvh_parts(rbvh)?;
+        let words = rbvh.atlas.device_words();
+        let (sizes, arrays) = rbvh_parts(rbvh, &words)?;
         Self::uploaded(ctx, Kind::Rbvh, Some(spirv), &arrays, sizes)
     }
 
@@ -264,7 +269,8 @@ impl Tracer {
     pub fn rbvh_lod(ctx: &Context, rbvh: &Rbvh, lod: &Lod) -> Result<Self> {
         check_depth("rbvh", rbvh.depth)?;
         let nodes = lod.annotated_nodes(rbvh);
-        let (sizes, arrays) = lod_parts(rbvh, lod, &nodes)?;
+        let words = rbvh.atlas.device_words();
+        let (sizes, arrays) = lod_parts(rbvh, &words, lod, &nodes)?;
         Self::uploaded(ctx, Kind::RbvhLod, None, &arrays, sizes)
     }
 
@@ -280,7 +286,8 @@ impl Tracer {
     /// Embedded use: as [`Tracer::record_exact`], for an RBVH.
     pub fn record_rbvh(ctx: &Context, rbvh: &Rbvh, cmd: vk::CommandBuffer) -> Result<Self> {
         check_depth("rbvh", rbvh.depth)?;
-        let (sizes, arrays) = rbvh_parts(rbvh)?;
+        let words = rbvh.atlas.device_words();
+        let (sizes, arrays) = rbvh_parts(rbvh, &words)?;
         Self::recorded(ctx, Kind::Rbvh, &arrays, sizes, cmd)
     }
 
@@ -294,7 +301,8 @@ impl Tracer {
     ) -> Result<Self> {
         check_depth("rbvh", rbvh.depth)?;
         let nodes = lod.annotated_nodes(rbvh);
-        let (sizes, arrays) = lod_parts(rbvh, lod, &nodes)?;
+        let words = rbvh.atlas.device_words();
+        let (sizes, arrays) = lod_parts(rbvh, &words, lod, &nodes)?;
         Self::recorded(ctx, Kind::RbvhLod, &arrays, sizes, cmd)
     }
 

@@ -6,6 +6,7 @@
 //! * `raster`: rasterizing a leaf's triangles into its tile, dilation, quantization;
 //! * `atlas`: packing tiles into one atlas;
 //! * [`layout`]: the packed data the GPU reads;
+//! * [`ranges`]: height ranges of the atlas's 8 × 8 blocks, for the device march's jumps;
 //! * `march`: the CPU reference caster on exactly that packed data;
 //! * `file`: save and load.
 
@@ -16,6 +17,7 @@ mod frame;
 pub mod layout;
 pub(crate) mod march;
 pub mod params;
+pub mod ranges;
 pub(crate) mod raster;
 mod split;
 
@@ -66,8 +68,11 @@ impl Rbvh {
             + std::mem::size_of_val(self.leaves.as_slice())) as u64
     }
 
+    /// The atlas as the device holds it: the texels and the blocks' height ranges
+    /// ([`ranges::block_ranges`], 1/64 as many words).
     pub fn atlas_bytes(&self) -> u64 {
         std::mem::size_of_val(self.atlas.texels.as_slice()) as u64
+            + 4 * ranges::block_count(&self.atlas)
     }
 
     pub fn triangle_bytes(&self) -> u64 {
