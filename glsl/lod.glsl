@@ -80,9 +80,10 @@ float rbvh_lod_boundary_t(int c, int step, float o, float inv) {
 }
 
 // Marches the columns of node `node`'s record over [tmin, t_closest); returns t (< 0 on a miss).
-// `columns` counts the columns visited.
+// `columns` counts the columns visited. `cut` is set when the device ended the walk early (see
+// rbvh_trace_bvh in bvh.glsl).
 float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inout uint columns,
-                     out vec3 normal) {
+                     out vec3 normal, inout bool cut) {
     normal = vec3(0.0);
     if (node >= lsz.node_count) {
         return -1.0;
@@ -130,8 +131,11 @@ float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inou
     float next_j = rbvh_lod_boundary_t(cj, step_j, go.y, inv.y);
     float t_in = t0;
     uint limit = lod.res_u + lod.res_v;
+    // A walk crosses at most res_u + res_v - 1 columns, so every normal ending is a `break`.
+    bool stopped = false;
     for (uint n = 0u; n < limit; ++n) {
         if (t_in > t1) {
+            stopped = true;
             break;
         }
         columns += 1u;
@@ -160,12 +164,14 @@ float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inou
         bool across_i = next_i <= next_j;
         int step = across_i ? step_i : step_j;
         if (step == 0) {
+            stopped = true;
             break;
         }
         if (across_i) {
             ci += step_i;
             t_in = next_i;
             if (ci < 0 || ci >= int(lod.res_u)) {
+                stopped = true;
                 break;
             }
             next_i = rbvh_lod_boundary_t(ci, step_i, go.x, inv.x);
@@ -173,10 +179,14 @@ float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inou
             cj += step_j;
             t_in = next_j;
             if (cj < 0 || cj >= int(lod.res_v)) {
+                stopped = true;
                 break;
             }
             next_j = rbvh_lod_boundary_t(cj, step_j, go.y, inv.y);
         }
+    }
+    if (!stopped) {
+        cut = true;
     }
     return -1.0;
 }

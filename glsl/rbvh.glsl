@@ -196,6 +196,25 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     if (leaf.res_u < 2u || leaf.res_v < 2u || leaf.res_u > sz.atlas_pitch) {
         return -1.0;
     }
+    // The tile's corner in the atlas. (The builder's pitch is a power of two, which spares the
+    // divisions; a loaded file's need not be.) A tile must not wrap across atlas rows (as in
+    // tile_fits of march.rs): the block jumps below count on it.
+    uint tile_u;
+    uint tile_v;
+    uint rows;
+    if ((sz.atlas_pitch & (sz.atlas_pitch - 1u)) == 0u) {
+        uint shift = uint(findLSB(sz.atlas_pitch));
+        tile_u = leaf.atlas_base & (sz.atlas_pitch - 1u);
+        tile_v = leaf.atlas_base >> shift;
+        rows = sz.atlas_len >> shift;
+    } else {
+        tile_u = leaf.atlas_base % sz.atlas_pitch;
+        tile_v = leaf.atlas_base / sz.atlas_pitch;
+        rows = sz.atlas_len / sz.atlas_pitch;
+    }
+    if (tile_u + leaf.res_u > sz.atlas_pitch) {
+        return -1.0;
+    }
     uint last_texel = leaf.atlas_base + (leaf.res_v - 1u) * sz.atlas_pitch + (leaf.res_u - 1u);
     if (last_texel >= sz.atlas_len || last_texel < leaf.atlas_base) {
         return -1.0;
@@ -251,23 +270,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     // The walk of march.rs with one cell test per iteration: a main cell, then (when the ray passes
     // a grid vertex too closely to resolve) the extra cell across it, then the step. A single call
     // site keeps the inlined cell test — the bulk of the shader — from being duplicated.
-    // Block jumps (src/rbvh/ranges.rs): the tile's corner in the atlas, and the blocks' height
-    // ranges after the texels.
-    // (The builder's pitch is a power of two, which spares the divisions; a loaded file's need
-    // not be.)
-    uint tile_u;
-    uint tile_v;
-    uint rows;
-    if ((sz.atlas_pitch & (sz.atlas_pitch - 1u)) == 0u) {
-        uint shift = uint(findLSB(sz.atlas_pitch));
-        tile_u = leaf.atlas_base & (sz.atlas_pitch - 1u);
-        tile_v = leaf.atlas_base >> shift;
-        rows = sz.atlas_len >> shift;
-    } else {
-        tile_u = leaf.atlas_base % sz.atlas_pitch;
-        tile_v = leaf.atlas_base / sz.atlas_pitch;
-        rows = sz.atlas_len / sz.atlas_pitch;
-    }
+    // Block jumps (src/rbvh/ranges.rs): the blocks' height ranges follow the texels.
     uint block_pitch = (sz.atlas_pitch + 7u) >> 3;
     uint block_count = ((rows + 7u) >> 3) * block_pitch;
     uint checked_block = 0xFFFFFFFFu;
@@ -321,6 +324,9 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
                             cj += step_j;
                             next_j = rbvh_boundary_t(cj, step_j, o.y, inv.y);
                         }
+                        if (step_j != 0 && next_j < leave_i) {
+                            cut = true;  // ended early by the device
+                        }
                         if (ci != edge_i) {
                             t_last = max(t_last, rbvh_boundary_t(edge_i - step_i, step_i, o.x, inv.x));
                             ci = edge_i;
@@ -331,6 +337,9 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
                             t_last = next_i;
                             ci += step_i;
                             next_i = rbvh_boundary_t(ci, step_i, o.x, inv.x);
+                        }
+                        if (step_i != 0 && next_i <= leave_j) {
+                            cut = true;  // ended early by the device
                         }
                         if (cj != edge_j) {
                             t_last = max(t_last, rbvh_boundary_t(edge_j - step_j, step_j, o.y, inv.y));
@@ -444,7 +453,9 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
     uint sp = 0u;
     uint node = 0u;
     uint visits = 0u;
-    uint bound = sz.node_count + sz.leaf_count;
+    // Rounds: one per marched or tested leaf or chosen node (a tree has at most one leaf more
+    // than it has inner nodes; chosen nodes replace subtrees), plus the first.
+    uint bound = sz.node_count + sz.leaf_count + 1u;
     // Loops the device ended early (see rbvh_trace_bvh in bvh.glsl) flag `overflow` too.
     bool cut = false;
     bool finished = false;
@@ -497,7 +508,7 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
 #ifdef RBVH_LOD
                 if ((pending & RBVH_LOD_BIT) != 0u) {
                     t = rbvh_lod_march(pending & ~(RBVH_LEAF_BIT | RBVH_LOD_BIT), lsz, ray,
-                                       t_closest, cells, normal);
+                                       t_closest, cells, normal, cut);
                 } else
 #endif
                 {

@@ -100,3 +100,135 @@ fn block_jumps_skip_many_cells_of_grazing_rays_and_change_no_hit() {
         );
     }
 }
+
+/// A hand-made RBVH around `nodes`, `triangles`, `leaves` and `atlas`.
+fn hand_made(
+    nodes: Vec<rbvh::bvh::GpuNode>,
+    triangles: Vec<rbvh::bvh::GpuTriangle>,
+    leaves: Vec<rbvh::rbvh::GpuHeightfield>,
+    atlas: rbvh::rbvh::Atlas,
+) -> Rbvh {
+    Rbvh {
+        params: RbvhParams::quality(2).unwrap(),
+        nodes,
+        triangles,
+        leaves,
+        atlas,
+        bounds: rbvh::geom::Aabb::from_points([glam::Vec3::splat(-10.0), glam::Vec3::splat(80.0)]),
+        depth: 2,
+        texel_size: 0.5,
+        stats: Default::default(),
+        colours: None,
+    }
+}
+
+/// A tree of triangle leaves alone (no height field) is traversed to its end on the
+/// device — both leaves tested, the nearer triangle returned — as on the CPU.
+#[test]
+fn a_tree_of_triangle_leaves_alone_is_traversed_to_its_end() {
+    use glam::Vec3;
+    use rbvh::bvh::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT};
+    use rbvh::geom::Aabb;
+    let ctx = common::context();
+    let plane = |y: f32, prim| {
+        GpuTriangle::new(
+            [
+                Vec3::new(-1.0, y, -1.0),
+                Vec3::new(1.0, y, -1.0),
+                Vec3::new(-1.0, y, 1.0),
+            ],
+            prim,
+        )
+    };
+    let (far, near) = (plane(1.0, 0), plane(2.0, 1));
+    let a = ChildRef {
+        bounds: Aabb::from_points([Vec3::new(-1.0, 0.0, -1.0), Vec3::new(1.0, 5.0, 1.0)]),
+        child: LEAF_BIT,
+        count: 1,
+    };
+    let b = ChildRef {
+        bounds: Aabb::from_points(near.vertices()),
+        child: LEAF_BIT | 1,
+        count: 1,
+    };
+    let atlas = rbvh::rbvh::Atlas {
+        pitch: 8,
+        rows: 8,
+        texels: vec![rbvh::rbvh::Texel::HOLE; 64],
+    };
+    let r = hand_made(vec![GpuNode::new(a, b)], vec![far, near], vec![], atlas);
+    let ray = Ray::new(Vec3::new(-0.5, 10.0, -0.5), -Vec3::Y, 0.0, f32::INFINITY);
+    let cpu = r.closest_hit(&ray).0;
+    let gpu = Tracer::rbvh(&ctx, &r)
+        .unwrap()
+        .trace(&[ray], Query::Closest)
+        .unwrap()
+        .hits[0];
+    assert_eq!((cpu.id, cpu.t), (1, 8.0));
+    assert_eq!((gpu.id, gpu.t), (cpu.id, cpu.t));
+}
+
+/// A tile whose rows would wrap across atlas rows is refused by the loader and, in a
+/// hand-made tree, is empty on the device and the CPU alike (never half-marched by block jumps).
+#[test]
+fn a_tile_that_wraps_across_atlas_rows_is_refused_or_empty() {
+    use glam::Vec3;
+    use rbvh::bvh::{ChildRef, GpuNode, LEAF_BIT};
+    use rbvh::geom::Aabb;
+    use rbvh::rbvh::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT};
+    let ctx = common::context();
+    let (pitch, rows, res_u, res_v, base) = (16u32, 16u32, 12u32, 4u32, 8u32);
+    let mut texels = vec![Texel::HOLE; (pitch * rows) as usize];
+    for j in 0..res_v {
+        for i in 0..res_u {
+            texels[(base + j * pitch + i) as usize] = Texel::new(0, Vec3::Y);
+        }
+    }
+    let leaf = GpuHeightfield {
+        origin: [-2.0, 1.0, -2.0],
+        atlas_base: base,
+        axis_u: [2.0, 0.0, 0.0],
+        res_u,
+        axis_v: [0.0, 0.0, 2.0],
+        res_v,
+        axis_w: [0.0, 1.0, 0.0],
+        h_scale: 0.001,
+    };
+    let child = ChildRef {
+        bounds: Aabb::from_points([Vec3::new(-3.0, 0.0, -3.0), Vec3::new(5.0, 70.0, 1.0)]),
+        child: LEAF_BIT,
+        count: HEIGHTFIELD_COUNT,
+    };
+    let r = hand_made(
+        vec![GpuNode::new(child, ChildRef::ABSENT)],
+        vec![],
+        vec![leaf],
+        Atlas {
+            pitch,
+            rows,
+            texels,
+        },
+    );
+    let e = Rbvh::from_bytes(&r.to_bytes(), std::path::Path::new("wrapped.rbvh"))
+        .expect_err("the loader refuses a wrapped tile")
+        .to_string();
+    assert!(e.contains("wrapped.rbvh"), "{e}");
+    let rays: Vec<Ray> = [2.0f32, 6.0, 9.0, 11.0]
+        .iter()
+        .map(|s| {
+            Ray::new(
+                Vec3::new(-2.0 + s * 0.5, 10.0, -1.0),
+                -Vec3::Y,
+                0.0,
+                f32::INFINITY,
+            )
+        })
+        .collect();
+    let gpu = Tracer::rbvh(&ctx, &r)
+        .unwrap()
+        .trace(&rays, Query::Closest)
+        .unwrap()
+        .hits;
+    let cpu = r.trace_cpu(&rays, false);
+    assert!(gpu.iter().chain(&cpu).all(|h| !h.is_hit()));
+}

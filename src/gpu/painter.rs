@@ -97,10 +97,11 @@ fn channel_data(rbvh: &Rbvh) -> Result<(Vec<Texel>, Vec<u32>)> {
 const ATLAS: &str = "RBVH atlas (painting)";
 const COLOURS: &str = "RBVH colours";
 
-/// How the atlas and the colours reach the paint shader ([`Context::reach`]), both checked.
-fn reach_of(ctx: &Context, atlas: &[Texel], colours: &[u32]) -> Result<Reach> {
+/// How the atlas and the colours reach the paint shader ([`Context::reach`]), both checked, from
+/// the bytes of the buffers that will hold them.
+fn reach_of(ctx: &Context, atlas_bytes: u64, colours: &[u32]) -> Result<Reach> {
     ctx.reach(&[
-        (ATLAS, std::mem::size_of_val(atlas) as u64),
+        (ATLAS, atlas_bytes),
         (COLOURS, std::mem::size_of_val(colours) as u64),
     ])
 }
@@ -124,9 +125,10 @@ fn shared_parts(tracer: &Tracer, rbvh: &Rbvh) -> Result<(Context, Arc<Buffer>, V
             ),
         ));
     }
-    let (texels, colours) = channel_data(rbvh)?;
+    let (_, colours) = channel_data(rbvh)?;
     let ctx = atlas.context().clone();
-    let reach = reach_of(&ctx, &texels, &colours)?;
+    // The tracer's buffer, block ranges included, is what gets bound.
+    let reach = reach_of(&ctx, atlas.size(), &colours)?;
     Ok((ctx, atlas.clone(), colours, reach))
 }
 
@@ -149,7 +151,11 @@ impl Painter {
     /// has none, as [`Rbvh::colour_channel`] creates it).
     pub fn new(ctx: &Context, rbvh: &Rbvh) -> Result<Painter> {
         let (atlas, colours) = channel_data(rbvh)?;
-        let reach = reach_of(ctx, &atlas, &colours)?;
+        let reach = reach_of(
+            ctx,
+            std::mem::size_of_val(atlas.as_slice()) as u64,
+            &colours,
+        )?;
         let atlas = ctx.upload_unchecked(ATLAS, bytemuck::cast_slice(&atlas))?;
         let colours = ctx.upload_unchecked(COLOURS, bytemuck::cast_slice(&colours))?;
         Self::with_buffers(ctx, rbvh, reach, Arc::new(atlas), colours)
@@ -205,7 +211,11 @@ impl Painter {
         cmd: vk::CommandBuffer,
     ) -> Result<(Painter, Vec<Buffer>)> {
         let (atlas, colours) = channel_data(rbvh)?;
-        let reach = reach_of(ctx, &atlas, &colours)?;
+        let reach = reach_of(
+            ctx,
+            std::mem::size_of_val(atlas.as_slice()) as u64,
+            &colours,
+        )?;
         let (atlas, stage_a) =
             ctx.upload_unchecked_recorded(ATLAS, bytemuck::cast_slice(&atlas), cmd)?;
         let (colours, stage_c) =

@@ -196,6 +196,8 @@ fn rbvh_parts<'a>(rbvh: &'a Rbvh, atlas_words: &'a [u32]) -> Result<(TraceParams
         atlas_len: count("atlas texels", rbvh.atlas.texels.len())?,
         ..TraceParams::default()
     };
+    // The shaders index the block ranges after the texels with 32 bits too.
+    count("atlas words (texels and block ranges)", atlas_words.len())?;
     let arrays = [
         ("RBVH nodes", bytemuck::cast_slice(&rbvh.nodes)),
         ("RBVH triangles", bytemuck::cast_slice(&rbvh.triangles)),

@@ -394,11 +394,17 @@ struct FrameRay {
     slack: f32,
 }
 
-/// Whether every texel of `leaf`'s tile lies in the atlas: at least one sample per side, no wider
-/// than the atlas row, and its last texel `atlas_base + (res_v − 1)·pitch + res_u − 1` in range.
+/// Whether every texel of `leaf`'s tile lies in the atlas: at least one sample per side, each tile
+/// row within one atlas row, and its last texel `atlas_base + (res_v − 1)·pitch + res_u − 1` in
+/// range.
 /// The loader rejects files with a leaf that does not fit; the march treats one as empty.
 pub(super) fn tile_fits(leaf: &GpuHeightfield, atlas: &Atlas) -> bool {
     if leaf.res_u == 0 || leaf.res_v == 0 || leaf.res_u > atlas.pitch {
+        return false;
+    }
+    // A tile must not wrap across atlas rows: its rows are atlas rows (and the device march's
+    // block jumps, `src/rbvh/ranges.rs`, count on it).
+    if leaf.atlas_base % atlas.pitch + leaf.res_u > atlas.pitch {
         return false;
     }
     let last = u64::from(leaf.atlas_base)
@@ -1101,18 +1107,22 @@ mod tests {
             let x = (i * 7919 + j * 104_729) % 65_521;
             (x * 13 % 30_000) as u16
         };
-        let mut texels = vec![Texel::new(0, Vec3::X); 3];
-        texels.extend(tile(res_u, res_v, |i, j| {
+        // The tile starts 3 texels into each atlas row, after other (non-hole) texels.
+        let samples = tile(res_u, res_v, |i, j| {
             if (i, j) == (4, 3) || (i, j) == (7, 1) || (i, j) == (1, 5) || (i, j) == (2, 5) {
                 Texel::HOLE
             } else {
                 Texel::new(code(i, j), w)
             }
-        }));
-        texels.extend(vec![Texel::HOLE; (res_u - 3) as usize]);
+        });
+        let mut texels = Vec::new();
+        for row in samples.chunks(res_u as usize) {
+            texels.extend([Texel::new(0, Vec3::X); 3]);
+            texels.extend_from_slice(row);
+        }
         let atlas = Atlas {
-            pitch: res_u,
-            rows: res_v + 1,
+            pitch: res_u + 3,
+            rows: res_v,
             texels,
         };
         // A loose box, so that the march, not the box, decides at the tile's border.
@@ -1217,7 +1227,7 @@ mod tests {
     }
 
     #[test]
-    fn tile_fits_checks_the_last_texel() {
+    fn tile_fits_checks_the_last_texel_and_refuses_rows_that_wrap() {
         let atlas = Atlas {
             pitch: 8,
             rows: 4,
@@ -1235,6 +1245,8 @@ mod tests {
         assert!(fits(0, 8, 4) && fits(4, 4, 4) && fits(31, 1, 1));
         assert!(!fits(5, 4, 4) && !fits(0, 9, 1) && !fits(0, 0, 1) && !fits(32, 1, 1));
         assert!(!fits(u32::MAX, u32::MAX, u32::MAX));
+        // Columns 6, 7 of one row, then 0, 1 of the next: in range, but wrapped.
+        assert!(fits(6, 2, 2) && !fits(6, 3, 2) && !fits(14, 4, 1));
     }
 
     #[test]
