@@ -15,8 +15,15 @@
 //! than 16 cells hold 78% of the primary rays' cells and 77% of the shadow rays'), and a SIMD
 //! group waits for its longest march. The walk reads a block's range once, on entering it, and
 //! when the ray's height over the block lies outside it (with the cell test's slack), it moves
-//! straight to the block's exit cell. The cells it skips could not be hit, so the hits are those of
-//! the plain walk (the CPU caster in `march.rs` walks every cell, and the agreement tests compare).
+//! straight to the block's exit cell. The main cells it skips could not be hit (their own test
+//! reads and rounds heights the same way and would reject them), so the hits are those of the
+//! plain walk (the CPU caster in `march.rs` walks every cell, and the agreement tests compare). One
+//! gap remains in principle: an "extra" cell, the neighbour the walk also tests where a ray passes
+//! a grid vertex within rounding, lies outside the block when that vertex is on the block's edge;
+//! it is skipped too, and could only have been hit within rounding times the surface's slope of
+//! the vertex, which the block's range (holding that vertex's sample) excludes. A stress test of
+//! 360,000 rays aimed at grid vertices of steep random tiles, not aligned to blocks, found no
+//! difference.
 
 use rayon::prelude::*;
 
