@@ -21,9 +21,10 @@
 //! gap remains in principle: an "extra" cell, the neighbour the walk also tests where a ray passes
 //! a grid vertex within rounding, lies outside the block when that vertex is on the block's edge;
 //! it is skipped too, and could only have been hit within rounding times the surface's slope of
-//! the vertex, which the block's range (holding that vertex's sample) excludes. A stress test of
-//! 360,000 rays aimed at grid vertices of steep random tiles, not aligned to blocks, found no
-//! difference.
+//! the vertex, which the block's range (holding that vertex's sample) excludes. In
+//! `tests/rbvh_agreement.rs`, 60,000 rays aimed at the grid vertices and surfaces of terraced and
+//! swelling tiles with holes, not aligned to blocks, find no difference (while the device visits
+//! a quarter fewer steps); a review's stress test of 360,000 such rays found none either.
 
 use rayon::prelude::*;
 
