@@ -122,6 +122,40 @@ fn hand_made(
     }
 }
 
+/// A hand-made RBVH of one height-field leaf: its tile at `base` in `atlas`, `res_u × res_v`
+/// samples half a unit apart over the xz plane from (-2, -2), heights up along y from 1 in steps of
+/// `h_scale`, inside a box from (-3, 0, -3) to `box_max`.
+fn one_leaf(
+    base: u32,
+    (res_u, res_v): (u32, u32),
+    h_scale: f32,
+    atlas: rbvh::rbvh::Atlas,
+    box_max: glam::Vec3,
+) -> Rbvh {
+    use rbvh::bvh::{ChildRef, GpuNode, LEAF_BIT};
+    let leaf = rbvh::rbvh::GpuHeightfield {
+        origin: [-2.0, 1.0, -2.0],
+        atlas_base: base,
+        axis_u: [2.0, 0.0, 0.0],
+        res_u,
+        axis_v: [0.0, 0.0, 2.0],
+        res_v,
+        axis_w: [0.0, 1.0, 0.0],
+        h_scale,
+    };
+    let child = ChildRef {
+        bounds: rbvh::geom::Aabb::from_points([glam::Vec3::new(-3.0, 0.0, -3.0), box_max]),
+        child: LEAF_BIT,
+        count: rbvh::rbvh::HEIGHTFIELD_COUNT,
+    };
+    hand_made(
+        vec![GpuNode::new(child, ChildRef::ABSENT)],
+        vec![],
+        vec![leaf],
+        atlas,
+    )
+}
+
 /// A tree of triangle leaves alone (no height field) is traversed to its end on the
 /// device — both leaves tested, the nearer triangle returned — as on the CPU.
 #[test]
@@ -173,9 +207,7 @@ fn a_tree_of_triangle_leaves_alone_is_traversed_to_its_end() {
 #[test]
 fn a_tile_that_wraps_across_atlas_rows_is_refused_or_empty() {
     use glam::Vec3;
-    use rbvh::bvh::{ChildRef, GpuNode, LEAF_BIT};
-    use rbvh::geom::Aabb;
-    use rbvh::rbvh::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT};
+    use rbvh::rbvh::{Atlas, Texel};
     let ctx = common::context();
     let (pitch, rows, res_u, res_v, base) = (16u32, 16u32, 12u32, 4u32, 8u32);
     let mut texels = vec![Texel::HOLE; (pitch * rows) as usize];
@@ -184,30 +216,17 @@ fn a_tile_that_wraps_across_atlas_rows_is_refused_or_empty() {
             texels[(base + j * pitch + i) as usize] = Texel::new(0, Vec3::Y);
         }
     }
-    let leaf = GpuHeightfield {
-        origin: [-2.0, 1.0, -2.0],
-        atlas_base: base,
-        axis_u: [2.0, 0.0, 0.0],
-        res_u,
-        axis_v: [0.0, 0.0, 2.0],
-        res_v,
-        axis_w: [0.0, 1.0, 0.0],
-        h_scale: 0.001,
+    let atlas = Atlas {
+        pitch,
+        rows,
+        texels,
     };
-    let child = ChildRef {
-        bounds: Aabb::from_points([Vec3::new(-3.0, 0.0, -3.0), Vec3::new(5.0, 70.0, 1.0)]),
-        child: LEAF_BIT,
-        count: HEIGHTFIELD_COUNT,
-    };
-    let r = hand_made(
-        vec![GpuNode::new(child, ChildRef::ABSENT)],
-        vec![],
-        vec![leaf],
-        Atlas {
-            pitch,
-            rows,
-            texels,
-        },
+    let r = one_leaf(
+        base,
+        (res_u, res_v),
+        0.001,
+        atlas,
+        Vec3::new(5.0, 70.0, 1.0),
     );
     let e = Rbvh::from_bytes(&r.to_bytes(), std::path::Path::new("wrapped.rbvh"))
         .expect_err("the loader refuses a wrapped tile")
@@ -240,9 +259,7 @@ fn a_tile_that_wraps_across_atlas_rows_is_refused_or_empty() {
 #[test]
 fn block_jumps_agree_with_the_plain_walk_on_steep_unaligned_tiles() {
     use glam::Vec3;
-    use rbvh::bvh::{ChildRef, GpuNode, LEAF_BIT};
-    use rbvh::geom::Aabb;
-    use rbvh::rbvh::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT};
+    use rbvh::rbvh::{Atlas, Texel};
     let ctx = common::context();
     let (pitch, rows) = (64u32, 64u32);
     let mut rng = common::Rng(7);
@@ -272,30 +289,17 @@ fn block_jumps_agree_with_the_plain_walk_on_steep_unaligned_tiles() {
                 };
             }
         }
-        let leaf = GpuHeightfield {
-            origin: [-2.0, 1.0, -2.0],
-            atlas_base: base,
-            axis_u: [2.0, 0.0, 0.0],
-            res_u,
-            axis_v: [0.0, 0.0, 2.0],
-            res_v,
-            axis_w: [0.0, 1.0, 0.0],
+        let atlas = Atlas {
+            pitch,
+            rows,
+            texels,
+        };
+        let r = one_leaf(
+            base,
+            (res_u, res_v),
             h_scale,
-        };
-        let child = ChildRef {
-            bounds: Aabb::from_points([Vec3::new(-3.0, 0.0, -3.0), Vec3::new(30.0, 5.0, 30.0)]),
-            child: LEAF_BIT,
-            count: HEIGHTFIELD_COUNT,
-        };
-        let r = hand_made(
-            vec![GpuNode::new(child, ChildRef::ABSENT)],
-            vec![],
-            vec![leaf],
-            Atlas {
-                pitch,
-                rows,
-                texels,
-            },
+            atlas,
+            Vec3::new(30.0, 5.0, 30.0),
         );
         let rays: Vec<Ray> = (0..10_000)
             .map(|_| {
