@@ -106,6 +106,18 @@ fn reach_of(ctx: &Context, atlas_bytes: u64, colours: &[u32]) -> Result<Reach> {
     ])
 }
 
+/// The atlas, colour words and reach of a painter that uploads its own atlas ([`Painter::new`],
+/// [`Painter::record_new`]).
+fn own_parts(ctx: &Context, rbvh: &Rbvh) -> Result<(Vec<Texel>, Vec<u32>, Reach)> {
+    let (atlas, colours) = channel_data(rbvh)?;
+    let reach = reach_of(
+        ctx,
+        std::mem::size_of_val(atlas.as_slice()) as u64,
+        &colours,
+    )?;
+    Ok((atlas, colours, reach))
+}
+
 /// The context, shared atlas, colour words and reach of [`Painter::sharing`]: the tracer must hold
 /// `rbvh`'s atlas (same pitch and texel count).
 fn shared_parts(tracer: &Tracer, rbvh: &Rbvh) -> Result<(Context, Arc<Buffer>, Vec<u32>, Reach)> {
@@ -150,12 +162,7 @@ impl Painter {
     /// Uploads the atlas and the colour channel of `rbvh` (white on every surface texel when it
     /// has none, as [`Rbvh::colour_channel`] creates it).
     pub fn new(ctx: &Context, rbvh: &Rbvh) -> Result<Painter> {
-        let (atlas, colours) = channel_data(rbvh)?;
-        let reach = reach_of(
-            ctx,
-            std::mem::size_of_val(atlas.as_slice()) as u64,
-            &colours,
-        )?;
+        let (atlas, colours, reach) = own_parts(ctx, rbvh)?;
         let atlas = ctx.upload_unchecked(ATLAS, bytemuck::cast_slice(&atlas))?;
         let colours = ctx.upload_unchecked(COLOURS, bytemuck::cast_slice(&colours))?;
         Self::with_buffers(ctx, rbvh, reach, Arc::new(atlas), colours)
@@ -210,12 +217,7 @@ impl Painter {
         rbvh: &Rbvh,
         cmd: vk::CommandBuffer,
     ) -> Result<(Painter, Vec<Buffer>)> {
-        let (atlas, colours) = channel_data(rbvh)?;
-        let reach = reach_of(
-            ctx,
-            std::mem::size_of_val(atlas.as_slice()) as u64,
-            &colours,
-        )?;
+        let (atlas, colours, reach) = own_parts(ctx, rbvh)?;
         let (atlas, stage_a) =
             ctx.upload_unchecked_recorded(ATLAS, bytemuck::cast_slice(&atlas), cmd)?;
         let (colours, stage_c) =
