@@ -305,6 +305,8 @@ fn render_and_trace_with_level_of_detail() {
         "--quality",
         "3",
         "--lod",
+        "--lod-bias",
+        "-0.5",
         "--stats",
         "--width",
         "64",
@@ -373,6 +375,9 @@ fn render_and_trace_with_level_of_detail() {
         (vec!["--lod-spread", "NaN"], "--lod-spread"),
         (vec!["--lod-spread=-1"], "--lod-spread"),
         (vec!["--lod-columns", "0"], "lod columns"),
+        (vec!["--lod-min-leaves", "0"], "lod min leaves"),
+        (vec!["--lod-bias", "-9"], "lod bias"),
+        (vec!["--lod-bias", "inf"], "lod bias"),
     ] {
         let mut all = vec![
             "trace",

@@ -475,6 +475,31 @@ fn shipped_scene_files_load() {
     }
 }
 
+/// `scenes/grove-aerial.toml` is the built-in grove under its own camera, from which every copy
+/// is as far as the file says: the level-of-detail view of the README.
+#[test]
+fn grove_aerial_is_the_grove_seen_from_afar() {
+    let aerial = load(&repo("scenes/grove-aerial.toml")).unwrap();
+    let grove = Scene::builtin("grove").unwrap();
+    assert_eq!(aerial.triangle_count(), grove.triangle_count());
+    assert_close(aerial.bounds().min, grove.bounds().min, 1e-5);
+    assert_close(aerial.bounds().max, grove.bounds().max, 1e-5);
+    let eye = aerial.camera.unwrap().eye;
+    let copies =
+        (0..aerial.object_names.len()).filter(|&o| aerial.object_names[o].contains("blob"));
+    let distances: Vec<f32> = copies
+        .map(|o| {
+            let b = Aabb::from_points(object_triangles(&aerial, o).flatten());
+            b.center().distance(eye)
+        })
+        .collect();
+    assert_eq!(distances.len(), 400);
+    let (near, far) = distances
+        .iter()
+        .fold((f32::INFINITY, 0f32), |(n, f), &d| (n.min(d), f.max(d)));
+    assert!(near > 48.0 && far < 155.0, "copies from {near} to {far}");
+}
+
 #[test]
 fn scene_file_transforms_rotate_about_x_then_y_then_z() {
     let dir = tempfile::tempdir().unwrap();

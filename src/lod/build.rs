@@ -5,8 +5,11 @@
 //! A sample covers a square patch about one fine texel wide, so it is splatted into every column
 //! its patch overlaps; since columns are at least two fine texels wide, a surface crossing a
 //! column leaves samples in it and the coarse level has no pinholes. A column keeps the lowest and
-//! highest sample along the grid's axis, with their normals (and colours, where the RBVH has a
-//! colour channel), and is solid in between.
+//! highest sample along the grid's axis (with their colours, where the RBVH has a colour channel)
+//! and is solid in between. Its top takes the mean normal of the samples facing up the axis, its
+//! bottom that of those facing down — the surface a ray sees from either side, averaged as normal
+//! maps are when mip-mapped — so that a coarse blob is shaded as round as the fine one is
+//! (extreme samples alone gave a far grove 18° normal error against 16° with the mean).
 
 use std::time::Instant;
 
@@ -16,7 +19,8 @@ use rayon::prelude::*;
 use super::layout::{Column, GpuLod, LOD_BIT};
 use super::{Lod, LodParams, LodStats};
 use crate::geom::Aabb;
-use crate::rbvh::{layout::HEIGHTFIELD_COUNT, layout::LEAF_BIT, Rbvh, Texel};
+use crate::rbvh::layout::{decode_octahedral, encode_octahedral, HEIGHTFIELD_COUNT, LEAF_BIT};
+use crate::rbvh::{Rbvh, Texel};
 use crate::{Error, Result};
 
 /// Most points spread along a triangle edge; bounds the work of a huge triangle in a triangle
@@ -78,18 +82,13 @@ impl Lod {
             ));
         }
         let sources: Vec<Vec<Sample>> = order.sources.par_iter().map(|s| s.samples(rbvh)).collect();
-        let column_sizes = column_sizes(rbvh, &order);
         let records: Vec<Coarse> = (0..rbvh.nodes.len())
             .into_par_iter()
             .map(|n| match order.span[n] {
-                Some((bounds, range)) => coarse_node(
-                    &bounds,
-                    &sources[range.0..range.1],
-                    fine,
-                    column_sizes[n],
-                    params.columns,
-                ),
-                None => (GpuLod::NONE, Vec::new(), Vec::new()),
+                Some((bounds, range)) if range.1 - range.0 >= params.min_leaves as usize => {
+                    coarse_node(&bounds, &sources[range.0..range.1], fine, params.columns)
+                }
+                _ => (GpuLod::NONE, Vec::new(), Vec::new()),
             })
             .collect();
         let mut nodes = Vec::with_capacity(records.len());
@@ -127,8 +126,6 @@ type Span = Option<(Aabb, (usize, usize))>;
 struct SubtreeOrder {
     sources: Vec<Source>,
     span: Vec<Span>,
-    /// Nodes in the order the walk left them: every child before its parent.
-    post_order: Vec<u32>,
 }
 
 /// A leaf whose surface is splatted.
@@ -145,13 +142,8 @@ fn subtree_order(rbvh: &Rbvh) -> SubtreeOrder {
     let mut span: Vec<Span> = vec![None; n];
     let mut sources = Vec::new();
     let mut entered = vec![false; n];
-    let mut post_order = Vec::with_capacity(n);
     if n == 0 {
-        return SubtreeOrder {
-            sources,
-            span,
-            post_order,
-        };
+        return SubtreeOrder { sources, span };
     }
     // (node, its box, first source) on the way down; the node's span closes on the way up.
     enum Step {
@@ -163,7 +155,6 @@ fn subtree_order(rbvh: &Rbvh) -> SubtreeOrder {
         match step {
             Step::Leave(node, bounds, first) => {
                 span[node as usize] = Some((bounds, (first, sources.len())));
-                post_order.push(node);
             }
             Step::Enter(node, bounds) => {
                 let Some(gpu) = rbvh.nodes.get(node as usize) else {
@@ -188,30 +179,13 @@ fn subtree_order(rbvh: &Rbvh) -> SubtreeOrder {
             }
         }
     }
-    SubtreeOrder {
-        sources,
-        span,
-        post_order,
-    }
+    SubtreeOrder { sources, span }
 }
 
-/// The column width of every node, children first: twice the widest of its inner children's
-/// (leaves count as the fine texel). Each level is thus half as sharp as the one below — a
-/// pyramid, as mip maps are, so that some level fits every footprint between the fine texel and
-/// the whole scene.
-fn column_sizes(rbvh: &Rbvh, order: &SubtreeOrder) -> Vec<f32> {
-    let fine = rbvh.texel_size;
-    let mut size = vec![fine; rbvh.nodes.len()];
-    for &node in &order.post_order {
-        let below = rbvh.nodes[node as usize]
-            .children()
-            .iter()
-            .filter(|c| c.child & LEAF_BIT == 0)
-            .filter_map(|c| size.get(c.child as usize).copied())
-            .fold(fine, f32::max);
-        size[node as usize] = 2.0 * below;
-    }
-    size
+/// The width of `columns` columns across `side`, made a hair wider so that `side` spans at most
+/// `columns` of them despite rounding, and at least two `fine` texels.
+fn column_width(side: f32, fine: f32, columns: u32) -> f32 {
+    (side / columns as f32 * (1.0 + 1e-6)).max(2.0 * fine)
 }
 
 impl Source {
@@ -316,13 +290,13 @@ fn triangle_samples([a, b, c]: [Vec3; 3], spacing: f32) -> Vec<Sample> {
 
 /// The column record of one node over `bounds` and its packed column words, or
 /// [`GpuLod::NONE`] when its subtree has no surface.
-fn coarse_node(
-    bounds: &Aabb,
-    sources: &[Vec<Sample>],
-    fine: f32,
-    texel_size: f32,
-    columns: u32,
-) -> Coarse {
+///
+/// The grid spans the node's box in `columns` columns along its longer side: every node is
+/// drawn at the same number of columns across, so a node is chosen once the ray sees it at most
+/// `columns` footprints wide, whatever the depth of the subtree below it (a pyramid over the tree
+/// depth, doubling per level, made whole objects far too blocky to ever be chosen). Columns are
+/// at least two fine texels wide, so that a surface crossing a column leaves samples in it.
+fn coarse_node(bounds: &Aabb, sources: &[Vec<Sample>], fine: f32, columns: u32) -> Coarse {
     if bounds.is_empty() || sources.iter().all(Vec::is_empty) {
         return (GpuLod::NONE, Vec::new(), Vec::new());
     }
@@ -335,16 +309,12 @@ fn coarse_node(
         2
     };
     let (u, v) = ((w + 1) % 3, (w + 2) % 3);
+    let texel_size = column_width(extent[u].max(extent[v]), fine, columns);
     if !(texel_size.is_finite() && texel_size > 0.0) {
         return (GpuLod::NONE, Vec::new(), Vec::new());
     }
-    let res = |axis: usize| ((extent[axis] / texel_size).ceil() as u32).max(1);
+    let res = |axis: usize| ((extent[axis] / texel_size).ceil() as u32).clamp(1, columns);
     let (res_u, res_v) = (res(u), res(v));
-    // A grid does not skip empty space as a tree does: a ray may walk all its columns. Only a node
-    // that the ray sees at most `columns` footprints wide is worth marching instead of descending.
-    if res_u > columns || res_v > columns {
-        return (GpuLod::NONE, Vec::new(), Vec::new());
-    }
     let origin = bounds.min;
     let radius = SPLAT_RADIUS * fine;
     // Per column: (lowest height, its sample, highest height, its sample).
@@ -354,15 +324,25 @@ fn coarse_node(
         colour: 0,
     };
     let mut acc = vec![(f32::INFINITY, none, f32::NEG_INFINITY, none); (res_u * res_v) as usize];
+    // Per column: the sums of the normals facing up and down the grid's axis.
+    let mut facing = vec![(Vec3::ZERO, Vec3::ZERO); acc.len()];
     let cell = |x: f32, res: u32| ((x / texel_size).floor().max(0.0) as u32).min(res - 1);
     for s in sources.iter().flatten() {
         let rel = s.p - origin;
         let (i0, i1) = (cell(rel[u] - radius, res_u), cell(rel[u] + radius, res_u));
         let (j0, j1) = (cell(rel[v] - radius, res_v), cell(rel[v] + radius, res_v));
         let h = rel[w];
+        let n = decode_octahedral(s.normal);
         for j in j0..=j1 {
             for i in i0..=i1 {
-                let a = &mut acc[(j * res_u + i) as usize];
+                let c = (j * res_u + i) as usize;
+                let f = &mut facing[c];
+                if n[w] >= 0.0 {
+                    f.0 += n;
+                } else {
+                    f.1 += n;
+                }
+                let a = &mut acc[c];
                 if h < a.0 {
                     (a.0, a.1) = (h, *s);
                 }
@@ -384,11 +364,17 @@ fn coarse_node(
     };
     let mut words = Vec::with_capacity(acc.len() * 2);
     let mut colours = Vec::with_capacity(acc.len() * 2);
-    for &(lo, bottom, hi, top) in &acc {
+    let mean = |sum: Vec3, fallback: u16| match sum.try_normalize() {
+        Some(n) => encode_octahedral(n),
+        None => fallback,
+    };
+    for (&(lo, bottom, hi, top), &(up, down)) in acc.iter().zip(&facing) {
         let column = if lo <= hi {
             Column {
-                top: Texel(u32::from(code(hi, true)) | u32::from(top.normal) << 16),
-                bottom: Texel(u32::from(code(lo, false)) | u32::from(bottom.normal) << 16),
+                top: Texel(u32::from(code(hi, true)) | u32::from(mean(up, top.normal)) << 16),
+                bottom: Texel(
+                    u32::from(code(lo, false)) | u32::from(mean(down, bottom.normal)) << 16,
+                ),
             }
         } else {
             Column::EMPTY
@@ -408,4 +394,70 @@ fn coarse_node(
         pad: [0; 2],
     };
     (record, words, colours)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rbvh::RbvhParams;
+    use crate::scene::Scene;
+
+    /// Leaves below every node, counted by walking the tree.
+    fn leaves_below(rbvh: &Rbvh, node: u32) -> usize {
+        rbvh.nodes[node as usize]
+            .children()
+            .iter()
+            .map(|c| {
+                if c.child & LEAF_BIT != 0 {
+                    usize::from(c.count > 0)
+                } else {
+                    leaves_below(rbvh, c.child)
+                }
+            })
+            .sum()
+    }
+
+    #[test]
+    fn every_grid_spans_its_node_in_at_most_columns_columns_of_at_least_two_texels() {
+        let rbvh = Rbvh::build(
+            &Scene::builtin("default").unwrap(),
+            &RbvhParams::quality(3).unwrap(),
+        )
+        .unwrap();
+        let fine = rbvh.texel_size;
+        for params in [
+            LodParams::default(),
+            LodParams {
+                columns: 3,
+                min_leaves: 1,
+                bias: 0.0,
+            },
+        ] {
+            let lod = Lod::build(&rbvh, &params).unwrap();
+            let order = subtree_order(&rbvh);
+            let mut longest_side_full = 0;
+            for (n, record) in lod.nodes.iter().enumerate() {
+                let below = leaves_below(&rbvh, n as u32);
+                if below < params.min_leaves as usize {
+                    assert!(!record.is_some(), "node {n}: {below} leaves");
+                    continue;
+                }
+                assert!(record.is_some(), "node {n}: {below} leaves but no grid");
+                let (bounds, _) = order.span[n].unwrap();
+                let [u, v, w] = record.axes();
+                let extent = bounds.extent();
+                assert!(extent[w] <= extent[u] && extent[w] <= extent[v], "node {n}");
+                assert!(record.texel_size >= 2.0 * fine, "node {n}");
+                for (axis, res) in [(u, record.res_u), (v, record.res_v)] {
+                    assert!((1..=params.columns).contains(&res), "node {n}");
+                    assert!(res as f32 * record.texel_size >= extent[axis], "node {n}");
+                }
+                if record.texel_size > 2.0 * fine {
+                    assert_eq!(record.res_u.max(record.res_v), params.columns, "node {n}");
+                    longest_side_full += 1;
+                }
+            }
+            assert!(longest_side_full > 0);
+        }
+    }
 }

@@ -225,9 +225,9 @@ impl Rbvh {
                     // marched or tested when it comes up (see `glsl/rbvh.glsl` for why).
                     let coarse = c.child & LEAF_BIT == 0
                         && lod.is_some_and(|(l, cone)| {
-                            l.nodes
-                                .get(c.child as usize)
-                                .is_some_and(|r| selects(r.texel_size, cone, t_entry))
+                            l.nodes.get(c.child as usize).is_some_and(|r| {
+                                selects(l.params.selection_width(r.texel_size), cone, t_entry)
+                            })
                         });
                     let child = if coarse { LOD_BIT | c.child } else { c.child };
                     if next.is_none() {

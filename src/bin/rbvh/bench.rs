@@ -7,9 +7,8 @@ use std::time::Duration;
 use anyhow::{Context as _, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use rbvh::bench::{self, BenchConfig, Device, Event, Level, RayType};
-use rbvh::lod::LodParams;
 
-use crate::prepare::{context_options, Quality};
+use crate::prepare::{context_options, LodBuildArgs, Quality};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("quality", |a| a.default_value("all")))]
@@ -61,9 +60,8 @@ pub struct Args {
     /// Also measure every level traced with level of detail (method rbvh-lod).
     #[arg(long)]
     lod: bool,
-    /// Most columns along a side of a coarse node's grid (with --lod).
-    #[arg(long, default_value_t = LodParams::default().columns, requires = "lod")]
-    lod_columns: u32,
+    #[command(flatten)]
+    lod_build: LodBuildArgs,
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -95,9 +93,7 @@ pub fn run(a: Args) -> Result<()> {
         config.seed = seed;
     }
     config.plot_dir = a.plot.clone();
-    config.lod = a.lod.then_some(LodParams {
-        columns: a.lod_columns,
-    });
+    config.lod = a.lod.then(|| a.lod_build.params());
 
     let bar = ProgressBar::new_spinner();
     bar.set_style(

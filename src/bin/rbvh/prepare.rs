@@ -48,12 +48,36 @@ pub struct LodArgs {
     /// footprint (a pixel's cone for render; --lod-spread for trace).
     #[arg(long)]
     pub lod: bool,
-    /// Most columns along a side of a coarse node's grid.
-    #[arg(long, default_value_t = LodParams::default().columns, requires = "lod")]
-    pub lod_columns: u32,
+    #[command(flatten)]
+    pub build: LodBuildArgs,
     /// Cone spread of rays from a file (radians per unit of t; their width at t = 0 is 0).
     #[arg(long, default_value_t = 1e-3, requires = "lod")]
     pub lod_spread: f32,
+}
+
+/// How levels of detail are built and chosen (with --lod): see `rbvh::lod::LodParams`.
+#[derive(Args, Clone, Debug)]
+pub struct LodBuildArgs {
+    /// Columns along the longer side of every coarse node's grid.
+    #[arg(long, default_value_t = LodParams::default().columns, requires = "lod")]
+    pub lod_columns: u32,
+    /// Fewest leaves below a node for it to get a coarse grid.
+    #[arg(long, default_value_t = LodParams::default().min_leaves, requires = "lod")]
+    pub lod_min_leaves: u32,
+    /// Log2 of the columns one footprint may span: a node is chosen where its column is at most
+    /// 2^bias footprints wide (negative: sharper and slower; positive: coarser and faster).
+    #[arg(long, default_value_t = LodParams::default().bias, requires = "lod", allow_negative_numbers = true)]
+    pub lod_bias: f32,
+}
+
+impl LodBuildArgs {
+    pub fn params(&self) -> LodParams {
+        LodParams {
+            columns: self.lod_columns,
+            min_leaves: self.lod_min_leaves,
+            bias: self.lod_bias,
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -216,9 +240,7 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
             anyhow::bail!("--lod needs an RBVH: add --method rbvh (or --rbvh FILE)")
         }
         (Structure::Rbvh(r), true) => {
-            let params = LodParams {
-                columns: c.lod.lod_columns,
-            };
+            let params = c.lod.build.params();
             Some(step("building levels of detail", || {
                 Lod::build(r, &params)
             })?)
