@@ -78,7 +78,7 @@ impl LodParams {
         if self.min_leaves == 0 {
             return Err(Error::param("lod min leaves", "must be at least 1"));
         }
-        if !(self.bias.abs() <= MAX_BIAS) {
+        if !(-MAX_BIAS..=MAX_BIAS).contains(&self.bias) {
             return Err(Error::param(
                 "lod bias",
                 format!("{} is outside -{MAX_BIAS}..={MAX_BIAS}", self.bias),
