@@ -410,3 +410,45 @@ fn height_field_colours_are_filtered_between_samples() {
             < 0.02
     );
 }
+
+/// A texture far finer than the atlas: the bake gives each texel the mean colour of the texture
+/// over the surface patch it stands for (a mip chain sampled at the patch's size), so a checker
+/// of single texels bakes to an even grey at Q0, where point samples would give a noise of black
+/// and white texels.
+#[test]
+fn baked_colours_average_a_texture_finer_than_the_atlas() {
+    use rbvh::surface::rgba;
+    let dir = tempfile::tempdir().unwrap();
+    let side = 512;
+    let checker = image::RgbaImage::from_fn(side, side, |x, y| {
+        let c = if (x + y) % 2 == 0 { 255 } else { 0 };
+        image::Rgba([c, c, c, 255])
+    });
+    checker.save(dir.path().join("fine.png")).unwrap();
+    let scene = Scene::load(
+        textured_obj(dir.path(), "map_Kd fine.png")
+            .to_str()
+            .unwrap(),
+    )
+    .unwrap();
+    let rbvh = Rbvh::build(&scene, &RbvhParams::quality(0).unwrap()).unwrap();
+    // The quad is 2 units wide: the texture has several texels per atlas texel.
+    let per_texel = side as f32 * rbvh.texel_size / 2.0;
+    assert!(
+        per_texel > 2.0,
+        "{per_texel} texture texels per atlas texel"
+    );
+    let greys: Vec<f32> = rbvh
+        .colours
+        .as_ref()
+        .unwrap()
+        .iter()
+        .filter(|&&c| c != 0)
+        .map(|&c| rgba::unpack(c).x)
+        .collect();
+    assert!(greys.len() > 10_000, "{} coloured texels", greys.len());
+    let mean = greys.iter().sum::<f32>() / greys.len() as f32;
+    let worst = greys.iter().map(|g| (g - 0.5).abs()).fold(0.0, f32::max);
+    assert!((mean - 0.5).abs() < 0.01, "mean {mean}");
+    assert!(worst < 0.05, "a texel {worst} away from mid grey");
+}

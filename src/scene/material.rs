@@ -12,6 +12,7 @@ use std::sync::Arc;
 
 use glam::{Vec2, Vec3, Vec4};
 
+use super::mipmap::MipChain;
 use super::texture::{Texture, Wrap};
 
 /// Material id of a triangle without a material: its base colour is white, so that shading
@@ -48,6 +49,21 @@ impl Material {
             None => self.factor,
         }
     }
+
+    /// Linear RGBA over the patch around `uv` whose sides span the texture-coordinate steps
+    /// `d_uv`: the texture is sampled from `mips` (its mip chain) at the patch's longer side in
+    /// texels, so that a patch covering many texels gets their mean instead of one of them.
+    pub(crate) fn colour_over(&self, uv: Vec2, d_uv: [Vec2; 2], mips: &MipChain) -> Vec4 {
+        match &self.texture {
+            Some(t) => {
+                debug_assert!(mips.is_of(t), "the mip chain of another texture");
+                let size = Vec2::new(t.width as f32, t.height as f32);
+                let footprint = (d_uv[0] * size).length().max((d_uv[1] * size).length());
+                self.factor * mips.sample(uv, self.wrap, footprint)
+            }
+            None => self.factor,
+        }
+    }
 }
 
 /// Per-triangle materials and texture coordinates, parallel to [`super::Scene::triangles`].
@@ -64,19 +80,28 @@ impl SurfaceMaterials {
     /// Linear RGBA of triangle `triangle` at barycentrics `bary` (weights of its three corners);
     /// white for a triangle without material or out of range.
     pub fn colour(&self, triangle: usize, bary: Vec3) -> Vec4 {
-        let material = self
-            .material_of_triangle
+        match self.material(triangle) {
+            Some(material) => material.colour(self.uv(triangle, bary)),
+            None => Vec4::ONE,
+        }
+    }
+
+    /// The material of triangle `triangle`; `None` without one or out of range.
+    pub fn material(&self, triangle: usize) -> Option<&Material> {
+        self.material_of_triangle
             .get(triangle)
-            .and_then(|&m| self.materials.get(m as usize));
-        let Some(material) = material else {
-            return Vec4::ONE;
-        };
+            .and_then(|&m| self.materials.get(m as usize))
+    }
+
+    /// Texture coordinates of triangle `triangle` at barycentrics `bary`, which may lie outside
+    /// the triangle (the corners' coordinates extrapolate linearly); `(0, 0)` out of range.
+    pub fn uv(&self, triangle: usize, bary: Vec3) -> Vec2 {
         let [a, b, c] = self
             .uv_of_triangle
             .get(triangle)
             .copied()
             .unwrap_or([Vec2::ZERO; 3]);
-        material.colour(a * bary.x + b * bary.y + c * bary.z)
+        a * bary.x + b * bary.y + c * bary.z
     }
 }
 

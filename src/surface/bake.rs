@@ -7,16 +7,59 @@
 //! texel ([`Tile::sources`]: the first writer, or for a dilated rim texel the neighbour's
 //! triangle). Its barycentrics are those of the texel centre in the leaf's projection along `w`,
 //! the same 2D interpolation the rasterizer used for the height; they are clamped to the triangle
-//! for rim texels (which lie just outside it). Barycentrics → texture coordinates → bilinear
-//! sample ([`crate::scene::SurfaceMaterials::colour`]) → [`super::rgba::pack`].
+//! for rim texels (which lie just outside it). Barycentrics → texture coordinates → texture
+//! sample → [`super::rgba::pack`]. A texel stands for a patch of surface one texel wide, which at
+//! coarse levels spans many texture texels, so the texture is sampled over the patch: the
+//! coordinates one texel further along `u` and `v` give the patch's extent in the texture, and
+//! its mip chain ([`crate::scene::MipChain`]) the mean colour there. (Point samples made a fine
+//! checker bake to noise of its two colours at Q0.)
 
-use glam::{DVec2, Vec3};
+use std::collections::HashMap;
+
+use glam::{DVec2, DVec3, Vec3, Vec4};
 use rayon::prelude::*;
 
 use super::rgba;
 use crate::rbvh::raster::{Tile, NO_SOURCE};
 use crate::scene::material::clamp_to_triangle;
-use crate::scene::{Scene, SurfaceMaterials};
+use crate::scene::{MipChain, Scene, SurfaceMaterials, Texture};
+
+/// The mip chain of every material's texture, built once per distinct texture.
+struct Mips<'a> {
+    chains: Vec<MipChain<'a>>,
+    /// Per material, its texture's chain in `chains`.
+    of_material: Vec<Option<usize>>,
+}
+
+impl<'a> Mips<'a> {
+    fn new(surface: &'a SurfaceMaterials) -> Mips<'a> {
+        let mut index: HashMap<*const Texture, usize> = HashMap::new();
+        let mut textures: Vec<&Texture> = Vec::new();
+        let of_material = surface
+            .materials
+            .iter()
+            .map(|m| {
+                let t = m.texture.as_deref()?;
+                Some(*index.entry(std::ptr::from_ref(t)).or_insert_with(|| {
+                    textures.push(t);
+                    textures.len() - 1
+                }))
+            })
+            .collect();
+        let chains = textures.into_par_iter().map(MipChain::new).collect();
+        Mips {
+            chains,
+            of_material,
+        }
+    }
+
+    /// The chain of triangle `triangle`'s texture; `None` without a textured material.
+    fn of(&self, surface: &SurfaceMaterials, triangle: usize) -> Option<&MipChain<'a>> {
+        let material = *surface.material_of_triangle.get(triangle)?;
+        let k = (*self.of_material.get(material as usize)?)?;
+        self.chains.get(k)
+    }
+}
 
 /// The colour channel of an atlas of `atlas_len` texels and row `pitch` holding `tiles` at
 /// `bases` (as packed by the builder, whose tiles carry scene triangle indices in `sources`); 0
@@ -29,9 +72,10 @@ pub(crate) fn bake(
     pitch: u32,
     atlas_len: usize,
 ) -> Vec<u32> {
+    let mips = Mips::new(surface);
     let per_tile: Vec<Vec<u32>> = tiles
         .par_iter()
-        .map(|t| bake_tile(scene, surface, t))
+        .map(|t| bake_tile(scene, surface, &mips, t))
         .collect();
     let mut colours = vec![0u32; atlas_len];
     let pitch = pitch as usize;
@@ -51,7 +95,7 @@ pub(crate) fn bake(
 }
 
 /// Row-major colours of one tile's texels.
-fn bake_tile(scene: &Scene, surface: &SurfaceMaterials, tile: &Tile) -> Vec<u32> {
+fn bake_tile(scene: &Scene, surface: &SurfaceMaterials, mips: &Mips, tile: &Tile) -> Vec<u32> {
     let f = &tile.frame;
     let res_u = f.res_u as usize;
     tile.sources
@@ -78,21 +122,42 @@ fn bake_tile(scene: &Scene, surface: &SurfaceMaterials, tile: &Tile) -> Vec<u32>
                 ((k % res_u) as f64 + 0.5) * texel,
                 ((k / res_u) as f64 + 0.5) * texel,
             );
-            let bary = barycentrics_2d([plane(a), plane(b), plane(c)], centre);
-            rgba::pack(surface.colour(source as usize, bary))
+            let corners = [plane(a), plane(b), plane(c)];
+            let Some(raw) = barycentrics_2d(corners, centre) else {
+                return rgba::pack(surface.colour(source as usize, Vec3::X));
+            };
+            let bary = clamp_to_triangle(raw);
+            let triangle = source as usize;
+            let Some(material) = surface.material(triangle) else {
+                return rgba::pack(Vec4::ONE);
+            };
+            let Some(chain) = mips.of(surface, triangle) else {
+                return rgba::pack(material.factor);
+            };
+            // The texture coordinates across the texel's patch, from the unclamped barycentrics
+            // one texel along u and v (the mapping is affine, so this is its exact extent).
+            let uv = |d: DVec2| {
+                let b = barycentrics_2d(corners, centre + d).unwrap_or(raw);
+                surface.uv(triangle, b.as_vec3())
+            };
+            let d_uv = [
+                uv(DVec2::new(texel, 0.0)) - uv(DVec2::ZERO),
+                uv(DVec2::new(0.0, texel)) - uv(DVec2::ZERO),
+            ];
+            rgba::pack(material.colour_over(surface.uv(triangle, bary), d_uv, chain))
         })
         .collect()
 }
 
-/// Barycentrics of `p` in the 2D triangle `t`, clamped to it; the first corner when degenerate.
-fn barycentrics_2d(t: [DVec2; 3], p: DVec2) -> Vec3 {
+/// Barycentrics of `p` in the 2D triangle `t`, negative outside it; `None` when degenerate.
+fn barycentrics_2d(t: [DVec2; 3], p: DVec2) -> Option<DVec3> {
     let [a, b, c] = t;
     let area = (b - a).perp_dot(c - a);
     if area == 0.0 || !area.is_finite() {
-        return Vec3::X;
+        return None;
     }
     let wa = (c - b).perp_dot(p - b) / area;
     let wb = (a - c).perp_dot(p - c) / area;
     let wc = (b - a).perp_dot(p - a) / area;
-    clamp_to_triangle(glam::DVec3::new(wa, wb, wc))
+    Some(DVec3::new(wa, wb, wc))
 }
