@@ -223,6 +223,8 @@ fn lod_adds_a_valid_rbvh_lod_record_per_level_and_ray_type() {
         // The coarse columns are counted with the tree.
         assert!(lod.memory_bytes.tree > plain.memory_bytes.tree);
         assert_eq!(lod.memory_bytes.atlas, plain.memory_bytes.atlas);
+        assert_eq!(lod.lod, config.lod);
+        assert_eq!((chunk[0].lod, plain.lod), (None, None));
     }
     assert!(dir.path().join("sphere").join("q4_lod.png").exists());
     let text = bench::table(&report);
@@ -311,7 +313,7 @@ fn the_validator_flags_a_method_that_is_wrong_rather_than_fast() {
 fn bad_configurations_are_errors_naming_the_field() {
     let base = BenchConfig::new(vec!["sphere".into()], Device::Create(Default::default()));
     type Break = fn(&mut BenchConfig);
-    let cases: [(&str, Break); 7] = [
+    let cases: [(&str, Break); 9] = [
         ("scenes", |c| c.scenes.clear()),
         ("width", |c| c.width = 0),
         ("runs", |c| c.runs = 0),
@@ -320,6 +322,18 @@ fn bad_configurations_are_errors_naming_the_field() {
         ("lod columns", |c| {
             c.lod = Some(rbvh::lod::LodParams {
                 columns: 0,
+                ..Default::default()
+            })
+        }),
+        ("lod min leaves", |c| {
+            c.lod = Some(rbvh::lod::LodParams {
+                min_leaves: 0,
+                ..Default::default()
+            })
+        }),
+        ("lod bias", |c| {
+            c.lod = Some(rbvh::lod::LodParams {
+                bias: f32::NAN,
                 ..Default::default()
             })
         }),

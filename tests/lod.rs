@@ -208,10 +208,16 @@ fn gpu_and_cpu_agree_with_lod_and_point_cones_change_nothing() {
         for (query, any) in [(Query::Closest, false), (Query::Any, true)] {
             let gpu = tracer.trace_lod(&rays, &cones, query, false).unwrap().hits;
             let cpu = r.trace_cpu_lod(&lod, &rays, &cones, any).unwrap();
-            coarse += cpu
+            let chosen = cpu
                 .iter()
                 .filter(|c| c.is_hit() && c.id & rbvh::lod::LOD_BIT != 0)
                 .count();
+            // Every setting must choose coarse nodes, or its agreement would prove nothing.
+            assert!(
+                chosen > 500,
+                "{name} Q{level} {lod_params:?}: {chosen} coarse hits"
+            );
+            coarse += chosen;
             agreement.add(&format!("{name} Q{level}"), &gpu, &cpu, any);
         }
         // With point cones nothing is coarse: the plain RBVH's hits, bit for bit.

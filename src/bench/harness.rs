@@ -388,6 +388,9 @@ impl<'a> SceneBench<'a> {
                 method: c.method,
                 quality: c.level.map(|(level, _)| level.name()),
                 params: c.level.map(|(_, params)| Params::from(&params)),
+                lod: (c.method == Method::RbvhLod)
+                    .then_some(self.config.lod)
+                    .flatten(),
                 ray_type,
                 rays: m.rays.len() as u64,
                 mrays_per_s: speeds[i],

@@ -25,6 +25,7 @@
 //! | `method` | `"exact"` \| `"rbvh"` \| `"rbvh-lod"` | exact triangle BVH, RBVH, or RBVH traced with level of detail |
 //! | `quality` | null \| `"Q0"`…`"Q4"` \| `"custom"` | RBVH level; null for exact |
 //! | `params` | object \| null | RBVH build parameters (below); null for exact |
+//! | `lod` | object \| null | level-of-detail parameters (below); null but for `rbvh-lod` |
 //! | `ray_type` | `"primary"` \| `"ao"` \| `"shadow"` \| `"diffuse"` | see `bench::rays` |
 //! | `rays` | int | rays per dispatch |
 //! | `mrays_per_s` | {`median`,`min`,`max`} | million rays per second over the timed runs |
@@ -42,6 +43,9 @@
 //! `subdivision` (`"spatial_median"` \| `"area_sah"`), `object_split`, `max_tile`,
 //! `min_leaf_texels` — the fields of [`RbvhParams`].
 //!
+//! `lod` (`rbvh-lod` records, else null): `columns`, `min_leaves`, `bias` — the fields of
+//! [`LodParams`].
+//!
 //! `error` (definitions in `bench::metrics`): `miss_mismatch_rate` (fraction of rays hit by one
 //! side only); `t_err_mean`, `t_err_p99`, `t_err_max` (`|t − t_exact|` over rays both hit, as a
 //! fraction of the scene's bounding-box diagonal); `normal_err_deg_mean`, `normal_err_deg_p99`
@@ -54,7 +58,7 @@
 //!
 //! RFC 4180: a header line, then one line per record with the same fields flattened (`params.*`,
 //! `mrays_per_s.*`, `memory_bytes.*` and `error.*` without their prefix, except
-//! `mrays_median`/`mrays_min`/`mrays_max` and `*_bytes`). Null is an empty cell; an infinite PSNR is
+//! `mrays_median`/`mrays_min`/`mrays_max`, `*_bytes` and `lod_*`). Null is an empty cell; an infinite PSNR is
 //! `inf`.
 
 use std::io::Write;
@@ -64,6 +68,7 @@ use serde::Serialize;
 
 use super::rays::RayType;
 use crate::io::write_atomically;
+use crate::lod::LodParams;
 use crate::rbvh::{RbvhParams, Refinement, Subdivision};
 use crate::Result;
 
@@ -94,6 +99,8 @@ pub struct Record {
     pub method: Method,
     pub quality: Option<String>,
     pub params: Option<Params>,
+    /// How the levels of detail were built and chosen, for `rbvh-lod` records.
+    pub lod: Option<LodParams>,
     pub ray_type: RayType,
     pub rays: u64,
     pub mrays_per_s: Spread,
@@ -238,7 +245,7 @@ pub fn write_json(path: &Path, report: &BenchReport) -> Result<()> {
 }
 
 /// The CSV header: one column per field of a [`Record`], flattened.
-pub const CSV_COLUMNS: [&str; 35] = [
+pub const CSV_COLUMNS: [&str; 38] = [
     "scene",
     "triangles",
     "method",
@@ -251,6 +258,9 @@ pub const CSV_COLUMNS: [&str; 35] = [
     "object_split",
     "max_tile",
     "min_leaf_texels",
+    "lod_columns",
+    "lod_min_leaves",
+    "lod_bias",
     "ray_type",
     "rays",
     "mrays_median",
@@ -296,6 +306,9 @@ fn csv_row(r: &Record) -> [String; CSV_COLUMNS.len()] {
         opt(p.map(|p| p.object_split)),
         opt(p.map(|p| p.max_tile)),
         opt(p.map(|p| p.min_leaf_texels)),
+        opt(r.lod.map(|l| l.columns)),
+        opt(r.lod.map(|l| l.min_leaves)),
+        opt(r.lod.map(|l| l.bias)),
         r.ray_type.name().into(),
         r.rays.to_string(),
         r.mrays_per_s.median.to_string(),

@@ -9,7 +9,8 @@
 //! and is solid in between. Its top takes the mean normal of the samples facing up the axis, its
 //! bottom that of those facing down — the surface a ray sees from either side, averaged as normal
 //! maps are when mip-mapped — so that a coarse blob is shaded as round as the fine one is
-//! (extreme samples alone gave a far grove 18° normal error against 16° with the mean).
+//! (measured on `grove-aerial` with 8 columns at bias 0: the extreme samples' normals gave an
+//! 18.0° mean normal error against exact, the mean normals 16.2°).
 
 use std::time::Instant;
 
@@ -85,7 +86,10 @@ impl Lod {
         let records: Vec<Coarse> = (0..rbvh.nodes.len())
             .into_par_iter()
             .map(|n| match order.span[n] {
-                Some((bounds, range)) if range.1 - range.0 >= params.min_leaves as usize => {
+                // The root is never a child, so no ray could choose its grid.
+                Some((bounds, range))
+                    if n > 0 && range.1 - range.0 >= params.min_leaves as usize =>
+                {
                     coarse_node(&bounds, &sources[range.0..range.1], fine, params.columns)
                 }
                 _ => (GpuLod::NONE, Vec::new(), Vec::new()),
@@ -293,9 +297,10 @@ fn triangle_samples([a, b, c]: [Vec3; 3], spacing: f32) -> Vec<Sample> {
 ///
 /// The grid spans the node's box in `columns` columns along its longer side: every node is
 /// drawn at the same number of columns across, so a node is chosen once the ray sees it at most
-/// `columns` footprints wide, whatever the depth of the subtree below it (a pyramid over the tree
-/// depth, doubling per level, made whole objects far too blocky to ever be chosen). Columns are
-/// at least two fine texels wide, so that a surface crossing a column leaves samples in it.
+/// `columns · 2^bias` footprints wide, whatever the depth of the subtree below it (a pyramid over
+/// the tree depth, doubling per level, made whole objects far too blocky to ever be chosen).
+/// Columns are at least two fine texels wide, so that a surface crossing a column leaves samples
+/// in it.
 fn coarse_node(bounds: &Aabb, sources: &[Vec<Sample>], fine: f32, columns: u32) -> Coarse {
     if bounds.is_empty() || sources.iter().all(Vec::is_empty) {
         return (GpuLod::NONE, Vec::new(), Vec::new());
@@ -436,7 +441,8 @@ mod tests {
             let lod = Lod::build(&rbvh, &params).unwrap();
             let order = subtree_order(&rbvh);
             let mut longest_side_full = 0;
-            for (n, record) in lod.nodes.iter().enumerate() {
+            assert!(!lod.nodes[0].is_some(), "no ray can choose the root");
+            for (n, record) in lod.nodes.iter().enumerate().skip(1) {
                 let below = leaves_below(&rbvh, n as u32);
                 if below < params.min_leaves as usize {
                     assert!(!record.is_some(), "node {n}: {below} leaves");

@@ -1,8 +1,9 @@
 //! Ray cones: the footprint a ray stands for, after Akenine-Möller et al., "Texture Level of
 //! Detail Strategies for Real-Time Ray Tracing" (Ray Tracing Gems, 2019, ch. 20), and Amanatides,
 //! "Ray Tracing with Cones" (SIGGRAPH 1984). A cone's width at distance `t` is
-//! `width + spread · t`; level-of-detail traversal uses the coarsest representation whose texel
-//! is no larger than that width where the ray enters it.
+//! `width + spread · t`; level-of-detail traversal uses the coarsest representation whose column,
+//! scaled by the LOD bias ([`crate::lod::LodParams::selection_width`]), is no larger than that
+//! width where the ray enters it.
 
 use bytemuck::{Pod, Zeroable};
 
@@ -65,8 +66,9 @@ impl RayCone {
 }
 
 /// The level-of-detail rule, shared by the CPU caster and (as its GLSL twin) the shader: a coarse
-/// representation with columns `texel_size` wide is used for a ray that enters it at `t_entry`
-/// when its texel is no wider than the cone there. The cone only widens with `t`, so for one ray
+/// representation whose selection width is `texel_size` (its column width scaled by the LOD
+/// bias, [`crate::lod::LodParams::selection_width`]) is used for a ray that enters it at
+/// `t_entry` when that width is no larger than the cone there. The cone only widens with `t`, so for one ray
 /// the selection is monotone: whatever is chosen at some distance is chosen at every larger one.
 /// A node without a coarse representation (`texel_size` +inf, or 0 in a tree whose nodes were not
 /// annotated, see [`crate::lod::Lod::annotated_nodes`]) is never chosen, whatever the cone.

@@ -44,8 +44,8 @@ pub struct Common {
 /// Level of detail (RBVH only): coarse column grids at inner nodes, chosen per ray by its cone.
 #[derive(Args, Clone, Debug)]
 pub struct LodArgs {
-    /// Trace with level of detail: each ray uses the coarsest representation whose texel fits its
-    /// footprint (a pixel's cone for render; --lod-spread for trace).
+    /// Trace with level of detail: each ray uses the coarsest representation whose columns are at
+    /// most 2^--lod-bias footprints wide (a pixel's cone for render; --lod-spread for trace).
     #[arg(long)]
     pub lod: bool,
     #[command(flatten)]
@@ -64,8 +64,8 @@ pub struct LodBuildArgs {
     /// Fewest leaves below a node for it to get a coarse grid.
     #[arg(long, default_value_t = LodParams::default().min_leaves, requires = "lod")]
     pub lod_min_leaves: u32,
-    /// Log2 of the columns one footprint may span: a node is chosen where its column is at most
-    /// 2^bias footprints wide (negative: sharper and slower; positive: coarser and faster).
+    /// A node is chosen where its column is at most 2^bias footprints wide: -1 puts two columns in
+    /// a footprint, 0 one (lower: sharper and slower; higher: coarser and faster).
     #[arg(long, default_value_t = LodParams::default().bias, requires = "lod", allow_negative_numbers = true)]
     pub lod_bias: f32,
 }
