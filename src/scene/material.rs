@@ -50,15 +50,25 @@ impl Material {
         }
     }
 
-    /// Linear RGBA over the patch around `uv` whose sides span the texture-coordinate steps
-    /// `d_uv`: the texture is sampled from `mips` (its mip chain) at the patch's longer side in
-    /// texels, so that a patch covering many texels gets their mean instead of one of them.
-    pub(crate) fn colour_over(&self, uv: Vec2, d_uv: [Vec2; 2], mips: &MipChain) -> Vec4 {
+    /// The longer side, in texels of this material's texture, of a patch whose sides span the
+    /// texture-coordinate steps `d_uv`; 0 without a texture.
+    pub(crate) fn footprint(&self, d_uv: [Vec2; 2]) -> f32 {
+        match &self.texture {
+            Some(t) => {
+                let size = Vec2::new(t.width as f32, t.height as f32);
+                (d_uv[0] * size).length().max((d_uv[1] * size).length())
+            }
+            None => 0.0,
+        }
+    }
+
+    /// Linear RGBA over a patch `footprint` texels wide around `uv` ([`Material::footprint`]),
+    /// sampled from `mips`, the mip chain of this material's texture, so that a patch covering
+    /// many texels gets their mean instead of one of them.
+    pub(crate) fn colour_over(&self, uv: Vec2, footprint: f32, mips: &MipChain) -> Vec4 {
         match &self.texture {
             Some(t) => {
                 debug_assert!(mips.is_of(t), "the mip chain of another texture");
-                let size = Vec2::new(t.width as f32, t.height as f32);
-                let footprint = (d_uv[0] * size).length().max((d_uv[1] * size).length());
                 self.factor * mips.sample(uv, self.wrap, footprint)
             }
             None => self.factor,

@@ -10,7 +10,10 @@
 //! isotropic filter of GPU samplers (Vulkan 1.3 §16.6.7, with λ = log2 of the footprint's longer
 //! side in texels).
 
+use std::sync::OnceLock;
+
 use glam::{Vec2, Vec4};
+use rayon::prelude::*;
 
 use super::texture::{linear, Texture, Wrap};
 
@@ -81,18 +84,19 @@ fn halve(t: &Texture) -> Texture {
         let (i, j) = (i.min(t.width - 1), j.min(t.height - 1));
         linear(t.texels[(j * t.width + i) as usize])
     };
-    let texels = (0..h)
-        .flat_map(|j| (0..w).map(move |i| (i, j)))
-        .map(|(i, j)| {
+    let texels = (0..w * h)
+        .into_par_iter()
+        .map(|k| {
+            let (i, j) = (k % w, k / w);
             let sum = at(2 * i, 2 * j)
                 + at(2 * i + 1, 2 * j)
                 + at(2 * i, 2 * j + 1)
                 + at(2 * i + 1, 2 * j + 1);
             let mean = sum * 0.25;
             [
-                crate::output::srgb_u8(mean.x),
-                crate::output::srgb_u8(mean.y),
-                crate::output::srgb_u8(mean.z),
+                nearest_code(mean.x),
+                nearest_code(mean.y),
+                nearest_code(mean.z),
                 (mean.w.clamp(0.0, 1.0) * 255.0).round() as u8,
             ]
         })
@@ -103,6 +107,20 @@ fn halve(t: &Texture) -> Texture {
         height: h,
         texels,
     }
+}
+
+/// The 8-bit sRGB code whose linear value is nearest `linear` (clamped to `[0, 1]`; NaN gives
+/// 0): a binary search over the midpoints between neighbouring codes' linear values, exact and
+/// several times cheaper than the transfer function's power, which a 2048² texture's chain would
+/// otherwise evaluate three million times.
+fn nearest_code(linear: f32) -> u8 {
+    static MIDPOINTS: OnceLock<[f32; 255]> = OnceLock::new();
+    let midpoints = MIDPOINTS.get_or_init(|| {
+        let value = |c: usize| super::texture::linear([c as u8, 0, 0, 0]).x;
+        std::array::from_fn(|c| 0.5 * (value(c) + value(c + 1)))
+    });
+    // NaN compares false with every midpoint, so it lands on code 0.
+    midpoints.partition_point(|&m| m < linear) as u8
 }
 
 #[cfg(test)]
@@ -123,6 +141,17 @@ mod tests {
                 })
                 .collect(),
         }
+    }
+
+    #[test]
+    fn nearest_code_inverts_the_decode() {
+        for c in 0..=255u8 {
+            assert_eq!(nearest_code(linear([c, 0, 0, 0]).x), c);
+        }
+        assert_eq!(nearest_code(-1.0), 0);
+        assert_eq!(nearest_code(2.0), 255);
+        assert_eq!(nearest_code(f32::NAN), 0);
+        assert_eq!(nearest_code(0.5), crate::output::srgb_u8(0.5));
     }
 
     #[test]

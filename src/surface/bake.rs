@@ -15,6 +15,7 @@
 //! checker bake to noise of its two colours at Q0.)
 
 use std::collections::HashMap;
+use std::sync::OnceLock;
 
 use glam::{DVec2, DVec3, Vec3, Vec4};
 use rayon::prelude::*;
@@ -24,9 +25,11 @@ use crate::rbvh::raster::{Tile, NO_SOURCE};
 use crate::scene::material::clamp_to_triangle;
 use crate::scene::{MipChain, Scene, SurfaceMaterials, Texture};
 
-/// The mip chain of every material's texture, built once per distinct texture.
+/// The mip chain of every material's texture, built once per distinct texture when a texel
+/// first needs it (fine levels, whose patches are smaller than a texture texel, never do).
 struct Mips<'a> {
-    chains: Vec<MipChain<'a>>,
+    textures: Vec<&'a Texture>,
+    chains: Vec<OnceLock<MipChain<'a>>>,
     /// Per material, its texture's chain in `chains`.
     of_material: Vec<Option<usize>>,
 }
@@ -46,9 +49,9 @@ impl<'a> Mips<'a> {
                 }))
             })
             .collect();
-        let chains = textures.into_par_iter().map(MipChain::new).collect();
         Mips {
-            chains,
+            chains: textures.iter().map(|_| OnceLock::new()).collect(),
+            textures,
             of_material,
         }
     }
@@ -57,7 +60,8 @@ impl<'a> Mips<'a> {
     fn of(&self, surface: &SurfaceMaterials, triangle: usize) -> Option<&MipChain<'a>> {
         let material = *surface.material_of_triangle.get(triangle)?;
         let k = (*self.of_material.get(material as usize)?)?;
-        self.chains.get(k)
+        let texture = *self.textures.get(k)?;
+        Some(self.chains.get(k)?.get_or_init(|| MipChain::new(texture)))
     }
 }
 
@@ -98,6 +102,9 @@ pub(crate) fn bake(
 fn bake_tile(scene: &Scene, surface: &SurfaceMaterials, mips: &Mips, tile: &Tile) -> Vec<u32> {
     let f = &tile.frame;
     let res_u = f.res_u as usize;
+    // The footprint of the last textured triangle: the plane-to-texture mapping is affine, so
+    // it is the same at every texel the triangle wins.
+    let mut last_footprint: Option<(u32, f32)> = None;
     tile.sources
         .iter()
         .enumerate()
@@ -131,20 +138,33 @@ fn bake_tile(scene: &Scene, surface: &SurfaceMaterials, mips: &Mips, tile: &Tile
             let Some(material) = surface.material(triangle) else {
                 return rgba::pack(Vec4::ONE);
             };
-            let Some(chain) = mips.of(surface, triangle) else {
-                return rgba::pack(material.factor);
+            let uv = surface.uv(triangle, bary);
+            if material.texture.is_none() {
+                return rgba::pack(material.colour(uv));
+            }
+            let footprint = match last_footprint {
+                Some((s, footprint)) if s == source => footprint,
+                _ => {
+                    // The texture coordinates across the texel's patch, from the unclamped
+                    // barycentrics one texel along u and v: the patch's exact extent.
+                    let uv_at = |d: DVec2| {
+                        let b = barycentrics_2d(corners, centre + d).unwrap_or(raw);
+                        surface.uv(triangle, b.as_vec3())
+                    };
+                    let origin = uv_at(DVec2::ZERO);
+                    let footprint = material.footprint([
+                        uv_at(DVec2::new(texel, 0.0)) - origin,
+                        uv_at(DVec2::new(0.0, texel)) - origin,
+                    ]);
+                    last_footprint = Some((source, footprint));
+                    footprint
+                }
             };
-            // The texture coordinates across the texel's patch, from the unclamped barycentrics
-            // one texel along u and v (the mapping is affine, so this is its exact extent).
-            let uv = |d: DVec2| {
-                let b = barycentrics_2d(corners, centre + d).unwrap_or(raw);
-                surface.uv(triangle, b.as_vec3())
+            let colour = match mips.of(surface, triangle) {
+                Some(chain) if footprint > 1.0 => material.colour_over(uv, footprint, chain),
+                _ => material.colour(uv),
             };
-            let d_uv = [
-                uv(DVec2::new(texel, 0.0)) - uv(DVec2::ZERO),
-                uv(DVec2::new(0.0, texel)) - uv(DVec2::ZERO),
-            ];
-            rgba::pack(material.colour_over(surface.uv(triangle, bary), d_uv, chain))
+            rgba::pack(colour)
         })
         .collect()
 }
