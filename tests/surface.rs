@@ -207,6 +207,46 @@ fn gltf_base_colour_texture_times_factor_from_a_file_and_a_data_uri() {
     check_quadrants(&scene, expect);
 }
 
+/// `KHR_texture_transform` on the base colour texture: a quarter turn (u, v) → (v, −u) and an
+/// offset of one along v map each quadrant centre onto another texel's centre, and a `texCoord`
+/// override names the set the primitive must have.
+#[test]
+fn gltf_texture_transform_moves_the_texture_and_may_pick_another_set() {
+    let dir = tempfile::tempdir().unwrap();
+    write_checker(&dir.path().join("checker.png"));
+    let with_transform = |transform: &str| {
+        gltf_quad(r#"{"uri": "checker.png"}"#, [1.0; 4])
+            .replace(
+                r#""baseColorTexture": {"index": 0}"#,
+                &format!(
+                    r#""baseColorTexture": {{"index": 0, "extensions": {{"KHR_texture_transform": {transform}}}}}"#
+                ),
+            )
+            .replace(
+                r#""asset": {"version": "2.0"},"#,
+                r#""asset": {"version": "2.0"}, "extensionsUsed": ["KHR_texture_transform"],"#,
+            )
+    };
+    let turned = write(
+        dir.path(),
+        "turned.gltf",
+        &with_transform(r#"{"rotation": 1.5707964, "offset": [0, 1], "scale": [1, 1]}"#),
+    );
+    let scene = Scene::load(turned.to_str().unwrap()).unwrap();
+    let c = checker_linear();
+    // Quadrant centres (u, v) → (v, 1 − u): top-left → bottom-left texel, top-right → top-left,
+    // bottom-left → bottom-right, bottom-right → top-right.
+    check_quadrants(&scene, [c[2], c[0], c[3], c[1]]);
+
+    let other_set = write(
+        dir.path(),
+        "set1.gltf",
+        &with_transform(r#"{"texCoord": 1}"#),
+    );
+    let e = Scene::load(other_set.to_str().unwrap()).unwrap_err();
+    assert!(e.to_string().contains("TEXCOORD_1"), "{e}");
+}
+
 #[test]
 fn missing_and_corrupt_textures_are_typed_errors_naming_the_image() {
     let dir = tempfile::tempdir().unwrap();

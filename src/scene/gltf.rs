@@ -2,7 +2,8 @@
 //!
 //! The `gltf` crate parses and validates the document and loads the buffers. Of the materials,
 //! the base colour is read (`pbrMetallicRoughness.baseColorFactor` times `baseColorTexture`,
-//! glTF 2.0 §3.9.2, with the texture's `TEXCOORD_n` set and its sampler's wrap modes); images are
+//! glTF 2.0 §3.9.2, with the texture's `TEXCOORD_n` set, its `KHR_texture_transform` and its
+//! sampler's wrap modes); images are
 //! decoded only when a material uses them, from a buffer view (GLB), a data URI or a file next to
 //! the glTF. A missing image file is [`Error::Io`] and an undecodable one [`Error::Parse`], both
 //! naming the image. Primitives without a material stay material-less (white), and a file without
@@ -122,13 +123,24 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
                 continue;
             }
             let id = materials.id(&mut scene, &material)?;
-            let set = material
-                .pbr_metallic_roughness()
-                .base_color_texture()
-                .map(|info| info.tex_coord());
-            let uvs = match set {
-                Some(set) => read_texcoords(&primitive, set, positions.len(), &buffers)
-                    .map_err(|e| fail(format!("mesh {object:?}: {e}")))?,
+            let uvs = match material.pbr_metallic_roughness().base_color_texture() {
+                Some(info) => {
+                    let transform = info.texture_transform().map(|t| UvTransform {
+                        offset: Vec2::from(t.offset()),
+                        rotation: t.rotation(),
+                        scale: Vec2::from(t.scale()),
+                    });
+                    let set = info
+                        .texture_transform()
+                        .and_then(|t| t.tex_coord())
+                        .unwrap_or(info.tex_coord());
+                    let uvs = read_texcoords(&primitive, set, positions.len(), &buffers)
+                        .map_err(|e| fail(format!("mesh {object:?}: {e}")))?;
+                    match transform {
+                        Some(t) => uvs.into_iter().map(|uv| t.apply(uv)).collect(),
+                        None => uvs,
+                    }
+                }
                 None => vec![Vec2::ZERO; positions.len()],
             };
             let (triangles, uv_of_triangle): (Vec<[u32; 3]>, Vec<[Vec2; 3]>) = triangles
@@ -253,6 +265,25 @@ fn resolve_uri(base: &Path, uri: &str) -> std::result::Result<std::path::PathBuf
     let decoded = urlencoding::decode(uri)
         .map_err(|_| format!("URI {uri:?} percent-decodes to invalid UTF-8"))?;
     Ok(base.join(&*decoded))
+}
+
+/// `KHR_texture_transform` on a texture reference: texture coordinates are scaled, then rotated
+/// by `rotation` radians (counter-clockwise in the (u, v) plane, the image turning clockwise),
+/// then offset — `T · R · S` in the extension's own matrices. Affine, so applying it to the
+/// corners' coordinates is the same as applying it to any point interpolated between them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct UvTransform {
+    offset: Vec2,
+    rotation: f32,
+    scale: Vec2,
+}
+
+impl UvTransform {
+    fn apply(&self, uv: Vec2) -> Vec2 {
+        let s = uv * self.scale;
+        let (sin, cos) = self.rotation.sin_cos();
+        Vec2::new(cos * s.x + sin * s.y, -sin * s.x + cos * s.y) + self.offset
+    }
 }
 
 fn wrap(mode: ::gltf::texture::WrappingMode) -> Wrap {
