@@ -247,6 +247,65 @@ fn gltf_texture_transform_moves_the_texture_and_may_pick_another_set() {
     assert!(e.to_string().contains("TEXCOORD_1"), "{e}");
 }
 
+/// `quad` (a [`gltf_quad`] document) with a `COLOR_0` of `colour` (float VEC3) at every vertex,
+/// and without its material when `material` is false.
+fn with_vertex_colours(quad: &str, colour: [f32; 3], material: bool) -> String {
+    let mut json: serde_json::Value = serde_json::from_str(quad).unwrap();
+    let uri = json["buffers"][0]["uri"].as_str().unwrap().to_owned();
+    let mut bytes = base64::decode(uri.split_once(";base64,").unwrap().1).unwrap();
+    let offset = bytes.len();
+    for _ in 0..4 {
+        bytes.extend_from_slice(bytemuck::cast_slice(&colour));
+    }
+    json["buffers"][0]["byteLength"] = bytes.len().into();
+    json["buffers"][0]["uri"] = format!(
+        "data:application/octet-stream;base64,{}",
+        base64::encode(&bytes)
+    )
+    .into();
+    let views = json["bufferViews"].as_array_mut().unwrap();
+    views.push(serde_json::json!({"buffer": 0, "byteOffset": offset, "byteLength": 48}));
+    let view = views.len() - 1;
+    let accessors = json["accessors"].as_array_mut().unwrap();
+    accessors.push(serde_json::json!(
+        {"bufferView": view, "componentType": 5126, "count": 4, "type": "VEC3"}
+    ));
+    let accessor = accessors.len() - 1;
+    let primitive = &mut json["meshes"][0]["primitives"][0];
+    primitive["attributes"]["COLOR_0"] = accessor.into();
+    if !material {
+        primitive.as_object_mut().unwrap().remove("material");
+    }
+    json.to_string()
+}
+
+/// glTF `COLOR_0` multiplies the base colour, and colours a primitive without a material.
+#[test]
+fn gltf_vertex_colours_multiply_the_base_colour() {
+    let dir = tempfile::tempdir().unwrap();
+    write_checker(&dir.path().join("checker.png"));
+    let quad = gltf_quad(r#"{"uri": "checker.png"}"#, [1.0; 4]);
+    let colour = [0.5, 0.25, 1.0];
+    let tint = Vec3::from(colour);
+
+    let tinted = write(
+        dir.path(),
+        "tinted.gltf",
+        &with_vertex_colours(&quad, colour, true),
+    );
+    let scene = Scene::load(tinted.to_str().unwrap()).unwrap();
+    check_quadrants(&scene, checker_linear().map(|c| c * tint));
+
+    let bare = write(
+        dir.path(),
+        "bare.gltf",
+        &with_vertex_colours(&quad, colour, false),
+    );
+    let scene = Scene::load(bare.to_str().unwrap()).unwrap();
+    assert!(scene.surface.as_ref().unwrap().materials.is_empty());
+    check_quadrants(&scene, [tint; 4]);
+}
+
 #[test]
 fn missing_and_corrupt_textures_are_typed_errors_naming_the_image() {
     let dir = tempfile::tempdir().unwrap();

@@ -3,11 +3,12 @@
 //! The `gltf` crate parses and validates the document and loads the buffers. Of the materials,
 //! the base colour is read (`pbrMetallicRoughness.baseColorFactor` times `baseColorTexture`,
 //! glTF 2.0 §3.9.2, with the texture's `TEXCOORD_n` set, its `KHR_texture_transform` and its
-//! sampler's wrap modes); images are
-//! decoded only when a material uses them, from a buffer view (GLB), a data URI or a file next to
-//! the glTF. A missing image file is [`Error::Io`] and an undecodable one [`Error::Parse`], both
-//! naming the image. Primitives without a material stay material-less (white), and a file without
-//! materials gives a scene without a surface table. Accessors are read here rather than through
+//! sampler's wrap modes), times the vertex colours `COLOR_0` where a primitive has them; images
+//! are decoded only when a material uses them, from a buffer view (GLB), a data URI or a file next
+//! to the glTF. A missing image file is [`Error::Io`] and an undecodable one [`Error::Parse`], both
+//! naming the image. Primitives without a material stay material-less (white, or their vertex
+//! colours), and a file with neither materials nor vertex colours gives a scene without a surface
+//! table. Accessors are read here rather than through
 //! the crate's reader, which trusts the file's strides and types and panics on some malformed
 //! ones: every range is checked, so a broken file is an error naming it, never a crash.
 
@@ -114,7 +115,9 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
                 .map(|&p| transform.transform_point3(p))
                 .collect();
             let material = primitive.material();
-            if material.index().is_none() {
+            let vertex_colours = read_colours(&primitive, positions.len(), &buffers)
+                .map_err(|e| fail(format!("mesh {object:?}: {e}")))?;
+            if material.index().is_none() && vertex_colours.is_none() {
                 let triangles: Vec<[u32; 3]> = triangles
                     .into_iter()
                     .map(|[a, b, c]| if mirror { [a, c, b] } else { [a, b, c] })
@@ -150,9 +153,16 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
                     (t, t.map(|v| uvs[v as usize]))
                 })
                 .unzip();
+            let colour_of_triangle = vertex_colours.map(|colours| {
+                triangles
+                    .iter()
+                    .map(|t| t.map(|v| colours[v as usize]))
+                    .collect()
+            });
             let surface = ObjectSurface {
                 material_of_triangle: vec![id; triangles.len()],
                 uv_of_triangle,
+                colour_of_triangle,
             };
             scene.push_textured_object(object, &positions, &triangles, surface);
         }
@@ -338,6 +348,67 @@ fn read_texcoords(
         ));
     }
     Ok(uvs)
+}
+
+/// `COLOR_0` of a primitive with `n` vertices, as linear RGBA (glTF 2.0 §3.7.2.1: VEC3 or VEC4,
+/// float or normalized unsigned byte or short; colours are linear, RGB without alpha is opaque),
+/// or `None` when it has none.
+fn read_colours(
+    primitive: &Primitive,
+    n: usize,
+    buffers: &[Data],
+) -> std::result::Result<Option<Vec<Vec4>>, String> {
+    let Some(accessor) = primitive.get(&Semantic::Colors(0)) else {
+        return Ok(None);
+    };
+    let channels = match accessor.dimensions() {
+        Dimensions::Vec3 => 3,
+        Dimensions::Vec4 => 4,
+        other => {
+            return Err(format!(
+                "COLOR_0 accessor {} is {other:?}, not VEC3 or VEC4",
+                accessor.index()
+            ))
+        }
+    };
+    let rgba = |c: [f32; 4]| Vec4::new(c[0], c[1], c[2], if channels == 4 { c[3] } else { 1.0 });
+    let colours = match (accessor.data_type(), accessor.normalized()) {
+        (DataType::F32, _) => read_accessor(&accessor, buffers, 4 * channels, |b| {
+            rgba(std::array::from_fn(|k| {
+                if k < channels {
+                    f32_le(&b[4 * k..4 * k + 4])
+                } else {
+                    1.0
+                }
+            }))
+        })?,
+        (DataType::U8, true) => read_accessor(&accessor, buffers, channels, |b| {
+            rgba(std::array::from_fn(|k| {
+                b.get(k).map_or(1.0, |&c| f32::from(c) / 255.0)
+            }))
+        })?,
+        (DataType::U16, true) => read_accessor(&accessor, buffers, 2 * channels, |b| {
+            rgba(std::array::from_fn(|k| {
+                b.get(2 * k..2 * k + 2).map_or(1.0, |c| {
+                    f32::from(u16::from_le_bytes([c[0], c[1]])) / 65535.0
+                })
+            }))
+        })?,
+        (other, normalized) => {
+            return Err(format!(
+                "COLOR_0 accessor {} has component type {other:?} (normalized: {normalized}); \
+                 expected float or normalized unsigned byte/short",
+                accessor.index()
+            ))
+        }
+    };
+    if colours.len() != n {
+        return Err(format!(
+            "COLOR_0 has {} elements for {n} positions",
+            colours.len()
+        ));
+    }
+    Ok(Some(colours))
 }
 
 /// gltf-json 1.4's validator looks up each primitive's POSITION accessor before checking that

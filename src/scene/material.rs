@@ -84,14 +84,31 @@ pub struct SurfaceMaterials {
     pub material_of_triangle: Vec<u32>,
     /// Per triangle, the texture coordinates of its three corners (in the triangle's winding).
     pub uv_of_triangle: Vec<[Vec2; 3]>,
+    /// Per triangle, the linear RGBA vertex colours of its three corners (glTF `COLOR_0`), which
+    /// multiply the material's colour; only when some object has them (white for the others).
+    pub colour_of_triangle: Option<Vec<[Vec4; 3]>>,
 }
 
 impl SurfaceMaterials {
-    /// Linear RGBA of triangle `triangle` at barycentrics `bary` (weights of its three corners);
-    /// white for a triangle without material or out of range.
+    /// Linear RGBA of triangle `triangle` at barycentrics `bary` (weights of its three corners):
+    /// its material's colour (white without one, or out of range) times its vertex colour.
     pub fn colour(&self, triangle: usize, bary: Vec3) -> Vec4 {
-        match self.material(triangle) {
+        let material = match self.material(triangle) {
             Some(material) => material.colour(self.uv(triangle, bary)),
+            None => Vec4::ONE,
+        };
+        material * self.vertex_colour(triangle, bary)
+    }
+
+    /// The vertex colour of triangle `triangle` at barycentrics `bary`; white without vertex
+    /// colours or out of range.
+    pub fn vertex_colour(&self, triangle: usize, bary: Vec3) -> Vec4 {
+        match self
+            .colour_of_triangle
+            .as_ref()
+            .and_then(|c| c.get(triangle))
+        {
+            Some([a, b, c]) => *a * bary.x + *b * bary.y + *c * bary.z,
             None => Vec4::ONE,
         }
     }
@@ -174,6 +191,7 @@ mod tests {
             }],
             material_of_triangle: vec![0, NO_MATERIAL],
             uv_of_triangle: vec![[Vec2::ZERO; 3]; 2],
+            colour_of_triangle: None,
         };
         let c = s.colour(0, Vec3::X);
         assert!(
@@ -184,5 +202,27 @@ mod tests {
         );
         assert_eq!(s.colour(1, Vec3::X), Vec4::ONE);
         assert_eq!(s.colour(7, Vec3::X), Vec4::ONE);
+
+        // Vertex colours multiply, interpolated between the corners; without a material they
+        // are the colour.
+        let corners = [
+            Vec4::new(1.0, 0.0, 0.0, 1.0),
+            Vec4::ONE,
+            Vec4::new(0.0, 0.0, 1.0, 0.5),
+        ];
+        let coloured = SurfaceMaterials {
+            colour_of_triangle: Some(vec![corners; 2]),
+            ..s
+        };
+        let bary = Vec3::new(0.5, 0.25, 0.25);
+        let vertex = Vec4::new(0.75, 0.25, 0.5, 0.875);
+        assert!(
+            (coloured.vertex_colour(1, bary) - vertex)
+                .abs()
+                .max_element()
+                < 1e-6
+        );
+        assert!((coloured.colour(1, bary) - vertex).abs().max_element() < 1e-6);
+        assert!((coloured.colour(0, bary) - c * vertex).abs().max_element() < 1e-6);
     }
 }

@@ -2,7 +2,7 @@
 //! to. A flat list (rather than a tree of instances) is what both BVH builders consume, and the
 //! object ids keep enough structure for per-object statistics and false-colour renders.
 
-use glam::{Mat4, Vec2, Vec3};
+use glam::{Mat4, Vec2, Vec3, Vec4};
 
 use super::material::{Material, SurfaceMaterials, NO_MATERIAL};
 use super::{Camera, Light};
@@ -33,12 +33,13 @@ pub struct Scene {
 }
 
 /// The surface data of one object for [`Scene::push_textured_object`]: per triangle, a material
-/// id returned by [`Scene::add_material`] (or [`NO_MATERIAL`]) and its corners' texture
-/// coordinates.
+/// id returned by [`Scene::add_material`] (or [`NO_MATERIAL`]), its corners' texture coordinates
+/// and, where the object has them, its corners' vertex colours.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ObjectSurface {
     pub material_of_triangle: Vec<u32>,
     pub uv_of_triangle: Vec<[Vec2; 3]>,
+    pub colour_of_triangle: Option<Vec<[Vec4; 3]>>,
 }
 
 impl Scene {
@@ -104,6 +105,7 @@ impl Scene {
             materials: Vec::new(),
             material_of_triangle: vec![NO_MATERIAL; n],
             uv_of_triangle: vec![[Vec2::ZERO; 3]; n],
+            colour_of_triangle: None,
         })
     }
 
@@ -116,10 +118,11 @@ impl Scene {
             return;
         }
         let surface = self.surface_mut();
-        match added {
+        let colours = match added {
             Some(o) => {
                 surface.material_of_triangle.extend(o.material_of_triangle);
                 surface.uv_of_triangle.extend(o.uv_of_triangle);
+                o.colour_of_triangle
             }
             None => {
                 surface
@@ -128,7 +131,19 @@ impl Scene {
                 surface
                     .uv_of_triangle
                     .extend(std::iter::repeat_n([Vec2::ZERO; 3], new));
+                None
             }
+        };
+        // Vertex colours exist once some object brings them; every other triangle is white.
+        match (colours, &mut surface.colour_of_triangle) {
+            (Some(c), Some(all)) => all.extend(c),
+            (Some(c), none) => {
+                let mut all = vec![[Vec4::ONE; 3]; before];
+                all.extend(c);
+                *none = Some(all);
+            }
+            (None, Some(all)) => all.extend(std::iter::repeat_n([Vec4::ONE; 3], new)),
+            (None, None) => {}
         }
     }
 
@@ -244,6 +259,23 @@ impl Scene {
                     "{m} material ids and {u} texture-coordinate triples for {n} triangles"
                 )));
             }
+            if let Some(colours) = &surface.colour_of_triangle {
+                if colours.len() != n {
+                    return Err(invalid(format!(
+                        "{} vertex-colour triples for {n} triangles",
+                        colours.len()
+                    )));
+                }
+                if let Some(t) = colours
+                    .iter()
+                    .position(|c| !c.iter().all(|v| v.is_finite()))
+                {
+                    return Err(invalid(format!(
+                        "triangle {t} has non-finite vertex colours {:?}",
+                        colours[t]
+                    )));
+                }
+            }
             let count = surface.materials.len();
             if let Some((t, id)) = surface
                 .material_of_triangle
@@ -317,6 +349,12 @@ impl Scene {
                     .iter()
                     .map(|&[a, b, c]| if mirror { [a, c, b] } else { [a, b, c] })
                     .collect(),
+                colour_of_triangle: o.colour_of_triangle.as_ref().map(|colours| {
+                    colours
+                        .iter()
+                        .map(|&[a, b, c]| if mirror { [a, c, b] } else { [a, b, c] })
+                        .collect()
+                }),
             }
         });
         self.extend_surface(before, added);
@@ -420,6 +458,7 @@ mod tests {
             ObjectSurface {
                 material_of_triangle: vec![red],
                 uv_of_triangle: vec![uv],
+                colour_of_triangle: None,
             },
         );
         // A plain object first, then two instances of the textured one, one mirrored.
@@ -440,6 +479,42 @@ mod tests {
         // The mirrored copy keeps each corner's texture coordinate with its vertex.
         let corner = |t: usize, c: usize| s.positions[s.triangles[t][c] as usize];
         assert_eq!(corner(2, 1).x, -corner(1, 2).x);
+        assert_eq!(surface.colour_of_triangle, None);
+
+        // Vertex colours, once some object brings them, pad every other triangle with white, and
+        // a mirrored copy keeps each corner's colour with its vertex.
+        let (r, g, b) = (glam::Vec4::X, glam::Vec4::Y, glam::Vec4::Z);
+        let mut coloured = Scene::new("col");
+        coloured.push_textured_object(
+            "c",
+            &[Vec3::ZERO, Vec3::X, Vec3::Z],
+            &[[0, 2, 1]],
+            ObjectSurface {
+                material_of_triangle: vec![NO_MATERIAL],
+                uv_of_triangle: vec![uv],
+                colour_of_triangle: Some(vec![[r, g, b]]),
+            },
+        );
+        let mut c = s.clone();
+        c.append(&coloured, Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0)));
+        c.push_object("plain", &[Vec3::ZERO, Vec3::X, Vec3::Y], &[[0, 1, 2]]);
+        c.validate().unwrap();
+        let colours = c
+            .surface
+            .as_ref()
+            .unwrap()
+            .colour_of_triangle
+            .as_ref()
+            .unwrap();
+        let white = [glam::Vec4::ONE; 3];
+        assert_eq!(colours, &vec![white, white, white, white, [r, b, g], white]);
+        let mut bad = c.clone();
+        bad.surface.as_mut().unwrap().colour_of_triangle = Some(vec![white; 2]);
+        assert!(bad
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("vertex-colour"));
         let mut bad = s.clone();
         bad.surface.as_mut().unwrap().material_of_triangle[1] = 5;
         assert!(bad

@@ -86,6 +86,7 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
                 let surface = ObjectSurface {
                     material_of_triangle: vec![id; triangles.len()],
                     uv_of_triangle: corner_uvs(mesh, triangles.len()),
+                    colour_of_triangle: None,
                 };
                 scene.push_textured_object(name, &positions, &triangles, surface);
             }

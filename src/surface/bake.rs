@@ -8,7 +8,8 @@
 //! triangle). Its barycentrics are those of the texel centre in the leaf's projection along `w`,
 //! the same 2D interpolation the rasterizer used for the height; they are clamped to the triangle
 //! for rim texels (which lie just outside it). Barycentrics → texture coordinates → texture
-//! sample → [`super::rgba::pack`]. A texel stands for a patch of surface one texel wide, which at
+//! sample, times the interpolated vertex colour where the scene has them →
+//! [`super::rgba::pack`]. A texel stands for a patch of surface one texel wide, which at
 //! coarse levels spans many texture texels, so the texture is sampled over the patch: the
 //! coordinates one texel further along `u` and `v` give the patch's extent in the texture, and
 //! its mip chain ([`crate::scene::MipChain`]) the mean colour there. (Point samples made a fine
@@ -135,35 +136,38 @@ fn bake_tile(scene: &Scene, surface: &SurfaceMaterials, mips: &Mips, tile: &Tile
             };
             let bary = clamp_to_triangle(raw);
             let triangle = source as usize;
-            let Some(material) = surface.material(triangle) else {
-                return rgba::pack(Vec4::ONE);
-            };
             let uv = surface.uv(triangle, bary);
-            if material.texture.is_none() {
-                return rgba::pack(material.colour(uv));
-            }
-            let footprint = match last_footprint {
-                Some((s, footprint)) if s == source => footprint,
-                _ => {
-                    // The texture coordinates across the texel's patch, from the unclamped
-                    // barycentrics one texel along u and v: the patch's exact extent.
-                    let uv_at = |d: DVec2| {
-                        let b = barycentrics_2d(corners, centre + d).unwrap_or(raw);
-                        surface.uv(triangle, b.as_vec3())
+            let base = match surface.material(triangle) {
+                None => Vec4::ONE,
+                Some(material) if material.texture.is_none() => material.colour(uv),
+                Some(material) => {
+                    let footprint = match last_footprint {
+                        Some((s, footprint)) if s == source => footprint,
+                        _ => {
+                            // The texture coordinates across the texel's patch, from the
+                            // unclamped barycentrics one texel along u and v: its exact extent.
+                            let uv_at = |d: DVec2| {
+                                let b = barycentrics_2d(corners, centre + d).unwrap_or(raw);
+                                surface.uv(triangle, b.as_vec3())
+                            };
+                            let origin = uv_at(DVec2::ZERO);
+                            let footprint = material.footprint([
+                                uv_at(DVec2::new(texel, 0.0)) - origin,
+                                uv_at(DVec2::new(0.0, texel)) - origin,
+                            ]);
+                            last_footprint = Some((source, footprint));
+                            footprint
+                        }
                     };
-                    let origin = uv_at(DVec2::ZERO);
-                    let footprint = material.footprint([
-                        uv_at(DVec2::new(texel, 0.0)) - origin,
-                        uv_at(DVec2::new(0.0, texel)) - origin,
-                    ]);
-                    last_footprint = Some((source, footprint));
-                    footprint
+                    match mips.of(surface, triangle) {
+                        Some(chain) if footprint > 1.0 => {
+                            material.colour_over(uv, footprint, chain)
+                        }
+                        _ => material.colour(uv),
+                    }
                 }
             };
-            let colour = match mips.of(surface, triangle) {
-                Some(chain) if footprint > 1.0 => material.colour_over(uv, footprint, chain),
-                _ => material.colour(uv),
-            };
+            let colour = base * surface.vertex_colour(triangle, bary);
             rgba::pack(colour)
         })
         .collect()
