@@ -238,6 +238,19 @@ fn gltf_texture_transform_moves_the_texture_and_may_pick_another_set() {
     // bottom-left → bottom-right, bottom-right → top-right.
     check_quadrants(&scene, [c[2], c[0], c[3], c[1]]);
 
+    // Scale before offset: (u, v) → (u/2 + 1/2, v) puts the left quadrants' centres a quarter
+    // texel right of the left texels' centres (sampled between the two texels of their row) and
+    // the right quadrants' beyond the right texels' (clamped to them). Offset first would give
+    // (u/2 + 1/4, v) instead.
+    let scaled = write(
+        dir.path(),
+        "scaled.gltf",
+        &with_transform(r#"{"offset": [0.5, 0], "scale": [0.5, 1]}"#),
+    );
+    let scene = Scene::load(scaled.to_str().unwrap()).unwrap();
+    let mix = |a: Vec3, b: Vec3| a * 0.25 + b * 0.75;
+    check_quadrants(&scene, [mix(c[0], c[1]), c[1], mix(c[2], c[3]), c[3]]);
+
     let other_set = write(
         dir.path(),
         "set1.gltf",
@@ -530,7 +543,29 @@ fn baked_colours_average_a_texture_finer_than_the_atlas() {
             .unwrap(),
     )
     .unwrap();
-    let rbvh = Rbvh::build(&scene, &RbvhParams::quality(0).unwrap()).unwrap();
+    // On many threads, as on a 16-core machine: the chain is built on first need while other
+    // workers wait for it, which once deadlocked there (the build nested parallel work).
+    let (send, receive) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(16)
+            .build()
+            .unwrap();
+        for _ in 0..3 {
+            let rbvh = pool.install(|| Rbvh::build(&scene, &RbvhParams::quality(0).unwrap()));
+            send.send(rbvh.unwrap()).unwrap();
+        }
+    });
+    let timeout = std::time::Duration::from_secs(120);
+    let builds: Vec<Rbvh> = (0..3)
+        .map(|k| {
+            receive
+                .recv_timeout(timeout)
+                .unwrap_or_else(|e| panic!("build {k}: {e}"))
+        })
+        .collect();
+    assert!(builds.windows(2).all(|w| w[0].colours == w[1].colours));
+    let rbvh = &builds[0];
     // The quad is 2 units wide: the texture has several texels per atlas texel.
     let per_texel = side as f32 * rbvh.texel_size / 2.0;
     assert!(

@@ -352,7 +352,8 @@ fn read_texcoords(
 
 /// `COLOR_0` of a primitive with `n` vertices, as linear RGBA (glTF 2.0 §3.7.2.1: VEC3 or VEC4,
 /// float or normalized unsigned byte or short; colours are linear, RGB without alpha is opaque),
-/// or `None` when it has none.
+/// or `None` when it has none. Float colours are clamped to `[0, 1]`, the range the others
+/// have, so that a stray negative one cannot make a negative albedo.
 fn read_colours(
     primitive: &Primitive,
     n: usize,
@@ -371,7 +372,10 @@ fn read_colours(
             ))
         }
     };
-    let rgba = |c: [f32; 4]| Vec4::new(c[0], c[1], c[2], if channels == 4 { c[3] } else { 1.0 });
+    let rgba = |c: [f32; 4]| {
+        Vec4::new(c[0], c[1], c[2], if channels == 4 { c[3] } else { 1.0 })
+            .clamp(Vec4::ZERO, Vec4::ONE)
+    };
     let colours = match (accessor.data_type(), accessor.normalized()) {
         (DataType::F32, _) => read_accessor(&accessor, buffers, 4 * channels, |b| {
             rgba(std::array::from_fn(|k| {

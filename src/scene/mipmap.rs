@@ -5,7 +5,11 @@
 //!
 //! The chain is the usual one (Williams 1983, "Pyramidal parametrics"): each level halves the
 //! previous one with a 2×2 box filter, averaged in linear light and stored 8-bit sRGB-encoded as
-//! the base texture is. Odd sides round up, the last column or row averaging with itself.
+//! the base texture is. Odd sides round up, the last column or row averaging with itself: the
+//! levels of an odd-sized texture lean slightly towards its far edges, and its 1×1 level is the
+//! texture's mean only for power-of-two sides. Building is sequential on purpose: the bake builds
+//! a chain on first need inside a `OnceLock` from rayon workers, and parallel work nested there
+//! lets a waiting worker steal a job that waits on the same lock, a deadlock.
 //! Sampling is trilinear (bilinear in the two levels around the footprint's level, blended), the
 //! isotropic filter of GPU samplers (Vulkan 1.3 §16.6.7, with λ = log2 of the footprint's longer
 //! side in texels).
@@ -13,7 +17,6 @@
 use std::sync::OnceLock;
 
 use glam::{Vec2, Vec4};
-use rayon::prelude::*;
 
 use super::texture::{linear, Texture, Wrap};
 
@@ -85,7 +88,6 @@ fn halve(t: &Texture) -> Texture {
         linear(t.texels[(j * t.width + i) as usize])
     };
     let texels = (0..w * h)
-        .into_par_iter()
         .map(|k| {
             let (i, j) = (k % w, k / w);
             let sum = at(2 * i, 2 * j)

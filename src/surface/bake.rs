@@ -151,10 +151,21 @@ fn bake_tile(scene: &Scene, surface: &SurfaceMaterials, mips: &Mips, tile: &Tile
                                 surface.uv(triangle, b.as_vec3())
                             };
                             let origin = uv_at(DVec2::ZERO);
-                            let footprint = material.footprint([
+                            let patch = material.footprint([
                                 uv_at(DVec2::new(texel, 0.0)) - origin,
                                 uv_at(DVec2::new(0.0, texel)) - origin,
                             ]);
+                            // A triangle steep to the leaf plane stretches the patch beyond
+                            // the triangle's own part of the texture, which bounds it.
+                            let [a, b, c] = surface
+                                .uv_of_triangle
+                                .get(triangle)
+                                .copied()
+                                .unwrap_or_default();
+                            let own = material
+                                .footprint([b - a, c - a])
+                                .max(material.footprint([c - b, c - b]));
+                            let footprint = patch.min(own);
                             last_footprint = Some((source, footprint));
                             footprint
                         }
