@@ -260,15 +260,22 @@ fn gltf_texture_transform_moves_the_texture_and_may_pick_another_set() {
     assert!(e.to_string().contains("TEXCOORD_1"), "{e}");
 }
 
-/// `quad` (a [`gltf_quad`] document) with a `COLOR_0` of `colour` (float VEC3) at every vertex,
-/// and without its material when `material` is false.
-fn with_vertex_colours(quad: &str, colour: [f32; 3], material: bool) -> String {
+/// `quad` (a [`gltf_quad`] document) with a `COLOR_0` accessor of `kind` (`"VEC3"`, `"VEC4"`) and
+/// `component_type` (normalized unless float) whose every element is `element`, and without its
+/// material when `material` is false.
+fn with_vertex_colours(
+    quad: &str,
+    element: &[u8],
+    component_type: u32,
+    kind: &str,
+    material: bool,
+) -> String {
     let mut json: serde_json::Value = serde_json::from_str(quad).unwrap();
     let uri = json["buffers"][0]["uri"].as_str().unwrap().to_owned();
     let mut bytes = base64::decode(uri.split_once(";base64,").unwrap().1).unwrap();
     let offset = bytes.len();
     for _ in 0..4 {
-        bytes.extend_from_slice(bytemuck::cast_slice(&colour));
+        bytes.extend_from_slice(element);
     }
     json["buffers"][0]["byteLength"] = bytes.len().into();
     json["buffers"][0]["uri"] = format!(
@@ -277,12 +284,15 @@ fn with_vertex_colours(quad: &str, colour: [f32; 3], material: bool) -> String {
     )
     .into();
     let views = json["bufferViews"].as_array_mut().unwrap();
-    views.push(serde_json::json!({"buffer": 0, "byteOffset": offset, "byteLength": 48}));
+    views.push(serde_json::json!(
+        {"buffer": 0, "byteOffset": offset, "byteLength": 4 * element.len()}
+    ));
     let view = views.len() - 1;
     let accessors = json["accessors"].as_array_mut().unwrap();
-    accessors.push(serde_json::json!(
-        {"bufferView": view, "componentType": 5126, "count": 4, "type": "VEC3"}
-    ));
+    accessors.push(serde_json::json!({
+        "bufferView": view, "componentType": component_type, "count": 4, "type": kind,
+        "normalized": component_type != 5126
+    }));
     let accessor = accessors.len() - 1;
     let primitive = &mut json["meshes"][0]["primitives"][0];
     primitive["attributes"]["COLOR_0"] = accessor.into();
@@ -292,31 +302,43 @@ fn with_vertex_colours(quad: &str, colour: [f32; 3], material: bool) -> String {
     json.to_string()
 }
 
-/// glTF `COLOR_0` multiplies the base colour, and colours a primitive without a material.
+/// glTF `COLOR_0` multiplies the base colour, and colours a primitive without a material, in
+/// each component type glTF allows.
 #[test]
 fn gltf_vertex_colours_multiply_the_base_colour() {
     let dir = tempfile::tempdir().unwrap();
     write_checker(&dir.path().join("checker.png"));
     let quad = gltf_quad(r#"{"uri": "checker.png"}"#, [1.0; 4]);
-    let colour = [0.5, 0.25, 1.0];
+    let colour = [0.5f32, 0.25, 1.0];
     let tint = Vec3::from(colour);
+    let float = bytemuck::cast_slice::<f32, u8>(&colour).to_vec();
 
     let tinted = write(
         dir.path(),
         "tinted.gltf",
-        &with_vertex_colours(&quad, colour, true),
+        &with_vertex_colours(&quad, &float, 5126, "VEC3", true),
     );
     let scene = Scene::load(tinted.to_str().unwrap()).unwrap();
     check_quadrants(&scene, checker_linear().map(|c| c * tint));
 
-    let bare = write(
-        dir.path(),
-        "bare.gltf",
-        &with_vertex_colours(&quad, colour, false),
-    );
-    let scene = Scene::load(bare.to_str().unwrap()).unwrap();
-    assert!(scene.surface.as_ref().unwrap().materials.is_empty());
-    check_quadrants(&scene, [tint; 4]);
+    let shorts: Vec<u8> = [32768u16, 16384, 65535, 65535]
+        .iter()
+        .flat_map(|c| c.to_le_bytes())
+        .collect();
+    for (name, element, component_type, kind) in [
+        ("float.gltf", float, 5126, "VEC3"),
+        ("bytes.gltf", vec![128, 64, 255, 255], 5121, "VEC4"),
+        ("shorts.gltf", shorts, 5123, "VEC4"),
+    ] {
+        let bare = write(
+            dir.path(),
+            name,
+            &with_vertex_colours(&quad, &element, component_type, kind, false),
+        );
+        let scene = Scene::load(bare.to_str().unwrap()).unwrap();
+        assert!(scene.surface.as_ref().unwrap().materials.is_empty());
+        check_quadrants(&scene, [tint; 4]);
+    }
 }
 
 #[test]

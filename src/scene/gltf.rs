@@ -322,32 +322,8 @@ fn read_texcoords(
             accessor.dimensions()
         ));
     }
-    let uvs = match (accessor.data_type(), accessor.normalized()) {
-        (DataType::F32, _) => read_accessor(&accessor, buffers, 8, |b| {
-            Vec2::new(f32_le(&b[0..4]), f32_le(&b[4..8]))
-        })?,
-        (DataType::U8, true) => read_accessor(&accessor, buffers, 2, |b| {
-            Vec2::new(f32::from(b[0]), f32::from(b[1])) / 255.0
-        })?,
-        (DataType::U16, true) => read_accessor(&accessor, buffers, 4, |b| {
-            let c = |k: usize| f32::from(u16::from_le_bytes([b[k], b[k + 1]]));
-            Vec2::new(c(0), c(2)) / 65535.0
-        })?,
-        (other, normalized) => {
-            return Err(format!(
-            "TEXCOORD_{set} accessor {} has component type {other:?} (normalized: {normalized}); \
-                 expected float or normalized unsigned byte/short",
-            accessor.index()
-        ))
-        }
-    };
-    if uvs.len() != n {
-        return Err(format!(
-            "TEXCOORD_{set} has {} elements for {n} positions",
-            uvs.len()
-        ));
-    }
-    Ok(uvs)
+    let uvs = read_components(&accessor, buffers, 2, n, &format!("TEXCOORD_{set}"))?;
+    Ok(uvs.into_iter().map(|c| Vec2::new(c[0], c[1])).collect())
 }
 
 /// `COLOR_0` of a primitive with `n` vertices, as linear RGBA (glTF 2.0 §3.7.2.1: VEC3 or VEC4,
@@ -372,47 +348,57 @@ fn read_colours(
             ))
         }
     };
-    let rgba = |c: [f32; 4]| {
-        Vec4::new(c[0], c[1], c[2], if channels == 4 { c[3] } else { 1.0 })
-            .clamp(Vec4::ZERO, Vec4::ONE)
-    };
-    let colours = match (accessor.data_type(), accessor.normalized()) {
-        (DataType::F32, _) => read_accessor(&accessor, buffers, 4 * channels, |b| {
-            rgba(std::array::from_fn(|k| {
-                if k < channels {
-                    f32_le(&b[4 * k..4 * k + 4])
-                } else {
-                    1.0
-                }
-            }))
-        })?,
-        (DataType::U8, true) => read_accessor(&accessor, buffers, channels, |b| {
-            rgba(std::array::from_fn(|k| {
-                b.get(k).map_or(1.0, |&c| f32::from(c) / 255.0)
-            }))
-        })?,
-        (DataType::U16, true) => read_accessor(&accessor, buffers, 2 * channels, |b| {
-            rgba(std::array::from_fn(|k| {
-                b.get(2 * k..2 * k + 2).map_or(1.0, |c| {
-                    f32::from(u16::from_le_bytes([c[0], c[1]])) / 65535.0
-                })
-            }))
-        })?,
+    let colours = read_components(&accessor, buffers, channels, n, "COLOR_0")?;
+    Ok(Some(
+        colours
+            .into_iter()
+            .map(|c| Vec4::from(c).clamp(Vec4::ZERO, Vec4::ONE))
+            .collect(),
+    ))
+}
+
+/// The first `channels` (1 to 4) components of each of the `n` elements of `accessor`, the
+/// attribute `what`, as floats (the rest of each array 1): float, or normalized unsigned byte or
+/// short, the component types glTF 2.0 allows texture coordinates and colours (§3.7.2.1).
+fn read_components(
+    accessor: &Accessor,
+    buffers: &[Data],
+    channels: usize,
+    n: usize,
+    what: &str,
+) -> std::result::Result<Vec<[f32; 4]>, String> {
+    let (width, scale) = match (accessor.data_type(), accessor.normalized()) {
+        (DataType::F32, _) => (4, 1.0),
+        (DataType::U8, true) => (1, 255.0),
+        (DataType::U16, true) => (2, 65535.0),
         (other, normalized) => {
             return Err(format!(
-                "COLOR_0 accessor {} has component type {other:?} (normalized: {normalized}); \
+                "{what} accessor {} has component type {other:?} (normalized: {normalized}); \
                  expected float or normalized unsigned byte/short",
                 accessor.index()
             ))
         }
     };
-    if colours.len() != n {
+    let values = read_accessor(accessor, buffers, width * channels, |b| {
+        std::array::from_fn(|k| {
+            // An element holds `channels` components: past them, `get` finds nothing.
+            let Some(c) = b.get(k * width..(k + 1) * width) else {
+                return 1.0;
+            };
+            match width {
+                4 => f32_le(c),
+                2 => f32::from(u16::from_le_bytes([c[0], c[1]])) / scale,
+                _ => f32::from(c[0]) / scale,
+            }
+        })
+    })?;
+    if values.len() != n {
         return Err(format!(
-            "COLOR_0 has {} elements for {n} positions",
-            colours.len()
+            "{what} has {} elements for {n} positions",
+            values.len()
         ));
     }
-    Ok(Some(colours))
+    Ok(values)
 }
 
 /// gltf-json 1.4's validator looks up each primitive's POSITION accessor before checking that
