@@ -84,6 +84,7 @@ layout(std430, set = RBVH_BVH_SET, binding = RBVH_BVH_TRIS_BINDING) readonly buf
 // `overflow`. This adds no arithmetic: the hit is computed exactly as in src/bvh/traverse.rs.
 Hit rbvh_trace_bvh(Ray ray, bool any_hit, uint node_count, out uint steps, out bool overflow) {
     steps = 0u;
+    RBVH_COUNT_RESET();
     overflow = false;
     if (!rbvh_ray_valid(ray)) {
         return rbvh_miss();
@@ -111,8 +112,10 @@ Hit rbvh_trace_bvh(Ray ray, bool any_hit, uint node_count, out uint steps, out b
         if (leaf != RBVH_INVALID) {
             uint first = leaf & ~RBVH_LEAF_BIT;
             uint slot = first;
+            RBVH_COUNT_ADD(triangle_leaves, 1u);
             for (; slot < first + leaf_count; ++slot) {
                 steps += 1u;
+                RBVH_COUNT_ADD(triangles, 1u);
                 BvhTriangle tri = RBVH_BVH_TRIANGLE(slot);
                 float t = rbvh_intersect_triangle(sh, tri.v0, tri.v1, tri.v2, ray.tmin, t_closest);
                 if (t >= 0.0) {
@@ -146,6 +149,7 @@ Hit rbvh_trace_bvh(Ray ray, bool any_hit, uint node_count, out uint steps, out b
                 break;
             }
             steps += 1u;
+            RBVH_COUNT_ADD(nodes, 1u);
             BvhNode n = RBVH_BVH_NODE(node);
             float ta;
             float tb;

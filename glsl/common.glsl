@@ -21,6 +21,28 @@ struct Hit {
     uint reserved2;
 };
 
+// One ray's work (src/probe.rs, RayCounters; 32 bytes, tests/layout.rs checks the order): counted
+// by the traversals only where the includer defines RBVH_COUNT as a true condition before the
+// #include (the trace shaders define it as a specialization constant, so that their timed runs
+// compile the counting away); other includers pay nothing. rbvh_trace_bvh and rbvh_trace_rbvh(_lod)
+// reset the counters when they start.
+struct RbvhCounters {
+    uint nodes;            // inner nodes visited
+    uint leaves;           // height-field leaves (and chosen LOD nodes) handed to the march
+    uint walks;            // of those, the ones whose tile box the ray crosses
+    uint cells;            // cells (LOD columns) handed to the cell test
+    uint cells_tested;     // cells past the cheap height rejection
+    uint jumps;            // block jumps (src/rbvh/ranges.rs)
+    uint triangle_leaves;  // triangle leaves tested
+    uint triangles;        // triangles tested in them
+};
+#ifndef RBVH_COUNT
+#define RBVH_COUNT false
+#endif
+RbvhCounters rbvh_counters;
+#define RBVH_COUNT_ADD(field, n) if (RBVH_COUNT) { rbvh_counters.field += (n); }
+#define RBVH_COUNT_RESET() if (RBVH_COUNT) { rbvh_counters = RbvhCounters(0u, 0u, 0u, 0u, 0u, 0u, 0u, 0u); }
+
 const uint RBVH_INVALID = 0xFFFFFFFFu;
 #define RBVH_INF uintBitsToFloat(0x7F800000u)
 #define RBVH_FLT_MAX 3.40282347e+38

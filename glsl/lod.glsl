@@ -117,6 +117,7 @@ float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inou
     if (!rbvh_intersect_box(bmin, bmax, go, inv, ray.tmin, t_closest, t0)) {
         return -1.0;
     }
+    RBVH_COUNT_ADD(walks, 1u);
     precise vec3 e0 = (bmin - go) * inv;
     precise vec3 e1 = (bmax - go) * inv;
     vec3 e = max(e0, e1);

@@ -140,6 +140,7 @@ float rbvh_cell_hit(RbvhLeaf leaf, RbvhSizes sz, RbvhFrameRay fr, float slack, i
     if (max(h_a, h_b) < lo_s || min(h_a, h_b) > hi_s) {
         return -1.0;
     }
+    RBVH_COUNT_ADD(cells_tested, 1u);
     float s0 = float(ci) + 0.5;
     float s1 = float(ci + 1) + 0.5;
     float r0 = float(cj) + 0.5;
@@ -249,6 +250,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     if (!rbvh_intersect_box(bmin, bmax, o, inv, fr.tmin, fr.tmax, t0)) {
         return -1.0;
     }
+    RBVH_COUNT_ADD(walks, 1u);
     precise vec3 e0 = (bmin - o) * inv;
     precise vec3 e1 = (bmax - o) * inv;
     vec3 e = max(e0, e1);
@@ -311,6 +313,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
                 float h_a = rbvh_height_at(o.z, d.z, t_in);
                 float h_b = rbvh_height_at(o.z, d.z, min(min(leave_i, leave_j), t1));
                 if (code_lo > code_hi || max(h_a, h_b) < lo_s || min(h_a, h_b) > hi_s) {
+                    RBVH_COUNT_ADD(jumps, 1u);
                     if (t1 < min(leave_i, leave_j)) {
                         stopped = true;
                         break;
@@ -441,6 +444,7 @@ Hit rbvh_trace_rbvh_lod(Ray ray, vec2 cone, bool any_hit, RbvhSizes sz, RbvhLodS
 Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out bool overflow) {
 #endif
     steps = 0u;
+    RBVH_COUNT_RESET();
     overflow = false;
     if (!rbvh_ray_valid(ray)) {
         return rbvh_miss();
@@ -480,8 +484,10 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
                 uint end = min(first + pending_count, sz.tri_count);
                 uint slot = first;
                 bool found = false;
+                RBVH_COUNT_ADD(triangle_leaves, 1u);
                 for (; slot < end; ++slot) {
                     steps += 1u;
+                    RBVH_COUNT_ADD(triangles, 1u);
                     BvhTriangle tri = RBVH_BVH_TRIANGLE(slot);
                     float t = rbvh_intersect_triangle(sh, tri.v0, tri.v1, tri.v2, ray.tmin, t_closest);
                     if (t >= 0.0) {
@@ -505,6 +511,7 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
                 vec3 normal;
                 uint cells = 0u;
                 float t;
+                RBVH_COUNT_ADD(leaves, 1u);
 #ifdef RBVH_LOD
                 if ((pending & RBVH_LOD_BIT) != 0u) {
                     t = rbvh_lod_march(pending & ~(RBVH_LEAF_BIT | RBVH_LOD_BIT), lsz, ray,
@@ -515,6 +522,7 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
                     t = rbvh_march(pending & ~RBVH_LEAF_BIT, sz, ray, t_closest, cells, normal, cut);
                 }
                 steps += cells;
+                RBVH_COUNT_ADD(cells, cells);
                 if (t >= 0.0) {
                     t_closest = t;
                     best = Hit(t, normal.x, normal.y, normal.z, RBVH_LEAF_BIT | pending, 0u, 0u, 0u);
@@ -549,6 +557,7 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
                 }
                 visits += 1u;
                 steps += 1u;
+                RBVH_COUNT_ADD(nodes, 1u);
                 BvhNode n = RBVH_BVH_NODE(node);
                 float ta;
                 float tb;

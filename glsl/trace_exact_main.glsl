@@ -1,10 +1,15 @@
 // The body of trace_exact.comp and trace_exact_bda.comp (which defines RBVH_DEVICE_ADDRESS): one
 // invocation per ray through the exact BVH. Bindings: nodes and triangles (0, 1; read through the
-// device addresses in the push constants instead in the _bda twin), rays, hits, status, steps (2-5).
+// device addresses in the push constants instead in the _bda twin), rays, hits, status, counters (2-5).
 #ifndef RBVH_TRACE_EXACT_MAIN_GLSL
 #define RBVH_TRACE_EXACT_MAIN_GLSL
 
 layout(local_size_x = 64) in;
+
+// Specialised true (src/gpu/tracer.rs, COUNT_CONSTANT_ID) for the pipeline that counts each ray's
+// work; the timed pipeline keeps it false, and the compiler drops the counting.
+layout(constant_id = 0) const bool rbvh_count = false;
+#define RBVH_COUNT rbvh_count
 
 #include "trace_params.glsl"
 #include "bvh.glsl"
@@ -20,7 +25,7 @@ void main() {
     uint steps;
     bool overflow;
     Hit h = rbvh_trace_bvh(rays[i], (pc.flags & 1u) != 0u, pc.node_count, steps, overflow);
-    rbvh_trace_store(i, pc.flags, h, steps, overflow);
+    rbvh_trace_store(i, h, overflow);
 }
 
 #endif

@@ -8,7 +8,7 @@
 layout(push_constant) uniform Params {
     uint ray_offset;  // first ray of this dispatch (dispatches are split at maxComputeWorkGroupCount)
     uint ray_count;   // rays in the whole batch
-    uint flags;       // bit 0: any hit; bit 1: write per-ray steps
+    uint flags;       // bit 0: any hit
     uint node_count;
     uint tri_count;
     uint leaf_count;

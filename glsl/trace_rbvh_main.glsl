@@ -1,12 +1,17 @@
 // The body of trace_rbvh.comp and trace_rbvh_lod.comp (which defines RBVH_LOD), and of their
 // *_bda twins (which define RBVH_DEVICE_ADDRESS): one invocation per ray. Bindings: the RBVH's four
-// arrays (0-3), rays, hits, status, steps (4-7); with RBVH_LOD also the LOD records and columns
+// arrays (0-3), rays, hits, status, counters (4-7); with RBVH_LOD also the LOD records and columns
 // (8, 9; see lod.glsl) and the per-ray cones (10). The *_bda twins read the structure's arrays
 // (0-3, 8, 9) through the device addresses in the push constants instead.
 #ifndef RBVH_TRACE_RBVH_MAIN_GLSL
 #define RBVH_TRACE_RBVH_MAIN_GLSL
 
 layout(local_size_x = 64) in;
+
+// Specialised true (src/gpu/tracer.rs, COUNT_CONSTANT_ID) for the pipeline that counts each ray's
+// work; the timed pipeline keeps it false, and the compiler drops the counting.
+layout(constant_id = 0) const bool rbvh_count = false;
+#define RBVH_COUNT rbvh_count
 
 #include "trace_params.glsl"
 #include "rbvh.glsl"
@@ -34,7 +39,7 @@ void main() {
 #else
     Hit h = rbvh_trace_rbvh(rays[i], (pc.flags & 1u) != 0u, sz, steps, overflow);
 #endif
-    rbvh_trace_store(i, pc.flags, h, steps, overflow);
+    rbvh_trace_store(i, h, overflow);
 }
 
 #endif

@@ -56,6 +56,7 @@ pub mod ibl;
 pub mod io;
 pub mod lod;
 pub mod output;
+pub mod probe;
 pub mod rbvh;
 pub mod regress;
 pub mod scene;

@@ -199,6 +199,62 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
     );
 }
 
+/// With `traffic`, every record carries the CPU twin's counters (equal to the device's) and the
+/// memory model's figures, consistent with the structure's size and with each other.
+#[test]
+fn traffic_records_come_from_a_twin_that_counts_as_the_device() {
+    let mut config = small_config(None);
+    config.width = 48;
+    config.height = 40;
+    config.runs = 1;
+    config.ray_types = vec![RayType::Primary, RayType::Shadow];
+    config.lod = Some(rbvh::lod::LodParams::default());
+    config.traffic = true;
+    let report = bench::run(&config).unwrap();
+    assert_eq!(report.results.len(), 2 * 5);
+    for r in &report.results {
+        let what = format!("{} {:?} {:?}", r.method.name(), r.quality, r.ray_type);
+        let t = r.traffic.as_ref().expect("traffic requested");
+        assert_eq!(t.counter_mismatch_rate, 0.0, "{what}");
+        assert_eq!(t.twin_counters, r.counters, "{what}");
+        let c = &r.counters;
+        assert!(
+            c.nodes > 0.0 && (0.0..=1.0).contains(&c.simd8_utilisation),
+            "{what}"
+        );
+        if r.method == Method::Exact {
+            assert!(
+                c.leaves == 0.0 && c.cells == 0.0 && c.triangles > 0.0,
+                "{what}"
+            );
+        } else {
+            assert!(
+                c.leaves >= c.walks && c.walks > 0.0 && c.cells >= c.cells_tested,
+                "{what}"
+            );
+        }
+        let m = &t.traffic;
+        assert_eq!(m.rays, r.rays, "{what}");
+        assert_eq!(m.structure_bytes, r.memory_bytes.total, "{what}");
+        assert!(
+            m.working_set_bytes > 0 && m.working_set_bytes <= m.structure_bytes,
+            "{what}"
+        );
+        assert!(m.lines128_per_ray <= m.lines64_per_ray, "{what}");
+        assert!(m.bytes_per_ray <= 64.0 * m.lines64_per_ray, "{what}");
+        assert_eq!(m.caches.len(), 3);
+        let dram: Vec<f64> = m.caches.iter().map(|c| c.dram_bytes_per_ray).collect();
+        assert!(dram[0] >= dram[1] && dram[1] >= dram[2], "{what}: {dram:?}");
+        // Every line of the working set is fetched at least once.
+        assert!(
+            dram[2] * m.rays as f64 >= m.working_set_bytes as f64,
+            "{what}"
+        );
+    }
+    let work = bench::work_table(&report);
+    assert_eq!(work.lines().count(), 1 + report.results.len() + 1, "{work}");
+}
+
 #[test]
 fn lod_adds_a_valid_rbvh_lod_record_per_level_and_ray_type() {
     let dir = tempfile::tempdir().unwrap();

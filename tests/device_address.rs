@@ -63,7 +63,7 @@ fn every_tracer_gives_identical_hits_through_device_addresses() {
             let ha = a.trace_with(&rays, query, true).unwrap();
             assert!(hb.hits.iter().any(Hit::is_hit), "{what}: no hits at all");
             assert_identical(&format!("{what} {query:?}"), &hb.hits, &ha.hits);
-            assert_eq!(hb.steps, ha.steps, "{what} {query:?}: steps");
+            assert_eq!(hb.counters, ha.counters, "{what} {query:?}: counters");
         }
         let b = Tracer::rbvh_lod(&bound, &rbvh, &lod).unwrap();
         let a = Tracer::rbvh_lod(&addressed, &rbvh, &lod).unwrap();
@@ -71,7 +71,7 @@ fn every_tracer_gives_identical_hits_through_device_addresses() {
         let hb = b.trace_lod(&rays, &cones, query, true).unwrap();
         let ha = a.trace_lod(&rays, &cones, query, true).unwrap();
         assert_identical(&format!("LOD {query:?}"), &hb.hits, &ha.hits);
-        assert_eq!(hb.steps, ha.steps, "LOD {query:?}: steps");
+        assert_eq!(hb.counters, ha.counters, "LOD {query:?}: counters");
         let any = query == Query::Any;
         let cpu = rbvh.trace_cpu_lod(&lod, &rays, &cones, any).unwrap();
         let mut agreement = common::Agreement::default();

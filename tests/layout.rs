@@ -6,6 +6,7 @@ use std::mem::{offset_of, size_of};
 use rbvh::bvh::{GpuNode, GpuTriangle, STACK_SIZE};
 use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{shaders, spirv};
+use rbvh::probe::RayCounters;
 
 fn reflect_trace_exact() -> spirv::Reflection {
     spirv::reflect(&shaders::words(shaders::TRACE_EXACT).unwrap())
@@ -64,6 +65,31 @@ fn bvh_triangle_layout_matches() {
             ("pad2", offset_of!(GpuTriangle, pad2)),
         ],
     );
+}
+
+#[test]
+fn counter_layout_matches_in_every_trace_shader() {
+    let fields = [
+        ("nodes", offset_of!(RayCounters, nodes)),
+        ("leaves", offset_of!(RayCounters, leaves)),
+        ("walks", offset_of!(RayCounters, walks)),
+        ("cells", offset_of!(RayCounters, cells)),
+        ("cells_tested", offset_of!(RayCounters, cells_tested)),
+        ("jumps", offset_of!(RayCounters, jumps)),
+        ("triangle_leaves", offset_of!(RayCounters, triangle_leaves)),
+        ("triangles", offset_of!(RayCounters, triangles)),
+    ];
+    for spirv_bytes in [
+        shaders::TRACE_EXACT,
+        shaders::TRACE_EXACT_BDA,
+        shaders::TRACE_RBVH,
+        shaders::TRACE_RBVH_BDA,
+        shaders::TRACE_RBVH_LOD,
+        shaders::TRACE_RBVH_LOD_BDA,
+    ] {
+        let r = spirv::reflect(&shaders::words(spirv_bytes).unwrap());
+        check(&r, "RbvhCounters", size_of::<RayCounters>(), &fields);
+    }
 }
 
 #[test]

@@ -103,10 +103,14 @@ fn grove_lod_is_near_fine_never_worse_than_coarse_and_ends_traversal_sooner() {
         let coarse_vs_exact = image_errors(&reference, &shade(&rays, &coarse_hits))
             .unwrap()
             .flip_mean;
-        let (fine_steps, lod_steps) = (
-            mean(fine_traced.steps.as_ref().unwrap()),
-            mean(lod_traced.steps.as_ref().unwrap()),
-        );
+        let steps = |t: &rbvh::gpu::Traced| -> Vec<u32> {
+            let counters = t.counters.as_ref().unwrap();
+            counters
+                .iter()
+                .map(rbvh::probe::RayCounters::steps)
+                .collect()
+        };
+        let (fine_steps, lod_steps) = (mean(&steps(&fine_traced)), mean(&steps(&lod_traced)));
         let coarse_pixels = lod_traced
             .hits
             .iter()
@@ -127,8 +131,8 @@ fn grove_lod_is_near_fine_never_worse_than_coarse_and_ends_traversal_sooner() {
                 ("fine", fine_image),
                 ("lod", lod_image),
                 ("exact", reference),
-                ("fine_steps", heat(fine_traced.steps.as_ref().unwrap())),
-                ("lod_steps", heat(lod_traced.steps.as_ref().unwrap())),
+                ("fine_steps", heat(&steps(&fine_traced))),
+                ("lod_steps", heat(&steps(&lod_traced))),
             ] {
                 output::write_png(&dir.join(format!("{name}_{what}.png")), &image).unwrap();
             }

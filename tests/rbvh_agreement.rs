@@ -84,10 +84,15 @@ fn block_jumps_skip_many_cells_of_grazing_rays_and_change_no_hit() {
                 "{query:?} ray {i}: {ray:?}"
             );
             assert!(!hit.is_hit() || g.normal().dot(hit.normal()) > 1.0 - 1e-6);
-            cpu_steps += u64::from(stats.nodes + stats.triangles + stats.cells);
+            cpu_steps += u64::from(stats.counters.steps());
             hits += usize::from(hit.is_hit());
         }
-        let gpu_steps: u64 = gpu.steps.unwrap().iter().map(|&s| u64::from(s)).sum();
+        let gpu_steps: u64 = gpu
+            .counters
+            .unwrap()
+            .iter()
+            .map(|c| u64::from(c.steps()))
+            .sum();
         println!("{query:?}: {hits} hits; steps GPU {gpu_steps}, CPU {cpu_steps}");
         assert!(
             hits > 1000 && hits < rays.len(),
@@ -337,17 +342,14 @@ fn block_jumps_agree_with_the_plain_walk_on_steep_unaligned_tiles() {
         let cpu = r.trace_cpu(&rays, false);
         agreement.add(&format!("steep tile {case}"), &gpu.hits, &cpu, false);
         gpu_steps += gpu
-            .steps
+            .counters
             .unwrap()
             .iter()
-            .map(|&s| u64::from(s))
+            .map(|c| u64::from(c.steps()))
             .sum::<u64>();
         cpu_steps += rays
             .iter()
-            .map(|ray| {
-                let s = r.closest_hit(ray).1;
-                u64::from(s.nodes + s.triangles + s.cells)
-            })
+            .map(|ray| u64::from(r.closest_hit(ray).1.counters.steps()))
             .sum::<u64>();
     }
     println!("{agreement:?}; steps GPU {gpu_steps}, CPU {cpu_steps}");

@@ -546,7 +546,10 @@ fn plane_tiles_do_not_leak_at_seams_samples_or_grazing_angles() {
         }
         for ray in &in_plane {
             let (_, stats) = r.closest_hit(ray);
-            assert!(!stats.overflow && stats.cells <= cell_bound, "{stats:?}");
+            assert!(
+                !stats.overflow && stats.counters.cells <= cell_bound,
+                "{stats:?}"
+            );
         }
     }
 }

@@ -7,19 +7,31 @@
 //! 2. **timing** — `runs` rounds, each tracing with every method in turn (A B C A B C …), so that
 //!    a slow spell of the machine lands on all methods alike instead of on whichever ran then.
 //!
+//! 3. **counting** — every method traces once more through its counting pipeline
+//!    ([`crate::probe::RayCounters`]: untimed, so that timed runs compile the counting away);
+//! 4. **memory traffic** (with [`BenchConfig::traffic`]) — the CPU twins trace the rays again in
+//!    screen-tile order, reporting every read of the structure's device arrays to the cache model
+//!    of [`traffic`](super::traffic), and counting as the device does (the two must agree).
+//!
 //! Throughput is `rays / time` per run, from GPU timestamps around the trace dispatches (uploads
 //! and read-back excluded). When a device cannot time, every method of that ray type falls back to
 //! host wall time (submit to fence) together, so that speedups always compare like with like.
 
 use std::collections::HashSet;
 use std::path::PathBuf;
+use std::sync::Arc;
+
+use rayon::prelude::*;
 
 use super::error_image::error_image;
 use super::metrics::{self, HitErrors, Summary};
 use super::plot;
 use super::provenance;
 use super::rays::{self, RayType, Secondary, DEFAULT_LIGHT};
-use super::record::{BenchReport, Errors, Memory, Method, Params, Record, Spread, TimingSource};
+use super::record::{
+    BenchReport, Errors, Memory, Method, Params, Record, Spread, TimingSource, TrafficRecord,
+};
+use super::traffic::{self, TrafficModel, CACHE_SIZES, DRAM_LINE};
 use super::validate;
 use super::{BenchConfig, Device, Level};
 use crate::bvh::Bvh;
@@ -27,6 +39,7 @@ use crate::geom::{Hit, Ray};
 use crate::gpu::{Context, Query, Timing, Traced, Tracer};
 use crate::lod::{Lod, RayCone};
 use crate::output::{self, Image};
+use crate::probe::{MeanCounters, Read, TraceStats};
 use crate::rbvh::{Rbvh, RbvhParams};
 use crate::scene::Scene;
 use crate::{Error, Result};
@@ -96,8 +109,20 @@ struct Candidate {
     /// None for the exact BVH.
     level: Option<(Level, RbvhParams)>,
     tracer: Tracer,
+    /// What its CPU twin traces (the exact BVH's is the scene's [`SceneBench::bvh`]).
+    twin: Twin,
     build_ms: f64,
     memory: Memory,
+}
+
+/// Ray `k` of a batch traced by a CPU twin, its reads pushed to the vector.
+type TwinTrace<'a> = Box<dyn Fn(usize, &mut Vec<Read>) -> TraceStats + Sync + 'a>;
+
+/// The host copy of a candidate's structure, for its CPU twin.
+enum Twin {
+    Exact,
+    Rbvh(Arc<Rbvh>),
+    Lod(Arc<Rbvh>, Box<Lod>),
 }
 
 impl Candidate {
@@ -120,12 +145,19 @@ impl Candidate {
         }
     }
 
-    /// Traces `rays`; a level-of-detail candidate with `cones`.
-    fn trace(&self, rays: &[Ray], cones: &[RayCone], query: Query) -> Result<Traced> {
+    /// Traces `rays`; a level-of-detail candidate with `cones`; `counters` through the counting
+    /// pipeline.
+    fn trace(
+        &self,
+        rays: &[Ray],
+        cones: &[RayCone],
+        query: Query,
+        counters: bool,
+    ) -> Result<Traced> {
         if self.method == Method::RbvhLod {
-            self.tracer.trace_lod(rays, cones, query, false)
+            self.tracer.trace_lod(rays, cones, query, counters)
         } else {
-            self.tracer.trace(rays, query)
+            self.tracer.trace_with(rays, query, counters)
         }
     }
 }
@@ -192,6 +224,7 @@ impl<'a> SceneBench<'a> {
             method: Method::Exact,
             level: None,
             tracer: Tracer::exact(ctx, &bvh)?,
+            twin: Twin::Exact,
             build_ms: bvh.build_ms,
             memory: Memory {
                 tree: bvh.tree_bytes(),
@@ -211,7 +244,7 @@ impl<'a> SceneBench<'a> {
                 level.name()
             )));
             let params = level.params()?;
-            let rbvh = Rbvh::build(&scene, &params)?;
+            let rbvh = Arc::new(Rbvh::build(&scene, &params)?);
             surface_offset = surface_offset.max(rbvh.texel_size);
             let memory = Memory {
                 tree: rbvh.tree_bytes(),
@@ -223,6 +256,7 @@ impl<'a> SceneBench<'a> {
                 method: Method::Rbvh,
                 level: Some((*level, params)),
                 tracer: Tracer::rbvh(ctx, &rbvh)?,
+                twin: Twin::Rbvh(Arc::clone(&rbvh)),
                 build_ms: rbvh.stats.build_ms,
                 memory,
             });
@@ -244,6 +278,7 @@ impl<'a> SceneBench<'a> {
                         total: memory.total + lod.bytes(),
                         ..memory
                     },
+                    twin: Twin::Lod(Arc::clone(&rbvh), Box::new(lod)),
                 });
             }
         }
@@ -342,6 +377,36 @@ impl<'a> SceneBench<'a> {
                 })
                 .collect();
         let exact_cpu = self.bvh.trace_cpu(&m.rays, m.query == Query::Any);
+        // The pixel each ray belongs to (secondary rays: one per exact primary hit, in order), for
+        // the traffic model's screen tiles.
+        let pixels: Vec<u32> = if ray_type == RayType::Primary {
+            (0..m.rays.len() as u32).collect()
+        } else {
+            (0..self.exact_primary.len() as u32)
+                .filter(|&p| self.exact_primary[p as usize].is_hit())
+                .collect()
+        };
+        let mut counted = Vec::with_capacity(self.candidates.len());
+        for c in &self.candidates {
+            observe(Event::Progress(format!(
+                "{name}: {} rays, counting the work of {}{}",
+                ray_type.name(),
+                c.label(),
+                if self.config.traffic {
+                    " and modelling its memory traffic"
+                } else {
+                    ""
+                }
+            )));
+            let traced = c.trace(&m.rays, &cones, m.query, true)?;
+            let device = traced.counters.unwrap_or_default();
+            let traffic = if self.config.traffic {
+                Some(self.traffic(c, &m, &cones, &pixels, &device)?)
+            } else {
+                None
+            };
+            counted.push((MeanCounters::of(&device), traffic));
+        }
         for (i, c) in self.candidates.iter().enumerate() {
             let (errors, invalid) = if i == 0 {
                 let referee = self.hit_errors(&m, &exact_cpu, &m.hits[0])?;
@@ -402,9 +467,101 @@ impl<'a> SceneBench<'a> {
                 valid: invalid.is_none(),
                 invalid_reason: invalid,
                 timing_source: m.source,
+                counters: counted[i].0,
+                traffic: counted[i].1.clone(),
             });
         }
         Ok(())
+    }
+
+    /// The CPU twin of candidate `c` on `m`'s rays: its counters, checked against the device's
+    /// (`device`, per ray), and the memory traffic of its reads with the rays taken in 8 × 8
+    /// screen tiles of `pixels` (each ray's pixel).
+    fn traffic(
+        &self,
+        c: &Candidate,
+        m: &Measured,
+        cones: &[RayCone],
+        pixels: &[u32],
+        device: &[crate::probe::RayCounters],
+    ) -> Result<TrafficRecord> {
+        let any = m.query == Query::Any;
+        let lod_twin;
+        let (arrays, trace): ([u64; 6], TwinTrace) = match &c.twin {
+            Twin::Exact => {
+                let b = &self.bvh;
+                (
+                    [b.tree_bytes(), b.triangle_bytes(), 0, 0, 0, 0],
+                    Box::new(move |k, reads| b.trace_probed(&m.rays[k], any, reads).1),
+                )
+            }
+            Twin::Rbvh(r) | Twin::Lod(r, _) => {
+                let lod = match &c.twin {
+                    Twin::Lod(_, lod) => Some(lod.as_ref()),
+                    _ => None,
+                };
+                lod_twin = r.device_twin(lod)?;
+                let twin = &lod_twin;
+                let lod_bytes = lod.map_or([0, 0], |l| {
+                    [
+                        std::mem::size_of_val(l.nodes.as_slice()) as u64,
+                        std::mem::size_of_val(l.texels.as_slice()) as u64,
+                    ]
+                });
+                (
+                    [
+                        std::mem::size_of_val(r.nodes.as_slice()) as u64,
+                        r.triangle_bytes(),
+                        std::mem::size_of_val(r.leaves.as_slice()) as u64,
+                        r.atlas_bytes(),
+                        lod_bytes[0],
+                        lod_bytes[1],
+                    ],
+                    Box::new(move |k, reads| twin.trace(&m.rays[k], any, cones.get(k), reads).1),
+                )
+            }
+        };
+        let mut model = TrafficModel::new(arrays, &CACHE_SIZES, DRAM_LINE)?;
+        // Screen tiles of 8 × 8 pixels, the rays of the pixels that have one.
+        let (width, height) = (self.config.width, self.config.height);
+        let mut ray_of_pixel = vec![u32::MAX; width as usize * height as usize];
+        for (k, &p) in pixels.iter().enumerate() {
+            if let Some(slot) = ray_of_pixel.get_mut(p as usize) {
+                *slot = k as u32;
+            }
+        }
+        let order: Vec<usize> = traffic::tile_order(width, height, 8)
+            .into_iter()
+            .filter_map(|p| ray_of_pixel.get(p as usize).copied())
+            .filter(|&k| (k as usize) < m.rays.len())
+            .map(|k| k as usize)
+            .collect();
+        let mut twin_counters = vec![crate::probe::RayCounters::default(); m.rays.len()];
+        // Chunks traced in parallel, fed to the model in order.
+        for chunk in order.chunks(4096) {
+            let traced: Vec<(TraceStats, Vec<Read>)> = chunk
+                .par_iter()
+                .map(|&k| {
+                    let mut reads = Vec::new();
+                    let stats = trace(k, &mut reads);
+                    (stats, reads)
+                })
+                .collect();
+            for (&k, (stats, reads)) in chunk.iter().zip(&traced) {
+                twin_counters[k] = stats.counters;
+                model.ray(reads)?;
+            }
+        }
+        let differing = twin_counters
+            .iter()
+            .zip(device)
+            .filter(|(t, d)| t != d)
+            .count();
+        Ok(TrafficRecord {
+            twin_counters: MeanCounters::of(&twin_counters),
+            counter_mismatch_rate: differing as f64 / m.rays.len().max(1) as f64,
+            traffic: model.report(),
+        })
     }
 
     /// One warm-up trace per candidate (whose hits are kept), then `runs` interleaved rounds.
@@ -412,13 +569,13 @@ impl<'a> SceneBench<'a> {
         let hits = self
             .candidates
             .iter()
-            .map(|c| Ok(c.trace(&rays, cones, query)?.hits))
+            .map(|c| Ok(c.trace(&rays, cones, query, false)?.hits))
             .collect::<Result<Vec<_>>>()?;
         let runs = self.config.runs as usize;
         let mut timings: Vec<Vec<Timing>> = vec![Vec::with_capacity(runs); self.candidates.len()];
         for _ in 0..runs {
             for (c, times) in self.candidates.iter().zip(&mut timings) {
-                times.push(c.trace(&rays, cones, query)?.timing);
+                times.push(c.trace(&rays, cones, query, false)?.timing);
             }
         }
         let gpu = timings.iter().flatten().all(|t| t.gpu_ms.is_some());

@@ -33,6 +33,7 @@ pub mod provenance;
 pub mod rays;
 pub mod record;
 pub mod table;
+pub mod traffic;
 pub mod validate;
 
 use std::path::PathBuf;
@@ -40,7 +41,7 @@ use std::path::PathBuf;
 pub use harness::{run, run_observed, Event};
 pub use rays::RayType;
 pub use record::{write_csv, write_json, BenchReport, Record};
-pub use table::table;
+pub use table::{table, work_table};
 
 use crate::gpu::Context;
 #[cfg(feature = "loaded")]
@@ -121,6 +122,10 @@ pub struct BenchConfig {
     /// rays get their pixel's cone; secondary rays a cone from their origin with the pixel's
     /// spread (no width, so that the surface a ray leaves is never coarsened under it).
     pub lod: Option<LodParams>,
+    /// Also trace every method's CPU twin and model its memory traffic (`bench::traffic`): bytes
+    /// and cache lines per ray, the frame's working set, DRAM bytes per ray behind 4, 32 and
+    /// 72 MiB caches. Costs a CPU trace per method and ray type.
+    pub traffic: bool,
 }
 
 /// Largest image side accepted, as for `rbvh render`.
@@ -142,6 +147,7 @@ impl BenchConfig {
             device,
             plot_dir: None,
             lod: None,
+            traffic: false,
         }
     }
 

@@ -67,8 +67,10 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 
 use super::rays::RayType;
+use super::traffic::{Traffic, CACHE_SIZES};
 use crate::io::write_atomically;
 use crate::lod::LodParams;
+use crate::probe::MeanCounters;
 use crate::rbvh::{RbvhParams, Refinement, Subdivision};
 use crate::Result;
 
@@ -112,6 +114,23 @@ pub struct Record {
     pub valid: bool,
     pub invalid_reason: Option<String>,
     pub timing_source: TimingSource,
+    /// Per-ray means of the device's counters (its counting pipeline, on the same rays).
+    pub counters: MeanCounters,
+    /// The CPU twin's counters and memory traffic, with `--traffic`.
+    pub traffic: Option<TrafficRecord>,
+}
+
+/// What the CPU twin measured on a record's rays ([`super::BenchConfig::traffic`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TrafficRecord {
+    /// Per-ray means of the twin's counters: the device's, when the two agree.
+    pub twin_counters: MeanCounters,
+    /// Fraction of rays whose twin counters differ from the device's (0 but where the device's
+    /// last-bit rounding changes a hit).
+    pub counter_mismatch_rate: f64,
+    /// The traffic model's figures (`bench::traffic`).
+    #[serde(flatten)]
+    pub traffic: Traffic,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -245,7 +264,7 @@ pub fn write_json(path: &Path, report: &BenchReport) -> Result<()> {
 }
 
 /// The CSV header: one column per field of a [`Record`], flattened.
-pub const CSV_COLUMNS: [&str; 38] = [
+pub const CSV_COLUMNS: [&str; 69] = [
     "scene",
     "triangles",
     "method",
@@ -284,16 +303,73 @@ pub const CSV_COLUMNS: [&str; 38] = [
     "valid",
     "invalid_reason",
     "timing_source",
+    "nodes",
+    "leaves",
+    "walks",
+    "cells",
+    "cells_tested",
+    "jumps",
+    "triangle_leaves",
+    "triangles",
+    "simd8_utilisation",
+    "twin_nodes",
+    "twin_leaves",
+    "twin_walks",
+    "twin_cells",
+    "twin_cells_tested",
+    "twin_jumps",
+    "twin_triangle_leaves",
+    "twin_triangles",
+    "twin_simd8_utilisation",
+    "counter_mismatch_rate",
+    "structure_bytes",
+    "working_set_bytes",
+    "reads_per_ray",
+    "bytes_per_ray",
+    "lines64_per_ray",
+    "lines128_per_ray",
+    "dram_bytes_per_ray_4mib",
+    "dram_bytes_per_ray_32mib",
+    "dram_bytes_per_ray_72mib",
+    "miss_rate_4mib",
+    "miss_rate_32mib",
+    "miss_rate_72mib",
 ];
 
+// The traffic columns name the modelled caches.
+const _: () = assert!(
+    CACHE_SIZES.len() == 3
+        && CACHE_SIZES[0] == 4 << 20
+        && CACHE_SIZES[1] == 32 << 20
+        && CACHE_SIZES[2] == 72 << 20
+);
+
+/// The nine counter cells of `c`, in [`CSV_COLUMNS`] order; empty without one.
+fn counter_cells(c: Option<&MeanCounters>) -> [String; 9] {
+    let cell = |f: fn(&MeanCounters) -> f64| c.map(|c| f(c).to_string()).unwrap_or_default();
+    [
+        cell(|c| c.nodes),
+        cell(|c| c.leaves),
+        cell(|c| c.walks),
+        cell(|c| c.cells),
+        cell(|c| c.cells_tested),
+        cell(|c| c.jumps),
+        cell(|c| c.triangle_leaves),
+        cell(|c| c.triangles),
+        cell(|c| c.simd8_utilisation),
+    ]
+}
+
 /// One record's CSV cells, in the order of [`CSV_COLUMNS`], unquoted.
-fn csv_row(r: &Record) -> [String; CSV_COLUMNS.len()] {
+fn csv_row(r: &Record) -> Vec<String> {
     fn opt<T: ToString>(v: Option<T>) -> String {
         v.map(|v| v.to_string()).unwrap_or_default()
     }
     let p = r.params.as_ref();
     let e = r.error.as_ref();
-    [
+    let t = r.traffic.as_ref();
+    let cache = |k: usize| t.and_then(|t| t.traffic.caches.get(k));
+    let mut row = vec![
         r.scene.clone(),
         r.triangles.to_string(),
         r.method.name().into(),
@@ -332,7 +408,22 @@ fn csv_row(r: &Record) -> [String; CSV_COLUMNS.len()] {
         r.valid.to_string(),
         opt(r.invalid_reason.as_ref()),
         r.timing_source.name().into(),
-    ]
+    ];
+    row.extend(counter_cells(Some(&r.counters)));
+    row.extend(counter_cells(t.map(|t| &t.twin_counters)));
+    row.extend([
+        opt(t.map(|t| t.counter_mismatch_rate)),
+        opt(t.map(|t| t.traffic.structure_bytes)),
+        opt(t.map(|t| t.traffic.working_set_bytes)),
+        opt(t.map(|t| t.traffic.reads_per_ray)),
+        opt(t.map(|t| t.traffic.bytes_per_ray)),
+        opt(t.map(|t| t.traffic.lines64_per_ray)),
+        opt(t.map(|t| t.traffic.lines128_per_ray)),
+    ]);
+    row.extend((0..3).map(|k| opt(cache(k).map(|c| c.dram_bytes_per_ray))));
+    row.extend((0..3).map(|k| opt(cache(k).map(|c| c.miss_rate))));
+    debug_assert_eq!(row.len(), CSV_COLUMNS.len());
+    row
 }
 
 /// A CSV cell: quoted, with inner quotes doubled, when it holds a comma, quote or line break.
@@ -349,7 +440,7 @@ pub fn write_csv(path: &Path, report: &BenchReport) -> Result<()> {
     write_atomically(path, |w| {
         writeln!(w, "{}", CSV_COLUMNS.join(","))?;
         for record in &report.results {
-            let cells = csv_row(record).map(|c| csv_cell(&c));
+            let cells: Vec<String> = csv_row(record).iter().map(|c| csv_cell(c)).collect();
             writeln!(w, "{}", cells.join(","))?;
         }
         Ok(())

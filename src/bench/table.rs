@@ -1,5 +1,6 @@
-//! The report as a table for people: one line per record, the numbers that decide the trade —
-//! speed and memory relative to the exact BVH, and what they cost in accuracy.
+//! The report as tables for people, one line per record: the numbers that decide the trade —
+//! speed and memory relative to the exact BVH, and what they cost in accuracy ([`table`]) — and
+//! where each ray's work and memory traffic go ([`work_table`]).
 
 use std::collections::BTreeSet;
 use std::fmt::Write;
@@ -24,6 +25,27 @@ const COLUMNS: [(&str, usize, bool); 13] = [
     ("valid", 5, true),
 ];
 
+/// Columns of [`work_table`]: the device's counters per ray, then, with `--traffic`, the model's
+/// lines per ray, working set and DRAM bytes per ray behind each modelled cache.
+const WORK_COLUMNS: [(&str, usize, bool); 16] = [
+    ("method", 8, true),
+    ("level", 6, true),
+    ("ray type", 8, true),
+    ("nodes", 6, false),
+    ("leaves", 6, false),
+    ("walks", 6, false),
+    ("cells", 6, false),
+    ("tested", 6, false),
+    ("jumps", 6, false),
+    ("tris", 6, false),
+    ("SIMD8", 6, false),
+    ("lines", 6, false),
+    ("set MB", 7, false),
+    ("DRAM4M", 7, false),
+    ("DRAM32M", 7, false),
+    ("DRAM72M", 7, false),
+];
+
 /// `text` padded to `width`, on the side `left` says.
 fn pad(text: &str, width: usize, left: bool) -> String {
     if left {
@@ -35,6 +57,41 @@ fn pad(text: &str, width: usize, left: bool) -> String {
 
 /// The table, with a header line and a footnote on units.
 pub fn table(report: &BenchReport) -> String {
+    let sources: BTreeSet<&str> = report
+        .results
+        .iter()
+        .map(|r| r.timing_source.name())
+        .collect();
+    let footnote = format!(
+        "MRays/s: median of {} runs (timing: {}); mem x: exact's bytes / these; t p99: hit \
+         distance error, % of the scene diagonal; n err: mean normal error; PSNR/FLIP: shaded \
+         primary image",
+        report.runs,
+        sources.into_iter().collect::<Vec<_>>().join(" and ")
+    );
+    render(report, &COLUMNS, cells, &footnote)
+}
+
+/// Where each record's work went: the device's per-ray counters and, where the run modelled it
+/// (`--traffic`), memory traffic.
+pub fn work_table(report: &BenchReport) -> String {
+    let footnote =
+        "per ray (device counters): inner nodes, leaves handed to the march, walks (leaves \
+                    past their tile box), cells visited, cells tested (past the height \
+                    rejection), block jumps, triangles; SIMD8: steps of a ray over its 8-ray \
+                    group's longest. With --traffic (CPU twin, rays in 8x8 tiles): lines = \
+                    distinct 128-byte lines per ray; set = the frame's working set; DRAMnM = \
+                    bytes per ray from DRAM behind an n MiB LRU cache (a model, see README)";
+    render(report, &WORK_COLUMNS, work_cells, footnote)
+}
+
+/// `report`'s records under `columns`, one line each from `cells`, then `footnote`.
+fn render<const N: usize>(
+    report: &BenchReport,
+    columns: &[(&str, usize, bool); N],
+    cells: fn(&Record) -> [String; N],
+    footnote: &str,
+) -> String {
     let scene_width = report
         .results
         .iter()
@@ -43,7 +100,7 @@ pub fn table(report: &BenchReport) -> String {
         .max()
         .unwrap_or(0);
     let mut out = String::new();
-    let header: Vec<String> = COLUMNS.iter().map(|&(h, w, l)| pad(h, w, l)).collect();
+    let header: Vec<String> = columns.iter().map(|&(h, w, l)| pad(h, w, l)).collect();
     // Writing to a String cannot fail.
     let _ = writeln!(
         out,
@@ -53,25 +110,13 @@ pub fn table(report: &BenchReport) -> String {
     for r in &report.results {
         let cells: Vec<String> = cells(r)
             .iter()
-            .zip(COLUMNS)
-            .map(|(c, (_, w, l))| pad(c, w, l))
+            .zip(columns)
+            .map(|(c, &(_, w, l))| pad(c, w, l))
             .collect();
         let line = format!("{:<scene_width$} {}", r.scene, cells.join(" "));
         let _ = writeln!(out, "{}", line.trim_end());
     }
-    let sources: BTreeSet<&str> = report
-        .results
-        .iter()
-        .map(|r| r.timing_source.name())
-        .collect();
-    let _ = writeln!(
-        out,
-        "MRays/s: median of {} runs (timing: {}); mem x: exact's bytes / these; t p99: hit \
-         distance error, % of the scene diagonal; n err: mean normal error; PSNR/FLIP: shaded \
-         primary image",
-        report.runs,
-        sources.into_iter().collect::<Vec<_>>().join(" and ")
-    );
+    let _ = writeln!(out, "{footnote}");
     out
 }
 
@@ -93,5 +138,33 @@ fn cells(r: &Record) -> [String; COLUMNS.len()] {
         num(e.and_then(|e| e.psnr_db), 1),
         num(e.and_then(|e| e.flip_mean), 3),
         if r.valid { "yes" } else { "NO" }.into(),
+    ]
+}
+
+fn work_cells(r: &Record) -> [String; WORK_COLUMNS.len()] {
+    let c = &r.counters;
+    let t = r.traffic.as_ref().map(|t| &t.traffic);
+    let dash = || "-".to_string();
+    let dram = |k: usize| {
+        t.and_then(|t| t.caches.get(k))
+            .map_or_else(dash, |c| format!("{:.0}", c.dram_bytes_per_ray))
+    };
+    [
+        r.method.name().into(),
+        r.quality.clone().unwrap_or_else(dash),
+        r.ray_type.name().into(),
+        format!("{:.2}", c.nodes),
+        format!("{:.2}", c.leaves),
+        format!("{:.2}", c.walks),
+        format!("{:.2}", c.cells),
+        format!("{:.2}", c.cells_tested),
+        format!("{:.2}", c.jumps),
+        format!("{:.2}", c.triangles),
+        format!("{:.0}%", 100.0 * c.simd8_utilisation),
+        t.map_or_else(dash, |t| format!("{:.2}", t.lines128_per_ray)),
+        t.map_or_else(dash, |t| format!("{:.2}", t.working_set_bytes as f64 / 1e6)),
+        dram(0),
+        dram(1),
+        dram(2),
     ]
 }

@@ -6,7 +6,7 @@
 //!   traversal on GPUs" (HPG 2009): one 64-byte node holds both children's boxes, so one fetch
 //!   answers "which children does the ray enter, and in which order".
 //! * `traverse`: the CPU reference tracer, operation for operation the same as
-//!   `glsl/bvh_traverse.glsl`, on the same packed data.
+//!   `glsl/bvh.glsl`, on the same packed data.
 
 mod build;
 pub mod layout;
@@ -16,4 +16,3 @@ mod validate;
 pub(crate) use build::{join_halves, partition};
 pub use build::{BuildParams, Bvh};
 pub use layout::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
-pub use traverse::TraceStats;

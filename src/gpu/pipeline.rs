@@ -42,6 +42,19 @@ impl ComputePipeline {
         bindings: &[u32],
         push_size: u32,
     ) -> Result<Self> {
+        Self::specialized(ctx, name, spirv_bytes, bindings, push_size, &[])
+    }
+
+    /// As [`ComputePipeline::new`], with the shader's specialization constants `(constant_id,
+    /// value)` set (32-bit values: a `bool` constant takes 0 or 1).
+    pub fn specialized(
+        ctx: &Context,
+        name: &str,
+        spirv_bytes: &[u8],
+        bindings: &[u32],
+        push_size: u32,
+        constants: &[(u32, u32)],
+    ) -> Result<Self> {
         let words = shaders::words(spirv_bytes).map_err(|e| {
             Error::NoDevice(format!("{name}: the embedded SPIR-V is unreadable: {e}"))
         })?;
@@ -101,10 +114,30 @@ impl ComputePipeline {
             d.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
         }
         .map_err(|r| Error::vk("vkCreateShaderModule", name, r))?;
-        let stage = vk::PipelineShaderStageCreateInfo::default()
+        let entries: Vec<vk::SpecializationMapEntry> = constants
+            .iter()
+            .enumerate()
+            .map(|(k, &(id, _))| {
+                vk::SpecializationMapEntry::default()
+                    .constant_id(id)
+                    .offset(4 * k as u32)
+                    .size(4)
+            })
+            .collect();
+        let data: Vec<u8> = constants
+            .iter()
+            .flat_map(|&(_, value)| value.to_ne_bytes())
+            .collect();
+        let specialization = vk::SpecializationInfo::default()
+            .map_entries(&entries)
+            .data(&data);
+        let mut stage = vk::PipelineShaderStageCreateInfo::default()
             .stage(vk::ShaderStageFlags::COMPUTE)
             .module(module)
             .name(c"main");
+        if !constants.is_empty() {
+            stage = stage.specialization_info(&specialization);
+        }
         let info = [vk::ComputePipelineCreateInfo::default()
             .stage(stage)
             .layout(p.layout)];

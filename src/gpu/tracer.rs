@@ -1,11 +1,14 @@
 //! Traces rays on the device: through the exact BVH (`glsl/trace_exact.comp`), an RBVH
 //! (`glsl/trace_rbvh.comp`), or an RBVH with level of detail (`glsl/trace_rbvh_lod.comp`). All
 //! share the push constants ([`TraceParams`]) and the bindings after the structure's own buffers:
-//! rays, hits, status, per-ray steps; the LOD trace then binds the LOD records and columns and the
-//! per-ray cones. Each has a `_bda` twin that reads the structure's arrays through buffer device
+//! rays, hits, status, per-ray counters; the LOD trace then binds the LOD records and columns and
+//! the per-ray cones. Counting each ray's work ([`RayCounters`]) takes a second pipeline of the
+//! same shader, made on first use, with the specialization constant `rbvh_count` set: the timed
+//! pipeline compiles the counting away. Each has a `_bda` twin that reads the structure's arrays through buffer device
 //! addresses rather than bindings, for arrays over `maxStorageBufferRange` ([`Reach`]).
 
-use std::sync::Arc;
+use std::borrow::Cow;
+use std::sync::{Arc, OnceLock};
 
 use bytemuck::{Pod, Zeroable};
 
@@ -17,6 +20,7 @@ use crate::bvh::{Bvh, STACK_SIZE};
 use crate::geom::{Hit, Ray};
 use crate::lod::cone::check_cones;
 use crate::lod::{Lod, RayCone};
+use crate::probe::RayCounters;
 use crate::rbvh::Rbvh;
 use crate::{Error, Result};
 
@@ -33,8 +37,8 @@ pub enum Query {
 #[derive(Clone, Debug)]
 pub struct Traced {
     pub hits: Vec<Hit>,
-    /// Per ray: nodes visited + triangles tested, when asked for.
-    pub steps: Option<Vec<u32>>,
+    /// Per ray, what its traversal did, when asked for (traced by the counting pipeline).
+    pub counters: Option<Vec<RayCounters>>,
     /// Summed over batches; see [`Timing`].
     pub timing: Timing,
 }
@@ -63,7 +67,9 @@ pub struct TraceParams {
 const _: () = assert!(std::mem::size_of::<TraceParams>() == 88);
 
 const FLAG_ANY_HIT: u32 = 1;
-const FLAG_STEPS: u32 = 2;
+
+/// `constant_id` of the trace shaders' `rbvh_count` (`glsl/trace_*_main.glsl`).
+const COUNT_CONSTANT_ID: u32 = 0;
 
 /// What a tracer traces, which fixes its shaders and bindings.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -124,7 +130,12 @@ impl Kind {
 pub struct Tracer {
     ctx: Context,
     reach: Reach,
+    kind: Kind,
     pipeline: ComputePipeline,
+    /// The shader `pipeline` was made from, for the counting pipeline.
+    spirv: Cow<'static, [u8]>,
+    /// The same shader specialised to count each ray's work, made on first use.
+    counting: OnceLock<ComputePipeline>,
     /// The structure's leading arrays, in the shader's binding order (shared: a [`super::Painter`]
     /// may paint with the RBVH's atlas).
     structure: Vec<Arc<Buffer>>,
@@ -151,8 +162,8 @@ pub struct TraceBinding {
     set: DescriptorSet,
     status: Buffer,
     count: u32,
-    /// Keeps the (unused) per-ray steps binding valid.
-    _steps: Buffer,
+    /// Keeps the (unused) per-ray counters binding valid.
+    _counters: Buffer,
 }
 
 impl TraceBinding {
@@ -237,7 +248,7 @@ fn lod_parts<'a>(
     Ok((sizes, arrays))
 }
 
-/// Bindings after the structure's own: rays, hits, status, per-ray steps.
+/// Bindings after the structure's own: rays, hits, status, per-ray counters.
 const PER_TRACE_BUFFERS: u32 = 4;
 
 impl Tracer {
@@ -326,8 +337,8 @@ impl Tracer {
         let reach = reach_of(ctx, arrays)?;
         let spirv =
             match (spirv, reach) {
-                (None, _) => kind.spirv(reach),
-                (Some(s), Reach::Bindings) => s,
+                (None, _) => Cow::Borrowed(kind.spirv(reach)),
+                (Some(s), Reach::Bindings) => Cow::Owned(s.to_vec()),
                 (Some(_), Reach::DeviceAddresses) => return Err(Error::param(
                     "trace shader",
                     "a replacement shader binds the RBVH's arrays, but this RBVH must be reached \
@@ -359,7 +370,8 @@ impl Tracer {
         if !staging.is_empty() {
             ctx.record_transfer_to_compute(cmd);
         }
-        let mut tracer = Self::new(ctx, kind, reach, kind.spirv(reach), structure, sizes)?;
+        let spirv = Cow::Borrowed(kind.spirv(reach));
+        let mut tracer = Self::new(ctx, kind, reach, spirv, structure, sizes)?;
         tracer.staging = staging;
         Ok(tracer)
     }
@@ -418,8 +430,8 @@ impl Tracer {
             }
         }
         let status = self.ctx.host_storage("trace status", 4)?;
-        let steps = self.ctx.create_buffer(
-            "per-ray steps (unused)",
+        let counters = self.ctx.create_buffer(
+            "per-ray counters (unused)",
             4,
             vk::BufferUsageFlags::STORAGE_BUFFER,
             gpu_allocator::MemoryLocation::GpuOnly,
@@ -429,7 +441,7 @@ impl Tracer {
                 (rays.buffer, rays.offset),
                 (hits.buffer, hits.offset),
                 (status.raw(), 0),
-                (steps.raw(), 0),
+                (counters.raw(), 0),
             ],
             cones.map(|c| (c.buffer, c.offset)),
         );
@@ -437,7 +449,7 @@ impl Tracer {
             set: self.pipeline.descriptor_set(&views)?,
             status,
             count,
-            _steps: steps,
+            _counters: counters,
         })
     }
 
@@ -470,7 +482,7 @@ impl Tracer {
         ctx: &Context,
         kind: Kind,
         reach: Reach,
-        spirv: &[u8],
+        spirv: Cow<'static, [u8]>,
         mut structure: Vec<Arc<Buffer>>,
         mut sizes: TraceParams,
     ) -> Result<Self> {
@@ -497,7 +509,10 @@ impl Tracer {
         Ok(Tracer {
             ctx: ctx.clone(),
             reach,
-            pipeline: ComputePipeline::new(ctx, kind.name(), spirv, &bindings, push)?,
+            kind,
+            pipeline: ComputePipeline::new(ctx, kind.name(), &spirv, &bindings, push)?,
+            spirv,
+            counting: OnceLock::new(),
             structure,
             lod,
             sizes,
@@ -505,8 +520,26 @@ impl Tracer {
         })
     }
 
+    /// The pipeline that counts each ray's work (the same shader with `rbvh_count` specialised
+    /// true), made on first use.
+    fn counting_pipeline(&self) -> Result<&ComputePipeline> {
+        if let Some(p) = self.counting.get() {
+            return Ok(p);
+        }
+        let push = std::mem::size_of::<TraceParams>() as u32;
+        let pipeline = ComputePipeline::specialized(
+            &self.ctx,
+            &format!("{} (counting)", self.kind.name()),
+            &self.spirv,
+            &self.kind.bindings(self.reach),
+            push,
+            &[(COUNT_CONSTANT_ID, 1)],
+        )?;
+        Ok(self.counting.get_or_init(|| pipeline))
+    }
+
     /// The buffers of one trace in the pipeline's binding order ([`Kind::bindings`]): the
-    /// structure's when bound, the per-trace four (rays, hits, status, steps), then the LOD arrays
+    /// structure's when bound, the per-trace four (rays, hits, status, counters), then the LOD arrays
     /// when bound and the cones.
     fn views(
         &self,
@@ -557,15 +590,16 @@ impl Tracer {
         self.trace_with(rays, query, false)
     }
 
-    /// Traces `rays`, in batches that fit `maxStorageBufferRange`; `steps` also returns the per-ray
-    /// traversal cost. Fails with [`Error::StackOverflow`] if any ray overflowed its stack.
-    pub fn trace_with(&self, rays: &[Ray], query: Query, steps: bool) -> Result<Traced> {
+    /// Traces `rays`, in batches that fit `maxStorageBufferRange`; `counters` also returns what
+    /// each ray's traversal did (through the counting pipeline, whose timing is not that of
+    /// [`Tracer::trace`]). Fails with [`Error::StackOverflow`] if any ray overflowed its stack.
+    pub fn trace_with(&self, rays: &[Ray], query: Query, counters: bool) -> Result<Traced> {
         self.expect_lod(
             false,
             "trace",
             "a level-of-detail tracer needs one cone per ray: use Tracer::trace_lod",
         )?;
-        self.trace_batches(rays, None, query, steps)
+        self.trace_batches(rays, None, query, counters)
     }
 
     /// Traces `rays` with level of detail, `cones[i]` the footprint of `rays[i]` (see
@@ -576,7 +610,7 @@ impl Tracer {
         rays: &[Ray],
         cones: &[RayCone],
         query: Query,
-        steps: bool,
+        counters: bool,
     ) -> Result<Traced> {
         self.expect_lod(
             true,
@@ -584,7 +618,7 @@ impl Tracer {
             "this tracer has no levels of detail: make it with Tracer::rbvh_lod",
         )?;
         check_cones(rays, cones)?;
-        self.trace_batches(rays, Some(cones), query, steps)
+        self.trace_batches(rays, Some(cones), query, counters)
     }
 
     fn trace_batches(
@@ -592,22 +626,28 @@ impl Tracer {
         rays: &[Ray],
         cones: Option<&[RayCone]>,
         query: Query,
-        steps: bool,
+        counters: bool,
     ) -> Result<Traced> {
-        let ray_size = std::mem::size_of::<Ray>() as u64;
+        // Batches bounded by the largest per-ray buffer: the counters when counting, else the rays.
+        let per_ray = if counters {
+            std::mem::size_of::<RayCounters>()
+        } else {
+            std::mem::size_of::<Ray>()
+        } as u64;
         let batch =
-            (self.ctx.limits().max_storage_buffer_range / ray_size).clamp(1, 1 << 22) as usize;
+            (self.ctx.limits().max_storage_buffer_range / per_ray).clamp(1, 1 << 22) as usize;
         let mut out = Traced {
             hits: Vec::with_capacity(rays.len()),
-            steps: steps.then(|| Vec::with_capacity(rays.len())),
+            counters: counters.then(|| Vec::with_capacity(rays.len())),
             timing: Timing::default(),
         };
         for (k, chunk) in rays.chunks(batch).enumerate() {
             let chunk_cones = cones.map(|c| &c[k * batch..k * batch + chunk.len()]);
-            let (hits, chunk_steps, timing) = self.trace_batch(chunk, chunk_cones, query, steps)?;
+            let (hits, chunk_counters, timing) =
+                self.trace_batch(chunk, chunk_cones, query, counters)?;
             out.hits.extend(hits);
-            if let (Some(all), Some(s)) = (out.steps.as_mut(), chunk_steps) {
-                all.extend(s);
+            if let (Some(all), Some(c)) = (out.counters.as_mut(), chunk_counters) {
+                all.extend(c);
             }
             out.timing.wall_ms += timing.wall_ms;
             out.timing.gpu_ms = match (out.timing.gpu_ms, timing.gpu_ms) {
@@ -624,8 +664,13 @@ impl Tracer {
         rays: &[Ray],
         cones: Option<&[RayCone]>,
         query: Query,
-        steps: bool,
-    ) -> Result<(Vec<Hit>, Option<Vec<u32>>, Timing)> {
+        counters: bool,
+    ) -> Result<(Vec<Hit>, Option<Vec<RayCounters>>, Timing)> {
+        let pipeline = if counters {
+            self.counting_pipeline()?
+        } else {
+            &self.pipeline
+        };
         let n = rays.len() as u32;
         let ray_buf = self.ctx.upload_storage("rays", rays)?;
         let mut hit_buf = self.ctx.zeroed_storage(
@@ -633,14 +678,19 @@ impl Tracer {
             rays.len() as u64 * std::mem::size_of::<Hit>() as u64,
         )?;
         let mut status = self.ctx.zeroed_storage("trace status", 4)?;
-        let mut steps_buf = self.ctx.zeroed_storage(
-            "per-ray steps",
-            if steps { rays.len() as u64 * 4 } else { 4 },
+        let counter_bytes = std::mem::size_of::<RayCounters>() as u64;
+        let mut counters_buf = self.ctx.zeroed_storage(
+            "per-ray counters",
+            if counters {
+                rays.len() as u64 * counter_bytes
+            } else {
+                4
+            },
         )?;
         let flags = match query {
             Query::Closest => 0,
             Query::Any => FLAG_ANY_HIT,
-        } | if steps { FLAG_STEPS } else { 0 };
+        };
         let cone_buf = match cones {
             Some(c) => Some(self.ctx.upload_storage("ray cones", c)?),
             None => None,
@@ -650,11 +700,11 @@ impl Tracer {
                 (ray_buf.raw(), 0),
                 (hit_buf.raw(), 0),
                 (status.raw(), 0),
-                (steps_buf.raw(), 0),
+                (counters_buf.raw(), 0),
             ],
             cone_buf.as_ref().map(|c| (c.raw(), 0)),
         );
-        let timing = self.pipeline.run(&views, n, |first| {
+        let timing = pipeline.run(&views, n, |first| {
             bytemuck::bytes_of(&TraceParams {
                 ray_offset: first,
                 ray_count: n,
@@ -666,21 +716,21 @@ impl Tracer {
         let overflow = self.ctx.read::<u32>(&mut status)?[0];
         if overflow > 0 {
             return Err(Error::StackOverflow {
-                resource: self.pipeline.name().into(),
+                resource: pipeline.name().into(),
                 depth: STACK_SIZE,
                 rays: overflow,
             });
         }
         let mut hits: Vec<Hit> = self.ctx.read(&mut hit_buf)?;
         hits.truncate(rays.len());
-        let steps = if steps {
-            let mut s: Vec<u32> = self.ctx.read(&mut steps_buf)?;
-            s.truncate(rays.len());
-            Some(s)
+        let counters = if counters {
+            let mut c: Vec<RayCounters> = self.ctx.read(&mut counters_buf)?;
+            c.truncate(rays.len());
+            Some(c)
         } else {
             None
         };
-        Ok((hits, steps, timing))
+        Ok((hits, counters, timing))
     }
 }
 

@@ -64,18 +64,20 @@ impl GpuLod {
         [(w + 1) % 3, (w + 2) % 3, w]
     }
 
-    /// The words of column `(i, j)` of this record in `texels`, if they are in range.
-    pub fn column(&self, texels: &[u32], i: u32, j: u32) -> Option<Column> {
+    /// The words of column `(i, j)` of this record in `texels`, and the index of its first word, if
+    /// they are in range.
+    pub fn column(&self, texels: &[u32], i: u32, j: u32) -> Option<(Column, usize)> {
         if i >= self.res_u || j >= self.res_v {
             return None;
         }
         let index =
             u64::from(self.base) + 2 * (u64::from(j) * u64::from(self.res_u) + u64::from(i));
         let index = usize::try_from(index).ok()?;
-        Some(Column {
+        let column = Column {
             top: Texel(*texels.get(index)?),
             bottom: Texel(*texels.get(index.checked_add(1)?)?),
-        })
+        };
+        Some((column, index))
     }
 }
 

@@ -15,18 +15,21 @@ use glam::Vec3;
 
 use super::layout::GpuLod;
 use crate::geom::{safe_inverse, Aabb, Ray};
+use crate::probe::{Array, Probe, RayCounters, Read};
 use crate::rbvh::layout::{decode_octahedral, MARCH_SLACK};
 use crate::rbvh::march::{height_at, step_of};
 use crate::rbvh::Texel;
 
 /// Marches `lod`'s columns (words in `texels`) over `[tmin, t_closest)`; returns the hit distance
-/// and world normal. `columns` counts the columns visited.
-pub(crate) fn march(
+/// and world normal. `counters` counts a walk when the ray crosses the grid's box and each column
+/// visited as a cell; `probe` hears each column's read (its two words).
+pub(crate) fn march<P: Probe>(
     lod: &GpuLod,
     texels: &[u32],
     ray: &Ray,
     t_closest: f32,
-    columns: &mut u32,
+    counters: &mut RayCounters,
+    probe: &mut P,
 ) -> Option<(f32, Vec3)> {
     if !lod.is_some() || lod.res_u == 0 || lod.res_v == 0 || lod.axis > 2 {
         return None;
@@ -53,6 +56,7 @@ pub(crate) fn march(
         max: Vec3::new(lod.res_u as f32, lod.res_v as f32, h_top + slack),
     };
     let t0 = grid.intersect(go, inv, ray.tmin, t_closest)?;
+    counters.walks += 1;
     let e0 = (grid.min - go) * inv;
     let e1 = (grid.max - go) * inv;
     let t1 = e0.max(e1).min_element().min(t_closest);
@@ -69,10 +73,15 @@ pub(crate) fn march(
         if t_in > t1 {
             break;
         }
-        *columns += 1;
+        counters.cells += 1;
         let t_out = next_i.min(next_j).min(t1);
         // 4. Column.
-        if let Some(column) = lod.column(texels, ci as u32, cj as u32) {
+        if let Some((column, index)) = lod.column(texels, ci as u32, cj as u32) {
+            probe.read(Read {
+                array: Array::LodColumns,
+                offset: 4 * index as u64,
+                bytes: 8,
+            });
             if !column.is_empty() {
                 let top = f32::from(column.top.height_code()) * lod.h_scale;
                 let bottom = f32::from(column.bottom.height_code()) * lod.h_scale;

@@ -180,7 +180,9 @@ impl Lod {
         let mut best: Option<(f32, u32)> = None;
         for j in cj.saturating_sub(1)..=(cj + 1).min(record.res_v.saturating_sub(1)) {
             for i in ci.saturating_sub(1)..=(ci + 1).min(record.res_u.saturating_sub(1)) {
-                let Some(column) = record.column(&self.texels, i, j).filter(|c| !c.is_empty())
+                let Some((column, _)) = record
+                    .column(&self.texels, i, j)
+                    .filter(|(c, _)| !c.is_empty())
                 else {
                     continue;
                 };

@@ -34,26 +34,53 @@ use super::layout::{
     Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT, LEAF_BIT, MARCH_EDGE_PAD as EDGE_PAD,
     MARCH_SLACK as SLACK,
 };
+use super::ranges::{block_ranges, BLOCK};
 use super::Rbvh;
-use crate::bvh::{ChildRef, STACK_SIZE};
+use crate::bvh::{ChildRef, GpuNode, GpuTriangle, STACK_SIZE};
 use crate::geom::{intersect_triangle, safe_inverse, Aabb, Hit, Ray, RayShear};
 use crate::lod::cone::check_cones;
 use crate::lod::march::march as lod_march;
 use crate::lod::{selects, GpuLod, Lod, RayCone, LOD_BIT};
+use crate::probe::{element, Array, Probe, Read, TraceStats};
 use crate::Result;
 
-/// What one ray cost. The heat map shows `nodes + triangles + cells`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct RbvhTraceStats {
-    /// Inner nodes visited.
-    pub nodes: u32,
-    /// Triangles of triangle leaves tested (height-field cells are counted in `cells`).
-    pub triangles: u32,
-    /// Height-field cells visited.
-    pub cells: u32,
-    /// The traversal was cut short: the stack overflowed (impossible for a tree no deeper than
-    /// [`STACK_SIZE`]) or, in corrupt data only, a cycle made it visit more nodes than there are.
-    pub overflow: bool,
+/// How the caster walks a leaf's cells.
+#[derive(Clone, Copy, Debug)]
+enum Walk<'a> {
+    /// Every cell the ray crosses: the referee of the device's block jumps.
+    Plain,
+    /// As the device does: on entering an 8×8 block whose height range (`ranges`, as
+    /// [`block_ranges`] gives them) the ray passes wholly above or below, straight to the block's
+    /// exit cell (`src/rbvh/ranges.rs`). Same hits, fewer cells.
+    Blocks(&'a [u32]),
+}
+
+/// The device's twin, read for read: traces as `glsl/rbvh.glsl` does, block jumps included, so
+/// that its [`TraceStats`] equal the device's counters ray by ray, and reports to a [`Probe`] every
+/// read the shader makes of the structure's arrays, at its byte offset in the device buffers
+/// (`src/gpu/tracer.rs` binds them in [`Array`] order; the atlas buffer holds the texels, then the
+/// block ranges). Made by [`Rbvh::device_twin`].
+pub struct DeviceTwin<'a> {
+    rbvh: &'a Rbvh,
+    ranges: Vec<u32>,
+    lod: Option<&'a Lod>,
+}
+
+impl DeviceTwin<'_> {
+    /// Traces one ray (closest hit, or any hit) as the device does, reporting its reads to
+    /// `probe`. With level of detail ([`Rbvh::device_twin`] given a [`Lod`]) `cone` is the
+    /// ray's footprint; without, it is ignored.
+    pub fn trace<P: Probe>(
+        &self,
+        ray: &Ray,
+        any_hit: bool,
+        cone: Option<&RayCone>,
+        probe: &mut P,
+    ) -> (Hit, TraceStats) {
+        let lod = self.lod.zip(cone);
+        self.rbvh
+            .traverse(ray, any_hit, lod, Walk::Blocks(&self.ranges), probe)
+    }
 }
 
 impl Rbvh {
@@ -64,14 +91,27 @@ impl Rbvh {
     /// (bit 31 set; the index is into [`Rbvh::leaves`]). A height-field hit's normal is the stored
     /// (world-space, dilated, octahedral-quantized) normal of the sample nearest the hit; a
     /// triangle's is its geometric normal as wound.
-    pub fn closest_hit(&self, ray: &Ray) -> (Hit, RbvhTraceStats) {
-        self.traverse(ray, false, None)
+    pub fn closest_hit(&self, ray: &Ray) -> (Hit, TraceStats) {
+        self.traverse(ray, false, None, Walk::Plain, &mut ())
     }
 
     /// Whether anything is hit in `[tmin, tmax)`: the hit returned is *some* hit, not the closest.
     /// Ids and normals as in [`Rbvh::closest_hit`].
-    pub fn any_hit(&self, ray: &Ray) -> (Hit, RbvhTraceStats) {
-        self.traverse(ray, true, None)
+    pub fn any_hit(&self, ray: &Ray) -> (Hit, TraceStats) {
+        self.traverse(ray, true, None, Walk::Plain, &mut ())
+    }
+
+    /// The device's twin ([`DeviceTwin`]), with level of detail when `lod` (built for this RBVH)
+    /// is given. Fails when `lod` was built for another tree.
+    pub fn device_twin<'a>(&'a self, lod: Option<&'a Lod>) -> Result<DeviceTwin<'a>> {
+        if let Some(l) = lod {
+            l.check_for(self)?;
+        }
+        Ok(DeviceTwin {
+            rbvh: self,
+            ranges: block_ranges(&self.atlas),
+            lod,
+        })
     }
 
     /// As [`Rbvh::closest_hit`] (or [`Rbvh::any_hit`]) with level of detail: an inner child whose
@@ -85,14 +125,14 @@ impl Rbvh {
         ray: &Ray,
         cone: &RayCone,
         any_hit: bool,
-    ) -> (Hit, RbvhTraceStats) {
-        self.traverse(ray, any_hit, Some((lod, cone)))
+    ) -> (Hit, TraceStats) {
+        self.traverse(ray, any_hit, Some((lod, cone)), Walk::Plain, &mut ())
     }
 
     /// Traces many rays in parallel with `rayon`; hits in ray order.
     pub fn trace_cpu(&self, rays: &[Ray], any_hit: bool) -> Vec<Hit> {
         rays.par_iter()
-            .map(|r| self.traverse(r, any_hit, None).0)
+            .map(|r| self.traverse(r, any_hit, None, Walk::Plain, &mut ()).0)
             .collect()
     }
 
@@ -110,17 +150,22 @@ impl Rbvh {
         Ok(rays
             .par_iter()
             .zip(cones)
-            .map(|(r, c)| self.traverse(r, any_hit, Some((lod, c))).0)
+            .map(|(r, c)| {
+                self.traverse(r, any_hit, Some((lod, c)), Walk::Plain, &mut ())
+                    .0
+            })
             .collect())
     }
 
-    fn traverse(
+    fn traverse<P: Probe>(
         &self,
         ray: &Ray,
         any_hit: bool,
         lod: Option<(&Lod, &RayCone)>,
-    ) -> (Hit, RbvhTraceStats) {
-        let mut stats = RbvhTraceStats::default();
+        walk: Walk,
+        probe: &mut P,
+    ) -> (Hit, TraceStats) {
+        let mut stats = TraceStats::default();
         if !ray.is_valid() {
             return (Hit::MISS, stats);
         }
@@ -144,11 +189,13 @@ impl Rbvh {
                 let end = first
                     .saturating_add(count as usize)
                     .min(self.triangles.len());
+                stats.counters.triangle_leaves += 1;
                 for slot in first..end {
                     let Some(tri) = self.triangles.get(slot) else {
                         break;
                     };
-                    stats.triangles += 1;
+                    stats.counters.triangles += 1;
+                    probe.read(element::<GpuTriangle>(Array::Triangles, slot));
                     let [a, b, v2] = tri.vertices();
                     if let Some(t) = intersect_triangle(&shear, a, b, v2, ray.tmin, t_closest) {
                         t_closest = t;
@@ -166,7 +213,9 @@ impl Rbvh {
             } else if node & LEAF_BIT != 0 {
                 // A height-field leaf that came up from the near-first order or the stack.
                 let leaf = node & !LEAF_BIT;
-                if let Some((t, normal)) = self.march(leaf, ray, t_closest, &mut stats) {
+                stats.counters.leaves += 1;
+                if let Some((t, normal)) = self.march(leaf, ray, t_closest, walk, &mut stats, probe)
+                {
                     t_closest = t;
                     best = Hit {
                         t,
@@ -181,11 +230,23 @@ impl Rbvh {
             } else if node & LOD_BIT != 0 {
                 // A coarse representation chosen for this ray (only with `lod`).
                 let n = node & !LOD_BIT;
+                stats.counters.leaves += 1;
                 if let Some((l, _)) = lod {
-                    let record = l.nodes.get(n as usize).unwrap_or(&GpuLod::NONE);
-                    if let Some((t, normal)) =
-                        lod_march(record, &l.texels, ray, t_closest, &mut stats.cells)
-                    {
+                    let record = match l.nodes.get(n as usize) {
+                        Some(r) => {
+                            probe.read(element::<GpuLod>(Array::LodRecords, n as usize));
+                            r
+                        }
+                        None => &GpuLod::NONE,
+                    };
+                    if let Some((t, normal)) = lod_march(
+                        record,
+                        &l.texels,
+                        ray,
+                        t_closest,
+                        &mut stats.counters,
+                        probe,
+                    ) {
                         t_closest = t;
                         best = Hit {
                             t,
@@ -202,11 +263,12 @@ impl Rbvh {
                 // A missing node (an index out of range, in corrupt data) has no children. In a
                 // tree every node is entered at most once per ray; more visits than nodes can
                 // only come from a cycle in corrupt data.
-                if stats.nodes as usize >= self.nodes.len() {
+                if stats.counters.nodes as usize >= self.nodes.len() {
                     stats.overflow = true;
                     break;
                 }
-                stats.nodes += 1;
+                stats.counters.nodes += 1;
+                probe.read(element::<GpuNode>(Array::Nodes, node as usize));
                 let children = gpu_node.children();
                 let enter = |c: &ChildRef| c.bounds.intersect(origin, inv_dir, ray.tmin, t_closest);
                 let (ta, tb) = (enter(&children[0]), enter(&children[1]));
@@ -253,15 +315,23 @@ impl Rbvh {
     }
 
     /// Marches height-field leaf `leaf_index` for the ray's interval `[tmin, t_closest)`; returns
-    /// the hit distance and the world-space normal. Steps as numbered in the module docs.
-    fn march(
+    /// the hit distance and the world-space normal. Steps as numbered in the module docs; with
+    /// [`Walk::Blocks`], the block jumps of `glsl/rbvh.glsl`'s `rbvh_march`, statement for
+    /// statement.
+    fn march<P: Probe>(
         &self,
         leaf_index: u32,
         ray: &Ray,
         t_closest: f32,
-        stats: &mut RbvhTraceStats,
+        walk: Walk,
+        stats: &mut TraceStats,
+        probe: &mut P,
     ) -> Option<(f32, Vec3)> {
         let leaf = self.leaves.get(leaf_index as usize)?;
+        probe.read(element::<GpuHeightfield>(
+            Array::Leaves,
+            leaf_index as usize,
+        ));
         // A tile needs two samples along each side to have a cell at all.
         if leaf.res_u < 2 || leaf.res_v < 2 || !tile_fits(leaf, &self.atlas) {
             return None;
@@ -302,11 +372,17 @@ impl Rbvh {
             ),
         };
         let t0 = tile.intersect(o, inv, frame.tmin, frame.tmax)?;
+        stats.counters.walks += 1;
         let t1 = box_exit(&tile, o, inv).min(frame.tmax);
         let fr = FrameRay {
             shear: RayShear::new(&frame),
             ray: frame,
             slack,
+        };
+        let cells = Cells {
+            atlas: &self.atlas,
+            leaf,
+            fr: &fr,
         };
 
         // 3. Walk. The start cell is the one holding the entry point, clamped so that the padding
@@ -328,14 +404,92 @@ impl Rbvh {
         // A straight line crosses each of the (res − 2) inner boundaries per axis at most once, so
         // it takes at most this many steps, each visiting one cell (two near a grid vertex).
         let max_steps = u64::from(leaf.res_u - 1) + u64::from(leaf.res_v - 1) - 1;
+        let blocks = match walk {
+            Walk::Plain => None,
+            Walk::Blocks(ranges) => Some(Blocks::of(&self.atlas, leaf, ranges)),
+        };
+        let mut checked_block = None;
         let mut t_in = t0;
         for _ in 0..max_steps {
             if t_in > t1 {
                 break;
             }
-            stats.cells += 1;
+            if let Some(b) = &blocks {
+                // On entering a block whose height range the ray passes wholly above or below,
+                // straight to the block's exit cell, as the walk would reach it cell by cell.
+                let block = b.index(ci, cj);
+                if checked_block != Some(block) && block < b.count {
+                    checked_block = Some(block);
+                    let (i0, j0) = b.first_cell(ci, cj);
+                    let edge_i = if step_i > 0 {
+                        (i0 + BLOCK as i64 - 1).min(last_i)
+                    } else {
+                        i0.max(0)
+                    };
+                    let edge_j = if step_j > 0 {
+                        (j0 + BLOCK as i64 - 1).min(last_j)
+                    } else {
+                        j0.max(0)
+                    };
+                    let leave_i = boundary_t(edge_i, step_i, o.x, inv.x);
+                    let leave_j = boundary_t(edge_j, step_j, o.y, inv.y);
+                    probe.read(Read {
+                        array: Array::Atlas,
+                        offset: 4 * (self.atlas.texels.len() as u64 + block),
+                        bytes: 4,
+                    });
+                    let range = b.range(block);
+                    let (code_lo, code_hi) = (range & 0xFFFF, range >> 16);
+                    let lo_s = code_lo as f32 * leaf.h_scale - slack;
+                    let hi_s = code_hi as f32 * leaf.h_scale + slack;
+                    let h_a = height_at(o.z, d.z, t_in);
+                    let h_b = height_at(o.z, d.z, leave_i.min(leave_j).min(t1));
+                    if code_lo > code_hi || h_a.max(h_b) < lo_s || h_a.min(h_b) > hi_s {
+                        stats.counters.jumps += 1;
+                        if t1 < leave_i.min(leave_j) {
+                            break;
+                        }
+                        let mut t_last = t_in;
+                        if leave_i <= leave_j {
+                            // Leaving through the i side (first on a tie, as the walk steps i
+                            // first): the j steps before it, then the step into the edge column.
+                            for _ in 0..BLOCK {
+                                if step_j == 0 || next_j >= leave_i {
+                                    break;
+                                }
+                                t_last = next_j;
+                                cj += step_j;
+                                next_j = boundary_t(cj, step_j, o.y, inv.y);
+                            }
+                            if ci != edge_i {
+                                t_last =
+                                    t_last.max(boundary_t(edge_i - step_i, step_i, o.x, inv.x));
+                                ci = edge_i;
+                                next_i = leave_i;
+                            }
+                        } else {
+                            for _ in 0..BLOCK {
+                                if step_i == 0 || next_i > leave_j {
+                                    break;
+                                }
+                                t_last = next_i;
+                                ci += step_i;
+                                next_i = boundary_t(ci, step_i, o.x, inv.x);
+                            }
+                            if cj != edge_j {
+                                t_last =
+                                    t_last.max(boundary_t(edge_j - step_j, step_j, o.y, inv.y));
+                                cj = edge_j;
+                                next_j = leave_j;
+                            }
+                        }
+                        t_in = t_last;
+                    }
+                }
+            }
+            stats.counters.cells += 1;
             let t_out = next_i.min(next_j).min(t1);
-            let hit = cell_hit(&self.atlas, leaf, &fr, ci, cj, t_in, t_out);
+            let hit = cells.hit(ci, cj, t_in, t_out, stats, probe);
             if hit.is_some() {
                 return hit;
             }
@@ -355,9 +509,9 @@ impl Rbvh {
                     (ci + step_i, cj)
                 };
                 if gap <= corner_slack && xi >= 0 && xi <= last_i && xj >= 0 && xj <= last_j {
-                    stats.cells += 1;
+                    stats.counters.cells += 1;
                     let t_x = next_i.max(next_j).min(t1);
-                    let hit = cell_hit(&self.atlas, leaf, &fr, xi, xj, t_out, t_x);
+                    let hit = cells.hit(xi, xj, t_out, t_x, stats, probe);
                     if hit.is_some() {
                         return hit;
                     }
@@ -383,6 +537,61 @@ impl Rbvh {
             }
         }
         None
+    }
+}
+
+/// The atlas-aligned 8×8 blocks a leaf's tile lies in (`src/rbvh/ranges.rs`), addressed as
+/// `rbvh_march` does.
+struct Blocks<'a> {
+    ranges: &'a [u32],
+    /// The tile's corner in the atlas.
+    tile_u: u64,
+    tile_v: u64,
+    pitch: u64,
+    count: u64,
+}
+
+impl<'a> Blocks<'a> {
+    fn of(atlas: &Atlas, leaf: &GpuHeightfield, ranges: &'a [u32]) -> Blocks<'a> {
+        let pitch = u64::from(atlas.pitch.max(1));
+        // Rows as the device counts them: from the texel count (the loader makes it a whole
+        // number of rows).
+        let rows = atlas.texels.len() as u64 / pitch;
+        let block = u64::from(BLOCK);
+        Blocks {
+            ranges,
+            tile_u: u64::from(leaf.atlas_base) % pitch,
+            tile_v: u64::from(leaf.atlas_base) / pitch,
+            pitch: pitch.div_ceil(block),
+            count: rows.div_ceil(block) * pitch.div_ceil(block),
+        }
+    }
+
+    /// The block holding cell `(ci, cj)` (both ≥ 0: the walk never leaves the tile).
+    fn index(&self, ci: i64, cj: i64) -> u64 {
+        let block = u64::from(BLOCK);
+        let (ax, ay) = (self.tile_u + ci as u64, self.tile_v + cj as u64);
+        (ay / block) * self.pitch + ax / block
+    }
+
+    /// The tile cell at the block's first atlas column and row (negative before the tile).
+    fn first_cell(&self, ci: i64, cj: i64) -> (i64, i64) {
+        let block = u64::from(BLOCK);
+        let (ax, ay) = (self.tile_u + ci as u64, self.tile_v + cj as u64);
+        (
+            (ax / block * block) as i64 - self.tile_u as i64,
+            (ay / block * block) as i64 - self.tile_v as i64,
+        )
+    }
+
+    /// The block's height-code range word; a block without one (only in data the loader
+    /// refuses) gets the full range, which never jumps.
+    fn range(&self, block: u64) -> u32 {
+        usize::try_from(block)
+            .ok()
+            .and_then(|b| self.ranges.get(b))
+            .copied()
+            .unwrap_or(0xFFFF_0000)
     }
 }
 
@@ -463,112 +672,132 @@ pub(crate) fn height_at(o: f32, d: f32, t: f32) -> f32 {
     }
 }
 
-/// Texel `(i, j)` of the leaf's tile, or a hole when the index leaves the atlas. The march only
-/// asks for `(i, j)` inside a tile that [`tile_fits`], so the index cannot overflow; the checked
-/// read is the last line of defence.
-fn texel(atlas: &Atlas, leaf: &GpuHeightfield, i: i64, j: i64) -> Texel {
+/// Texel `(i, j)` of the leaf's tile and its index in the atlas, or a hole (and no index) when
+/// the index leaves the atlas. The march only asks for `(i, j)` inside a tile that
+/// [`tile_fits`], so the index cannot overflow; the checked read is the last line of defence.
+fn texel(atlas: &Atlas, leaf: &GpuHeightfield, i: i64, j: i64) -> (Texel, Option<usize>) {
     let index = i64::from(leaf.atlas_base) + j * i64::from(atlas.pitch) + i;
     let Ok(index) = usize::try_from(index) else {
-        return Texel::HOLE;
+        return (Texel::HOLE, None);
     };
     match atlas.texels.get(index) {
-        Some(&t) => t,
-        None => Texel::HOLE,
+        Some(&t) => (t, Some(index)),
+        None => (Texel::HOLE, None),
     }
 }
 
-/// Steps 4 and 5: intersects the ray with cell `(ci, cj)`, which it crosses over `[t_in, t_out]`;
-/// returns the nearest hit distance of the cell's triangles within the frame ray's interval, and
-/// the normal.
-///
-/// Corners are indexed `k = di + 2·dj`: c00, c10, c01, c11. With all four present the surface is
-/// (c00, c10, c11) and (c00, c11, c01); with one hole, the triangle of the other three taken in the
-/// cycle order c00, c10, c11, c01 (so the winding stays that of the quad); with two or more holes
-/// there is no surface.
-fn cell_hit(
-    atlas: &Atlas,
-    leaf: &GpuHeightfield,
-    fr: &FrameRay,
-    ci: i64,
-    cj: i64,
-    t_in: f32,
-    t_out: f32,
-) -> Option<(f32, Vec3)> {
-    let mut corner = [Texel::HOLE; 4];
-    let mut pos = [Vec3::ZERO; 4];
-    let mut valid = 0;
-    let mut lo = f32::INFINITY;
-    let mut hi = f32::NEG_INFINITY;
-    for k in 0..4 {
-        let i = ci + (k & 1) as i64;
-        let j = cj + (k >> 1) as i64;
-        let c = texel(atlas, leaf, i, j);
-        corner[k] = c;
-        if !c.is_hole() {
-            let h = c.height_code() as f32 * leaf.h_scale;
-            pos[k] = Vec3::new(i as f32 + 0.5, j as f32 + 0.5, h);
-            valid += 1;
-            lo = lo.min(h);
-            hi = hi.max(h);
-        }
-    }
-    if valid < 3 {
-        return None;
-    }
+/// The cells of one leaf's march: what [`Cells::hit`] needs besides the cell.
+struct Cells<'a> {
+    atlas: &'a Atlas,
+    leaf: &'a GpuHeightfield,
+    fr: &'a FrameRay,
+}
 
-    // Cheap rejection: the ray's height over the cell misses the corners' height range (by more
-    // than the rounding slack covers).
-    let o = fr.ray.origin();
-    let d = fr.ray.dir();
-    let h_a = height_at(o.z, d.z, t_in);
-    let h_b = height_at(o.z, d.z, t_out);
-    if h_a.max(h_b) < lo - fr.slack || h_a.min(h_b) > hi + fr.slack {
-        return None;
-    }
-
-    let (first, second) = if valid == 4 {
-        ([0, 1, 3], Some([0, 3, 2]))
-    } else {
-        let cycle = [0, 1, 3, 2];
-        let mut tri = [0usize; 3];
-        let mut n = 0;
-        for k in cycle {
-            if !corner[k].is_hole() && n < 3 {
-                tri[n] = k;
-                n += 1;
+impl Cells<'_> {
+    /// Steps 4 and 5: intersects the ray with cell `(ci, cj)`, which it crosses over
+    /// `[t_in, t_out]`; returns the nearest hit distance of the cell's triangles within the frame
+    /// ray's interval, and the normal. Counts the cell in `cells_tested` when it gets past the
+    /// height rejection; reports the four texel reads.
+    ///
+    /// Corners are indexed `k = di + 2·dj`: c00, c10, c01, c11. With all four present the surface
+    /// is (c00, c10, c11) and (c00, c11, c01); with one hole, the triangle of the other three taken
+    /// in the cycle order c00, c10, c11, c01 (so the winding stays that of the quad); with two or
+    /// more holes there is no surface.
+    fn hit<P: Probe>(
+        &self,
+        ci: i64,
+        cj: i64,
+        t_in: f32,
+        t_out: f32,
+        stats: &mut TraceStats,
+        probe: &mut P,
+    ) -> Option<(f32, Vec3)> {
+        let (atlas, leaf, fr) = (self.atlas, self.leaf, self.fr);
+        let mut corner = [Texel::HOLE; 4];
+        let mut pos = [Vec3::ZERO; 4];
+        let mut valid = 0;
+        let mut lo = f32::INFINITY;
+        let mut hi = f32::NEG_INFINITY;
+        for k in 0..4 {
+            let i = ci + (k & 1) as i64;
+            let j = cj + (k >> 1) as i64;
+            let (c, index) = texel(atlas, leaf, i, j);
+            if let Some(index) = index {
+                probe.read(Read {
+                    array: Array::Atlas,
+                    offset: 4 * index as u64,
+                    bytes: 4,
+                });
             }
-        }
-        (tri, None)
-    };
-    // The second triangle only counts when nearer than the first one's hit.
-    let [a, b, c] = first;
-    let mut t_hit = intersect_triangle(&fr.shear, pos[a], pos[b], pos[c], fr.ray.tmin, fr.ray.tmax);
-    if let Some([a, b, c]) = second {
-        let t_max = t_hit.unwrap_or(fr.ray.tmax);
-        let t = intersect_triangle(&fr.shear, pos[a], pos[b], pos[c], fr.ray.tmin, t_max);
-        if t.is_some() {
-            t_hit = t;
-        }
-    }
-    let t = t_hit?;
-
-    // The normal of the corner sample nearest the hit: sample i sits at s = i + ½, so the nearest
-    // is floor(s) (halves round up), clamped to the cell; a hole there falls back to the first
-    // present corner in the order c00, c10, c01, c11.
-    let s = o.x + d.x * t;
-    let r = o.y + d.y * t;
-    let di = ((s.floor() as i64).clamp(ci, ci + 1) - ci) as usize;
-    let dj = ((r.floor() as i64).clamp(cj, cj + 1) - cj) as usize;
-    let mut nearest = corner[di + 2 * dj];
-    if nearest.is_hole() {
-        for c in corner {
+            corner[k] = c;
             if !c.is_hole() {
-                nearest = c;
-                break;
+                let h = c.height_code() as f32 * leaf.h_scale;
+                pos[k] = Vec3::new(i as f32 + 0.5, j as f32 + 0.5, h);
+                valid += 1;
+                lo = lo.min(h);
+                hi = hi.max(h);
             }
         }
+        if valid < 3 {
+            return None;
+        }
+
+        // Cheap rejection: the ray's height over the cell misses the corners' height range (by more
+        // than the rounding slack covers).
+        let o = fr.ray.origin();
+        let d = fr.ray.dir();
+        let h_a = height_at(o.z, d.z, t_in);
+        let h_b = height_at(o.z, d.z, t_out);
+        if h_a.max(h_b) < lo - fr.slack || h_a.min(h_b) > hi + fr.slack {
+            return None;
+        }
+        stats.counters.cells_tested += 1;
+
+        let (first, second) = if valid == 4 {
+            ([0, 1, 3], Some([0, 3, 2]))
+        } else {
+            let cycle = [0, 1, 3, 2];
+            let mut tri = [0usize; 3];
+            let mut n = 0;
+            for k in cycle {
+                if !corner[k].is_hole() && n < 3 {
+                    tri[n] = k;
+                    n += 1;
+                }
+            }
+            (tri, None)
+        };
+        // The second triangle only counts when nearer than the first one's hit.
+        let [a, b, c] = first;
+        let mut t_hit =
+            intersect_triangle(&fr.shear, pos[a], pos[b], pos[c], fr.ray.tmin, fr.ray.tmax);
+        if let Some([a, b, c]) = second {
+            let t_max = t_hit.unwrap_or(fr.ray.tmax);
+            let t = intersect_triangle(&fr.shear, pos[a], pos[b], pos[c], fr.ray.tmin, t_max);
+            if t.is_some() {
+                t_hit = t;
+            }
+        }
+        let t = t_hit?;
+
+        // The normal of the corner sample nearest the hit: sample i sits at s = i + ½, so the nearest
+        // is floor(s) (halves round up), clamped to the cell; a hole there falls back to the first
+        // present corner in the order c00, c10, c01, c11.
+        let s = o.x + d.x * t;
+        let r = o.y + d.y * t;
+        let di = ((s.floor() as i64).clamp(ci, ci + 1) - ci) as usize;
+        let dj = ((r.floor() as i64).clamp(cj, cj + 1) - cj) as usize;
+        let mut nearest = corner[di + 2 * dj];
+        if nearest.is_hole() {
+            for c in corner {
+                if !c.is_hole() {
+                    nearest = c;
+                    break;
+                }
+            }
+        }
+        Some((t, nearest.normal()))
     }
-    Some((t, nearest.normal()))
 }
 
 #[cfg(test)]
@@ -706,11 +935,45 @@ mod tests {
     }
 
     #[test]
+    fn the_device_twin_counts_and_reports_each_read() {
+        let r = flat_plane();
+        let twin = r.device_twin(None).unwrap();
+        let mut reads = Vec::new();
+        let (hit, stats) = twin.trace(&down(0.3, 0.2), false, None, &mut reads);
+        assert_eq!(hit.id, LEAF_BIT);
+        let c = stats.counters;
+        assert_eq!(
+            (c.nodes, c.leaves, c.walks, c.cells, c.cells_tested, c.jumps),
+            (1, 1, 1, 1, 1, 0)
+        );
+        assert_eq!((c.triangle_leaves, c.triangles), (0, 0));
+        // World (0.3, 0.2) is frame (4.6, 4.4): cell (4, 3), texels 28, 29, 36, 37 of the 8 × 8
+        // tile; the block range word follows the 64 texels.
+        let read = |array, offset, bytes| Read {
+            array,
+            offset,
+            bytes,
+        };
+        assert_eq!(
+            reads,
+            [
+                read(Array::Nodes, 0, 64),
+                read(Array::Leaves, 0, 64),
+                read(Array::Atlas, 4 * 64, 4),
+                read(Array::Atlas, 4 * 28, 4),
+                read(Array::Atlas, 4 * 29, 4),
+                read(Array::Atlas, 4 * 36, 4),
+                read(Array::Atlas, 4 * 37, 4),
+            ]
+        );
+    }
+
+    #[test]
     fn flat_plane_is_hit_at_its_height() {
         let r = flat_plane();
         let hit = assert_hit(&r, &down(0.3, 0.2), 9.0, LEAF_BIT);
         assert!(hit.normal().dot(Vec3::Y) > 0.9999, "{hit:?}");
-        assert_eq!(r.closest_hit(&down(0.3, 0.2)).1.cells, 1);
+        assert_eq!(r.closest_hit(&down(0.3, 0.2)).1.counters.cells, 1);
         // Oblique rays from every quadrant, grazing ones included, hit at the same height.
         let dirs = [
             Vec3::new(0.1, -1.0, 0.05),
@@ -805,7 +1068,7 @@ mod tests {
             f32::INFINITY,
         );
         assert_hit(&r, &ray, 8.5 / 1.6, LEAF_BIT);
-        assert!(r.closest_hit(&ray).1.cells >= 3);
+        assert!(r.closest_hit(&ray).1.counters.cells >= 3);
     }
 
     #[test]
@@ -1059,11 +1322,11 @@ mod tests {
         });
         let (hit, stats) = r.closest_hit(&ray);
         assert_eq!(hit.id, MISS_ID);
-        assert!(stats.overflow && stats.nodes == 1, "{stats:?}");
+        assert!(stats.overflow && stats.counters.nodes == 1, "{stats:?}");
         // No nodes at all.
         let mut r = good.clone();
         r.nodes.clear();
-        assert_eq!(r.closest_hit(&ray), (Hit::MISS, RbvhTraceStats::default()));
+        assert_eq!(r.closest_hit(&ray), (Hit::MISS, TraceStats::default()));
     }
 
     #[test]
@@ -1074,7 +1337,7 @@ mod tests {
             for dir in [Vec3::X, Vec3::new(1.0, 0.0, 1.0), Vec3::new(-1.0, 0.0, 0.3)] {
                 let ray = Ray::new(Vec3::new(0.0, y, 0.1) - 5.0 * dir, dir, 0.0, f32::INFINITY);
                 let (_, stats) = r.closest_hit(&ray);
-                assert!(stats.cells <= 13, "{ray:?}: {stats:?}");
+                assert!(stats.counters.cells <= 13, "{ray:?}: {stats:?}");
             }
         }
         // An empty tile's box crossed corner to corner: every cell on the way, and no more.
@@ -1084,7 +1347,7 @@ mod tests {
         let ray = Ray::new(a - (b - a), b - a, 0.0, f32::INFINITY);
         let (hit, stats) = r.closest_hit(&ray);
         assert_eq!(hit, Hit::MISS);
-        assert!((8..=8 + 5 - 1).contains(&stats.cells), "{stats:?}");
+        assert!((8..=8 + 5 - 1).contains(&stats.counters.cells), "{stats:?}");
     }
 
     /// A deterministic bumpy tile with a few holes, in a rotated frame.
@@ -1206,7 +1469,7 @@ mod tests {
                 let ray = Ray::new(target - 6.0 * dir, dir, 0.0, f32::INFINITY);
                 let (hit, stats) = r.closest_hit(&ray);
                 // At most 8 + 6 − 1 steps, each visiting one cell or two near a grid vertex.
-                assert!(stats.cells <= 2 * (8 + 6 - 1), "{stats:?}");
+                assert!(stats.counters.cells <= 2 * (8 + 6 - 1), "{stats:?}");
                 let expected = brute_force(&r, &ray);
                 assert_eq!(
                     hit.is_hit(),

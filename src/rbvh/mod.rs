@@ -7,7 +7,7 @@
 //! * `atlas`: packing tiles into one atlas;
 //! * [`layout`]: the packed data the GPU reads;
 //! * [`ranges`]: height ranges of the atlas's 8 × 8 blocks, for the device march's jumps;
-//! * `march`: the CPU reference caster on exactly that packed data;
+//! * `march`: the CPU reference caster on exactly that packed data, and its [`DeviceTwin`];
 //! * `file`: save and load.
 
 mod atlas;
@@ -22,7 +22,7 @@ pub(crate) mod raster;
 mod split;
 
 pub use layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT};
-pub use march::RbvhTraceStats;
+pub use march::DeviceTwin;
 pub use params::{RbvhParams, Refinement, Subdivision, QUALITY_NAMES};
 
 use crate::bvh::{GpuNode, GpuTriangle};

@@ -60,6 +60,10 @@ pub struct Args {
     /// Also measure every level traced with level of detail (method rbvh-lod).
     #[arg(long)]
     lod: bool,
+    /// Also model each method's memory traffic from its CPU twin's reads: cache lines per ray,
+    /// working set, DRAM bytes per ray behind 4, 32 and 72 MiB caches (slower: a CPU trace each).
+    #[arg(long)]
+    traffic: bool,
     #[command(flatten)]
     lod_build: LodBuildArgs,
 }
@@ -94,6 +98,7 @@ pub fn run(a: Args) -> Result<()> {
     }
     config.plot_dir = a.plot.clone();
     config.lod = a.lod.then(|| a.lod_build.params());
+    config.traffic = a.traffic;
 
     let bar = ProgressBar::new_spinner();
     bar.set_style(
@@ -116,6 +121,8 @@ pub fn run(a: Args) -> Result<()> {
     let report = result.context("benchmark")?;
 
     print!("{}", bench::table(&report));
+    println!();
+    print!("{}", bench::work_table(&report));
     if invalid > 0 {
         eprintln!(
             "!!!!!!!! {invalid} measurement(s) INVALID: their hits are wrong (see above); their speeds mean nothing"

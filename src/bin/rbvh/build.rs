@@ -7,7 +7,8 @@ use std::time::Instant;
 use anyhow::{Context as _, Result};
 use rayon::prelude::*;
 use rbvh::bvh::Bvh;
-use rbvh::rbvh::{Rbvh, RbvhParams, RbvhTraceStats, Subdivision};
+use rbvh::probe::TraceStats;
+use rbvh::rbvh::{Rbvh, RbvhParams, Subdivision};
 use rbvh::scene::Scene;
 
 use crate::prepare::{step, Quality};
@@ -130,9 +131,9 @@ fn compare_splits(scene: &Scene, level: &str, params: &RbvhParams) -> Result<()>
             Rbvh::build(scene, &p)
         })?;
         let start = Instant::now();
-        let stats: Vec<RbvhTraceStats> = rays.par_iter().map(|ray| r.closest_hit(ray).1).collect();
+        let stats: Vec<TraceStats> = rays.par_iter().map(|ray| r.closest_hit(ray).1).collect();
         let ms = start.elapsed().as_secs_f64() * 1e3;
-        let per_ray = |f: fn(&RbvhTraceStats) -> u32| {
+        let per_ray = |f: fn(&TraceStats) -> u32| {
             stats.iter().map(|s| f(s) as f64).sum::<f64>() / rays.len() as f64
         };
         println!(
@@ -140,9 +141,9 @@ fn compare_splits(scene: &Scene, level: &str, params: &RbvhParams) -> Result<()>
             r.stats.build_ms,
             r.nodes.len(),
             r.stats.heightfield_leaves + r.stats.triangle_leaves,
-            per_ray(|s| s.nodes),
-            per_ray(|s| s.triangles),
-            per_ray(|s| s.cells),
+            per_ray(|s| s.counters.nodes),
+            per_ray(|s| s.counters.triangles),
+            per_ray(|s| s.counters.cells),
             rays.len() as f64 / (ms * 1e3)
         );
     }

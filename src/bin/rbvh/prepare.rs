@@ -11,6 +11,7 @@ use rbvh::bvh::Bvh;
 use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{Addressing, Context, ContextOptions, Query, Reach, Traced, Tracer, Validation};
 use rbvh::lod::{Lod, LodParams, RayCone};
+use rbvh::probe::{MeanCounters, RayCounters};
 use rbvh::rbvh::Rbvh;
 use rbvh::scene::Scene;
 
@@ -95,6 +96,14 @@ pub enum Structure {
 }
 
 impl Structure {
+    /// "exact BVH" or "RBVH": for messages.
+    pub fn label(&self) -> &'static str {
+        match self {
+            Structure::Exact(_) => "exact BVH",
+            Structure::Rbvh(_) => "RBVH",
+        }
+    }
+
     pub fn tracer(&self, ctx: &Context) -> Result<Tracer> {
         match self {
             Structure::Exact(b) => Tracer::exact(ctx, b),
@@ -147,12 +156,12 @@ impl Prepared {
         rays: &[Ray],
         cones: impl FnOnce() -> Vec<RayCone>,
         query: Query,
-        steps: bool,
+        counters: bool,
     ) -> Result<Traced> {
         Ok(if self.lod.is_some() {
-            tracer.trace_lod(rays, &cones(), query, steps)?
+            tracer.trace_lod(rays, &cones(), query, counters)?
         } else {
-            tracer.trace_with(rays, query, steps)?
+            tracer.trace_with(rays, query, counters)?
         })
     }
 
@@ -339,36 +348,43 @@ pub fn report_throughput(
     }
     if let Structure::Rbvh(_) = p.structure {
         let bvh = Bvh::build(&p.scene)?;
-        let exact = Tracer::exact(&p.ctx, &bvh)?.trace(rays, query)?;
-        if let Some(exact_ms) = exact.timing.gpu_ms {
+        let exact = Tracer::exact(&p.ctx, &bvh)?;
+        let timed = exact.trace(rays, query)?;
+        if let Some(exact_ms) = timed.timing.gpu_ms {
             eprintln!(
                 "exact BVH on the same rays: GPU {exact_ms:.2} ms = {:.2} MRays/s; RBVH speedup {:.2}x",
                 mrays(exact_ms),
                 exact_ms / gpu_ms
             );
         }
+        if let Some(c) = exact.trace_with(rays, query, true)?.counters {
+            report_counters("exact BVH", &c);
+        }
     }
     Ok(())
 }
 
-/// `--stats` with per-ray steps: their mean and maximum, and how well 8-wide SIMD (lavapipe's
-/// subgroup) would be used by consecutive rays — the mean over groups of 8 of mean/max steps,
-/// since a group runs as long as its longest ray.
-pub fn report_steps(steps: &[u32]) {
-    if steps.is_empty() {
+/// `--stats` with per-ray counters (`what` names the structure): the mean of each, the heat map's
+/// steps (mean and maximum), and how well 8-wide SIMD (lavapipe's subgroup) would be used by
+/// consecutive rays, since a group runs as long as its longest ray.
+pub fn report_counters(what: &str, counters: &[RayCounters]) {
+    if counters.is_empty() {
         return;
     }
-    let mean = steps.iter().map(|&s| s as f64).sum::<f64>() / steps.len() as f64;
-    let max = steps.iter().copied().max().unwrap_or(0);
-    let (mut busy, mut total) = (0.0, 0.0);
-    for group in steps.chunks(8) {
-        let longest = group.iter().copied().max().unwrap_or(0) as f64;
-        busy += group.iter().map(|&s| s as f64).sum::<f64>();
-        total += longest * group.len() as f64;
-    }
+    let m = MeanCounters::of(counters);
+    let max = counters.iter().map(RayCounters::steps).max().unwrap_or(0);
     eprintln!(
-        "steps per ray (nodes + triangles + cells): mean {mean:.1}, max {max}; SIMD-8 utilisation {:.0}%",
-        100.0 * busy / total.max(1.0)
+        "{what}: per ray {:.2} nodes, {:.2} leaves marched ({:.2} past their tile box), {:.2} cells ({:.2} tested, {:.2} block jumps), {:.2} triangle leaves, {:.2} triangles; steps (nodes + triangles + cells) mean {:.1}, max {max}; SIMD-8 utilisation {:.0}%",
+        m.nodes,
+        m.leaves,
+        m.walks,
+        m.cells,
+        m.cells_tested,
+        m.jumps,
+        m.triangle_leaves,
+        m.triangles,
+        m.nodes + m.triangles + m.cells,
+        100.0 * m.simd8_utilisation
     );
 }
 

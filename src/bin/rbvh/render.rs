@@ -16,12 +16,14 @@ use rbvh::gpu::{Query, Tracer};
 use rbvh::ibl::{self, Environment, Frame, Settings, Sky};
 use rbvh::lod::{Lod, RayCone};
 use rbvh::output::{self, Image};
+use rbvh::probe::RayCounters;
 use rbvh::rbvh::Rbvh;
 use rbvh::scene::{Light, Scene};
 use rbvh::surface::hit_albedo;
 
 use crate::prepare::{
-    check_image_size, prepare, report_steps, report_throughput, step, Common, Prepared, Structure,
+    check_image_size, prepare, report_counters, report_throughput, step, Common, Prepared,
+    Structure,
 };
 
 #[derive(clap::Args, Debug)]
@@ -95,12 +97,21 @@ pub fn run(a: Args) -> Result<()> {
     let cone = RayCone::pixel(&camera, a.height);
     let cones = || vec![cone; rays.len()];
     let traced = step("tracing", || {
-        p.trace(&tracer, &rays, cones, Query::Closest, a.heatmap.is_some())
+        p.trace(&tracer, &rays, cones, Query::Closest, false)
     })?;
+    // Counted in a trace of their own: the timed one compiles the counting away.
+    let counters = if a.heatmap.is_some() || a.common.stats {
+        step("counting each ray's work", || {
+            p.trace(&tracer, &rays, cones, Query::Closest, true)
+        })?
+        .counters
+    } else {
+        None
+    };
     if a.common.stats {
         report_throughput(&p, &rays, &cones(), Query::Closest, &traced)?;
-        if let Some(steps) = &traced.steps {
-            report_steps(steps);
+        if let Some(c) = &counters {
+            report_counters(p.structure.label(), c);
         }
     }
     let image = match a.shading {
@@ -125,8 +136,9 @@ pub fn run(a: Args) -> Result<()> {
         output::write_exr(path, &image, &traced.hits)?;
         eprintln!("wrote {}", path.display());
     }
-    if let (Some(path), Some(steps)) = (&a.heatmap, &traced.steps) {
-        output::write_png(path, &output::heatmap(steps, a.width, a.height, None)?)?;
+    if let (Some(path), Some(counters)) = (&a.heatmap, &counters) {
+        let steps: Vec<u32> = counters.iter().map(RayCounters::steps).collect();
+        output::write_png(path, &output::heatmap(&steps, a.width, a.height, None)?)?;
         eprintln!("wrote {}", path.display());
     }
     Ok(())

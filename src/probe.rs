@@ -1,0 +1,181 @@
+//! What a traversal reports about its own work, in the same terms on the GPU and the CPU twins:
+//! per-ray [`RayCounters`] (`glsl/common.glsl`'s `RbvhCounters`, written by the trace shaders when
+//! counting is specialised on) and the reads a ray makes of the structure's device arrays
+//! ([`Read`], reported to a [`Probe`] by the CPU twins), from which `crate::bench::traffic` models
+//! memory traffic.
+//!
+//! The counters are how the README's "where a ray's work goes" tables are made, and how a speed
+//! difference is explained rather than only measured: the exact BVH's and the RBVH's steps are
+//! counted alike (an inner node is an inner node in both).
+
+use bytemuck::{Pod, Zeroable};
+
+/// One ray's work, counted the same way by the device (`RbvhCounters` in `glsl/common.glsl`) and
+/// by the CPU twins (`Bvh::closest_hit`, `Rbvh::closest_hit`), so the two can be compared ray by
+/// ray. 32 bytes, 8 words in this order (`tests/layout.rs` checks the GLSL struct).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct RayCounters {
+    /// Inner nodes visited (both children's boxes tested).
+    pub nodes: u32,
+    /// Height-field leaves (and, with level of detail, chosen coarse nodes) handed to the march.
+    pub leaves: u32,
+    /// Of those, the ones whose tile box the ray crosses, so that a walk starts.
+    pub walks: u32,
+    /// Cells stepped into and handed to the cell test (with level of detail, columns too).
+    pub cells: u32,
+    /// Cells past the cheap height rejection: those whose triangles were tested.
+    pub cells_tested: u32,
+    /// Block jumps of the device march (`src/rbvh/ranges.rs`): blocks crossed without a cell test.
+    pub jumps: u32,
+    /// Triangle leaves tested (the exact BVH's leaves, the RBVH's hybrid leaves).
+    pub triangle_leaves: u32,
+    /// Triangles tested in triangle leaves (height-field cells count in `cells`).
+    pub triangles: u32,
+}
+const _: () = assert!(std::mem::size_of::<RayCounters>() == 32);
+
+impl RayCounters {
+    /// Words per ray in the device's counter buffer.
+    pub const WORDS: usize = 8;
+
+    /// The heat map's "steps": inner nodes + triangles tested + cells visited.
+    pub fn steps(&self) -> u32 {
+        self.nodes
+            .saturating_add(self.triangles)
+            .saturating_add(self.cells)
+    }
+
+    /// The counters as `(name, value)`, in field order: for tables and records.
+    pub fn named(&self) -> [(&'static str, u32); 8] {
+        [
+            ("nodes", self.nodes),
+            ("leaves", self.leaves),
+            ("walks", self.walks),
+            ("cells", self.cells),
+            ("cells_tested", self.cells_tested),
+            ("jumps", self.jumps),
+            ("triangle_leaves", self.triangle_leaves),
+            ("triangles", self.triangles),
+        ]
+    }
+}
+
+/// The means of many rays' counters.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct MeanCounters {
+    pub nodes: f64,
+    pub leaves: f64,
+    pub walks: f64,
+    pub cells: f64,
+    pub cells_tested: f64,
+    pub jumps: f64,
+    pub triangle_leaves: f64,
+    pub triangles: f64,
+    /// Mean steps ([`RayCounters::steps`]) over the mean of the longest in each group of 8
+    /// consecutive rays: how busy an 8-wide SIMD group (lavapipe's, on AVX2) stays when every lane
+    /// waits for its slowest. 1 when all rays of a group cost alike.
+    pub simd8_utilisation: f64,
+}
+
+impl MeanCounters {
+    /// Means over `counters` (zeros for none).
+    pub fn of(counters: &[RayCounters]) -> MeanCounters {
+        if counters.is_empty() {
+            return MeanCounters::default();
+        }
+        let n = counters.len() as f64;
+        let mean =
+            |f: fn(&RayCounters) -> u32| counters.iter().map(|c| f64::from(f(c))).sum::<f64>() / n;
+        let (mut busy, mut total) = (0.0, 0.0);
+        for group in counters.chunks(8) {
+            let longest = group.iter().map(RayCounters::steps).max().unwrap_or(0);
+            busy += group.iter().map(|c| f64::from(c.steps())).sum::<f64>();
+            total += f64::from(longest) * group.len() as f64;
+        }
+        MeanCounters {
+            nodes: mean(|c| c.nodes),
+            leaves: mean(|c| c.leaves),
+            walks: mean(|c| c.walks),
+            cells: mean(|c| c.cells),
+            cells_tested: mean(|c| c.cells_tested),
+            jumps: mean(|c| c.jumps),
+            triangle_leaves: mean(|c| c.triangle_leaves),
+            triangles: mean(|c| c.triangles),
+            simd8_utilisation: if total > 0.0 { busy / total } else { 1.0 },
+        }
+    }
+}
+
+/// The device arrays a traversal reads, in the order a tracer binds them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Array {
+    /// Inner nodes (`GpuNode`, 64 bytes each).
+    Nodes = 0,
+    /// Triangles of triangle leaves (`GpuTriangle`, 48 bytes each).
+    Triangles = 1,
+    /// Height-field leaf records (`GpuHeightfield`, 64 bytes each).
+    Leaves = 2,
+    /// The atlas words: texels (4 bytes each), then the 8×8 blocks' height ranges.
+    Atlas = 3,
+    /// Level-of-detail records (`GpuLod`, 48 bytes each).
+    LodRecords = 4,
+    /// Level-of-detail column words (4 bytes each).
+    LodColumns = 5,
+}
+
+impl Array {
+    /// Every array, in binding order.
+    pub const ALL: [Array; 6] = [
+        Array::Nodes,
+        Array::Triangles,
+        Array::Leaves,
+        Array::Atlas,
+        Array::LodRecords,
+        Array::LodColumns,
+    ];
+}
+
+/// One read a ray makes: `bytes` bytes from byte `offset` of `array`, as the shader reads them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Read {
+    pub array: Array,
+    pub offset: u64,
+    pub bytes: u32,
+}
+
+/// Receives the reads of one traversal, in the order the device makes them. The CPU twins call it
+/// where their GLSL twins read memory; the no-op `()` costs nothing.
+pub trait Probe {
+    fn read(&mut self, read: Read);
+}
+
+impl Probe for () {
+    #[inline(always)]
+    fn read(&mut self, _: Read) {}
+}
+
+impl Probe for Vec<Read> {
+    fn read(&mut self, read: Read) {
+        self.push(read);
+    }
+}
+
+/// What one traversal reports: its [`RayCounters`], and whether it was cut short (the stack
+/// overflowed, impossible for a tree no deeper than the stack, or, in corrupt data only, a cycle
+/// made it visit more nodes than there are).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TraceStats {
+    pub counters: RayCounters,
+    pub overflow: bool,
+}
+
+/// The read of element `index` of `array`, whose elements are `T`s read whole.
+pub(crate) fn element<T>(array: Array, index: usize) -> Read {
+    let size = std::mem::size_of::<T>();
+    Read {
+        array,
+        offset: (index as u64).saturating_mul(size as u64),
+        bytes: size as u32,
+    }
+}

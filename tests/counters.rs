@@ -1,0 +1,226 @@
+//! Per-ray counters (`rbvh::probe`): the device's counting pipeline and the CPU twins count the
+//! same work ray by ray, for the exact BVH, the RBVH (block jumps included) and the RBVH with level
+//! of detail; the counting pipeline returns the timed pipeline's hits; the twin's jumping walk
+//! returns the plain walk's hits with fewer cells; and the reads the twins report match their
+//! counters, array by array.
+
+mod common;
+
+use rbvh::bvh::Bvh;
+use rbvh::geom::{Hit, Ray};
+use rbvh::gpu::{Query, Tracer};
+use rbvh::lod::{Lod, LodParams, RayCone};
+use rbvh::probe::{Array, RayCounters, Read, TraceStats};
+use rbvh::rbvh::{Rbvh, RbvhParams};
+use rbvh::scene::Scene;
+
+fn rays_for(scene: &Scene, side: u32, random: usize, seed: u64) -> Vec<Ray> {
+    let mut rays = scene.camera_or_framed(1.0).primary_rays(side, side);
+    rays.extend(common::random_rays(scene, random, &mut common::Rng(seed)));
+    rays
+}
+
+/// Rays whose device counters differ from the twin's, with the first such ray for the message.
+/// The hits of the two agree bit for bit except, rarely, in the last bit of a division on the
+/// device (`tests/rbvh_agreement.rs`); a ray whose hit differs may count differently too.
+fn mismatches(
+    gpu: &[RayCounters],
+    gpu_hits: &[Hit],
+    twin: &[(Hit, TraceStats)],
+) -> (usize, Option<String>) {
+    let mut count = 0;
+    let mut first = None;
+    for (i, ((g, gh), (th, ts))) in gpu.iter().zip(gpu_hits).zip(twin).enumerate() {
+        assert!(!ts.overflow, "ray {i} overflowed on the twin");
+        if *g != ts.counters {
+            count += 1;
+            first.get_or_insert_with(|| {
+                format!(
+                    "ray {i}: device {g:?} (t {}), twin {:?} (t {})",
+                    gh.t, ts.counters, th.t
+                )
+            });
+        }
+    }
+    (count, first)
+}
+
+#[test]
+fn device_and_cpu_twin_count_the_same_work() {
+    let ctx = common::context();
+    let (mut total, mut differing) = (0usize, 0usize);
+    for (k, name) in ["default", "blob", "sphere"].into_iter().enumerate() {
+        let scene = Scene::builtin(name).unwrap();
+        let rays = rays_for(&scene, 64, 2000, 40 + k as u64);
+        let bvh = Bvh::build(&scene).unwrap();
+        let exact = Tracer::exact(&ctx, &bvh).unwrap();
+        for level in [0, 2, 4] {
+            let r = Rbvh::build(&scene, &RbvhParams::quality(level).unwrap()).unwrap();
+            let tracer = Tracer::rbvh(&ctx, &r).unwrap();
+            let twin = r.device_twin(None).unwrap();
+            for query in [Query::Closest, Query::Any] {
+                let any = query == Query::Any;
+                let gpu = tracer.trace_with(&rays, query, true).unwrap();
+                let cpu: Vec<_> = rays
+                    .iter()
+                    .map(|ray| twin.trace(ray, any, None, &mut ()))
+                    .collect();
+                let counters = gpu.counters.as_ref().unwrap();
+                let (n, first) = mismatches(counters, &gpu.hits, &cpu);
+                assert!(
+                    n * 10_000 <= rays.len(),
+                    "{name} Q{level} {query:?}: {n} rays differ; {first:?}"
+                );
+                total += rays.len();
+                differing += n;
+                // The counting pipeline is the timed one with counting compiled in: same hits.
+                let timed = tracer.trace(&rays, query).unwrap().hits;
+                assert!(
+                    timed
+                        .iter()
+                        .zip(&gpu.hits)
+                        .all(|(a, b)| a.t.to_bits() == b.t.to_bits() && a.id == b.id),
+                    "{name} Q{level} {query:?}: counting changed a hit"
+                );
+                let jumps: u64 = counters.iter().map(|c| u64::from(c.jumps)).sum();
+                let walks: u64 = counters.iter().map(|c| u64::from(c.walks)).sum();
+                assert!(
+                    walks > 0 && jumps > 0,
+                    "{name} Q{level}: nothing marched or jumped"
+                );
+            }
+        }
+        for query in [Query::Closest, Query::Any] {
+            let gpu = exact.trace_with(&rays, query, true).unwrap();
+            let cpu: Vec<_> = rays
+                .iter()
+                .map(|ray| bvh.trace_probed(ray, query == Query::Any, &mut ()))
+                .collect();
+            let counters = gpu.counters.as_ref().unwrap();
+            let (n, first) = mismatches(counters, &gpu.hits, &cpu);
+            assert_eq!(n, 0, "{name} exact {query:?}: {first:?}");
+            total += rays.len();
+            assert!(counters.iter().all(|c| c.leaves == 0 && c.cells == 0));
+        }
+    }
+    println!("device vs twin counters: {differing} of {total} rays differ");
+}
+
+#[test]
+fn level_of_detail_counts_agree_too() {
+    let ctx = common::context();
+    let scene = Scene::builtin("grove").unwrap();
+    let r = Rbvh::build(&scene, &RbvhParams::quality(2).unwrap()).unwrap();
+    let lod = Lod::build(&r, &LodParams::default()).unwrap();
+    let tracer = Tracer::rbvh_lod(&ctx, &r, &lod).unwrap();
+    let camera = scene.camera_or_framed(1.0);
+    let rays = camera.primary_rays(96, 96);
+    // A wide cone, so that many coarse nodes are chosen.
+    let cone = RayCone {
+        width: 0.0,
+        spread: 40.0 * RayCone::pixel(&camera, 96).spread,
+    };
+    let cones = vec![cone; rays.len()];
+    let gpu = tracer
+        .trace_lod(&rays, &cones, Query::Closest, true)
+        .unwrap();
+    let twin = r.device_twin(Some(&lod)).unwrap();
+    let cpu: Vec<_> = rays
+        .iter()
+        .map(|ray| twin.trace(ray, false, Some(&cone), &mut ()))
+        .collect();
+    let coarse = gpu
+        .hits
+        .iter()
+        .filter(|h| h.is_hit() && h.id & rbvh::lod::LOD_BIT != 0)
+        .count();
+    assert!(coarse > 100, "only {coarse} coarse hits");
+    let (n, first) = mismatches(gpu.counters.as_ref().unwrap(), &gpu.hits, &cpu);
+    assert!(n * 1000 <= rays.len(), "{n} rays differ; {first:?}");
+}
+
+/// The twin jumps over blocks as the device does; the plain walk is the referee: same hits to the
+/// bit, never more cells, and many fewer on rays grazing the sphere.
+#[test]
+fn the_twins_block_jumps_change_no_hit_and_save_cells() {
+    let scene = Scene::builtin("sphere").unwrap();
+    let mut rng = common::Rng(77);
+    let mut rays = rays_for(&scene, 64, 3000, 78);
+    rays.extend((0..4000).map(|_| {
+        let angle = std::f32::consts::TAU * rng.next_f32();
+        let radius = 0.97 + 0.05 * rng.next_f32();
+        let origin = glam::Vec3::new(-3.0, radius * angle.cos(), radius * angle.sin());
+        Ray::new(origin, glam::Vec3::X, 0.0, f32::INFINITY)
+    }));
+    for level in [0, 2, 4] {
+        let r = Rbvh::build(&scene, &RbvhParams::quality(level).unwrap()).unwrap();
+        let twin = r.device_twin(None).unwrap();
+        let (mut plain_cells, mut twin_cells) = (0u64, 0u64);
+        for any in [false, true] {
+            for ray in &rays {
+                let (plain, ps) = if any {
+                    r.any_hit(ray)
+                } else {
+                    r.closest_hit(ray)
+                };
+                let (jumping, js) = twin.trace(ray, any, None, &mut ());
+                assert_eq!(
+                    (plain.t.to_bits(), plain.id),
+                    (jumping.t.to_bits(), jumping.id),
+                    "Q{level} any {any}: {ray:?}"
+                );
+                assert!(js.counters.cells <= ps.counters.cells, "{ray:?}");
+                assert_eq!(ps.counters.jumps, 0);
+                plain_cells += u64::from(ps.counters.cells);
+                twin_cells += u64::from(js.counters.cells);
+            }
+        }
+        println!("Q{level}: cells plain {plain_cells}, with jumps {twin_cells}");
+        assert!(
+            twin_cells * 4 < plain_cells * 3,
+            "Q{level}: {twin_cells} of {plain_cells}"
+        );
+    }
+}
+
+/// Reads per array follow from the counters: a node read per node visited, a leaf record per leaf
+/// marched, four texels per cell and a range word per block entered, a triangle per triangle tested
+/// (and, for the exact BVH, once more for the hit's normal).
+#[test]
+fn the_twins_reads_match_their_counters() {
+    let scene = Scene::builtin("default").unwrap();
+    let rays = rays_for(&scene, 48, 1000, 5);
+    let r = Rbvh::build(&scene, &RbvhParams::quality(2).unwrap()).unwrap();
+    let twin = r.device_twin(None).unwrap();
+    let bvh = Bvh::build(&scene).unwrap();
+    let count = |reads: &[Read], array: Array| reads.iter().filter(|r| r.array == array).count();
+    let texel_bytes = 4 * r.atlas.texels.len() as u64;
+    for ray in &rays {
+        let mut reads = Vec::new();
+        let (_, s) = twin.trace(ray, false, None, &mut reads);
+        let c = s.counters;
+        assert_eq!(count(&reads, Array::Nodes), c.nodes as usize);
+        assert_eq!(count(&reads, Array::Leaves), c.leaves as usize);
+        assert_eq!(count(&reads, Array::Triangles), c.triangles as usize);
+        let texels = reads
+            .iter()
+            .filter(|r| r.array == Array::Atlas && r.offset < texel_bytes)
+            .count();
+        assert_eq!(texels, 4 * c.cells as usize, "{ray:?}");
+        let ranges = count(&reads, Array::Atlas) - texels;
+        assert!(ranges >= c.jumps as usize && ranges <= (c.jumps + c.cells) as usize);
+        assert!(reads.iter().all(|r| r.offset % 4 == 0 && r.bytes % 4 == 0));
+
+        let mut reads = Vec::new();
+        let (hit, s) = bvh.trace_probed(ray, false, &mut reads);
+        assert_eq!(count(&reads, Array::Nodes), s.counters.nodes as usize);
+        assert_eq!(
+            count(&reads, Array::Triangles),
+            (s.counters.triangles + u32::from(hit.is_hit())) as usize
+        );
+        assert!(reads.iter().all(|r| (r.array == Array::Nodes
+            && r.bytes == 64
+            && r.offset % 64 == 0)
+            || (r.array == Array::Triangles && r.bytes == 48 && r.offset % 48 == 0)));
+    }
+}
