@@ -332,8 +332,8 @@ struct Flattened {
 }
 
 impl Flattened {
-    /// Depth-first packing; inner boxes are the union of their children's boxes, which for
-    /// height-field leaves include the dilated rim beyond the triangles.
+    /// Depth-first packing; inner boxes are the union of their children's boxes: a height-field
+    /// leaf's is the box of its samples, dilated rim included (`Tile::surface_bounds`).
     fn flatten(&mut self, node: &Node, b: &Builder, order: &[u32]) -> ChildRef {
         match node {
             Node::Inner(children) => {
@@ -353,7 +353,7 @@ impl Flattened {
                 self.leaves.push(tile.heightfield(0));
                 self.tiles.push((**tile).clone());
                 ChildRef {
-                    bounds: tile.world_bounds(),
+                    bounds: tile.surface_bounds(),
                     child: LEAF_BIT | index,
                     count: HEIGHTFIELD_COUNT,
                 }

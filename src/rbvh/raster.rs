@@ -146,6 +146,43 @@ impl Tile {
     }
 }
 
+impl Tile {
+    /// World AABB of the tile's surface: of its sample points (holes left out), widened by a few
+    /// ulps of its coordinates and 1/1024 texel against f32 rounding. Every reconstructed surface
+    /// point is a convex combination of sample points, so it lies inside; this is the leaf's box
+    /// in the tree. It is tighter than [`Tile::world_bounds`] (the box of the whole tile box)
+    /// wherever the tile is tilted against the world axes or has holes, so that fewer rays are
+    /// handed to the march only to miss the tile's box (the speed study found 44–63% of the
+    /// leaves a ray reaches rejected there). A tile without samples gets its tile box.
+    pub fn surface_bounds(&self) -> Aabb {
+        let f = &self.frame;
+        let mut b = Aabb::EMPTY;
+        for j in 0..f.res_v {
+            for i in 0..f.res_u {
+                let texel = self.texels[(j * f.res_u + i) as usize];
+                if texel.is_hole() {
+                    continue;
+                }
+                let h = f32::from(texel.height_code()) * self.h_scale;
+                b = b.grow(
+                    f.origin
+                        + (i as f32 + 0.5) * f.texel * f.u
+                        + (j as f32 + 0.5) * f.texel * f.v
+                        + h * f.w,
+                );
+            }
+        }
+        if b.min.cmpgt(b.max).any() {
+            return self.world_bounds();
+        }
+        let margin = b.min.abs().max(b.max.abs()) * (8.0 * f32::EPSILON) + f.texel / 1024.0;
+        Aabb {
+            min: b.min - margin,
+            max: b.max + margin,
+        }
+    }
+}
+
 /// Rasterizes `triangles` (world space) into `frame`'s sample grid, or returns `None` when the
 /// result is not single-valued: two triangles covering the same sample centre at heights differing
 /// by more than `fold_tolerance` (world units; it should exceed f32 rounding of the heights, e.g. a
@@ -539,14 +576,20 @@ mod tests {
         let tile = rasterize(&square(&frame, 1.0, 11.0, bumpy), &frame, 0.01).unwrap();
         assert!(tile.covered > 0 && tile.h_scale > 0.0);
         let b = tile.world_bounds();
+        // The tilted, bumpy tile's samples fill much less than the box of its tile box (the two
+        // may differ by the tight box's margin where a sample is extreme along a world axis).
+        let tight = tile.surface_bounds();
+        assert!(tight.area() < 0.9 * b.area(), "{tight:?} against {b:?}");
         for j in 0..9 {
             for i in 0..12 {
                 if !tile.texels[(j * 12 + i) as usize].is_hole() {
                     let p = world_sample(&tile, i, j);
-                    assert!(
-                        p.cmpge(b.min).all() && p.cmple(b.max).all(),
-                        "{p} not in {b:?}"
-                    );
+                    for b in [b, tight] {
+                        assert!(
+                            p.cmpge(b.min).all() && p.cmple(b.max).all(),
+                            "{p} not in {b:?}"
+                        );
+                    }
                 }
             }
         }
