@@ -16,6 +16,7 @@
 //!        → output (PNG, EXR)
 //!        → ibl (image-based lighting: environment light, visibility through either structure)
 //!        → bench, regress (measurement and image regression)
+//! probe: per-ray counters and the reads of the CPU twins, shared by bvh, rbvh, gpu and bench
 //! ```
 //!
 //! ```
