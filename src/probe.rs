@@ -36,28 +36,11 @@ pub struct RayCounters {
 const _: () = assert!(std::mem::size_of::<RayCounters>() == 32);
 
 impl RayCounters {
-    /// Words per ray in the device's counter buffer.
-    pub const WORDS: usize = 8;
-
     /// The heat map's "steps": inner nodes + triangles tested + cells visited.
     pub fn steps(&self) -> u32 {
         self.nodes
             .saturating_add(self.triangles)
             .saturating_add(self.cells)
-    }
-
-    /// The counters as `(name, value)`, in field order: for tables and records.
-    pub fn named(&self) -> [(&'static str, u32); 8] {
-        [
-            ("nodes", self.nodes),
-            ("leaves", self.leaves),
-            ("walks", self.walks),
-            ("cells", self.cells),
-            ("cells_tested", self.cells_tested),
-            ("jumps", self.jumps),
-            ("triangle_leaves", self.triangle_leaves),
-            ("triangles", self.triangles),
-        ]
     }
 }
 
