@@ -79,12 +79,13 @@ float rbvh_lod_boundary_t(int c, int step, float o, float inv) {
     return step > 0 ? far_side : (step < 0 ? near_side : RBVH_INF);
 }
 
-// Marches the columns of node `node`'s record over [tmin, t_closest); returns t (< 0 on a miss).
-// `columns` counts the columns visited. `cut` is set when the device ended the walk early (see
+// Marches the columns of node `node`'s record over [tmin, t_closest); returns t (< 0 on a miss)
+// and, on a hit, the word whose normal it reports (decode with rbvh_decode_normal). `columns`
+// counts the columns visited. `cut` is set when the device ended the walk early (see
 // rbvh_trace_bvh in bvh.glsl).
 float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inout uint columns,
-                     out vec3 normal, inout bool cut) {
-    normal = vec3(0.0);
+                     out uint normal_texel, inout bool cut) {
+    normal_texel = RBVH_HOLE_CODE;
     if (node >= lsz.node_count) {
         return -1.0;
     }
@@ -158,7 +159,7 @@ float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inou
                 precise float to_bottom = za - bottom;
                 float t = za > top ? t_top : (za < bottom ? t_bottom : t_in);
                 bool use_top = za > top || (za >= bottom && to_top <= to_bottom);
-                normal = rbvh_decode_normal(use_top ? top_word : bottom_word);
+                normal_texel = use_top ? top_word : bottom_word;
                 return min(max(t, t_in), t_out);
             }
         }

@@ -166,8 +166,10 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
         assert_eq!(line.split(',').count(), CSV_COLUMNS.len(), "{line}");
     }
 
-    // Plots: charts and, per level, the render and its error image beside the exact render.
+    // Plots: charts and, per level, the render and its error image beside the exact render;
+    // no traffic chart without traffic.
     let scene_dir = plots.join("sphere");
+    assert!(!report.written.iter().any(|p| p.to_string_lossy().contains("traffic_")));
     for file in [
         "speed_vs_error.svg",
         "memory_vs_error.svg",
@@ -203,7 +205,8 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
 /// memory model's figures, consistent with the structure's size and with each other.
 #[test]
 fn traffic_records_come_from_a_twin_that_counts_as_the_device() {
-    let mut config = small_config(None);
+    let plots = tempfile::tempdir().unwrap();
+    let mut config = small_config(Some(plots.path()));
     config.width = 48;
     config.height = 40;
     config.runs = 1;
@@ -253,6 +256,18 @@ fn traffic_records_come_from_a_twin_that_counts_as_the_device() {
     }
     let work = bench::work_table(&report);
     assert_eq!(work.lines().count(), 1 + report.results.len() + 1, "{work}");
+
+    // A traffic chart per ray type, a line per structure, labelled with its working set.
+    for rays in ["primary", "shadow"] {
+        let path = plots.path().join("sphere").join(format!("traffic_{rays}.svg"));
+        assert!(report.written.contains(&path), "{} not listed", path.display());
+        let svg = std::fs::read_to_string(&path).unwrap();
+        assert!(svg.starts_with("<svg"), "{rays}");
+        for label in ["exact, set ", "Q0, set ", "Q2, set ", "Q0 LOD, set ", "Q2 LOD, set "] {
+            assert!(svg.contains(label), "{rays}: no line labelled {label:?}");
+        }
+    }
+    assert!(!plots.path().join("sphere").join("traffic_ao.svg").exists());
 }
 
 #[test]

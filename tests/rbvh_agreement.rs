@@ -257,6 +257,31 @@ fn a_tile_that_wraps_across_atlas_rows_is_refused_or_empty() {
     assert!(gpu.iter().chain(&cpu).all(|h| !h.is_hit()));
 }
 
+/// The shaders locate a tile in the atlas with shifts, not divisions: an atlas whose pitch is not a
+/// power of two (which the builder never makes) is refused by the upload, and by the loader.
+#[test]
+fn an_atlas_pitch_that_is_not_a_power_of_two_is_refused() {
+    use glam::Vec3;
+    use rbvh::rbvh::{Atlas, Texel};
+    let ctx = common::context();
+    let (pitch, rows) = (12u32, 4u32);
+    let atlas = Atlas {
+        pitch,
+        rows,
+        texels: vec![Texel::new(0, Vec3::Y); (pitch * rows) as usize],
+    };
+    let r = one_leaf(0, (4, 4), 0.001, atlas, Vec3::new(5.0, 70.0, 1.0));
+    let e = Tracer::rbvh(&ctx, &r)
+        .err()
+        .expect("the upload refuses the pitch")
+        .to_string();
+    assert!(e.contains("atlas pitch 12: not a power of two"), "{e}");
+    let e = Rbvh::from_bytes(&r.to_bytes(), std::path::Path::new("pitch.rbvh"))
+        .expect_err("the loader refuses the pitch")
+        .to_string();
+    assert!(e.contains("pitch.rbvh") && e.contains("not a power of two"), "{e}");
+}
+
 /// Block jumps against the plain walk where they are most delicate: steep tiles (terraces with
 /// cliffs, a noisy swell) with holes, not aligned to the atlas's 8 × 8 blocks, rays aimed at grid vertices (where the walk also tests
 /// the neighbour across the vertex) and at random points, near-diagonal and grazing, from near

@@ -224,6 +224,9 @@ fn inconsistent_contents_are_rejected_with_the_reason() {
     r.atlas.rows = 8;
     check(r, "pitch × rows");
     let mut r = sample();
+    (r.atlas.pitch, r.atlas.rows) = (12, 6);
+    check(r, "the atlas pitch is 12 texels, not a power of two");
+    let mut r = sample();
     r.params.texels_per_diagonal = f32::NAN;
     check(r, "texels_per_diagonal is NaN");
     let mut r = sample();

@@ -96,13 +96,14 @@ fn a_broken_rbvh_shader_fails_with_a_diff_image() {
     let source =
         std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("glsl/rbvh.glsl"))
             .unwrap();
-    // A plausible slip: one of a cell's four corner heights decoded at half scale.
-    let correct = "precise float h11 = float(c11 & 0xFFFFu) * leaf.h_scale;";
+    // A plausible slip: one of a cell's four corners taken at half its height in the cell's
+    // triangles.
+    let correct = "vec3 p11 = vec3(s1, r1, h11);";
     assert!(
-        source.contains(correct),
+        source.matches(correct).count() == 1,
         "rbvh.glsl changed; update this test's edit"
     );
-    let broken = source.replacen(correct, &correct.replace(';', " * 0.5;"), 1);
+    let broken = source.replacen(correct, "vec3 p11 = vec3(s1, r1, h11 * 0.5);", 1);
     let case = Case::new("blob", Method::Rbvh(2));
 
     // Control: the same compile path with the source unchanged renders the golden.

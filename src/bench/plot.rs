@@ -3,7 +3,10 @@
 //! draws (Novák & Dachsbacher 2012, §6).
 //!
 //! * `speed_vs_error.svg`: primary-ray MRays/s (median) against the hit-distance error p99;
-//! * `memory_vs_error.svg`: total bytes of the structure against the same error.
+//! * `memory_vs_error.svg`: total bytes of the structure against the same error;
+//! * with `--traffic`, `traffic_<rays>.svg` per ray type: the DRAM bytes per ray that the cache
+//!   model (`bench::traffic`) predicts against the cache's capacity, one line per method and
+//!   level, with each structure's working set in its label.
 //!
 //! Accuracy is measured on primary rays (closest hits), since the distance error of occlusion
 //! rays is not defined (see `bench::metrics`). Levels that failed validation are labelled
@@ -85,7 +88,93 @@ pub fn write_charts(dir: &Path, records: &[Record]) -> Result<Vec<PathBuf>> {
         write_atomically(&path, |w| w.write_all(svg.as_bytes()))?;
         written.push(path);
     }
+    for ray_type in RayType::ALL {
+        let lines: Vec<Line> = records
+            .iter()
+            .filter(|r| r.ray_type == ray_type)
+            .filter_map(|r| {
+                let traffic = &r.traffic.as_ref()?.traffic;
+                let level = r.quality.clone().unwrap_or_default();
+                let name = match r.method {
+                    Method::Exact => "exact".to_string(),
+                    Method::Rbvh => level,
+                    Method::RbvhLod => format!("{level} LOD"),
+                };
+                Some(Line {
+                    label: format!("{name}, set {:.2} MB", traffic.working_set_bytes as f64 / 1e6),
+                    points: traffic
+                        .caches
+                        .iter()
+                        .map(|c| (c.capacity_bytes as f64 / MIB, c.dram_bytes_per_ray))
+                        .collect(),
+                    exact: r.method == Method::Exact,
+                })
+            })
+            .collect();
+        if lines.iter().all(|l| l.points.is_empty()) {
+            continue;
+        }
+        let path = dir.join(format!("traffic_{}.svg", ray_type.name()));
+        let title = format!("{scene}: modelled DRAM traffic, {} rays", ray_type.name());
+        let mut svg = String::new();
+        draw_traffic(&mut svg, &title, &lines)
+            .map_err(|e| Error::io(&path, io::Error::other(e.to_string())))?;
+        write_atomically(&path, |w| w.write_all(svg.as_bytes()))?;
+        written.push(path);
+    }
     Ok(written)
+}
+
+const MIB: f64 = 1024.0 * 1024.0;
+
+/// One structure's line of a traffic chart: (cache MiB, DRAM bytes per ray) per modelled cache.
+struct Line {
+    label: String,
+    points: Vec<(f64, f64)>,
+    exact: bool,
+}
+
+/// Draws a traffic chart into `svg`: capacity on a log axis, since the modelled caches span an
+/// order of magnitude (4 to 72 MiB).
+fn draw_traffic(
+    svg: &mut String,
+    title: &str,
+    lines: &[Line],
+) -> std::result::Result<(), Box<dyn std::error::Error>> {
+    let root = SVGBackend::with_string(svg, (720, 480)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let all = || lines.iter().flat_map(|l| l.points.iter().copied());
+    let x_min = all().map(|p| p.0).fold(f64::INFINITY, f64::min);
+    let x_max = all().map(|p| p.0).fold(0.0, f64::max);
+    let y_max = (1.15 * all().map(|p| p.1).fold(0.0, f64::max)).max(1e-3);
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(16)
+        .x_label_area_size(48)
+        .y_label_area_size(72)
+        .build_cartesian_2d((0.8 * x_min..1.6 * x_max).log_scale(), 0.0..y_max)?;
+    chart
+        .configure_mesh()
+        .x_desc("cache capacity (MiB, LRU, 128-byte lines)")
+        .y_desc("DRAM bytes per ray (model)")
+        .draw()?;
+    let font = ("sans-serif", 13).into_font();
+    for (k, line) in lines.iter().enumerate() {
+        let colour = if line.exact {
+            RED.to_rgba()
+        } else {
+            Palette99::pick(k).to_rgba()
+        };
+        chart.draw_series(LineSeries::new(line.points.iter().copied(), colour))?;
+        chart.draw_series(line.points.iter().map(|&p| Circle::new(p, 4, colour.filled())))?;
+        if let Some(&last) = line.points.last() {
+            chart.draw_series(std::iter::once(
+                EmptyElement::at(last) + Text::new(line.label.clone(), (8, -6), font.clone()),
+            ))?;
+        }
+    }
+    root.present()?;
+    Ok(())
 }
 
 /// Draws one chart into `svg`.

@@ -199,6 +199,16 @@ fn rbvh_parts<'a>(rbvh: &'a Rbvh, atlas_words: &'a [u32]) -> Result<(TraceParams
     let count = |what: &str, n: usize| {
         u32::try_from(n).map_err(|_| Error::param("rbvh", format!("{n} {what}: more than 2^32")))
     };
+    if !rbvh.atlas.pitch.is_power_of_two() {
+        return Err(Error::param(
+            "rbvh",
+            format!(
+                "atlas pitch {}: not a power of two, which the shaders count on (the builder \
+                 and the file reader make every pitch one)",
+                rbvh.atlas.pitch
+            ),
+        ));
+    }
     let sizes = TraceParams {
         node_count: count("nodes", rbvh.nodes.len())?,
         tri_count: count("triangles", rbvh.triangles.len())?,

@@ -40,7 +40,7 @@
 //!
 //! Loading checks everything a tracer relies on, so a loaded RBVH is safe to trace and to upload:
 //! the magic and version, the length (counts × record sizes must be exactly what follows the
-//! header), `X = pitch × rows`, no NaN in the header's floats, enum tags and flags in range, every
+//! header), `X = pitch × rows` with a power-of-two pitch, no NaN in the header's floats, enum tags and flags in range, every
 //! node's children (inner: a node index, with count 0; triangle leaf: a range within `triangles`;
 //! height-field leaf: an index into `leaves`), every leaf's tile inside the atlas with finite
 //! frame and a non-negative height scale, and every triangle's scene index below 2³¹ (hit ids with
@@ -310,6 +310,12 @@ impl Rbvh {
             return Err(err(format!(
                 "the colour section has {n_colours} colours for {n_texels} texels (it must have \
                  one per texel)"
+            )));
+        }
+        if !pitch.is_power_of_two() {
+            return Err(err(format!(
+                "the atlas pitch is {pitch} texels, not a power of two (the builder makes every \
+                 pitch one, and the shaders count on it)"
             )));
         }
         if n_texels != u64::from(pitch) * u64::from(rows) {
