@@ -8,6 +8,9 @@
 // or, with RBVH_DEVICE_ADDRESS (see bvh.glsl), RBVH_LEAVES_ADDRESS and RBVH_ATLAS_ADDRESS.
 // and, to trace with level of detail, RBVH_LOD (see lod.glsl for its two bindings): the traversal
 // is then rbvh_trace_rbvh_lod, taking each ray's cone and the LOD array sizes.
+// RBVH_BLOCK_JUMPS (default true) is the condition under which the march jumps over blocks the
+// ray passes above or below; the hits are the same either way. On CPU implementations such as
+// lavapipe, which run every branch, the walk is faster without (see Tracer::block_jumps).
 #ifndef RBVH_RBVH_GLSL
 #define RBVH_RBVH_GLSL
 
@@ -18,6 +21,9 @@
 #endif
 #ifndef RBVH_ATLAS_BINDING
 #define RBVH_ATLAS_BINDING 3
+#endif
+#ifndef RBVH_BLOCK_JUMPS
+#define RBVH_BLOCK_JUMPS true
 #endif
 
 // Must equal MARCH_SLACK, MARCH_EDGE_PAD and Texel::MAX_CODE / HOLE_CODE (tests/layout.rs checks).
@@ -378,7 +384,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
                 uint ax = tile_u + uint(ci);
                 uint ay = tile_v + uint(cj);
                 uint block = (ay >> 3) * block_pitch + (ax >> 3);
-                if (block != checked_block && block < block_count) {
+                if (RBVH_BLOCK_JUMPS && block != checked_block && block < block_count) {
                     checked_block = block;
                     int i0 = int(ax & ~7u) - int(tile_u);
                     int j0 = int(ay & ~7u) - int(tile_v);
@@ -399,38 +405,40 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
                             stopped = true;
                             break;
                         }
+                        // Leaving through the i side (first on a tie, as the walk steps i
+                        // first): the j steps before it, then the step into the edge column; or
+                        // the same with i and j swapped. One loop for both sides: lavapipe runs
+                        // every loop at least once, whether or not a lane needs it.
+                        bool out_i = leave_i <= leave_j;
+                        int minor_step = out_i ? step_j : step_i;
+                        int major_step = out_i ? step_i : step_j;
+                        float leave = out_i ? leave_i : leave_j;
+                        int minor = out_i ? cj : ci;
+                        float next = out_i ? next_j : next_i;
+                        float minor_o = out_i ? o.y : o.x;
+                        float minor_inv = out_i ? inv.y : inv.x;
                         float t_last = t_in;
-                        if (leave_i <= leave_j) {
-                            // Leaving through the i side (first on a tie, as the walk steps i first):
-                            // the j steps before it, then the step into the edge column.
-                            for (int m = 0; m < 8 && step_j != 0 && next_j < leave_i; ++m) {
-                                t_last = next_j;
-                                cj += step_j;
-                                next_j = rbvh_boundary_t(cj, step_j, o.y, inv.y);
-                            }
-                            if (step_j != 0 && next_j < leave_i) {
-                                cut = true;  // ended early by the device
-                            }
-                            if (ci != edge_i) {
-                                t_last = max(t_last, rbvh_boundary_t(edge_i - step_i, step_i, o.x, inv.x));
-                                ci = edge_i;
-                                next_i = leave_i;
-                            }
-                        } else {
-                            for (int m = 0; m < 8 && step_i != 0 && next_i <= leave_j; ++m) {
-                                t_last = next_i;
-                                ci += step_i;
-                                next_i = rbvh_boundary_t(ci, step_i, o.x, inv.x);
-                            }
-                            if (step_i != 0 && next_i <= leave_j) {
-                                cut = true;  // ended early by the device
-                            }
-                            if (cj != edge_j) {
-                                t_last = max(t_last, rbvh_boundary_t(edge_j - step_j, step_j, o.y, inv.y));
-                                cj = edge_j;
-                                next_j = leave_j;
-                            }
+                        for (int m = 0; m < 8 && minor_step != 0 && (out_i ? next < leave : next <= leave); ++m) {
+                            t_last = next;
+                            minor += minor_step;
+                            next = rbvh_boundary_t(minor, minor_step, minor_o, minor_inv);
                         }
+                        if (minor_step != 0 && (out_i ? next < leave : next <= leave)) {
+                            cut = true;  // ended early by the device
+                        }
+                        int major = out_i ? ci : cj;
+                        int edge = out_i ? edge_i : edge_j;
+                        float major_next = out_i ? next_i : next_j;
+                        if (major != edge) {
+                            t_last = max(t_last, rbvh_boundary_t(edge - major_step, major_step,
+                                                                 out_i ? o.x : o.y, out_i ? inv.x : inv.y));
+                            major = edge;
+                            major_next = leave;
+                        }
+                        ci = out_i ? major : minor;
+                        cj = out_i ? minor : major;
+                        next_i = out_i ? major_next : next;
+                        next_j = out_i ? next : major_next;
                         t_in = t_last;
                     }
                 }
@@ -502,9 +510,9 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
     vec3 inv_dir = rbvh_safe_inverse(ray.dir);
     RbvhShear sh = rbvh_shear(ray);
     float t_closest = ray.tmax;
-    // The nearest hit so far: its id, and what its normal comes from (a triangle slot, or a
-    // texel of a height field or of a chosen node's columns), decoded once after the loops so
-    // that the SIMD loops do not carry the decoding.
+    // The nearest hit so far: a triangle's slot, or the id of a height field or chosen node and
+    // the texel its normal comes from. Its id and normal are read and decoded once, after the
+    // loops, so that the SIMD loops do not carry them.
     uint best_id = RBVH_INVALID;
     uint best_slot = RBVH_INVALID;
     uint best_texel = RBVH_HOLE_CODE;
@@ -547,7 +555,6 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
                     float t = rbvh_intersect_triangle(sh, tri.v0, tri.v1, tri.v2, ray.tmin, t_closest);
                     if (t >= 0.0) {
                         t_closest = t;
-                        best_id = tri.prim;
                         best_slot = slot;
                         if (any_hit) {
                             found = true;
@@ -675,13 +682,13 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
     if (cut || !finished) {
         overflow = true;
     }
-    if (best_id == RBVH_INVALID) {
-        return rbvh_miss();
-    }
     vec3 nrm;
     if (best_slot != RBVH_INVALID) {
         BvhTriangle tri = RBVH_BVH_TRIANGLE(best_slot);
+        best_id = tri.prim;
         nrm = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
+    } else if (best_id == RBVH_INVALID) {
+        return rbvh_miss();
     } else {
         nrm = rbvh_decode_normal(best_texel);
     }

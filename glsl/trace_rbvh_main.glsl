@@ -12,6 +12,9 @@ layout(local_size_x = 64) in;
 // work; the timed pipeline keeps it false, and the compiler drops the counting.
 layout(constant_id = 0) const bool rbvh_count = false;
 #define RBVH_COUNT rbvh_count
+// Specialised by the tracer (src/gpu/tracer.rs, JUMPS_CONSTANT_ID; off on CPU implementations).
+layout(constant_id = 1) const bool rbvh_block_jumps = true;
+#define RBVH_BLOCK_JUMPS rbvh_block_jumps
 
 #include "trace_params.glsl"
 #include "rbvh.glsl"

@@ -119,6 +119,7 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
             "error",
             "valid",
             "timing_source",
+            "block_jumps",
         ])));
         assert_eq!(
             keys(&r["mrays_per_s"]),
@@ -136,6 +137,7 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
         match r["method"].as_str().unwrap() {
             "exact" => {
                 assert!(r["error"].is_null() && r["params"].is_null() && r["quality"].is_null());
+                assert!(r["block_jumps"].is_null());
             }
             "rbvh" => {
                 assert!(keys(&r["error"]).is_superset(&set(&[
@@ -150,6 +152,8 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
                 ])));
                 assert!(keys(&r["params"]).contains("texels_per_diagonal"));
                 assert!(matches!(r["quality"].as_str(), Some("Q0" | "Q2")));
+                // lavapipe's default (`Tracer::block_jumps`).
+                assert_eq!(r["block_jumps"].as_bool(), Some(false));
             }
             other => panic!("method {other}"),
         }
@@ -213,6 +217,8 @@ fn traffic_records_come_from_a_twin_that_counts_as_the_device() {
     config.ray_types = vec![RayType::Primary, RayType::Shadow];
     config.lod = Some(rbvh::lod::LodParams::default());
     config.traffic = true;
+    // Not this CPU device's default: the twin must follow the tracer.
+    config.block_jumps = Some(true);
     let report = bench::run(&config).unwrap();
     assert_eq!(report.results.len(), 2 * 5);
     for r in &report.results {
@@ -235,6 +241,7 @@ fn traffic_records_come_from_a_twin_that_counts_as_the_device() {
                 c.leaves >= c.walks && c.walks > 0.0 && c.cells >= c.cells_tested,
                 "{what}"
             );
+            assert_eq!(r.block_jumps, Some(true), "{what}");
         }
         let m = &t.traffic;
         assert_eq!(m.rays, r.rays, "{what}");

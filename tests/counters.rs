@@ -1,6 +1,6 @@
 //! Per-ray counters (`rbvh::probe`): the device's counting pipeline and the CPU twins count the
-//! same work ray by ray, for the exact BVH, the RBVH (block jumps included) and the RBVH with level
-//! of detail; the counting pipeline returns the timed pipeline's hits; the twin's jumping walk
+//! same work ray by ray, for the exact BVH, the RBVH (with block jumps and without) and the RBVH
+//! with level of detail; the counting pipeline returns the timed pipeline's hits; the twin's jumping walk
 //! returns the plain walk's hits with fewer cells; and the reads the twins report match their
 //! counters, array by array.
 
@@ -53,12 +53,24 @@ fn device_and_cpu_twin_count_the_same_work() {
         let scene = Scene::builtin(name).unwrap();
         let rays = rays_for(&scene, 64, 2000, 40 + k as u64);
         let bvh = Bvh::build(&scene).unwrap();
-        let exact = Tracer::exact(&ctx, &bvh).unwrap();
+        let mut exact = Tracer::exact(&ctx, &bvh).unwrap();
+        assert!(!exact.block_jumps());
+        let e = exact.set_block_jumps(true).unwrap_err().to_string();
+        assert!(e.contains("no march"), "{e}");
         for level in [0, 2, 4] {
             let r = Rbvh::build(&scene, &RbvhParams::quality(level).unwrap()).unwrap();
-            let tracer = Tracer::rbvh(&ctx, &r).unwrap();
-            let twin = r.device_twin(None).unwrap();
-            for query in [Query::Closest, Query::Any] {
+            let mut tracer = Tracer::rbvh(&ctx, &r).unwrap();
+            // Off is this CPU device's default; both are what some device runs.
+            assert_eq!(tracer.block_jumps(), !ctx.limits().cpu);
+            for (jumping, query) in [
+                (false, Query::Closest),
+                (false, Query::Any),
+                (true, Query::Closest),
+                (true, Query::Any),
+            ] {
+                tracer.set_block_jumps(jumping).unwrap();
+                assert_eq!(tracer.block_jumps(), jumping);
+                let twin = r.device_twin(None).unwrap().with_block_jumps(jumping);
                 let any = query == Query::Any;
                 let gpu = tracer.trace_with(&rays, query, true).unwrap();
                 let cpu: Vec<_> = rays
@@ -69,7 +81,7 @@ fn device_and_cpu_twin_count_the_same_work() {
                 let (n, first) = mismatches(counters, &gpu.hits, &cpu);
                 assert!(
                     n * 10_000 <= rays.len(),
-                    "{name} Q{level} {query:?}: {n} rays differ; {first:?}"
+                    "{name} Q{level} {query:?} jumps {jumping}: {n} rays differ; {first:?}"
                 );
                 total += rays.len();
                 differing += n;
@@ -84,10 +96,8 @@ fn device_and_cpu_twin_count_the_same_work() {
                 );
                 let jumps: u64 = counters.iter().map(|c| u64::from(c.jumps)).sum();
                 let walks: u64 = counters.iter().map(|c| u64::from(c.walks)).sum();
-                assert!(
-                    walks > 0 && jumps > 0,
-                    "{name} Q{level}: nothing marched or jumped"
-                );
+                assert!(walks > 0, "{name} Q{level}: nothing marched");
+                assert_eq!(jumps > 0, jumping, "{name} Q{level}: {jumps} jumps");
             }
         }
         for query in [Query::Closest, Query::Any] {
@@ -124,7 +134,10 @@ fn level_of_detail_counts_agree_too() {
     let gpu = tracer
         .trace_lod(&rays, &cones, Query::Closest, true)
         .unwrap();
-    let twin = r.device_twin(Some(&lod)).unwrap();
+    let twin = r
+        .device_twin(Some(&lod))
+        .unwrap()
+        .with_block_jumps(tracer.block_jumps());
     let cpu: Vec<_> = rays
         .iter()
         .map(|ray| twin.trace(ray, false, Some(&cone), &mut ()))
@@ -185,7 +198,7 @@ fn the_twins_block_jumps_change_no_hit_and_save_cells() {
 
 /// Reads per array follow from the counters: a node read per node visited, a leaf record per leaf
 /// marched, four texels per cell and a range word per block entered, a triangle per triangle tested
-/// (and, for the exact BVH, once more for the hit's normal).
+/// (and once more for a triangle hit's id and normal).
 #[test]
 fn the_twins_reads_match_their_counters() {
     let scene = Scene::builtin("default").unwrap();
@@ -197,11 +210,15 @@ fn the_twins_reads_match_their_counters() {
     let texel_bytes = 4 * r.atlas.texels.len() as u64;
     for ray in &rays {
         let mut reads = Vec::new();
-        let (_, s) = twin.trace(ray, false, None, &mut reads);
+        let (hit, s) = twin.trace(ray, false, None, &mut reads);
         let c = s.counters;
         assert_eq!(count(&reads, Array::Nodes), c.nodes as usize);
         assert_eq!(count(&reads, Array::Leaves), c.leaves as usize);
-        assert_eq!(count(&reads, Array::Triangles), c.triangles as usize);
+        let triangle_hit = hit.is_hit() && hit.id & rbvh::bvh::LEAF_BIT == 0;
+        assert_eq!(
+            count(&reads, Array::Triangles),
+            (c.triangles + u32::from(triangle_hit)) as usize
+        );
         let texels = reads
             .iter()
             .filter(|r| r.array == Array::Atlas && r.offset < texel_bytes)

@@ -66,7 +66,9 @@ fn block_jumps_skip_many_cells_of_grazing_rays_and_change_no_hit() {
             Ray::new(origin, glam::Vec3::X, 0.0, f32::INFINITY)
         })
         .collect();
-    let tracer = Tracer::rbvh(&ctx, &r).unwrap();
+    let mut tracer = Tracer::rbvh(&ctx, &r).unwrap();
+    // On whatever this device's default.
+    tracer.set_block_jumps(true).unwrap();
     for (query, any) in [(Query::Closest, false), (Query::Any, true)] {
         let gpu = tracer.trace_with(&rays, query, true).unwrap();
         let (mut cpu_steps, mut hits) = (0u64, 0usize);
@@ -360,10 +362,9 @@ fn block_jumps_agree_with_the_plain_walk_on_steep_unaligned_tiles() {
                 Ray::new(target - distance * dir, dir, 0.0, f32::INFINITY)
             })
             .collect();
-        let gpu = Tracer::rbvh(&ctx, &r)
-            .unwrap()
-            .trace_with(&rays, Query::Closest, true)
-            .unwrap();
+        let mut tracer = Tracer::rbvh(&ctx, &r).unwrap();
+        tracer.set_block_jumps(true).unwrap();
+        let gpu = tracer.trace_with(&rays, Query::Closest, true).unwrap();
         let cpu = r.trace_cpu(&rays, false);
         agreement.add(&format!("steep tile {case}"), &gpu.hits, &cpu, false);
         gpu_steps += gpu

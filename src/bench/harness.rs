@@ -255,7 +255,7 @@ impl<'a> SceneBench<'a> {
             candidates.push(Candidate {
                 method: Method::Rbvh,
                 level: Some((*level, params)),
-                tracer: Tracer::rbvh(ctx, &rbvh)?,
+                tracer: with_jumps(Tracer::rbvh(ctx, &rbvh)?, config.block_jumps)?,
                 twin: Twin::Rbvh(Arc::clone(&rbvh)),
                 build_ms: rbvh.stats.build_ms,
                 memory,
@@ -271,7 +271,7 @@ impl<'a> SceneBench<'a> {
                 candidates.push(Candidate {
                     method: Method::RbvhLod,
                     level: Some((*level, params)),
-                    tracer: Tracer::rbvh_lod(ctx, &rbvh, &lod)?,
+                    tracer: with_jumps(Tracer::rbvh_lod(ctx, &rbvh, &lod)?, config.block_jumps)?,
                     build_ms: rbvh.stats.build_ms + lod.stats.build_ms,
                     memory: Memory {
                         tree: memory.tree + lod.bytes(),
@@ -467,6 +467,7 @@ impl<'a> SceneBench<'a> {
                 valid: invalid.is_none(),
                 invalid_reason: invalid,
                 timing_source: m.source,
+                block_jumps: (c.method != Method::Exact).then(|| c.tracer.block_jumps()),
                 counters: counted[i].0,
                 traffic: counted[i].1.clone(),
             });
@@ -500,7 +501,7 @@ impl<'a> SceneBench<'a> {
                     Twin::Lod(_, lod) => Some(lod.as_ref()),
                     _ => None,
                 };
-                lod_twin = r.device_twin(lod)?;
+                lod_twin = r.device_twin(lod)?.with_block_jumps(c.tracer.block_jumps());
                 let twin = &lod_twin;
                 let lod_bytes = lod.map_or([0, 0], |l| {
                     [
@@ -634,4 +635,12 @@ impl<'a> SceneBench<'a> {
         written.extend(plot::write_charts(&dir, &self.records)?);
         Ok(written)
     }
+}
+
+/// `tracer` with its block jumps set as the bench was asked (`None`: left as the tracer chose).
+fn with_jumps(mut tracer: Tracer, block_jumps: Option<bool>) -> Result<Tracer> {
+    if let Some(on) = block_jumps {
+        tracer.set_block_jumps(on)?;
+    }
+    Ok(tracer)
 }

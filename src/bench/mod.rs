@@ -126,6 +126,9 @@ pub struct BenchConfig {
     /// and cache lines per ray, the frame's working set, DRAM bytes per ray behind 4, 32 and
     /// 72 MiB caches. Costs a CPU trace per method and ray type.
     pub traffic: bool,
+    /// Block jumps in the RBVH march on or off; None: the tracer's choice for the device
+    /// ([`crate::gpu::Tracer::block_jumps`]).
+    pub block_jumps: Option<bool>,
 }
 
 /// Largest image side accepted, as for `rbvh render`.
@@ -148,6 +151,7 @@ impl BenchConfig {
             plot_dir: None,
             lod: None,
             traffic: false,
+            block_jumps: None,
         }
     }
 

@@ -37,6 +37,7 @@
 //! | `valid` | bool | false when the hits are wrong rather than approximate (`bench::validate`); for exact: whether the GPU agrees with the CPU reference tracer |
 //! | `invalid_reason` | string \| null | why `valid` is false |
 //! | `timing_source` | `"gpu_timestamps"` \| `"wall"` | GPU timestamp queries, or host wall time (submit to fence) when the device cannot time |
+//! | `block_jumps` | bool \| null | whether the march jumped over blocks ([`crate::gpu::Tracer::block_jumps`]); null for exact |
 //!
 //! `params`: `texels_per_diagonal`, `refinement` (`"normal_cone"` \| `"projected_area"`),
 //! `max_angle_deg` (normal cone, else null), `min_ratio` (projected area, else null),
@@ -114,6 +115,8 @@ pub struct Record {
     pub valid: bool,
     pub invalid_reason: Option<String>,
     pub timing_source: TimingSource,
+    /// Whether the device march jumped over blocks; None for the exact BVH.
+    pub block_jumps: Option<bool>,
     /// Per-ray means of the device's counters (its counting pipeline, on the same rays).
     pub counters: MeanCounters,
     /// The CPU twin's counters and memory traffic, with `--traffic`.
@@ -264,7 +267,7 @@ pub fn write_json(path: &Path, report: &BenchReport) -> Result<()> {
 }
 
 /// The CSV header: one column per field of a [`Record`], flattened.
-pub const CSV_COLUMNS: [&str; 69] = [
+pub const CSV_COLUMNS: [&str; 70] = [
     "scene",
     "triangles",
     "method",
@@ -303,6 +306,7 @@ pub const CSV_COLUMNS: [&str; 69] = [
     "valid",
     "invalid_reason",
     "timing_source",
+    "block_jumps",
     "nodes",
     "leaves",
     "walks",
@@ -408,6 +412,7 @@ fn csv_row(r: &Record) -> Vec<String> {
         r.valid.to_string(),
         opt(r.invalid_reason.as_ref()),
         r.timing_source.name().into(),
+        opt(r.block_jumps),
     ];
     row.extend(counter_cells(Some(&r.counters)));
     row.extend(counter_cells(t.map(|t| &t.twin_counters)));

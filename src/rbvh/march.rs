@@ -64,9 +64,19 @@ pub struct DeviceTwin<'a> {
     rbvh: &'a Rbvh,
     ranges: Vec<u32>,
     lod: Option<&'a Lod>,
+    block_jumps: bool,
 }
 
 impl DeviceTwin<'_> {
+    /// The twin of a device trace with block jumps on (the default) or off
+    /// ([`crate::gpu::Tracer::block_jumps`]): off, it walks every cell, as the CPU reference does.
+    pub fn with_block_jumps(self, on: bool) -> Self {
+        DeviceTwin {
+            block_jumps: on,
+            ..self
+        }
+    }
+
     /// Traces one ray (closest hit, or any hit) as the device does, reporting its reads to
     /// `probe`. With level of detail ([`Rbvh::device_twin`] given a [`Lod`]) `cone` is the
     /// ray's footprint; without, it is ignored.
@@ -78,8 +88,12 @@ impl DeviceTwin<'_> {
         probe: &mut P,
     ) -> (Hit, TraceStats) {
         let lod = self.lod.zip(cone);
-        self.rbvh
-            .traverse(ray, any_hit, lod, Walk::Blocks(&self.ranges), probe)
+        let walk = if self.block_jumps {
+            Walk::Blocks(&self.ranges)
+        } else {
+            Walk::Plain
+        };
+        self.rbvh.traverse(ray, any_hit, lod, walk, probe)
     }
 }
 
@@ -111,6 +125,7 @@ impl Rbvh {
             rbvh: self,
             ranges: block_ranges(&self.atlas),
             lod,
+            block_jumps: true,
         })
     }
 
@@ -174,6 +189,14 @@ impl Rbvh {
         let shear = RayShear::new(ray);
         let mut t_closest = ray.tmax;
         let mut best = Hit::MISS;
+        // The device reads the nearest triangle once more, after its loops, for the hit's id and
+        // normal; `hit_read` reports that read when the best hit is a triangle.
+        let mut best_slot = None;
+        let hit_read = |best_slot: Option<usize>, probe: &mut P| {
+            if let Some(slot) = best_slot {
+                probe.read(element::<GpuTriangle>(Array::Triangles, slot));
+            }
+        };
         // Children as (reference, count): leaves of both kinds are pushed and popped like inner
         // nodes and handled when they come up, in the order of glsl/rbvh.glsl's "while-while"
         // traversal.
@@ -205,7 +228,9 @@ impl Rbvh {
                             id: tri.prim,
                             reserved: [0; 3],
                         };
+                        best_slot = Some(slot);
                         if any_hit {
+                            hit_read(best_slot, probe);
                             return (best, stats);
                         }
                     }
@@ -223,6 +248,7 @@ impl Rbvh {
                         id: node,
                         reserved: [0; 3],
                     };
+                    best_slot = None;
                     if any_hit {
                         return (best, stats);
                     }
@@ -254,6 +280,7 @@ impl Rbvh {
                             id: LEAF_BIT | node,
                             reserved: [0; 3],
                         };
+                        best_slot = None;
                         if any_hit {
                             return (best, stats);
                         }
@@ -311,6 +338,7 @@ impl Rbvh {
                 None => break,
             };
         }
+        hit_read(best_slot, probe);
         (best, stats)
     }
 

@@ -64,6 +64,11 @@ pub struct Args {
     /// working set, DRAM bytes per ray behind 4, 32 and 72 MiB caches (slower: a CPU trace each).
     #[arg(long)]
     traffic: bool,
+    /// Block jumps in the RBVH march: on or off (default: off on CPU implementations such as
+    /// lavapipe, on elsewhere). The hits are the same; to measure what they are worth on a device.
+    #[arg(long, value_name = "on|off", hide_possible_values = true,
+          value_parser = clap::builder::BoolishValueParser::new())]
+    block_jumps: Option<bool>,
     #[command(flatten)]
     lod_build: LodBuildArgs,
 }
@@ -99,6 +104,7 @@ pub fn run(a: Args) -> Result<()> {
     config.plot_dir = a.plot.clone();
     config.lod = a.lod.then(|| a.lod_build.params());
     config.traffic = a.traffic;
+    config.block_jumps = a.block_jumps;
 
     let bar = ProgressBar::new_spinner();
     bar.set_style(
