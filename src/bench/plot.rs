@@ -167,9 +167,10 @@ fn draw_traffic(
         };
         chart.draw_series(LineSeries::new(line.points.iter().copied(), colour))?;
         chart.draw_series(line.points.iter().map(|&p| Circle::new(p, 4, colour.filled())))?;
-        if let Some(&last) = line.points.last() {
+        // Labelled at the smallest cache, on the left, where the label has the chart's width.
+        if let Some(&first) = line.points.first() {
             chart.draw_series(std::iter::once(
-                EmptyElement::at(last) + Text::new(line.label.clone(), (8, -6), font.clone()),
+                EmptyElement::at(first) + Text::new(line.label.clone(), (8, -16), font.clone()),
             ))?;
         }
     }
