@@ -152,8 +152,9 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
                 ])));
                 assert!(keys(&r["params"]).contains("texels_per_diagonal"));
                 assert!(matches!(r["quality"].as_str(), Some("Q0" | "Q2")));
-                // lavapipe's default (`Tracer::block_jumps`).
-                assert_eq!(r["block_jumps"].as_bool(), Some(false));
+                // The device's default (`Tracer::block_jumps`).
+                let cpu = common::context().limits().cpu;
+                assert_eq!(r["block_jumps"].as_bool(), Some(!cpu));
             }
             other => panic!("method {other}"),
         }
@@ -173,7 +174,10 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
     // Plots: charts and, per level, the render and its error image beside the exact render;
     // no traffic chart without traffic.
     let scene_dir = plots.join("sphere");
-    assert!(!report.written.iter().any(|p| p.to_string_lossy().contains("traffic_")));
+    assert!(!report
+        .written
+        .iter()
+        .any(|p| p.to_string_lossy().contains("traffic_")));
     for file in [
         "speed_vs_error.svg",
         "memory_vs_error.svg",
@@ -217,7 +221,7 @@ fn traffic_records_come_from_a_twin_that_counts_as_the_device() {
     config.ray_types = vec![RayType::Primary, RayType::Shadow];
     config.lod = Some(rbvh::lod::LodParams::default());
     config.traffic = true;
-    // Not this CPU device's default: the twin must follow the tracer.
+    // Jumps on, which a CPU device does not choose by itself: the twin must follow the tracer.
     config.block_jumps = Some(true);
     let report = bench::run(&config).unwrap();
     assert_eq!(report.results.len(), 2 * 5);
@@ -266,11 +270,24 @@ fn traffic_records_come_from_a_twin_that_counts_as_the_device() {
 
     // A traffic chart per ray type, a line per structure, labelled with its working set.
     for rays in ["primary", "shadow"] {
-        let path = plots.path().join("sphere").join(format!("traffic_{rays}.svg"));
-        assert!(report.written.contains(&path), "{} not listed", path.display());
+        let path = plots
+            .path()
+            .join("sphere")
+            .join(format!("traffic_{rays}.svg"));
+        assert!(
+            report.written.contains(&path),
+            "{} not listed",
+            path.display()
+        );
         let svg = std::fs::read_to_string(&path).unwrap();
         assert!(svg.starts_with("<svg"), "{rays}");
-        for label in ["exact, set ", "Q0, set ", "Q2, set ", "Q0 LOD, set ", "Q2 LOD, set "] {
+        for label in [
+            "exact, set ",
+            "Q0, set ",
+            "Q2, set ",
+            "Q0 LOD, set ",
+            "Q2 LOD, set ",
+        ] {
             assert!(svg.contains(label), "{rays}: no line labelled {label:?}");
         }
     }

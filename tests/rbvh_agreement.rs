@@ -281,7 +281,10 @@ fn an_atlas_pitch_that_is_not_a_power_of_two_is_refused() {
     let e = Rbvh::from_bytes(&r.to_bytes(), std::path::Path::new("pitch.rbvh"))
         .expect_err("the loader refuses the pitch")
         .to_string();
-    assert!(e.contains("pitch.rbvh") && e.contains("not a power of two"), "{e}");
+    assert!(
+        e.contains("pitch.rbvh") && e.contains("not a power of two"),
+        "{e}"
+    );
 }
 
 /// Block jumps against the plain walk where they are most delicate: steep tiles (terraces with

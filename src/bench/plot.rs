@@ -32,15 +32,15 @@ struct Point {
     exact: bool,
 }
 
-/// Writes both charts for one scene's `records` into `dir`, returning the files written. Records
-/// of other ray types are ignored; a level without a defined error (no ray hit by both) is left
-/// out of the charts.
+/// Writes the charts for one scene's `records` into `dir`, returning the files written: the two
+/// against accuracy from its primary-ray records (a level without a defined error, no ray hit by
+/// both, is left out), and a traffic chart per ray type whose records carry traffic.
 pub fn write_charts(dir: &Path, records: &[Record]) -> Result<Vec<PathBuf>> {
     let primary: Vec<&Record> = records
         .iter()
         .filter(|r| r.ray_type == RayType::Primary)
         .collect();
-    let scene = primary.first().map_or("", |r| r.scene.as_str());
+    let scene = records.first().map_or("", |r| r.scene.as_str());
     let points = |y: &dyn Fn(&Record) -> f64| -> Vec<Point> {
         primary
             .iter()
@@ -101,7 +101,10 @@ pub fn write_charts(dir: &Path, records: &[Record]) -> Result<Vec<PathBuf>> {
                     Method::RbvhLod => format!("{level} LOD"),
                 };
                 Some(Line {
-                    label: format!("{name}, set {:.2} MB", traffic.working_set_bytes as f64 / 1e6),
+                    label: format!(
+                        "{name}, set {:.2} MB",
+                        traffic.working_set_bytes as f64 / 1e6
+                    ),
                     points: traffic
                         .caches
                         .iter()
@@ -166,7 +169,11 @@ fn draw_traffic(
             Palette99::pick(k).to_rgba()
         };
         chart.draw_series(LineSeries::new(line.points.iter().copied(), colour))?;
-        chart.draw_series(line.points.iter().map(|&p| Circle::new(p, 4, colour.filled())))?;
+        chart.draw_series(
+            line.points
+                .iter()
+                .map(|&p| Circle::new(p, 4, colour.filled())),
+        )?;
         // Labelled at the smallest cache, on the left, where the label has the chart's width.
         if let Some(&first) = line.points.first() {
             chart.draw_series(std::iter::once(

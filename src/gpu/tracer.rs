@@ -4,9 +4,10 @@
 //! rays, hits, status, per-ray counters; the LOD trace then binds the LOD records and columns and
 //! the per-ray cones. Counting each ray's work ([`RayCounters`]) takes a second pipeline of the
 //! same shader, made on first use, with the specialization constant `rbvh_count` set: the timed
-//! pipeline compiles the counting away. The RBVH shaders' block jumps are a second such constant,
-//! `rbvh_block_jumps` ([`Tracer::block_jumps`]). Each has a `_bda` twin that reads the structure's arrays through buffer device
-//! addresses rather than bindings, for arrays over `maxStorageBufferRange` ([`Reach`]).
+//! pipeline compiles the counting away. Each shader has a `_bda` twin that reads the structure's
+//! arrays through buffer device addresses rather than bindings, for arrays over
+//! `maxStorageBufferRange` ([`Reach`]). The RBVH shaders' block jumps are a second specialization
+//! constant, `rbvh_block_jumps` ([`Tracer::block_jumps`]).
 
 use std::borrow::Cow;
 use std::sync::{Arc, OnceLock};
@@ -393,8 +394,8 @@ impl Tracer {
                 "the exact BVH has no march to jump in",
             ));
         }
+        self.pipeline = make_pipeline(&self.ctx, self.kind, self.reach, &self.spirv, on, false)?;
         self.block_jumps = on;
-        self.pipeline = self.make_pipeline(false)?;
         self.counting = OnceLock::new();
         Ok(())
     }
@@ -595,24 +596,19 @@ impl Tracer {
         })
     }
 
-    /// The tracer's pipeline, or with `counting` the one that counts each ray's work.
-    fn make_pipeline(&self, counting: bool) -> Result<ComputePipeline> {
-        make_pipeline(
-            &self.ctx,
-            self.kind,
-            self.reach,
-            &self.spirv,
-            self.block_jumps,
-            counting,
-        )
-    }
-
     /// The counting pipeline, made on first use.
     fn counting_pipeline(&self) -> Result<&ComputePipeline> {
         if let Some(p) = self.counting.get() {
             return Ok(p);
         }
-        let pipeline = self.make_pipeline(true)?;
+        let pipeline = make_pipeline(
+            &self.ctx,
+            self.kind,
+            self.reach,
+            &self.spirv,
+            self.block_jumps,
+            true,
+        )?;
         Ok(self.counting.get_or_init(|| pipeline))
     }
 

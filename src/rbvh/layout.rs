@@ -207,6 +207,8 @@ fn sign(x: f32) -> f32 {
 }
 
 /// The texel atlas: `rows` rows of `pitch` texels. Tiles are packed on shelves (see `atlas.rs`).
+/// The shaders require `pitch` to be a power of two (they locate tiles with shifts): the builder
+/// makes it one, and the file reader and the upload refuse any other.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Atlas {
     pub pitch: u32,

@@ -47,7 +47,8 @@ use crate::Result;
 /// How the caster walks a leaf's cells.
 #[derive(Clone, Copy, Debug)]
 enum Walk<'a> {
-    /// Every cell the ray crosses: the referee of the device's block jumps.
+    /// Every cell the ray crosses: the referee of the device's block jumps, and the twin of a
+    /// device that does not jump ([`DeviceTwin::with_block_jumps`]).
     Plain,
     /// As the device does: on entering an 8×8 block whose height range (`ranges`, as
     /// [`block_ranges`] gives them) the ray passes wholly above or below, straight to the block's
@@ -55,8 +56,10 @@ enum Walk<'a> {
     Blocks(&'a [u32]),
 }
 
-/// The device's twin, read for read: traces as `glsl/rbvh.glsl` does, block jumps included, so
-/// that its [`TraceStats`] equal the device's counters ray by ray, and reports to a [`Probe`] every
+/// The device's twin, read for read: traces as `glsl/rbvh.glsl` does, with block jumps (the
+/// default) or without ([`DeviceTwin::with_block_jumps`]; pass the tracer's
+/// [`crate::gpu::Tracer::block_jumps`], which is off on CPU devices), so that its [`TraceStats`]
+/// equal the device's counters ray by ray, and reports to a [`Probe`] every
 /// read the shader makes of the structure's arrays, at its byte offset in the device buffers
 /// (`src/gpu/tracer.rs` binds them in [`Array`] order; the atlas buffer holds the texels, then the
 /// block ranges). Made by [`Rbvh::device_twin`].
