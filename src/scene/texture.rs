@@ -1,4 +1,4 @@
-//! Base-colour textures: decoded once at load time (PNG or JPEG through the `image` crate) into
+//! Base-colour textures: decoded once at load time (PNG, JPEG, TGA or BMP through the `image` crate) into
 //! 8-bit RGBA, and sampled bilinearly in linear space.
 //!
 //! Texels stay 8-bit sRGB-encoded in memory (a quarter of the size of linear floats: the damaged
@@ -12,7 +12,7 @@ use std::path::Path;
 use std::sync::OnceLock;
 
 use glam::{Vec2, Vec4};
-use image::{DynamicImage, ImageDecoder, ImageReader, Limits};
+use image::{DynamicImage, ImageDecoder, ImageFormat, ImageReader, Limits};
 
 use crate::{Error, Result};
 
@@ -44,7 +44,9 @@ pub struct Texture {
 }
 
 impl Texture {
-    /// Decodes PNG or JPEG bytes (the format is sniffed from the bytes, not the name). A failure
+    /// Decodes PNG, JPEG, TGA or BMP bytes. The format is sniffed from the bytes; TGA, which has
+    /// no signature to sniff (and is common in OBJ datasets, Sibenik's for one), is taken from a
+    /// `.tga` name. A failure
     /// is an [`Error::Parse`] naming `file` and saying what `what` (e.g. "image 2") was.
     /// Images larger than [`MAX_TEXTURE_SIDE`] or [`MAX_TEXTURE_TEXELS`] are refused from their
     /// header, before any texel is allocated.
@@ -54,6 +56,10 @@ impl Texture {
         let mut reader = ImageReader::new(Cursor::new(bytes))
             .with_guessed_format()
             .map_err(|e| fail(format!("cannot decode the image: {e}")))?;
+        if reader.format().is_none() && ImageFormat::from_path(file).ok() == Some(ImageFormat::Tga)
+        {
+            reader.set_format(ImageFormat::Tga);
+        }
         let mut limits = Limits::default();
         limits.max_image_width = Some(MAX_TEXTURE_SIDE);
         limits.max_image_height = Some(MAX_TEXTURE_SIDE);
@@ -157,6 +163,32 @@ fn srgb_table() -> &'static [f32; 256] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// TGA has no signature: it is decoded when the name says `.tga`, and refused, with a clear
+    /// message, when nothing says what it is.
+    #[test]
+    fn tga_is_decoded_by_its_name() {
+        let pixels: [u8; 12] = [255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255];
+        let mut bytes = Vec::new();
+        image::codecs::tga::TgaEncoder::new(&mut bytes)
+            .encode(&pixels, 2, 2, image::ExtendedColorType::Rgb8)
+            .unwrap();
+        let t = Texture::decode(&bytes, Path::new("wall.tga"), "texture").unwrap();
+        assert_eq!((t.width, t.height), (2, 2));
+        assert_eq!(
+            t.texels,
+            vec![
+                [255, 0, 0, 255],
+                [0, 255, 0, 255],
+                [0, 0, 255, 255],
+                [255, 255, 255, 255]
+            ]
+        );
+        let e = Texture::decode(&bytes, Path::new("wall.bin"), "texture")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("wall.bin") && e.contains("cannot decode"), "{e}");
+    }
 
     fn checker() -> Texture {
         Texture {
