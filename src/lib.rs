@@ -19,11 +19,10 @@
 //! probe: per-ray counters and the reads of the CPU twins, shared by bvh, rbvh, gpu and bench
 //! ```
 //!
+//! The types most users need are at the crate root:
+//!
 //! ```
-//! use rbvh::bvh::Bvh;
-//! use rbvh::gpu::{Context, ContextOptions, Query, Tracer};
-//! use rbvh::rbvh::{Rbvh, RbvhParams};
-//! use rbvh::scene::Scene;
+//! use rbvh::{Bvh, Context, ContextOptions, Query, Rbvh, RbvhParams, Scene, Tracer};
 //!
 //! let scene = Scene::load("sphere")?;
 //! let rays = scene.camera_or_framed(1.0).primary_rays(64, 64);
@@ -64,3 +63,18 @@ pub mod scene;
 pub mod surface;
 
 pub use error::{Error, Result};
+
+// The types most users need, at the crate root (their modules hold the rest).
+pub use bvh::Bvh;
+pub use geom::{Aabb, Hit, Ray};
+pub use gpu::{Context, ContextOptions, External, Query, Tracer};
+pub use lod::{Lod, LodParams, RayCone};
+pub use rbvh::{Rbvh, RbvhParams};
+pub use scene::{Camera, Scene};
+
+// The crates whose types appear in the public API (`gpu::External` holds `ash` handles and a
+// `gpu_allocator` allocator; rays and cameras take `glam` vectors), re-exported so that an engine
+// uses the very versions this crate was built with: ash 0.38, gpu-allocator 0.28, glam 0.34.
+pub use ash;
+pub use glam;
+pub use gpu_allocator;

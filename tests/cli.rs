@@ -176,11 +176,32 @@ fn rbvh_build_save_render_and_trace() {
         "48",
         "--out",
         arg(&png),
+        "--stats",
     ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
     assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+        stderr.contains("loaded from") && !stderr.contains(", built in"),
+        "{stderr}"
+    );
+    // The file with a scene it was not built for: an error, before any work.
+    let out = rbvh(&[
+        "render",
+        "--scene",
+        "blob",
+        "--rbvh",
+        arg(&file),
+        "--width",
+        "8",
+        "--height",
+        "8",
+        "--out",
+        arg(&png),
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("built for another scene"),
+        "{stderr}"
     );
     let out = rbvh(&[
         "render",

@@ -299,3 +299,42 @@ fn a_failed_save_leaves_nothing_behind() {
     assert_eq!(Rbvh::load(&path).unwrap(), sample());
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
 }
+
+/// A file knows its box, not its scene: `check_built_from` accepts the scene an RBVH was built
+/// from, at every level and with the extreme criteria, and refuses another scene, naming both boxes.
+#[test]
+fn an_rbvh_is_checked_against_the_scene_it_is_used_with() {
+    use rbvh::rbvh::SCENE_MATCH_TEXELS;
+    let mut worst = 0.0f32;
+    for name in ["default", "sphere", "blob", "grove"] {
+        let scene = rbvh::scene::Scene::builtin(name).unwrap();
+        let mut params: Vec<RbvhParams> =
+            (0..=4).map(|q| RbvhParams::quality(q).unwrap()).collect();
+        params.push(RbvhParams {
+            refinement: Refinement::NormalCone {
+                max_angle_deg: 85.0,
+            },
+            ..RbvhParams::quality(0).unwrap()
+        });
+        for p in &params {
+            let r = Rbvh::build(&scene, p).unwrap();
+            let b = scene.bounds();
+            let apart = (r.bounds.min - b.min)
+                .abs()
+                .max((r.bounds.max - b.max).abs())
+                .max_element();
+            worst = worst.max(apart / r.texel_size);
+            r.check_built_from(&scene)
+                .unwrap_or_else(|e| panic!("{name} {p:?}: {e}"));
+        }
+    }
+    println!("farthest box side: {worst:.2} texels (allowed {SCENE_MATCH_TEXELS})");
+    let sphere = rbvh::scene::Scene::builtin("sphere").unwrap();
+    let r = Rbvh::build(&sphere, &RbvhParams::quality(2).unwrap()).unwrap();
+    let other = rbvh::scene::Scene::builtin("blob").unwrap();
+    let e = r.check_built_from(&other).unwrap_err().to_string();
+    assert!(
+        e.contains("built for another scene") && e.contains("blob"),
+        "{e}"
+    );
+}

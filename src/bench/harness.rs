@@ -11,7 +11,7 @@
 //!    ([`crate::probe::RayCounters`]: untimed, so that timed runs compile the counting away);
 //! 4. **memory traffic** (with [`BenchConfig::traffic`]) — the CPU twins trace the rays again in
 //!    screen-tile order, reporting every read of the structure's device arrays to the cache model
-//!    of [`traffic`](super::traffic), and counting as the device does (the two must agree).
+//!    of [`traffic`], and counting as the device does (the two must agree).
 //!
 //! Throughput is `rays / time` per run, from GPU timestamps around the trace dispatches (uploads
 //! and read-back excluded). When a device cannot time, every method of that ray type falls back to

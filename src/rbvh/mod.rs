@@ -27,6 +27,8 @@ pub use params::{RbvhParams, Refinement, Subdivision, QUALITY_NAMES};
 
 use crate::bvh::{GpuNode, GpuTriangle};
 use crate::geom::Aabb;
+use crate::scene::Scene;
+use crate::{Error, Result};
 
 /// A built RBVH in its packed (GPU) form.
 #[derive(Clone, Debug, PartialEq)]
@@ -62,6 +64,11 @@ pub struct RbvhStats {
     pub tile_texels: u64,
 }
 
+/// How far, in texels of its level, an RBVH's box may lie from its scene's on any side
+/// ([`Rbvh::check_built_from`]): a one-texel dilated rim whose heights are extrapolated along
+/// slopes of up to a few texels per texel, and the tile's edge.
+pub const SCENE_MATCH_TEXELS: f32 = 16.0;
+
 impl Rbvh {
     pub fn tree_bytes(&self) -> u64 {
         (std::mem::size_of_val(self.nodes.as_slice())
@@ -89,6 +96,42 @@ impl Rbvh {
 
     pub fn total_bytes(&self) -> u64 {
         self.tree_bytes() + self.atlas_bytes() + self.triangle_bytes()
+    }
+
+    /// Checks that this RBVH (one loaded from a file, say) was built from `scene`, which a file
+    /// cannot know by itself: traced with another scene's camera and materials it would show the
+    /// wrong geometry without a word. Its box must be the scene's to within
+    /// [`SCENE_MATCH_TEXELS`] texels on every side: leaves reach past the triangles by their
+    /// dilated rims (extrapolated along steep slopes) and may fall short by a sliver that no
+    /// sample met. The error names both boxes.
+    pub fn check_built_from(&self, scene: &Scene) -> Result<()> {
+        let expected = scene.bounds();
+        if expected.is_empty() && self.bounds.is_empty() {
+            return Ok(());
+        }
+        let tolerance = SCENE_MATCH_TEXELS * self.texel_size.max(0.0) + 1e-5 * expected.diagonal();
+        let apart = (self.bounds.min - expected.min)
+            .abs()
+            .max((self.bounds.max - expected.max).abs())
+            .max_element();
+        // NaN (an empty box on one side only) fails too.
+        if apart <= tolerance {
+            return Ok(());
+        }
+        Err(Error::param(
+            "rbvh",
+            format!(
+                "built for another scene: its box is {:?}..{:?}, scene {:?}'s is {:?}..{:?} \
+                 ({apart} apart, more than {SCENE_MATCH_TEXELS} texels of {}); rebuild it from \
+                 this scene (rbvh build --scene ... --out ...)",
+                self.bounds.min.to_array(),
+                self.bounds.max.to_array(),
+                scene.name,
+                expected.min.to_array(),
+                expected.max.to_array(),
+                self.texel_size
+            ),
+        ))
     }
 
     /// Used tile texels over atlas texels.

@@ -219,11 +219,15 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
     if let Some(warning) = scene.precision_warning() {
         eprintln!("warning: {warning}");
     }
+    let t = Instant::now();
     let structure = match (&c.rbvh, c.method) {
-        (Some(path), _) => Structure::Rbvh(Box::new(
-            step("loading RBVH", || Rbvh::load(path))
-                .with_context(|| format!("loading RBVH {}", path.display()))?,
-        )),
+        (Some(path), _) => {
+            let r = step("loading RBVH", || Rbvh::load(path))
+                .with_context(|| format!("loading RBVH {}", path.display()))?;
+            r.check_built_from(&scene)
+                .with_context(|| format!("RBVH {} with scene {:?}", path.display(), c.scene))?;
+            Structure::Rbvh(Box::new(r))
+        }
         (None, Method::Exact) => Structure::Exact(step("building BVH", || Bvh::build(&scene))?),
         (None, Method::Rbvh) => {
             let mut levels = c.quality.levels()?;
@@ -243,6 +247,7 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
             );
         }
     }
+    let structure_ms = t.elapsed().as_secs_f64() * 1e3;
     let lod = match (&structure, c.lod.lod) {
         (_, false) => None,
         (Structure::Exact(_), true) => {
@@ -273,12 +278,19 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
                 bvh.triangle_bytes()
             ),
             Structure::Rbvh(r) => eprintln!(
-                "RBVH: {} nodes, {} height-field + {} triangle leaves, depth {}, built in {:.1} ms, {} bytes (tree {}, atlas {}, triangles {})",
+                "RBVH: {} nodes, {} height-field + {} triangle leaves, depth {}, {}, {} bytes (tree {}, atlas {}, triangles {})",
                 r.nodes.len(),
                 r.stats.heightfield_leaves,
                 r.stats.triangle_leaves,
                 r.depth,
-                r.stats.build_ms,
+                match &c.rbvh {
+                    Some(path) => format!(
+                        "loaded from {} in {structure_ms:.1} ms (built in {:.1} ms when it was made)",
+                        path.display(),
+                        r.stats.build_ms
+                    ),
+                    None => format!("built in {:.1} ms", r.stats.build_ms),
+                },
                 r.total_bytes(),
                 r.tree_bytes(),
                 r.atlas_bytes(),
