@@ -6,3 +6,23 @@ include!(concat!(env!("OUT_DIR"), "/shaders.rs"));
 pub fn words(bytes: &[u8]) -> std::io::Result<Vec<u32>> {
     ash::util::read_spv(&mut std::io::Cursor::new(bytes))
 }
+
+/// The GLSL headers an engine includes in its own shaders (README, "Embedding in an engine"), by
+/// the name `#include` gives them: `rbvh.glsl` (RBVH traversal and march), `bvh.glsl` (the exact
+/// BVH), `lod.glsl` (level of detail, with `RBVH_LOD`) and what they include. An engine that
+/// compiles its shaders resolves its includes from this table and needs no files of this crate.
+pub const GLSL_HEADERS: [(&str, &str); 5] = [
+    ("common.glsl", include_str!("../../glsl/common.glsl")),
+    ("intersect.glsl", include_str!("../../glsl/intersect.glsl")),
+    ("bvh.glsl", include_str!("../../glsl/bvh.glsl")),
+    ("rbvh.glsl", include_str!("../../glsl/rbvh.glsl")),
+    ("lod.glsl", include_str!("../../glsl/lod.glsl")),
+];
+
+/// The header `name` of [`GLSL_HEADERS`], for an include callback.
+pub fn glsl_header(name: &str) -> Option<&'static str> {
+    GLSL_HEADERS
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, text)| *text)
+}
