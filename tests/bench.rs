@@ -55,11 +55,14 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
             assert_eq!(r.ray_type, ray_type);
             assert_eq!(r.scene, "sphere");
             assert!(r.rays > 0 && r.triangles > 0);
-            let s = r.mrays_per_s;
+            let s = &r.mrays_per_s;
             assert!(
                 s.min > 0.0 && s.min <= s.median && s.median <= s.max,
                 "{s:?}"
             );
+            // Every timed run's value, as many as runs, within the spread.
+            assert_eq!(s.samples.len(), 2, "{s:?}");
+            assert!(s.samples.iter().all(|&v| s.min <= v && v <= s.max), "{s:?}");
             assert!(r.build_ms > 0.0);
             let m = r.memory_bytes;
             assert_eq!(m.total, m.tree + m.atlas + m.triangles);
@@ -96,7 +99,7 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json_path).unwrap()).unwrap();
     assert!(keys(&json).is_superset(&set(&[
-        "device", "driver", "threads", "date", "git", "runs", "results"
+        "device", "driver", "threads", "date", "git", "version", "runs", "results"
     ])));
     let date = json["date"].as_str().unwrap();
     assert!(date.len() == 20 && date.ends_with('Z') && date.as_bytes()[10] == b'T');
@@ -123,7 +126,7 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
         ])));
         assert_eq!(
             keys(&r["mrays_per_s"]),
-            set(&["median", "min", "max"]),
+            set(&["median", "min", "max", "samples"]),
             "{r}"
         );
         assert_eq!(
@@ -160,15 +163,22 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
         }
     }
 
-    // CSV: the header, then one line per record with as many cells.
+    // CSV, read back by the `csv` crate: the header, then one row per record with as many
+    // cells, each led by the report's provenance (the device name holds a comma: quoted).
     let csv_path = dir.path().join("bench.csv");
     bench::write_csv(&csv_path, &report).unwrap();
-    let csv = std::fs::read_to_string(&csv_path).unwrap();
-    let lines: Vec<&str> = csv.lines().collect();
-    assert_eq!(lines[0], CSV_COLUMNS.join(","));
-    assert_eq!(lines.len(), 1 + report.results.len());
-    for line in &lines[1..] {
-        assert_eq!(line.split(',').count(), CSV_COLUMNS.len(), "{line}");
+    let mut reader = csv::Reader::from_path(&csv_path).unwrap();
+    let header: Vec<String> = reader.headers().unwrap().iter().map(String::from).collect();
+    assert_eq!(header, CSV_COLUMNS);
+    let rows: Vec<csv::StringRecord> = reader.records().map(Result::unwrap).collect();
+    assert_eq!(rows.len(), report.results.len());
+    for (row, record) in rows.iter().zip(&report.results) {
+        assert_eq!(row.len(), CSV_COLUMNS.len(), "{row:?}");
+        assert_eq!(&row[0], report.device, "{row:?}");
+        assert_eq!(&row[1], report.driver, "{row:?}");
+        assert_eq!(&row[2], report.date, "{row:?}");
+        assert_eq!(&row[4], env!("CARGO_PKG_VERSION"), "{row:?}");
+        assert_eq!(&row[5], record.scene, "{row:?}");
     }
 
     // Plots: charts and, per level, the render and its error image beside the exact render;

@@ -547,3 +547,37 @@ fn rbvh_addressing_forces_device_addresses_and_refuses_what_it_does_not_know() {
     );
     assert!(!bad_png.exists());
 }
+
+/// A bench whose hits are wrong fails after reporting, unless told to allow it.
+#[test]
+fn bench_exits_non_zero_on_an_invalid_measurement() {
+    let coarse = [
+        "bench",
+        "--scene",
+        "sphere",
+        "--quality",
+        "2",
+        "--texels-per-diagonal",
+        "12",
+        "--rays",
+        "primary",
+        "--width",
+        "32",
+        "--height",
+        "32",
+        "--runs",
+        "1",
+    ];
+    let out = rbvh(&coarse);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(stderr.contains("INVALID (--allow-invalid"), "{stderr}");
+    // The table is printed all the same.
+    assert!(String::from_utf8_lossy(&out.stdout).contains("custom"));
+    let out = rbvh(&[&coarse[..], &["--allow-invalid"]].concat());
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

@@ -83,6 +83,8 @@ pub struct BenchReport {
     pub threads: Option<u32>,
     pub date: String,
     pub git: Option<String>,
+    /// This crate's version.
+    pub version: String,
     pub runs: u32,
     pub width: u32,
     pub height: u32,
@@ -172,12 +174,13 @@ impl TimingSource {
     }
 }
 
-/// Median, minimum and maximum over the timed runs.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+/// Median, minimum and maximum over the timed runs, and every run's value in the order run.
+#[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Spread {
     pub median: f64,
     pub min: f64,
     pub max: f64,
+    pub samples: Vec<f64>,
 }
 
 impl Spread {
@@ -196,6 +199,7 @@ impl Spread {
             median,
             min: v[0],
             max: v[n - 1],
+            samples: values.to_vec(),
         }
     }
 }
@@ -267,7 +271,12 @@ pub fn write_json(path: &Path, report: &BenchReport) -> Result<()> {
 }
 
 /// The CSV header: one column per field of a [`Record`], flattened.
-pub const CSV_COLUMNS: [&str; 70] = [
+pub const CSV_COLUMNS: [&str; 75] = [
+    "device",
+    "driver",
+    "date",
+    "git",
+    "version",
     "scene",
     "triangles",
     "method",
@@ -364,8 +373,9 @@ fn counter_cells(c: Option<&MeanCounters>) -> [String; 9] {
     ]
 }
 
-/// One record's CSV cells, in the order of [`CSV_COLUMNS`], unquoted.
-fn csv_row(r: &Record) -> Vec<String> {
+/// One record's CSV cells, in the order of [`CSV_COLUMNS`], unquoted: the report's provenance
+/// on every row, then the record's fields.
+fn csv_row(report: &BenchReport, r: &Record) -> Vec<String> {
     fn opt<T: ToString>(v: Option<T>) -> String {
         v.map(|v| v.to_string()).unwrap_or_default()
     }
@@ -374,6 +384,11 @@ fn csv_row(r: &Record) -> Vec<String> {
     let t = r.traffic.as_ref();
     let cache = |k: usize| t.and_then(|t| t.traffic.caches.get(k));
     let mut row = vec![
+        report.device.clone(),
+        report.driver.clone(),
+        report.date.clone(),
+        opt(report.git.as_ref()),
+        report.version.clone(),
         r.scene.clone(),
         r.triangles.to_string(),
         r.method.name().into(),
@@ -445,7 +460,10 @@ pub fn write_csv(path: &Path, report: &BenchReport) -> Result<()> {
     write_atomically(path, |w| {
         writeln!(w, "{}", CSV_COLUMNS.join(","))?;
         for record in &report.results {
-            let cells: Vec<String> = csv_row(record).iter().map(|c| csv_cell(c)).collect();
+            let cells: Vec<String> = csv_row(report, record)
+                .iter()
+                .map(|c| csv_cell(c))
+                .collect();
             writeln!(w, "{}", cells.join(","))?;
         }
         Ok(())
@@ -463,7 +481,8 @@ mod tests {
             Spread {
                 median: 2.0,
                 min: 1.0,
-                max: 3.0
+                max: 3.0,
+                samples: vec![3.0, 1.0, 2.0],
             }
         );
         assert_eq!(Spread::of(&[4.0, 1.0, 2.0, 3.0]).median, 2.5);

@@ -69,6 +69,10 @@ pub struct Args {
     #[arg(long, value_name = "on|off", hide_possible_values = true,
           value_parser = clap::builder::BoolishValueParser::new())]
     block_jumps: Option<bool>,
+    /// Exit 0 even when a measurement is INVALID (its hits wrong rather than approximate); by
+    /// default the command then fails, after writing the table, JSON, CSV and charts.
+    #[arg(long)]
+    allow_invalid: bool,
     #[command(flatten)]
     lod_build: LodBuildArgs,
 }
@@ -111,12 +115,10 @@ pub fn run(a: Args) -> Result<()> {
         ProgressStyle::with_template("{spinner} {msg} {elapsed}").expect("static template"),
     );
     bar.enable_steady_tick(Duration::from_millis(120));
-    let mut invalid = 0usize;
     let result = bench::run_observed(&config, &mut |event| match event {
         Event::Progress(what) => bar.set_message(what),
         Event::Warning(what) => bar.suspend(|| {
             if what.starts_with("INVALID") {
-                invalid += 1;
                 eprintln!("!!!!!!!! {what}");
             } else {
                 eprintln!("warning: {what}");
@@ -129,6 +131,7 @@ pub fn run(a: Args) -> Result<()> {
     print!("{}", bench::table(&report));
     println!();
     print!("{}", bench::work_table(&report));
+    let invalid = report.results.iter().filter(|r| !r.valid).count();
     if invalid > 0 {
         eprintln!(
             "!!!!!!!! {invalid} measurement(s) INVALID: their hits are wrong (see above); their speeds mean nothing"
@@ -145,5 +148,9 @@ pub fn run(a: Args) -> Result<()> {
     for path in &report.written {
         eprintln!("wrote {}", path.display());
     }
+    anyhow::ensure!(
+        invalid == 0 || a.allow_invalid,
+        "{invalid} measurement(s) INVALID (--allow-invalid to exit 0 all the same)"
+    );
     Ok(())
 }
