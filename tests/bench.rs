@@ -414,6 +414,20 @@ fn the_validator_flags_a_method_that_is_wrong_rather_than_fast() {
     assert!(invalid_reason(&blind).unwrap().contains("hit/miss"));
 }
 
+/// Every scene is checked before any work: a missing last scene fails the run before the first
+/// scene is loaded or the device is made.
+#[test]
+fn a_bad_scene_fails_the_run_before_any_work() {
+    let mut config = small_config(None);
+    config.scenes = vec!["sphere".into(), "/no/such/model.obj".into()];
+    let mut events = Vec::new();
+    let e = bench::run_observed(&config, &mut |event| events.push(event))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("/no/such/model.obj"), "{e}");
+    assert!(events.is_empty(), "work was done first: {events:?}");
+}
+
 #[test]
 fn bad_configurations_are_errors_naming_the_field() {
     let base = BenchConfig::new(vec!["sphere".into()], Device::Create(Default::default()));

@@ -527,15 +527,47 @@ fn scene_file_transforms_rotate_about_x_then_y_then_z() {
 }
 
 /// Loads `toml` from a file and expects a parse error at `line` whose message mentions `needle`.
+/// `Scene::load` and `Scene::check` (which loads no mesh) both refuse `toml` with a parse error at
+/// `line` that says `needle`.
 fn expect_toml_error(dir: &Path, toml: &str, line: usize, needle: &str) {
     let path = write(dir, "bad.toml", toml);
-    match load(&path) {
-        Err(e @ Error::Parse { line: Some(l), .. }) if l == line => {
-            let text = e.to_string();
-            assert!(text.contains(&format!("bad.toml:{line}")), "{text}");
-            assert!(text.contains(needle), "{needle:?} not in {text:?}");
+    let checked = Scene::check(path.to_str().unwrap()).map(|()| None);
+    for result in [load(&path).map(Some), checked] {
+        match result {
+            Err(e @ Error::Parse { line: Some(l), .. }) if l == line => {
+                let text = e.to_string();
+                assert!(text.contains(&format!("bad.toml:{line}")), "{text}");
+                assert!(text.contains(needle), "{needle:?} not in {text:?}");
+            }
+            other => panic!("{toml:?}: expected a parse error at line {line}, got {other:?}"),
         }
-        other => panic!("{toml:?}: expected a parse error at line {line}, got {other:?}"),
+    }
+}
+
+/// `Scene::check` takes what `Scene::load` takes without loading meshes: a sound scene file whose
+/// mesh is corrupt passes the check and fails the load; missing files and names fail both.
+#[test]
+fn scenes_are_checked_without_loading_their_meshes() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "broken.obj", "v 0 0 0\nv 1 zero 0\nv 0 1 0\nf 1 2 3\n");
+    let file = write(
+        d,
+        "s.toml",
+        "[[mesh]]\npath = \"broken.obj\"\n[[mesh]]\nbuiltin = \"sphere\"\n",
+    );
+    let spec = file.to_str().unwrap();
+    Scene::check(spec).unwrap();
+    assert!(Scene::load(spec).is_err());
+    Scene::check("sphere").unwrap();
+    Scene::check(repo("scenes/meshes/pyramid.obj").to_str().unwrap()).unwrap();
+    for bad in ["spere", "/no/such/model.obj", d.to_str().unwrap()] {
+        let (checked, loaded) = (Scene::check(bad), Scene::load(bad));
+        assert_eq!(
+            checked.unwrap_err().to_string(),
+            loaded.unwrap_err().to_string(),
+            "{bad}"
+        );
     }
 }
 

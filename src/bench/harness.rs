@@ -61,6 +61,10 @@ pub fn run(config: &BenchConfig) -> Result<BenchReport> {
 /// [`run`], reporting progress and warnings to `observe` as they happen.
 pub fn run_observed(config: &BenchConfig, observe: &mut dyn FnMut(Event)) -> Result<BenchReport> {
     config.validate()?;
+    // Every scene before any work: a mistyped last scene must not cost the others' run.
+    for spec in &config.scenes {
+        Scene::check(spec)?;
+    }
     let date = provenance::utc_now();
     let ctx = match &config.device {
         Device::Existing(ctx) => ctx.clone(),

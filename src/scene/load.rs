@@ -40,28 +40,21 @@ impl Scene {
     /// it when `spec` looks like a path (has an extension or a separator), and otherwise an
     /// unknown-scene error listing the built-ins, since it was most likely a mistyped name.
     pub fn load(spec: &str) -> Result<Scene> {
-        if builtin::NAMES.contains(&spec) {
-            return Scene::builtin(spec);
+        match resolve(spec)? {
+            None => Scene::builtin(spec),
+            Some((path, FileType::SceneFile)) => scene_file::load(path),
+            Some((path, FileType::Obj | FileType::Gltf)) => load_mesh_file(path),
         }
-        let path = Path::new(spec);
-        let metadata = std::fs::metadata(path);
-        if let Ok(m) = &metadata {
-            regular_file(path, m)?;
-        }
-        if let Err(e) = metadata {
-            let looks_like_path = path.extension().is_some() || spec.contains(['/', '\\']);
-            return Err(if looks_like_path {
-                Error::io(path, e)
-            } else {
-                Error::UnknownScene {
-                    name: spec.to_owned(),
-                    known: builtin::NAMES.join(", "),
-                }
-            });
-        }
-        match FileType::of(path)? {
-            FileType::SceneFile => scene_file::load(path),
-            FileType::Obj | FileType::Gltf => load_mesh_file(path),
+    }
+
+    /// Checks `spec` as [`Scene::load`] would take it, without loading any mesh: a built-in name,
+    /// or an existing mesh file of a known type, or a scene file whose syntax, camera, light,
+    /// transforms and meshes (each a built-in name or an existing file) are sound. A caller with
+    /// several scenes to load (`rbvh bench`) checks them all before any work.
+    pub fn check(spec: &str) -> Result<()> {
+        match resolve(spec)? {
+            Some((path, FileType::SceneFile)) => scene_file::check(path),
+            _ => Ok(()),
         }
     }
 
@@ -76,11 +69,35 @@ impl Scene {
     }
 }
 
-/// Loads an OBJ, glTF or GLB file. Scene files refer to meshes through this, which is why it
-/// refuses scene files: one level of arrangement keeps them simple and free of cycles. A file
-/// with nothing to trace (empty, or only vertices, points or lines) is an error, as an empty
-/// scene file is: it is almost certainly the wrong file, and would render a blank image.
-pub(super) fn load_mesh_file(path: &Path) -> Result<Scene> {
+/// What `spec` names: None for a built-in scene, else an existing regular file and its type; an
+/// error for a missing file (or an unknown name that does not look like a path), a directory, or
+/// an unknown extension.
+fn resolve(spec: &str) -> Result<Option<(&Path, FileType)>> {
+    if builtin::NAMES.contains(&spec) {
+        return Ok(None);
+    }
+    let path = Path::new(spec);
+    let metadata = std::fs::metadata(path);
+    if let Ok(m) = &metadata {
+        regular_file(path, m)?;
+    }
+    if let Err(e) = metadata {
+        let looks_like_path = path.extension().is_some() || spec.contains(['/', '\\']);
+        return Err(if looks_like_path {
+            Error::io(path, e)
+        } else {
+            Error::UnknownScene {
+                name: spec.to_owned(),
+                known: builtin::NAMES.join(", "),
+            }
+        });
+    }
+    Ok(Some((path, FileType::of(path)?)))
+}
+
+/// The type of the mesh file at `path` (OBJ or glTF), after checking that it is one and is there:
+/// what [`load_mesh_file`] checks before reading it, in the same order.
+pub(super) fn check_mesh_file(path: &Path) -> Result<FileType> {
     let file_type = FileType::of(path)?;
     if file_type == FileType::SceneFile {
         return Err(Error::parse(
@@ -91,6 +108,15 @@ pub(super) fn load_mesh_file(path: &Path) -> Result<Scene> {
     }
     let metadata = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
     regular_file(path, &metadata)?;
+    Ok(file_type)
+}
+
+/// Loads an OBJ, glTF or GLB file. Scene files refer to meshes through this, which is why it
+/// refuses scene files: one level of arrangement keeps them simple and free of cycles. A file
+/// with nothing to trace (empty, or only vertices, points or lines) is an error, as an empty
+/// scene file is: it is almost certainly the wrong file, and would render a blank image.
+pub(super) fn load_mesh_file(path: &Path) -> Result<Scene> {
+    let file_type = check_mesh_file(path)?;
     let scene = if file_type == FileType::Obj {
         obj::load(path)?
     } else {

@@ -61,15 +61,13 @@ enum ScaleEntry {
 /// The default vertical field of view, matching framing cameras.
 const DEFAULT_VFOV_DEG: f32 = 40.0;
 
-/// Loads the scene file at `path`. Mesh paths are relative to the file's directory.
-pub(super) fn load(path: &Path) -> Result<Scene> {
+/// The text of the scene file at `path`, and the file parsed from it (with at least one mesh).
+fn parse(path: &Path) -> Result<(String, SceneFile)> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
     let file: SceneFile = toml::from_str(&text).map_err(|e| {
         let line = e.span().map(|s| line_of(&text, s.start));
         Error::parse(path, line, e.message())
     })?;
-    let source = Source { path, text: &text };
-
     if file.mesh.is_empty() {
         return Err(Error::parse(
             path,
@@ -77,6 +75,28 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
             "no meshes: a scene file needs at least one [[mesh]] table",
         ));
     }
+    Ok((text, file))
+}
+
+/// Checks the scene file at `path` as [`load`] would, short of loading its meshes: its syntax,
+/// camera, light and transforms, and that each mesh is a built-in name or an existing file.
+pub(super) fn check(path: &Path) -> Result<()> {
+    let (text, file) = parse(path)?;
+    let source = Source { path, text: &text };
+    file.camera.map(|c| source.camera(&c)).transpose()?;
+    file.light.map(|l| source.light(&l)).transpose()?;
+    let dir = path.parent().unwrap_or(Path::new(""));
+    for entry in &file.mesh {
+        source.transform(entry.get_ref())?;
+        source.mesh_exists(entry, dir)?;
+    }
+    Ok(())
+}
+
+/// Loads the scene file at `path`. Mesh paths are relative to the file's directory.
+pub(super) fn load(path: &Path) -> Result<Scene> {
+    let (text, file) = parse(path)?;
+    let source = Source { path, text: &text };
     let mut scene = Scene::new(path.display().to_string());
     scene.camera = file.camera.map(|c| source.camera(&c)).transpose()?;
     scene.light = file.light.map(|l| source.light(&l)).transpose()?;
@@ -208,6 +228,34 @@ impl Source<'_> {
         let rotation =
             Mat4::from_rotation_z(r.z) * Mat4::from_rotation_y(r.y) * Mat4::from_rotation_x(r.x);
         Ok(Mat4::from_translation(translate) * rotation * Mat4::from_scale(scale))
+    }
+
+    /// Whether the mesh an entry names is there: a built-in name, or a regular file of a mesh
+    /// type, without loading it.
+    fn mesh_exists(&self, entry: &Spanned<MeshEntry>, dir: &Path) -> Result<()> {
+        match (&entry.get_ref().builtin, &entry.get_ref().path) {
+            (Some(name), None) if super::builtin::NAMES.contains(&name.get_ref().as_str()) => {
+                Ok(())
+            }
+            (Some(name), None) => Err(self.error(
+                name.span(),
+                format!(
+                    "unknown built-in scene {:?} (built-ins: {})",
+                    name.get_ref(),
+                    super::builtin::NAMES.join(", ")
+                ),
+            )),
+            (None, Some(file)) => {
+                let path = dir.join(file.get_ref());
+                super::load::check_mesh_file(&path)
+                    .map(|_| ())
+                    .map_err(|e| self.error(file.span(), format!("cannot load mesh: {e}")))
+            }
+            _ => Err(self.error(
+                entry.span(),
+                "[[mesh]] needs exactly one of `builtin` or `path`",
+            )),
+        }
     }
 
     /// Loads the mesh an entry names. Its objects are later prefixed with the name it is given
