@@ -332,6 +332,21 @@ fn lod_adds_a_valid_rbvh_lod_record_per_level_and_ray_type() {
         assert_eq!((chunk[0].lod, plain.lod), (None, None));
     }
     assert!(dir.path().join("sphere").join("q4_lod.png").exists());
+    // One line per method, named in the legend (the levels with and without LOD no longer share
+    // one zig-zagging line).
+    let svg =
+        std::fs::read_to_string(dir.path().join("sphere").join("speed_vs_error.svg")).unwrap();
+    let texts: Vec<&str> = svg
+        .split('<')
+        .filter_map(|t| t.strip_prefix("text").and_then(|t| t.split('>').nth(1)))
+        .map(str::trim)
+        .collect();
+    for name in ["rbvh", "rbvh-lod"] {
+        assert!(
+            texts.contains(&name),
+            "no {name:?} in the legend: {texts:?}"
+        );
+    }
     let text = bench::table(&report);
     assert!(text.contains("rbvh-lod"), "{text}");
 }

@@ -1,6 +1,7 @@
-//! The trade at a glance: per scene, SVG charts of speed and memory against accuracy, one point
-//! per RBVH level with the exact BVH marked at zero error — the curves the paper's evaluation
-//! draws (Novák & Dachsbacher 2012, §6).
+//! The trade at a glance: per scene, SVG charts of speed and memory against accuracy, a line per
+//! method (RBVH, and RBVH with level of detail) through its levels, named in a legend, with the
+//! exact BVH marked at zero error — the curves the paper's evaluation draws (Novák & Dachsbacher
+//! 2012, §6).
 //!
 //! * `speed_vs_error.svg`: primary-ray MRays/s (median) against the hit-distance error p99;
 //! * `memory_vs_error.svg`: total bytes of the structure against the same error;
@@ -29,7 +30,7 @@ struct Point {
     /// Hit-distance error p99, in percent of the scene diagonal.
     x: f64,
     y: f64,
-    exact: bool,
+    method: Method,
 }
 
 /// Writes the charts for one scene's `records` into `dir`, returning the files written: the two
@@ -60,7 +61,7 @@ pub fn write_charts(dir: &Path, records: &[Record]) -> Result<Vec<PathBuf>> {
                     },
                     x,
                     y: y(r),
-                    exact,
+                    method: r.method,
                 })
             })
             .collect()
@@ -209,18 +210,48 @@ fn draw(
         .x_desc("hit distance error, p99 (% of scene diagonal)")
         .y_desc(y_desc)
         .draw()?;
-    let mut levels: Vec<&Point> = points.iter().filter(|p| !p.exact).collect();
-    levels.sort_by(|a, b| a.x.total_cmp(&b.x));
-    chart.draw_series(LineSeries::new(levels.iter().map(|p| (p.x, p.y)), &BLUE))?;
+    // One line per method through its levels, in order of error, each in the legend; the exact
+    // BVH a marker at zero error.
     let font = ("sans-serif", 13).into_font();
-    chart.draw_series(points.iter().map(|p| {
-        let marker = if p.exact {
-            TriangleMarker::new((0, 0), 7, RED.filled()).into_dyn()
+    for (method, colour) in [
+        (Method::Rbvh, BLUE.to_rgba()),
+        (Method::RbvhLod, GREEN.to_rgba()),
+        (Method::Exact, RED.to_rgba()),
+    ] {
+        let mut mine: Vec<&Point> = points.iter().filter(|p| p.method == method).collect();
+        if mine.is_empty() {
+            continue;
+        }
+        mine.sort_by(|a, b| a.x.total_cmp(&b.x));
+        let series = if method == Method::Exact {
+            chart.draw_series(
+                mine.iter()
+                    .map(|p| TriangleMarker::new((p.x, p.y), 7, colour.filled())),
+            )?
         } else {
-            Circle::new((0, 0), 4, BLUE.filled()).into_dyn()
+            chart.draw_series(LineSeries::new(mine.iter().map(|p| (p.x, p.y)), colour))?
         };
-        EmptyElement::at((p.x, p.y)) + marker + Text::new(p.label.clone(), (8, -16), font.clone())
-    }))?;
+        series
+            .label(method.name())
+            .legend(move |(x, y)| Rectangle::new([(x, y - 4), (x + 16, y + 4)], colour.filled()));
+        chart.draw_series(mine.iter().map(|p| {
+            let marker = if method == Method::Exact {
+                TriangleMarker::new((0, 0), 7, colour.filled()).into_dyn()
+            } else {
+                Circle::new((0, 0), 4, colour.filled()).into_dyn()
+            };
+            EmptyElement::at((p.x, p.y))
+                + marker
+                + Text::new(p.label.clone(), (8, -16), font.clone())
+        }))?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 13))
+        .draw()?;
     root.present()?;
     Ok(())
 }
