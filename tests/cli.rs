@@ -259,6 +259,51 @@ fn rbvh_build_save_render_and_trace() {
     );
 }
 
+/// What the CLI would otherwise get wrong quietly or refuse obscurely: an output name whose
+/// extension says another format, and a negative number (which clap took for a flag).
+#[test]
+fn formats_follow_the_flag_and_negative_numbers_reach_their_checks() {
+    let dir = tempfile::tempdir().unwrap();
+    let ok = dir.path().join("ok.png");
+    for (flag, name, needle) in [
+        ("--out", "r.jpg", "writes PNG, so give it a .png name"),
+        ("--heatmap", "h.exr", "writes PNG"),
+        ("--exr", "d.png", "writes EXR"),
+    ] {
+        let path = dir.path().join(name);
+        let mut args = vec![
+            "render", "--scene", "sphere", "--width", "8", "--height", "8",
+        ];
+        if flag != "--out" {
+            args.extend(["--out", arg(&ok)]);
+        }
+        args.extend([flag, arg(&path)]);
+        let out = rbvh(&args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && stderr.contains(needle),
+            "{args:?}: {stderr}"
+        );
+        assert!(!path.exists(), "{args:?} wrote {}", path.display());
+    }
+    let out = rbvh(&["build", "--scene", "sphere", "--texels-per-diagonal", "-3"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("-3 is outside"),
+        "{stderr}"
+    );
+}
+
+/// `rbvh scenes` lists the built-in scenes, every one of which renders with no file at all.
+#[test]
+fn the_scenes_command_lists_the_built_in_scenes() {
+    let out = rbvh(&["scenes"]);
+    assert!(out.status.success());
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let names: Vec<&str> = stdout.lines().collect();
+    assert_eq!(names, rbvh::scene::builtin::NAMES);
+}
+
 #[test]
 fn bad_quality_and_parameters_are_clear_errors() {
     for args in [
@@ -487,7 +532,7 @@ fn render_ibl_refuses_bad_environments_and_samples() {
     let bad = dir.path().join("bad.exr");
     std::fs::write(&bad, b"not an exr").unwrap();
     let missing = dir.path().join("missing.exr");
-    let cases: [(Vec<&str>, &str); 4] = [
+    let cases: [(Vec<&str>, &str); 6] = [
         (
             vec!["--shading", "ibl", "--env", arg(&missing)],
             "missing.exr",
@@ -495,6 +540,12 @@ fn render_ibl_refuses_bad_environments_and_samples() {
         (vec!["--shading", "ibl", "--env", arg(&bad)], "bad.exr"),
         (vec!["--shading", "ibl", "--samples", "0"], "--samples"),
         (vec!["--env", arg(&bad)], "--shading ibl"),
+        // Flags that only an image-based render uses are refused, not ignored.
+        (
+            vec!["--samples", "4"],
+            "--samples is for an image-based render",
+        ),
+        (vec!["--seed", "3"], "--seed is for an image-based render"),
     ];
     for (extra, needle) in cases {
         let mut args = vec![

@@ -14,27 +14,38 @@ use clap::{Parser, Subcommand};
 #[command(
     name = "rbvh",
     version,
-    about = "Rasterized BVH ray casting on Vulkan compute (Novák & Dachsbacher 2012)"
+    about = "Rasterized BVH ray casting on Vulkan compute (Novák & Dachsbacher 2012)",
+    propagate_version = true
 )]
 struct Cli {
     #[command(subcommand)]
     command: Command,
 }
 
+// Every command takes negative numbers as values, so that `--texels-per-diagonal -3` reaches the
+// range check that explains it instead of clap's "unexpected argument".
 #[derive(Subcommand)]
 enum Command {
     /// Render a scene to PNG (and optionally EXR with depth and normals).
+    #[command(allow_negative_numbers = true)]
     Render(render::Args),
     /// Build an RBVH and report its nodes, leaves, texels and memory against the exact BVH.
+    #[command(allow_negative_numbers = true)]
     Build(build::Args),
     /// Trace a ray file and write a hit file (formats in README.md).
+    #[command(allow_negative_numbers = true)]
     Trace(trace::Args),
     /// Benchmark the exact BVH and RBVH levels: speed, memory and error on the same rays.
+    #[command(allow_negative_numbers = true)]
     Bench(bench::Args),
     /// Paint brush strokes onto an RBVH's surface on the device, and save it (with its colours).
+    #[command(allow_negative_numbers = true)]
     Paint(paint::Args),
     /// Render the regression cases and compare them with golden images (FLIP and depth).
+    #[command(allow_negative_numbers = true)]
     Regress(regress::Args),
+    /// List the built-in scenes, which every command takes for --scene without any file.
+    Scenes,
 }
 
 fn main() {
@@ -46,6 +57,12 @@ fn main() {
         Command::Bench(a) => bench::run(a),
         Command::Regress(a) => regress::run(a),
         Command::Paint(a) => paint::run(a),
+        Command::Scenes => {
+            for name in rbvh::scene::builtin::NAMES {
+                println!("{name}");
+            }
+            Ok(())
+        }
     };
     if let Err(e) = result {
         eprintln!("error: {e}");

@@ -49,12 +49,18 @@ pub struct Args {
     /// procedural sky.
     #[arg(long)]
     env: Option<PathBuf>,
-    /// With --shading ibl: visibility rays per pixel, one per progressive pass.
-    #[arg(long, default_value_t = 16)]
-    samples: u32,
-    /// With --shading ibl: random seed; the same seed gives the same image.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
+    /// With --shading ibl: visibility rays per pixel, one per progressive pass [default: 16].
+    #[arg(long)]
+    samples: Option<u32>,
+    /// With --shading ibl: random seed; the same seed gives the same image [default: 0].
+    #[arg(long)]
+    seed: Option<u64>,
+}
+
+impl Args {
+    fn samples(&self) -> u32 {
+        self.samples.unwrap_or(16)
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -71,16 +77,38 @@ enum Shading {
 
 pub fn run(a: Args) -> Result<()> {
     check_image_size(a.width, a.height)?;
+    for (given, flag) in [
+        (a.env.is_some(), "--env"),
+        (a.samples.is_some(), "--samples"),
+        (a.seed.is_some(), "--seed"),
+    ] {
+        ensure!(
+            !given || a.shading == Shading::Ibl,
+            "{flag} is for an image-based render: add --shading ibl"
+        );
+    }
     ensure!(
-        a.env.is_none() || a.shading == Shading::Ibl,
-        "--env lights an image-based render: add --shading ibl"
-    );
-    ensure!(
-        (1..=ibl::MAX_SAMPLES).contains(&a.samples),
+        (1..=ibl::MAX_SAMPLES).contains(&a.samples()),
         "--samples must be within 1..={} (got {})",
         ibl::MAX_SAMPLES,
-        a.samples
+        a.samples()
     );
+    // The format is the flag's, not the name's: a name that says otherwise is refused.
+    for (path, flag, ext) in [
+        (Some(&a.out), "--out", "png"),
+        (a.heatmap.as_ref(), "--heatmap", "png"),
+        (a.exr.as_ref(), "--exr", "exr"),
+    ] {
+        if let Some(path) = path {
+            ensure!(
+                path.extension()
+                    .is_some_and(|e| e.eq_ignore_ascii_case(ext)),
+                "{flag} {}: writes {}, so give it a .{ext} name",
+                path.display(),
+                ext.to_uppercase()
+            );
+        }
+    }
     // Read the environment before the (possibly long) build, so a bad file fails at once.
     let env = a
         .env
@@ -190,8 +218,8 @@ fn render_ibl(
     };
     let albedo = ibl_albedo(&p.scene, rbvh, p.lod.as_ref(), rays, hits);
     let settings = Settings {
-        samples: a.samples,
-        seed: a.seed,
+        samples: a.samples(),
+        seed: a.seed.unwrap_or(0),
         diagonal: p.scene.bounds().diagonal(),
         surface_offset,
         cone: p.lod.as_ref().map(|_| cone),
@@ -207,7 +235,7 @@ fn render_ibl(
         Structure::Exact(_) => "IBL (exact BVH)",
         Structure::Rbvh(_) => "IBL (RBVH)",
     };
-    let rendered = progressive(label, a.samples, |on_pass| {
+    let rendered = progressive(label, a.samples(), |on_pass| {
         ibl::render(tracer, &frame, env, &settings, on_pass)
     })?;
     if a.common.stats {
