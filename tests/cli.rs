@@ -289,9 +289,61 @@ fn formats_follow_the_flag_and_negative_numbers_reach_their_checks() {
     let out = rbvh(&["build", "--scene", "sphere", "--texels-per-diagonal", "-3"]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
-        !out.status.success() && stderr.contains("-3 is outside"),
+        !out.status.success() && stderr.contains("--texels-per-diagonal: -3 is outside"),
         "{stderr}"
     );
+}
+
+/// A parameter out of range is reported under the flag that set it, not the library's field name.
+#[test]
+fn parameter_errors_name_their_flag() {
+    for (args, needle) in [
+        (
+            &[
+                "render",
+                "--scene",
+                "sphere",
+                "--method",
+                "rbvh",
+                "--lod",
+                "--lod-columns",
+                "0",
+            ][..],
+            "--lod-columns: 0 is outside",
+        ),
+        (
+            &[
+                "bench",
+                "--scene",
+                "sphere",
+                "--quality",
+                "2",
+                "--lod",
+                "--lod-bias",
+                "20",
+            ][..],
+            "--lod-bias: 20 is outside",
+        ),
+        (
+            &[
+                "build",
+                "--scene",
+                "sphere",
+                "--quality",
+                "2",
+                "--max-tile",
+                "2",
+            ][..],
+            "--max-tile: 2 is outside",
+        ),
+    ] {
+        let out = rbvh(args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && stderr.contains(needle),
+            "{args:?}: {stderr}"
+        );
+    }
 }
 
 /// `rbvh scenes` lists the built-in scenes, every one of which renders with no file at all.
@@ -323,7 +375,7 @@ fn bad_quality_and_parameters_are_clear_errors() {
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success(), "{args:?} succeeded");
         assert!(
-            stderr.contains("quality") || stderr.contains("max_angle_deg"),
+            stderr.contains("quality") || stderr.contains("--max-angle: 95 is outside"),
             "{args:?}: {stderr}"
         );
     }
@@ -440,10 +492,10 @@ fn render_and_trace_with_level_of_detail() {
     for (args, needle) in [
         (vec!["--lod-spread", "NaN"], "--lod-spread"),
         (vec!["--lod-spread=-1"], "--lod-spread"),
-        (vec!["--lod-columns", "0"], "lod columns"),
-        (vec!["--lod-min-leaves", "0"], "lod min leaves"),
-        (vec!["--lod-bias", "-9"], "lod bias"),
-        (vec!["--lod-bias", "inf"], "lod bias"),
+        (vec!["--lod-columns", "0"], "--lod-columns"),
+        (vec!["--lod-min-leaves", "0"], "--lod-min-leaves"),
+        (vec!["--lod-bias", "-9"], "--lod-bias"),
+        (vec!["--lod-bias", "inf"], "--lod-bias"),
     ] {
         let mut all = vec![
             "trace",

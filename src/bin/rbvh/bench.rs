@@ -8,7 +8,7 @@ use anyhow::{Context as _, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use rbvh::bench::{self, BenchConfig, Device, Event, Level, RayType};
 
-use crate::prepare::{context_options, LodBuildArgs, Quality};
+use crate::prepare::{context_options, flag_error, LodBuildArgs, Quality};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("quality", |a| a.default_value("all")))]
@@ -126,7 +126,7 @@ pub fn run(a: Args) -> Result<()> {
         }),
     });
     bar.finish_and_clear();
-    let report = result.context("benchmark")?;
+    let report = result.map_err(flag_error).context("benchmark")?;
 
     print!("{}", bench::table(&report));
     println!();

@@ -11,7 +11,7 @@ use rbvh::probe::TraceStats;
 use rbvh::rbvh::{Rbvh, RbvhParams, Subdivision};
 use rbvh::scene::Scene;
 
-use crate::prepare::{step, Quality};
+use crate::prepare::{flag_error, step, Quality};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -75,7 +75,7 @@ pub fn run(a: Args) -> Result<()> {
     }
     for (name, params) in levels {
         let r = step(&format!("building RBVH {name}"), || {
-            Rbvh::build(&scene, &params)
+            Rbvh::build(&scene, &params).map_err(flag_error)
         })?;
         if table {
             println!(
@@ -128,7 +128,7 @@ fn compare_splits(scene: &Scene, level: &str, params: &RbvhParams) -> Result<()>
             ..*params
         };
         let r = step(&format!("building {level} ({name})"), || {
-            Rbvh::build(scene, &p)
+            Rbvh::build(scene, &p).map_err(flag_error)
         })?;
         let start = Instant::now();
         let stats: Vec<TraceStats> = rays.par_iter().map(|ray| r.closest_hit(ray).1).collect();

@@ -199,6 +199,28 @@ pub fn check_image_size(width: u32, height: u32) -> Result<()> {
     Ok(())
 }
 
+/// The library's error about a parameter, reworded to name the command-line flag that set it
+/// (the library names its fields: `texels_per_diagonal`, `lod columns`, ...); any other error as
+/// it is.
+pub fn flag_error(e: rbvh::Error) -> anyhow::Error {
+    const FLAGS: [(&str, &str); 8] = [
+        ("texels_per_diagonal", "--texels-per-diagonal"),
+        ("max_angle_deg", "--max-angle"),
+        ("min_ratio", "--min-area-ratio"),
+        ("max_tile", "--max-tile"),
+        ("min_leaf_texels", "--min-leaf-texels"),
+        ("lod columns", "--lod-columns"),
+        ("lod min leaves", "--lod-min-leaves"),
+        ("lod bias", "--lod-bias"),
+    ];
+    if let rbvh::Error::InvalidParameter { name, message } = &e {
+        if let Some((_, flag)) = FLAGS.iter().find(|(field, _)| field == name) {
+            return anyhow::anyhow!("{flag}: {message}");
+        }
+    }
+    e.into()
+}
+
 /// Runs `f` under a spinner labelled `what`.
 pub fn step<T>(what: &str, f: impl FnOnce() -> T) -> T {
     let bar = ProgressBar::new_spinner().with_message(what.to_string());
@@ -234,7 +256,7 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
             anyhow::ensure!(levels.len() == 1, "--quality: give one level to trace");
             let (_, params) = levels.remove(0);
             Structure::Rbvh(Box::new(step("building RBVH", || {
-                Rbvh::build(&scene, &params)
+                Rbvh::build(&scene, &params).map_err(flag_error)
             })?))
         }
     };
@@ -256,7 +278,7 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
         (Structure::Rbvh(r), true) => {
             let params = c.lod.build.params();
             Some(step("building levels of detail", || {
-                Lod::build(r, &params)
+                Lod::build(r, &params).map_err(flag_error)
             })?)
         }
     };
@@ -498,7 +520,7 @@ impl Quality {
                 if let Some(m) = self.min_leaf_texels {
                     p.min_leaf_texels = m;
                 }
-                p.validate()?;
+                p.validate().map_err(flag_error)?;
                 let name = if self.is_custom() {
                     "custom".to_string()
                 } else {
