@@ -684,3 +684,28 @@ fn bench_exits_non_zero_on_an_invalid_measurement() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// Each command shows the flags it uses: `paint` (an RBVH, never level of detail or another
+/// structure) has no --method or --lod, and the commands that trace one level say so.
+#[test]
+fn commands_show_only_the_flags_they_use() {
+    let help = |command: &str| {
+        let out = rbvh(&[command, "--help"]);
+        assert!(out.status.success());
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let paint = help("paint");
+    for flag in ["--method", "--lod"] {
+        assert!(
+            !paint.lines().any(|l| l.trim_start().starts_with(flag)),
+            "paint shows {flag}:\n{paint}"
+        );
+    }
+    assert!(paint.contains("--strokes") && paint.contains("--quality"));
+    let out = rbvh(&["paint", "--lod", "--strokes", "s.txt", "--out", "o.rbvh"]);
+    assert!(!out.status.success());
+    for command in ["render", "trace", "paint"] {
+        assert!(help(command).contains("one of 0..4"), "{command}");
+    }
+    assert!(help("bench").contains("comma-separated"));
+}

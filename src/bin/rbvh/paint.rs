@@ -5,20 +5,22 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{bail, ensure, Context as _, Result};
+use anyhow::{bail, Context as _, Result};
 use rbvh::bvh::LEAF_BIT;
 use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{Painter, Query, Tracer};
 use rbvh::output;
 use rbvh::surface::{strokes, Brush};
 
-use crate::prepare::{check_image_size, prepare, step, Common, Method, Prepared, Structure};
+use crate::prepare::{
+    check_image_size, prepare, step, Common, LodArgs, Method, Prepared, Source, Structure,
+};
 use crate::render::lambert;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
     #[command(flatten)]
-    common: Common,
+    source: Source,
     /// Strokes file (format in README.md, "Surface data and painting").
     #[arg(long)]
     strokes: PathBuf,
@@ -40,14 +42,13 @@ pub struct Args {
 
 pub fn run(a: Args) -> Result<()> {
     check_image_size(a.width, a.height)?;
-    ensure!(
-        !a.common.lod.lod,
-        "--lod: painting writes the RBVH's texels; coarse levels of detail have none to paint"
-    );
     let dabs = strokes::load(&a.strokes)?;
+    // Painting writes the RBVH's texels: no other structure, and no coarse levels of detail,
+    // which have none to paint.
     let common = Common {
+        source: a.source.clone(),
         method: Method::Rbvh,
-        ..a.common.clone()
+        lod: LodArgs::off(),
     };
     let mut p = prepare(&common)?;
     let camera = p.scene.camera_or_framed(a.width as f32 / a.height as f32);

@@ -15,15 +15,28 @@ use rbvh::probe::{MeanCounters, RayCounters};
 use rbvh::rbvh::Rbvh;
 use rbvh::scene::Scene;
 
-/// Options shared by the commands that trace.
+/// Options shared by the commands that trace through a structure of their choice.
 #[derive(Args, Clone, Debug)]
 pub struct Common {
-    /// Built-in scene name, OBJ/glTF/GLB file, or scene file (.toml).
-    #[arg(long, default_value = "default")]
-    pub scene: String,
+    #[command(flatten)]
+    pub source: Source,
     /// Acceleration structure to trace through.
     #[arg(long, value_enum, default_value_t = Method::Exact)]
     pub method: Method,
+    #[command(flatten)]
+    pub lod: LodArgs,
+}
+
+/// Where the scene and its RBVH come from, and the device: what every command that traces takes
+/// (`paint`, which needs an RBVH without level of detail, takes only these). They trace one level.
+#[derive(Args, Clone, Debug)]
+#[command(mut_arg("quality", |a| a.help(
+    "Quality preset of the RBVH: one of 0..4 or Q0..Q4 (Q0 coarsest, Q4 finest)"
+)))]
+pub struct Source {
+    /// Built-in scene name (`rbvh scenes` lists them), OBJ/glTF/GLB file, or scene file (.toml).
+    #[arg(long, default_value = "default")]
+    pub scene: String,
     #[command(flatten)]
     pub quality: Quality,
     /// Trace this saved RBVH (from `rbvh build --out`) instead of building one (implies --method rbvh).
@@ -38,8 +51,6 @@ pub struct Common {
     /// Print timings and ray throughput (for --method rbvh also the exact BVH's on the same rays).
     #[arg(long)]
     pub stats: bool,
-    #[command(flatten)]
-    pub lod: LodArgs,
 }
 
 /// Level of detail (RBVH only): coarse column grids at inner nodes, chosen per ray by its cone.
@@ -52,8 +63,27 @@ pub struct LodArgs {
     #[command(flatten)]
     pub build: LodBuildArgs,
     /// Cone spread of rays from a file (radians per unit of t; their width at t = 0 is 0).
-    #[arg(long, default_value_t = 1e-3, requires = "lod")]
+    #[arg(long, default_value_t = LOD_SPREAD, requires = "lod")]
     pub lod_spread: f32,
+}
+
+/// The default of `--lod-spread`.
+const LOD_SPREAD: f32 = 1e-3;
+
+impl LodArgs {
+    /// No level of detail, for a command without the flags.
+    pub fn off() -> LodArgs {
+        let d = LodParams::default();
+        LodArgs {
+            lod: false,
+            build: LodBuildArgs {
+                lod_columns: d.columns,
+                lod_min_leaves: d.min_leaves,
+                lod_bias: d.bias,
+            },
+            lod_spread: LOD_SPREAD,
+        }
+    }
 }
 
 /// How levels of detail are built and chosen (with --lod): see `rbvh::lod::LodParams`.
@@ -235,24 +265,25 @@ pub fn step<T>(what: &str, f: impl FnOnce() -> T) -> T {
 
 pub fn prepare(c: &Common) -> Result<Prepared> {
     let t = Instant::now();
-    let scene = step("loading scene", || Scene::load(&c.scene))
-        .with_context(|| format!("loading scene {:?}", c.scene))?;
+    let scene = step("loading scene", || Scene::load(&c.source.scene))
+        .with_context(|| format!("loading scene {:?}", c.source.scene))?;
     let load_ms = t.elapsed().as_secs_f64() * 1e3;
     if let Some(warning) = scene.precision_warning() {
         eprintln!("warning: {warning}");
     }
     let t = Instant::now();
-    let structure = match (&c.rbvh, c.method) {
+    let structure = match (&c.source.rbvh, c.method) {
         (Some(path), _) => {
             let r = step("loading RBVH", || Rbvh::load(path))
                 .with_context(|| format!("loading RBVH {}", path.display()))?;
-            r.check_built_from(&scene)
-                .with_context(|| format!("RBVH {} with scene {:?}", path.display(), c.scene))?;
+            r.check_built_from(&scene).with_context(|| {
+                format!("RBVH {} with scene {:?}", path.display(), c.source.scene)
+            })?;
             Structure::Rbvh(Box::new(r))
         }
         (None, Method::Exact) => Structure::Exact(step("building BVH", || Bvh::build(&scene))?),
         (None, Method::Rbvh) => {
-            let mut levels = c.quality.levels()?;
+            let mut levels = c.source.quality.levels()?;
             anyhow::ensure!(levels.len() == 1, "--quality: give one level to trace");
             let (_, params) = levels.remove(0);
             Structure::Rbvh(Box::new(step("building RBVH", || {
@@ -260,7 +291,7 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
             })?))
         }
     };
-    if let (Structure::Rbvh(r), Some(_)) = (&structure, &c.rbvh) {
+    if let (Structure::Rbvh(r), Some(_)) = (&structure, &c.source.rbvh) {
         if scene.surface.is_some() && r.colours.is_none() {
             eprintln!(
                 "warning: {} has materials but the RBVH file has no colour channel: its \
@@ -282,9 +313,12 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
             })?)
         }
     };
-    let ctx = Context::new(&context_options(c.device.as_deref(), c.validate)?)
-        .context("creating the Vulkan device")?;
-    if c.stats {
+    let ctx = Context::new(&context_options(
+        c.source.device.as_deref(),
+        c.source.validate,
+    )?)
+    .context("creating the Vulkan device")?;
+    if c.source.stats {
         eprintln!(
             "scene {}: {} triangles, loaded in {load_ms:.1} ms",
             scene.name,
@@ -305,7 +339,7 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
                 r.stats.heightfield_leaves,
                 r.stats.triangle_leaves,
                 r.depth,
-                match &c.rbvh {
+                match &c.source.rbvh {
                     Some(path) => format!(
                         "loaded from {} in {structure_ms:.1} ms (built in {:.1} ms when it was made)",
                         path.display(),

@@ -128,7 +128,7 @@ pub fn run(a: Args) -> Result<()> {
         p.trace(&tracer, &rays, cones, Query::Closest, false)
     })?;
     // Counted in a trace of their own: the timed one compiles the counting away.
-    let counters = if a.heatmap.is_some() || a.common.stats {
+    let counters = if a.heatmap.is_some() || a.common.source.stats {
         step("counting each ray's work", || {
             p.trace(&tracer, &rays, cones, Query::Closest, true)
         })?
@@ -136,7 +136,7 @@ pub fn run(a: Args) -> Result<()> {
     } else {
         None
     };
-    if a.common.stats {
+    if a.common.source.stats {
         report_throughput(&p, &rays, &cones(), Query::Closest, &traced)?;
         if let Some(c) = &counters {
             report_counters(p.structure.label(), c);
@@ -238,7 +238,7 @@ fn render_ibl(
     let rendered = progressive(label, a.samples(), |on_pass| {
         ibl::render(tracer, &frame, env, &settings, on_pass)
     })?;
-    if a.common.stats {
+    if a.common.source.stats {
         report_ibl("this render", &rendered);
         if let Structure::Rbvh(_) = p.structure {
             compare_with_exact(p, env, &frame, &settings, &rendered)?;

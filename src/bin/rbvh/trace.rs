@@ -54,7 +54,7 @@ pub fn run(a: Args) -> Result<()> {
         let traced = step("tracing", || {
             p.trace(&tracer, &rays, || cones.clone(), query, false)
         })?;
-        if a.common.stats {
+        if a.common.source.stats {
             report_throughput(&p, &rays, &cones, query, &traced)?;
         }
         traced.hits
