@@ -142,6 +142,8 @@ fn a_missing_golden_fails_with_advice_and_bless_creates_it() {
     let ctx = common::context();
     let dir = tempfile::tempdir().unwrap();
     let (golden, out) = (dir.path().join("golden"), dir.path().join("out"));
+    // The folder is there; the case's golden files are not.
+    std::fs::create_dir(&golden).unwrap();
     let mut config = Config {
         cases: vec![Case::new("sphere", Method::Exact)],
         width: 48,
@@ -201,6 +203,19 @@ fn cli_fails_on_a_missing_golden_and_an_unknown_scene() {
     let dir = tempfile::tempdir().unwrap();
     let golden = dir.path().join("g");
     let out = dir.path().join("o");
+    // Without the folder the run stops at once (a_missing_golden_folder_is_one_clear_error).
+    let (ok, text) = rbvh(&[
+        "regress",
+        "--scene",
+        "plane",
+        "--method",
+        "exact",
+        "--golden",
+        golden.to_str().unwrap(),
+    ]);
+    assert!(!ok && text.contains("no golden folder"), "{text}");
+    assert!(!text.contains("plane_exact"), "{text}");
+    std::fs::create_dir(&golden).unwrap();
     let common = [
         "--golden",
         golden.to_str().unwrap(),
@@ -248,4 +263,23 @@ fn cli_fails_on_a_missing_golden_and_an_unknown_scene() {
         !ok && text.contains("no-such-scene") && !text.contains("panicked"),
         "{text}"
     );
+}
+
+/// Comparing against a golden folder that is not there is one clear error before any render, not
+/// a failure per case; blessing into it is fine (it is made).
+#[test]
+fn a_missing_golden_folder_is_one_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("no-goldens");
+    let config = Config::new(&missing, dir.path().join("out"));
+    let e = config.validate().unwrap_err().to_string();
+    assert!(
+        e.contains("no golden folder") && e.contains("no-goldens") && e.contains("--bless"),
+        "{e}"
+    );
+    let bless = Config {
+        mode: Mode::Bless,
+        ..config
+    };
+    bless.validate().unwrap();
 }

@@ -130,6 +130,17 @@ impl Config {
                 crate::rbvh::RbvhParams::quality(level)?;
             }
         }
+        // Comparing against a folder that is not there would fail every case alone; say it once.
+        if self.mode == Mode::Compare && !self.golden_dir.is_dir() {
+            return Err(Error::param(
+                "golden",
+                format!(
+                    "no golden folder {}: run from the repository (whose goldens are in {GOLDEN_DIR}), \
+                     give the folder with --golden, or --bless to make goldens there",
+                    self.golden_dir.display()
+                ),
+            ));
+        }
         cases::check_unique_names(&self.cases)
     }
 }

@@ -83,7 +83,7 @@ impl Report {
             "FLIP mean",
             format!("FLIP>{}", t.outlier_flip),
             "depth off",
-            "max rel",
+            "max Δz/z",
         );
         let _ = writeln!(
             out,
@@ -92,7 +92,7 @@ impl Report {
             format!("≤{}", t.flip_mean),
             format!("≤{}%", 100.0 * t.outlier_fraction),
             format!("≤{}%", 100.0 * t.depth_outlier_fraction),
-            format!("({:.0e})", t.depth_relative),
+            "(shown)",
         );
         for case in &self.cases {
             let (flip, outliers) = match &case.image {
@@ -122,6 +122,12 @@ impl Report {
                 case.name
             );
         }
+        let _ = writeln!(
+            out,
+            "depth off: pixels whose depth differs by more than {:.0e} of itself, or that hit in one \
+             image and miss in the other; max Δz/z: the largest relative depth difference",
+            t.depth_relative
+        );
         for case in self.failures() {
             let _ = writeln!(out, "{}:", case.name);
             let problems = [
