@@ -40,6 +40,8 @@ fn render_writes_png_exr_and_heatmap() {
         arg(&exr),
         "--heatmap",
         arg(&heat),
+        "--heatmap-max",
+        "500",
         "--stats",
     ]);
     let stderr = String::from_utf8_lossy(&out.stderr);
@@ -50,7 +52,15 @@ fn render_writes_png_exr_and_heatmap() {
     );
     let img = image::open(&png).unwrap();
     assert_eq!((img.width(), img.height()), (96, 64));
-    assert!(exr.exists() && heat.exists());
+    assert!(exr.exists());
+    // The heat map: the picture at the fixed scale asked for, with its colour bar below.
+    assert!(stderr.contains("0 to 500 on its colour bar"), "{stderr}");
+    let map = image::open(&heat).unwrap();
+    assert!(
+        map.width() == 96 && map.height() > 64,
+        "{:?}",
+        (map.width(), map.height())
+    );
 }
 
 #[test]

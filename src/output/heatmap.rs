@@ -32,6 +32,76 @@ pub fn heatmap(values: &[u32], width: u32, height: u32, max: Option<u32>) -> cra
     })
 }
 
+/// `map` (a [`heatmap`] scaled to `max`) with a colour bar below it: the Turbo map from 0 at the
+/// left to `max` at the right, labelled with both numbers, so that a picture says its own scale
+/// and two pictures made with the same `max` can be compared by eye. The bar is as wide as the
+/// picture; the digits are drawn from a built-in 3 × 5 pixel font at twice that size, so nothing
+/// depends on fonts being installed.
+pub fn with_colour_bar(map: &Image, max: u32) -> Image {
+    const GAP: u32 = 3;
+    const BAR: u32 = 10;
+    const SCALE: u32 = 2;
+    const LABEL: u32 = 5 * SCALE;
+    let extra = GAP + BAR + GAP + LABEL + GAP;
+    let (width, height) = (map.width, map.height + extra);
+    let mut pixels = map.pixels.clone();
+    pixels.resize(width as usize * height as usize, Vec3::ZERO);
+    let row = |y: u32| y as usize * width as usize;
+    for x in 0..width {
+        let colour = turbo(f64::from(x) / f64::from(width.saturating_sub(1).max(1)));
+        for y in map.height + GAP..map.height + GAP + BAR {
+            pixels[row(y) + x as usize] = colour;
+        }
+    }
+    let top = map.height + GAP + BAR + GAP;
+    let mut text = |label: &str, right_aligned: bool| {
+        let text_width = label.len() as u32 * 4 * SCALE;
+        let left = if right_aligned {
+            width.saturating_sub(text_width)
+        } else {
+            0
+        };
+        for (k, digit) in label.bytes().enumerate() {
+            let glyph = DIGITS[usize::from(digit - b'0')];
+            for (gy, bits) in glyph.iter().enumerate() {
+                for gx in 0..3u32 {
+                    if bits >> (2 - gx) & 1 == 0 {
+                        continue;
+                    }
+                    for (dx, dy) in (0..SCALE).flat_map(|dx| (0..SCALE).map(move |dy| (dx, dy))) {
+                        let x = left + (k as u32 * 4 + gx) * SCALE + dx;
+                        let y = top + gy as u32 * SCALE + dy;
+                        if x < width {
+                            pixels[row(y) + x as usize] = Vec3::ONE;
+                        }
+                    }
+                }
+            }
+        }
+    };
+    text("0", false);
+    text(&max.max(1).to_string(), true);
+    Image {
+        width,
+        height,
+        pixels,
+    }
+}
+
+/// Digits 0-9 in a 3 × 5 pixel font: one row per entry, the high bit of three on the left.
+const DIGITS: [[u8; 5]; 10] = [
+    [0b111, 0b101, 0b101, 0b101, 0b111],
+    [0b010, 0b110, 0b010, 0b010, 0b111],
+    [0b111, 0b001, 0b111, 0b100, 0b111],
+    [0b111, 0b001, 0b111, 0b001, 0b111],
+    [0b101, 0b101, 0b111, 0b001, 0b001],
+    [0b111, 0b100, 0b111, 0b001, 0b111],
+    [0b111, 0b100, 0b111, 0b101, 0b111],
+    [0b111, 0b001, 0b001, 0b001, 0b001],
+    [0b111, 0b101, 0b111, 0b101, 0b111],
+    [0b111, 0b101, 0b111, 0b001, 0b111],
+];
+
 /// The Turbo colour map at `x ∈ [0, 1]`, as linear RGB.
 ///
 /// Turbo was designed by Anton Mikhailov (Google AI blog, "Turbo, An Improved Rainbow Colormap
@@ -98,5 +168,29 @@ mod tests {
         let capped = heatmap(&[0, 5, 10, 20], 2, 2, Some(10)).unwrap();
         assert_eq!(capped.pixels[2], capped.pixels[3]);
         assert!(heatmap(&[1, 2, 3], 2, 2, None).is_err());
+    }
+
+    #[test]
+    fn the_colour_bar_runs_the_map_and_is_labelled_with_its_ends() {
+        let map = heatmap(&[0; 64 * 4], 64, 4, Some(250)).unwrap();
+        let barred = with_colour_bar(&map, 250);
+        assert_eq!(barred.width, 64);
+        assert!(barred.height > map.height + 20);
+        // The picture is unchanged on top.
+        assert_eq!(&barred.pixels[..map.pixels.len()], &map.pixels[..]);
+        // The bar: Turbo's dark blue at the left end, dark red at the right.
+        let bar_row = (map.height + 5) as usize * 64;
+        assert_eq!(barred.pixels[bar_row], turbo(0.0));
+        assert_eq!(barred.pixels[bar_row + 63], turbo(1.0));
+        // Labels: "0" at the left, "250" (three digits, 8 pixels each) at the right, in white.
+        let label_rows = &barred.pixels[(map.height + 16) as usize * 64..];
+        let white_columns = |range: std::ops::Range<usize>| {
+            range
+                .filter(|&x| label_rows.chunks(64).any(|row| row[x] == Vec3::ONE))
+                .count()
+        };
+        assert!(white_columns(0..8) > 0);
+        assert_eq!(white_columns(8..40), 0);
+        assert!(white_columns(40..64) >= 3 * 4);
     }
 }

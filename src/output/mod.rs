@@ -15,7 +15,7 @@ pub(crate) use srgb::decode as srgb_decode;
 pub(crate) use srgb::encode_u8 as srgb_u8;
 
 pub use self::exr::write_exr;
-pub use self::heatmap::heatmap;
+pub use self::heatmap::{heatmap, with_colour_bar};
 pub use self::image::Image;
 pub use self::png::write_png;
 pub use self::shade::{shade, shade_normals, shade_with_albedo};

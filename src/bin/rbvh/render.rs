@@ -36,9 +36,14 @@ pub struct Args {
     /// Also write an EXR with R,G,B, Z (hit distance) and N.X,N.Y,N.Z.
     #[arg(long)]
     exr: Option<PathBuf>,
-    /// Also write a PNG heat map of traversal steps (nodes visited + triangles tested) per pixel.
+    /// Also write a PNG heat map of traversal steps (nodes visited + triangles tested + cells
+    /// stepped) per pixel, with a colour bar labelled with its scale.
     #[arg(long)]
     heatmap: Option<PathBuf>,
+    /// The heat map's scale: this many steps or more are dark red (default: the largest count),
+    /// so that two renders' maps compare.
+    #[arg(long, requires = "heatmap")]
+    heatmap_max: Option<u32>,
     #[arg(long, default_value_t = 800)]
     width: u32,
     #[arg(long, default_value_t = 600)]
@@ -166,8 +171,16 @@ pub fn run(a: Args) -> Result<()> {
     }
     if let (Some(path), Some(counters)) = (&a.heatmap, &counters) {
         let steps: Vec<u32> = counters.iter().map(RayCounters::steps).collect();
-        output::write_png(path, &output::heatmap(&steps, a.width, a.height, None)?)?;
-        eprintln!("wrote {}", path.display());
+        let max = a
+            .heatmap_max
+            .unwrap_or_else(|| steps.iter().copied().max().unwrap_or(0))
+            .max(1);
+        let map = output::heatmap(&steps, a.width, a.height, Some(max))?;
+        output::write_png(path, &output::with_colour_bar(&map, max))?;
+        eprintln!(
+            "wrote {} (steps per pixel, 0 to {max} on its colour bar)",
+            path.display()
+        );
     }
     Ok(())
 }
