@@ -134,6 +134,23 @@ fn a_broken_rbvh_shader_fails_with_a_diff_image() {
     for name in ["blob_rbvh_q2_render.png", "blob_rbvh_q2_depth_diff.png"] {
         assert!(out.path().join(name).exists(), "{name}");
     }
+    // Golden, render and the FLIP picture with its colour bar, side by side: the golden on the
+    // left as shipped.
+    let compare = image::open(out.path().join("blob_rbvh_q2_compare.png"))
+        .unwrap()
+        .to_rgb8();
+    assert_eq!(compare.width(), 3 * regress::WIDTH + 2 * 4);
+    assert!(compare.height() > regress::HEIGHT);
+    let golden = image::open(shipped_goldens().join("blob_rbvh_q2.png"))
+        .unwrap()
+        .to_rgb8();
+    for (x, y) in [(0, 0), (80, 60), (159, 119)] {
+        assert_eq!(
+            compare.get_pixel(x, y),
+            golden.get_pixel(x, y),
+            "({x}, {y})"
+        );
+    }
     assert!(report.table().contains("FAIL"), "{}", report.table());
 }
 

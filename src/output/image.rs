@@ -53,3 +53,29 @@ pub(crate) fn check_writable(image: &Image) -> crate::Result<()> {
     }
     check_per_pixel("pixels", image.pixels.len(), image.width, image.height)
 }
+
+/// `pictures` left to right with `gap` black pixels between them, top-aligned; shorter pictures
+/// are padded with black below. For comparisons that a viewer takes in at a glance.
+pub fn side_by_side(pictures: &[&Image], gap: u32) -> Image {
+    let height = pictures.iter().map(|p| p.height).max().unwrap_or(0);
+    let gaps = gap * (pictures.len() as u32).saturating_sub(1);
+    let width = pictures.iter().map(|p| p.width).sum::<u32>() + gaps;
+    let mut pixels = vec![Vec3::ZERO; width as usize * height as usize];
+    let mut left = 0usize;
+    for picture in pictures {
+        for (y, row) in picture
+            .pixels
+            .chunks(picture.width.max(1) as usize)
+            .enumerate()
+        {
+            let start = y * width as usize + left;
+            pixels[start..start + row.len()].copy_from_slice(row);
+        }
+        left += (picture.width + gap) as usize;
+    }
+    Image {
+        width,
+        height,
+        pixels,
+    }
+}

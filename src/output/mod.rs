@@ -16,6 +16,6 @@ pub(crate) use srgb::encode_u8 as srgb_u8;
 
 pub use self::exr::write_exr;
 pub use self::heatmap::{heatmap, with_colour_bar};
-pub use self::image::Image;
+pub use self::image::{side_by_side, Image};
 pub use self::png::write_png;
 pub use self::shade::{shade, shade_normals, shade_with_albedo};

@@ -44,6 +44,20 @@ impl Rgb8 {
                 .collect(),
         }
     }
+
+    /// Back to linear RGB, to be shown beside other pictures.
+    pub fn to_linear(&self) -> Image {
+        let channel = |b: u8| crate::output::srgb_decode(f32::from(b) / 255.0);
+        Image {
+            width: self.width,
+            height: self.height,
+            pixels: self
+                .bytes
+                .chunks_exact(3)
+                .map(|c| glam::Vec3::new(channel(c[0]), channel(c[1]), channel(c[2])))
+                .collect(),
+        }
+    }
 }
 
 /// Reads a golden PNG as 8-bit sRGB (any PNG colour type is converted; alpha is dropped).

@@ -7,8 +7,10 @@
 //! `<case>_depth.exr` (the primary hit distances, channel `Z`). A render passes when ꟻLIP finds
 //! its image close to the golden's and its hit distances agree; [`Tolerance`] gives the limits
 //! and why they are what they are. A failing case leaves `<case>_render.png`, the ꟻLIP error
-//! picture `<case>_diff.png` and, when the depths disagree, `<case>_depth_diff.png` in the output
-//! folder; the names never collide with goldens, so the two folders may be one.
+//! picture `<case>_diff.png`, the three side by side with the error's colour bar
+//! (`<case>_compare.png`: golden, render, error) and, when the depths disagree,
+//! `<case>_depth_diff.png` in the output folder; the names never collide with goldens, so the two
+//! folders may be one.
 //!
 //! ```no_run
 //! use rbvh::{gpu::{Context, ContextOptions}, regress};
@@ -231,7 +233,7 @@ fn compare_case(config: &Config, name: &str, render: &cases::Render) -> Result<C
                         score,
                         pass: score.passes(tol),
                     },
-                    Some(map),
+                    Some((golden, map)),
                 ),
                 Err(e) => (Check::Unusable(format!("{}: {e}", png.display())), None),
             }
@@ -268,8 +270,13 @@ fn compare_case(config: &Config, name: &str, render: &cases::Render) -> Result<C
             Ok(())
         };
         write("render", &render.image)?;
-        if let Some(map) = flip_map {
-            write("diff", &map.picture()?)?;
+        if let Some((golden, map)) = flip_map {
+            let diff = map.picture()?;
+            write("diff", &diff)?;
+            // Golden, render and the FLIP error (0 to 1 on its colour bar), side by side.
+            let diff = crate::output::with_colour_bar(&diff, 1);
+            let pictures = [&golden.to_linear(), &render.image, &diff];
+            write("compare", &crate::output::side_by_side(&pictures, 4))?;
         }
         if let Some(map) = depth_map {
             write("depth_diff", &map.picture()?)?;
