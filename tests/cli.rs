@@ -719,3 +719,75 @@ fn commands_show_only_the_flags_they_use() {
     }
     assert!(help("bench").contains("comma-separated"));
 }
+
+/// --camera-eye/--camera-target/--vfov place the camera of a scene without one (or replace
+/// it), refused with the scene file's reasons when they cannot make rays.
+#[test]
+fn camera_flags_place_the_camera() {
+    let dir = tempfile::tempdir().unwrap();
+    let (framed, placed) = (dir.path().join("f.png"), dir.path().join("p.png"));
+    let render = |extra: &[&str], out: &Path| {
+        let mut args = vec![
+            "render", "--scene", "sphere", "--width", "32", "--height", "24",
+        ];
+        args.extend(extra);
+        args.extend(["--out", arg(out)]);
+        rbvh(&args)
+    };
+    assert!(render(&[], &framed).status.success());
+    let out = render(
+        &[
+            "--camera-eye",
+            "0,0,4",
+            "--camera-target",
+            "0,0,0",
+            "--vfov",
+            "30",
+        ],
+        &placed,
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (a, b) = (image::open(&framed).unwrap(), image::open(&placed).unwrap());
+    assert_ne!(
+        a.to_rgb8().into_raw(),
+        b.to_rgb8().into_raw(),
+        "the camera moved nothing"
+    );
+    for (extra, needle) in [
+        (
+            &["--camera-eye", "0,0,4", "--camera-target", "0,0,4"][..],
+            "must differ",
+        ),
+        (
+            &["--camera-eye", "0,3,0", "--camera-target", "0,0,0"][..],
+            "`up`",
+        ),
+        (
+            &["--camera-eye", "0,0,4", "--camera-target", "0,0"][..],
+            "three numbers",
+        ),
+        (&["--camera-eye", "0,0,4"][..], "--camera-target"),
+        (
+            &[
+                "--camera-eye",
+                "0,0,4",
+                "--camera-target",
+                "0,0,0",
+                "--vfov",
+                "0",
+            ][..],
+            "vfov",
+        ),
+    ] {
+        let out = render(extra, &dir.path().join("never.png"));
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && stderr.contains(needle),
+            "{extra:?}: {stderr}"
+        );
+    }
+}

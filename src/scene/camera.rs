@@ -15,14 +15,72 @@ pub struct Camera {
     pub vfov_deg: f32,
 }
 
-/// The vertical field of view of framing cameras: moderate, so perspective stays gentle.
-const FRAMING_VFOV_DEG: f32 = 40.0;
+/// The vertical field of view of framing cameras, and of cameras that give none: moderate, so
+/// perspective stays gentle.
+pub const DEFAULT_VFOV_DEG: f32 = 40.0;
 
 /// Aspect ratios are clamped to this range (and its inverse) when framing, so an absurd window
 /// shape cannot push the eye to infinity.
 const MAX_ASPECT: f32 = 1.0e4;
 
+/// Why [`Camera::look_at`] refused a camera.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum CameraFault {
+    /// A coordinate or the field of view is NaN or infinite.
+    NotFinite,
+    /// The eye is the target: no view direction.
+    SameEyeAndTarget,
+    /// `up` is zero or parallel to the view direction: no roll.
+    BadUp,
+    /// The vertical field of view (degrees) is outside (0, 180).
+    BadVfov(f32),
+}
+
+impl std::fmt::Display for CameraFault {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            CameraFault::NotFinite => write!(f, "camera coordinates must be finite"),
+            CameraFault::SameEyeAndTarget => write!(f, "camera `target` must differ from `eye`"),
+            CameraFault::BadUp => write!(
+                f,
+                "camera `up` must be non-zero and not parallel to the view direction"
+            ),
+            CameraFault::BadVfov(v) => write!(f, "`vfov` must be in (0, 180) degrees, got {v}"),
+        }
+    }
+}
+
 impl Camera {
+    /// The camera at `eye` looking at `target`, rolled by `up`, with a vertical field of view of
+    /// `vfov_deg` degrees; refused when it cannot make rays (the fault says why, for the caller
+    /// to place: a scene file names the line, the CLI the flag).
+    pub fn look_at(
+        eye: Vec3,
+        target: Vec3,
+        up: Vec3,
+        vfov_deg: f32,
+    ) -> Result<Camera, CameraFault> {
+        if !(eye.is_finite() && target.is_finite() && up.is_finite()) {
+            return Err(CameraFault::NotFinite);
+        }
+        if eye == target {
+            return Err(CameraFault::SameEyeAndTarget);
+        }
+        let view = (target - eye).normalize();
+        if up.length() == 0.0 || view.cross(up.normalize()).length() < 1.0e-4 {
+            return Err(CameraFault::BadUp);
+        }
+        if !(vfov_deg > 0.0 && vfov_deg < 180.0) {
+            return Err(CameraFault::BadVfov(vfov_deg));
+        }
+        Ok(Camera {
+            eye,
+            target,
+            up,
+            vfov_deg,
+        })
+    }
+
     /// Frames `bounds` for images of `aspect` = width/height: looks at the centre from the
     /// direction (0.8, 0.55, 1.3), a three-quarter view from above that shows three faces of a
     /// box, far enough that the bounding sphere fits both the vertical and the horizontal field
@@ -36,14 +94,14 @@ impl Camera {
         } else {
             1.0
         };
-        let half_v = (0.5 * FRAMING_VFOV_DEG).to_radians();
+        let half_v = (0.5 * DEFAULT_VFOV_DEG).to_radians();
         let half_h = (half_v.tan() * aspect).atan();
         let distance = radius / half_v.min(half_h).sin();
         Camera {
             eye: center + Vec3::new(0.8, 0.55, 1.3).normalize() * distance,
             target: center,
             up: Vec3::Y,
-            vfov_deg: FRAMING_VFOV_DEG,
+            vfov_deg: DEFAULT_VFOV_DEG,
         }
     }
 
@@ -118,5 +176,36 @@ impl View {
         let sy = 1.0 - 2.0 * y * self.inv_height;
         let dir = (self.forward + sx * self.right + sy * self.up).normalize();
         Ray::new(self.eye, dir, 0.0, f32::INFINITY)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn look_at_refuses_cameras_that_cannot_make_rays() {
+        let (eye, target) = (Vec3::new(0.0, 0.0, 4.0), Vec3::ZERO);
+        let camera = Camera::look_at(eye, target, Vec3::Y, 30.0).unwrap();
+        assert_eq!((camera.eye, camera.vfov_deg), (eye, 30.0));
+        let fault = |eye, target, up, vfov| Camera::look_at(eye, target, up, vfov).unwrap_err();
+        assert_eq!(
+            fault(eye, eye, Vec3::Y, 30.0),
+            CameraFault::SameEyeAndTarget
+        );
+        assert_eq!(fault(Vec3::Y, target, Vec3::Y, 30.0), CameraFault::BadUp);
+        assert_eq!(fault(eye, target, Vec3::ZERO, 30.0), CameraFault::BadUp);
+        assert_eq!(
+            fault(eye, target, Vec3::Y, 180.0),
+            CameraFault::BadVfov(180.0)
+        );
+        assert!(matches!(
+            fault(eye, target, Vec3::Y, f32::NAN),
+            CameraFault::BadVfov(_)
+        ));
+        assert_eq!(
+            fault(Vec3::NAN, target, Vec3::Y, 30.0),
+            CameraFault::NotFinite
+        );
     }
 }

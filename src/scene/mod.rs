@@ -22,7 +22,7 @@ mod obj;
 mod scene_file;
 pub mod texture;
 
-pub use camera::Camera;
+pub use camera::{Camera, CameraFault, DEFAULT_VFOV_DEG};
 pub use light::Light;
 pub use material::{Material, SurfaceMaterials, NO_MATERIAL};
 pub use mesh::{ObjectSurface, Scene};

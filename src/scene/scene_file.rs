@@ -11,8 +11,9 @@ use glam::{Mat4, Vec3};
 use serde::Deserialize;
 use toml::Spanned;
 
+use super::camera::DEFAULT_VFOV_DEG;
 use super::load::load_mesh_file;
-use super::{Camera, Light, Scene};
+use super::{Camera, CameraFault, Light, Scene};
 use crate::{Error, Result};
 
 #[derive(Deserialize)]
@@ -57,9 +58,6 @@ enum ScaleEntry {
     Uniform(f32),
     PerAxis([f32; 3]),
 }
-
-/// The default vertical field of view, matching framing cameras.
-const DEFAULT_VFOV_DEG: f32 = 40.0;
 
 /// The text of the scene file at `path`, and the file parsed from it (with at least one mesh).
 fn parse(path: &Path) -> Result<(String, SceneFile)> {
@@ -147,32 +145,16 @@ impl Source<'_> {
         let up =
             c.up.as_ref()
                 .map_or(Ok(Vec3::Y), |up| self.vec3("up", up))?;
-        if eye == target {
-            return Err(self.error(c.target.span(), "camera `target` must differ from `eye`"));
-        }
-        let view = (target - eye).normalize();
-        if up.length() == 0.0 || view.cross(up.normalize()).length() < 1.0e-4 {
-            let span = c.up.as_ref().map_or(entry.span(), Spanned::span);
-            return Err(self.error(
-                span,
-                "camera `up` must be non-zero and not parallel to the view direction",
-            ));
-        }
-        let vfov_deg = match &c.vfov {
-            Some(v) if !(v.get_ref() > &0.0 && v.get_ref() < &180.0) => {
-                return Err(self.error(
-                    v.span(),
-                    format!("`vfov` must be in (0, 180) degrees, got {}", v.get_ref()),
-                ));
-            }
-            Some(v) => *v.get_ref(),
-            None => DEFAULT_VFOV_DEG,
-        };
-        Ok(Camera {
-            eye,
-            target,
-            up,
-            vfov_deg,
+        let vfov_deg = c.vfov.as_ref().map_or(DEFAULT_VFOV_DEG, |v| *v.get_ref());
+        Camera::look_at(eye, target, up, vfov_deg).map_err(|fault| {
+            // The line of the entry at fault.
+            let span = match fault {
+                CameraFault::SameEyeAndTarget => c.target.span(),
+                CameraFault::BadUp => c.up.as_ref().map_or(entry.span(), Spanned::span),
+                CameraFault::BadVfov(_) => c.vfov.as_ref().map_or(entry.span(), Spanned::span),
+                CameraFault::NotFinite => entry.span(),
+            };
+            self.error(span, fault.to_string())
         })
     }
 

@@ -9,11 +9,12 @@ use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use rbvh::bvh::Bvh;
 use rbvh::geom::{Hit, Ray};
+use rbvh::glam::Vec3;
 use rbvh::gpu::{Addressing, Context, ContextOptions, Query, Reach, Traced, Tracer, Validation};
 use rbvh::lod::{Lod, LodParams, RayCone};
 use rbvh::probe::{MeanCounters, RayCounters};
 use rbvh::rbvh::Rbvh;
-use rbvh::scene::Scene;
+use rbvh::scene::{Camera, Scene, DEFAULT_VFOV_DEG};
 
 /// Options shared by the commands that trace through a structure of their choice.
 #[derive(Args, Clone, Debug)]
@@ -51,6 +52,53 @@ pub struct Source {
     /// Print timings and ray throughput (for --method rbvh also the exact BVH's on the same rays).
     #[arg(long)]
     pub stats: bool,
+    /// Camera position x,y,z (with --camera-target), for a mesh without a scene file or to
+    /// replace the scene's camera; without it, the scene's camera or a framing view.
+    #[arg(
+        long,
+        value_name = "X,Y,Z",
+        value_delimiter = ',',
+        num_args = 1,
+        requires = "camera_target"
+    )]
+    pub camera_eye: Option<Vec<f32>>,
+    /// The point the camera looks at, x,y,z (with --camera-eye).
+    #[arg(
+        long,
+        value_name = "X,Y,Z",
+        value_delimiter = ',',
+        num_args = 1,
+        requires = "camera_eye"
+    )]
+    pub camera_target: Option<Vec<f32>>,
+    /// The camera's vertical field of view in degrees (with --camera-eye) [default: 40].
+    #[arg(long, requires = "camera_eye")]
+    pub vfov: Option<f32>,
+}
+
+impl Source {
+    /// The camera the flags describe, when they describe one (+y up).
+    fn camera(&self) -> Result<Option<Camera>> {
+        let (Some(eye), Some(target)) = (&self.camera_eye, &self.camera_target) else {
+            return Ok(None);
+        };
+        let point = |flag: &str, v: &[f32]| -> Result<Vec3> {
+            anyhow::ensure!(
+                v.len() == 3,
+                "{flag}: give three numbers x,y,z (got {})",
+                v.len()
+            );
+            Ok(Vec3::from_slice(v))
+        };
+        let (eye, target) = (
+            point("--camera-eye", eye)?,
+            point("--camera-target", target)?,
+        );
+        let vfov = self.vfov.unwrap_or(DEFAULT_VFOV_DEG);
+        Camera::look_at(eye, target, Vec3::Y, vfov)
+            .map(Some)
+            .map_err(|fault| anyhow::anyhow!("--camera-eye/--camera-target/--vfov: {fault}"))
+    }
 }
 
 /// Level of detail (RBVH only): coarse column grids at inner nodes, chosen per ray by its cone.
@@ -265,8 +313,12 @@ pub fn step<T>(what: &str, f: impl FnOnce() -> T) -> T {
 
 pub fn prepare(c: &Common) -> Result<Prepared> {
     let t = Instant::now();
-    let scene = step("loading scene", || Scene::load(&c.source.scene))
+    let camera = c.source.camera()?;
+    let mut scene = step("loading scene", || Scene::load(&c.source.scene))
         .with_context(|| format!("loading scene {:?}", c.source.scene))?;
+    if camera.is_some() {
+        scene.camera = camera;
+    }
     let load_ms = t.elapsed().as_secs_f64() * 1e3;
     if let Some(warning) = scene.precision_warning() {
         eprintln!("warning: {warning}");
