@@ -306,9 +306,8 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     // and the outer loop tests the triangles of the cell that passes it, so that on SIMD
     // hardware the triangle tests run once for the lanes that reached such a cell, not beside every
     // step (on the dragon close-up at Q2, 1 in 3 cells of a primary ray passes, 1 in 24 of an AO
-    // ray). The step after a
-    // cell whose triangles missed opens the next inner round (`advance`). A single call site of
-    // each test keeps the inlined code from being duplicated.
+    // ray). The step after a cell whose triangles missed opens the next inner round (`advance`).
+    // A single call site of each test keeps the inlined code from being duplicated.
     // Block jumps (src/rbvh/ranges.rs): the blocks' height ranges follow the texels.
     uint block_pitch = (sz.atlas_pitch + 7u) >> 3;
     uint block_count = ((rows + 7u) >> 3) * block_pitch;

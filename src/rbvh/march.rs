@@ -480,39 +480,37 @@ impl Rbvh {
                         if t1 < leave_i.min(leave_j) {
                             break;
                         }
+                        // Leaving through the i side (first on a tie, as the walk steps i
+                        // first): the j steps before it, then the step into the edge column; or
+                        // the same with i and j swapped. One loop for both, as glsl/rbvh.glsl.
+                        let out_i = leave_i <= leave_j;
+                        let leave = if out_i { leave_i } else { leave_j };
+                        let before = |t: f32| if out_i { t < leave } else { t <= leave };
                         let mut t_last = t_in;
-                        if leave_i <= leave_j {
-                            // Leaving through the i side (first on a tie, as the walk steps i
-                            // first): the j steps before it, then the step into the edge column.
-                            for _ in 0..BLOCK {
-                                if step_j == 0 || next_j >= leave_i {
-                                    break;
-                                }
-                                t_last = next_j;
-                                cj += step_j;
-                                next_j = boundary_t(cj, step_j, o.y, inv.y);
-                            }
-                            if ci != edge_i {
-                                t_last =
-                                    t_last.max(boundary_t(edge_i - step_i, step_i, o.x, inv.x));
-                                ci = edge_i;
-                                next_i = leave_i;
-                            }
+                        let (minor, minor_next, minor_step, minor_o, minor_inv) = if out_i {
+                            (&mut cj, &mut next_j, step_j, o.y, inv.y)
                         } else {
-                            for _ in 0..BLOCK {
-                                if step_i == 0 || next_i > leave_j {
-                                    break;
-                                }
-                                t_last = next_i;
-                                ci += step_i;
-                                next_i = boundary_t(ci, step_i, o.x, inv.x);
+                            (&mut ci, &mut next_i, step_i, o.x, inv.x)
+                        };
+                        for _ in 0..BLOCK {
+                            if minor_step == 0 || !before(*minor_next) {
+                                break;
                             }
-                            if cj != edge_j {
-                                t_last =
-                                    t_last.max(boundary_t(edge_j - step_j, step_j, o.y, inv.y));
-                                cj = edge_j;
-                                next_j = leave_j;
-                            }
+                            t_last = *minor_next;
+                            *minor += minor_step;
+                            *minor_next = boundary_t(*minor, minor_step, minor_o, minor_inv);
+                        }
+                        let (major, major_next, major_step, major_o, major_inv, edge) = if out_i {
+                            (&mut ci, &mut next_i, step_i, o.x, inv.x, edge_i)
+                        } else {
+                            (&mut cj, &mut next_j, step_j, o.y, inv.y, edge_j)
+                        };
+                        if *major != edge {
+                            let into_edge =
+                                boundary_t(edge - major_step, major_step, major_o, major_inv);
+                            t_last = t_last.max(into_edge);
+                            *major = edge;
+                            *major_next = leave;
                         }
                         t_in = t_last;
                     }
