@@ -14,8 +14,9 @@
 //!                                       → surface (colour channel, hit → texel, painting)
 //!        → gpu (Vulkan context, own or embedded; uploads, pipelines, tracer, painter)
 //!        → output (PNG, EXR)
+//!        → rays (secondary rays from hits: ambient occlusion, shadow, diffuse)
 //!        → ibl (image-based lighting: environment light, visibility through either structure)
-//!        → bench, regress (measurement and image regression)
+//!        → bench, regress (measurement and image regression; feature `measure`)
 //! probe: per-ray counters and the reads of the CPU twins, shared by bvh, rbvh, gpu and bench
 //! ```
 //!
@@ -46,7 +47,22 @@
 //! into their own command buffers ([`gpu::Tracer::record_rbvh`], [`gpu::Tracer::bind`],
 //! [`gpu::Tracer::record`]); `examples/embed.rs` shows the whole contract, and
 //! `glsl/rbvh.glsl` can be included in an engine's own shaders.
+//!
+//! ## Features
+//!
+//! All are on by default, for the `rbvh` tool. An engine takes `default-features = false` and
+//! adds what it uses; the library itself (scenes, builders, Vulkan tracing) needs none of them.
+//!
+//! * `loaded` — [`Context::new`], which loads libvulkan at run time; off, the library works on the
+//!   engine's device through [`Context::embedded`].
+//! * `exr` — EXR output ([`output::write_exr`]) and EXR environment maps for [`ibl`].
+//! * `measure` — [`mod@bench`] and [`regress`] (FLIP through nv-flip's C++, charts through plotters).
+//! * `cli` — the `rbvh` binary (clap, indicatif, anyhow).
+//!
+//! Shaders are compiled at build time by `glslc` (found as `$GLSLC`, in `$VULKAN_SDK`, or on
+//! `PATH`); nothing else is needed from the system to build.
 
+#[cfg(feature = "measure")]
 pub mod bench;
 pub mod bvh;
 pub mod error;
@@ -57,7 +73,9 @@ pub mod io;
 pub mod lod;
 pub mod output;
 pub mod probe;
+pub mod rays;
 pub mod rbvh;
+#[cfg(feature = "measure")]
 pub mod regress;
 pub mod scene;
 pub mod surface;

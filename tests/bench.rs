@@ -9,13 +9,13 @@ use std::path::Path;
 use std::process::Command;
 
 use rbvh::bench::metrics::hit_errors;
-use rbvh::bench::rays::{generate, offset_origin, Secondary, DEFAULT_LIGHT};
 use rbvh::bench::record::{Method, CSV_COLUMNS};
 use rbvh::bench::validate::invalid_reason;
 use rbvh::bench::{self, BenchConfig, Device, Level, RayType};
 use rbvh::bvh::Bvh;
 use rbvh::geom::Hit;
 use rbvh::gpu::Query;
+use rbvh::rays::{generate, offset_origin, Secondary, DEFAULT_LIGHT};
 use rbvh::scene::{Light, Scene};
 
 fn small_config(plot: Option<&Path>) -> BenchConfig {

@@ -27,7 +27,6 @@ use super::error_image::error_image;
 use super::metrics::{self, HitErrors, Summary};
 use super::plot;
 use super::provenance;
-use super::rays::{self, RayType, Secondary, DEFAULT_LIGHT};
 use super::record::{
     BenchReport, Errors, Memory, Method, Params, Record, Spread, TimingSource, TrafficRecord,
 };
@@ -40,6 +39,7 @@ use crate::gpu::{Context, Query, Timing, Traced, Tracer};
 use crate::lod::{Lod, RayCone};
 use crate::output::{self, Image};
 use crate::probe::{MeanCounters, Read, TraceStats};
+use crate::rays::{self, RayType, Secondary, DEFAULT_LIGHT};
 use crate::rbvh::{Rbvh, RbvhParams};
 use crate::scene::Scene;
 use crate::{Error, Result};

@@ -3,7 +3,7 @@
 //!
 //! For every scene, the exact BVH and each RBVH quality level trace the same rays of each
 //! [`RayType`]: camera rays, and ambient-occlusion, shadow and diffuse rays that all start at the
-//! *exact* primary hits ([`rays`]), so that every method answers identical questions. Each method
+//! *exact* primary hits ([`crate::rays`]), so that every method answers identical questions. Each method
 //! first traces once (warm-up), and those hits are compared with the exact BVH's
 //! ([`metrics`], following "Accuracy — how the trade is measured" in the design notes) and judged
 //! ([`validate`]): a method whose answers are wrong is flagged, loudly, rather than reported as
@@ -30,7 +30,6 @@ pub mod harness;
 pub mod metrics;
 pub mod plot;
 pub mod provenance;
-pub mod rays;
 pub mod record;
 pub mod table;
 pub mod traffic;
@@ -38,8 +37,8 @@ pub mod validate;
 
 use std::path::PathBuf;
 
+pub use crate::rays::RayType;
 pub use harness::{run, run_observed, Event};
-pub use rays::RayType;
 pub use record::{write_csv, write_json, BenchReport, Record};
 pub use table::{table, work_table};
 

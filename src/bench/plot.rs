@@ -19,9 +19,9 @@ use std::path::{Path, PathBuf};
 
 use plotters::prelude::*;
 
-use super::rays::RayType;
 use super::record::{Method, Record};
 use crate::io::write_atomically;
+use crate::rays::RayType;
 use crate::{Error, Result};
 
 /// One marker of a chart.

@@ -67,11 +67,11 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
-use super::rays::RayType;
 use super::traffic::{Traffic, CACHE_SIZES};
 use crate::io::write_atomically;
 use crate::lod::LodParams;
 use crate::probe::MeanCounters;
+use crate::rays::RayType;
 use crate::rbvh::{RbvhParams, Refinement, Subdivision};
 use crate::Result;
 

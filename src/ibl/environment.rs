@@ -5,11 +5,8 @@
 //! [`crate::output::shade`].
 
 use std::f32::consts::{PI, TAU};
-use std::fs::File;
-use std::io::{BufReader, Seek};
 use std::path::Path;
 
-use ::exr::prelude::{read, MetaData, ReadChannels, ReadLayers};
 use glam::Vec3;
 
 use crate::{Error, Result};
@@ -33,6 +30,7 @@ pub enum Environment {
 
 impl Environment {
     /// Loads an environment map from the EXR file at `path`; see [`LatLongMap::load`].
+    #[cfg(feature = "exr")]
     pub fn load(path: &Path) -> Result<Environment> {
         LatLongMap::load(path).map(Environment::Map)
     }
@@ -103,9 +101,9 @@ impl Sky {
 
 impl Default for Sky {
     /// The sun where the CLI's default light comes from
-    /// ([`crate::bench::rays::DEFAULT_LIGHT`]), so IBL and preview renders are lit alike.
+    /// ([`crate::rays::DEFAULT_LIGHT`]), so IBL and preview renders are lit alike.
     fn default() -> Sky {
-        match crate::bench::rays::DEFAULT_LIGHT {
+        match crate::rays::DEFAULT_LIGHT {
             crate::scene::Light::Directional { direction } => Sky::towards(-direction),
             crate::scene::Light::Point { position } => Sky::towards(position),
         }
@@ -173,8 +171,13 @@ impl LatLongMap {
     /// [`Error::Io`] when the file cannot be opened, and with [`Error::Parse`] naming the file
     /// when it is not a regular file, not a valid EXR, lacks R, G or B, is empty or larger than
     /// [`MAX_MAP_SIDE`] / [`MAX_MAP_TEXELS`], or holds a texel that is not finite and
-    /// non-negative.
+    /// non-negative. (Feature `exr`; without it, build a map from texels with [`LatLongMap::new`].)
+    #[cfg(feature = "exr")]
     pub fn load(path: &Path) -> Result<LatLongMap> {
+        use ::exr::prelude::{read, MetaData, ReadChannels, ReadLayers};
+        use std::fs::File;
+        use std::io::{BufReader, Seek};
+
         // Checked before opening: opening a pipe would block until something writes to it.
         let metadata = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
         if !metadata.is_file() {

@@ -17,11 +17,11 @@ use rayon::prelude::*;
 
 use super::environment::Environment;
 use super::sampling::sample_direction;
-use crate::bench::rays::{facing_normal, offset_origin};
 use crate::geom::{Hit, Ray};
 use crate::gpu::{Query, Timing, Tracer};
 use crate::lod::RayCone;
 use crate::output::Image;
+use crate::rays::{facing_normal, offset_origin};
 use crate::{Error, Result};
 
 /// Most samples per pixel: far past convergence for any picture, and small enough that the
@@ -48,7 +48,7 @@ pub struct Settings {
     /// Selects the random directions; the same seed gives the same image.
     pub seed: u64,
     /// The scene's bounding-box diagonal: the scale of the origin offset (see
-    /// [`crate::bench::rays::offset_origin`]).
+    /// [`crate::rays::offset_origin`]).
     pub diagonal: f32,
     /// Extra origin offset for an approximate surface: the RBVH's texel size, 0 for the exact
     /// BVH. Without it an RBVH surface, which may lie a fraction of a texel off the exact one,
@@ -94,7 +94,7 @@ pub struct Rendered {
 /// after each pass (for progress). The result depends only on the inputs and the seed.
 ///
 /// Each ray starts at the primary hit point moved off the surface along the normal facing the
-/// camera ([`crate::bench::rays::offset_origin`]) and is unbounded: whatever it meets occludes
+/// camera ([`crate::rays::offset_origin`]) and is unbounded: whatever it meets occludes
 /// the environment. Fails with [`Error::InvalidParameter`] on a sample count outside
 /// `1..=MAX_SAMPLES`, a non-finite or non-positive diagonal, a negative or non-finite offset,
 /// per-pixel inputs of the wrong length or a non-finite or negative albedo, and with the

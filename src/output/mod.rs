@@ -4,6 +4,7 @@
 //!
 //! Both writers go through [`crate::io::write_atomically`]: a failed write leaves no file behind.
 
+#[cfg(feature = "exr")]
 mod exr;
 mod heatmap;
 mod image;
@@ -14,6 +15,7 @@ mod srgb;
 pub(crate) use srgb::decode as srgb_decode;
 pub(crate) use srgb::encode_u8 as srgb_u8;
 
+#[cfg(feature = "exr")]
 pub use self::exr::write_exr;
 pub use self::heatmap::{heatmap, with_colour_bar};
 pub use self::image::{side_by_side, Image};

@@ -1,6 +1,7 @@
-//! The rays a benchmark traces: camera rays, and three kinds of secondary rays that all start at
-//! the *exact* BVH's primary hits, so that every method under test answers the same questions and
-//! differences in their answers are differences in the methods, not in the rays.
+//! Secondary rays from primary hits, as the benchmark, the image-based lighting and engines trace
+//! them. The benchmark starts all of them at the *exact* BVH's primary hits, so that every method
+//! under test answers the same questions and differences in their answers are differences in the
+//! methods, not in the rays.
 //!
 //! * **primary** — one camera ray per pixel, closest hit.
 //! * **ao** — ambient occlusion: a short cosine-distributed ray (`ao_radius` × the scene's
