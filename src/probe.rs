@@ -47,13 +47,21 @@ impl RayCounters {
 /// The means of many rays' counters.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct MeanCounters {
+    /// Inner nodes visited per ray ([`RayCounters::nodes`]).
     pub nodes: f64,
+    /// Height-field leaves handed to the march per ray ([`RayCounters::leaves`]).
     pub leaves: f64,
+    /// Walks started per ray ([`RayCounters::walks`]).
     pub walks: f64,
+    /// Cells stepped into per ray ([`RayCounters::cells`]).
     pub cells: f64,
+    /// Cells whose triangles were tested, per ray ([`RayCounters::cells_tested`]).
     pub cells_tested: f64,
+    /// Block jumps per ray ([`RayCounters::jumps`]).
     pub jumps: f64,
+    /// Triangle leaves tested per ray ([`RayCounters::triangle_leaves`]).
     pub triangle_leaves: f64,
+    /// Triangles tested in triangle leaves per ray ([`RayCounters::triangles`]).
     pub triangles: f64,
     /// Mean steps ([`RayCounters::steps`]) over the mean of the longest in each group of 8
     /// consecutive rays: how busy an 8-wide SIMD group (lavapipe's, on AVX2) stays when every lane
@@ -122,14 +130,18 @@ impl Array {
 /// One read a ray makes: `bytes` bytes from byte `offset` of `array`, as the shader reads them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Read {
+    /// The device array read.
     pub array: Array,
+    /// Byte offset of the read from the start of `array`.
     pub offset: u64,
+    /// Bytes read: the size of the record or word the shader loads.
     pub bytes: u32,
 }
 
 /// Receives the reads of one traversal, in the order the device makes them. The CPU twins call it
 /// where their GLSL twins read memory; the no-op `()` costs nothing.
 pub trait Probe {
+    /// Records one read, called in the device's read order.
     fn read(&mut self, read: Read);
 }
 
@@ -149,7 +161,10 @@ impl Probe for Vec<Read> {
 /// made it visit more nodes than there are).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct TraceStats {
+    /// The ray's work, up to where it ended.
     pub counters: RayCounters,
+    /// True when the traversal was cut short, so its hit is not trustworthy (the device reports
+    /// such rays as [`Error::StackOverflow`](crate::Error::StackOverflow)).
     pub overflow: bool,
 }
 

@@ -33,17 +33,24 @@ use crate::gpu::Query;
 use crate::scene::Light;
 use crate::{Error, Result};
 
-/// What a batch of rays is for.
+/// What a batch of rays is for. The discriminants are fixed: they salt each ray's random stream,
+/// so reordering the variants must not change the rays.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum RayType {
-    Primary,
-    Ao,
-    Shadow,
-    Diffuse,
+    /// One camera ray per pixel, closest hit.
+    Primary = 0,
+    /// Ambient occlusion: a cosine-distributed ray of length `ao_radius × diagonal` per exact
+    /// hit, any hit.
+    Ao = 1,
+    /// Towards the scene's light (or [`DEFAULT_LIGHT`]) per exact hit, any hit.
+    Shadow = 2,
+    /// An unbounded cosine-distributed bounce per exact hit, closest hit.
+    Diffuse = 3,
 }
 
 impl RayType {
+    /// Every ray type, in the order the benchmark traces and reports them.
     pub const ALL: [RayType; 4] = [
         RayType::Primary,
         RayType::Ao,
@@ -105,6 +112,7 @@ pub struct Secondary {
     pub light: Light,
     /// AO ray length as a fraction of `diagonal`.
     pub ao_radius: f32,
+    /// Seed of the direction streams; the same seed gives the same rays on any thread count.
     pub seed: u64,
 }
 

@@ -191,6 +191,8 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
     for file in [
         "speed_vs_error.svg",
         "memory_vs_error.svg",
+        "speed_vs_error.png",
+        "memory_vs_error.png",
         "exact.png",
         "q0.png",
         "q0_error.png",
@@ -347,6 +349,27 @@ fn lod_adds_a_valid_rbvh_lod_record_per_level_and_ray_type() {
             "no {name:?} in the legend: {texts:?}"
         );
     }
+    // The PNG twin draws the same series: RBVH blue, LOD green, the exact BVH red, and text.
+    let png = image::open(dir.path().join("sphere").join("speed_vs_error.png"))
+        .unwrap()
+        .to_rgb8();
+    let has = |c: [u8; 3]| png.pixels().any(|p| p.0 == c);
+    for (name, colour) in [
+        ("rbvh", [0, 0, 255]),
+        ("rbvh-lod", [0, 255, 0]),
+        ("exact", [255, 0, 0]),
+    ] {
+        assert!(has(colour), "no {name} series in the PNG chart");
+    }
+    // The title, drawn with the compiled-in font, darkens the top band (no series reaches it).
+    let title_ink = (0..png.width())
+        .flat_map(|x| (0..40).map(move |y| (x, y)))
+        .filter(|&(x, y)| png.get_pixel(x, y).0.iter().all(|&v| v < 128))
+        .count();
+    assert!(
+        title_ink > 100,
+        "{title_ink} dark pixels: no title in the PNG chart"
+    );
     let text = bench::table(&report);
     assert!(text.contains("rbvh-lod"), "{text}");
 }

@@ -26,8 +26,11 @@ use crate::{Error, Result};
 /// Mean, 99th percentile and maximum of a set of errors.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Summary {
+    /// Arithmetic mean of the values.
     pub mean: f64,
+    /// Nearest-rank 99th percentile: one of the values.
     pub p99: f64,
+    /// Largest value.
     pub max: f64,
 }
 
@@ -55,6 +58,7 @@ fn nearest_rank(sorted: &[f64], q: f64) -> f64 {
 /// The errors of one method's hits against the exact hits of the same rays.
 #[derive(Clone, Debug, PartialEq)]
 pub struct HitErrors {
+    /// Rays compared: the denominator of `miss_mismatch_rate`.
     pub rays: usize,
     /// Rays hit by one side and missed by the other, over all rays (0 when there are none).
     pub miss_mismatch_rate: f64,

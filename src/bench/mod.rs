@@ -104,9 +104,12 @@ pub struct BenchConfig {
     pub scenes: Vec<String>,
     /// RBVH levels, each measured against the exact BVH (which is always measured).
     pub levels: Vec<Level>,
+    /// Ray types to measure, in this order; at least one, and primary when plotting.
     pub ray_types: Vec<RayType>,
-    /// Primary-ray image size; secondary rays start at its exact hits, one per hit pixel.
+    /// Primary-ray image width in pixels, 1..=16384; secondary rays start at its exact hits, one
+    /// per hit pixel.
     pub width: u32,
+    /// Primary-ray image height in pixels, 1..=16384.
     pub height: u32,
     /// Timed dispatches per method and ray type, after one warm-up.
     pub runs: u32,
@@ -114,6 +117,7 @@ pub struct BenchConfig {
     pub ao_radius: f32,
     /// Seed of the secondary rays' random directions.
     pub seed: u64,
+    /// The Vulkan device to trace on.
     pub device: Device,
     /// Write charts and error images under this directory, one subdirectory per scene.
     pub plot_dir: Option<PathBuf>,

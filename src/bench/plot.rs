@@ -1,23 +1,33 @@
-//! The trade at a glance: per scene, SVG charts of speed and memory against accuracy, a line per
+//! The trade at a glance: per scene, charts of speed and memory against accuracy, a line per
 //! method (RBVH, and RBVH with level of detail) through its levels, named in a legend, with the
 //! exact BVH marked at zero error — the curves the paper's evaluation draws (Novák & Dachsbacher
 //! 2012, §6).
 //!
-//! * `speed_vs_error.svg`: primary-ray MRays/s (median) against the hit-distance error p99;
-//! * `memory_vs_error.svg`: total bytes of the structure against the same error;
-//! * with `--traffic`, `traffic_<rays>.svg` per ray type: the DRAM bytes per ray that the cache
+//! * `speed_vs_error`: primary-ray MRays/s (median) against the hit-distance error p99;
+//! * `memory_vs_error`: total bytes of the structure against the same error;
+//! * with `--traffic`, `traffic_<rays>` per ray type: the DRAM bytes per ray that the cache
 //!   model (`bench::traffic`) predicts against the cache's capacity, one line per method and
 //!   level, with each structure's working set in its label.
 //!
 //! Accuracy is measured on primary rays (closest hits), since the distance error of occlusion
 //! rays is not defined (see `bench::metrics`). Levels that failed validation are labelled
-//! "(invalid)". SVG text needs no fonts at draw time, so the charts render the same anywhere.
+//! "(invalid)".
+//!
+//! Each chart is written twice, drawn by the same code: `.svg` for pages and zooming, `.png` for
+//! whatever shows no SVG (terminals, issue trackers, slides). The PNG's text is drawn with a font
+//! compiled in (Ubuntu Light from `epaint_default_fonts`), not looked up on the system, so a
+//! machine without fonts draws the same picture.
 
 use std::collections::HashSet;
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
+use ::image::codecs::png::PngEncoder;
+use ::image::{ExtendedColorType, ImageEncoder};
+use plotters::coord::Shift;
 use plotters::prelude::*;
+use plotters::style::FontStyle;
 
 use super::record::{Method, Record};
 use crate::io::write_atomically;
@@ -31,6 +41,79 @@ struct Point {
     x: f64,
     y: f64,
     method: Method,
+}
+
+/// Chart size: pixels of the PNG, user units of the SVG.
+const SIZE: (u32, u32) = (720, 480);
+
+/// The font family every chart's text names; [`register_font`] backs it for drawing.
+const FAMILY: &str = "sans-serif";
+
+/// Gives plotters the compiled-in font for [`FAMILY`] (it measures text with it for both formats
+/// and rasterizes the PNG's with it), once per process; the outcome is kept for later charts.
+fn register_font() -> std::result::Result<(), String> {
+    static REGISTERED: OnceLock<std::result::Result<(), String>> = OnceLock::new();
+    REGISTERED
+        .get_or_init(|| {
+            plotters::style::register_font(
+                FAMILY,
+                FontStyle::Normal,
+                epaint_default_fonts::UBUNTU_LIGHT,
+            )
+            .map_err(|_| "the compiled-in chart font (Ubuntu Light) is not a valid font".into())
+        })
+        .clone()
+}
+
+/// What one chart shows.
+enum Chart<'a> {
+    /// Speed or memory (`y_desc`) against the error, per method and level.
+    Accuracy {
+        title: String,
+        y_desc: &'a str,
+        points: Vec<Point>,
+    },
+    /// Modelled DRAM traffic against cache capacity, a line per structure.
+    Traffic { title: String, lines: Vec<Line> },
+}
+
+type DrawResult = std::result::Result<(), Box<dyn std::error::Error>>;
+
+impl Chart<'_> {
+    fn draw<DB: DrawingBackend>(&self, root: DrawingArea<DB, Shift>) -> DrawResult
+    where
+        DB::ErrorType: 'static,
+    {
+        match self {
+            Chart::Accuracy {
+                title,
+                y_desc,
+                points,
+            } => draw(root, title, y_desc, points),
+            Chart::Traffic { title, lines } => draw_traffic(root, title, lines),
+        }
+    }
+
+    /// Writes `<stem>.svg` and `<stem>.png` into `dir`, atomically, returning both paths.
+    fn write(&self, dir: &Path, stem: &str) -> Result<[PathBuf; 2]> {
+        let svg_path = dir.join(format!("{stem}.svg"));
+        register_font().map_err(|e| Error::io(&svg_path, io::Error::other(e)))?;
+        let mut svg = String::new();
+        self.draw(SVGBackend::with_string(&mut svg, SIZE).into_drawing_area())
+            .map_err(|e| Error::io(&svg_path, io::Error::other(e.to_string())))?;
+        write_atomically(&svg_path, |w| w.write_all(svg.as_bytes()))?;
+
+        let png_path = dir.join(format!("{stem}.png"));
+        let mut rgb = vec![0u8; 3 * SIZE.0 as usize * SIZE.1 as usize];
+        self.draw(BitMapBackend::with_buffer(&mut rgb, SIZE).into_drawing_area())
+            .map_err(|e| Error::io(&png_path, io::Error::other(e.to_string())))?;
+        write_atomically(&png_path, |w| {
+            PngEncoder::new(w)
+                .write_image(&rgb, SIZE.0, SIZE.1, ExtendedColorType::Rgb8)
+                .map_err(io::Error::other)
+        })?;
+        Ok([svg_path, png_path])
+    }
 }
 
 /// Writes the charts for one scene's `records` into `dir`, returning the files written: the two
@@ -68,26 +151,25 @@ pub fn write_charts(dir: &Path, records: &[Record]) -> Result<Vec<PathBuf>> {
     };
     let charts = [
         (
-            "speed_vs_error.svg",
-            format!("{scene}: primary-ray speed vs accuracy"),
-            "MRays/s (median)",
-            points(&|r| r.mrays_per_s.median),
+            "speed_vs_error",
+            Chart::Accuracy {
+                title: format!("{scene}: primary-ray speed vs accuracy"),
+                y_desc: "MRays/s (median)",
+                points: points(&|r| r.mrays_per_s.median),
+            },
         ),
         (
-            "memory_vs_error.svg",
-            format!("{scene}: memory vs accuracy"),
-            "memory (MB)",
-            points(&|r| r.memory_bytes.total as f64 / 1e6),
+            "memory_vs_error",
+            Chart::Accuracy {
+                title: format!("{scene}: memory vs accuracy"),
+                y_desc: "memory (MB)",
+                points: points(&|r| r.memory_bytes.total as f64 / 1e6),
+            },
         ),
     ];
     let mut written = Vec::new();
-    for (file, title, y_desc, points) in charts {
-        let path = dir.join(file);
-        let mut svg = String::new();
-        draw(&mut svg, &title, y_desc, &points)
-            .map_err(|e| Error::io(&path, io::Error::other(e.to_string())))?;
-        write_atomically(&path, |w| w.write_all(svg.as_bytes()))?;
-        written.push(path);
+    for (stem, chart) in charts {
+        written.extend(chart.write(dir, stem)?);
     }
     for ray_type in RayType::ALL {
         let lines: Vec<Line> = records
@@ -118,13 +200,11 @@ pub fn write_charts(dir: &Path, records: &[Record]) -> Result<Vec<PathBuf>> {
         if lines.iter().all(|l| l.points.is_empty()) {
             continue;
         }
-        let path = dir.join(format!("traffic_{}.svg", ray_type.name()));
-        let title = format!("{scene}: modelled DRAM traffic, {} rays", ray_type.name());
-        let mut svg = String::new();
-        draw_traffic(&mut svg, &title, &lines)
-            .map_err(|e| Error::io(&path, io::Error::other(e.to_string())))?;
-        write_atomically(&path, |w| w.write_all(svg.as_bytes()))?;
-        written.push(path);
+        let chart = Chart::Traffic {
+            title: format!("{scene}: modelled DRAM traffic, {} rays", ray_type.name()),
+            lines,
+        };
+        written.extend(chart.write(dir, &format!("traffic_{}", ray_type.name()))?);
     }
     Ok(written)
 }
@@ -138,21 +218,23 @@ struct Line {
     exact: bool,
 }
 
-/// Draws a traffic chart into `svg`: capacity on a log axis, since the modelled caches span an
+/// Draws a traffic chart onto `root`: capacity on a log axis, since the modelled caches span an
 /// order of magnitude (4 to 72 MiB).
-fn draw_traffic(
-    svg: &mut String,
+fn draw_traffic<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
     title: &str,
     lines: &[Line],
-) -> std::result::Result<(), Box<dyn std::error::Error>> {
-    let root = SVGBackend::with_string(svg, (720, 480)).into_drawing_area();
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
     root.fill(&WHITE)?;
     let all = || lines.iter().flat_map(|l| l.points.iter().copied());
     let x_min = all().map(|p| p.0).fold(f64::INFINITY, f64::min);
     let x_max = all().map(|p| p.0).fold(0.0, f64::max);
     let y_max = (1.15 * all().map(|p| p.1).fold(0.0, f64::max)).max(1e-3);
     let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 20))
+        .caption(title, (FAMILY, 20))
         .margin(16)
         .x_label_area_size(48)
         .y_label_area_size(72)
@@ -162,7 +244,7 @@ fn draw_traffic(
         .x_desc("cache capacity (MiB, LRU, 128-byte lines)")
         .y_desc("DRAM bytes per ray (model)")
         .draw()?;
-    let font = ("sans-serif", 13).into_font();
+    let font = (FAMILY, 13).into_font();
     for (k, line) in lines.iter().enumerate() {
         let colour = if line.exact {
             RED.to_rgba()
@@ -186,21 +268,25 @@ fn draw_traffic(
     Ok(())
 }
 
-/// Draws one chart into `svg`.
-fn draw(
-    svg: &mut String,
+/// Draws a speed or memory chart against the error onto `root`.
+fn draw<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
     title: &str,
     y_desc: &str,
     points: &[Point],
-) -> std::result::Result<(), Box<dyn std::error::Error>> {
-    let root = SVGBackend::with_string(svg, (720, 480)).into_drawing_area();
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
     root.fill(&WHITE)?;
-    // Room above the largest values for their labels; a floor keeps an all-zero axis drawable.
-    let top = |v: f64| (1.15 * v).max(1e-3);
-    let x_max = top(points.iter().map(|p| p.x).fold(0.0, f64::max));
-    let y_max = top(points.iter().map(|p| p.y).fold(0.0, f64::max));
+    // Room above the largest values for their labels, and on the right for the legend (upper
+    // right), which would otherwise cover the coarsest level; a floor keeps an all-zero axis
+    // drawable.
+    let top = |v: f64, room: f64| (room * v).max(1e-3);
+    let x_max = top(points.iter().map(|p| p.x).fold(0.0, f64::max), 1.4);
+    let y_max = top(points.iter().map(|p| p.y).fold(0.0, f64::max), 1.15);
     let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 20))
+        .caption(title, (FAMILY, 20))
         .margin(16)
         .x_label_area_size(48)
         .y_label_area_size(72)
@@ -212,7 +298,7 @@ fn draw(
         .draw()?;
     // One line per method through its levels, in order of error, each in the legend; the exact
     // BVH a marker at zero error.
-    let font = ("sans-serif", 13).into_font();
+    let font = (FAMILY, 13).into_font();
     for (method, colour) in [
         (Method::Rbvh, BLUE.to_rgba()),
         (Method::RbvhLod, GREEN.to_rgba()),
@@ -250,7 +336,7 @@ fn draw(
         .position(SeriesLabelPosition::UpperRight)
         .background_style(WHITE.mix(0.8))
         .border_style(BLACK)
-        .label_font(("sans-serif", 13))
+        .label_font((FAMILY, 13))
         .draw()?;
     root.present()?;
     Ok(())

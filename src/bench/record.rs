@@ -10,6 +10,7 @@
 //! | `threads` | int \| null | lavapipe's worker threads (`LP_NUM_THREADS`, else one per CPU); null on other devices |
 //! | `date` | string | start of the run, UTC, ISO 8601 (`2025-01-31T12:00:00Z`) |
 //! | `git` | string \| null | `git rev-parse HEAD` in the working directory, null outside a repository |
+//! | `version` | string | this crate's version |
 //! | `runs` | int | timed dispatches per record, after one warm-up |
 //! | `width`, `height` | int | primary-ray image size |
 //! | `ao_radius` | number | AO ray length, fraction of the scene diagonal |
@@ -26,9 +27,9 @@
 //! | `quality` | null \| `"Q0"`…`"Q4"` \| `"custom"` | RBVH level; null for exact |
 //! | `params` | object \| null | RBVH build parameters (below); null for exact |
 //! | `lod` | object \| null | level-of-detail parameters (below); null but for `rbvh-lod` |
-//! | `ray_type` | `"primary"` \| `"ao"` \| `"shadow"` \| `"diffuse"` | see `bench::rays` |
+//! | `ray_type` | `"primary"` \| `"ao"` \| `"shadow"` \| `"diffuse"` | see [`crate::rays`] |
 //! | `rays` | int | rays per dispatch |
-//! | `mrays_per_s` | {`median`,`min`,`max`} | million rays per second over the timed runs |
+//! | `mrays_per_s` | {`median`,`min`,`max`,`samples`} | million rays per second over the timed runs; `samples` each run's, in run order |
 //! | `speedup_vs_exact` | number | median MRays/s over the exact BVH's, same rays, same run (1 for exact) |
 //! | `build_ms` | number | CPU build time of the structure |
 //! | `memory_bytes` | {`tree`,`atlas`,`triangles`,`total`} | bytes uploaded: nodes (+ height-field leaf records for RBVH), atlas texels, triangles |
@@ -38,6 +39,8 @@
 //! | `invalid_reason` | string \| null | why `valid` is false |
 //! | `timing_source` | `"gpu_timestamps"` \| `"wall"` | GPU timestamp queries, or host wall time (submit to fence) when the device cannot time |
 //! | `block_jumps` | bool \| null | whether the march jumped over blocks ([`crate::gpu::Tracer::block_jumps`]); null for exact |
+//! | `counters` | object | per-ray means of the device's counters ([`crate::probe::MeanCounters`]: `nodes`, `leaves`, `walks`, `cells`, `cells_tested`, `jumps`, `triangle_leaves`, `triangles`, `simd8_utilisation`) |
+//! | `traffic` | object \| null | with `--traffic`: `twin_counters` (the CPU twin's, same keys), `counter_mismatch_rate`, and `traffic` (the cache model's figures, [`super::traffic::Traffic`]); else null |
 //!
 //! `params`: `texels_per_diagonal`, `refinement` (`"normal_cone"` \| `"projected_area"`),
 //! `max_angle_deg` (normal cone, else null), `min_ratio` (projected area, else null),
@@ -57,10 +60,14 @@
 //!
 //! # CSV (`--csv`)
 //!
-//! RFC 4180: a header line, then one line per record with the same fields flattened (`params.*`,
-//! `mrays_per_s.*`, `memory_bytes.*` and `error.*` without their prefix, except
-//! `mrays_median`/`mrays_min`/`mrays_max`, `*_bytes` and `lod_*`). Null is an empty cell; an infinite PSNR is
-//! `inf`.
+//! RFC 4180: a header line ([`CSV_COLUMNS`]), then one line per record: first the run's provenance
+//! (`device`, `driver`, `date`, `git`, `version`), so that rows from several runs can be pasted
+//! into one table, then the record's fields flattened (`params.*`, `mrays_per_s.*`,
+//! `memory_bytes.*`, `error.*`, `counters.*` and the traffic figures without their prefix, except
+//! `mrays_median`/`mrays_min`/`mrays_max`, `*_bytes`, `lod_*`, `twin_*` and one
+//! `dram_bytes_per_ray_*`/`miss_rate_*` pair per modelled cache). The run's settings (`threads`,
+//! `runs`, image size, `ao_radius`, `seed`) and the per-run `samples` are in the JSON only. Null
+//! is an empty cell; an infinite PSNR is `inf`.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -78,18 +85,30 @@ use crate::Result;
 /// A whole run: provenance and records.
 #[derive(Clone, Debug, Serialize)]
 pub struct BenchReport {
+    /// The Vulkan device's name, as it reports itself.
     pub device: String,
+    /// The driver's name and version, as the device reports them.
     pub driver: String,
+    /// lavapipe's worker threads (`LP_NUM_THREADS`, else one per CPU); None on other devices.
     pub threads: Option<u32>,
+    /// Start of the run, UTC, ISO 8601 (`2025-01-31T12:00:00Z`).
     pub date: String,
+    /// `git rev-parse HEAD` in the working directory; None outside a repository.
     pub git: Option<String>,
     /// This crate's version.
     pub version: String,
+    /// Timed dispatches per record, after one warm-up
+    /// ([`BenchConfig::runs`](super::BenchConfig::runs)).
     pub runs: u32,
+    /// Primary-ray image width in pixels.
     pub width: u32,
+    /// Primary-ray image height in pixels.
     pub height: u32,
+    /// AO ray length as a fraction of each scene's bounding-box diagonal.
     pub ao_radius: f32,
+    /// Seed of the secondary rays' directions.
     pub seed: u64,
+    /// One record per (scene, method, level, ray type), in the order measured.
     pub results: Vec<Record>,
     /// Charts and images written under the plot directory (not part of the JSON).
     #[serde(skip)]
@@ -99,23 +118,41 @@ pub struct BenchReport {
 /// One (scene, method, level, ray type).
 #[derive(Clone, Debug, Serialize)]
 pub struct Record {
+    /// Scene name: built-in name, file name, or the scene file's `name`.
     pub scene: String,
+    /// Triangles in the scene.
     pub triangles: u64,
+    /// Which structure traced the rays.
     pub method: Method,
+    /// RBVH level, `"Q0"`…`"Q4"` or `"custom"` ([`Level::name`](super::Level::name)); None for
+    /// exact.
     pub quality: Option<String>,
+    /// RBVH build parameters; None for exact.
     pub params: Option<Params>,
     /// How the levels of detail were built and chosen, for `rbvh-lod` records.
     pub lod: Option<LodParams>,
+    /// What the rays are for; secondary rays start at the exact BVH's primary hits.
     pub ray_type: RayType,
+    /// Rays per dispatch: pixels for primary rays, exact primary hits for secondary rays.
     pub rays: u64,
+    /// Million rays per second of each timed run (rays / dispatch time).
     pub mrays_per_s: Spread,
+    /// Median MRays/s over the exact BVH's on the same rays in the same run; 1 for exact.
     pub speedup_vs_exact: f64,
+    /// CPU build time in milliseconds (RBVH plus levels of detail for `rbvh-lod`).
     pub build_ms: f64,
+    /// Bytes of the structure as uploaded.
     pub memory_bytes: Memory,
+    /// The exact BVH's total bytes over this structure's: above 1, smaller than exact.
     pub memory_ratio_vs_exact: f64,
+    /// Errors against the exact BVH on the same rays; None for exact.
     pub error: Option<Errors>,
+    /// False when the hits are wrong rather than approximate ([`super::validate`]); for exact,
+    /// whether the GPU agrees with the CPU reference tracer.
     pub valid: bool,
+    /// Why `valid` is false; None when valid.
     pub invalid_reason: Option<String>,
+    /// What the runs' times were measured with, the same for every method of a ray type.
     pub timing_source: TimingSource,
     /// Whether the device march jumped over blocks; None for the exact BVH.
     pub block_jumps: Option<bool>,
@@ -138,10 +175,13 @@ pub struct TrafficRecord {
     pub traffic: Traffic,
 }
 
+/// The structure a record measures.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Method {
+    /// The exact triangle BVH ([`crate::bvh`]), the referee.
     Exact,
+    /// An RBVH ([`crate::rbvh`]) traced at full resolution.
     Rbvh,
     /// The RBVH of the same level traced with level of detail ([`crate::lod`]).
     #[serde(rename = "rbvh-lod")]
@@ -149,6 +189,7 @@ pub enum Method {
 }
 
 impl Method {
+    /// `"exact"`, `"rbvh"` or `"rbvh-lod"`: the `method` of the JSON and CSV records.
     pub fn name(self) -> &'static str {
         match self {
             Method::Exact => "exact",
@@ -158,14 +199,19 @@ impl Method {
     }
 }
 
+/// What the timed runs were measured with.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum TimingSource {
+    /// GPU timestamp queries around the trace dispatches (uploads and read-back excluded).
     GpuTimestamps,
+    /// Host wall time from submit to fence, when the device cannot time; includes submission
+    /// overhead.
     Wall,
 }
 
 impl TimingSource {
+    /// `"gpu_timestamps"` or `"wall"`: the `timing_source` of the JSON and CSV records.
     pub fn name(self) -> &'static str {
         match self {
             TimingSource::GpuTimestamps => "gpu_timestamps",
@@ -177,9 +223,13 @@ impl TimingSource {
 /// Median, minimum and maximum over the timed runs, and every run's value in the order run.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Spread {
+    /// Median of `samples`; the mean of the middle two for an even count.
     pub median: f64,
+    /// Smallest of `samples`.
     pub min: f64,
+    /// Largest of `samples`.
     pub max: f64,
+    /// Every timed run's value, in the order run (CSV: not written).
     pub samples: Vec<f64>,
 }
 
@@ -207,22 +257,38 @@ impl Spread {
 /// Bytes of one structure, as uploaded.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 pub struct Memory {
+    /// Nodes, plus height-field leaf records for an RBVH and coarse columns for `rbvh-lod`.
     pub tree: u64,
+    /// Atlas texels and the blocks' height ranges; 0 for exact.
     pub atlas: u64,
+    /// Triangles: all of them for exact, those of hybrid triangle leaves for an RBVH.
     pub triangles: u64,
+    /// `tree + atlas + triangles`.
     pub total: u64,
 }
 
 /// [`RbvhParams`] with named enums, for the records.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Params {
+    /// Sampling rate: texels along the scene's bounding-box diagonal.
     pub texels_per_diagonal: f32,
+    /// Leaf refinement criterion: `"normal_cone"` or `"projected_area"`.
     pub refinement: &'static str,
+    /// Largest angle between a triangle normal and the projection axis, in degrees; None unless
+    /// `refinement` is `"normal_cone"`.
     pub max_angle_deg: Option<f32>,
+    /// Smallest projected-to-true area ratio `A⊥ / A`, in (0, 1]; None unless `refinement` is
+    /// `"projected_area"`.
     pub min_ratio: Option<f32>,
+    /// Subdivision rule: `"spatial_median"` or `"area_sah"`.
     pub subdivision: &'static str,
+    /// Whether separate parts are never fused into one height field
+    /// ([`RbvhParams::object_split`]).
     pub object_split: bool,
+    /// Most texels along one side of a tile ([`RbvhParams::max_tile`]).
     pub max_tile: u32,
+    /// Box diagonal in texels below which a set that is no height field stays triangles
+    /// ([`RbvhParams::min_leaf_texels`]).
     pub min_leaf_texels: f32,
 }
 
@@ -251,14 +317,21 @@ impl From<&RbvhParams> for Params {
 /// Errors against the exact BVH (see the module docs for which are null when).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Errors {
+    /// Fraction of rays hit by one side and missed by the other, in [0, 1].
     pub miss_mismatch_rate: f64,
+    /// Mean `|t − t_exact| · |dir|` over rays both hit, as a fraction of the scene diagonal.
     pub t_err_mean: Option<f64>,
+    /// Nearest-rank 99th percentile of the same distance error.
     pub t_err_p99: Option<f64>,
+    /// Largest distance error, as a fraction of the scene diagonal.
     pub t_err_max: Option<f64>,
+    /// Mean angle between the geometric normals (as wound) over rays both hit, in degrees.
     pub normal_err_deg_mean: Option<f64>,
+    /// Nearest-rank 99th percentile of the normal angle error, in degrees.
     pub normal_err_deg_p99: Option<f64>,
     /// +∞ for identical images, which JSON writes as null.
     pub psnr_db: Option<f64>,
+    /// Mean of FLIP's per-pixel error map between the shaded primary images, in [0, 1].
     pub flip_mean: Option<f64>,
 }
 

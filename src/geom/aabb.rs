@@ -6,7 +6,9 @@ use glam::Vec3;
 /// point gives that point's box.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Aabb {
+    /// Lower corner, per axis; `+inf` on every axis for the empty box.
     pub min: Vec3,
+    /// Upper corner, per axis; `-inf` on every axis for the empty box.
     pub max: Vec3,
 }
 
@@ -17,15 +19,18 @@ impl Default for Aabb {
 }
 
 impl Aabb {
+    /// The empty box, identity of [`grow`](Self::grow) and [`union`](Self::union).
     pub const EMPTY: Aabb = Aabb {
         min: Vec3::splat(f32::INFINITY),
         max: Vec3::splat(f32::NEG_INFINITY),
     };
 
+    /// The tightest box around `points`; [`EMPTY`](Self::EMPTY) when there are none.
     pub fn from_points(points: impl IntoIterator<Item = Vec3>) -> Self {
         points.into_iter().fold(Self::EMPTY, |b, p| b.grow(p))
     }
 
+    /// This box extended to contain `p`.
     #[must_use]
     pub fn grow(self, p: Vec3) -> Self {
         Aabb {
@@ -34,6 +39,7 @@ impl Aabb {
         }
     }
 
+    /// The tightest box containing both boxes.
     #[must_use]
     pub fn union(self, o: Aabb) -> Self {
         Aabb {
@@ -42,10 +48,12 @@ impl Aabb {
         }
     }
 
+    /// True when `min > max` on some axis (no point inside); a degenerate flat box is not empty.
     pub fn is_empty(&self) -> bool {
         self.min.x > self.max.x || self.min.y > self.max.y || self.min.z > self.max.z
     }
 
+    /// Edge lengths `max − min` per axis; zero for the empty box.
     pub fn extent(&self) -> Vec3 {
         if self.is_empty() {
             Vec3::ZERO
@@ -54,10 +62,13 @@ impl Aabb {
         }
     }
 
+    /// Midpoint of `min` and `max`; meaningless (NaN) for the empty box.
     pub fn center(&self) -> Vec3 {
         0.5 * (self.min + self.max)
     }
 
+    /// Length of the main diagonal, in scene units; 0 for the empty box. The scale that relative
+    /// tolerances (hit distances, texel sizes) are measured against.
     pub fn diagonal(&self) -> f32 {
         self.extent().length()
     }
@@ -68,6 +79,7 @@ impl Aabb {
         2.0 * (e.x * e.y + e.y * e.z + e.z * e.x)
     }
 
+    /// Index (0 = x, 1 = y, 2 = z) of the longest edge; ties go to the lower index.
     pub fn largest_axis(&self) -> usize {
         let e = self.extent();
         if e.x >= e.y && e.x >= e.z {

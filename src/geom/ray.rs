@@ -9,14 +9,20 @@ use glam::Vec3;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct Ray {
+    /// Start point in world space (GLSL `vec3 origin`).
     pub origin: [f32; 3],
+    /// Nearest accepted hit distance, in units of `dir`; at least 0 (GLSL `float tmin`).
     pub tmin: f32,
+    /// Direction in world space, not necessarily unit length (GLSL `vec3 dir`).
     pub dir: [f32; 3],
+    /// Farthest accepted hit distance, in units of `dir`; may be `+inf` (GLSL `float tmax`).
     pub tmax: f32,
 }
 const _: () = assert!(std::mem::size_of::<Ray>() == 32);
 
 impl Ray {
+    /// A ray from `origin` along `dir`, accepting hits at `t` in `[tmin, tmax)`; not validated
+    /// (see [`is_valid`](Self::is_valid)).
     pub fn new(origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Self {
         Ray {
             origin: origin.to_array(),
@@ -26,10 +32,12 @@ impl Ray {
         }
     }
 
+    /// [`origin`](Self::origin) as a vector.
     pub fn origin(&self) -> Vec3 {
         Vec3::from_array(self.origin)
     }
 
+    /// [`dir`](Self::dir) as a vector.
     pub fn dir(&self) -> Vec3 {
         Vec3::from_array(self.dir)
     }
@@ -51,14 +59,21 @@ impl Ray {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct Hit {
+    /// Hit distance in units of the ray's `dir`; `+inf` on a miss (GLSL `float t`).
     pub t: f32,
+    /// Unit geometric normal in world space, as wound; zero on a miss (GLSL `nx`, `ny`, `nz`).
     pub normal: [f32; 3],
+    /// Scene triangle index, `u32::MAX` on a miss (GLSL `uint id`). RBVH height-field hits set
+    /// bit 31 ([`LEAF_BIT`](crate::bvh::LEAF_BIT)) over the leaf index, coarse level-of-detail
+    /// hits also [`LOD_BIT`](crate::lod::LOD_BIT) over the node index.
     pub id: u32,
+    /// Padding to 32 bytes; always zero (GLSL `reserved0..2`).
     pub reserved: [u32; 3],
 }
 const _: () = assert!(std::mem::size_of::<Hit>() == 32);
 
 impl Hit {
+    /// The miss record: `t = +inf`, zero normal, `id = u32::MAX`.
     pub const MISS: Hit = Hit {
         t: f32::INFINITY,
         normal: [0.0; 3],
@@ -66,10 +81,12 @@ impl Hit {
         reserved: [0; 3],
     };
 
+    /// True unless `id` is the miss id `u32::MAX`.
     pub fn is_hit(&self) -> bool {
         self.id != u32::MAX
     }
 
+    /// [`normal`](Self::normal) as a vector.
     pub fn normal(&self) -> Vec3 {
         Vec3::from_array(self.normal)
     }

@@ -20,12 +20,18 @@ use super::Ray;
 /// dominant direction axis, `s` the shear, and `sz = 1/d[kz]`.
 #[derive(Clone, Copy, Debug)]
 pub struct RayShear {
+    /// The ray's origin, subtracted from each vertex before shearing.
     pub origin: Vec3,
+    /// Axis indices `[kx, ky, kz]`: `kz` the direction's largest component, `kx`, `ky` the others,
+    /// swapped when `d[kz] < 0` to keep the winding.
     pub k: [usize; 3],
+    /// Shear `[d[kx]/d[kz], d[ky]/d[kz], 1/d[kz]]` (the paper's `Sx`, `Sy`, `Sz`).
     pub s: [f32; 3],
 }
 
 impl RayShear {
+    /// The shear constants of `ray`, computed once per ray and reused for every triangle it
+    /// is tested against; `ray.dir` must be non-zero.
     pub fn new(ray: &Ray) -> Self {
         let d = ray.dir();
         let a = d.abs();

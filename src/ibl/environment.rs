@@ -61,7 +61,7 @@ impl Environment {
 /// ```
 ///
 /// Both halves meet at `HORIZON`, so the sky is continuous. The sun is a broad glow rather than a
-/// disk: with exponent 16 it carries `2π/17 ≈ 0.37 sr × SUN` of irradiance at normal incidence,
+/// disk: with exponent 16 it carries `2π/18 ≈ 0.35 sr × SUN` of irradiance at normal incidence,
 /// about half the sky's, and at most a few times the sky's radiance, so that shading still shows
 /// its direction while 16 cosine-weighted samples per pixel stay free of bright speckles (a small
 /// bright disk would need importance sampling of the light to converge).
@@ -72,10 +72,15 @@ pub struct Sky {
 }
 
 impl Sky {
+    /// Linear RGB radiance straight up (`y = 1`): a clear blue.
     pub const ZENITH: Vec3 = Vec3::new(0.25, 0.45, 0.95);
+    /// Linear RGB radiance at the horizon (`y = 0`), where sky and ground meet: a pale haze.
     pub const HORIZON: Vec3 = Vec3::new(0.9, 0.9, 0.95);
+    /// Linear RGB radiance from below, reached at `y ≤ −1/8`: a dull brown.
     pub const GROUND: Vec3 = Vec3::new(0.35, 0.3, 0.25);
+    /// Linear RGB peak radiance of the sun's glow, added towards [`sun`](Sky::sun).
     pub const SUN: Vec3 = Vec3::new(3.0, 2.7, 2.2);
+    /// Exponent of the glow's cosine lobe: larger is tighter (see the type's documentation).
     pub const SUN_EXPONENT: i32 = 16;
 
     /// A sky with its sun towards `sun` (normalised here), or straight up when `sun` is zero or
@@ -239,10 +244,12 @@ impl LatLongMap {
         LatLongMap::new(size.0 as u32, size.1 as u32, texels, path)
     }
 
+    /// Texels per row, covering the full 360° of azimuth; 1..=[`MAX_MAP_SIDE`].
     pub fn width(&self) -> u32 {
         self.width
     }
 
+    /// Rows, from straight up (row 0) to straight down; 1..=[`MAX_MAP_SIDE`].
     pub fn height(&self) -> u32 {
         self.height
     }

@@ -24,8 +24,8 @@ use crate::output::Image;
 use crate::rays::{facing_normal, offset_origin};
 use crate::{Error, Result};
 
-/// Most samples per pixel: far past convergence for any picture, and small enough that the
-/// per-pixel sums keep full `f32` precision.
+/// Most samples per pixel: far past convergence for any picture, and a bound on how long a
+/// render may be asked to run (the per-pixel sums are `f64`, so precision does not bound it).
 pub const MAX_SAMPLES: u32 = 1 << 16;
 
 /// The picture to light: one primary ray per pixel (row-major, top row first), its closest hit
@@ -33,10 +33,15 @@ pub const MAX_SAMPLES: u32 = 1 << 16;
 /// the ray missed; `rbvh render` passes the surfaces' base colour times [`super::GREY`]).
 #[derive(Clone, Copy, Debug)]
 pub struct Frame<'a> {
+    /// Image width in pixels; at least 1.
     pub width: u32,
+    /// Image height in pixels; at least 1.
     pub height: u32,
+    /// The primary rays, `width × height` of them; a missed one looks up the environment.
     pub rays: &'a [Ray],
+    /// Their closest hits through the structure being rendered, one per ray.
     pub hits: &'a [Hit],
+    /// Linear RGB albedo ρ per pixel, finite and non-negative (1 reflects all light).
     pub albedo: &'a [Vec3],
 }
 
@@ -68,6 +73,7 @@ pub struct Settings {
 pub struct Pass {
     /// Passes (samples per pixel) done so far, `1..=total`.
     pub done: u32,
+    /// Passes the render will make: [`Settings::samples`].
     pub total: u32,
     /// Visibility rays traced in this pass: one per hit pixel.
     pub rays: usize,

@@ -40,6 +40,7 @@ impl SampleRng {
         SampleRng(mix64(seed ^ mix64(pixel ^ inner)))
     }
 
+    /// The next 64 uniformly distributed bits of the stream.
     pub fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(GOLDEN_GAMMA);
         mix64(self.0)

@@ -8,8 +8,11 @@ use crate::Error;
 /// `pixels[y * width + x]`), the order in which the camera emits its primary rays.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Image {
+    /// Width in pixels; at least 1 for the writers.
     pub width: u32,
+    /// Height in pixels; at least 1 for the writers.
     pub height: u32,
+    /// Linear RGB values (not sRGB-encoded, not clamped), `width × height` of them.
     pub pixels: Vec<Vec3>,
 }
 
@@ -55,12 +58,29 @@ pub(crate) fn check_writable(image: &Image) -> crate::Result<()> {
 }
 
 /// `pictures` left to right with `gap` black pixels between them, top-aligned; shorter pictures
-/// are padded with black below. For comparisons that a viewer takes in at a glance.
-pub fn side_by_side(pictures: &[&Image], gap: u32) -> Image {
+/// are padded with black below. For comparisons that a viewer takes in at a glance. Fails with
+/// [`Error::InvalidParameter`] when a picture's pixel count disagrees with its size (the fields
+/// are public) or the result would be wider than `u32` counts.
+pub fn side_by_side(pictures: &[&Image], gap: u32) -> crate::Result<Image> {
+    for picture in pictures {
+        check_per_pixel(
+            "pixels",
+            picture.pixels.len(),
+            picture.width,
+            picture.height,
+        )?;
+    }
     let height = pictures.iter().map(|p| p.height).max().unwrap_or(0);
-    let gaps = gap * (pictures.len() as u32).saturating_sub(1);
-    let width = pictures.iter().map(|p| p.width).sum::<u32>() + gaps;
-    let mut pixels = vec![Vec3::ZERO; width as usize * height as usize];
+    let too_wide = || Error::param("gap", "the pictures side by side are wider than 2³² pixels");
+    let gaps = (pictures.len() as u32)
+        .saturating_sub(1)
+        .checked_mul(gap)
+        .ok_or_else(too_wide)?;
+    let width = pictures
+        .iter()
+        .try_fold(gaps, |sum, p| sum.checked_add(p.width))
+        .ok_or_else(too_wide)?;
+    let mut pixels = vec![Vec3::ZERO; pixel_count(width, height)?];
     let mut left = 0usize;
     for picture in pictures {
         for (y, row) in picture
@@ -71,11 +91,11 @@ pub fn side_by_side(pictures: &[&Image], gap: u32) -> Image {
             let start = y * width as usize + left;
             pixels[start..start + row.len()].copy_from_slice(row);
         }
-        left += (picture.width + gap) as usize;
+        left += picture.width as usize + gap as usize;
     }
-    Image {
+    Ok(Image {
         width,
         height,
         pixels,
-    }
+    })
 }

@@ -28,7 +28,7 @@ pub enum Method {
 }
 
 impl Method {
-    /// `exact` or `rbvh_q<level>`: the method's part of a golden file's name.
+    /// `exact`, `rbvh_q<level>` or `rbvh_lod_q<level>`: the method's part of a golden file's name.
     pub fn file_tag(&self) -> String {
         match self {
             Method::Exact => "exact".into(),
@@ -61,10 +61,12 @@ impl fmt::Display for Method {
 pub struct Case {
     /// What [`Scene::load`] takes: a built-in name or a scene/mesh file.
     pub scene: String,
+    /// The structure the scene is traced through.
     pub method: Method,
 }
 
 impl Case {
+    /// `scene` (a [`Scene::load`] spec) traced by `method`; checked only when the run starts.
     pub fn new(scene: impl Into<String>, method: Method) -> Case {
         Case {
             scene: scene.into(),
@@ -111,7 +113,9 @@ pub fn cross(scenes: &[String], methods: &[Method]) -> Vec<Case> {
 /// A case's structure, built and ready to upload: what a custom tracer factory receives (see
 /// [`super::run_with`]), so that a caller can trace it with its own shader.
 pub enum Structure {
+    /// The exact triangle BVH, for [`Method::Exact`].
     Exact(Bvh),
+    /// An RBVH at the case's preset, for [`Method::Rbvh`].
     Rbvh(Box<Rbvh>),
     /// An RBVH with its levels of detail.
     RbvhLod(Box<Rbvh>, Box<Lod>),

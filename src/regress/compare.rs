@@ -93,6 +93,7 @@ pub struct ImageScore {
 }
 
 impl ImageScore {
+    /// Within both image limits: `flip_mean` and `outlier_fraction` at most `tol`'s.
     pub fn passes(&self, tol: &Tolerance) -> bool {
         self.flip_mean <= tol.flip_mean && self.outlier_fraction <= tol.outlier_fraction
     }
@@ -175,6 +176,8 @@ pub struct DepthScore {
 }
 
 impl DepthScore {
+    /// Within the depth limit: `off_fraction` at most [`Tolerance::depth_outlier_fraction`]
+    /// (`max_relative` is shown, not judged).
     pub fn passes(&self, tol: &Tolerance) -> bool {
         self.off_fraction <= tol.depth_outlier_fraction
     }

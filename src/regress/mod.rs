@@ -65,6 +65,7 @@ pub const METHODS: [Method; 7] = [
 /// pixels, small enough that the 21 cases render in about a second on lavapipe and the
 /// goldens stay small.
 pub const WIDTH: u32 = 160;
+/// Image height of the shipped suite, in pixels (4:3 with [`WIDTH`]).
 pub const HEIGHT: u32 = 120;
 
 /// The shipped goldens, relative to the repository root.
@@ -86,13 +87,19 @@ pub enum Mode {
 /// What to render and where the goldens and failure pictures are.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Config {
+    /// The cases to run, in order; at least one, no two with the same [`Case::name`].
     pub cases: Vec<Case>,
+    /// Where the goldens are read from (compare: must exist) or written to (bless).
     pub golden_dir: PathBuf,
     /// Where a failing case's render and error pictures go (created when needed).
     pub out_dir: PathBuf,
+    /// Render width in pixels, 1..=4096; must match the goldens'.
     pub width: u32,
+    /// Render height in pixels, 1..=4096; must match the goldens'.
     pub height: u32,
+    /// The pass/fail limits of each comparison.
     pub tolerance: Tolerance,
+    /// Compare with the goldens, or write new ones.
     pub mode: Mode,
 }
 
@@ -276,7 +283,7 @@ fn compare_case(config: &Config, name: &str, render: &cases::Render) -> Result<C
             // Golden, render and the FLIP error (0 to 1 on its colour bar), side by side.
             let diff = crate::output::with_colour_bar(&diff, 1);
             let pictures = [&golden.to_linear(), &render.image, &diff];
-            write("compare", &crate::output::side_by_side(&pictures, 4))?;
+            write("compare", &crate::output::side_by_side(&pictures, 4)?)?;
         }
         if let Some(map) = depth_map {
             write("depth_diff", &map.picture()?)?;

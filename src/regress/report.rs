@@ -9,7 +9,12 @@ use super::compare::{DepthScore, ImageScore, Tolerance};
 #[derive(Clone, Debug, PartialEq)]
 pub enum Check<S> {
     /// Compared with the golden: the scores, and whether they are within tolerance.
-    Compared { score: S, pass: bool },
+    Compared {
+        /// The comparison's scores ([`ImageScore`] or [`DepthScore`]).
+        score: S,
+        /// Whether `score` is within the run's [`Tolerance`].
+        pass: bool,
+    },
     /// No comparison was possible — the golden is missing, unreadable or of another size — which
     /// is a failure: the message says what to do.
     Unusable(String),
@@ -18,6 +23,7 @@ pub enum Check<S> {
 }
 
 impl<S> Check<S> {
+    /// True when compared within tolerance or blessed; false when out of tolerance or unusable.
     pub fn passed(&self) -> bool {
         match self {
             Check::Compared { pass, .. } => *pass,
@@ -32,7 +38,9 @@ impl<S> Check<S> {
 pub struct CaseResult {
     /// The case's name, the stem of its golden files (see [`super::Case::name`]).
     pub name: String,
+    /// The shaded image against the golden PNG, by ꟻLIP.
     pub image: Check<ImageScore>,
+    /// The primary hit distances against the golden depth EXR.
     pub depth: Check<DepthScore>,
     /// Files written for this case: on a failure the render and the error pictures (in the output
     /// folder), when blessing the new goldens.
@@ -40,6 +48,7 @@ pub struct CaseResult {
 }
 
 impl CaseResult {
+    /// True when both the image and the depth check passed (or were blessed).
     pub fn passed(&self) -> bool {
         self.image.passed() && self.depth.passed()
     }
@@ -48,7 +57,9 @@ impl CaseResult {
 /// All cases' outcomes, in the order they ran, and the limits they were judged by.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Report {
+    /// One result per case of the config, in the order run.
     pub cases: Vec<CaseResult>,
+    /// The limits the cases were judged by (the config's).
     pub tolerance: Tolerance,
 }
 
@@ -58,6 +69,7 @@ impl Report {
         self.cases.iter().all(CaseResult::passed)
     }
 
+    /// The cases that did not pass, in the order run.
     pub fn failures(&self) -> impl Iterator<Item = &CaseResult> {
         self.cases.iter().filter(|c| !c.passed())
     }

@@ -48,7 +48,7 @@ pub struct Args {
     /// Run the Vulkan validation layer and fail on any error it reports.
     #[arg(long)]
     validate: bool,
-    /// Write the report as JSON (schema in README.md).
+    /// Write the report as JSON (schema in docs/benchmarks.md).
     #[arg(long)]
     json: Option<PathBuf>,
     /// Write the records as CSV.

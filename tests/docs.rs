@@ -1,0 +1,151 @@
+//! The README and `docs/` stay true to the repository: every relative link and image they hold
+//! names a file that exists, and every `#anchor` a heading of that file (GitHub's anchors).
+//! Links inside code (fenced blocks, inline spans) are not links and are skipped.
+
+use std::collections::HashSet;
+use std::path::{Path, PathBuf};
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The markdown files a reader of the repository opens.
+fn documents() -> Vec<PathBuf> {
+    let mut files = vec![root().join("README.md"), root().join("scenes/README.md")];
+    let mut docs: Vec<PathBuf> = std::fs::read_dir(root().join("docs"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "md"))
+        .collect();
+    docs.sort();
+    files.extend(docs);
+    files
+}
+
+/// The text's lines with fenced code blocks emptied and inline code spans removed.
+fn prose_lines(text: &str) -> Vec<String> {
+    let mut fenced = false;
+    text.lines()
+        .map(|line| {
+            if line.trim_start().starts_with("```") {
+                fenced = !fenced;
+                return String::new();
+            }
+            if fenced {
+                return String::new();
+            }
+            // Odd-numbered pieces between backticks are code.
+            line.split('`').step_by(2).collect::<Vec<_>>().join("")
+        })
+        .collect()
+}
+
+/// GitHub's anchor of a heading: a link's text only, lower case, punctuation other than `-` and
+/// `_` dropped, spaces as hyphens.
+fn slug(heading: &str) -> String {
+    let mut text = String::new();
+    let mut rest = heading;
+    while let Some(start) = rest.find("](") {
+        let end = rest[start..]
+            .find(')')
+            .map_or(rest.len(), |e| start + e + 1);
+        text.push_str(&rest[..start]);
+        rest = &rest[end..];
+    }
+    text.push_str(rest);
+    text.trim()
+        .to_lowercase()
+        .chars()
+        .filter(|c| c.is_alphanumeric() || matches!(c, '-' | '_' | ' '))
+        .map(|c| if c == ' ' { '-' } else { c })
+        .collect()
+}
+
+/// Every heading anchor of `path`, repeated headings numbered `-1`, `-2`, … as GitHub does.
+fn anchors(path: &Path) -> HashSet<String> {
+    let mut found = HashSet::new();
+    let mut seen = std::collections::HashMap::new();
+    for line in prose_lines(&std::fs::read_to_string(path).unwrap()) {
+        let hashes = line.chars().take_while(|&c| c == '#').count();
+        if (1..=6).contains(&hashes) && line[hashes..].starts_with(' ') {
+            let base = slug(line[hashes..].trim().trim_end_matches('#'));
+            let n = seen.entry(base.clone()).or_insert(0);
+            found.insert(if *n == 0 {
+                base.clone()
+            } else {
+                format!("{base}-{n}")
+            });
+            *n += 1;
+        }
+    }
+    found
+}
+
+/// The targets of the `[text](target)` and `![alt](target)` links in a line.
+fn link_targets(line: &str) -> Vec<&str> {
+    line.match_indices("](")
+        .filter_map(|(i, _)| {
+            let rest = &line[i + 2..];
+            let end = rest.find([')', ' '])?;
+            Some(&rest[..end])
+        })
+        .collect()
+}
+
+#[test]
+fn every_relative_link_and_anchor_resolves() {
+    let mut broken = Vec::new();
+    let mut checked = 0;
+    for doc in documents() {
+        let text = std::fs::read_to_string(&doc).unwrap();
+        for (number, line) in prose_lines(&text).iter().enumerate() {
+            for target in link_targets(line) {
+                let external = target
+                    .split_once(':')
+                    .is_some_and(|(scheme, _)| scheme.chars().all(|c| c.is_ascii_alphabetic()));
+                if external || target.is_empty() {
+                    continue;
+                }
+                checked += 1;
+                let (file, anchor) = target.split_once('#').unwrap_or((target, ""));
+                let dest = if file.is_empty() {
+                    doc.clone()
+                } else {
+                    doc.parent().unwrap().join(file)
+                };
+                let place = format!(
+                    "{}:{}: {target}",
+                    doc.strip_prefix(root()).unwrap().display(),
+                    number + 1
+                );
+                if !dest.exists() {
+                    broken.push(format!("{place}: no such file"));
+                } else if !anchor.is_empty() && !anchors(&dest).contains(anchor) {
+                    broken.push(format!("{place}: no heading with that anchor"));
+                }
+            }
+        }
+    }
+    assert!(
+        checked > 50,
+        "only {checked} links found: is the parser still right?"
+    );
+    assert!(broken.is_empty(), "broken links:\n{}", broken.join("\n"));
+}
+
+#[test]
+fn anchors_follow_github() {
+    assert_eq!(
+        slug("Benchmarks: the speed/accuracy trade"),
+        "benchmarks-the-speedaccuracy-trade"
+    );
+    assert_eq!(
+        slug("Speed: where a ray's work and memory traffic go"),
+        "speed-where-a-rays-work-and-memory-traffic-go"
+    );
+    assert_eq!(slug("[Linked](x.md) heading"), "linked-heading");
+    assert_eq!(
+        link_targets("see [a](b.md#c) and ![i](d.png)"),
+        ["b.md#c", "d.png"]
+    );
+}
