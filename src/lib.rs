@@ -62,6 +62,8 @@
 //! Shaders are compiled at build time by `glslc` (found as `$GLSLC`, in `$VULKAN_SDK`, or on
 //! `PATH`); nothing else is needed from the system to build.
 
+#![warn(missing_docs)]
+
 #[cfg(feature = "measure")]
 pub mod bench;
 pub mod bvh;

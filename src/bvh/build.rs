@@ -29,6 +29,7 @@ pub struct BuildParams {
 }
 
 impl BuildParams {
+    /// 16 bins, leaves of at most 8 triangles, unit traversal cost, median splits from depth 32.
     pub const DEFAULT: BuildParams = BuildParams {
         bins: 16,
         max_leaf: 8,
@@ -52,7 +53,8 @@ pub struct Bvh {
     pub triangles: Vec<GpuTriangle>,
     /// Bounds of the whole scene.
     pub bounds: Aabb,
-    /// Longest root-to-leaf path, counted in nodes (≤ [`STACK_SIZE`]).
+    /// Inner nodes on the longest root-to-leaf path, at least 1 (≤ [`STACK_SIZE`], which bounds
+    /// the traversal stack by it).
     pub depth: u32,
     /// Wall time of the build in milliseconds.
     pub build_ms: f64,
@@ -93,6 +95,11 @@ impl Bvh {
         Self::build_with(scene, &BuildParams::DEFAULT)
     }
 
+    /// Builds with explicit `params`. Fails with [`Error::InvalidParameter`] when `bins` is
+    /// outside 2..=256, `max_leaf` outside 1..=64, `median_below_depth` leaves no room in
+    /// [`STACK_SIZE`], the scene has 2^31 triangles or more, or the tree still comes out deeper
+    /// than the stack; with [`Error::InvalidGeometry`] from [`Scene::validate`] for a malformed
+    /// scene.
     pub fn build_with(scene: &Scene, params: &BuildParams) -> Result<Bvh> {
         if params.bins < 2 || params.bins > 256 {
             return Err(Error::param(

@@ -29,13 +29,21 @@ pub const LEAF_BIT: u32 = 0x8000_0000;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuNode {
+    /// GLSL `BvhNode.a_min`: lower corner of child `a`'s box, world space.
     pub a_min: [f32; 3],
+    /// GLSL `a_child`: node index of child `a`, or [`LEAF_BIT`] | its first triangle.
     pub a_child: u32,
+    /// GLSL `a_max`: upper corner of child `a`'s box, world space.
     pub a_max: [f32; 3],
+    /// GLSL `a_count`: triangles of leaf `a`; 0 for an inner node or an absent child.
     pub a_count: u32,
+    /// GLSL `b_min`: lower corner of child `b`'s box, world space.
     pub b_min: [f32; 3],
+    /// GLSL `b_child`: node index of child `b`, or [`LEAF_BIT`] | its first triangle.
     pub b_child: u32,
+    /// GLSL `b_max`: upper corner of child `b`'s box, world space.
     pub b_max: [f32; 3],
+    /// GLSL `b_count`: triangles of leaf `b`; 0 for an inner node or an absent child.
     pub b_count: u32,
 }
 const _: () = assert!(std::mem::size_of::<GpuNode>() == 64);
@@ -43,8 +51,11 @@ const _: () = assert!(std::mem::size_of::<GpuNode>() == 64);
 /// One child as the builder sees it, before packing.
 #[derive(Clone, Copy, Debug)]
 pub struct ChildRef {
+    /// World-space box of the child's subtree (or leaf triangles).
     pub bounds: Aabb,
+    /// Node index of an inner child, or [`LEAF_BIT`] | first triangle of a leaf.
     pub child: u32,
+    /// Triangles of a leaf; 0 for an inner node or an absent child.
     pub count: u32,
 }
 
@@ -59,12 +70,14 @@ impl ChildRef {
         count: 0,
     };
 
+    /// Whether `child` carries [`LEAF_BIT`] (a leaf, possibly the empty [`ChildRef::ABSENT`]).
     pub fn is_leaf(&self) -> bool {
         self.child & LEAF_BIT != 0
     }
 }
 
 impl GpuNode {
+    /// Packs two children, `a` and `b`, into one node; the inverse of [`GpuNode::children`].
     pub fn new(a: ChildRef, b: ChildRef) -> Self {
         GpuNode {
             a_min: a.bounds.min.to_array(),
@@ -107,16 +120,23 @@ impl GpuNode {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuTriangle {
+    /// GLSL `BvhTriangle.v0`: first vertex, world space.
     pub v0: [f32; 3],
+    /// GLSL `prim`: the triangle's index in the scene, returned as the hit `id`.
     pub prim: u32,
+    /// GLSL `v1`: second vertex, world space.
     pub v1: [f32; 3],
+    /// GLSL `pad1`: padding to 16 bytes; always 0.
     pub pad1: u32,
+    /// GLSL `v2`: third vertex, world space; winding `v0, v1, v2` gives [`GpuTriangle::normal`].
     pub v2: [f32; 3],
+    /// GLSL `pad2`: padding to 16 bytes; always 0.
     pub pad2: u32,
 }
 const _: () = assert!(std::mem::size_of::<GpuTriangle>() == 48);
 
 impl GpuTriangle {
+    /// Packs the vertices `[v0, v1, v2]` (winding kept) of scene triangle `prim`, padding zeroed.
     pub fn new([a, b, c]: [Vec3; 3], prim: u32) -> Self {
         GpuTriangle {
             v0: a.to_array(),
@@ -128,6 +148,7 @@ impl GpuTriangle {
         }
     }
 
+    /// The vertices `[v0, v1, v2]`, world space.
     pub fn vertices(&self) -> [Vec3; 3] {
         [self.v0.into(), self.v1.into(), self.v2.into()]
     }

@@ -28,14 +28,17 @@ impl std::fmt::Debug for Buffer {
 }
 
 impl Buffer {
+    /// The Vulkan handle, for binding or recording commands; valid while `self` lives.
     pub fn raw(&self) -> vk::Buffer {
         self.raw
     }
 
+    /// Size in bytes as created: the requested size, but at least 4.
     pub fn size(&self) -> u64 {
         self.size
     }
 
+    /// The name given at creation, used in error messages and allocator reports.
     pub fn name(&self) -> &str {
         &self.name
     }

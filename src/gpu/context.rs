@@ -21,6 +21,7 @@ use crate::{Error, Result};
 /// Whether to run the Khronos validation layer.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Validation {
+    /// Never load the layer (what [`Validation::from_env`] gives when `RBVH_VALIDATION` is unset).
     Off,
     /// On when `VK_LAYER_KHRONOS_validation` is installed, silently off otherwise.
     IfInstalled,
@@ -49,6 +50,7 @@ pub struct ContextOptions {
     /// Pick the first device whose name contains this (case-insensitive); `RBVH_DEVICE` when None.
     /// Without either, a discrete GPU is preferred, then integrated, virtual, and CPU (lavapipe).
     pub device_name: Option<String>,
+    /// Whether to load the Khronos validation layer; `RBVH_VALIDATION` by default.
     pub validation: Validation,
     /// How shaders reach a structure's arrays; see [`Addressing`]. `RBVH_ADDRESSING` by default
     /// (Auto when it is unset or not understood; [`Addressing::from_env`] reports the latter).
@@ -68,14 +70,21 @@ impl Default for ContextOptions {
 /// What the device can do that our code depends on.
 #[derive(Clone, Copy, Debug)]
 pub struct DeviceLimits {
+    /// `maxStorageBufferRange`: the largest storage-buffer binding, bytes; larger arrays need
+    /// device addresses ([`Addressing`]).
     pub max_storage_buffer_range: u64,
     /// The largest single allocation, which bounds a buffer read through its device address.
     pub max_memory_allocation_size: u64,
     /// Whether this context can read buffers through device addresses (the device has
     /// `bufferDeviceAddress` and this context enabled it, or the engine said it did).
     pub buffer_device_address: bool,
+    /// `maxComputeWorkGroupCount`: workgroups per dispatch along x, y, z; the pipelines split
+    /// larger dispatches along x.
     pub max_compute_work_group_count: [u32; 3],
+    /// `maxPushConstantsSize`, bytes (at least 128 by the Vulkan spec).
     pub max_push_constants_size: u32,
+    /// `minStorageBufferOffsetAlignment`, bytes: what a storage binding's offset must be a
+    /// multiple of.
     pub min_storage_buffer_offset_alignment: u64,
     /// Nanoseconds per timestamp tick; None when the queue cannot time.
     pub timestamp_period_ns: Option<f64>,
@@ -117,12 +126,17 @@ pub(crate) struct Owned {
 /// An engine's own Vulkan objects, for [`Context::embedded`]. The engine keeps them alive (and
 /// destroys them) after every `rbvh` object made from the context is dropped.
 pub struct External {
+    /// The engine's instance (Vulkan 1.1 or later).
     pub instance: ash::Instance,
+    /// The engine's logical device, created from `physical_device`.
     pub device: ash::Device,
+    /// The physical device behind `device`; its limits become [`Context::limits`].
     pub physical_device: vk::PhysicalDevice,
     /// The family of the queue the engine will submit the recorded commands on (it must support
     /// compute).
     pub queue_family: u32,
+    /// The engine's `gpu-allocator` allocator for `device`; every library buffer is allocated
+    /// from it.
     pub allocator: Arc<Mutex<Allocator>>,
     /// Whether the engine enabled the `bufferDeviceAddress` feature on `device` (Vulkan 1.2 or
     /// `VK_KHR_buffer_device_address`) and created `allocator` with `buffer_device_address`: the
@@ -298,6 +312,7 @@ impl Context {
         partial.finish(options)
     }
 
+    /// The device's name as the driver reports it (`VkPhysicalDeviceProperties::deviceName`).
     pub fn device_name(&self) -> &str {
         &self.shared.device_name
     }
@@ -307,6 +322,7 @@ impl Context {
         &self.shared.driver
     }
 
+    /// The device's limits that this crate checks against, read once at creation.
     pub fn limits(&self) -> &DeviceLimits {
         &self.shared.limits
     }
@@ -316,6 +332,7 @@ impl Context {
         self.shared.addressing
     }
 
+    /// Whether this context's own validation messenger is attached (never for an embedded one).
     pub fn validation_enabled(&self) -> bool {
         self.shared.own.as_ref().is_some_and(|o| o.debug.is_some())
     }
@@ -545,8 +562,16 @@ fn driver_string(
     props: &vk::PhysicalDeviceProperties,
 ) -> String {
     let mut driver = vk::PhysicalDeviceDriverProperties::default();
-    let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut driver);
-    unsafe { instance.get_physical_device_properties2(pd, &mut props2) };
+    // The driver's name is Vulkan 1.2 or VK_KHR_driver_properties; a device with neither gets
+    // only its API version, rather than a query the validation layer would flag.
+    let has_driver_properties = unsafe { instance.enumerate_device_extension_properties(pd) }
+        .unwrap_or_default()
+        .iter()
+        .any(|e| e.extension_name_as_c_str() == Ok(ash::khr::driver_properties::NAME));
+    if has_driver_properties {
+        let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut driver);
+        unsafe { instance.get_physical_device_properties2(pd, &mut props2) };
+    }
     let name = driver
         .driver_name_as_c_str()
         .map(|s| s.to_string_lossy().into_owned())

@@ -27,19 +27,36 @@ pub const MAX_BRUSHES_PER_PASS: usize = 4096;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct PaintParams {
+    /// GLSL `pc.origin`: the leaf frame's world-space origin
+    /// ([`SampleGrid::origin`](crate::rbvh::layout::SampleGrid::origin)).
     pub origin: [f32; 3],
+    /// GLSL `atlas_base`: atlas index of the tile's texel (0, 0).
     pub atlas_base: u32,
+    /// GLSL `step_u`: world vector of one texel step along `u`.
     pub step_u: [f32; 3],
+    /// GLSL `res_u`: texels of the tile along `u` (also the row length of the invocation index).
     pub res_u: u32,
+    /// GLSL `step_v`: world vector of one texel step along `v`.
     pub step_v: [f32; 3],
+    /// GLSL `res_v`: texels of the tile along `v`.
     pub res_v: u32,
+    /// GLSL `axis_w`: unit world-space height axis of the leaf.
     pub axis_w: [f32; 3],
+    /// GLSL `h_scale`: world height per height-code quantum.
     pub h_scale: f32,
+    /// GLSL `texel_offset`: tile texel (`j · res_u + i`) of this dispatch's first invocation;
+    /// dispatches are split at `maxComputeWorkGroupCount`.
     pub texel_offset: u32,
+    /// GLSL `brush_count`: brushes in the bound brush buffer, at most [`MAX_BRUSHES_PER_PASS`].
     pub brush_count: u32,
+    /// GLSL `atlas_pitch`: texels per atlas row ([`Atlas::pitch`](crate::rbvh::Atlas::pitch)).
     pub atlas_pitch: u32,
+    /// GLSL `atlas_len`: texels in the atlas; reads at or beyond it are skipped.
     pub atlas_len: u32,
+    /// GLSL `atlas_address` (`uvec2`, low word first): the atlas's device address; 0 when bound.
     pub atlas_address: u64,
+    /// GLSL `colours_address` (`uvec2`, low word first): the colour channel's device address; 0
+    /// when bound.
     pub colours_address: u64,
 }
 const _: () = assert!(std::mem::size_of::<PaintParams>() == 96);

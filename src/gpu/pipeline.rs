@@ -148,6 +148,7 @@ impl ComputePipeline {
         Ok(p)
     }
 
+    /// The name given at creation, which errors and timings report.
     pub fn name(&self) -> &str {
         &self.name
     }

@@ -38,6 +38,7 @@ pub enum Query {
 /// Hits of a batch, with the GPU time of the trace dispatches alone (uploads excluded).
 #[derive(Clone, Debug)]
 pub struct Traced {
+    /// One hit per ray, in ray order; [`Hit::MISS`] where nothing was hit.
     pub hits: Vec<Hit>,
     /// Per ray, what its traversal did, when asked for (traced by the counting pipeline).
     pub counters: Option<Vec<RayCounters>>,
@@ -50,13 +51,24 @@ pub struct Traced {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct TraceParams {
+    /// GLSL `pc.ray_offset`: ray index of this dispatch's first invocation (dispatches are split at
+    /// `maxComputeWorkGroupCount`).
     pub ray_offset: u32,
+    /// GLSL `ray_count`: rays in the whole batch; invocations at or past it do nothing.
     pub ray_count: u32,
+    /// GLSL `flags`: bit 0 set for [`Query::Any`], clear for [`Query::Closest`]; no other bits.
     pub flags: u32,
+    /// GLSL `node_count`: [`GpuNode`](crate::bvh::GpuNode)s of the tree; bounds the traversal loop.
     pub node_count: u32,
+    /// GLSL `tri_count`: triangles of the BVH, or of the RBVH's triangle leaves (whose reads the
+    /// RBVH traversal clamps to it).
     pub tri_count: u32,
+    /// GLSL `leaf_count`: height-field leaves of the RBVH; 0 for the exact BVH.
     pub leaf_count: u32,
+    /// GLSL `atlas_pitch`: texels per atlas row, a power of two; 0 for the exact BVH.
     pub atlas_pitch: u32,
+    /// GLSL `atlas_len`: texels in the atlas; the blocks' height ranges follow them in the same
+    /// buffer, and texel reads at or beyond it see holes.
     pub atlas_len: u32,
     /// LOD records (one per node; 0 without LOD).
     pub lod_node_count: u32,
@@ -188,7 +200,9 @@ pub struct Tracer {
 /// multiple of `minStorageBufferOffsetAlignment`).
 #[derive(Clone, Copy, Debug)]
 pub struct BufferView {
+    /// The engine's buffer, created with `STORAGE_BUFFER` usage; the view runs to its end.
     pub buffer: vk::Buffer,
+    /// Byte offset of the first element in `buffer`.
     pub offset: u64,
 }
 
@@ -660,6 +674,7 @@ impl Tracer {
             .map(|b| (b, self.sizes.atlas_pitch, self.sizes.atlas_len))
     }
 
+    /// Traces `rays` without per-ray counters: [`Tracer::trace_with`] with `counters` off.
     pub fn trace(&self, rays: &[Ray], query: Query) -> Result<Traced> {
         self.trace_with(rays, query, false)
     }

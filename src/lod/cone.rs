@@ -17,7 +17,9 @@ use crate::{Error, Result};
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct RayCone {
+    /// Footprint width at the ray origin (`t = 0`), world units; ≥ 0.
     pub width: f32,
+    /// Growth of the width per unit of `t`, ≥ 0 (radians of full cone angle for a unit direction).
     pub spread: f32,
 }
 const _: () = assert!(std::mem::size_of::<RayCone>() == 8);

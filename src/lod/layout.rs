@@ -28,14 +28,25 @@ pub const LOD_BIT: u32 = 0x4000_0000;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct GpuLod {
+    /// GLSL `RbvhLod.origin`: world-space corner of column (0, 0) at height code 0 (the node box's
+    /// minimum corner).
     pub origin: [f32; 3],
+    /// GLSL `texel_size`: world width of one (square) column; +inf for a node without a grid.
     pub texel_size: f32,
+    /// GLSL `axis`: the world axis the columns stand along, `w` (0 x, 1 y, 2 z).
     pub axis: u32,
+    /// GLSL `res_u`: columns along `u` = (`axis` + 1) mod 3, at most
+    /// [`LodParams::columns`](crate::lod::LodParams::columns).
     pub res_u: u32,
+    /// GLSL `res_v`: columns along `v` = (`axis` + 2) mod 3.
     pub res_v: u32,
+    /// GLSL `base`: index in the column-word array of column (0, 0)'s top word.
     pub base: u32,
+    /// GLSL `h_scale`: world height along `w` per unit of a 16-bit height code.
     pub h_scale: f32,
+    /// GLSL `inv_texel`: `1 / texel_size`, so that the march multiplies instead of dividing.
     pub inv_texel: f32,
+    /// GLSL `pad0`, `pad1`: padding to 48 bytes; always 0.
     pub pad: [u32; 2],
 }
 const _: () = assert!(std::mem::size_of::<GpuLod>() == 48);
@@ -54,6 +65,7 @@ impl GpuLod {
         pad: [0; 2],
     };
 
+    /// Whether the node has a coarse representation (`texel_size` finite).
     pub fn is_some(&self) -> bool {
         self.texel_size.is_finite()
     }
@@ -85,16 +97,21 @@ impl GpuLod {
 /// origin along `w`, 8:8 octahedral normal of the surface there). An empty column has a hole top.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Column {
+    /// Highest sample's height code (rounded up) with the mean normal of the samples facing up
+    /// `w`; a hole for an empty column.
     pub top: Texel,
+    /// Lowest sample's height code (rounded down) with the mean normal of those facing down `w`.
     pub bottom: Texel,
 }
 
 impl Column {
+    /// A column no sample fell into: both words holes; rays pass through it.
     pub const EMPTY: Column = Column {
         top: Texel::HOLE,
         bottom: Texel::HOLE,
     };
 
+    /// Whether the column holds no surface (its top is a hole).
     pub fn is_empty(&self) -> bool {
         self.top.is_hole()
     }

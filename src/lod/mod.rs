@@ -71,6 +71,8 @@ impl Default for LodParams {
 pub const MAX_BIAS: f32 = 8.0;
 
 impl LodParams {
+    /// Fails with [`Error::InvalidParameter`] when `columns` is outside 1..=256, `min_leaves` is
+    /// 0, or `bias` is outside ±[`MAX_BIAS`].
     pub fn validate(&self) -> Result<()> {
         if !(1..=256).contains(&self.columns) {
             return Err(Error::param(
@@ -100,6 +102,7 @@ impl LodParams {
 /// The coarse representations of one RBVH's inner nodes, in the packed form the GPU reads.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Lod {
+    /// The parameters it was built with; `bias` also steers the CPU caster's choice.
     pub params: LodParams,
     /// One record per RBVH node, in node order ([`GpuLod::NONE`] for a node without one).
     pub nodes: Vec<GpuLod>,
@@ -109,12 +112,14 @@ pub struct Lod {
     /// of each column word's surface sample, parallel to `texels` (0: none). Host-side only: the
     /// colour of a coarse hit is looked up after the trace ([`Lod::colour_at`]).
     pub colours: Option<Vec<u32>>,
+    /// What the build made and how long it took.
     pub stats: LodStats,
 }
 
 /// Accounting of one build.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct LodStats {
+    /// Wall time of [`Lod::build`] in milliseconds.
     pub build_ms: f64,
     /// Nodes with a coarse representation.
     pub coarse_nodes: u32,

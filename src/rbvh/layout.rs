@@ -52,13 +52,23 @@ pub const HEIGHTFIELD_COUNT: u32 = u32::MAX;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuHeightfield {
+    /// GLSL `RbvhLeaf.origin`: world-space origin of the leaf frame (`s = t = h = 0`).
     pub origin: [f32; 3],
+    /// GLSL `atlas_base`: atlas index of texel (0, 0) of the tile.
     pub atlas_base: u32,
+    /// GLSL `axis_u`: world tangent `u` divided by the texel size, so `s = (p − origin)·axis_u`
+    /// is in texels.
     pub axis_u: [f32; 3],
+    /// GLSL `res_u`: samples (texels) along `u`; at most
+    /// [`RbvhParams::max_tile`](crate::rbvh::RbvhParams::max_tile).
     pub res_u: u32,
+    /// GLSL `axis_v`: world tangent `v` divided by the texel size (`t` in texels).
     pub axis_v: [f32; 3],
+    /// GLSL `res_v`: samples (texels) along `v`.
     pub res_v: u32,
+    /// GLSL `axis_w`: unit world-space projection axis; heights are measured along it.
     pub axis_w: [f32; 3],
+    /// GLSL `h_scale`: world height per height-code quantum (`h = code · h_scale`).
     pub h_scale: f32,
 }
 const _: () = assert!(std::mem::size_of::<GpuHeightfield>() == 64);
@@ -132,21 +142,27 @@ impl Texel {
     pub const HOLE_CODE: u16 = 0xFFFF;
     /// Largest height code of a surface texel.
     pub const MAX_CODE: u16 = 0xFFFE;
+    /// An empty texel: [`Texel::HOLE_CODE`] with a zero normal word.
     pub const HOLE: Texel = Texel(Self::HOLE_CODE as u32);
 
+    /// A surface texel of height code `height_code` (at most [`Texel::MAX_CODE`]) and world-space
+    /// unit `normal`, octahedrally encoded.
     pub fn new(height_code: u16, normal: Vec3) -> Texel {
         debug_assert!(height_code != Self::HOLE_CODE);
         Texel(height_code as u32 | (encode_octahedral(normal) as u32) << 16)
     }
 
+    /// Whether the texel has no surface ([`Texel::HOLE_CODE`]).
     pub fn is_hole(self) -> bool {
         self.height_code() == Self::HOLE_CODE
     }
 
+    /// Bits 0–15: the quantized height, in units of the leaf's `h_scale` along `axis_w`.
     pub fn height_code(self) -> u16 {
         (self.0 & 0xFFFF) as u16
     }
 
+    /// Bits 16–31 decoded: the world-space unit normal (meaningless for a hole).
     pub fn normal(self) -> Vec3 {
         decode_octahedral((self.0 >> 16) as u16)
     }
@@ -157,10 +173,15 @@ impl Texel {
 /// leaf, on the host, for the CPU and for `glsl/paint.comp` alike.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SampleGrid {
+    /// World-space frame origin, as [`GpuHeightfield::origin`].
     pub origin: Vec3,
+    /// World vector of one texel step along `u`.
     pub step_u: Vec3,
+    /// World vector of one texel step along `v`.
     pub step_v: Vec3,
+    /// Unit world-space height axis, as [`GpuHeightfield::axis_w`].
     pub axis_w: Vec3,
+    /// World height per height-code quantum, as [`GpuHeightfield::h_scale`].
     pub h_scale: f32,
 }
 
@@ -211,8 +232,11 @@ fn sign(x: f32) -> f32 {
 /// makes it one, and the file reader and the upload refuse any other.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Atlas {
+    /// Texels per row; a power of two (the row stride of every tile).
     pub pitch: u32,
+    /// Rows of texels.
     pub rows: u32,
+    /// `pitch × rows` texels, row-major; unused texels are holes.
     pub texels: Vec<Texel>,
 }
 

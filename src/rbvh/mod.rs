@@ -33,6 +33,7 @@ use crate::{Error, Result};
 /// A built RBVH in its packed (GPU) form.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Rbvh {
+    /// The parameters it was built with (stored in the file, too).
     pub params: RbvhParams,
     /// Node 0 is the root.
     pub nodes: Vec<GpuNode>,
@@ -40,12 +41,16 @@ pub struct Rbvh {
     pub triangles: Vec<GpuTriangle>,
     /// Height-field leaves.
     pub leaves: Vec<GpuHeightfield>,
+    /// Texels of all height-field tiles, addressed by [`GpuHeightfield::atlas_base`].
     pub atlas: Atlas,
+    /// World box of the root's children: the leaves' boxes, dilated rims included, so it may
+    /// differ from the scene's by up to [`SCENE_MATCH_TEXELS`] texels.
     pub bounds: Aabb,
-    /// Longest root-to-leaf path in nodes.
+    /// Inner nodes on the longest root-to-leaf path, at least 1.
     pub depth: u32,
     /// World-space size of one texel (scene diagonal / texels_per_diagonal).
     pub texel_size: f32,
+    /// What the build made and how long it took.
     pub stats: RbvhStats,
     /// Optional per-texel surface colour, parallel to `atlas.texels` (same index): RGBA8 packed
     /// as in [`crate::surface::rgba`] (red in the low byte, RGB sRGB-encoded, alpha linear), 0 at
@@ -57,8 +62,11 @@ pub struct Rbvh {
 /// Accounting of one build.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct RbvhStats {
+    /// Wall time of [`Rbvh::build`] in milliseconds (as recorded at build time for a loaded file).
     pub build_ms: f64,
+    /// Leaves that became height fields (= `leaves.len()`).
     pub heightfield_leaves: u32,
+    /// Leaves kept as triangles (hybrid leaves), traced exactly.
     pub triangle_leaves: u32,
     /// Texels of all tiles (the atlas has `atlas.pitch × atlas.rows`, the difference is waste).
     pub tile_texels: u64,
@@ -70,6 +78,7 @@ pub struct RbvhStats {
 pub const SCENE_MATCH_TEXELS: f32 = 16.0;
 
 impl Rbvh {
+    /// Bytes of the node array and the height-field leaf records.
     pub fn tree_bytes(&self) -> u64 {
         (std::mem::size_of_val(self.nodes.as_slice())
             + std::mem::size_of_val(self.leaves.as_slice())) as u64
@@ -82,6 +91,7 @@ impl Rbvh {
             + 4 * ranges::block_count(&self.atlas)
     }
 
+    /// Bytes of the triangle-leaf triangles.
     pub fn triangle_bytes(&self) -> u64 {
         std::mem::size_of_val(self.triangles.as_slice()) as u64
     }
@@ -94,6 +104,8 @@ impl Rbvh {
             .map_or(0, |c| std::mem::size_of_val(c.as_slice()) as u64)
     }
 
+    /// Device bytes of the geometry: tree, atlas (with block ranges) and triangles, the figure
+    /// compared with [`Bvh`](crate::bvh::Bvh)'s nodes and triangles.
     pub fn total_bytes(&self) -> u64 {
         self.tree_bytes() + self.atlas_bytes() + self.triangle_bytes()
     }

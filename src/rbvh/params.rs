@@ -10,10 +10,16 @@ use crate::{Error, Result};
 pub enum Refinement {
     /// Cone of normals: every triangle normal within `max_angle_deg` of the projection axis.
     /// Good for smooth (subdivision) surfaces.
-    NormalCone { max_angle_deg: f32 },
+    NormalCone {
+        /// Largest angle between a triangle normal and the axis, degrees, in (0, 90).
+        max_angle_deg: f32,
+    },
     /// Projected surface area: `A⊥ / A ≥ min_ratio`, with `A⊥ = Σ Aᵢ (nᵢ · w)` the area seen along
     /// the projection axis `w`. Good for scanned, noisy surfaces.
-    ProjectedArea { min_ratio: f32 },
+    ProjectedArea {
+        /// Smallest accepted `A⊥ / A`, in (0, 1]; 1 admits only surfaces facing the axis squarely.
+        min_ratio: f32,
+    },
 }
 
 /// Where to split a set that cannot be one height field.
@@ -33,7 +39,9 @@ pub struct RbvhParams {
     /// Global sampling rate, in texels along the scene's bounding-box diagonal (so that presets
     /// mean the same on any scale).
     pub texels_per_diagonal: f32,
+    /// Local criterion for accepting a set of triangles as one height field.
     pub refinement: Refinement,
+    /// Where a set that fails `refinement` is split.
     pub subdivision: Subdivision,
     /// Object split: separate connected parts (and scene objects) are never fused into one height
     /// field; a node holding several is split between them first.

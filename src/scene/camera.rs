@@ -9,9 +9,13 @@ use crate::geom::{Aabb, Ray};
 /// the vertical field of view in degrees.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
+    /// World-space position of the pinhole, where every primary ray starts.
     pub eye: Vec3,
+    /// World-space point at the image centre; must differ from `eye`.
     pub target: Vec3,
+    /// World-space up hint, fixing the roll; any length, but not parallel to `target − eye`.
     pub up: Vec3,
+    /// Vertical field of view in degrees, in (0, 180).
     pub vfov_deg: f32,
 }
 

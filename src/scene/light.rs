@@ -7,7 +7,14 @@ use glam::Vec3;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Light {
     /// Light from infinitely far away; `direction` is the unit direction in which it travels.
-    Directional { direction: Vec3 },
+    Directional {
+        /// World-space direction of travel, from the light towards the scene (unit length from
+        /// scene files; users normalize anyway).
+        direction: Vec3,
+    },
     /// Light emitted from `position` in all directions.
-    Point { position: Vec3 },
+    Point {
+        /// World-space position of the light.
+        position: Vec3,
+    },
 }

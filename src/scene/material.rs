@@ -23,7 +23,10 @@ pub const NO_MATERIAL: u32 = u32::MAX;
 /// the `texture` sample when there is one (glTF `baseColorTexture`, OBJ `map_Kd`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Material {
+    /// The name in the source file (OBJ `newmtl`, glTF `name` or `material<index>`).
     pub name: String,
+    /// Constant linear RGBA that the texture sample is multiplied by; the whole colour without a
+    /// texture.
     pub factor: Vec4,
     /// Shared, so that instances of one mesh share its images.
     pub texture: Option<Arc<Texture>>,
@@ -79,6 +82,7 @@ impl Material {
 /// Per-triangle materials and texture coordinates, parallel to [`super::Scene::triangles`].
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SurfaceMaterials {
+    /// The scene's materials, indexed by `material_of_triangle`.
     pub materials: Vec<Material>,
     /// Per triangle, an index into `materials` or [`NO_MATERIAL`].
     pub material_of_triangle: Vec<u32>,

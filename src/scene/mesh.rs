@@ -18,11 +18,14 @@ pub const COORDINATE_RESOLUTION_LIMIT: f32 = 1.0 / 1024.0;
 pub struct Scene {
     /// The file name or built-in name (or a scene file's `name`), used in messages.
     pub name: String,
+    /// World-space vertices shared by all objects (finite once validated).
     pub positions: Vec<Vec3>,
     /// Indices into `positions`.
     pub triangles: Vec<[u32; 3]>,
     /// Per triangle, an index into `object_names`.
     pub object_of_triangle: Vec<u32>,
+    /// Per object, its name (OBJ `o`/`g` name, glTF `mesh/primitive`), prefixed with
+    /// `scene-name/` for meshes placed by [`Scene::append`].
     pub object_names: Vec<String>,
     /// The camera a scene file asked for.
     pub camera: Option<Camera>,
@@ -37,8 +40,11 @@ pub struct Scene {
 /// and, where the object has them, its corners' vertex colours.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ObjectSurface {
+    /// Per triangle, a material id or [`NO_MATERIAL`].
     pub material_of_triangle: Vec<u32>,
+    /// Per triangle, the texture coordinates of its three corners, in its winding.
     pub uv_of_triangle: Vec<[Vec2; 3]>,
+    /// Per triangle, the linear RGBA colours of its three corners; `None`: all white.
     pub colour_of_triangle: Option<Vec<[Vec4; 3]>>,
 }
 
@@ -147,6 +153,7 @@ impl Scene {
         }
     }
 
+    /// Triangles of the scene (= `triangles.len()`), the primitive count of every builder.
     pub fn triangle_count(&self) -> usize {
         self.triangles.len()
     }

@@ -29,6 +29,8 @@ pub struct MipChain<'a> {
 }
 
 impl<'a> MipChain<'a> {
+    /// Builds every level below `base` by 2×2 box filtering in linear space (an odd side repeats
+    /// its last texel), RGB re-encoded to the nearest sRGB code.
     pub fn new(base: &'a Texture) -> MipChain<'a> {
         let mut levels: Vec<Texture> = Vec::new();
         loop {

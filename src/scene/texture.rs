@@ -26,9 +26,12 @@ pub const MAX_TEXTURE_TEXELS: u64 = 1 << 26;
 /// How texture coordinates outside `[0, 1]` wrap (glTF samplers' `wrapS`/`wrapT`; OBJ repeats).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Wrap {
+    /// Tile the image: only the fractional part of a coordinate counts (glTF `REPEAT`, 10497).
     #[default]
     Repeat,
+    /// Clamp to the edge texels (glTF `CLAMP_TO_EDGE`, 33071).
     ClampToEdge,
+    /// Tile, flipping every other copy (glTF `MIRRORED_REPEAT`, 33648).
     MirroredRepeat,
 }
 
@@ -38,8 +41,11 @@ pub enum Wrap {
 pub struct Texture {
     /// Where it came from (a file, or a glTF file and image index), for messages.
     pub name: String,
+    /// Texels per row, 1..=[`MAX_TEXTURE_SIDE`].
     pub width: u32,
+    /// Rows, 1..=[`MAX_TEXTURE_SIDE`].
     pub height: u32,
+    /// `width × height` RGBA8 texels, row-major from the top row.
     pub texels: Vec<[u8; 4]>,
 }
 

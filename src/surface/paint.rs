@@ -28,11 +28,14 @@ pub struct Brush {
     pub radius: f32,
     /// Packed RGBA8 ([`super::rgba`]).
     pub colour: u32,
+    /// GLSL `pad0`..`pad2`: padding to 32 bytes; always 0.
     pub pad: [u32; 3],
 }
 const _: () = assert!(std::mem::size_of::<Brush>() == 32);
 
 impl Brush {
+    /// A dab at world-space `centre` of world-space `radius` in packed RGBA8 `colour`, padding
+    /// zeroed.
     pub fn new(centre: Vec3, radius: f32, colour: u32) -> Brush {
         Brush {
             centre: centre.to_array(),

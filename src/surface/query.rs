@@ -19,9 +19,13 @@ use crate::scene::Scene;
 /// [`Rbvh::atlas`] (and in [`Rbvh::colours`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SurfaceLocation {
+    /// Index of the height-field leaf in [`Rbvh::leaves`] (the hit's `id` without `LEAF_BIT`).
     pub leaf: u32,
+    /// Sample column along the leaf's `u`, `0..res_u`.
     pub i: u32,
+    /// Sample row along the leaf's `v`, `0..res_v`.
     pub j: u32,
+    /// `atlas_base + j · pitch + i`: the texel's index in the atlas and in the colour channel.
     pub atlas_index: u32,
 }
 

@@ -9,15 +9,22 @@ pub enum Analytic {
     /// The square of side `2 * half_extent` centred at `point` in the plane through it with
     /// unit `normal`, its edges along the plane's coordinate axes.
     Plane {
+        /// World-space centre of the square.
         point: Vec3,
+        /// Unit normal of the plane.
         normal: Vec3,
+        /// Half the square's side, world units.
         half_extent: f32,
     },
     /// A sphere, and the largest distance between it and its tessellation (anywhere on any
     /// triangle, inside or outside), measured on the actual vertices.
     Sphere {
+        /// World-space centre.
         center: Vec3,
+        /// Radius, world units.
         radius: f32,
+        /// Largest distance between sphere and tessellation, world units (computed in `f64`,
+        /// rounded up), so that a test's hit tolerance is computed rather than guessed.
         max_chord_error: f32,
     },
 }
