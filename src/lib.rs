@@ -75,6 +75,7 @@ pub mod io;
 pub mod lod;
 pub mod output;
 pub mod probe;
+pub mod progress;
 pub mod rays;
 pub mod rbvh;
 #[cfg(feature = "measure")]

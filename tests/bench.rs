@@ -459,9 +459,13 @@ fn a_bad_scene_fails_the_run_before_any_work() {
     let mut config = small_config(None);
     config.scenes = vec!["sphere".into(), "/no/such/model.obj".into()];
     let mut events = Vec::new();
-    let e = bench::run_observed(&config, &mut |event| events.push(event))
-        .unwrap_err()
-        .to_string();
+    let e = bench::run_observed(
+        &config,
+        &mut |event| events.push(event),
+        &rbvh::progress::Quiet,
+    )
+    .unwrap_err()
+    .to_string();
     assert!(e.contains("/no/such/model.obj"), "{e}");
     assert!(events.is_empty(), "work was done first: {events:?}");
 }

@@ -33,12 +33,13 @@ use super::record::{
 use super::traffic::{self, TrafficModel, CACHE_SIZES, DRAM_LINE};
 use super::validate;
 use super::{BenchConfig, Device, Level};
-use crate::bvh::Bvh;
+use crate::bvh::{BuildParams, Bvh};
 use crate::geom::{Hit, Ray};
 use crate::gpu::{Context, Query, Timing, Traced, Tracer};
 use crate::lod::{Lod, RayCone};
 use crate::output::{self, Image};
 use crate::probe::{MeanCounters, Read, TraceStats};
+use crate::progress::{Progress, Quiet};
 use crate::rays::{self, RayType, Secondary, DEFAULT_LIGHT};
 use crate::rbvh::{Rbvh, RbvhParams};
 use crate::scene::Scene;
@@ -55,11 +56,17 @@ pub enum Event {
 
 /// Runs the benchmark `config` describes.
 pub fn run(config: &BenchConfig) -> Result<BenchReport> {
-    run_observed(config, &mut |_| {})
+    run_observed(config, &mut |_| {}, &Quiet)
 }
 
-/// [`run`], reporting progress and warnings to `observe` as they happen.
-pub fn run_observed(config: &BenchConfig, observe: &mut dyn FnMut(Event)) -> Result<BenchReport> {
+/// [`run`], reporting what it is doing and warnings to `observe` as they happen (each
+/// measurement's messages prefixed `[k/n]`), and the counted steps of loading and building to
+/// `progress`.
+pub fn run_observed(
+    config: &BenchConfig,
+    observe: &mut dyn FnMut(Event),
+    progress: &dyn Progress,
+) -> Result<BenchReport> {
     config.validate()?;
     // Every scene before any work: a mistyped last scene must not cost the others' run.
     for spec in &config.scenes {
@@ -90,14 +97,25 @@ pub fn run_observed(config: &BenchConfig, observe: &mut dyn FnMut(Event)) -> Res
         written: Vec::new(),
     };
     let mut plot_dirs = HashSet::new();
+    let measurements = config.scenes.len() * config.ray_types.len();
+    let mut measurement = 0;
     for spec in &config.scenes {
         let scene = {
             observe(Event::Progress(format!("{spec}: loading")));
-            Scene::load(spec)?
+            Scene::load_observed(spec, progress)?
         };
-        let mut bench = SceneBench::new(&ctx, config, scene, observe)?;
+        let mut bench = SceneBench::new(&ctx, config, scene, observe, progress)?;
         for &ray_type in &config.ray_types {
-            bench.measure(ray_type, observe)?;
+            measurement += 1;
+            let mut numbered = |event| {
+                observe(match event {
+                    Event::Progress(what) => {
+                        Event::Progress(format!("[{measurement}/{measurements}] {what}"))
+                    }
+                    warning => warning,
+                })
+            };
+            bench.measure(ray_type, &mut numbered)?;
         }
         if let Some(dir) = &config.plot_dir {
             let dir = dir.join(plot::scene_dir_name(&bench.scene.name, &mut plot_dirs));
@@ -204,6 +222,7 @@ impl<'a> SceneBench<'a> {
         config: &'a BenchConfig,
         scene: Scene,
         observe: &mut dyn FnMut(Event),
+        progress: &dyn Progress,
     ) -> Result<SceneBench<'a>> {
         let diagonal = scene.bounds().diagonal();
         if scene.triangle_count() == 0 || !(diagonal.is_finite() && diagonal > 0.0) {
@@ -224,7 +243,7 @@ impl<'a> SceneBench<'a> {
             "{}: building the exact BVH",
             scene.name
         )));
-        let bvh = Bvh::build(&scene)?;
+        let bvh = Bvh::build_observed(&scene, &BuildParams::DEFAULT, progress)?;
         let mut candidates = vec![Candidate {
             method: Method::Exact,
             level: None,
@@ -249,7 +268,7 @@ impl<'a> SceneBench<'a> {
                 level.name()
             )));
             let params = level.params()?;
-            let rbvh = Arc::new(Rbvh::build(&scene, &params)?);
+            let rbvh = Arc::new(Rbvh::build_observed(&scene, &params, progress)?);
             surface_offset = surface_offset.max(rbvh.texel_size);
             let memory = Memory {
                 tree: rbvh.tree_bytes(),

@@ -10,6 +10,7 @@ use glam::Vec3;
 
 use super::layout::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
 use crate::geom::Aabb;
+use crate::progress::{step, Progress, Quiet};
 use crate::scene::Scene;
 use crate::{Error, Result};
 
@@ -101,6 +102,15 @@ impl Bvh {
     /// than the stack; with [`Error::InvalidGeometry`] from [`Scene::validate`] for a malformed
     /// scene.
     pub fn build_with(scene: &Scene, params: &BuildParams) -> Result<Bvh> {
+        Self::build_observed(scene, params, &Quiet)
+    }
+
+    /// [`Bvh::build_with`], reporting to `progress` the triangles placed in leaves.
+    pub fn build_observed(
+        scene: &Scene,
+        params: &BuildParams,
+        progress: &dyn Progress,
+    ) -> Result<Bvh> {
         if params.bins < 2 || params.bins > 256 {
             return Err(Error::param(
                 "bins",
@@ -143,8 +153,14 @@ impl Bvh {
         let builder = Builder {
             prims: &prims,
             params,
+            progress,
         };
-        let root = (!order.is_empty()).then(|| builder.build(&mut order, 0, 0));
+        let root = step(
+            progress,
+            "building the exact BVH (triangles)",
+            prims.len() as u64,
+            || (!order.is_empty()).then(|| builder.build(&mut order, 0, 0)),
+        );
         let mut nodes = Vec::new();
         let root_children = match &root {
             None => [ChildRef::ABSENT, ChildRef::ABSENT],
@@ -242,6 +258,8 @@ fn flatten(node: &BuildNode, nodes: &mut Vec<GpuNode>) -> ChildRef {
 struct Builder<'a> {
     prims: &'a [Prim],
     params: &'a BuildParams,
+    /// Told of every leaf's triangles as the leaf is made.
+    progress: &'a dyn Progress,
 }
 
 #[derive(Clone, Copy)]
@@ -266,8 +284,12 @@ impl Builder<'_> {
             start: offset,
             count: n as u32,
         };
+        let made_leaf = || {
+            self.progress.advance(n as u64);
+            leaf
+        };
         if n == 1 {
-            return leaf;
+            return made_leaf();
         }
         let split = if depth < self.params.median_below_depth {
             self.sah_split(order, &bounds, &centroids)
@@ -275,9 +297,9 @@ impl Builder<'_> {
             None
         };
         let mid = match split {
-            Some(s) if s.cost >= n as f32 && n <= self.params.max_leaf => return leaf,
+            Some(s) if s.cost >= n as f32 && n <= self.params.max_leaf => return made_leaf(),
             Some(s) => partition(order, |i| s.bin_of(&self.prims[i as usize]) < s.bin),
-            None if n <= self.params.max_leaf => return leaf,
+            None if n <= self.params.max_leaf => return made_leaf(),
             None => self.median_split(order, &centroids),
         };
         let (left, right) = order.split_at_mut(mid);

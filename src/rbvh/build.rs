@@ -31,6 +31,7 @@ use super::split::{split, SplitPrim};
 use super::{Rbvh, RbvhParams, RbvhStats};
 use crate::bvh::{join_halves, ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
 use crate::geom::Aabb;
+use crate::progress::{step, Progress, Quiet};
 use crate::scene::Scene;
 use crate::{Error, Result};
 
@@ -56,12 +57,24 @@ struct Builder<'a> {
     keep_sources: bool,
     prims: &'a [SplitPrim],
     params: &'a RbvhParams,
+    /// Told of every leaf's triangles as the leaf is made.
+    progress: &'a dyn Progress,
     texel: f32,
 }
 
 impl Rbvh {
     /// Builds an RBVH of `scene` with `params` (see [`RbvhParams::quality`] for presets).
     pub fn build(scene: &Scene, params: &RbvhParams) -> Result<Rbvh> {
+        Rbvh::build_observed(scene, params, &Quiet)
+    }
+
+    /// [`Rbvh::build`], reporting to `progress` the triangles placed in leaves (height fields,
+    /// rasterized as they are made, or triangle leaves), then the baking of the colour channel.
+    pub fn build_observed(
+        scene: &Scene,
+        params: &RbvhParams,
+        progress: &dyn Progress,
+    ) -> Result<Rbvh> {
         params.validate()?;
         scene.validate()?;
         if scene.triangle_count() >= LEAF_BIT as usize {
@@ -95,7 +108,9 @@ impl Rbvh {
                 ),
             ));
         }
-        let components = connected_parts(scene);
+        let components = step(progress, "finding the scene's connected parts", 0, || {
+            connected_parts(scene)
+        });
         let prims: Vec<SplitPrim> = tris
             .iter()
             .zip(&components)
@@ -115,9 +130,15 @@ impl Rbvh {
             prims: &prims,
             params,
             texel,
+            progress,
         };
         let mut order: Vec<u32> = (0..tris.len() as u32).collect();
-        let root = (!order.is_empty()).then(|| builder.build(&mut order, 0, 0));
+        let root = step(
+            progress,
+            "building the RBVH (triangles into leaves)",
+            tris.len() as u64,
+            || (!order.is_empty()).then(|| builder.build(&mut order, 0, 0)),
+        );
 
         let mut out = Flattened::default();
         let root_children = match &root {
@@ -149,20 +170,22 @@ impl Rbvh {
             .iter()
             .map(|t| (t.frame.res_u, t.frame.res_v))
             .collect();
-        let packing = atlas::pack(&sizes)?;
+        let packing = step(progress, "packing the atlas", 0, || atlas::pack(&sizes))?;
         for (leaf, &base) in out.leaves.iter_mut().zip(&packing.bases) {
             leaf.atlas_base = base;
         }
         let atlas = atlas::assemble(&out.tiles, &packing);
         let colours = scene.surface.as_ref().map(|surface| {
-            crate::surface::bake(
-                scene,
-                surface,
-                &out.tiles,
-                &packing.bases,
-                packing.pitch,
-                atlas.texels.len(),
-            )
+            step(progress, "baking the colour channel", 0, || {
+                crate::surface::bake(
+                    scene,
+                    surface,
+                    &out.tiles,
+                    &packing.bases,
+                    packing.pitch,
+                    atlas.texels.len(),
+                )
+            })
         });
         let stats = RbvhStats {
             build_ms: start.elapsed().as_secs_f64() * 1e3,
@@ -211,6 +234,7 @@ impl Builder<'_> {
                         Vec::new()
                     };
                 }
+                self.progress.advance(n as u64);
                 return tiles_subtree(tiles);
             }
         }
@@ -219,6 +243,7 @@ impl Builder<'_> {
             .fold(Aabb::EMPTY, |b, &i| b.union(self.prims[i as usize].bounds));
         let small = bounds.diagonal() < self.params.min_leaf_texels * self.texel;
         if n == 1 || (n <= MAX_TRIANGLE_LEAF && small) {
+            self.progress.advance(n as u64);
             return Node::Triangles {
                 start: offset,
                 count: n as u32,

@@ -3,6 +3,7 @@
 use std::path::Path;
 
 use super::{builtin, gltf, obj, scene_file, Scene};
+use crate::progress::{step, Progress, Quiet};
 use crate::{Error, Result};
 
 /// The file types a scene can be loaded from, by lower-case extension.
@@ -40,10 +41,20 @@ impl Scene {
     /// it when `spec` looks like a path (has an extension or a separator), and otherwise an
     /// unknown-scene error listing the built-ins, since it was most likely a mistyped name.
     pub fn load(spec: &str) -> Result<Scene> {
+        Scene::load_observed(spec, &Quiet)
+    }
+
+    /// [`Scene::load`], reporting to `progress` the meshes of a scene file as they load (a
+    /// single mesh file or built-in scene is one step with nothing to count).
+    pub fn load_observed(spec: &str, progress: &dyn Progress) -> Result<Scene> {
         match resolve(spec)? {
             None => Scene::builtin(spec),
-            Some((path, FileType::SceneFile)) => scene_file::load(path),
-            Some((path, FileType::Obj | FileType::Gltf)) => load_mesh_file(path),
+            Some((path, FileType::SceneFile)) => scene_file::load(path, progress),
+            Some((path, FileType::Obj | FileType::Gltf)) => {
+                step(progress, &format!("loading {}", path.display()), 0, || {
+                    load_mesh_file(path)
+                })
+            }
         }
     }
 

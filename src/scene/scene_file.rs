@@ -4,6 +4,7 @@
 //! Unknown keys are errors (a typo must not be silently ignored), and every error names the
 //! file and the line of the offending value; the format is described in `scenes/README.md`.
 
+use std::collections::hash_map::{Entry, HashMap};
 use std::ops::Range;
 use std::path::Path;
 
@@ -14,6 +15,7 @@ use toml::Spanned;
 use super::camera::DEFAULT_VFOV_DEG;
 use super::load::load_mesh_file;
 use super::{Camera, CameraFault, Light, Scene};
+use crate::progress::{step, Progress};
 use crate::{Error, Result};
 
 #[derive(Deserialize)]
@@ -92,18 +94,30 @@ pub(super) fn check(path: &Path) -> Result<()> {
 }
 
 /// Loads the scene file at `path`. Mesh paths are relative to the file's directory.
-pub(super) fn load(path: &Path) -> Result<Scene> {
+///
+/// A mesh named by several entries (the same built-in name, or the same path as written) is
+/// read once and placed as often as it is named: a scene of 25 copies of a dragon parses one.
+pub(super) fn load(path: &Path, progress: &dyn Progress) -> Result<Scene> {
     let (text, file) = parse(path)?;
     let source = Source { path, text: &text };
     let mut scene = Scene::new(path.display().to_string());
     scene.camera = file.camera.map(|c| source.camera(&c)).transpose()?;
     scene.light = file.light.map(|l| source.light(&l)).transpose()?;
     let dir = path.parent().unwrap_or(Path::new(""));
-    for entry in &file.mesh {
-        let transform = source.transform(entry.get_ref())?;
-        let mesh = source.mesh(entry, dir)?;
-        scene.append(&mesh, transform);
-    }
+    let what = format!("loading the meshes of {}", path.display());
+    step(progress, &what, file.mesh.len() as u64, || {
+        let mut loaded: HashMap<(bool, &str), Scene> = HashMap::new();
+        for entry in &file.mesh {
+            let transform = source.transform(entry.get_ref())?;
+            let mesh = match loaded.entry(source.mesh_key(entry)?) {
+                Entry::Occupied(known) => known.into_mut(),
+                Entry::Vacant(new) => new.insert(source.mesh(entry, dir)?),
+            };
+            scene.append(mesh, transform);
+            progress.advance(1);
+        }
+        Ok::<(), Error>(())
+    })?;
     scene.validate()?;
     if let Some(name) = file.name {
         scene.name = name;
@@ -233,6 +247,18 @@ impl Source<'_> {
                     .map(|_| ())
                     .map_err(|e| self.error(file.span(), format!("cannot load mesh: {e}")))
             }
+            _ => Err(self.error(
+                entry.span(),
+                "[[mesh]] needs exactly one of `builtin` or `path`",
+            )),
+        }
+    }
+
+    /// What an entry's mesh is known by while loading: (built-in?, name or path as written).
+    fn mesh_key<'e>(&self, entry: &'e Spanned<MeshEntry>) -> Result<(bool, &'e str)> {
+        match (&entry.get_ref().builtin, &entry.get_ref().path) {
+            (Some(name), None) => Ok((true, name.get_ref().as_str())),
+            (None, Some(file)) => Ok((false, file.get_ref().as_str())),
             _ => Err(self.error(
                 entry.span(),
                 "[[mesh]] needs exactly one of `builtin` or `path`",

@@ -2,10 +2,9 @@
 //! as a table, JSON, CSV, charts and error images (the library's `rbvh::bench`).
 
 use std::path::PathBuf;
-use std::time::Duration;
 
+use crate::progress::Bar;
 use anyhow::{Context as _, Result};
-use indicatif::{ProgressBar, ProgressStyle};
 use rbvh::bench::{self, BenchConfig, Device, Event, Level, RayType};
 
 use crate::prepare::{context_options, flag_error, LodBuildArgs, Quality};
@@ -110,22 +109,19 @@ pub fn run(a: Args) -> Result<()> {
     config.traffic = a.traffic;
     config.block_jumps = a.block_jumps;
 
-    let bar = ProgressBar::new_spinner();
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} {msg} {elapsed}").expect("static template"),
-    );
-    bar.enable_steady_tick(Duration::from_millis(120));
-    let result = bench::run_observed(&config, &mut |event| match event {
-        Event::Progress(what) => bar.set_message(what),
-        Event::Warning(what) => bar.suspend(|| {
-            if what.starts_with("INVALID") {
-                eprintln!("!!!!!!!! {what}");
-            } else {
-                eprintln!("warning: {what}");
+    let bar = Bar::new("benchmark");
+    let result = bench::run_observed(
+        &config,
+        &mut |event| match event {
+            Event::Progress(what) => bar.set_label(what),
+            Event::Warning(what) if what.starts_with("INVALID") => {
+                bar.println(&format!("!!!!!!!! {what}"))
             }
-        }),
-    });
-    bar.finish_and_clear();
+            Event::Warning(what) => bar.println(&format!("warning: {what}")),
+        },
+        &bar,
+    );
+    bar.finish();
     let report = result.map_err(flag_error).context("benchmark")?;
 
     print!("{}", bench::table(&report));

@@ -6,12 +6,13 @@ use std::time::Instant;
 
 use anyhow::{Context as _, Result};
 use rayon::prelude::*;
-use rbvh::bvh::Bvh;
+use rbvh::bvh::{BuildParams, Bvh};
 use rbvh::probe::TraceStats;
 use rbvh::rbvh::{Rbvh, RbvhParams, Subdivision};
 use rbvh::scene::Scene;
 
-use crate::prepare::{flag_error, step, Quality};
+use crate::prepare::{flag_error, Quality};
+use crate::progress::step;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -34,7 +35,7 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let scene = step("loading scene", || Scene::load(&a.scene))
+    let scene = step("loading scene", |bar| Scene::load_observed(&a.scene, bar))
         .with_context(|| format!("loading scene {:?}", a.scene))?;
     if let Some(warning) = scene.precision_warning() {
         eprintln!("warning: {warning}");
@@ -45,19 +46,22 @@ pub fn run(a: Args) -> Result<()> {
         "--out saves one level: give a single --quality"
     );
     let table = a.stats || a.out.is_none();
-    let exact = step("building exact BVH", || Bvh::build(&scene))?;
+    let exact = step("building exact BVH", |bar| {
+        Bvh::build_observed(&scene, &BuildParams::DEFAULT, bar)
+    })?;
     let exact_bytes = exact.tree_bytes() + exact.triangle_bytes();
     if table {
         println!(
-            "{}: {} triangles; exact BVH {} nodes, {:.2} MB (tree + triangles), built in {:.0} ms",
+            "{}: {} triangles; exact BVH {} nodes, {:.2} MB (tree + triangles), built in {:.0} ms; peak host memory so far {}",
             scene.name,
             scene.triangle_count(),
             exact.nodes.len(),
             mb(exact_bytes),
-            exact.build_ms
+            exact.build_ms,
+            peak_host_mb()
         );
         println!(
-            "{:>6} {:>9} {:>9} {:>8} {:>9} {:>11} {:>10} {:>7} {:>9} {:>9} {:>9} {:>9} {:>10}",
+            "{:>6} {:>9} {:>9} {:>8} {:>9} {:>11} {:>10} {:>7} {:>9} {:>9} {:>9} {:>9} {:>10} {:>9}",
             "level",
             "build ms",
             "nodes",
@@ -70,16 +74,17 @@ pub fn run(a: Args) -> Result<()> {
             "atlas MB",
             "tris MB",
             "total MB",
-            "vs exact"
+            "vs exact",
+            "peak MB"
         );
     }
     for (name, params) in levels {
-        let r = step(&format!("building RBVH {name}"), || {
-            Rbvh::build(&scene, &params).map_err(flag_error)
+        let r = step(&format!("building RBVH {name}"), |bar| {
+            Rbvh::build_observed(&scene, &params, bar).map_err(flag_error)
         })?;
         if table {
             println!(
-            "{:>6} {:>9.0} {:>9} {:>8} {:>9} {:>11} {:>10} {:>6.1}% {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.1}x",
+            "{:>6} {:>9.0} {:>9} {:>8} {:>9} {:>11} {:>10} {:>6.1}% {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.1}x {:>9}",
             name,
             r.stats.build_ms,
             r.nodes.len(),
@@ -92,7 +97,8 @@ pub fn run(a: Args) -> Result<()> {
             mb(r.atlas_bytes()),
             mb(r.triangle_bytes()),
             mb(r.total_bytes()),
-            exact_bytes as f64 / r.total_bytes().max(1) as f64
+            exact_bytes as f64 / r.total_bytes().max(1) as f64,
+            peak_host_mb()
         );
             if r.colours.is_some() {
                 println!(
@@ -127,7 +133,7 @@ fn compare_splits(scene: &Scene, level: &str, params: &RbvhParams) -> Result<()>
             object_split,
             ..*params
         };
-        let r = step(&format!("building {level} ({name})"), || {
+        let r = step(&format!("building {level} ({name})"), |_| {
             Rbvh::build(scene, &p).map_err(flag_error)
         })?;
         let start = Instant::now();
@@ -152,4 +158,17 @@ fn compare_splits(scene: &Scene, level: &str, params: &RbvhParams) -> Result<()>
 
 fn mb(bytes: u64) -> f64 {
     bytes as f64 / 1e6
+}
+
+/// The process's peak resident memory so far (Linux's `VmHWM`), in MB, or `-` where the
+/// system does not say: the figure a user sizing a machine for a large scene needs.
+fn peak_host_mb() -> String {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|status| {
+            let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+            let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+            Some(format!("{:.0}", kb as f64 / 1024.0))
+        })
+        .unwrap_or_else(|| "-".into())
 }

@@ -4,6 +4,7 @@ mod bench;
 mod build;
 mod paint;
 mod prepare;
+mod progress;
 mod regress;
 mod render;
 mod trace;

@@ -13,8 +13,9 @@ use rbvh::output;
 use rbvh::surface::{strokes, Brush};
 
 use crate::prepare::{
-    check_image_size, prepare, step, Common, LodArgs, Method, Prepared, Source, Structure,
+    check_image_size, prepare, Common, LodArgs, Method, Prepared, Source, Structure,
 };
+use crate::progress::step;
 use crate::render::lambert;
 
 #[derive(clap::Args, Debug)]
@@ -59,7 +60,7 @@ pub fn run(a: Args) -> Result<()> {
 
     let (rays, hits) = if a.before.is_some() || a.after.is_some() {
         let rays = camera.primary_rays(a.width, a.height);
-        let hits = step("tracing", || tracer.trace(&rays, Query::Closest))?.hits;
+        let hits = step("tracing", |_| tracer.trace(&rays, Query::Closest))?.hits;
         (rays, hits)
     } else {
         (Vec::new(), Vec::new())

@@ -2,12 +2,13 @@
 //! structure — with a spinner on long steps (hidden when stderr is not a terminal).
 
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use anyhow::{Context as _, Result};
+
+use crate::progress::step;
 use clap::{Args, ValueEnum};
-use indicatif::{ProgressBar, ProgressStyle};
-use rbvh::bvh::Bvh;
+use rbvh::bvh::{BuildParams, Bvh};
 use rbvh::geom::{Hit, Ray};
 use rbvh::glam::Vec3;
 use rbvh::gpu::{Addressing, Context, ContextOptions, Query, Reach, Traced, Tracer, Validation};
@@ -299,23 +300,13 @@ pub fn flag_error(e: rbvh::Error) -> anyhow::Error {
     e.into()
 }
 
-/// Runs `f` under a spinner labelled `what`.
-pub fn step<T>(what: &str, f: impl FnOnce() -> T) -> T {
-    let bar = ProgressBar::new_spinner().with_message(what.to_string());
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} {msg} {elapsed}").expect("static template"),
-    );
-    bar.enable_steady_tick(Duration::from_millis(120));
-    let out = f();
-    bar.finish_and_clear();
-    out
-}
-
 pub fn prepare(c: &Common) -> Result<Prepared> {
     let t = Instant::now();
     let camera = c.source.camera()?;
-    let mut scene = step("loading scene", || Scene::load(&c.source.scene))
-        .with_context(|| format!("loading scene {:?}", c.source.scene))?;
+    let mut scene = step("loading scene", |bar| {
+        Scene::load_observed(&c.source.scene, bar)
+    })
+    .with_context(|| format!("loading scene {:?}", c.source.scene))?;
     if camera.is_some() {
         scene.camera = camera;
     }
@@ -326,20 +317,22 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
     let t = Instant::now();
     let structure = match (&c.source.rbvh, c.method) {
         (Some(path), _) => {
-            let r = step("loading RBVH", || Rbvh::load(path))
+            let r = step("loading RBVH", |_| Rbvh::load(path))
                 .with_context(|| format!("loading RBVH {}", path.display()))?;
             r.check_built_from(&scene).with_context(|| {
                 format!("RBVH {} with scene {:?}", path.display(), c.source.scene)
             })?;
             Structure::Rbvh(Box::new(r))
         }
-        (None, Method::Exact) => Structure::Exact(step("building BVH", || Bvh::build(&scene))?),
+        (None, Method::Exact) => Structure::Exact(step("building BVH", |bar| {
+            Bvh::build_observed(&scene, &BuildParams::DEFAULT, bar)
+        })?),
         (None, Method::Rbvh) => {
             let mut levels = c.source.quality.levels()?;
             anyhow::ensure!(levels.len() == 1, "--quality: give one level to trace");
             let (_, params) = levels.remove(0);
-            Structure::Rbvh(Box::new(step("building RBVH", || {
-                Rbvh::build(&scene, &params).map_err(flag_error)
+            Structure::Rbvh(Box::new(step("building RBVH", |bar| {
+                Rbvh::build_observed(&scene, &params, bar).map_err(flag_error)
             })?))
         }
     };
@@ -360,7 +353,7 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
         }
         (Structure::Rbvh(r), true) => {
             let params = c.lod.build.params();
-            Some(step("building levels of detail", || {
+            Some(step("building levels of detail", |_| {
                 Lod::build(r, &params).map_err(flag_error)
             })?)
         }

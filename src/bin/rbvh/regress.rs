@@ -8,7 +8,8 @@ use clap::ValueEnum;
 use rbvh::gpu::Context;
 use rbvh::regress::{self, Config, Method, Mode, Tolerance};
 
-use crate::prepare::{context_options, step};
+use crate::prepare::context_options;
+use crate::progress::step;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -135,7 +136,7 @@ pub fn run(a: Args) -> Result<()> {
         ctx.device_name(),
         ctx.driver()
     );
-    let report = step("rendering", || regress::run(&ctx, &config))?;
+    let report = step("rendering", |_| regress::run(&ctx, &config))?;
     print!("{}", report.table());
     if a.bless {
         eprintln!("wrote the goldens to {}", config.golden_dir.display());

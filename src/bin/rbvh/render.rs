@@ -22,9 +22,9 @@ use rbvh::scene::{Light, Scene};
 use rbvh::surface::hit_albedo;
 
 use crate::prepare::{
-    check_image_size, prepare, report_counters, report_throughput, step, Common, Prepared,
-    Structure,
+    check_image_size, prepare, report_counters, report_throughput, Common, Prepared, Structure,
 };
+use crate::progress::step;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -119,7 +119,7 @@ pub fn run(a: Args) -> Result<()> {
         .env
         .as_ref()
         .map(|path| {
-            step("loading environment map", || Environment::load(path))
+            step("loading environment map", |_| Environment::load(path))
                 .with_context(|| format!("loading environment map {}", path.display()))
         })
         .transpose()?;
@@ -129,12 +129,12 @@ pub fn run(a: Args) -> Result<()> {
     let tracer = p.tracer()?;
     let cone = RayCone::pixel(&camera, a.height);
     let cones = || vec![cone; rays.len()];
-    let traced = step("tracing", || {
+    let traced = step("tracing", |_| {
         p.trace(&tracer, &rays, cones, Query::Closest, false)
     })?;
     // Counted in a trace of their own: the timed one compiles the counting away.
     let counters = if a.heatmap.is_some() || a.common.source.stats {
-        step("counting each ray's work", || {
+        step("counting each ray's work", |_| {
             p.trace(&tracer, &rays, cones, Query::Closest, true)
         })?
         .counters
@@ -271,7 +271,7 @@ fn compare_with_exact(
     rendered: &ibl::Rendered,
 ) -> Result<()> {
     let t = Instant::now();
-    let bvh = step("building BVH", || Bvh::build(&p.scene))?;
+    let bvh = step("building BVH", |_| Bvh::build(&p.scene))?;
     let exact = Tracer::exact(&p.ctx, &bvh).context("uploading the exact BVH")?;
     let setup_ms = t.elapsed().as_secs_f64() * 1e3;
     let exact_hits = exact.trace(frame.rays, Query::Closest)?.hits;

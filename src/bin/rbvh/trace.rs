@@ -7,7 +7,8 @@ use rbvh::gpu::Query;
 use rbvh::io;
 use rbvh::lod::RayCone;
 
-use crate::prepare::{prepare, report_throughput, step, Common};
+use crate::prepare::{prepare, report_throughput, Common};
+use crate::progress::step;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -51,7 +52,7 @@ pub fn run(a: Args) -> Result<()> {
         p.trace_cpu(&rays, &cones, a.any_hit)?
     } else {
         let tracer = p.tracer()?;
-        let traced = step("tracing", || {
+        let traced = step("tracing", |_| {
             p.trace(&tracer, &rays, || cones.clone(), query, false)
         })?;
         if a.common.source.stats {

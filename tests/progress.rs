@@ -1,0 +1,121 @@
+//! Progress reports add up: every counted step ends, and the units advanced are the units
+//! announced (a bar that stops at 97% or runs past 100% misleads the user it is for).
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Mutex;
+
+use rbvh::bvh::{BuildParams, Bvh};
+use rbvh::progress::Progress;
+use rbvh::rbvh::{Rbvh, RbvhParams};
+use rbvh::scene::Scene;
+
+/// Steps as (what, announced total, units advanced), in order; advances may come from any thread.
+#[derive(Default)]
+struct Tally {
+    steps: Mutex<Vec<(String, u64, u64)>>,
+    open: Mutex<Option<(String, u64)>>,
+    advanced: AtomicU64,
+}
+
+impl Progress for Tally {
+    fn begin(&self, what: &str, total: u64) {
+        let mut open = self.open.lock().unwrap();
+        assert!(open.is_none(), "{what} began inside {open:?}");
+        *open = Some((what.to_string(), total));
+        self.advanced.store(0, Ordering::SeqCst);
+    }
+    fn advance(&self, done: u64) {
+        assert!(
+            self.open.lock().unwrap().is_some(),
+            "advance outside a step"
+        );
+        self.advanced.fetch_add(done, Ordering::SeqCst);
+    }
+    fn end(&self) {
+        let (what, total) = self.open.lock().unwrap().take().expect("end without begin");
+        let advanced = self.advanced.load(Ordering::SeqCst);
+        self.steps.lock().unwrap().push((what, total, advanced));
+    }
+}
+
+impl Tally {
+    /// The counted steps (total > 0), each checked to have advanced exactly its total.
+    fn counted(&self) -> Vec<String> {
+        assert!(self.open.lock().unwrap().is_none(), "a step never ended");
+        let steps = self.steps.lock().unwrap();
+        for (what, total, advanced) in steps.iter() {
+            if *total > 0 {
+                assert_eq!(advanced, total, "{what}");
+            }
+        }
+        steps
+            .iter()
+            .filter(|s| s.1 > 0)
+            .map(|s| format!("{} {}", s.0, s.1))
+            .collect()
+    }
+}
+
+#[test]
+fn builds_count_every_triangle_once() {
+    let scene = Scene::load("default").unwrap();
+    let n = scene.triangle_count() as u64;
+
+    let tally = Tally::default();
+    Bvh::build_observed(&scene, &BuildParams::DEFAULT, &tally).unwrap();
+    assert_eq!(
+        tally.counted(),
+        [format!("building the exact BVH (triangles) {n}")]
+    );
+
+    for level in [0, 4] {
+        let tally = Tally::default();
+        let observed =
+            Rbvh::build_observed(&scene, &RbvhParams::quality(level).unwrap(), &tally).unwrap();
+        assert_eq!(
+            tally.counted(),
+            [format!("building the RBVH (triangles into leaves) {n}")]
+        );
+        // Watching changes nothing.
+        let plain = Rbvh::build(&scene, &RbvhParams::quality(level).unwrap()).unwrap();
+        assert_eq!(observed.nodes, plain.nodes);
+        assert_eq!(observed.atlas.texels, plain.atlas.texels);
+    }
+}
+
+#[test]
+fn a_scene_file_counts_its_meshes_and_reads_a_repeated_mesh_once_to_the_same_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("twice.toml");
+    std::fs::write(
+        &path,
+        "[[mesh]]\nbuiltin = \"blob\"\n\n\
+         [[mesh]]\nbuiltin = \"blob\"\ntranslate = [3.0, 0.0, 0.0]\n\n\
+         [[mesh]]\nbuiltin = \"sphere\"\nscale = 0.5\n",
+    )
+    .unwrap();
+    let tally = Tally::default();
+    let scene = Scene::load_observed(path.to_str().unwrap(), &tally).unwrap();
+    assert_eq!(
+        tally.counted(),
+        [format!("loading the meshes of {} 3", path.display())]
+    );
+
+    let blob = Scene::load("blob").unwrap();
+    let sphere = Scene::load("sphere").unwrap();
+    let (b, s) = (blob.triangle_count(), sphere.triangle_count());
+    assert_eq!(scene.triangle_count(), 2 * b + s);
+    for t in 0..b {
+        let original = blob.triangle(t);
+        let [first, second] = [scene.triangle(t), scene.triangle(b + t)];
+        for k in 0..3 {
+            assert_eq!(first[k], original[k]);
+            assert_eq!(second[k], original[k] + glam::Vec3::new(3.0, 0.0, 0.0));
+        }
+    }
+    let last = scene.triangle(2 * b);
+    let expected = sphere.triangle(0);
+    for k in 0..3 {
+        assert!((last[k] - 0.5 * expected[k]).length() < 1e-6);
+    }
+}
