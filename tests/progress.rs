@@ -4,7 +4,11 @@
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
 
+mod common;
+
 use rbvh::bvh::{BuildParams, Bvh};
+use rbvh::gpu::{Query, Tracer, OBSERVED_BATCH};
+use rbvh::lod::{Lod, LodParams, RayCone};
 use rbvh::progress::Progress;
 use rbvh::rbvh::{Rbvh, RbvhParams};
 use rbvh::scene::Scene;
@@ -118,4 +122,44 @@ fn a_scene_file_counts_its_meshes_and_reads_a_repeated_mesh_once_to_the_same_sce
     for k in 0..3 {
         assert!((last[k] - 0.5 * expected[k]).length() < 1e-6);
     }
+}
+
+#[test]
+fn a_watched_trace_counts_its_rays_in_batches_and_answers_as_an_unwatched_one() {
+    let ctx = common::context();
+    let scene = Scene::load("sphere").unwrap();
+    let camera = scene.camera_or_framed(1.0);
+    // More than two batches, the last one partial.
+    let rays = camera.primary_rays(400, 400);
+    assert!(rays.len() > 2 * OBSERVED_BATCH && rays.len() % OBSERVED_BATCH != 0);
+    let rbvh = Rbvh::build(&scene, &RbvhParams::quality(2).unwrap()).unwrap();
+
+    let tracer = Tracer::rbvh(&ctx, &rbvh).unwrap();
+    let tally = Tally::default();
+    let watched = tracer
+        .trace_observed(&rays, None, Query::Closest, false, &tally)
+        .unwrap();
+    assert_eq!(tally.counted(), [format!("tracing rays {}", rays.len())]);
+    assert_eq!(
+        watched.hits,
+        tracer.trace(&rays, Query::Closest).unwrap().hits
+    );
+
+    let lod = Lod::build(&rbvh, &LodParams::default()).unwrap();
+    let tracer = Tracer::rbvh_lod(&ctx, &rbvh, &lod).unwrap();
+    let cones = vec![RayCone::pixel(&camera, 400); rays.len()];
+    let tally = Tally::default();
+    let watched = tracer
+        .trace_observed(&rays, Some(&cones), Query::Closest, true, &tally)
+        .unwrap();
+    assert_eq!(tally.counted(), [format!("tracing rays {}", rays.len())]);
+    let plain = tracer
+        .trace_lod(&rays, &cones, Query::Closest, true)
+        .unwrap();
+    assert_eq!(watched.hits, plain.hits);
+    assert_eq!(watched.counters, plain.counters);
+    // A level-of-detail tracer without cones is refused, as trace_with refuses it.
+    assert!(tracer
+        .trace_observed(&rays, None, Query::Closest, false, &tally)
+        .is_err());
 }

@@ -18,4 +18,4 @@ pub use context::{Context, ContextOptions, DeviceLimits, External, Validation};
 pub use painter::{PaintParams, PaintRecording, PaintStats, Painter, MAX_BRUSHES_PER_PASS};
 pub use pipeline::{ComputePipeline, DescriptorSet};
 pub use submit::Timing;
-pub use tracer::{BufferView, Query, TraceBinding, TraceParams, Traced, Tracer};
+pub use tracer::{BufferView, Query, TraceBinding, TraceParams, Traced, Tracer, OBSERVED_BATCH};

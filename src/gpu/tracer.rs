@@ -23,6 +23,7 @@ use crate::geom::{Hit, Ray};
 use crate::lod::cone::check_cones;
 use crate::lod::{Lod, RayCone};
 use crate::probe::RayCounters;
+use crate::progress::{step, Progress};
 use crate::rbvh::Rbvh;
 use crate::{Error, Result};
 
@@ -81,6 +82,11 @@ pub struct TraceParams {
 const _: () = assert!(std::mem::size_of::<TraceParams>() == 88);
 
 const FLAG_ANY_HIT: u32 = 1;
+
+/// Most rays per submission of [`Tracer::trace_observed`]: 65,536 rays keep lavapipe's and a
+/// GPU's cores busy (a thousand workgroups) while a watched trace of a million rays reports
+/// sixteen times.
+pub const OBSERVED_BATCH: usize = 1 << 16;
 
 /// `constant_id` of the trace shaders' `rbvh_count` (`glsl/trace_*_main.glsl`).
 const COUNT_CONSTANT_ID: u32 = 0;
@@ -688,7 +694,7 @@ impl Tracer {
             "trace",
             "a level-of-detail tracer needs one cone per ray: use Tracer::trace_lod",
         )?;
-        self.trace_batches(rays, None, query, counters)
+        self.trace_batches(rays, None, query, counters, None)
     }
 
     /// Traces `rays` with level of detail, `cones[i]` the footprint of `rays[i]` (see
@@ -707,7 +713,38 @@ impl Tracer {
             "this tracer has no levels of detail: make it with Tracer::rbvh_lod",
         )?;
         check_cones(rays, cones)?;
-        self.trace_batches(rays, Some(cones), query, counters)
+        self.trace_batches(rays, Some(cones), query, counters, None)
+    }
+
+    /// [`Tracer::trace_with`], or with `cones` [`Tracer::trace_lod`], reporting the rays traced
+    /// to `progress`: in batches of at most [`OBSERVED_BATCH`] rays, each its own submission, so
+    /// that a trace of seconds shows how far it is (the timing is the batches' sum).
+    pub fn trace_observed(
+        &self,
+        rays: &[Ray],
+        cones: Option<&[RayCone]>,
+        query: Query,
+        counters: bool,
+        progress: &dyn Progress,
+    ) -> Result<Traced> {
+        match cones {
+            Some(cones) => {
+                self.expect_lod(
+                    true,
+                    "trace",
+                    "this tracer has no levels of detail: make it with Tracer::rbvh_lod",
+                )?;
+                check_cones(rays, cones)?;
+            }
+            None => self.expect_lod(
+                false,
+                "trace",
+                "a level-of-detail tracer needs one cone per ray: pass them",
+            )?,
+        }
+        step(progress, "tracing rays", rays.len() as u64, || {
+            self.trace_batches(rays, cones, query, counters, Some(progress))
+        })
     }
 
     fn trace_batches(
@@ -716,6 +753,7 @@ impl Tracer {
         cones: Option<&[RayCone]>,
         query: Query,
         counters: bool,
+        progress: Option<&dyn Progress>,
     ) -> Result<Traced> {
         // Batches bounded by the largest per-ray buffer: the counters when counting, else the rays.
         let per_ray = if counters {
@@ -725,6 +763,11 @@ impl Tracer {
         } as u64;
         let batch =
             (self.ctx.limits().max_storage_buffer_range / per_ray).clamp(1, 1 << 22) as usize;
+        let batch = if progress.is_some() {
+            batch.min(OBSERVED_BATCH)
+        } else {
+            batch
+        };
         let mut out = Traced {
             hits: Vec::with_capacity(rays.len()),
             counters: counters.then(|| Vec::with_capacity(rays.len())),
@@ -744,6 +787,9 @@ impl Tracer {
                 (None, b) if out.hits.len() == chunk.len() => b,
                 _ => None,
             };
+            if let Some(progress) = progress {
+                progress.advance(chunk.len() as u64);
+            }
         }
         Ok(out)
     }

@@ -227,8 +227,8 @@ impl Prepared {
         Ok(tracer)
     }
 
-    /// Traces `rays` through `tracer` (from [`Prepared::tracer`]); `cones` gives their footprints
-    /// when tracing with level of detail.
+    /// Traces `rays` through `tracer` (from [`Prepared::tracer`]), counting them on `progress`;
+    /// `cones` gives their footprints when tracing with level of detail.
     pub fn trace(
         &self,
         tracer: &Tracer,
@@ -236,12 +236,10 @@ impl Prepared {
         cones: impl FnOnce() -> Vec<RayCone>,
         query: Query,
         counters: bool,
+        progress: &dyn rbvh::progress::Progress,
     ) -> Result<Traced> {
-        Ok(if self.lod.is_some() {
-            tracer.trace_lod(rays, &cones(), query, counters)?
-        } else {
-            tracer.trace_with(rays, query, counters)?
-        })
+        let cones = self.lod.is_some().then(cones);
+        Ok(tracer.trace_observed(rays, cones.as_deref(), query, counters, progress)?)
     }
 
     /// The CPU reference of [`Prepared::trace`].

@@ -126,16 +126,16 @@ pub fn run(a: Args) -> Result<()> {
     let p = prepare(&a.common)?;
     let camera = p.scene.camera_or_framed(a.width as f32 / a.height as f32);
     let rays = camera.primary_rays(a.width, a.height);
-    let tracer = p.tracer()?;
+    let tracer = step("uploading", |_| p.tracer())?;
     let cone = RayCone::pixel(&camera, a.height);
     let cones = || vec![cone; rays.len()];
-    let traced = step("tracing", |_| {
-        p.trace(&tracer, &rays, cones, Query::Closest, false)
+    let traced = step("tracing", |bar| {
+        p.trace(&tracer, &rays, cones, Query::Closest, false, bar)
     })?;
     // Counted in a trace of their own: the timed one compiles the counting away.
     let counters = if a.heatmap.is_some() || a.common.source.stats {
-        step("counting each ray's work", |_| {
-            p.trace(&tracer, &rays, cones, Query::Closest, true)
+        step("counting each ray's work", |bar| {
+            p.trace(&tracer, &rays, cones, Query::Closest, true, bar)
         })?
         .counters
     } else {

@@ -52,8 +52,8 @@ pub fn run(a: Args) -> Result<()> {
         p.trace_cpu(&rays, &cones, a.any_hit)?
     } else {
         let tracer = p.tracer()?;
-        let traced = step("tracing", |_| {
-            p.trace(&tracer, &rays, || cones.clone(), query, false)
+        let traced = step("tracing", |bar| {
+            p.trace(&tracer, &rays, || cones.clone(), query, false, bar)
         })?;
         if a.common.source.stats {
             report_throughput(&p, &rays, &cones, query, &traced)?;
