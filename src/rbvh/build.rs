@@ -22,6 +22,7 @@ use std::collections::HashMap;
 use std::time::Instant;
 
 use glam::Vec3;
+use rayon::prelude::*;
 
 use super::atlas;
 use super::frame::{fit, passes, projection_axis, rounding_pad};
@@ -406,33 +407,87 @@ impl Flattened {
 /// scene object (loaders often duplicate vertices along UV or normal seams), then joined by the
 /// triangles that share them. Ids are numbered in order of first appearance, so they are
 /// deterministic.
+///
+/// Parts never span objects, so when each object's triangles are one run (as [`Scene::append`]
+/// makes them) the objects are found in parallel and numbered one after the other, which is the
+/// same numbering; otherwise the whole scene is one run.
 fn connected_parts(scene: &Scene) -> Vec<u32> {
+    let object = |t: usize| scene.object_of_triangle.get(t).copied().unwrap_or(0);
+    let mut runs: Vec<std::ops::Range<usize>> = Vec::new();
+    for t in 0..scene.triangle_count() {
+        match runs.last_mut() {
+            Some(run) if object(run.start) == object(t) => run.end = t + 1,
+            _ => runs.push(t..t + 1),
+        }
+    }
+    if runs
+        .windows(2)
+        .any(|w| object(w[0].start) >= object(w[1].start))
+    {
+        runs.clear();
+        runs.push(0..scene.triangle_count());
+    }
+    let parts: Vec<(Vec<u32>, u32)> = runs
+        .par_iter()
+        .map(|run| parts_of_run(scene, run.clone()))
+        .collect();
+    let mut offset = 0;
+    let mut ids = Vec::with_capacity(scene.triangle_count());
+    for (local, count) in parts {
+        ids.extend(local.into_iter().map(|id| id + offset));
+        offset += count;
+    }
+    ids
+}
+
+/// [`connected_parts`] of triangles `run`, numbered from 0, and how many parts there are.
+///
+/// A vertex index remembers its (object, welded vertex) once looked up, so the position map is
+/// consulted once per vertex rather than once per corner: a sixth of the lookups on a closed
+/// mesh, which take most of the time on a scene of millions of triangles.
+fn parts_of_run(scene: &Scene, run: std::ops::Range<usize>) -> (Vec<u32>, u32) {
+    const UNSEEN: (u32, u32) = (u32::MAX, u32::MAX);
+    let triangles = &scene.triangles[run.clone()];
+    let first_vertex = triangles.iter().flatten().copied().min().unwrap_or(0);
+    let last_vertex = triangles.iter().flatten().copied().max().unwrap_or(0);
+    let mut welded_of_vertex = vec![UNSEEN; (last_vertex - first_vertex) as usize + 1];
     let mut key_of: HashMap<(u32, [u32; 3]), u32> = HashMap::new();
     let mut parent: Vec<u32> = Vec::new();
-    let mut corners = Vec::with_capacity(scene.triangle_count());
-    for (t, tri) in scene.triangles.iter().enumerate() {
+    let mut corners = Vec::with_capacity(triangles.len());
+    for (t, tri) in run.zip(triangles) {
         let object = scene.object_of_triangle.get(t).copied().unwrap_or(0);
         let ids = tri.map(|v| {
+            let slot = &mut welded_of_vertex[(v - first_vertex) as usize];
+            if slot.0 == object && slot.1 != u32::MAX {
+                return slot.1;
+            }
             let p = scene.positions[v as usize] + Vec3::ZERO;
             let key = (object, [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]);
-            *key_of.entry(key).or_insert_with(|| {
+            let welded = *key_of.entry(key).or_insert_with(|| {
                 parent.push(parent.len() as u32);
                 parent.len() as u32 - 1
-            })
+            });
+            *slot = (object, welded);
+            welded
         });
         union(&mut parent, ids[0], ids[1]);
         union(&mut parent, ids[0], ids[2]);
         corners.push(ids[0]);
     }
-    let mut dense: HashMap<u32, u32> = HashMap::new();
-    corners
+    let mut dense = vec![u32::MAX; parent.len()];
+    let mut count = 0;
+    let ids = corners
         .into_iter()
         .map(|v| {
-            let root = find(&mut parent, v);
-            let next = dense.len() as u32;
-            *dense.entry(root).or_insert(next)
+            let root = find(&mut parent, v) as usize;
+            if dense[root] == u32::MAX {
+                dense[root] = count;
+                count += 1;
+            }
+            dense[root]
         })
-        .collect()
+        .collect();
+    (ids, count)
 }
 
 fn find(parent: &mut [u32], mut x: u32) -> u32 {
