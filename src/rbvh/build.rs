@@ -504,3 +504,45 @@ fn union(parent: &mut [u32], a: u32, b: u32) {
         parent[ra.max(rb) as usize] = ra.min(rb);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two triangles welded along a duplicated edge, and one apart, in one object.
+    fn object(scene: &mut Scene, x: f32) {
+        let p = |a: f32, b: f32| Vec3::new(x + a, b, 0.0);
+        scene.push_object(
+            "o",
+            &[
+                p(0.0, 0.0),
+                p(1.0, 0.0),
+                p(0.0, 1.0),
+                // The shared edge again, as a loader splits vertices along a UV seam.
+                p(1.0, 0.0),
+                p(0.0, 1.0),
+                p(1.0, 1.0),
+                p(5.0, 5.0),
+                p(6.0, 5.0),
+                p(5.0, 6.0),
+            ],
+            &[[0, 1, 2], [3, 5, 4], [6, 7, 8]],
+        );
+    }
+
+    #[test]
+    fn parts_weld_within_an_object_never_across_and_number_by_first_appearance() {
+        let mut scene = Scene::new("parts");
+        object(&mut scene, 0.0);
+        // The same positions in another object: touching, but a part of its own.
+        object(&mut scene, 0.0);
+        assert_eq!(connected_parts(&scene), [0, 0, 1, 2, 2, 3]);
+
+        // Objects interleaved (public fields allow it): found as one run. The second triangle
+        // now belongs to the other object and welds with the fourth; the fifth, in the first
+        // object, with the first.
+        let mut interleaved = scene.clone();
+        interleaved.object_of_triangle = vec![0, 1, 0, 1, 0, 1];
+        assert_eq!(connected_parts(&interleaved), [0, 1, 2, 1, 0, 3]);
+    }
+}
