@@ -18,6 +18,7 @@
 //!        → ibl (image-based lighting: environment light, visibility through either structure)
 //!        → bench, regress (measurement and image regression; feature `measure`)
 //! probe: per-ray counters and the reads of the CPU twins, shared by bvh, rbvh, gpu and bench
+//! progress: how a caller watches long steps (loading, building, tracing), shared likewise
 //! ```
 //!
 //! The types most users need are at the crate root:

@@ -109,9 +109,10 @@ pub(super) fn load(path: &Path, progress: &dyn Progress) -> Result<Scene> {
         let mut loaded: HashMap<(bool, &str), Scene> = HashMap::new();
         for entry in &file.mesh {
             let transform = source.transform(entry.get_ref())?;
-            let mesh = match loaded.entry(source.mesh_key(entry)?) {
+            let named = source.mesh_ref(entry)?;
+            let mesh = match loaded.entry(named.key()) {
                 Entry::Occupied(known) => known.into_mut(),
-                Entry::Vacant(new) => new.insert(source.mesh(entry, dir)?),
+                Entry::Vacant(new) => new.insert(source.mesh(named, dir)?),
             };
             scene.append(mesh, transform);
             progress.advance(1);
@@ -129,6 +130,23 @@ pub(super) fn load(path: &Path, progress: &dyn Progress) -> Result<Scene> {
 fn line_of(text: &str, offset: usize) -> usize {
     let before = &text.as_bytes()[..offset.min(text.len())];
     before.iter().filter(|&&b| b == b'\n').count() + 1
+}
+
+/// What a `[[mesh]]` names: a built-in scene or a file, with its place in the scene file.
+#[derive(Clone, Copy)]
+enum MeshRef<'e> {
+    Builtin(&'e Spanned<String>),
+    File(&'e Spanned<String>),
+}
+
+impl<'e> MeshRef<'e> {
+    /// What the mesh is known by while loading: entries with equal keys name one mesh.
+    fn key(self) -> (bool, &'e str) {
+        match self {
+            MeshRef::Builtin(name) => (true, name.get_ref()),
+            MeshRef::File(file) => (false, file.get_ref()),
+        }
+    }
 }
 
 /// The file being read, for errors that point into it.
@@ -226,14 +244,26 @@ impl Source<'_> {
         Ok(Mat4::from_translation(translate) * rotation * Mat4::from_scale(scale))
     }
 
+    /// The mesh an entry names, or an error when it names none or both.
+    fn mesh_ref<'e>(&self, entry: &'e Spanned<MeshEntry>) -> Result<MeshRef<'e>> {
+        match (&entry.get_ref().builtin, &entry.get_ref().path) {
+            (Some(name), None) => Ok(MeshRef::Builtin(name)),
+            (None, Some(file)) => Ok(MeshRef::File(file)),
+            _ => Err(self.error(
+                entry.span(),
+                "[[mesh]] needs exactly one of `builtin` or `path`",
+            )),
+        }
+    }
+
     /// Whether the mesh an entry names is there: a built-in name, or a regular file of a mesh
     /// type, without loading it.
     fn mesh_exists(&self, entry: &Spanned<MeshEntry>, dir: &Path) -> Result<()> {
-        match (&entry.get_ref().builtin, &entry.get_ref().path) {
-            (Some(name), None) if super::builtin::NAMES.contains(&name.get_ref().as_str()) => {
+        match self.mesh_ref(entry)? {
+            MeshRef::Builtin(name) if super::builtin::NAMES.contains(&name.get_ref().as_str()) => {
                 Ok(())
             }
-            (Some(name), None) => Err(self.error(
+            MeshRef::Builtin(name) => Err(self.error(
                 name.span(),
                 format!(
                     "unknown built-in scene {:?} (built-ins: {})",
@@ -241,48 +271,28 @@ impl Source<'_> {
                     super::builtin::NAMES.join(", ")
                 ),
             )),
-            (None, Some(file)) => {
+            MeshRef::File(file) => {
                 let path = dir.join(file.get_ref());
                 super::load::check_mesh_file(&path)
                     .map(|_| ())
                     .map_err(|e| self.error(file.span(), format!("cannot load mesh: {e}")))
             }
-            _ => Err(self.error(
-                entry.span(),
-                "[[mesh]] needs exactly one of `builtin` or `path`",
-            )),
         }
     }
 
-    /// What an entry's mesh is known by while loading: (built-in?, name or path as written).
-    fn mesh_key<'e>(&self, entry: &'e Spanned<MeshEntry>) -> Result<(bool, &'e str)> {
-        match (&entry.get_ref().builtin, &entry.get_ref().path) {
-            (Some(name), None) => Ok((true, name.get_ref().as_str())),
-            (None, Some(file)) => Ok((false, file.get_ref().as_str())),
-            _ => Err(self.error(
-                entry.span(),
-                "[[mesh]] needs exactly one of `builtin` or `path`",
-            )),
-        }
-    }
-
-    /// Loads the mesh an entry names. Its objects are later prefixed with the name it is given
-    /// here: the built-in name or the path as written, shorter than the resolved path.
-    fn mesh(&self, entry: &Spanned<MeshEntry>, dir: &Path) -> Result<Scene> {
-        match (&entry.get_ref().builtin, &entry.get_ref().path) {
-            (Some(name), None) => {
+    /// Loads the mesh `named`. Its objects are later prefixed with the name it is given here:
+    /// the built-in name or the path as written, shorter than the resolved path.
+    fn mesh(&self, named: MeshRef<'_>, dir: &Path) -> Result<Scene> {
+        match named {
+            MeshRef::Builtin(name) => {
                 Scene::builtin(name.get_ref()).map_err(|e| self.error(name.span(), e.to_string()))
             }
-            (None, Some(file)) => {
+            MeshRef::File(file) => {
                 let mut mesh = load_mesh_file(&dir.join(file.get_ref()))
                     .map_err(|e| self.error(file.span(), format!("cannot load mesh: {e}")))?;
                 mesh.name = file.get_ref().clone();
                 Ok(mesh)
             }
-            _ => Err(self.error(
-                entry.span(),
-                "[[mesh]] needs exactly one of `builtin` or `path`",
-            )),
         }
     }
 }
