@@ -16,7 +16,8 @@
 //!        → output (PNG, EXR)
 //!        → rays (secondary rays from hits: ambient occlusion, shadow, diffuse)
 //!        → ibl (image-based lighting: environment light, visibility through either structure)
-//!        → bench, regress (measurement and image regression; feature `measure`)
+//!        → bench, regress (measurement and image regression; feature `measure`), both scoring
+//!          images by flip
 //! probe: per-ray counters and the reads of the CPU twins, shared by bvh, rbvh, gpu and bench
 //! progress: how a caller watches long steps (loading, building, tracing), shared likewise
 //! ```
@@ -69,6 +70,8 @@
 pub mod bench;
 pub mod bvh;
 pub mod error;
+#[cfg(feature = "measure")]
+pub mod flip;
 pub mod geom;
 pub mod gpu;
 pub mod ibl;

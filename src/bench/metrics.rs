@@ -18,6 +18,7 @@
 //! Percentiles use the nearest-rank definition: p99 is the smallest value with at least 99% of
 //! the values at or below it, so it is always one of the measured values.
 
+use crate::flip;
 use crate::geom::{Hit, Ray};
 use crate::gpu::Query;
 use crate::output::Image;
@@ -184,13 +185,7 @@ pub fn image_errors(reference: &Image, test: &Image) -> Result<ImageErrors> {
         .sum();
     let mse = squared / a.len() as f64;
     let psnr_db = 10.0 * (255.0f64.powi(2) / mse).log10();
-    let map = nv_flip::flip(
-        nv_flip::FlipImageRgb8::with_data(reference.width, reference.height, &a),
-        nv_flip::FlipImageRgb8::with_data(test.width, test.height, &b),
-        nv_flip::DEFAULT_PIXELS_PER_DEGREE,
-    )
-    .to_vec();
-    let flip_mean = map.iter().map(|&v| f64::from(v)).sum::<f64>() / map.len() as f64;
+    let flip_mean = flip::mean(&flip::errors(reference.width, reference.height, &a, &b)?);
     Ok(ImageErrors { psnr_db, flip_mean })
 }
 

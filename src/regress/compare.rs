@@ -3,6 +3,7 @@
 //! error of the hit distances. Each comparison also yields a per-pixel error picture, written only
 //! for failures.
 
+use crate::flip;
 use crate::output::{heatmap, Image};
 use crate::{Error, Result};
 
@@ -143,14 +144,9 @@ pub fn compare_images(
             ),
         ));
     }
-    let errors = nv_flip::flip(
-        nv_flip::FlipImageRgb8::with_data(golden.width, golden.height, &golden.bytes),
-        nv_flip::FlipImageRgb8::with_data(render.width, render.height, &render.bytes),
-        nv_flip::DEFAULT_PIXELS_PER_DEGREE,
-    )
-    .to_vec();
+    let errors = flip::errors(golden.width, golden.height, &golden.bytes, &render.bytes)?;
     let n = errors.len().max(1) as f64;
-    let flip_mean = errors.iter().map(|&e| f64::from(e)).sum::<f64>() / n;
+    let flip_mean = flip::mean(&errors);
     let outliers = errors.iter().filter(|&&e| e > tol.outlier_flip).count();
     let score = ImageScore {
         flip_mean,
