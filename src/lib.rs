@@ -14,6 +14,7 @@
 //!                                       → surface (colour channel, hit → texel, painting)
 //!        → gpu (Vulkan context, own or embedded; uploads, pipelines, tracer, painter)
 //!        → output (PNG, EXR)
+//!        → random (SplitMix64 streams, cosine directions)
 //!        → rays (secondary rays from hits: ambient occlusion, shadow, diffuse)
 //!        → ibl (image-based lighting: environment light, visibility through either structure)
 //!        → bench, regress (measurement and image regression; feature `measure`), both scoring
@@ -80,6 +81,7 @@ pub mod lod;
 pub mod output;
 pub mod probe;
 pub mod progress;
+pub mod random;
 pub mod rays;
 pub mod rbvh;
 #[cfg(feature = "measure")]

@@ -30,6 +30,7 @@ use serde::Serialize;
 
 use crate::geom::{Hit, Ray};
 use crate::gpu::Query;
+use crate::random::{cosine_direction_from, mix64, SplitMix64, GOLDEN_GAMMA};
 use crate::scene::Light;
 use crate::{Error, Result};
 
@@ -124,8 +125,8 @@ pub fn generate(kind: RayType, primary: &[Ray], exact: &[Hit], setup: &Secondary
     let ao_length = setup.ao_radius * setup.diagonal;
     let aim: Aim = match kind {
         RayType::Primary => return primary.to_vec(),
-        RayType::Ao => &|_, normal, rng| (cosine_direction(normal, rng), ao_length),
-        RayType::Diffuse => &|_, normal, rng| (cosine_direction(normal, rng), f32::INFINITY),
+        RayType::Ao => &|_, normal, rng| (cosine_direction_from(normal, rng), ao_length),
+        RayType::Diffuse => &|_, normal, rng| (cosine_direction_from(normal, rng), f32::INFINITY),
         RayType::Shadow => &|origin, _, _| match setup.light {
             Light::Directional { direction } => (-direction.normalize_or_zero(), f32::INFINITY),
             Light::Point { position } => (position - origin, 1.0),
@@ -140,11 +141,7 @@ pub fn generate(kind: RayType, primary: &[Ray], exact: &[Hit], setup: &Secondary
             let point = ray.origin() + hit.t * ray.dir();
             let normal = facing_normal(ray, hit);
             let origin = offset_origin(point, normal, setup.diagonal, setup.surface_offset);
-            let (dir, tmax) = aim(
-                origin,
-                normal,
-                &mut SplitMix64::for_ray(setup.seed, kind, index),
-            );
+            let (dir, tmax) = aim(origin, normal, &mut ray_rng(setup.seed, kind, index));
             Ray::new(origin, dir, 0.0, tmax)
         })
         .collect()
@@ -177,47 +174,10 @@ pub fn offset_origin(point: Vec3, normal: Vec3, diagonal: f32, surface_offset: f
     point + epsilon * normal
 }
 
-/// A cosine-distributed unit direction about the unit `normal` (Malley's method).
-fn cosine_direction(normal: Vec3, rng: &mut SplitMix64) -> Vec3 {
-    let (u1, u2) = (rng.next_f32(), rng.next_f32());
-    let r = u1.sqrt();
-    let phi = std::f32::consts::TAU * u2;
-    // u1 < 1, so the lifted component is positive and the direction leaves the surface.
-    let z = (1.0 - u1).sqrt();
-    let (t, b) = normal.any_orthonormal_pair();
-    (r * phi.cos() * t + r * phi.sin() * b + z * normal).normalize()
-}
-
-/// SplitMix64: a 64-bit counter passed through a strong mixing function.
-struct SplitMix64(u64);
-
-const GOLDEN_GAMMA: u64 = 0x9E37_79B9_7F4A_7C15;
-
-/// SplitMix64's output function (Stafford's "Mix13" variant of MurmurHash3's finalizer).
-fn mix64(mut z: u64) -> u64 {
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
-impl SplitMix64 {
-    /// The stream of one ray. Its start is a hash of (seed, kind, index) rather than, say,
-    /// `seed + index`, since consecutive SplitMix states would make ray `i`'s second number ray
-    /// `i + 1`'s first.
-    fn for_ray(seed: u64, kind: RayType, index: usize) -> SplitMix64 {
-        let salt = (kind as u64 + 1).wrapping_mul(GOLDEN_GAMMA);
-        SplitMix64(mix64(seed ^ mix64(salt ^ index as u64)))
-    }
-
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(GOLDEN_GAMMA);
-        mix64(self.0)
-    }
-
-    /// Uniform in `[0, 1)`: the top 24 bits, exactly representable in `f32`.
-    fn next_f32(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
+/// The stream of one ray: a hash of (seed, kind, index).
+fn ray_rng(seed: u64, kind: RayType, index: usize) -> SplitMix64 {
+    let salt = (kind as u64 + 1).wrapping_mul(GOLDEN_GAMMA);
+    SplitMix64::new(mix64(seed ^ mix64(salt ^ index as u64)))
 }
 
 #[cfg(test)]
@@ -240,23 +200,6 @@ mod tests {
         }
         assert!("AO".parse::<RayType>().is_ok());
         assert!("bounce".parse::<RayType>().is_err());
-    }
-
-    #[test]
-    fn cosine_directions_are_unit_in_the_hemisphere_with_cosine_mean() {
-        let n = Vec3::new(0.3, -0.5, 0.8).normalize();
-        let count = 20_000;
-        let mut sum_cos = 0.0f64;
-        for i in 0..count {
-            let d = cosine_direction(n, &mut SplitMix64::for_ray(7, RayType::Ao, i));
-            assert!((d.length() - 1.0).abs() < 1e-5);
-            let c = d.dot(n);
-            assert!(c > 0.0, "{d} leaves below the surface");
-            sum_cos += f64::from(c);
-        }
-        // E[cos θ] under a cosine distribution is 2/3.
-        let mean = sum_cos / count as f64;
-        assert!((mean - 2.0 / 3.0).abs() < 0.01, "{mean}");
     }
 
     #[test]
