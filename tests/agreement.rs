@@ -79,7 +79,7 @@ fn rays_for(scene: &Scene, camera_side: u32, random: usize, seed: u64) -> Vec<Ra
         .primary_rays(camera_side, camera_side);
     let b = scene.bounds();
     let (c, r) = (b.center(), 0.5 * b.diagonal());
-    let mut rng = common::Rng(seed);
+    let mut rng = common::Rng::new(seed);
     for _ in 0..random {
         let origin = c + rng.unit_vector() * r * 1.5 * (0.2 + rng.next_f32());
         let target = c + rng.unit_vector() * r * 0.5;

@@ -24,7 +24,7 @@ fn trace_both(name: &str, rays: &[Ray]) -> [Vec<Hit>; 2] {
 #[test]
 fn plane_depth_and_normal_are_exact() {
     let (point, normal, half_extent) = common::plane_oracle();
-    let mut rng = common::Rng(3);
+    let mut rng = common::Rng::new(3);
     let rays: Vec<Ray> = (0..4096)
         .map(|_| {
             let u = (rng.next_f32() * 2.0 - 1.0) * 0.95 * half_extent;
@@ -59,7 +59,7 @@ fn plane_depth_and_normal_are_exact() {
 #[test]
 fn sphere_depth_and_normal_within_tessellation_error() {
     let (center, radius, max_chord_error) = common::sphere_oracle();
-    let mut rng = common::Rng(5);
+    let mut rng = common::Rng::new(5);
     let rays: Vec<Ray> = (0..4096)
         .map(|_| {
             let origin = center + rng.unit_vector() * radius * (2.0 + 3.0 * rng.next_f32());

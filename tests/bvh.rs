@@ -67,7 +67,7 @@ fn build_is_identical_for_any_thread_count() {
 fn reference_tracer_matches_brute_force() {
     let scene = Scene::builtin("sphere").unwrap();
     let bvh = Bvh::build(&scene).unwrap();
-    let mut rng = common::Rng(7);
+    let mut rng = common::Rng::new(7);
     for i in 0..2000 {
         let origin = rng.unit_vector() * 3.0;
         let target = rng.unit_vector() * 0.9;

@@ -16,7 +16,11 @@ use rbvh::scene::Scene;
 
 fn rays_for(scene: &Scene, side: u32, random: usize, seed: u64) -> Vec<Ray> {
     let mut rays = scene.camera_or_framed(1.0).primary_rays(side, side);
-    rays.extend(common::random_rays(scene, random, &mut common::Rng(seed)));
+    rays.extend(common::random_rays(
+        scene,
+        random,
+        &mut common::Rng::new(seed),
+    ));
     rays
 }
 
@@ -157,7 +161,7 @@ fn level_of_detail_counts_agree_too() {
 #[test]
 fn the_twins_block_jumps_change_no_hit_and_save_cells() {
     let scene = Scene::builtin("sphere").unwrap();
-    let mut rng = common::Rng(77);
+    let mut rng = common::Rng::new(77);
     let mut rays = rays_for(&scene, 64, 3000, 78);
     rays.extend((0..4000).map(|_| {
         let angle = std::f32::consts::TAU * rng.next_f32();

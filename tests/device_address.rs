@@ -38,7 +38,7 @@ fn every_tracer_gives_identical_hits_through_device_addresses() {
     let bound = common::context_with(Addressing::Bindings);
     let addressed = common::context_with(Addressing::DeviceAddress);
     let scene = Scene::load("default").unwrap();
-    let rays = common::random_rays(&scene, 20_000, &mut common::Rng(7));
+    let rays = common::random_rays(&scene, 20_000, &mut common::Rng::new(7));
     let bvh = Bvh::build(&scene).unwrap();
     let rbvh = Rbvh::build(&scene, &RbvhParams::quality(2).unwrap()).unwrap();
     let lod = Lod::build(&rbvh, &LodParams::default()).unwrap();
@@ -162,7 +162,7 @@ fn an_atlas_over_the_storage_buffer_range_is_traced_and_painted_through_device_a
     // Auto reads it through its device address, and agrees with the CPU caster.
     let tracer = Tracer::rbvh(&ctx, &r).unwrap();
     assert_eq!(tracer.reach(), Reach::DeviceAddresses);
-    let mut rng = common::Rng(11);
+    let mut rng = common::Rng::new(11);
     let rays: Vec<Ray> = (0..4096)
         .map(|_| {
             let target = Vec3::new(rng.next_f32() * 2.0 - 1.0, 0.0, rng.next_f32() * 2.0 - 1.0);

@@ -173,7 +173,7 @@ fn rays_and_cones(scene: &Scene, side: u32, random: usize, seed: u64) -> (Vec<Ra
             primary.len(),
         ));
     }
-    let mut rng = common::Rng(seed);
+    let mut rng = common::Rng::new(seed);
     rays.extend(common::random_rays(scene, random, &mut rng));
     let r = 0.5 * scene.bounds().diagonal();
     cones.extend((0..random).map(|_| RayCone {

@@ -111,7 +111,7 @@ fn a_stroke_on_a_cube_edge_paints_both_faces_and_nothing_else() {
 fn many_brushes_take_several_passes_and_the_last_one_wins() {
     let ctx = common::context();
     let r = cube();
-    let mut rng = common::Rng(7);
+    let mut rng = common::Rng::new(7);
     let mut brushes: Vec<Brush> = (0..5000)
         .map(|k| {
             let c = rng.unit_vector() * 1.2;

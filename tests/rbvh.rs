@@ -63,7 +63,7 @@ fn plane_is_one_leaf_with_exact_heights() {
     let tiled = Rbvh::build(&scene, &q(2)).unwrap();
     assert!(tiled.leaves.len() > 1 && tiled.stats.triangle_leaves == 0);
     assert!(tiled.leaves.iter().all(|l| l.res_u <= 64 && l.res_v <= 64));
-    let mut rng = common::Rng(11);
+    let mut rng = common::Rng::new(11);
     for r in [&r, &tiled] {
         for _ in 0..2000 {
             let target = point
@@ -110,7 +110,7 @@ fn sphere_leaves_respect_the_cone_and_height_error_bound() {
         // error: nearly all within a tenth of a texel of it; the rare worst cases are rays that hit
         // the dilated rim of a neighbouring leaf, extrapolated linearly from a curved surface
         // (error about κ·texel²/cos³φ_max), bounded by half a texel.
-        let mut rng = common::Rng(level as u64);
+        let mut rng = common::Rng::new(level as u64);
         let mut errors: Vec<f32> = (0..3000)
             .map(|_| {
                 let origin = center + rng.unit_vector() * 3.0 * radius;

@@ -14,7 +14,11 @@ use rbvh::scene::Scene;
 
 fn rays_for(scene: &Scene, side: u32, random: usize, seed: u64) -> Vec<Ray> {
     let mut rays = scene.camera_or_framed(1.0).primary_rays(side, side);
-    rays.extend(common::random_rays(scene, random, &mut common::Rng(seed)));
+    rays.extend(common::random_rays(
+        scene,
+        random,
+        &mut common::Rng::new(seed),
+    ));
     rays
 }
 
@@ -57,7 +61,7 @@ fn block_jumps_skip_many_cells_of_grazing_rays_and_change_no_hit() {
     let ctx = common::context();
     let scene = Scene::builtin("sphere").unwrap();
     let r = Rbvh::build(&scene, &RbvhParams::quality(4).unwrap()).unwrap();
-    let mut rng = common::Rng(5);
+    let mut rng = common::Rng::new(5);
     let rays: Vec<Ray> = (0..4096)
         .map(|_| {
             let angle = std::f32::consts::TAU * rng.next_f32();
@@ -297,7 +301,7 @@ fn block_jumps_agree_with_the_plain_walk_on_steep_unaligned_tiles() {
     use rbvh::rbvh::{Atlas, Texel};
     let ctx = common::context();
     let (pitch, rows) = (64u32, 64u32);
-    let mut rng = common::Rng(7);
+    let mut rng = common::Rng::new(7);
     let mut agreement = common::Agreement::default();
     let (mut gpu_steps, mut cpu_steps) = (0u64, 0u64);
     for case in 0..6u32 {
@@ -310,7 +314,7 @@ fn block_jumps_agree_with_the_plain_walk_on_steep_unaligned_tiles() {
                 // Terraces of random height on 5 × 5 patches (cliffs inside and across blocks),
                 // or a smooth swell with a little noise.
                 let level = if case % 2 == 0 {
-                    let mut patch = common::Rng(u64::from(case * 1000 + (i / 5) * 31 + j / 5));
+                    let mut patch = common::Rng::new(u64::from(case * 1000 + (i / 5) * 31 + j / 5));
                     patch.next_f32()
                 } else {
                     0.5 + 0.45 * (0.3 * i as f32).sin() * (0.2 * j as f32).cos()

@@ -120,7 +120,7 @@ fn rays_at_vertices_and_edges(scene: &Scene, dist: f32, seed: u64) -> Vec<Ray> {
     let normals: Vec<Vec3> = (0..scene.triangle_count())
         .map(|t| face_normal(scene, t))
         .collect();
-    let mut rng = common::Rng(seed);
+    let mut rng = common::Rng::new(seed);
     let mut rays = Vec::new();
     let mut push = |target: Vec3, inward: Vec3, faces: &[usize]| {
         if faces.iter().all(|&f| inward.dot(normals[f]) < -0.2) {
@@ -249,7 +249,7 @@ fn signed_zero_and_tiny_direction_components_hit_the_analytic_surfaces() {
     let plane = Scene::builtin("plane").unwrap();
     let bvh = Bvh::build(&plane).unwrap();
     let rbvh = Rbvh::build(&plane, &q(2)).unwrap();
-    let mut rng = common::Rng(21);
+    let mut rng = common::Rng::new(21);
     let mut points: Vec<(f32, f32)> = Vec::new();
     for i in -3..=3 {
         for j in -3..=3 {
@@ -567,7 +567,7 @@ fn sphere_silhouettes_and_leaf_seams_hold_their_bounds() {
     let (center, radius, chord) = common::sphere_oracle();
     let sphere = Scene::builtin("sphere").unwrap();
     let bvh = Bvh::build(&sphere).unwrap();
-    let mut rng = common::Rng(31);
+    let mut rng = common::Rng::new(31);
     // Impact parameters in [0.9, 1.1] of the radius, dense near 1.
     let grazing: Vec<(Ray, f32)> = (0..6000)
         .map(|k| {
@@ -644,7 +644,7 @@ struct Placement {
 /// cosine ≥ 0.8), built in f32; the oracle `t` is computed in f64 from the rounded f32 rays.
 fn placed_sphere_rays(p: &Placement, n: usize, seed: u64) -> (Vec<Ray>, Vec<f64>) {
     let c = Vec3::splat(p.offset);
-    let mut rng = common::Rng(seed);
+    let mut rng = common::Rng::new(seed);
     let mut rays = Vec::new();
     let mut truth = Vec::new();
     while rays.len() < n {
@@ -825,7 +825,7 @@ fn secondary_rays_leave_a_convex_surface_without_acne() {
         let mut scene = Scene::new("scaled sphere");
         scene.append(&unit, Mat4::from_scale(Vec3::splat(scale)));
         let diag = scene.bounds().diagonal();
-        let mut rng = common::Rng(scale.to_bits() as u64);
+        let mut rng = common::Rng::new(scale.to_bits() as u64);
         let primary: Vec<Ray> = (0..1000)
             .map(|_| {
                 let o = rng.unit_vector() * 3.0 * scale;
@@ -895,7 +895,7 @@ fn thin_closed_walls_do_not_leak_light() {
     let ctx = common::context();
     let wall = 1e-3;
     let scene = hollow_box(wall);
-    let mut rng = common::Rng(77);
+    let mut rng = common::Rng::new(77);
     let origins: Vec<Vec3> = (0..500)
         .map(|_| (Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 - 1.0) * 0.9)
         .collect();
@@ -934,7 +934,7 @@ fn thin_closed_walls_do_not_leak_light() {
         }
     };
     let offset_rays = |hits: &[Hit], eps: f32| -> Vec<Ray> {
-        let mut rng = common::Rng(78);
+        let mut rng = common::Rng::new(78);
         rays.iter()
             .zip(hits)
             .map(|(r, h)| {
@@ -1080,7 +1080,7 @@ fn adversarial_scene() -> Scene {
         Vec3::new(1e4, -1e4, -1.0),
         Vec3::new(0.0, 1e4, -1.0),
     );
-    let mut rng = common::Rng(5);
+    let mut rng = common::Rng::new(5);
     for _ in 0..200 {
         let c = Vec3::new(rng.next_f32(), rng.next_f32(), -0.999) * 2.0 - Vec3::new(1.0, 1.0, 0.0);
         tri(
@@ -1094,7 +1094,7 @@ fn adversarial_scene() -> Scene {
 
 /// 200 000 random triangles within a 2e-3 cube (one spot), inside the unit sphere.
 fn crowded_scene() -> Scene {
-    let mut rng = common::Rng(9);
+    let mut rng = common::Rng::new(9);
     let mut p = Vec::with_capacity(600_000);
     let mut t = Vec::with_capacity(200_000);
     for i in 0..200_000u32 {
@@ -1148,7 +1148,7 @@ fn accordion_scene() -> Scene {
 fn rays_through(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
     let b = scene.bounds();
     let (c, r) = (b.center(), 0.5 * b.diagonal());
-    let mut rng = common::Rng(seed);
+    let mut rng = common::Rng::new(seed);
     (0..n)
         .map(|_| {
             let o = c + rng.unit_vector() * 1.5 * r;
@@ -1215,7 +1215,7 @@ fn degenerate_and_adversarial_geometry_builds_and_traces() {
         );
         let mut rays = rays_through(scene, 2000, k as u64 + 60);
         // And through the unit cube, where the small things are.
-        let mut rng = common::Rng(k as u64 + 70);
+        let mut rng = common::Rng::new(k as u64 + 70);
         rays.extend((0..2000).map(|_| {
             let o = rng.unit_vector() * 3.0;
             let target = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 - 1.0;
@@ -1223,7 +1223,7 @@ fn degenerate_and_adversarial_geometry_builds_and_traces() {
         }));
         if name == "spot" {
             // Into the crowd: ~16 000 nodes per ray, beyond lavapipe's loop limit.
-            let mut rng = common::Rng(61);
+            let mut rng = common::Rng::new(61);
             let crowd: Vec<Ray> = (0..300)
                 .map(|_| {
                     let o = Vec3::splat(0.3) + rng.unit_vector() * 0.1;
@@ -1500,7 +1500,7 @@ fn parameter_extremes_build_valid_results_or_clear_errors() {
         let scene = Scene::builtin(name).unwrap();
         let diag = scene.bounds().diagonal();
         let mut rays = scene.camera_or_framed(1.0).primary_rays(30, 30);
-        let mut rng = common::Rng(90);
+        let mut rng = common::Rng::new(90);
         rays.extend((0..1600).map(|_| {
             let o = rng.unit_vector() * 3.0;
             let t = rng.unit_vector() * 0.6;

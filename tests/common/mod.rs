@@ -53,17 +53,18 @@ pub fn sphere_oracle() -> (glam::Vec3, f32, f32) {
     }
 }
 
-/// Deterministic pseudo-random numbers in [0, 1) (SplitMix64), so tests need no RNG crate.
-pub struct Rng(pub u64);
+/// Deterministic pseudo-random numbers in [0, 1): the library's SplitMix64, so tests need no RNG
+/// crate.
+pub struct Rng(rbvh::random::SplitMix64);
 
 impl Rng {
+    /// The stream whose counter starts at `seed`.
+    pub fn new(seed: u64) -> Rng {
+        Rng(rbvh::random::SplitMix64::new(seed))
+    }
+
     pub fn next_f32(&mut self) -> f32 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        (z >> 40) as f32 / (1u64 << 24) as f32
+        self.0.next_f32()
     }
 
     pub fn unit_vector(&mut self) -> glam::Vec3 {
