@@ -130,7 +130,7 @@ fn a_watched_trace_counts_its_rays_in_batches_and_answers_as_an_unwatched_one() 
     let scene = Scene::load("sphere").unwrap();
     let camera = scene.camera_or_framed(1.0);
     // More than two batches, the last one partial.
-    let rays = camera.primary_rays(400, 400);
+    let rays = camera.primary_rays(768, 768);
     assert!(rays.len() > 2 * OBSERVED_BATCH && rays.len() % OBSERVED_BATCH != 0);
     let rbvh = Rbvh::build(&scene, &RbvhParams::quality(2).unwrap()).unwrap();
 
@@ -147,7 +147,7 @@ fn a_watched_trace_counts_its_rays_in_batches_and_answers_as_an_unwatched_one() 
 
     let lod = Lod::build(&rbvh, &LodParams::default()).unwrap();
     let tracer = Tracer::rbvh_lod(&ctx, &rbvh, &lod).unwrap();
-    let cones = vec![RayCone::pixel(&camera, 400); rays.len()];
+    let cones = vec![RayCone::pixel(&camera, 768); rays.len()];
     let tally = Tally::default();
     let watched = tracer
         .trace_observed(&rays, Some(&cones), Query::Closest, true, &tally)

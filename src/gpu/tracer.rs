@@ -83,10 +83,10 @@ const _: () = assert!(std::mem::size_of::<TraceParams>() == 88);
 
 const FLAG_ANY_HIT: u32 = 1;
 
-/// Most rays per submission of [`Tracer::trace_observed`]: 65,536 rays keep lavapipe's and a
-/// GPU's cores busy (a thousand workgroups) while a watched trace of a million rays reports
-/// sixteen times.
-pub const OBSERVED_BATCH: usize = 1 << 16;
+/// Most rays per submission of [`Tracer::trace_observed`]: 262,144 rays are a thread for each
+/// of the ~270k a large GPU keeps resident (132 SMs × 2048 on an H100), so a watched trace is
+/// not starved of parallelism, while a 1024×768 frame still reports its progress three times.
+pub const OBSERVED_BATCH: usize = 1 << 18;
 
 /// `constant_id` of the trace shaders' `rbvh_count` (`glsl/trace_*_main.glsl`).
 const COUNT_CONSTANT_ID: u32 = 0;
@@ -663,6 +663,26 @@ impl Tracer {
         }
     }
 
+    /// Whether `cones` suit this tracer: one per ray for a level-of-detail tracer, none for
+    /// another ([`Error::InvalidParameter`] naming `trace` otherwise).
+    fn check_trace_cones(&self, rays: &[Ray], cones: Option<&[RayCone]>) -> Result<()> {
+        match cones {
+            Some(cones) => {
+                self.expect_lod(
+                    true,
+                    "trace",
+                    "this tracer has no levels of detail: make it with Tracer::rbvh_lod",
+                )?;
+                check_cones(rays, cones)
+            }
+            None => self.expect_lod(
+                false,
+                "trace",
+                "a level-of-detail tracer needs one cone per ray: use Tracer::trace_lod",
+            ),
+        }
+    }
+
     /// Bytes of the structure (and its levels of detail) on the device.
     pub fn device_bytes(&self) -> u64 {
         self.structure
@@ -689,11 +709,7 @@ impl Tracer {
     /// each ray's traversal did (through the counting pipeline, whose timing is not that of
     /// [`Tracer::trace`]). Fails with [`Error::StackOverflow`] if any ray overflowed its stack.
     pub fn trace_with(&self, rays: &[Ray], query: Query, counters: bool) -> Result<Traced> {
-        self.expect_lod(
-            false,
-            "trace",
-            "a level-of-detail tracer needs one cone per ray: use Tracer::trace_lod",
-        )?;
+        self.check_trace_cones(rays, None)?;
         self.trace_batches(rays, None, query, counters, None)
     }
 
@@ -707,12 +723,7 @@ impl Tracer {
         query: Query,
         counters: bool,
     ) -> Result<Traced> {
-        self.expect_lod(
-            true,
-            "trace",
-            "this tracer has no levels of detail: make it with Tracer::rbvh_lod",
-        )?;
-        check_cones(rays, cones)?;
+        self.check_trace_cones(rays, Some(cones))?;
         self.trace_batches(rays, Some(cones), query, counters, None)
     }
 
@@ -727,21 +738,7 @@ impl Tracer {
         counters: bool,
         progress: &dyn Progress,
     ) -> Result<Traced> {
-        match cones {
-            Some(cones) => {
-                self.expect_lod(
-                    true,
-                    "trace",
-                    "this tracer has no levels of detail: make it with Tracer::rbvh_lod",
-                )?;
-                check_cones(rays, cones)?;
-            }
-            None => self.expect_lod(
-                false,
-                "trace",
-                "a level-of-detail tracer needs one cone per ray: pass them",
-            )?,
-        }
+        self.check_trace_cones(rays, cones)?;
         step(progress, "tracing rays", rays.len() as u64, || {
             self.trace_batches(rays, cones, query, counters, Some(progress))
         })
