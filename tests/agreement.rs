@@ -173,3 +173,30 @@ fn empty_scene_and_empty_batch() {
     );
     assert!(tracer.trace(&[], Query::Closest).unwrap().hits.is_empty());
 }
+
+#[test]
+fn repeated_passes_trace_the_same_hits_and_time_one_pass() {
+    let ctx = common::context();
+    let scene = Scene::builtin("torus").unwrap();
+    let bvh = Bvh::build(&scene).unwrap();
+    let rbvh =
+        rbvh::rbvh::Rbvh::build(&scene, &rbvh::rbvh::RbvhParams::quality(1).unwrap()).unwrap();
+    let rays = rays_for(&scene, 48, 500, 9);
+    for tracer in [
+        Tracer::exact(&ctx, &bvh).unwrap(),
+        Tracer::rbvh(&ctx, &rbvh).unwrap(),
+    ] {
+        for query in [Query::Closest, Query::Any] {
+            let once = tracer.trace(&rays, query).unwrap();
+            let thrice = tracer.trace_repeated(&rays, None, query, 3).unwrap();
+            // Each pass sees the last one's writes and writes the same hits again.
+            assert_eq!(once.hits, thrice.hits, "{query:?}");
+            assert!(thrice.timing.ms() > 0.0 && thrice.timing.wall_ms > 0.0);
+        }
+        let err = tracer
+            .trace_repeated(&rays, None, Query::Closest, 0)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("at least one pass"), "{err}");
+    }
+}

@@ -62,6 +62,7 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
             );
             // Every timed run's value, as many as runs, within the spread.
             assert_eq!(s.samples.len(), 2, "{s:?}");
+            assert!((1..=4096).contains(&r.passes), "{}", r.passes);
             assert!(s.samples.iter().all(|&v| s.min <= v && v <= s.max), "{s:?}");
             assert!(r.build_ms > 0.0);
             let m = r.memory_bytes;
@@ -99,8 +100,36 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json_path).unwrap()).unwrap();
     assert!(keys(&json).is_superset(&set(&[
-        "device", "driver", "threads", "date", "git", "version", "runs", "results"
+        "device",
+        "driver",
+        "threads",
+        "date",
+        "git",
+        "version",
+        "runs",
+        "min_run_ms",
+        "results",
+        "shaders"
     ])));
+    // One entry per trace pipeline, in the order first used; statistics where the driver gives them.
+    let pipelines: Vec<(&str, Method)> = report
+        .shaders
+        .iter()
+        .map(|s| (s.pipeline.as_str(), s.method))
+        .collect();
+    assert_eq!(
+        pipelines,
+        [("trace_exact", Method::Exact), ("trace_rbvh", Method::Rbvh)]
+    );
+    assert_eq!(json["shaders"].as_array().unwrap().len(), 2);
+    let listed = bench::shader_table(&report);
+    for s in &report.shaders {
+        assert_eq!(
+            s.statistics.is_empty(),
+            !listed.contains(&s.pipeline),
+            "{listed}"
+        );
+    }
     let date = json["date"].as_str().unwrap();
     assert!(date.len() == 20 && date.ends_with('Z') && date.as_bytes()[10] == b'T');
     let results = json["results"].as_array().unwrap();
@@ -122,6 +151,7 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
             "error",
             "valid",
             "timing_source",
+            "passes",
             "block_jumps",
         ])));
         assert_eq!(
@@ -474,10 +504,12 @@ fn a_bad_scene_fails_the_run_before_any_work() {
 fn bad_configurations_are_errors_naming_the_field() {
     let base = BenchConfig::new(vec!["sphere".into()], Device::Create(Default::default()));
     type Break = fn(&mut BenchConfig);
-    let cases: [(&str, Break); 9] = [
+    let cases: [(&str, Break); 11] = [
         ("scenes", |c| c.scenes.clear()),
         ("width", |c| c.width = 0),
         ("runs", |c| c.runs = 0),
+        ("min_run_ms", |c| c.min_run_ms = -1.0),
+        ("min_run_ms", |c| c.min_run_ms = f64::NAN),
         ("ao_radius", |c| c.ao_radius = f32::NAN),
         ("quality", |c| c.levels = vec![Level::Preset(7)]),
         ("lod columns", |c| {

@@ -28,7 +28,8 @@ use super::metrics::{self, HitErrors, Summary};
 use super::plot;
 use super::provenance;
 use super::record::{
-    BenchReport, Errors, Memory, Method, Params, Record, Spread, TimingSource, TrafficRecord,
+    BenchReport, Errors, Memory, Method, Params, Record, ShaderRecord, Spread, TimingSource,
+    TrafficRecord,
 };
 use super::traffic::{self, TrafficModel, CACHE_SIZES, DRAM_LINE};
 use super::validate;
@@ -89,11 +90,13 @@ pub fn run_observed(
         git: provenance::git_commit(),
         version: env!("CARGO_PKG_VERSION").to_string(),
         runs: config.runs,
+        min_run_ms: config.min_run_ms,
         width: config.width,
         height: config.height,
         ao_radius: config.ao_radius,
         seed: config.seed,
         results: Vec::new(),
+        shaders: Vec::new(),
         written: Vec::new(),
     };
     let mut plot_dirs = HashSet::new();
@@ -105,6 +108,16 @@ pub fn run_observed(
             Scene::load_observed(spec, progress)?
         };
         let mut bench = SceneBench::new(&ctx, config, scene, observe, progress)?;
+        for c in &bench.candidates {
+            let (pipeline, statistics) = c.tracer.shader_statistics();
+            if !report.shaders.iter().any(|s| s.pipeline == pipeline) {
+                report.shaders.push(ShaderRecord {
+                    pipeline: pipeline.to_string(),
+                    method: c.method,
+                    statistics: statistics.to_vec(),
+                });
+            }
+        }
         for &ray_type in &config.ray_types {
             measurement += 1;
             let mut numbered = |event| {
@@ -183,6 +196,18 @@ impl Candidate {
             self.tracer.trace_with(rays, query, counters)
         }
     }
+
+    /// Traces `rays` `passes` times back to back, for timing ([`Tracer::trace_repeated`]).
+    fn trace_timed(
+        &self,
+        rays: &[Ray],
+        cones: &[RayCone],
+        query: Query,
+        passes: u32,
+    ) -> Result<Traced> {
+        let cones = (self.method == Method::RbvhLod).then_some(cones);
+        self.tracer.trace_repeated(rays, cones, query, passes)
+    }
 }
 
 /// One scene's structures, rays and records.
@@ -210,8 +235,10 @@ struct Measured {
     query: Query,
     /// Per candidate, the warm-up's hits.
     hits: Vec<Vec<Hit>>,
-    /// Per candidate, milliseconds of each timed run.
+    /// Per candidate, milliseconds per pass of each timed run.
     ms: Vec<Vec<f64>>,
+    /// Per candidate, trace passes per timed run.
+    passes: Vec<u32>,
     source: TimingSource,
 }
 
@@ -491,6 +518,7 @@ impl<'a> SceneBench<'a> {
                 valid: invalid.is_none(),
                 invalid_reason: invalid,
                 timing_source: m.source,
+                passes: m.passes[i],
                 block_jumps: (c.method != Method::Exact).then(|| c.tracer.block_jumps()),
                 counters: counted[i].0,
                 traffic: counted[i].1.clone(),
@@ -589,18 +617,31 @@ impl<'a> SceneBench<'a> {
         })
     }
 
-    /// One warm-up trace per candidate (whose hits are kept), then `runs` interleaved rounds.
+    /// One warm-up trace per candidate (whose hits are kept), which also sizes its runs
+    /// ([`passes_for`]), then `runs` interleaved rounds.
     fn trace_all(&self, rays: Vec<Ray>, cones: &[RayCone], query: Query) -> Result<Measured> {
-        let hits = self
-            .candidates
-            .iter()
-            .map(|c| Ok(c.trace(&rays, cones, query, false)?.hits))
-            .collect::<Result<Vec<_>>>()?;
+        let min_ms = self.config.min_run_ms;
+        let mut hits = Vec::with_capacity(self.candidates.len());
+        let mut passes = Vec::with_capacity(self.candidates.len());
+        for c in &self.candidates {
+            let warm = c.trace(&rays, cones, query, false)?;
+            let mut n = passes_for(warm.timing.ms(), 1, min_ms);
+            if n > 1 {
+                // A first trace can pay for cold caches and clocks: size again, busy.
+                n = passes_for(
+                    c.trace_timed(&rays, cones, query, n)?.timing.ms(),
+                    n,
+                    min_ms,
+                );
+            }
+            hits.push(warm.hits);
+            passes.push(n);
+        }
         let runs = self.config.runs as usize;
         let mut timings: Vec<Vec<Timing>> = vec![Vec::with_capacity(runs); self.candidates.len()];
         for _ in 0..runs {
-            for (c, times) in self.candidates.iter().zip(&mut timings) {
-                times.push(c.trace(&rays, cones, query, false)?.timing);
+            for ((c, times), &n) in self.candidates.iter().zip(&mut timings).zip(&passes) {
+                times.push(c.trace_timed(&rays, cones, query, n)?.timing);
             }
         }
         let gpu = timings.iter().flatten().all(|t| t.gpu_ms.is_some());
@@ -618,6 +659,7 @@ impl<'a> SceneBench<'a> {
             query,
             hits,
             ms,
+            passes,
             source: if gpu {
                 TimingSource::GpuTimestamps
             } else {
@@ -661,10 +703,42 @@ impl<'a> SceneBench<'a> {
     }
 }
 
+/// Most trace passes in one timed run: on lavapipe a pass takes milliseconds, on a large GPU tens
+/// of microseconds for a small image; beyond this the run is long enough anyway.
+const MAX_PASSES: u32 = 4096;
+
+/// Passes per timed run so that a run lasts at least `min_ms`, from a trace of `passes` passes
+/// that took `ms` per pass: one where a pass alone is long enough (lavapipe), more on a fast GPU.
+fn passes_for(ms: f64, passes: u32, min_ms: f64) -> u32 {
+    if ms.is_nan() || ms <= 0.0 || min_ms <= 0.0 {
+        return passes.max(1);
+    }
+    (min_ms / ms).ceil().clamp(1.0, f64::from(MAX_PASSES)) as u32
+}
+
 /// `tracer` with its block jumps set as the bench was asked (`None`: left as the tracer chose).
 fn with_jumps(mut tracer: Tracer, block_jumps: Option<bool>) -> Result<Tracer> {
     if let Some(on) = block_jumps {
         tracer.set_block_jumps(on)?;
     }
     Ok(tracer)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{passes_for, MAX_PASSES};
+
+    #[test]
+    fn runs_are_sized_to_last_the_shortest_run() {
+        // A pass long enough alone (lavapipe), or no minimum asked: one pass.
+        assert_eq!(passes_for(35.0, 1, 20.0), 1);
+        assert_eq!(passes_for(0.2, 1, 0.0), 1);
+        // A fast GPU: as many passes as fill the run.
+        assert_eq!(passes_for(0.5, 1, 20.0), 40);
+        assert_eq!(passes_for(0.3, 40, 20.0), 67);
+        assert_eq!(passes_for(1e-9, 1, 20.0), MAX_PASSES);
+        // No usable time (a zero-length or broken timestamp): keep what was asked.
+        assert_eq!(passes_for(0.0, 7, 20.0), 7);
+        assert_eq!(passes_for(f64::NAN, 1, 20.0), 1);
+    }
 }

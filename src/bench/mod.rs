@@ -39,8 +39,8 @@ use std::path::PathBuf;
 
 pub use crate::rays::RayType;
 pub use harness::{run, run_observed, Event};
-pub use record::{write_csv, write_json, BenchReport, Record};
-pub use table::{table, work_table};
+pub use record::{write_csv, write_json, BenchReport, Record, ShaderRecord};
+pub use table::{shader_table, table, work_table};
 
 use crate::gpu::Context;
 #[cfg(feature = "loaded")]
@@ -111,8 +111,15 @@ pub struct BenchConfig {
     pub width: u32,
     /// Primary-ray image height in pixels, 1..=16384.
     pub height: u32,
-    /// Timed dispatches per method and ray type, after one warm-up.
+    /// Timed runs per method and ray type, after one warm-up.
     pub runs: u32,
+    /// Shortest timed run, in milliseconds: a method whose trace of the rays takes less traces
+    /// them this many times over back to back in each run (its time divided by the passes), so
+    /// that a fast GPU is timed busy and over milliseconds, not over one pass of a fraction of a
+    /// millisecond between idle gaps, where its clocks drop and timestamps resolve poorly (one
+    /// H200 measured the same exact-BVH pass at 4,300 and 6,800 MRays/s in two invocations).
+    /// 0: one pass per run.
+    pub min_run_ms: f64,
     /// Length of ambient-occlusion rays as a fraction of the scene's bounding-box diagonal.
     pub ao_radius: f32,
     /// Seed of the secondary rays' random directions.
@@ -134,12 +141,15 @@ pub struct BenchConfig {
     pub block_jumps: Option<bool>,
 }
 
+/// Longest timed run that may be asked for: ten seconds a run is already far past any need.
+const MAX_MIN_RUN_MS: f64 = 10_000.0;
+
 /// Largest image side accepted, as for `rbvh render`.
 const MAX_SIDE: u32 = 16384;
 
 impl BenchConfig {
     /// The defaults of `rbvh bench`: all five presets, all ray types, 256×256 (small enough to
-    /// stay quick on lavapipe), 5 runs, AO rays 5% of the diagonal long.
+    /// stay quick on lavapipe), 5 runs of at least 20 ms, AO rays 5% of the diagonal long.
     pub fn new(scenes: Vec<String>, device: Device) -> BenchConfig {
         BenchConfig {
             scenes,
@@ -148,6 +158,7 @@ impl BenchConfig {
             width: 256,
             height: 256,
             runs: 5,
+            min_run_ms: 20.0,
             ao_radius: 0.05,
             seed: 0x5EED_2012,
             device,
@@ -176,6 +187,12 @@ impl BenchConfig {
         }
         if self.runs == 0 {
             return Err(Error::param("runs", "needs at least one timed run"));
+        }
+        if !(0.0..=MAX_MIN_RUN_MS).contains(&self.min_run_ms) {
+            return Err(Error::param(
+                "min_run_ms",
+                format!("{} is outside 0..={MAX_MIN_RUN_MS} ms", self.min_run_ms),
+            ));
         }
         if !(self.ao_radius.is_finite() && self.ao_radius > 0.0) {
             return Err(Error::param(

@@ -11,11 +11,13 @@
 //! | `date` | string | start of the run, UTC, ISO 8601 (`2025-01-31T12:00:00Z`) |
 //! | `git` | string \| null | `git rev-parse HEAD` in the working directory, null outside a repository |
 //! | `version` | string | this crate's version |
-//! | `runs` | int | timed dispatches per record, after one warm-up |
+//! | `runs` | int | timed runs per record, after one warm-up |
+//! | `min_run_ms` | number | shortest timed run asked for, in milliseconds (records' `passes`) |
 //! | `width`, `height` | int | primary-ray image size |
 //! | `ao_radius` | number | AO ray length, fraction of the scene diagonal |
 //! | `seed` | int | seed of the secondary rays' directions |
 //! | `results` | array | the records below |
+//! | `shaders` | array | each trace pipeline used, once: `pipeline` (name), `method`, `statistics` (`name`, `value` pairs in the driver's words: registers, spills, instructions; empty where the device does not report them) |
 //!
 //! Each record:
 //!
@@ -38,6 +40,7 @@
 //! | `valid` | bool | false when the hits are wrong rather than approximate (`bench::validate`); for exact: whether the GPU agrees with the CPU reference tracer |
 //! | `invalid_reason` | string \| null | why `valid` is false |
 //! | `timing_source` | `"gpu_timestamps"` \| `"wall"` | GPU timestamp queries, or host wall time (submit to fence) when the device cannot time |
+//! | `passes` | int | trace passes per timed run, back to back in one submission (as many as make a run last `min_run_ms`); `mrays_per_s` is per pass |
 //! | `block_jumps` | bool \| null | whether the march jumped over blocks ([`crate::gpu::Tracer::block_jumps`]); null for exact |
 //! | `counters` | object | per-ray means of the device's counters ([`crate::probe::MeanCounters`]: `nodes`, `leaves`, `walks`, `cells`, `cells_tested`, `jumps`, `triangle_leaves`, `triangles`, `simd8_utilisation`) |
 //! | `traffic` | object \| null | with `--traffic`: `twin_counters` (the CPU twin's, same keys), `counter_mismatch_rate`, and `traffic` (the cache model's figures, [`super::traffic::Traffic`]); else null |
@@ -66,7 +69,7 @@
 //! `memory_bytes.*`, `error.*`, `counters.*` and the traffic figures without their prefix, except
 //! `mrays_median`/`mrays_min`/`mrays_max`, `*_bytes`, `lod_*`, `twin_*` and one
 //! `dram_bytes_per_ray_*`/`miss_rate_*` pair per modelled cache). The run's settings (`threads`,
-//! `runs`, image size, `ao_radius`, `seed`) and the per-run `samples` are in the JSON only. Null
+//! `runs`, `min_run_ms`, image size, `ao_radius`, `seed`) and the per-run `samples` are in the JSON only. Null
 //! is an empty cell; an infinite PSNR is `inf`.
 
 use std::io::Write;
@@ -75,6 +78,7 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 
 use super::traffic::{Traffic, CACHE_SIZES};
+use crate::gpu::ShaderStatistic;
 use crate::io::write_atomically;
 use crate::lod::LodParams;
 use crate::probe::MeanCounters;
@@ -97,9 +101,12 @@ pub struct BenchReport {
     pub git: Option<String>,
     /// This crate's version.
     pub version: String,
-    /// Timed dispatches per record, after one warm-up
+    /// Timed runs per record, after one warm-up
     /// ([`BenchConfig::runs`](super::BenchConfig::runs)).
     pub runs: u32,
+    /// Shortest timed run asked for, in milliseconds
+    /// ([`BenchConfig::min_run_ms`](super::BenchConfig::min_run_ms)).
+    pub min_run_ms: f64,
     /// Primary-ray image width in pixels.
     pub width: u32,
     /// Primary-ray image height in pixels.
@@ -110,6 +117,8 @@ pub struct BenchReport {
     pub seed: u64,
     /// One record per (scene, method, level, ray type), in the order measured.
     pub results: Vec<Record>,
+    /// Each trace pipeline the run used, once, with what the driver compiled it into.
+    pub shaders: Vec<ShaderRecord>,
     /// Charts and images written under the plot directory (not part of the JSON).
     #[serde(skip)]
     pub written: Vec<PathBuf>,
@@ -154,12 +163,28 @@ pub struct Record {
     pub invalid_reason: Option<String>,
     /// What the runs' times were measured with, the same for every method of a ray type.
     pub timing_source: TimingSource,
+    /// Trace passes per timed run, back to back in one submission; the run's time is per pass
+    /// ([`BenchConfig::min_run_ms`](super::BenchConfig::min_run_ms)).
+    pub passes: u32,
     /// Whether the device march jumped over blocks; None for the exact BVH.
     pub block_jumps: Option<bool>,
     /// Per-ray means of the device's counters (its counting pipeline, on the same rays).
     pub counters: MeanCounters,
     /// The CPU twin's counters and memory traffic, with `--traffic`.
     pub traffic: Option<TrafficRecord>,
+}
+
+/// A trace pipeline and the driver's statistics of it ([`crate::gpu::ShaderStatistic`]): on a GPU
+/// its registers bound how many rays run at once, which no per-ray counter shows.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ShaderRecord {
+    /// The pipeline's name (the shader and its variant).
+    pub pipeline: String,
+    /// The first method traced with it.
+    pub method: Method,
+    /// In the driver's order and words; empty where the device does not report them
+    /// (`VK_KHR_pipeline_executable_properties`).
+    pub statistics: Vec<ShaderStatistic>,
 }
 
 /// What the CPU twin measured on a record's rays ([`super::BenchConfig::traffic`]).
@@ -344,7 +369,7 @@ pub fn write_json(path: &Path, report: &BenchReport) -> Result<()> {
 }
 
 /// The CSV header: one column per field of a [`Record`], flattened.
-pub const CSV_COLUMNS: [&str; 75] = [
+pub const CSV_COLUMNS: [&str; 76] = [
     "device",
     "driver",
     "date",
@@ -388,6 +413,7 @@ pub const CSV_COLUMNS: [&str; 75] = [
     "valid",
     "invalid_reason",
     "timing_source",
+    "passes",
     "block_jumps",
     "nodes",
     "leaves",
@@ -500,6 +526,7 @@ fn csv_row(report: &BenchReport, r: &Record) -> Vec<String> {
         r.valid.to_string(),
         opt(r.invalid_reason.as_ref()),
         r.timing_source.name().into(),
+        r.passes.to_string(),
         opt(r.block_jumps),
     ];
     row.extend(counter_cells(Some(&r.counters)));

@@ -62,10 +62,22 @@ pub fn table(report: &BenchReport) -> String {
         .iter()
         .map(|r| r.timing_source.name())
         .collect();
+    let passes = report.results.iter().map(|r| r.passes);
+    let (fewest, most) = (passes.clone().min().unwrap_or(1), passes.max().unwrap_or(1));
+    let passes = if fewest == most {
+        format!("{most}")
+    } else {
+        format!("{fewest}-{most}")
+    };
+    let shortest = if report.min_run_ms > 0.0 {
+        format!(", a run at least {} ms", report.min_run_ms)
+    } else {
+        String::new()
+    };
     let footnote = format!(
-        "MRays/s: median of {} runs (timing: {}); mem x: exact's bytes / these; t p99: hit \
-         distance error, % of the scene diagonal; n err: mean normal error; PSNR/FLIP: shaded \
-         primary image",
+        "MRays/s: median of {} runs of {passes} trace pass(es){shortest} (timing: {}); mem x: \
+         exact's bytes / these; t p99: hit distance error, % of the scene diagonal; n err: mean \
+         normal error; PSNR/FLIP: shaded primary image",
         report.runs,
         sources.into_iter().collect::<Vec<_>>().join(" and ")
     );
@@ -83,6 +95,26 @@ pub fn work_table(report: &BenchReport) -> String {
                     distinct 128-byte lines per ray; set = the frame's working set; DRAMnM = \
                     bytes per ray from DRAM behind an n MiB LRU cache (a model, see README)";
     render(report, &WORK_COLUMNS, work_cells, footnote)
+}
+
+/// What the driver compiled each trace pipeline into (registers, spills, …: where a GPU's
+/// occupancy is decided), one line per pipeline; empty where the device reports nothing.
+pub fn shader_table(report: &BenchReport) -> String {
+    let mut out = String::new();
+    for shader in report.shaders.iter().filter(|s| !s.statistics.is_empty()) {
+        let statistics: Vec<String> = shader.statistics.iter().map(|s| s.to_string()).collect();
+        out += &format!(
+            "{} ({}): {}\n",
+            shader.pipeline,
+            shader.method.name(),
+            statistics.join(", ")
+        );
+    }
+    if out.is_empty() {
+        out
+    } else {
+        format!("shaders, as the driver compiled them:\n{out}")
+    }
 }
 
 /// `report`'s records under `columns`, one line each from `cells`, then `footnote`.

@@ -5,8 +5,9 @@
 //! instance are destroyed only after the last resource made from them — the correct order by
 //! construction, whatever order the user drops things in.
 
+use std::ffi::CStr;
 #[cfg(feature = "loaded")]
-use std::ffi::{c_void, CStr, CString};
+use std::ffi::{c_char, c_void, CString};
 use std::mem::ManuallyDrop;
 use std::sync::{Arc, Mutex};
 
@@ -92,6 +93,10 @@ pub struct DeviceLimits {
     /// every branch of a divergent `if` and every loop at least once, whether or not a lane needs
     /// it, so the tracers leave the march's block jumps out there ([`crate::gpu::Tracer`]).
     pub cpu: bool,
+    /// Whether this context asked the driver for its pipelines' statistics
+    /// (`VK_KHR_pipeline_executable_properties`, enabled where the device offers it; never for an
+    /// embedded context): see [`crate::gpu::ComputePipeline::statistics`].
+    pub pipeline_statistics: bool,
 }
 
 pub(crate) struct Shared {
@@ -449,14 +454,28 @@ impl Partial {
         let queue_info = [vk::DeviceQueueCreateInfo::default()
             .queue_family_index(queue_family)
             .queue_priorities(&priorities)];
-        let extensions = [ash::khr::buffer_device_address::NAME.as_ptr()];
+        let statistics = super::statistics::offered(&instance, physical_device);
+        let extensions: Vec<*const c_char> = [
+            addresses.then_some(ash::khr::buffer_device_address::NAME),
+            statistics.then_some(ash::khr::pipeline_executable_properties::NAME),
+        ]
+        .into_iter()
+        .flatten()
+        .map(|name| name.as_ptr())
+        .collect();
         let mut address_features =
             vk::PhysicalDeviceBufferDeviceAddressFeatures::default().buffer_device_address(true);
-        let mut device_info = vk::DeviceCreateInfo::default().queue_create_infos(&queue_info);
+        let mut statistics_features =
+            vk::PhysicalDevicePipelineExecutablePropertiesFeaturesKHR::default()
+                .pipeline_executable_info(true);
+        let mut device_info = vk::DeviceCreateInfo::default()
+            .queue_create_infos(&queue_info)
+            .enabled_extension_names(&extensions);
         if addresses {
-            device_info = device_info
-                .enabled_extension_names(&extensions)
-                .push_next(&mut address_features);
+            device_info = device_info.push_next(&mut address_features);
+        }
+        if statistics {
+            device_info = device_info.push_next(&mut statistics_features);
         }
         let device = unsafe { instance.create_device(physical_device, &device_info, None) }
             .map_err(|r| Error::vk("vkCreateDevice", device_name.clone(), r))?;
@@ -466,6 +485,7 @@ impl Partial {
             None
         };
         limits.buffer_device_address = get_address.is_some();
+        limits.pipeline_statistics = statistics;
         let queue = unsafe { device.get_device_queue(queue_family, 0) };
         let pool_info = vk::CommandPoolCreateInfo::default()
             .queue_family_index(queue_family)
@@ -552,8 +572,21 @@ fn describe(
         timestamp_period_ns: (timestamp_bits > 0 && props.limits.timestamp_period > 0.0)
             .then_some(props.limits.timestamp_period as f64),
         cpu: props.device_type == vk::PhysicalDeviceType::CPU,
+        pipeline_statistics: false,
     };
     (limits, device_name, driver)
+}
+
+/// Whether `pd` lists the device extension `name`.
+pub(crate) fn offers_extension(
+    instance: &ash::Instance,
+    pd: vk::PhysicalDevice,
+    name: &CStr,
+) -> bool {
+    unsafe { instance.enumerate_device_extension_properties(pd) }
+        .unwrap_or_default()
+        .iter()
+        .any(|e| e.extension_name_as_c_str() == Ok(name))
 }
 
 fn driver_string(
@@ -564,11 +597,7 @@ fn driver_string(
     let mut driver = vk::PhysicalDeviceDriverProperties::default();
     // The driver's name is Vulkan 1.2 or VK_KHR_driver_properties; a device with neither gets
     // only its API version, rather than a query the validation layer would flag.
-    let has_driver_properties = unsafe { instance.enumerate_device_extension_properties(pd) }
-        .unwrap_or_default()
-        .iter()
-        .any(|e| e.extension_name_as_c_str() == Ok(ash::khr::driver_properties::NAME));
-    if has_driver_properties {
+    if offers_extension(instance, pd, ash::khr::driver_properties::NAME) {
         let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut driver);
         unsafe { instance.get_physical_device_properties2(pd, &mut props2) };
     }
@@ -596,12 +625,7 @@ fn driver_string(
 /// Vulkan 1.2 device does; a 1.1 device may). Extension and feature are what this crate's own
 /// context enables, so that a Vulkan 1.1 instance suffices.
 fn has_buffer_device_address(instance: &ash::Instance, pd: vk::PhysicalDevice) -> bool {
-    let extensions =
-        unsafe { instance.enumerate_device_extension_properties(pd) }.unwrap_or_default();
-    let listed = extensions
-        .iter()
-        .any(|e| e.extension_name_as_c_str() == Ok(ash::khr::buffer_device_address::NAME));
-    if !listed {
+    if !offers_extension(instance, pd, ash::khr::buffer_device_address::NAME) {
         return false;
     }
     let mut address = vk::PhysicalDeviceBufferDeviceAddressFeatures::default();

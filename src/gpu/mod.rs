@@ -9,6 +9,7 @@ mod painter;
 mod pipeline;
 pub mod shaders;
 pub mod spirv;
+mod statistics;
 mod submit;
 mod tracer;
 
@@ -17,5 +18,6 @@ pub use buffer::Buffer;
 pub use context::{Context, ContextOptions, DeviceLimits, External, Validation};
 pub use painter::{PaintParams, PaintRecording, PaintStats, Painter, MAX_BRUSHES_PER_PASS};
 pub use pipeline::{ComputePipeline, DescriptorSet};
+pub use statistics::{ShaderStatistic, StatisticValue};
 pub use submit::Timing;
 pub use tracer::{BufferView, Query, TraceBinding, TraceParams, Traced, Tracer, OBSERVED_BATCH};

@@ -3,6 +3,7 @@
 
 use ash::vk;
 
+use super::statistics::{self, ShaderStatistic};
 use super::{shaders, spirv, Context};
 use crate::{Error, Result};
 
@@ -17,6 +18,8 @@ pub struct ComputePipeline {
     bindings: Vec<u32>,
     push_size: u32,
     local_size_x: u32,
+    /// The driver's statistics, where the context captures them.
+    statistics: Vec<ShaderStatistic>,
 }
 
 impl Drop for ComputePipeline {
@@ -82,6 +85,7 @@ impl ComputePipeline {
             bindings: bindings.to_vec(),
             push_size,
             local_size_x,
+            statistics: Vec::new(),
         };
         let layout_bindings: Vec<_> = bindings
             .iter()
@@ -138,12 +142,23 @@ impl ComputePipeline {
         if !constants.is_empty() {
             stage = stage.specialization_info(&specialization);
         }
+        let capture = ctx.limits().pipeline_statistics;
+        let flags = if capture {
+            vk::PipelineCreateFlags::CAPTURE_STATISTICS_KHR
+        } else {
+            vk::PipelineCreateFlags::empty()
+        };
         let info = [vk::ComputePipelineCreateInfo::default()
+            .flags(flags)
             .stage(stage)
             .layout(p.layout)];
         let created = unsafe { d.create_compute_pipelines(vk::PipelineCache::null(), &info, None) };
         unsafe { d.destroy_shader_module(module, None) };
         p.pipeline = created.map_err(|(_, r)| Error::vk("vkCreateComputePipelines", name, r))?[0];
+        if capture {
+            // SAFETY: created above with CAPTURE_STATISTICS on a device that enabled the extension.
+            p.statistics = unsafe { statistics::query(&ctx.shared.instance, d, p.pipeline) };
+        }
         ctx.check_validation()?;
         Ok(p)
     }
@@ -151,6 +166,12 @@ impl ComputePipeline {
     /// The name given at creation, which errors and timings report.
     pub fn name(&self) -> &str {
         &self.name
+    }
+
+    /// What the driver compiled this pipeline into (registers, spills, instructions), where the
+    /// context asked for it ([`super::DeviceLimits::pipeline_statistics`]); else empty.
+    pub fn statistics(&self) -> &[ShaderStatistic] {
+        &self.statistics
     }
 
     /// Workgroup width declared by the shader.
@@ -166,9 +187,57 @@ impl ComputePipeline {
         invocations: u32,
         push: impl Fn(u32) -> Vec<u8>,
     ) -> Result<super::Timing> {
+        self.run_repeated(buffers, invocations, 1, push)
+    }
+
+    /// [`ComputePipeline::run`] with the work recorded `times` times back to back in the one
+    /// submission, a barrier between (each pass sees the last one's writes, as successive frames
+    /// would); the timing returned is per pass (the total over `times`). A fast GPU finishes one
+    /// pass of a frame's rays in a fraction of a millisecond, which timestamps resolve poorly and
+    /// which leaves it idle, clocked down, between submissions; repeated passes keep it busy for
+    /// as long as the caller needs to time it.
+    pub fn run_repeated(
+        &self,
+        buffers: &[(vk::Buffer, u64)],
+        invocations: u32,
+        times: u32,
+        push: impl Fn(u32) -> Vec<u8>,
+    ) -> Result<super::Timing> {
+        if times == 0 {
+            return Err(Error::param(
+                "times",
+                format!("{}: needs at least one pass", self.name),
+            ));
+        }
         let set = self.descriptor_set(buffers)?;
-        self.ctx.submit(&self.name, |device, cmd| {
-            self.record(device, cmd, &set, invocations, push)
+        let timing = self.ctx.submit(&self.name, |device, cmd| {
+            for pass in 0..times {
+                if pass > 0 {
+                    let barrier = [vk::MemoryBarrier::default()
+                        .src_access_mask(vk::AccessFlags::SHADER_WRITE)
+                        .dst_access_mask(
+                            vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
+                        )];
+                    // SAFETY: `cmd` is recording (inside `submit`).
+                    unsafe {
+                        device.cmd_pipeline_barrier(
+                            cmd,
+                            vk::PipelineStageFlags::COMPUTE_SHADER,
+                            vk::PipelineStageFlags::COMPUTE_SHADER,
+                            vk::DependencyFlags::empty(),
+                            &barrier,
+                            &[],
+                            &[],
+                        )
+                    };
+                }
+                self.record(device, cmd, &set, invocations, &push);
+            }
+        })?;
+        let per_pass = |ms: f64| ms / f64::from(times);
+        Ok(super::Timing {
+            gpu_ms: timing.gpu_ms.map(per_pass),
+            wall_ms: per_pass(timing.wall_ms),
         })
     }
 

@@ -21,6 +21,13 @@ pub struct Timing {
     pub wall_ms: f64,
 }
 
+impl Timing {
+    /// The device's time where it can time, else the host's.
+    pub fn ms(&self) -> f64 {
+        self.gpu_ms.unwrap_or(self.wall_ms)
+    }
+}
+
 /// RAII for the per-submission objects, so every exit path frees them.
 struct Scratch<'a> {
     device: &'a ash::Device,

@@ -17,7 +17,7 @@ use bytemuck::{Pod, Zeroable};
 use ash::vk;
 
 use super::pipeline::DescriptorSet;
-use super::{shaders, Buffer, ComputePipeline, Context, Reach, Timing};
+use super::{shaders, Buffer, ComputePipeline, Context, Reach, ShaderStatistic, Timing};
 use crate::bvh::{Bvh, STACK_SIZE};
 use crate::geom::{Hit, Ray};
 use crate::lod::cone::check_cones;
@@ -401,6 +401,12 @@ impl Tracer {
         self.block_jumps
     }
 
+    /// The trace pipeline's name and the driver's statistics of it (registers, spills, …; empty
+    /// where the context does not capture them, [`super::DeviceLimits::pipeline_statistics`]).
+    pub fn shader_statistics(&self) -> (&str, &[ShaderStatistic]) {
+        (self.pipeline.name(), self.pipeline.statistics())
+    }
+
     /// Turns the block jumps on or off (see [`Tracer::block_jumps`]), remaking the pipeline: do it
     /// before recording traces into command buffers. Fails for the exact BVH when asked to turn
     /// them on.
@@ -710,7 +716,7 @@ impl Tracer {
     /// [`Tracer::trace`]). Fails with [`Error::StackOverflow`] if any ray overflowed its stack.
     pub fn trace_with(&self, rays: &[Ray], query: Query, counters: bool) -> Result<Traced> {
         self.check_trace_cones(rays, None)?;
-        self.trace_batches(rays, None, query, counters, None)
+        self.trace_batches(rays, None, query, counters, None, 1)
     }
 
     /// Traces `rays` with level of detail, `cones[i]` the footprint of `rays[i]` (see
@@ -724,7 +730,22 @@ impl Tracer {
         counters: bool,
     ) -> Result<Traced> {
         self.check_trace_cones(rays, Some(cones))?;
-        self.trace_batches(rays, Some(cones), query, counters, None)
+        self.trace_batches(rays, Some(cones), query, counters, None, 1)
+    }
+
+    /// [`Tracer::trace`], or with `cones` [`Tracer::trace_lod`] without counters, each batch traced
+    /// `passes` times back to back in its submission ([`super::ComputePipeline::run_repeated`]):
+    /// the hits are the same, and the timing is per pass. For timing a fast GPU, where one pass
+    /// over a frame's rays is too short to time well.
+    pub fn trace_repeated(
+        &self,
+        rays: &[Ray],
+        cones: Option<&[RayCone]>,
+        query: Query,
+        passes: u32,
+    ) -> Result<Traced> {
+        self.check_trace_cones(rays, cones)?;
+        self.trace_batches(rays, cones, query, false, None, passes)
     }
 
     /// [`Tracer::trace_with`], or with `cones` [`Tracer::trace_lod`], reporting the rays traced
@@ -740,7 +761,7 @@ impl Tracer {
     ) -> Result<Traced> {
         self.check_trace_cones(rays, cones)?;
         step(progress, "tracing rays", rays.len() as u64, || {
-            self.trace_batches(rays, cones, query, counters, Some(progress))
+            self.trace_batches(rays, cones, query, counters, Some(progress), 1)
         })
     }
 
@@ -751,6 +772,7 @@ impl Tracer {
         query: Query,
         counters: bool,
         progress: Option<&dyn Progress>,
+        passes: u32,
     ) -> Result<Traced> {
         // Batches bounded by the largest per-ray buffer: the counters when counting, else the rays.
         let per_ray = if counters {
@@ -773,7 +795,7 @@ impl Tracer {
         for (k, chunk) in rays.chunks(batch).enumerate() {
             let chunk_cones = cones.map(|c| &c[k * batch..k * batch + chunk.len()]);
             let (hits, chunk_counters, timing) =
-                self.trace_batch(chunk, chunk_cones, query, counters)?;
+                self.trace_batch(chunk, chunk_cones, query, counters, passes)?;
             out.hits.extend(hits);
             if let (Some(all), Some(c)) = (out.counters.as_mut(), chunk_counters) {
                 all.extend(c);
@@ -797,6 +819,7 @@ impl Tracer {
         cones: Option<&[RayCone]>,
         query: Query,
         counters: bool,
+        passes: u32,
     ) -> Result<(Vec<Hit>, Option<Vec<RayCounters>>, Timing)> {
         let pipeline = if counters {
             self.counting_pipeline()?
@@ -836,7 +859,7 @@ impl Tracer {
             ],
             cone_buf.as_ref().map(|c| (c.raw(), 0)),
         );
-        let timing = pipeline.run(&views, n, |first| {
+        let timing = pipeline.run_repeated(&views, n, passes, |first| {
             bytemuck::bytes_of(&TraceParams {
                 ray_offset: first,
                 ray_count: n,
@@ -845,7 +868,8 @@ impl Tracer {
             })
             .to_vec()
         })?;
-        let overflow = self.ctx.read::<u32>(&mut status)?[0];
+        // Every pass counts its overflowing rays again.
+        let overflow = self.ctx.read::<u32>(&mut status)?[0] / passes;
         if overflow > 0 {
             return Err(Error::StackOverflow {
                 resource: pipeline.name().into(),

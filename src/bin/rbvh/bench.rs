@@ -29,9 +29,12 @@ pub struct Args {
     width: u32,
     #[arg(long, default_value_t = 256)]
     height: u32,
-    /// Timed dispatches per method and ray type, after one warm-up.
+    /// Timed runs per method and ray type, after one warm-up.
     #[arg(long, default_value_t = 5)]
     runs: u32,
+    /// Shortest timed run (ms): a faster trace is repeated back to back within each run, so that a fast GPU is timed busy; 0: one pass per run.
+    #[arg(long, default_value_t = 20.0)]
+    min_run_ms: f64,
     /// Ambient-occlusion ray length, as a fraction of the scene's bounding-box diagonal.
     #[arg(long, default_value_t = 0.05)]
     ao_radius: f32,
@@ -100,6 +103,7 @@ pub fn run(a: Args) -> Result<()> {
     config.width = a.width;
     config.height = a.height;
     config.runs = a.runs;
+    config.min_run_ms = a.min_run_ms;
     config.ao_radius = a.ao_radius;
     if let Some(seed) = a.seed {
         config.seed = seed;
@@ -127,6 +131,7 @@ pub fn run(a: Args) -> Result<()> {
     print!("{}", bench::table(&report));
     println!();
     print!("{}", bench::work_table(&report));
+    print!("{}", bench::shader_table(&report));
     let invalid = report.results.iter().filter(|r| !r.valid).count();
     if invalid > 0 {
         eprintln!(
