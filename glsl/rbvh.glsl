@@ -106,13 +106,16 @@ float rbvh_boundary_t(int c, int step, float o, float inv) {
     return step > 0 ? far_side : (step < 0 ? near_side : RBVH_INF);
 }
 
-// Frame-space ray of one leaf.
+// Frame-space ray of one leaf. Its shear (for the cells' triangles) is not kept here but made
+// where a cell's triangles are tested, as the traversal makes the ray's own shear per triangle
+// leaf: twelve floats kept live across the loops cost registers, and on a GPU registers bound
+// the rays in flight (on an H200 the two took trace_rbvh from 127 registers to 96: docs/speed.md,
+// "On a GPU").
 struct RbvhFrameRay {
     vec3 o;
     vec3 d;
     float tmin;
     float tmax;
-    RbvhShear shear;
 };
 
 // One cell of the walk: its indices, the ray's parameter range over it, and its four corner
@@ -183,13 +186,14 @@ float rbvh_cell_triangles(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, inout b
     vec3 b = v00 ? (v10 ? p10 : p11) : p11;
     vec3 c = (v00 && v10) ? (v11 ? p11 : p01) : p01;
     // Then, with all four, (c00, c11, c01) when nearer; one call site for both triangles.
+    RbvhShear shear = rbvh_shear(Ray(fr.o, fr.tmin, fr.d, fr.tmax));
     float t_hit = -1.0;
     int tris = (v00 && v10 && v01 && v11) ? 2 : 1;
     int k = 0;
     for (; k < tris; ++k) {
         vec3 b_k = k == 0 ? b : p11;
         vec3 c_k = k == 0 ? c : p01;
-        float t = rbvh_intersect_triangle(fr.shear, a, b_k, c_k, fr.tmin, t_hit >= 0.0 ? t_hit : fr.tmax);
+        float t = rbvh_intersect_triangle(shear, a, b_k, c_k, fr.tmin, t_hit >= 0.0 ? t_hit : fr.tmax);
         if (t >= 0.0) {
             t_hit = t;
         }
@@ -286,7 +290,6 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     precise vec3 e1 = (bmax - o) * inv;
     vec3 e = max(e0, e1);
     float t1 = min(min(min(e.x, e.y), e.z), fr.tmax);
-    fr.shear = rbvh_shear(frame);
 
     // 3. Walk.
     int last_i = int(leaf.res_u) - 2;
@@ -508,7 +511,6 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
         return rbvh_miss();
     }
     vec3 inv_dir = rbvh_safe_inverse(ray.dir);
-    RbvhShear sh = rbvh_shear(ray);
     float t_closest = ray.tmax;
     // The nearest hit so far: a triangle's slot, or the id of a height field or chosen node and
     // the texel its normal comes from. Its id and normal are read and decoded once, after the
@@ -547,6 +549,8 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
                 uint end = min(first + pending_count, sz.tri_count);
                 uint slot = first;
                 bool found = false;
+                // Made per leaf rather than kept across the loops: see RbvhFrameRay.
+                RbvhShear sh = rbvh_shear(ray);
                 RBVH_COUNT_ADD(triangle_leaves, 1u);
                 for (; slot < end; ++slot) {
                     steps += 1u;
