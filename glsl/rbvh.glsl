@@ -11,6 +11,9 @@
 // RBVH_BLOCK_JUMPS (default true) is the condition under which the march jumps over blocks the
 // ray passes above or below; the hits are the same either way. On CPU implementations such as
 // lavapipe, which run every branch, the walk is faster without (see Tracer::block_jumps).
+// RBVH_HEIGHT_ONLY (default false) must be true for an RBVH built with TexelFormat::Height: its
+// atlas holds 16-bit height codes two to a word (texel 2k in the low half of word k), the block
+// ranges follow the texels' words, and a hit's normal is that of the cell triangle it hit.
 #ifndef RBVH_RBVH_GLSL
 #define RBVH_RBVH_GLSL
 
@@ -24,6 +27,9 @@
 #endif
 #ifndef RBVH_BLOCK_JUMPS
 #define RBVH_BLOCK_JUMPS true
+#endif
+#ifndef RBVH_HEIGHT_ONLY
+#define RBVH_HEIGHT_ONLY false
 #endif
 
 // Must equal MARCH_SLACK, MARCH_EDGE_PAD and Texel::MAX_CODE / HOLE_CODE (tests/layout.rs checks).
@@ -92,7 +98,18 @@ bool rbvh_is_hole(uint texel) {
 
 uint rbvh_texel(RbvhLeaf leaf, RbvhSizes sz, int i, int j) {
     uint index = leaf.atlas_base + uint(j) * sz.atlas_pitch + uint(i);
-    return index < sz.atlas_len ? RBVH_ATLAS(index) : RBVH_HOLE_CODE;
+    if (index >= sz.atlas_len) {
+        return RBVH_HOLE_CODE;
+    }
+    if (RBVH_HEIGHT_ONLY) {
+        return (RBVH_ATLAS(index >> 1) >> ((index & 1u) << 4)) & 0xFFFFu;
+    }
+    return RBVH_ATLAS(index);
+}
+
+// Where the blocks' height ranges start in the atlas words: after the texels' words.
+uint rbvh_texel_words(RbvhSizes sz) {
+    return RBVH_HEIGHT_ONLY ? (sz.atlas_len >> 1) + (sz.atlas_len & 1u) : sz.atlas_len;
 }
 
 float rbvh_height_at(float o, float d, float t) {
@@ -162,8 +179,10 @@ bool rbvh_cell_candidate(RbvhLeaf leaf, RbvhSizes sz, RbvhFrameRay fr, float sla
 }
 
 // Step 4 of march.rs, its costly half: the cell's two (or one) triangles; returns t (< 0 on a
-// miss). `cut` is set when the device ended the loop early (see rbvh_trace_bvh in bvh.glsl).
-float rbvh_cell_triangles(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, inout bool cut) {
+// miss) and, on a hit, the frame-space normal of the triangle hit, (b - a) x (c - a) (used by
+// height-only RBVHs). `cut` is set when the device ended the loop early (see rbvh_trace_bvh in
+// bvh.glsl).
+float rbvh_cell_triangles(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, out vec3 facet, inout bool cut) {
     bool v00 = !rbvh_is_hole(cell.c00);
     bool v10 = !rbvh_is_hole(cell.c10);
     bool v01 = !rbvh_is_hole(cell.c01);
@@ -188,6 +207,7 @@ float rbvh_cell_triangles(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, inout b
     // Then, with all four, (c00, c11, c01) when nearer; one call site for both triangles.
     RbvhShear shear = rbvh_shear(Ray(fr.o, fr.tmin, fr.d, fr.tmax));
     float t_hit = -1.0;
+    facet = vec3(0.0);
     int tris = (v00 && v10 && v01 && v11) ? 2 : 1;
     int k = 0;
     for (; k < tris; ++k) {
@@ -196,6 +216,13 @@ float rbvh_cell_triangles(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, inout b
         float t = rbvh_intersect_triangle(shear, a, b_k, c_k, fr.tmin, t_hit >= 0.0 ? t_hit : fr.tmax);
         if (t >= 0.0) {
             t_hit = t;
+            if (RBVH_HEIGHT_ONLY) {
+                precise vec3 e1 = b_k - a;
+                precise vec3 e2 = c_k - a;
+                precise vec3 n = vec3(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z,
+                                      e1.x * e2.y - e1.y * e2.x);
+                facet = n;
+            }
         }
     }
     if (k < tris) {
@@ -224,11 +251,13 @@ uint rbvh_cell_normal_texel(RbvhFrameRay fr, RbvhCell cell, float t_hit) {
 }
 
 // Marches leaf `li` over [tmin, t_closest); returns t (< 0 on a miss) and, on a hit, the texel
-// whose normal it reports (decode with rbvh_decode_normal). `cells` counts cells visited. `cut` is
-// set when the device ended a loop early (see rbvh_trace_bvh in bvh.glsl).
+// whose normal it reports (decode with rbvh_decode_normal), or with RBVH_HEIGHT_ONLY the world
+// normal of the cell triangle hit (`facet_normal`, as facet_normal in march.rs). `cells` counts
+// cells visited. `cut` is set when the device ended a loop early (see rbvh_trace_bvh in bvh.glsl).
 float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cells, out uint normal_texel,
-                 inout bool cut) {
+                 out vec3 facet_normal, inout bool cut) {
     normal_texel = RBVH_HOLE_CODE;
+    facet_normal = vec3(0.0);
     if (li >= sz.leaf_count) {
         return -1.0;
     }
@@ -323,6 +352,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     bool stopped = false;
     bool advance = false;
     float t_hit = -1.0;
+    vec3 facet = vec3(0.0);
     uint n = 0u;
     for (uint round = 0u; round < 2u * max_steps; ++round) {
         bool candidate = false;
@@ -395,7 +425,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
                     int edge_j = step_j > 0 ? min(j0 + 7, last_j) : max(j0, 0);
                     float leave_i = rbvh_boundary_t(edge_i, step_i, o.x, inv.x);
                     float leave_j = rbvh_boundary_t(edge_j, step_j, o.y, inv.y);
-                    uint range = RBVH_ATLAS(sz.atlas_len + block);
+                    uint range = RBVH_ATLAS(rbvh_texel_words(sz) + block);
                     uint code_lo = range & 0xFFFFu;
                     uint code_hi = range >> 16;
                     precise float lo_s = float(code_lo) * leaf.h_scale - slack;
@@ -463,7 +493,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
             break;
         }
         RBVH_COUNT_ADD(cells_tested, 1u);
-        float t = rbvh_cell_triangles(leaf, fr, cell, cut);
+        float t = rbvh_cell_triangles(leaf, fr, cell, facet, cut);
         if (t >= 0.0) {
             t_hit = t;
             stopped = true;
@@ -475,7 +505,15 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
         cut = true;
     }
     if (t_hit >= 0.0) {
-        normal_texel = rbvh_cell_normal_texel(fr, cell, t_hit);
+        if (RBVH_HEIGHT_ONLY) {
+            // The leaf's frame again (read anew rather than kept through the walk): normals map
+            // back by the frame's transpose.
+            RbvhLeaf frame_leaf = RBVH_LEAF(li);
+            precise vec3 n = (frame_leaf.axis_u * facet.x + frame_leaf.axis_v * facet.y) + frame_leaf.axis_w * facet.z;
+            facet_normal = normalize(n);
+        } else {
+            normal_texel = rbvh_cell_normal_texel(fr, cell, t_hit);
+        }
     }
     return t_hit;
 }
@@ -518,6 +556,7 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
     uint best_id = RBVH_INVALID;
     uint best_slot = RBVH_INVALID;
     uint best_texel = RBVH_HOLE_CODE;
+    vec3 best_facet = vec3(0.0);  // RBVH_HEIGHT_ONLY: the hit's normal, made by the march
     uint stack[RBVH_STACK_SIZE];
     uint sp = 0u;
     uint node = 0u;
@@ -575,6 +614,7 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
                 }
             } else {
                 uint normal_texel;
+                vec3 facet_normal = vec3(0.0);
                 uint cells = 0u;
                 float t;
                 RBVH_COUNT_ADD(leaves, 1u);
@@ -585,7 +625,8 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
                 } else
 #endif
                 {
-                    t = rbvh_march(pending & ~RBVH_LEAF_BIT, sz, ray, t_closest, cells, normal_texel, cut);
+                    t = rbvh_march(pending & ~RBVH_LEAF_BIT, sz, ray, t_closest, cells, normal_texel,
+                                   facet_normal, cut);
                 }
                 steps += cells;
                 RBVH_COUNT_ADD(cells, cells);
@@ -594,6 +635,7 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
                     best_id = RBVH_LEAF_BIT | pending;
                     best_slot = RBVH_INVALID;
                     best_texel = normal_texel;
+                    best_facet = facet_normal;
                     if (any_hit) {
                         finished = true;
                         break;
@@ -693,6 +735,8 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
         nrm = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
     } else if (best_id == RBVH_INVALID) {
         return rbvh_miss();
+    } else if (RBVH_HEIGHT_ONLY) {
+        nrm = best_facet;
     } else {
         nrm = rbvh_decode_normal(best_texel);
     }

@@ -15,6 +15,10 @@ layout(constant_id = 0) const bool rbvh_count = false;
 // Specialised by the tracer (src/gpu/tracer.rs, JUMPS_CONSTANT_ID; off on CPU implementations).
 layout(constant_id = 1) const bool rbvh_block_jumps = true;
 #define RBVH_BLOCK_JUMPS rbvh_block_jumps
+// Specialised true (src/gpu/tracer.rs, HEIGHT_ONLY_CONSTANT_ID) for an RBVH built with
+// TexelFormat::Height; never for the LOD trace, which needs the texels' normals.
+layout(constant_id = 2) const bool rbvh_height_only = false;
+#define RBVH_HEIGHT_ONLY rbvh_height_only
 
 #include "trace_params.glsl"
 #include "rbvh.glsl"

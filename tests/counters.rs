@@ -11,7 +11,7 @@ use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{Query, Tracer};
 use rbvh::lod::{Lod, LodParams, RayCone};
 use rbvh::probe::{Array, RayCounters, Read, TraceStats};
-use rbvh::rbvh::{Rbvh, RbvhParams};
+use rbvh::rbvh::{Rbvh, RbvhParams, TexelFormat};
 use rbvh::scene::Scene;
 
 fn rays_for(scene: &Scene, side: u32, random: usize, seed: u64) -> Vec<Ray> {
@@ -61,8 +61,19 @@ fn device_and_cpu_twin_count_the_same_work() {
         assert!(!exact.block_jumps());
         let e = exact.set_block_jumps(true).unwrap_err().to_string();
         assert!(e.contains("no march"), "{e}");
-        for level in [0, 2, 4] {
-            let r = Rbvh::build(&scene, &RbvhParams::quality(level).unwrap()).unwrap();
+        // Height-only texels are read two to a word, and the block ranges after them.
+        let builds = [
+            (0, TexelFormat::HeightNormal),
+            (2, TexelFormat::HeightNormal),
+            (2, TexelFormat::Height),
+            (4, TexelFormat::HeightNormal),
+        ];
+        for (level, texels) in builds {
+            let params = RbvhParams {
+                texels,
+                ..RbvhParams::quality(level).unwrap()
+            };
+            let r = Rbvh::build(&scene, &params).unwrap();
             let mut tracer = Tracer::rbvh(&ctx, &r).unwrap();
             // Off is this CPU device's default; both are what some device runs.
             assert_eq!(tracer.block_jumps(), !ctx.limits().cpu);

@@ -521,3 +521,34 @@ fn coarse_hits_carry_the_colour_of_the_surface_they_stand_for() {
         .colours
         .is_none());
 }
+
+/// Levels of detail take their columns' normals from the texels: a height-only RBVH has none, so
+/// building them, or tracing with ones built for its twin with normals, is refused by name.
+#[test]
+fn lod_refuses_a_height_only_rbvh() {
+    let ctx = common::context();
+    let scene = Scene::builtin("sphere").unwrap();
+    let normals = Rbvh::build(&scene, &RbvhParams::quality(1).unwrap()).unwrap();
+    let height = Rbvh::build(
+        &scene,
+        &RbvhParams {
+            texels: rbvh::rbvh::TexelFormat::Height,
+            ..normals.params
+        },
+    )
+    .unwrap();
+    let lod = Lod::build(&normals, &LodParams::default()).unwrap();
+    let (rays, cones) = rays_and_cones(&scene, 8, 0, 1);
+    for e in [
+        Lod::build(&height, &LodParams::default()).err().unwrap(),
+        Tracer::rbvh_lod(&ctx, &height, &lod).err().unwrap(),
+        height
+            .trace_cpu_lod(&lod, &rays, &cones, false)
+            .unwrap_err(),
+    ] {
+        assert!(
+            matches!(e, Error::InvalidParameter { .. }) && e.to_string().contains("height-only"),
+            "{e}"
+        );
+    }
+}

@@ -162,6 +162,25 @@ fn a_colour_channel_that_does_not_match_the_atlas_is_refused() {
 }
 
 #[test]
+fn a_height_only_rbvh_has_no_colours_to_paint() {
+    let ctx = common::context();
+    let scene = Scene::builtin("cube").unwrap();
+    let params = RbvhParams {
+        texels: rbvh::rbvh::TexelFormat::Height,
+        ..RbvhParams::quality(1).unwrap()
+    };
+    let r = Rbvh::build(&scene, &params).unwrap();
+    let tracer = Tracer::rbvh(&ctx, &r).unwrap();
+    for e in [
+        Painter::new(&ctx, &r).err().unwrap(),
+        Painter::sharing(&tracer, &r).err().unwrap(),
+    ] {
+        let e = e.to_string();
+        assert!(e.contains("height-only") && e.contains("colours"), "{e}");
+    }
+}
+
+#[test]
 fn a_recorded_paint_matches_the_submitted_one() {
     let ctx = common::context();
     let r = cube();

@@ -9,7 +9,7 @@ mod common;
 
 use rbvh::geom::Ray;
 use rbvh::gpu::{Query, Tracer};
-use rbvh::rbvh::{Rbvh, RbvhParams};
+use rbvh::rbvh::{Rbvh, RbvhParams, TexelFormat};
 use rbvh::scene::Scene;
 
 fn rays_for(scene: &Scene, side: u32, random: usize, seed: u64) -> Vec<Ray> {
@@ -392,4 +392,71 @@ fn block_jumps_agree_with_the_plain_walk_on_steep_unaligned_tiles() {
     );
     assert_eq!(agreement.hit_miss, 0, "{agreement:?}");
     assert_eq!(agreement.worst_t, 0.0, "{agreement:?}");
+}
+
+/// Height-only texels (`TexelFormat::Height`): the same tree and heights, so the same hits as with
+/// normals, bit for bit, on the device and the CPU; only the normal differs — the cell triangle's,
+/// which on the unit sphere is at least as close to the true normal as the nearest sample's.
+#[test]
+fn height_only_texels_hit_the_same_and_report_the_facet_normal() {
+    let ctx = common::context();
+    let mut agreement = common::Agreement::default();
+    for (k, name) in ["default", "blob", "sphere"].into_iter().enumerate() {
+        let scene = Scene::builtin(name).unwrap();
+        for level in [0, 2, 4] {
+            let normals = Rbvh::build(&scene, &RbvhParams::quality(level).unwrap()).unwrap();
+            let params = RbvhParams {
+                texels: TexelFormat::Height,
+                ..normals.params
+            };
+            let height = Rbvh::build(&scene, &params).unwrap();
+            assert_eq!(
+                (&height.nodes, &height.leaves),
+                (&normals.nodes, &normals.leaves)
+            );
+            assert!(height.colours.is_none());
+            assert!(height.atlas_bytes() < normals.atlas_bytes() * 3 / 4);
+            let tracer = Tracer::rbvh(&ctx, &height).unwrap();
+            let rays = rays_for(&scene, 64, 2000, 70 + (k * 5 + level as usize) as u64);
+            let (mut sphere_err, mut sphere_err_normals, mut sphere_hits) = (0.0f64, 0.0f64, 0);
+            for (query, any) in [(Query::Closest, false), (Query::Any, true)] {
+                let gpu = tracer.trace(&rays, query).unwrap().hits;
+                let cpu = height.trace_cpu(&rays, any);
+                agreement.add(&format!("{name} Q{level} height-only"), &gpu, &cpu, any);
+                let with_normals = normals.trace_cpu(&rays, any);
+                for (i, (h, n)) in cpu.iter().zip(&with_normals).enumerate() {
+                    assert_eq!(
+                        (h.t.to_bits(), h.id),
+                        (n.t.to_bits(), n.id),
+                        "{name} Q{level} ray {i}"
+                    );
+                    if !h.is_hit() {
+                        continue;
+                    }
+                    assert!((h.normal().length() - 1.0).abs() < 1e-5, "{h:?}");
+                    if name == "sphere" && !any && h.id & rbvh::bvh::LEAF_BIT != 0 {
+                        let p = rays[i].origin() + h.t * rays[i].dir();
+                        let truth = p.normalize();
+                        let angle = |n: glam::Vec3| f64::from(n.dot(truth).clamp(-1.0, 1.0).acos());
+                        sphere_err += angle(h.normal());
+                        sphere_err_normals += angle(n.normal());
+                        sphere_hits += 1;
+                    }
+                }
+            }
+            if sphere_hits > 0 {
+                let (mean, mean_normals) = (
+                    (sphere_err / sphere_hits as f64).to_degrees(),
+                    (sphere_err_normals / sphere_hits as f64).to_degrees(),
+                );
+                println!("sphere Q{level}: mean normal error {mean:.2}° height-only, {mean_normals:.2}° with normals");
+                assert!(
+                    mean <= mean_normals * 1.1 + 0.05,
+                    "Q{level}: {mean}° against {mean_normals}°"
+                );
+            }
+        }
+    }
+    assert!(agreement.total >= 50_000);
+    assert!(agreement.rate() < 1e-4, "{agreement:?}");
 }

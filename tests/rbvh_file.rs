@@ -8,7 +8,7 @@ use rbvh::bvh::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT};
 use rbvh::geom::Aabb;
 use rbvh::rbvh::{
     Atlas, GpuHeightfield, Rbvh, RbvhParams, RbvhStats, Refinement, Subdivision, Texel,
-    HEIGHTFIELD_COUNT,
+    TexelFormat, HEIGHTFIELD_COUNT,
 };
 use rbvh::Error;
 
@@ -180,10 +180,61 @@ fn bad_magic_and_unknown_versions_are_rejected() {
     assert!(message.contains("not an RBVH file"), "{message}");
 
     let mut bytes = sample().to_bytes();
-    bytes[8..12].copy_from_slice(&3u32.to_le_bytes());
+    bytes[8..12].copy_from_slice(&4u32.to_le_bytes());
     let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
-    assert!(message.contains("unsupported version 3"), "{message}");
-    assert!(message.contains("reads versions 1 and 2"), "{message}");
+    assert!(message.contains("unsupported version 4"), "{message}");
+    assert!(message.contains("reads versions 1, 2 and 3"), "{message}");
+}
+
+#[test]
+fn height_only_texels_round_trip_as_version_3_in_half_the_bytes() {
+    let path = Path::new("height.rbvh");
+    let mut height = sample();
+    height.params.texels = TexelFormat::Height;
+    for t in &mut height.atlas.texels {
+        *t = Texel(u32::from(t.height_code()));
+    }
+    let bytes = height.to_bytes();
+    assert_eq!(Rbvh::from_bytes(&bytes, path).unwrap(), height);
+    // Version 3: version 1's header and arrays, with two-byte texels.
+    let v1 = sample().to_bytes();
+    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 3);
+    assert_eq!(bytes.len(), v1.len() - 72 * 2);
+    assert_eq!(bytes[12..HEADER_BYTES], v1[12..HEADER_BYTES]);
+    let first_texel = bytes.len() - 72 * 2;
+    assert_eq!(
+        u16::from_le_bytes([bytes[first_texel], bytes[first_texel + 1]]),
+        height.atlas.texels[0].height_code()
+    );
+    // On the device: 4-byte words of two texels, then the block ranges as before.
+    assert_eq!(
+        height.atlas_bytes() + 72 * 2,
+        sample().atlas_bytes(),
+        "half the texel bytes"
+    );
+    let words = height.atlas_words();
+    let codes = |k: usize| height.atlas.texels[k].height_code() as u32;
+    assert_eq!(words[0], codes(0) | codes(1) << 16);
+    assert_eq!(words[35], codes(70) | codes(71) << 16);
+    assert_eq!(words[36..], sample().atlas_words()[72..]);
+
+    for cut in [1, 2, 72 * 2] {
+        let message = parse_error(Rbvh::from_bytes(&bytes[..bytes.len() - cut], path), path);
+        assert!(message.contains("truncated"), "{cut}: {message}");
+    }
+    // Colours (painted on a height-only RBVH in memory) have no place in its file: refused.
+    let dir = tempfile::tempdir().unwrap();
+    let mut painted = height.clone();
+    painted.colours = Some(vec![0; 72]);
+    let err = painted
+        .save(&dir.path().join("p.rbvh"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("height-only") && err.contains("colour"),
+        "{err}"
+    );
+    assert!(!dir.path().join("p.rbvh").exists());
 }
 
 #[test]

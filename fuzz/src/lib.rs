@@ -259,6 +259,7 @@ pub fn decode_geometry(data: &[u8]) -> (Scene, RbvhParams) {
             object_split: b.u8() % 2 == 0,
             max_tile: 4 + u32::from(b.u8() % 61),
             min_leaf_texels: f32::from(b.u8() % 8),
+            ..q
         }
     };
     let vertex_count = 3 + usize::from(b.u8() % 30);

@@ -42,7 +42,7 @@ use crate::output::{self, Image};
 use crate::probe::{MeanCounters, Read, TraceStats};
 use crate::progress::{Progress, Quiet};
 use crate::rays::{self, RayType, Secondary, DEFAULT_LIGHT};
-use crate::rbvh::{Rbvh, RbvhParams};
+use crate::rbvh::{Rbvh, RbvhParams, TexelFormat};
 use crate::scene::Scene;
 use crate::{Error, Result};
 
@@ -166,18 +166,20 @@ impl Candidate {
     fn label(&self) -> String {
         match &self.level {
             None => self.method.name().into(),
-            Some((level, _)) => format!("{} {}", self.method.name(), level.name()),
+            Some((level, params)) => {
+                format!("{} {}", self.method.name(), level_label(level, params))
+            }
         }
     }
 
-    /// "exact", "q2", "q2_lod", "custom": for file names.
+    /// "exact", "q2", "q2h" (height-only), "q2_lod", "custom": for file names.
     fn file_stem(&self) -> String {
         match &self.level {
             None => "exact".into(),
-            Some((level, _)) if self.method == Method::RbvhLod => {
-                format!("{}_lod", level.name().to_ascii_lowercase())
+            Some((level, params)) if self.method == Method::RbvhLod => {
+                format!("{}_lod", level_label(level, params).to_ascii_lowercase())
             }
-            Some((level, _)) => level.name().to_ascii_lowercase(),
+            Some((level, params)) => level_label(level, params).to_ascii_lowercase(),
         }
     }
 
@@ -288,13 +290,20 @@ impl<'a> SceneBench<'a> {
         // surface may lie up to a fraction of a texel off the exact one, and a ray starting
         // closer would meet its own surface. One offset for all, so all trace identical rays.
         let mut surface_offset = 0.0f32;
-        for level in &config.levels {
+        let builds = config
+            .levels
+            .iter()
+            .flat_map(|level| config.texels.iter().map(move |&texels| (level, texels)));
+        for (level, texels) in builds {
+            let params = RbvhParams {
+                texels,
+                ..level.params()?
+            };
             observe(Event::Progress(format!(
                 "{}: building RBVH {}",
                 scene.name,
-                level.name()
+                level_label(level, &params)
             )));
-            let params = level.params()?;
             let rbvh = Arc::new(Rbvh::build_observed(&scene, &params, progress)?);
             surface_offset = surface_offset.max(rbvh.texel_size);
             let memory = Memory {
@@ -311,7 +320,8 @@ impl<'a> SceneBench<'a> {
                 build_ms: rbvh.stats.build_ms,
                 memory,
             });
-            if let Some(lod_params) = &config.lod {
+            let lod = config.lod.filter(|_| texels == TexelFormat::HeightNormal);
+            if let Some(lod_params) = &lod {
                 observe(Event::Progress(format!(
                     "{}: building levels of detail of {}",
                     scene.name,
@@ -700,6 +710,14 @@ impl<'a> SceneBench<'a> {
         }
         written.extend(plot::write_charts(&dir, &self.records)?);
         Ok(written)
+    }
+}
+
+/// `level`'s name, with `h` appended when built height-only (as [`Record::level_label`]).
+fn level_label(level: &Level, params: &RbvhParams) -> String {
+    match params.texels {
+        TexelFormat::HeightNormal => level.name(),
+        TexelFormat::Height => format!("{}h", level.name()),
     }
 }
 

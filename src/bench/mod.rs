@@ -46,7 +46,7 @@ use crate::gpu::Context;
 #[cfg(feature = "loaded")]
 use crate::gpu::ContextOptions;
 use crate::lod::LodParams;
-use crate::rbvh::{RbvhParams, QUALITY_NAMES};
+use crate::rbvh::{RbvhParams, TexelFormat, QUALITY_NAMES};
 use crate::{Error, Result};
 
 /// Where the benchmark's Vulkan device comes from.
@@ -136,6 +136,9 @@ pub struct BenchConfig {
     /// and cache lines per ray, the frame's working set, DRAM bytes per ray behind 4, 32 and
     /// 72 MiB caches. Costs a CPU trace per method and ray type.
     pub traffic: bool,
+    /// Texel formats to build every level in, each measured as its own RBVH (at least one; the
+    /// default: height and normal only). A height-only level gets no level-of-detail record.
+    pub texels: Vec<TexelFormat>,
     /// Block jumps in the RBVH march on or off; None: the tracer's choice for the device
     /// ([`crate::gpu::Tracer::block_jumps`]).
     pub block_jumps: Option<bool>,
@@ -165,6 +168,7 @@ impl BenchConfig {
             plot_dir: None,
             lod: None,
             traffic: false,
+            texels: vec![TexelFormat::HeightNormal],
             block_jumps: None,
         }
     }
@@ -176,6 +180,9 @@ impl BenchConfig {
         }
         if self.ray_types.is_empty() {
             return Err(Error::param("rays", "no ray type to trace"));
+        }
+        if self.texels.is_empty() {
+            return Err(Error::param("texels", "no texel format to build"));
         }
         for (name, side) in [("width", self.width), ("height", self.height)] {
             if !(1..=MAX_SIDE).contains(&side) {

@@ -135,7 +135,10 @@ pub fn write_charts(dir: &Path, records: &[Record]) -> Result<Vec<PathBuf>> {
                 } else {
                     100.0 * r.error.as_ref()?.t_err_p99?
                 };
-                let level = r.quality.clone().unwrap_or_else(|| "exact".into());
+                let level = match r.method {
+                    Method::Exact => "exact".to_string(),
+                    _ => r.level_label(),
+                };
                 Some(Point {
                     label: if r.valid {
                         level
@@ -177,7 +180,7 @@ pub fn write_charts(dir: &Path, records: &[Record]) -> Result<Vec<PathBuf>> {
             .filter(|r| r.ray_type == ray_type)
             .filter_map(|r| {
                 let traffic = &r.traffic.as_ref()?.traffic;
-                let level = r.quality.clone().unwrap_or_default();
+                let level = r.level_label();
                 let name = match r.method {
                     Method::Exact => "exact".to_string(),
                     Method::Rbvh => level,

@@ -48,7 +48,7 @@
 //! `params`: `texels_per_diagonal`, `refinement` (`"normal_cone"` \| `"projected_area"`),
 //! `max_angle_deg` (normal cone, else null), `min_ratio` (projected area, else null),
 //! `subdivision` (`"spatial_median"` \| `"area_sah"`), `object_split`, `max_tile`,
-//! `min_leaf_texels` — the fields of [`RbvhParams`].
+//! `min_leaf_texels`, `texels` (`"height_normal"` \| `"height"`) — the fields of [`RbvhParams`].
 //!
 //! `lod` (`rbvh-lod` records, else null): `columns`, `min_leaves`, `bias` — the fields of
 //! [`LodParams`].
@@ -315,6 +315,8 @@ pub struct Params {
     /// Box diagonal in texels below which a set that is no height field stays triangles
     /// ([`RbvhParams::min_leaf_texels`]).
     pub min_leaf_texels: f32,
+    /// What each texel holds: `"height_normal"` or `"height"` ([`RbvhParams::texels`]).
+    pub texels: &'static str,
 }
 
 impl From<&RbvhParams> for Params {
@@ -335,6 +337,20 @@ impl From<&RbvhParams> for Params {
             object_split: p.object_split,
             max_tile: p.max_tile,
             min_leaf_texels: p.min_leaf_texels,
+            texels: p.texels.name(),
+        }
+    }
+}
+
+impl Record {
+    /// The level as tables and charts show it: the quality (`-` for exact), with `h` appended for
+    /// a height-only RBVH (`"Q2h"`), so that both texel formats of one level tell apart.
+    pub fn level_label(&self) -> String {
+        let height_only = self.params.as_ref().is_some_and(|p| p.texels == "height");
+        match &self.quality {
+            Some(q) if height_only => format!("{q}h"),
+            Some(q) => q.clone(),
+            None => "-".into(),
         }
     }
 }
@@ -369,7 +385,7 @@ pub fn write_json(path: &Path, report: &BenchReport) -> Result<()> {
 }
 
 /// The CSV header: one column per field of a [`Record`], flattened.
-pub const CSV_COLUMNS: [&str; 76] = [
+pub const CSV_COLUMNS: [&str; 77] = [
     "device",
     "driver",
     "date",
@@ -387,6 +403,7 @@ pub const CSV_COLUMNS: [&str; 76] = [
     "object_split",
     "max_tile",
     "min_leaf_texels",
+    "texels",
     "lod_columns",
     "lod_min_leaves",
     "lod_bias",
@@ -500,6 +517,7 @@ fn csv_row(report: &BenchReport, r: &Record) -> Vec<String> {
         opt(p.map(|p| p.object_split)),
         opt(p.map(|p| p.max_tile)),
         opt(p.map(|p| p.min_leaf_texels)),
+        opt(p.map(|p| p.texels)),
         opt(r.lod.map(|l| l.columns)),
         opt(r.lod.map(|l| l.min_leaves)),
         opt(r.lod.map(|l| l.bias)),

@@ -11,7 +11,7 @@ use super::record::{BenchReport, Record};
 /// than right-aligned (numbers).
 const COLUMNS: [(&str, usize, bool); 13] = [
     ("method", 8, true),
-    ("level", 6, true),
+    ("level", 7, true),
     ("ray type", 8, true),
     ("MRays/s", 8, false),
     ("speedup", 8, false),
@@ -29,7 +29,7 @@ const COLUMNS: [(&str, usize, bool); 13] = [
 /// lines per ray, working set and DRAM bytes per ray behind each modelled cache.
 const WORK_COLUMNS: [(&str, usize, bool); 16] = [
     ("method", 8, true),
-    ("level", 6, true),
+    ("level", 7, true),
     ("ray type", 8, true),
     ("nodes", 6, false),
     ("leaves", 6, false),
@@ -158,7 +158,7 @@ fn cells(r: &Record) -> [String; COLUMNS.len()] {
     let e = r.error.as_ref();
     [
         r.method.name().into(),
-        r.quality.clone().unwrap_or_else(dash),
+        r.level_label(),
         r.ray_type.name().into(),
         format!("{:.2}", r.mrays_per_s.median),
         format!("{:.2}x", r.speedup_vs_exact),
@@ -183,7 +183,7 @@ fn work_cells(r: &Record) -> [String; WORK_COLUMNS.len()] {
     };
     [
         r.method.name().into(),
-        r.quality.clone().unwrap_or_else(dash),
+        r.level_label(),
         r.ray_type.name().into(),
         format!("{:.2}", c.nodes),
         format!("{:.2}", c.leaves),

@@ -13,7 +13,7 @@ use ash::vk;
 use super::pipeline::DescriptorSet;
 use super::{shaders, Buffer, BufferView, ComputePipeline, Context, Reach, Timing, Tracer};
 use crate::rbvh::GpuHeightfield;
-use crate::rbvh::{Rbvh, Texel};
+use crate::rbvh::{Rbvh, Texel, TexelFormat};
 use crate::surface::{blank_colours, candidate_leaves, Brush};
 use crate::{Error, Result};
 
@@ -85,6 +85,7 @@ pub struct PaintRecording {
 /// [`Rbvh::colour_channel`] creates it), and neither empty (a buffer cannot be; an empty atlas has
 /// no leaf to paint anyway).
 fn channel_data(rbvh: &Rbvh) -> Result<(Vec<Texel>, Vec<u32>)> {
+    no_height_only(rbvh)?;
     if let Some(c) = rbvh
         .colours
         .as_ref()
@@ -109,6 +110,19 @@ fn channel_data(rbvh: &Rbvh) -> Result<(Vec<Texel>, Vec<u32>)> {
         colours.push(0);
     }
     Ok((atlas, colours))
+}
+
+/// A height-only RBVH ([`crate::rbvh::TexelFormat::Height`]) keeps no colour channel, and its
+/// atlas is packed two texels to a word, which the paint shader does not read.
+fn no_height_only(rbvh: &Rbvh) -> Result<()> {
+    if rbvh.params.texels == TexelFormat::Height {
+        return Err(Error::param(
+            "rbvh",
+            "a height-only RBVH keeps no colours to paint: build it with normals (--texels normals, the \
+             default)",
+        ));
+    }
+    Ok(())
 }
 
 const ATLAS: &str = "RBVH atlas (painting)";
@@ -138,6 +152,7 @@ fn own_parts(ctx: &Context, rbvh: &Rbvh) -> Result<(Vec<Texel>, Vec<u32>, Reach)
 /// The context, shared atlas, colour words and reach of [`Painter::sharing`]: the tracer must hold
 /// `rbvh`'s atlas (same pitch and texel count).
 fn shared_parts(tracer: &Tracer, rbvh: &Rbvh) -> Result<(Context, Arc<Buffer>, Vec<u32>, Reach)> {
+    no_height_only(rbvh)?;
     let Some((atlas, pitch, len)) = tracer.atlas() else {
         return Err(Error::param(
             "tracer",

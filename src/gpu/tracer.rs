@@ -24,7 +24,7 @@ use crate::lod::cone::check_cones;
 use crate::lod::{Lod, RayCone};
 use crate::probe::RayCounters;
 use crate::progress::{step, Progress};
-use crate::rbvh::Rbvh;
+use crate::rbvh::{Rbvh, TexelFormat};
 use crate::{Error, Result};
 
 /// What a ray asks for.
@@ -93,6 +93,10 @@ const COUNT_CONSTANT_ID: u32 = 0;
 /// `constant_id` of the RBVH trace shaders' `rbvh_block_jumps` (`glsl/trace_rbvh_main.glsl`).
 const JUMPS_CONSTANT_ID: u32 = 1;
 
+/// `constant_id` of the plain RBVH trace shaders' `rbvh_height_only`
+/// (`glsl/trace_rbvh_main.glsl`): the atlas holds height codes alone, two to a word.
+const HEIGHT_ONLY_CONSTANT_ID: u32 = 2;
+
 /// What a tracer traces, which fixes its shaders and bindings.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Kind {
@@ -157,11 +161,18 @@ fn make_pipeline(
     reach: Reach,
     spirv: &[u8],
     block_jumps: bool,
+    texels: TexelFormat,
     counting: bool,
 ) -> Result<ComputePipeline> {
     let mut constants = vec![(COUNT_CONSTANT_ID, u32::from(counting))];
     if kind != Kind::Exact {
         constants.push((JUMPS_CONSTANT_ID, u32::from(block_jumps)));
+    }
+    if kind == Kind::Rbvh {
+        constants.push((
+            HEIGHT_ONLY_CONSTANT_ID,
+            u32::from(texels == TexelFormat::Height),
+        ));
     }
     let name = if counting {
         format!("{} (counting)", kind.name())
@@ -190,6 +201,8 @@ pub struct Tracer {
     counting: OnceLock<ComputePipeline>,
     /// Whether the RBVH march jumps over blocks the ray passes above or below.
     block_jumps: bool,
+    /// What the atlas texels hold ([`TexelFormat::HeightNormal`] but for a height-only RBVH).
+    texels: TexelFormat,
     /// The structure's leading arrays, in the shader's binding order (shared: a [`super::Painter`]
     /// may paint with the RBVH's atlas).
     structure: Vec<Arc<Buffer>>,
@@ -249,7 +262,7 @@ fn exact_parts(bvh: &Bvh) -> (TraceParams, Arrays<'_, 2>) {
 }
 
 /// The shader sizes and the arrays (name, bytes) of an RBVH, in binding order; `atlas_words` is
-/// its atlas as the shaders read it ([`crate::rbvh::Atlas::device_words`]: texels, then the
+/// its atlas as the shaders read it ([`crate::rbvh::Rbvh::atlas_words`]: texels, then the
 /// blocks' height ranges).
 fn rbvh_parts<'a>(rbvh: &'a Rbvh, atlas_words: &'a [u32]) -> Result<(TraceParams, Arrays<'a, 4>)> {
     let count = |what: &str, n: usize| {
@@ -322,15 +335,22 @@ impl Tracer {
     pub fn exact(ctx: &Context, bvh: &Bvh) -> Result<Self> {
         check_depth("bvh", bvh.depth)?;
         let (sizes, arrays) = exact_parts(bvh);
-        Self::uploaded(ctx, Kind::Exact, None, &arrays, sizes)
+        Self::uploaded(
+            ctx,
+            Kind::Exact,
+            TexelFormat::HeightNormal,
+            None,
+            &arrays,
+            sizes,
+        )
     }
 
     /// Uploads an RBVH: nodes, triangle-leaf triangles, height-field leaves and the atlas.
     pub fn rbvh(ctx: &Context, rbvh: &Rbvh) -> Result<Self> {
         check_depth("rbvh", rbvh.depth)?;
-        let words = rbvh.atlas.device_words();
+        let words = rbvh.atlas_words();
         let (sizes, arrays) = rbvh_parts(rbvh, &words)?;
-        Self::uploaded(ctx, Kind::Rbvh, None, &arrays, sizes)
+        Self::uploaded(ctx, Kind::Rbvh, rbvh.params.texels, None, &arrays, sizes)
     }
 
     /// As [`Tracer::rbvh`], with another build of `trace_rbvh.comp` (same bindings and push
@@ -338,9 +358,16 @@ impl Tracer {
     /// Fails where the RBVH must be reached through device addresses, which that build cannot.
     pub fn rbvh_with_shader(ctx: &Context, rbvh: &Rbvh, spirv: &[u8]) -> Result<Self> {
         check_depth("rbvh", rbvh.depth)?;
-        let words = rbvh.atlas.device_words();
+        let words = rbvh.atlas_words();
         let (sizes, arrays) = rbvh_parts(rbvh, &words)?;
-        Self::uploaded(ctx, Kind::Rbvh, Some(spirv), &arrays, sizes)
+        Self::uploaded(
+            ctx,
+            Kind::Rbvh,
+            rbvh.params.texels,
+            Some(spirv),
+            &arrays,
+            sizes,
+        )
     }
 
     /// Uploads an RBVH with its levels of detail (`lod`, built for it by [`Lod::build`]): traces
@@ -348,9 +375,16 @@ impl Tracer {
     pub fn rbvh_lod(ctx: &Context, rbvh: &Rbvh, lod: &Lod) -> Result<Self> {
         check_depth("rbvh", rbvh.depth)?;
         let nodes = lod.annotated_nodes(rbvh);
-        let words = rbvh.atlas.device_words();
+        let words = rbvh.atlas_words();
         let (sizes, arrays) = lod_parts(rbvh, &words, lod, &nodes)?;
-        Self::uploaded(ctx, Kind::RbvhLod, None, &arrays, sizes)
+        Self::uploaded(
+            ctx,
+            Kind::RbvhLod,
+            TexelFormat::HeightNormal,
+            None,
+            &arrays,
+            sizes,
+        )
     }
 
     /// Embedded use: uploads the exact BVH with the context's (the engine's) allocator, *recording*
@@ -359,15 +393,22 @@ impl Tracer {
     pub fn record_exact(ctx: &Context, bvh: &Bvh, cmd: vk::CommandBuffer) -> Result<Self> {
         check_depth("bvh", bvh.depth)?;
         let (sizes, arrays) = exact_parts(bvh);
-        Self::recorded(ctx, Kind::Exact, &arrays, sizes, cmd)
+        Self::recorded(
+            ctx,
+            Kind::Exact,
+            TexelFormat::HeightNormal,
+            &arrays,
+            sizes,
+            cmd,
+        )
     }
 
     /// Embedded use: as [`Tracer::record_exact`], for an RBVH.
     pub fn record_rbvh(ctx: &Context, rbvh: &Rbvh, cmd: vk::CommandBuffer) -> Result<Self> {
         check_depth("rbvh", rbvh.depth)?;
-        let words = rbvh.atlas.device_words();
+        let words = rbvh.atlas_words();
         let (sizes, arrays) = rbvh_parts(rbvh, &words)?;
-        Self::recorded(ctx, Kind::Rbvh, &arrays, sizes, cmd)
+        Self::recorded(ctx, Kind::Rbvh, rbvh.params.texels, &arrays, sizes, cmd)
     }
 
     /// Embedded use: as [`Tracer::record_exact`], for an RBVH with its levels of detail; bind the
@@ -380,9 +421,16 @@ impl Tracer {
     ) -> Result<Self> {
         check_depth("rbvh", rbvh.depth)?;
         let nodes = lod.annotated_nodes(rbvh);
-        let words = rbvh.atlas.device_words();
+        let words = rbvh.atlas_words();
         let (sizes, arrays) = lod_parts(rbvh, &words, lod, &nodes)?;
-        Self::recorded(ctx, Kind::RbvhLod, &arrays, sizes, cmd)
+        Self::recorded(
+            ctx,
+            Kind::RbvhLod,
+            TexelFormat::HeightNormal,
+            &arrays,
+            sizes,
+            cmd,
+        )
     }
 
     /// How the structure's arrays reach the shader: bound, or through device addresses (when one
@@ -420,7 +468,15 @@ impl Tracer {
                 "the exact BVH has no march to jump in",
             ));
         }
-        self.pipeline = make_pipeline(&self.ctx, self.kind, self.reach, &self.spirv, on, false)?;
+        self.pipeline = make_pipeline(
+            &self.ctx,
+            self.kind,
+            self.reach,
+            &self.spirv,
+            on,
+            self.texels,
+            false,
+        )?;
         self.block_jumps = on;
         self.counting = OnceLock::new();
         Ok(())
@@ -431,6 +487,7 @@ impl Tracer {
     fn uploaded(
         ctx: &Context,
         kind: Kind,
+        texels: TexelFormat,
         spirv: Option<&[u8]>,
         arrays: &[(&str, &[u8])],
         sizes: TraceParams,
@@ -450,12 +507,13 @@ impl Tracer {
             .iter()
             .map(|(array, bytes)| ctx.upload_unchecked(array, bytes).map(Arc::new))
             .collect::<Result<Vec<_>>>()?;
-        Self::new(ctx, kind, reach, spirv, structure, sizes)
+        Self::new(ctx, kind, texels, reach, spirv, structure, sizes)
     }
 
     fn recorded(
         ctx: &Context,
         kind: Kind,
+        texels: TexelFormat,
         arrays: &[(&str, &[u8])],
         sizes: TraceParams,
         cmd: vk::CommandBuffer,
@@ -472,7 +530,7 @@ impl Tracer {
             ctx.record_transfer_to_compute(cmd);
         }
         let spirv = Cow::Borrowed(kind.spirv(reach));
-        let mut tracer = Self::new(ctx, kind, reach, spirv, structure, sizes)?;
+        let mut tracer = Self::new(ctx, kind, texels, reach, spirv, structure, sizes)?;
         tracer.staging = staging;
         Ok(tracer)
     }
@@ -582,6 +640,7 @@ impl Tracer {
     fn new(
         ctx: &Context,
         kind: Kind,
+        texels: TexelFormat,
         reach: Reach,
         spirv: Cow<'static, [u8]>,
         mut structure: Vec<Arc<Buffer>>,
@@ -606,11 +665,12 @@ impl Tracer {
             None
         };
         let block_jumps = kind != Kind::Exact && !ctx.limits().cpu;
-        let pipeline = make_pipeline(ctx, kind, reach, &spirv, block_jumps, false)?;
+        let pipeline = make_pipeline(ctx, kind, reach, &spirv, block_jumps, texels, false)?;
         Ok(Tracer {
             ctx: ctx.clone(),
             reach,
             kind,
+            texels,
             pipeline,
             spirv,
             counting: OnceLock::new(),
@@ -633,6 +693,7 @@ impl Tracer {
             self.reach,
             &self.spirv,
             self.block_jumps,
+            self.texels,
             true,
         )?;
         Ok(self.counting.get_or_init(|| pipeline))

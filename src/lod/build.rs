@@ -54,6 +54,7 @@ impl Lod {
     /// Builds the coarse representation of every inner node of `rbvh` (see the module docs).
     pub fn build(rbvh: &Rbvh, params: &LodParams) -> Result<Lod> {
         params.validate()?;
+        super::no_height_only(rbvh)?;
         let start = Instant::now();
         let fine = rbvh.texel_size;
         if !(fine.is_finite() && fine > 0.0) {

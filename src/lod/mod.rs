@@ -130,6 +130,7 @@ pub struct LodStats {
 impl Lod {
     /// Checks that this was built for `rbvh` (one record per node).
     pub fn check_for(&self, rbvh: &crate::rbvh::Rbvh) -> Result<()> {
+        no_height_only(rbvh)?;
         if self.nodes.len() != rbvh.nodes.len() {
             return Err(Error::param(
                 "lod",
@@ -221,6 +222,19 @@ impl Lod {
         (std::mem::size_of_val(self.nodes.as_slice())
             + std::mem::size_of_val(self.texels.as_slice())) as u64
     }
+}
+
+/// Levels of detail take their columns' normals from the texels, which a height-only RBVH
+/// ([`crate::rbvh::TexelFormat::Height`]) does not keep: refused with a way out.
+pub(crate) fn no_height_only(rbvh: &crate::rbvh::Rbvh) -> Result<()> {
+    if rbvh.params.texels == crate::rbvh::TexelFormat::Height {
+        return Err(Error::param(
+            "lod",
+            "levels of detail need the texels' normals, which a height-only RBVH does not keep: \
+             build it with normals (--texels normals, the default)",
+        ));
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -26,10 +26,10 @@ use rayon::prelude::*;
 
 use super::atlas;
 use super::frame::{fit, passes, projection_axis, rounding_pad};
-use super::layout::HEIGHTFIELD_COUNT;
+use super::layout::{Texel, HEIGHTFIELD_COUNT};
 use super::raster::{rasterize, Frame, Tile, NO_SOURCE};
 use super::split::{split, SplitPrim};
-use super::{Rbvh, RbvhParams, RbvhStats};
+use super::{Rbvh, RbvhParams, RbvhStats, TexelFormat};
 use crate::bvh::{join_halves, ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
 use crate::geom::Aabb;
 use crate::progress::{step, Progress, Quiet};
@@ -175,8 +175,17 @@ impl Rbvh {
         for (leaf, &base) in out.leaves.iter_mut().zip(&packing.bases) {
             leaf.atlas_base = base;
         }
-        let atlas = atlas::assemble(&out.tiles, &packing);
-        let colours = scene.surface.as_ref().map(|surface| {
+        let mut atlas = atlas::assemble(&out.tiles, &packing);
+        let height_only = params.texels == TexelFormat::Height;
+        if height_only {
+            // Only the height codes are kept (and uploaded, two to a word): a hit's normal comes
+            // from the cell triangle it hit.
+            for t in &mut atlas.texels {
+                *t = Texel(u32::from(t.height_code()));
+            }
+        }
+        let surface = scene.surface.as_ref().filter(|_| !height_only);
+        let colours = surface.map(|surface| {
             step(progress, "baking the colour channel", 0, || {
                 crate::surface::bake(
                     scene,

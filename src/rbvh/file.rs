@@ -10,7 +10,7 @@
 //! | bytes | type | field |
 //! |---|---|---|
 //! | 0..8 | `[u8; 8]` | magic `RBVHv` followed by three zero bytes |
-//! | 8..12 | u32 | format version: 1 without a colour channel, 2 with one |
+//! | 8..12 | u32 | format version: 1 without a colour channel, 2 with one, 3 for height-only texels ([`super::TexelFormat::Height`]) |
 //! | 12..16 | f32 | `params.texels_per_diagonal` |
 //! | 16..20, 20..24 | u32, f32 | `params.refinement`: tag (0 = `NormalCone`, 1 = `ProjectedArea`), its value (`max_angle_deg` or `min_ratio`) |
 //! | 24..28 | u32 | `params.subdivision`: 0 = `SpatialMedian`, 1 = `AreaSah` |
@@ -28,9 +28,13 @@
 //! | 136.. | `N` × 64 bytes | `nodes` ([`crate::bvh::GpuNode`], 16 words each) |
 //! | then | `T` × 48 bytes | `triangles` ([`crate::bvh::GpuTriangle`], 12 words each) |
 //! | then | `L` × 64 bytes | `leaves` ([`super::GpuHeightfield`], 16 words each) |
-//! | then | `X` × 4 bytes | `atlas.texels` ([`super::Texel`], one word each), row by row |
+//! | then | `X` × 4 bytes | `atlas.texels` ([`super::Texel`], one word each), row by row; version 3: `X` × 2 bytes, each texel's height code (u16) |
 //! | then | u64 | version 2 only: colour count `C`, which must equal `X` |
 //! | then | `C` × 4 bytes | version 2 only: `colours` (packed RGBA8, see [`crate::surface::rgba`]), parallel to the texels |
+//!
+//! Version 3 is version 1 with texels of two bytes, the height codes alone: the file of an RBVH
+//! built with [`super::TexelFormat::Height`], which has no colour channel. The texel format is
+//! the version's, not a header field, so versions 1 and 2 read as before.
 //!
 //! Version 2 appended the optional colour channel (`crate::surface`). An RBVH without one is
 //! written as version 1, byte for byte as before the channel existed, so old files load and
@@ -54,7 +58,7 @@ use bytemuck::Pod;
 
 use super::layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT, LEAF_BIT};
 use super::march::tile_fits;
-use super::params::{RbvhParams, Refinement, Subdivision};
+use super::params::{RbvhParams, Refinement, Subdivision, TexelFormat};
 use super::{Rbvh, RbvhStats};
 use crate::bvh::{GpuNode, GpuTriangle};
 use crate::geom::Aabb;
@@ -67,6 +71,8 @@ const MAGIC: [u8; 8] = *b"RBVHv\0\0\0";
 const VERSION: u32 = 2;
 /// The format version of files without one: the same bytes without the colour section.
 const VERSION_WITHOUT_COLOURS: u32 = 1;
+/// The format version of height-only RBVHs: version 1 with two-byte texels.
+const VERSION_HEIGHT_ONLY: u32 = 3;
 /// Bytes before the arrays (see the table in the module docs).
 const HEADER_BYTES: usize = 136;
 
@@ -74,6 +80,16 @@ impl Rbvh {
     /// Writes the versioned binary file described in the module docs, atomically (through
     /// [`write_atomically`]): a failed save leaves `path` as it was and no temporary file behind.
     pub fn save(&self, path: &Path) -> Result<()> {
+        if self.params.texels == TexelFormat::Height && self.colours.is_some() {
+            return Err(Error::param(
+                "rbvh",
+                format!(
+                    "{}: a height-only RBVH's file has no colour channel, and this one has \
+                     colours (painted after the build?): build it with normals to keep them",
+                    path.display()
+                ),
+            ));
+        }
         let bytes = self.to_bytes();
         write_atomically(path, |w| w.write_all(&bytes))
     }
@@ -91,16 +107,17 @@ impl Rbvh {
         let arrays = std::mem::size_of_val(self.nodes.as_slice())
             + std::mem::size_of_val(self.triangles.as_slice())
             + std::mem::size_of_val(self.leaves.as_slice())
-            + std::mem::size_of_val(self.atlas.texels.as_slice())
+            + self.atlas.texels.len() * self.params.texels.bytes() as usize
             + self.colours.as_ref().map_or(0, |_| 8)
             + self.colour_bytes() as usize;
         let mut out = Vec::with_capacity(HEADER_BYTES + arrays);
         out.extend_from_slice(&MAGIC);
         put_u32(
             &mut out,
-            match self.colours {
-                Some(_) => VERSION,
-                None => VERSION_WITHOUT_COLOURS,
+            match (self.params.texels, &self.colours) {
+                (TexelFormat::Height, _) => VERSION_HEIGHT_ONLY,
+                (TexelFormat::HeightNormal, Some(_)) => VERSION,
+                (TexelFormat::HeightNormal, None) => VERSION_WITHOUT_COLOURS,
             },
         );
 
@@ -150,8 +167,16 @@ impl Rbvh {
         put_records(&mut out, &self.nodes);
         put_records(&mut out, &self.triangles);
         put_records(&mut out, &self.leaves);
-        put_records(&mut out, &self.atlas.texels);
-        if let Some(colours) = &self.colours {
+        match self.params.texels {
+            TexelFormat::HeightNormal => put_records(&mut out, &self.atlas.texels),
+            TexelFormat::Height => {
+                for t in &self.atlas.texels {
+                    out.extend_from_slice(&t.height_code().to_le_bytes());
+                }
+            }
+        }
+        // A height-only RBVH has no colour channel (the builder bakes none).
+        if let (TexelFormat::HeightNormal, Some(colours)) = (self.params.texels, &self.colours) {
             out.extend_from_slice(&(colours.len() as u64).to_le_bytes());
             put_records(&mut out, colours);
         }
@@ -175,12 +200,16 @@ impl Rbvh {
         };
         r.take(MAGIC.len(), "the magic")?;
         let version = r.u32("the version")?;
-        if version != VERSION && version != VERSION_WITHOUT_COLOURS {
-            return Err(err(format!(
-                "unsupported version {version} (this build reads versions \
-                 {VERSION_WITHOUT_COLOURS} and {VERSION})"
-            )));
-        }
+        let texel_format = match version {
+            VERSION | VERSION_WITHOUT_COLOURS => TexelFormat::HeightNormal,
+            VERSION_HEIGHT_ONLY => TexelFormat::Height,
+            _ => {
+                return Err(err(format!(
+                    "unsupported version {version} (this build reads versions \
+                     {VERSION_WITHOUT_COLOURS}, {VERSION} and {VERSION_HEIGHT_ONLY})"
+                )))
+            }
+        };
 
         let texels_per_diagonal = r.f32("params.texels_per_diagonal")?;
         let refinement = match (
@@ -216,6 +245,7 @@ impl Rbvh {
             object_split,
             max_tile: r.u32("params.max_tile")?,
             min_leaf_texels: r.f32("params.min_leaf_texels")?,
+            texels: texel_format,
         };
         let bounds = Aabb {
             min: [r.f32("bounds")?, r.f32("bounds")?, r.f32("bounds")?].into(),
@@ -261,7 +291,7 @@ impl Rbvh {
             std::mem::size_of::<GpuNode>(),
             std::mem::size_of::<GpuTriangle>(),
             std::mem::size_of::<GpuHeightfield>(),
-            std::mem::size_of::<Texel>(),
+            texel_format.bytes() as usize,
         ];
         let mut needed = Some(0u64);
         for k in 0..4 {
@@ -328,7 +358,14 @@ impl Rbvh {
         let nodes: Vec<GpuNode> = r.records(n_nodes as usize)?;
         let triangles: Vec<GpuTriangle> = r.records(n_triangles as usize)?;
         let leaves: Vec<GpuHeightfield> = r.records(n_leaves as usize)?;
-        let texels: Vec<Texel> = r.records(n_texels as usize)?;
+        let texels: Vec<Texel> = match texel_format {
+            TexelFormat::HeightNormal => r.records(n_texels as usize)?,
+            TexelFormat::Height => r
+                .take(n_texels as usize * 2, "the arrays")?
+                .chunks_exact(2)
+                .map(|b| Texel(u32::from(u16::from_le_bytes([b[0], b[1]]))))
+                .collect(),
+        };
         let colours = if version == VERSION {
             r.u64("the colour count")?;
             Some(r.records(n_colours as usize)?)

@@ -35,7 +35,7 @@ use super::layout::{
     MARCH_SLACK as SLACK,
 };
 use super::ranges::{block_ranges, BLOCK};
-use super::Rbvh;
+use super::{Rbvh, TexelFormat};
 use crate::bvh::{ChildRef, GpuNode, GpuTriangle, STACK_SIZE};
 use crate::geom::{intersect_triangle, safe_inverse, Aabb, Hit, Ray, RayShear};
 use crate::lod::cone::check_cones;
@@ -413,7 +413,9 @@ impl Rbvh {
         let cells = Cells {
             atlas: &self.atlas,
             leaf,
+            leaf_index,
             fr: &fr,
+            format: self.params.texels,
         };
 
         // 3. Walk. The start cell is the one holding the entry point, clamped so that the padding
@@ -466,7 +468,7 @@ impl Rbvh {
                     let leave_j = boundary_t(edge_j, step_j, o.y, inv.y);
                     probe.read(Read {
                         array: Array::Atlas,
-                        offset: 4 * (self.atlas.texels.len() as u64 + block),
+                        offset: 4 * (self.atlas.texel_words(self.params.texels) + block),
                         bytes: 4,
                     });
                     let range = b.range(block);
@@ -651,6 +653,21 @@ pub(super) fn tile_fits(leaf: &GpuHeightfield, atlas: &Atlas) -> bool {
     last < atlas.texels.len() as u64
 }
 
+/// The world-space unit normal of the cell triangle `(a, b, c)` (frame coordinates, counter-
+/// clockwise in `(s, t)`, so the normal points along `+h`, the side the leaf's surface faces):
+/// the frame maps world offsets by the rows `axis_u`, `axis_v`, `axis_w`, so normals map back by
+/// its transpose. The hit normal of a height-only RBVH; `glsl/rbvh.glsl` computes it in the same
+/// order.
+fn facet_normal(leaf: &GpuHeightfield, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
+    let n = (b - a).cross(c - a);
+    let (u, v, w) = (
+        Vec3::from(leaf.axis_u),
+        Vec3::from(leaf.axis_v),
+        Vec3::from(leaf.axis_w),
+    );
+    (u * n.x + v * n.y + w * n.z).normalize()
+}
+
 /// The exit distance of a ray from `b`: the far end of the slab test of [`Aabb::intersect`]. It
 /// needs no widening against rounding here: the box is already `slack` taller than any surface.
 fn box_exit(b: &Aabb, o: Vec3, inv: Vec3) -> f32 {
@@ -719,7 +736,11 @@ fn texel(atlas: &Atlas, leaf: &GpuHeightfield, i: i64, j: i64) -> (Texel, Option
 struct Cells<'a> {
     atlas: &'a Atlas,
     leaf: &'a GpuHeightfield,
+    /// Which leaf `leaf` is (for the re-read of its record that a height-only hit reports).
+    leaf_index: u32,
     fr: &'a FrameRay,
+    /// What the texels hold: the normal of a hit comes from its sample or from its facet.
+    format: TexelFormat,
 }
 
 impl Cells<'_> {
@@ -752,10 +773,11 @@ impl Cells<'_> {
             let j = cj + (k >> 1) as i64;
             let (c, index) = texel(atlas, leaf, i, j);
             if let Some(index) = index {
+                let bytes = self.format.bytes();
                 probe.read(Read {
                     array: Array::Atlas,
-                    offset: 4 * index as u64,
-                    bytes: 4,
+                    offset: bytes * index as u64,
+                    bytes: bytes as u32,
                 });
             }
             corner[k] = c;
@@ -800,14 +822,25 @@ impl Cells<'_> {
         let [a, b, c] = first;
         let mut t_hit =
             intersect_triangle(&fr.shear, pos[a], pos[b], pos[c], fr.ray.tmin, fr.ray.tmax);
+        let mut hit_triangle = first;
         if let Some([a, b, c]) = second {
             let t_max = t_hit.unwrap_or(fr.ray.tmax);
             let t = intersect_triangle(&fr.shear, pos[a], pos[b], pos[c], fr.ray.tmin, t_max);
             if t.is_some() {
                 t_hit = t;
+                hit_triangle = [a, b, c];
             }
         }
         let t = t_hit?;
+        if self.format == TexelFormat::Height {
+            // The device reads the leaf's frame again after its walk, for the facet's normal.
+            probe.read(element::<GpuHeightfield>(
+                Array::Leaves,
+                self.leaf_index as usize,
+            ));
+            let [a, b, c] = hit_triangle.map(|k| pos[k]);
+            return Some((t, facet_normal(leaf, a, b, c)));
+        }
 
         // The normal of the corner sample nearest the hit: sample i sits at s = i + ½, so the nearest
         // is floor(s) (halves round up), clamped to the cell; a hole there falls back to the first

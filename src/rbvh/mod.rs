@@ -23,7 +23,7 @@ mod split;
 
 pub use layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT};
 pub use march::DeviceTwin;
-pub use params::{RbvhParams, Refinement, Subdivision, QUALITY_NAMES};
+pub use params::{RbvhParams, Refinement, Subdivision, TexelFormat, QUALITY_NAMES};
 
 use crate::bvh::{GpuNode, GpuTriangle};
 use crate::geom::Aabb;
@@ -87,8 +87,13 @@ impl Rbvh {
     /// The atlas as the device holds it: the texels and the blocks' height ranges
     /// ([`ranges::block_ranges`], 1/64 as many words).
     pub fn atlas_bytes(&self) -> u64 {
-        std::mem::size_of_val(self.atlas.texels.as_slice()) as u64
-            + 4 * ranges::block_count(&self.atlas)
+        4 * (self.atlas.texel_words(self.params.texels) + ranges::block_count(&self.atlas))
+    }
+
+    /// The atlas as the trace shaders read it, in this RBVH's texel format
+    /// ([`Atlas::device_words`]).
+    pub fn atlas_words(&self) -> Vec<u32> {
+        self.atlas.device_words(self.params.texels)
     }
 
     /// Bytes of the triangle-leaf triangles.

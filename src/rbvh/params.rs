@@ -33,6 +33,40 @@ pub enum Subdivision {
     AreaSah,
 }
 
+/// What each atlas texel holds (issue "The paper's scale", item 5: model only what the scene
+/// requires).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum TexelFormat {
+    /// 32 bits: the 16-bit height code and the sample's 8:8 octahedral normal; a hit reports the
+    /// normal of the sample nearest it (the paper's texels).
+    #[default]
+    HeightNormal,
+    /// 16 bits: the height code alone, half the atlas. A hit reports the normal of the cell
+    /// triangle it hit (a facet normal, exact for the height field as sampled), so shading shows
+    /// the facets; for visibility (AO, shadows) the hits are the same as with normals. Carries no
+    /// colour channel, and levels of detail (whose columns take their normals from the texels)
+    /// are not built for it.
+    Height,
+}
+
+impl TexelFormat {
+    /// Bytes of one texel on the device and in the file.
+    pub fn bytes(self) -> u64 {
+        match self {
+            TexelFormat::HeightNormal => 4,
+            TexelFormat::Height => 2,
+        }
+    }
+
+    /// `"height_normal"` or `"height"`, as the bench records and the CLI name it.
+    pub fn name(self) -> &'static str {
+        match self {
+            TexelFormat::HeightNormal => "height_normal",
+            TexelFormat::Height => "height",
+        }
+    }
+}
+
 /// All build parameters of an RBVH.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RbvhParams {
@@ -52,6 +86,8 @@ pub struct RbvhParams {
     /// A set that cannot be one height field and whose box diagonal spans fewer texels than this
     /// stays as triangles (hybrid leaf), traced exactly.
     pub min_leaf_texels: f32,
+    /// What each texel holds: height and normal (the default), or height alone.
+    pub texels: TexelFormat,
 }
 
 /// Quality preset names, coarsest to finest.
@@ -76,6 +112,7 @@ impl RbvhParams {
             object_split: true,
             max_tile: 64,
             min_leaf_texels: 3.0,
+            texels: TexelFormat::HeightNormal,
         })
     }
 

@@ -29,6 +29,7 @@
 use rayon::prelude::*;
 
 use super::layout::{Atlas, Texel};
+use super::params::TexelFormat;
 
 /// Cells along a block's side.
 pub const BLOCK: u32 = 8;
@@ -74,11 +75,32 @@ pub fn block_ranges(atlas: &Atlas) -> Vec<u32> {
 }
 
 impl Atlas {
-    /// The atlas as the trace shaders read it: the texels, then [`block_ranges`].
-    pub fn device_words(&self) -> Vec<u32> {
-        let mut words: Vec<u32> = bytemuck::cast_slice::<Texel, u32>(&self.texels).to_vec();
+    /// The atlas as the trace shaders read it in `format`: the texels — one word each, or with
+    /// [`TexelFormat::Height`] their height codes two to a word (texel `2k` in the low half of word
+    /// `k`, `2k + 1` in the high half) — then [`block_ranges`], from word
+    /// [`Atlas::texel_words`] on.
+    pub fn device_words(&self, format: TexelFormat) -> Vec<u32> {
+        let mut words: Vec<u32> = match format {
+            TexelFormat::HeightNormal => bytemuck::cast_slice::<Texel, u32>(&self.texels).to_vec(),
+            TexelFormat::Height => self
+                .texels
+                .chunks(2)
+                .map(|pair| {
+                    let high = pair.get(1).map_or(Texel::HOLE_CODE, |t| t.height_code());
+                    u32::from(pair[0].height_code()) | (u32::from(high) << 16)
+                })
+                .collect(),
+        };
         words.extend(block_ranges(self));
         words
+    }
+
+    /// Words the texels take in `format`, where the block ranges start.
+    pub fn texel_words(&self, format: TexelFormat) -> u64 {
+        match format {
+            TexelFormat::HeightNormal => self.texels.len() as u64,
+            TexelFormat::Height => (self.texels.len() as u64).div_ceil(2),
+        }
     }
 }
 
@@ -134,8 +156,31 @@ mod tests {
         );
         assert!(r[0] & 0xFFFF > r[0] >> 16);
         assert_eq!((r[1] & 0xFFFF, r[1] >> 16), (9, 15));
-        let words = a.device_words();
+        let words = a.device_words(TexelFormat::HeightNormal);
         assert_eq!(words.len(), a.texels.len() + r.len());
         assert_eq!(&words[a.texels.len()..], &r[..]);
+        // Height-only: two codes a word, then the same ranges from `texel_words` on.
+        let half = a.device_words(TexelFormat::Height);
+        let k = a.texel_words(TexelFormat::Height) as usize;
+        assert_eq!(k, a.texels.len().div_ceil(2));
+        assert_eq!(&half[k..], &r[..]);
+        for (i, t) in a.texels.iter().enumerate() {
+            let code = (half[i / 2] >> (16 * (i % 2))) & 0xFFFF;
+            assert_eq!(code, u32::from(t.height_code()), "texel {i}");
+        }
+    }
+
+    #[test]
+    fn an_odd_texel_count_pads_its_last_word_with_a_hole() {
+        let a = Atlas {
+            pitch: 1,
+            rows: 3,
+            texels: vec![Texel::new(5, glam::Vec3::Z); 3],
+        };
+        let words = a.device_words(TexelFormat::Height);
+        assert_eq!(
+            words[..2],
+            [5 | 5 << 16, 5 | u32::from(Texel::HOLE_CODE) << 16]
+        );
     }
 }

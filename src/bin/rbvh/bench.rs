@@ -90,7 +90,7 @@ pub fn run(a: Args) -> Result<()> {
     }
     let levels = a
         .quality
-        .levels()?
+        .quality_levels()?
         .into_iter()
         .map(|(name, params)| Level::named(&name, params))
         .collect();
@@ -99,6 +99,7 @@ pub fn run(a: Args) -> Result<()> {
         Device::Create(context_options(a.device.as_deref(), a.validate)?),
     );
     config.levels = levels;
+    config.texels = a.quality.texel_formats();
     config.ray_types = a.rays.clone();
     config.width = a.width;
     config.height = a.height;

@@ -14,7 +14,7 @@ use rbvh::glam::Vec3;
 use rbvh::gpu::{Addressing, Context, ContextOptions, Query, Reach, Traced, Tracer, Validation};
 use rbvh::lod::{Lod, LodParams, RayCone};
 use rbvh::probe::{MeanCounters, RayCounters};
-use rbvh::rbvh::Rbvh;
+use rbvh::rbvh::{Rbvh, TexelFormat};
 use rbvh::scene::{Camera, Scene, DEFAULT_VFOV_DEG};
 
 /// Options shared by the commands that trace through a structure of their choice.
@@ -335,7 +335,10 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
         }
     };
     if let (Structure::Rbvh(r), Some(_)) = (&structure, &c.source.rbvh) {
-        if scene.surface.is_some() && r.colours.is_none() {
+        if scene.surface.is_some()
+            && r.colours.is_none()
+            && r.params.texels == TexelFormat::HeightNormal
+        {
             eprintln!(
                 "warning: {} has materials but the RBVH file has no colour channel: its \
                  height-field surfaces show white (rebuild it from this scene to bake colours)",
@@ -526,6 +529,19 @@ pub struct Quality {
     /// Free parameter: unrepresentable sets smaller than this many texels stay triangles.
     #[arg(long)]
     pub min_leaf_texels: Option<f32>,
+    /// What each atlas texel holds: `normals` (height and normal, 4 bytes) or `height` (height
+    /// alone, 2 bytes: facet normals, no colours, no levels of detail); comma-separate both to
+    /// build each level in each (a height-only level is named with an `h`, e.g. Q2h).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "normals")]
+    pub texels: Vec<TexelsArg>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum TexelsArg {
+    /// Height and normal per texel (the paper's texels).
+    Normals,
+    /// Height alone: half the atlas; hits report the normal of the cell triangle hit.
+    Height,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -547,9 +563,45 @@ impl Quality {
             || self.min_leaf_texels.is_some()
     }
 
-    /// The requested levels, named `Q0`…`Q4` (or `custom` when free parameters change a preset),
-    /// each validated.
+    /// The texel formats asked for, each once, in the order given.
+    pub fn texel_formats(&self) -> Vec<rbvh::rbvh::TexelFormat> {
+        use rbvh::rbvh::TexelFormat;
+        let mut formats = Vec::new();
+        for t in &self.texels {
+            let f = match t {
+                TexelsArg::Normals => TexelFormat::HeightNormal,
+                TexelsArg::Height => TexelFormat::Height,
+            };
+            if !formats.contains(&f) {
+                formats.push(f);
+            }
+        }
+        formats
+    }
+
+    /// Every requested level in every requested texel format: named as
+    /// [`Quality::quality_levels`] names them, with `h` appended for height-only texels.
     pub fn levels(&self) -> Result<Vec<(String, rbvh::rbvh::RbvhParams)>> {
+        use rbvh::rbvh::TexelFormat;
+        let formats = self.texel_formats();
+        Ok(self
+            .quality_levels()?
+            .into_iter()
+            .flat_map(|(name, params)| {
+                formats.iter().map(move |&texels| {
+                    let name = match texels {
+                        TexelFormat::HeightNormal => name.clone(),
+                        TexelFormat::Height => format!("{name}h"),
+                    };
+                    (name, rbvh::rbvh::RbvhParams { texels, ..params })
+                })
+            })
+            .collect())
+    }
+
+    /// The requested levels, named `Q0`…`Q4` (or `custom` when free parameters change a preset),
+    /// each validated, with the default texels (see [`Quality::levels`] for the formats).
+    pub fn quality_levels(&self) -> Result<Vec<(String, rbvh::rbvh::RbvhParams)>> {
         use rbvh::rbvh::{RbvhParams, Refinement, Subdivision};
         let mut levels = Vec::new();
         for q in &self.quality {
