@@ -87,6 +87,7 @@ pub mod rbvh;
 #[cfg(feature = "measure")]
 pub mod regress;
 pub mod scene;
+mod srgb;
 pub mod surface;
 
 pub use error::{Error, Result};

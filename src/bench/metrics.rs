@@ -194,7 +194,7 @@ fn srgb8(image: &Image) -> Vec<u8> {
     image
         .pixels
         .iter()
-        .flat_map(|p| p.to_array().map(crate::output::srgb_u8))
+        .flat_map(|p| p.to_array().map(crate::srgb::encode_u8))
         .collect()
 }
 

@@ -5,7 +5,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::image::{check_per_pixel, Image};
-use super::srgb;
+use crate::srgb;
 
 /// Maps each of `values` (one per pixel, row-major, top row first) to the Turbo colour map,
 /// 0 at the dark blue end and `max` or more at the dark red end. `max` defaults to the largest

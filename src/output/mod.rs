@@ -10,10 +10,6 @@ mod heatmap;
 mod image;
 mod png;
 mod shade;
-mod srgb;
-
-pub(crate) use srgb::decode as srgb_decode;
-pub(crate) use srgb::encode_u8 as srgb_u8;
 
 #[cfg(feature = "exr")]
 pub use self::exr::write_exr;

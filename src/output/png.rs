@@ -7,8 +7,8 @@ use ::image::codecs::png::PngEncoder;
 use ::image::{ExtendedColorType, ImageEncoder};
 
 use super::image::{check_writable, Image};
-use super::srgb;
 use crate::io::write_atomically;
+use crate::srgb;
 
 /// Writes `image` as an 8-bit RGB PNG, converting linear values to sRGB (clamped to `[0, 1]`,
 /// NaN as 0), since that is what viewers assume an untagged PNG holds. Written atomically.

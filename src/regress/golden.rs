@@ -40,14 +40,14 @@ impl Rgb8 {
             bytes: image
                 .pixels
                 .iter()
-                .flat_map(|p| p.to_array().map(crate::output::srgb_u8))
+                .flat_map(|p| p.to_array().map(crate::srgb::encode_u8))
                 .collect(),
         }
     }
 
     /// Back to linear RGB, to be shown beside other pictures.
     pub fn to_linear(&self) -> Image {
-        let channel = |b: u8| crate::output::srgb_decode(f32::from(b) / 255.0);
+        let channel = |b: u8| crate::srgb::decode(f32::from(b) / 255.0);
         Image {
             width: self.width,
             height: self.height,

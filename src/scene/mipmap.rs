@@ -155,7 +155,7 @@ mod tests {
         assert_eq!(nearest_code(-1.0), 0);
         assert_eq!(nearest_code(2.0), 255);
         assert_eq!(nearest_code(f32::NAN), 0);
-        assert_eq!(nearest_code(0.5), crate::output::srgb_u8(0.5));
+        assert_eq!(nearest_code(0.5), crate::srgb::encode_u8(0.5));
     }
 
     #[test]

@@ -163,7 +163,7 @@ pub fn linear(rgba: [u8; 4]) -> Vec4 {
 /// The sRGB decode of every 8-bit code (IEC 61966-2-1).
 fn srgb_table() -> &'static [f32; 256] {
     static TABLE: OnceLock<[f32; 256]> = OnceLock::new();
-    TABLE.get_or_init(|| std::array::from_fn(|c| crate::output::srgb_decode(c as f32 / 255.0)))
+    TABLE.get_or_init(|| std::array::from_fn(|c| crate::srgb::decode(c as f32 / 255.0)))
 }
 
 #[cfg(test)]

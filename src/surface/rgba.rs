@@ -6,8 +6,8 @@
 
 use glam::Vec4;
 
-use crate::output::srgb_u8;
 use crate::scene::texture::linear;
+use crate::srgb::encode_u8 as srgb_u8;
 
 /// Linear RGBA (each clamped to `[0, 1]`, NaN as 0) → packed RGBA8.
 pub fn pack(rgba: Vec4) -> u32 {
