@@ -86,6 +86,7 @@ pub mod rays;
 pub mod rbvh;
 #[cfg(feature = "measure")]
 pub mod regress;
+pub mod rgba;
 pub mod scene;
 mod srgb;
 pub mod surface;

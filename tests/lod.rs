@@ -487,7 +487,8 @@ fn recorded_lod_trace_matches_the_submitted_one() {
 
 #[test]
 fn coarse_hits_carry_the_colour_of_the_surface_they_stand_for() {
-    use rbvh::surface::{hit_albedo, rgba};
+    use rbvh::rgba;
+    use rbvh::surface::hit_albedo;
     let ctx = common::context();
     let scene = Scene::builtin("blob").unwrap();
     let mut r = Rbvh::build(&scene, &RbvhParams::quality(3).unwrap()).unwrap();

@@ -8,8 +8,9 @@ use glam::{Vec3, Vec4};
 use rbvh::geom::Ray;
 use rbvh::gpu::{Painter, Query, Tracer, MAX_BRUSHES_PER_PASS};
 use rbvh::rbvh::{Rbvh, RbvhParams};
+use rbvh::rgba;
 use rbvh::scene::Scene;
-use rbvh::surface::{rgba, Brush};
+use rbvh::surface::Brush;
 
 const RED: u32 = 0xFF00_00FF;
 

@@ -499,7 +499,7 @@ fn gltf_uris_are_percent_decoded_and_file_uris_to_special_files_are_refused() {
 
 #[test]
 fn height_field_colours_are_filtered_between_samples() {
-    use rbvh::surface::rgba;
+    use rbvh::rgba;
     let scene = Scene::load("plane").unwrap();
     let mut r = Rbvh::build(&scene, &RbvhParams::quality(0).unwrap()).unwrap();
     let (red, blue) = (
@@ -551,7 +551,7 @@ fn height_field_colours_are_filtered_between_samples() {
 /// and white texels.
 #[test]
 fn baked_colours_average_a_texture_finer_than_the_atlas() {
-    use rbvh::surface::rgba;
+    use rbvh::rgba;
     let dir = tempfile::tempdir().unwrap();
     let side = 512;
     let checker = image::RgbaImage::from_fn(side, side, |x, y| {

@@ -317,7 +317,7 @@ impl Painter {
     }
 
     /// Embedded use: records the painting of `brushes` (at most [`MAX_BRUSHES_PER_PASS`]; in
-    /// order, each composited over the texel, see [`crate::surface::rgba::over`]) into the engine's `cmd`: a recorded upload of the
+    /// order, each composited over the texel, see [`crate::rgba::over`]) into the engine's `cmd`: a recorded upload of the
     /// brushes, a transfer-to-compute barrier where one was needed, and one dispatch per leaf they
     /// reach. No barrier follows: the engine orders its readers of [`Painter::colour_buffer`]. The
     /// returned recording must live until `cmd` has executed.
@@ -402,7 +402,7 @@ impl Painter {
     }
 
     /// Paints `brushes` in order, each composited over the texels it covers
-    /// ([`crate::surface::rgba::over`]; an opaque brush replaces them).
+    /// ([`crate::rgba::over`]; an opaque brush replaces them).
     pub fn paint(&mut self, brushes: &[Brush]) -> Result<PaintStats> {
         let ctx = self.atlas.context().clone();
         let mut stats = PaintStats::default();

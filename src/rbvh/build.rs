@@ -187,7 +187,7 @@ impl Rbvh {
         let surface = scene.surface.as_ref().filter(|_| !height_only);
         let colours = surface.map(|surface| {
             step(progress, "baking the colour channel", 0, || {
-                crate::surface::bake(
+                super::bake::bake(
                     scene,
                     surface,
                     &out.tiles,

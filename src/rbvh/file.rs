@@ -30,7 +30,7 @@
 //! | then | `L` × 64 bytes | `leaves` ([`super::GpuHeightfield`], 16 words each) |
 //! | then | `X` × 4 bytes | `atlas.texels` ([`super::Texel`], one word each), row by row; version 3: `X` × 2 bytes, each texel's height code (u16) |
 //! | then | u64 | version 2 only: colour count `C`, which must equal `X` |
-//! | then | `C` × 4 bytes | version 2 only: `colours` (packed RGBA8, see [`crate::surface::rgba`]), parallel to the texels |
+//! | then | `C` × 4 bytes | version 2 only: `colours` (packed RGBA8, see [`crate::rgba`]), parallel to the texels |
 //!
 //! Version 3 is version 1 with texels of two bytes, the height codes alone: the file of an RBVH
 //! built with [`super::TexelFormat::Height`], which has no colour channel. The texel format is

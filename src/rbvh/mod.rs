@@ -5,12 +5,14 @@
 //! * `build`: the top-down recursion — refinement criteria, subdivision, leaf frames;
 //! * `raster`: rasterizing a leaf's triangles into its tile, dilation, quantization;
 //! * `atlas`: packing tiles into one atlas;
+//! * `bake`: the scene's base colour into the per-texel colour channel (packed as [`crate::rgba`]);
 //! * [`layout`]: the packed data the GPU reads;
 //! * [`ranges`]: height ranges of the atlas's 8 × 8 blocks, for the device march's jumps;
 //! * `march`: the CPU reference caster on exactly that packed data, and its [`DeviceTwin`];
 //! * `file`: save and load.
 
 mod atlas;
+mod bake;
 mod build;
 mod file;
 mod frame;
@@ -53,7 +55,7 @@ pub struct Rbvh {
     /// What the build made and how long it took.
     pub stats: RbvhStats,
     /// Optional per-texel surface colour, parallel to `atlas.texels` (same index): RGBA8 packed
-    /// as in [`crate::surface::rgba`] (red in the low byte, RGB sRGB-encoded, alpha linear), 0 at
+    /// as in [`crate::rgba`] (red in the low byte, RGB sRGB-encoded, alpha linear), 0 at
     /// holes. Baked at build time when the scene has materials, created on first paint otherwise;
     /// `None` costs nothing. See `crate::surface`.
     pub colours: Option<Vec<u32>>,

@@ -5,7 +5,7 @@
 //! **Rule.** A surface texel (not a hole) of any height-field leaf is painted by a brush when its
 //! world-space sample point ([`crate::rbvh::layout::SampleGrid::point`]) lies within the brush's
 //! radius of the brush centre, `|p − c|² ≤ r²`: the brush's colour is composited over the
-//! texel's ([`super::rgba::over`], integer arithmetic), brushes in list order, so that the device
+//! texel's ([`crate::rgba::over`], integer arithmetic), brushes in list order, so that the device
 //! and the CPU agree bit for bit; an opaque brush replaces the colour. Deciding in world space rather than per tile is what makes strokes
 //! cross leaf borders without seams: neighbouring tiles that overlap (the builder's dilation and
 //! window overlap) paint their shared surface alike. Triangle leaves carry no texels and stay
@@ -14,9 +14,9 @@
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
-use super::rgba;
 use crate::geom::Aabb;
 use crate::rbvh::{GpuHeightfield, Rbvh};
+use crate::rgba;
 
 /// One brush dab. 32 bytes, the `PaintBrush` of `glsl/paint.comp`.
 #[repr(C)]
@@ -26,7 +26,7 @@ pub struct Brush {
     pub centre: [f32; 3],
     /// World-space radius.
     pub radius: f32,
-    /// Packed RGBA8 ([`super::rgba`]).
+    /// Packed RGBA8 ([`crate::rgba`]).
     pub colour: u32,
     /// GLSL `pad0`..`pad2`: padding to 32 bytes; always 0.
     pub pad: [u32; 3],

@@ -7,12 +7,12 @@
 use glam::{Vec3, Vec4};
 use rayon::prelude::*;
 
-use super::rgba;
 use crate::bvh::LEAF_BIT;
 use crate::geom::{Hit, Ray};
 use crate::lod::{Lod, LOD_BIT};
 use crate::rbvh::layout::Texel;
 use crate::rbvh::Rbvh;
+use crate::rgba;
 use crate::scene::Scene;
 
 /// A texel of a height-field leaf: sample `(i, j)` of leaf `leaf`, at `atlas_index` in

@@ -25,7 +25,7 @@ use std::path::Path;
 
 use glam::Vec2;
 
-use super::rgba;
+use crate::rgba;
 use crate::{Error, Result};
 
 /// Spacing of the dabs of a `line`, as a fraction of the screen.
@@ -41,7 +41,7 @@ pub struct Dab {
     pub screen: Vec2,
     /// Fraction of the scene's bounding-box diagonal.
     pub radius: f32,
-    /// Packed RGBA8 ([`super::rgba`]).
+    /// Packed RGBA8 ([`crate::rgba`]).
     pub colour: u32,
 }
 

@@ -9,7 +9,7 @@
 //! the same 2D interpolation the rasterizer used for the height; they are clamped to the triangle
 //! for rim texels (which lie just outside it). Barycentrics → texture coordinates → texture
 //! sample, times the interpolated vertex colour where the scene has them →
-//! [`super::rgba::pack`]. A texel stands for a patch of surface one texel wide, which at
+//! [`crate::rgba::pack`]. A texel stands for a patch of surface one texel wide, which at
 //! coarse levels spans many texture texels, so the texture is sampled over the patch: the
 //! coordinates one texel further along `u` and `v` give the patch's extent in the texture, and
 //! its mip chain ([`crate::scene::MipChain`]) the mean colour there. (Point samples made a fine
@@ -21,8 +21,8 @@ use std::sync::OnceLock;
 use glam::{DVec2, DVec3, Vec3, Vec4};
 use rayon::prelude::*;
 
-use super::rgba;
-use crate::rbvh::raster::{Tile, NO_SOURCE};
+use super::raster::{Tile, NO_SOURCE};
+use crate::rgba;
 use crate::scene::material::clamp_to_triangle;
 use crate::scene::{MipChain, Scene, SurfaceMaterials, Texture};
 
