@@ -26,7 +26,7 @@
 #define RBVH_BVH_TRIS_BINDING 1
 #endif
 
-// Must equal bvh::STACK_SIZE; tests/layout.rs checks it.
+// Must equal bvh::STACK_SIZE; tests/glsl_header.rs checks it on the device.
 #define RBVH_STACK_SIZE 64
 const uint RBVH_LEAF_BIT = 0x80000000u;
 

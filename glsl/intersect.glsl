@@ -6,7 +6,8 @@
 
 #include "common.glsl"
 
-// 1 + 2*gamma(3), gamma(n) = n*eps/(1 - n*eps), eps = 2^-24 (Ize 2013).
+// 1 + 2*gamma(3), gamma(n) = n*eps/(1 - n*eps), eps = 2^-24 (Ize 2013); equals geom::ROBUST_FAR_SCALE
+// to the bit (tests/glsl_header.rs checks, on the device).
 const float RBVH_FAR_SCALE = 1.0 + 2.0 * (3.0 * 5.9604645e-8) / (1.0 - 3.0 * 5.9604645e-8);
 
 // Conservative slab test (Ize, "Robust BVH Ray Traversal", JCGT 2013).

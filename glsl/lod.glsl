@@ -17,7 +17,7 @@
 #define RBVH_LOD_TEXELS_BINDING 9
 #endif
 
-// Must equal LOD_BIT (tests/layout.rs checks).
+// Must equal LOD_BIT (tests/glsl_header.rs checks, on the device).
 const uint RBVH_LOD_BIT = 0x40000000u;
 
 // 48 bytes: see GpuLod.

@@ -32,7 +32,7 @@
 #define RBVH_HEIGHT_ONLY false
 #endif
 
-// Must equal MARCH_SLACK, MARCH_EDGE_PAD and Texel::MAX_CODE / HOLE_CODE (tests/layout.rs checks).
+// Must equal MARCH_SLACK, MARCH_EDGE_PAD and Texel::MAX_CODE / HOLE_CODE (tests/glsl_header.rs checks, on the device).
 #define RBVH_MARCH_SLACK 1e-5
 #define RBVH_MARCH_EDGE_PAD 0.015625
 #define RBVH_MAX_CODE 65534u

@@ -4,6 +4,8 @@
 //! from `rbvh::gpu::shaders::GLSL_HEADERS` only, as in an engine that has none of this crate's
 //! files.
 
+mod common;
+
 use rbvh::gpu::spirv;
 
 const FOREIGN: &str = r#"
@@ -186,4 +188,80 @@ fn each_header_compiles_on_its_own() {
         );
         compile(&source).unwrap_or_else(|e| panic!("{header}: {e}"));
     }
+}
+
+/// Every constant the shaders share with Rust, as the compiled shader sees it: a probe including
+/// the headers writes each one's bits into a buffer on the device, and each must equal the Rust
+/// constant it mirrors bit for bit. This reads what the compiler made of each `#define` and
+/// `const` (folding included), rather than the header's text.
+const CONSTANTS_PROBE: &str = r#"
+#version 460
+#extension GL_GOOGLE_include_directive : require
+layout(local_size_x = 1) in;
+#define RBVH_LOD 1
+#include "rbvh.glsl"
+
+layout(std430, set = 0, binding = 0) writeonly buffer Out { uint words[]; };
+
+void main() {
+    words[0] = RBVH_LEAF_BIT;
+    words[1] = RBVH_LOD_BIT;
+    words[2] = RBVH_HEIGHTFIELD_COUNT;
+    words[3] = RBVH_INVALID;
+    words[4] = uint(RBVH_STACK_SIZE);
+    words[5] = RBVH_MAX_CODE;
+    words[6] = RBVH_HOLE_CODE;
+    words[7] = floatBitsToUint(float(RBVH_MARCH_SLACK));
+    words[8] = floatBitsToUint(float(RBVH_MARCH_EDGE_PAD));
+    words[9] = floatBitsToUint(RBVH_FAR_SCALE);
+    words[10] = floatBitsToUint(float(RBVH_FLT_MAX));
+    words[11] = floatBitsToUint(float(RBVH_FLT_MIN));
+}
+"#;
+
+#[test]
+fn shared_constants_are_the_rust_ones_in_the_compiled_shader() {
+    use rbvh::bvh::{LEAF_BIT, STACK_SIZE};
+    use rbvh::geom::ROBUST_FAR_SCALE;
+    use rbvh::gpu::ComputePipeline;
+    use rbvh::lod::LOD_BIT;
+    use rbvh::rbvh::layout::{MARCH_EDGE_PAD, MARCH_SLACK};
+    use rbvh::rbvh::{Texel, HEIGHTFIELD_COUNT};
+
+    let expected: [(&str, u32); 12] = [
+        ("RBVH_LEAF_BIT", LEAF_BIT),
+        ("RBVH_LOD_BIT", LOD_BIT),
+        ("RBVH_HEIGHTFIELD_COUNT", HEIGHTFIELD_COUNT),
+        ("RBVH_INVALID (Hit::MISS id)", rbvh::geom::Hit::MISS.id),
+        ("RBVH_STACK_SIZE", STACK_SIZE),
+        ("RBVH_MAX_CODE", u32::from(Texel::MAX_CODE)),
+        ("RBVH_HOLE_CODE", u32::from(Texel::HOLE_CODE)),
+        ("RBVH_MARCH_SLACK", MARCH_SLACK.to_bits()),
+        ("RBVH_MARCH_EDGE_PAD", MARCH_EDGE_PAD.to_bits()),
+        ("RBVH_FAR_SCALE", ROBUST_FAR_SCALE.to_bits()),
+        ("RBVH_FLT_MAX", f32::MAX.to_bits()),
+        ("RBVH_FLT_MIN", f32::MIN_POSITIVE.to_bits()),
+    ];
+    let words = compile(CONSTANTS_PROBE).unwrap();
+    let ctx = common::context();
+    let pipeline = ComputePipeline::new(
+        &ctx,
+        "constants probe",
+        bytemuck::cast_slice(&words),
+        &[0],
+        0,
+    )
+    .unwrap();
+    let mut out = ctx
+        .zeroed_storage("constants", 4 * expected.len() as u64)
+        .unwrap();
+    pipeline.run(&[(out.raw(), 0)], 1, |_| Vec::new()).unwrap();
+    let got: Vec<u32> = ctx.read(&mut out).unwrap();
+    let wrong: Vec<String> = expected
+        .iter()
+        .zip(&got)
+        .filter(|((_, rust), glsl)| rust != *glsl)
+        .map(|((name, rust), glsl)| format!("{name}: GLSL {glsl:#x}, Rust {rust:#x}"))
+        .collect();
+    assert!(wrong.is_empty(), "constants differ: {wrong:#?}");
 }

@@ -1,9 +1,11 @@
 //! Rust and GLSL agree on every shared layout: offsets and strides are read back from the SPIR-V
 //! that build.rs compiled, and compared with `offset_of!`/`size_of` of the `#[repr(C)]` mirrors.
+//! The shared constants are checked on the device, as the compiled shader sees them
+//! (`tests/glsl_header.rs`).
 
 use std::mem::{offset_of, size_of};
 
-use rbvh::bvh::{GpuNode, GpuTriangle, STACK_SIZE};
+use rbvh::bvh::{GpuNode, GpuTriangle};
 use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{shaders, spirv};
 use rbvh::probe::RayCounters;
@@ -124,16 +126,6 @@ fn ray_and_hit_layouts_match() {
 }
 
 #[test]
-fn stack_size_matches() {
-    let header = include_str!("../glsl/bvh.glsl");
-    let define = format!("#define RBVH_STACK_SIZE {STACK_SIZE}\n");
-    assert!(
-        header.contains(&define),
-        "glsl/bvh.glsl must contain {define:?}"
-    );
-}
-
-#[test]
 fn workgroup_size_is_reflected() {
     let r = reflect_trace_exact();
     let size = r.local_size.expect("LocalSize");
@@ -203,29 +195,6 @@ fn push_constants_match_in_every_trace_shader() {
             .collect();
         assert_eq!(glsl, expected);
     }
-}
-
-#[test]
-fn march_constants_match() {
-    use rbvh::rbvh::layout::{MARCH_EDGE_PAD, MARCH_SLACK};
-    use rbvh::rbvh::Texel;
-    let header = include_str!("../glsl/rbvh.glsl");
-    let define = |name: &str| -> f64 {
-        let line = header
-            .lines()
-            .find(|l| l.starts_with(&format!("#define {name} ")))
-            .unwrap_or_else(|| panic!("glsl/rbvh.glsl lacks #define {name}"));
-        line.split_whitespace()
-            .nth(2)
-            .unwrap()
-            .trim_end_matches('u')
-            .parse()
-            .unwrap()
-    };
-    assert_eq!(define("RBVH_MARCH_SLACK") as f32, MARCH_SLACK);
-    assert_eq!(define("RBVH_MARCH_EDGE_PAD") as f32, MARCH_EDGE_PAD);
-    assert_eq!(define("RBVH_MAX_CODE") as u16, Texel::MAX_CODE);
-    assert_eq!(define("RBVH_HOLE_CODE") as u16, Texel::HOLE_CODE);
 }
 
 #[test]

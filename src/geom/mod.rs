@@ -6,6 +6,6 @@ mod aabb;
 mod ray;
 mod triangle;
 
-pub use aabb::Aabb;
+pub use aabb::{Aabb, ROBUST_FAR_SCALE};
 pub use ray::{safe_inverse, Hit, Ray};
 pub use triangle::{intersect_triangle, RayShear};
