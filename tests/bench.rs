@@ -9,7 +9,7 @@ use std::path::Path;
 use std::process::Command;
 
 use rbvh::bench::metrics::hit_errors;
-use rbvh::bench::record::{Method, CSV_COLUMNS};
+use rbvh::bench::record::{csv_columns, Method};
 use rbvh::bench::validate::invalid_reason;
 use rbvh::bench::{self, BenchConfig, Device, Level, RayType};
 use rbvh::bvh::Bvh;
@@ -199,16 +199,38 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
     bench::write_csv(&csv_path, &report).unwrap();
     let mut reader = csv::Reader::from_path(&csv_path).unwrap();
     let header: Vec<String> = reader.headers().unwrap().iter().map(String::from).collect();
-    assert_eq!(header, CSV_COLUMNS);
+    let columns = csv_columns().unwrap();
+    assert_eq!(header, columns);
     let rows: Vec<csv::StringRecord> = reader.records().map(Result::unwrap).collect();
     assert_eq!(rows.len(), report.results.len());
-    for (row, record) in rows.iter().zip(&report.results) {
-        assert_eq!(row.len(), CSV_COLUMNS.len(), "{row:?}");
+    let column = |name: &str| columns.iter().position(|c| c == name).unwrap();
+    for ((row, record), json) in rows.iter().zip(&report.results).zip(results) {
+        assert_eq!(row.len(), columns.len(), "{row:?}");
         assert_eq!(&row[0], report.device, "{row:?}");
         assert_eq!(&row[1], report.driver, "{row:?}");
         assert_eq!(&row[2], report.date, "{row:?}");
         assert_eq!(&row[4], env!("CARGO_PKG_VERSION"), "{row:?}");
-        assert_eq!(&row[5], record.scene, "{row:?}");
+        assert_eq!(&row[column("scene")], record.scene, "{row:?}");
+        // The CSV is the JSON record flattened: the same values under dotted keys.
+        for (key, value) in [
+            ("mrays_per_s.median", &json["mrays_per_s"]["median"]),
+            ("memory_bytes.total", &json["memory_bytes"]["total"]),
+            ("counters.nodes", &json["counters"]["nodes"]),
+            ("passes", &json["passes"]),
+            ("error.t_err_p99", &json["error"]["t_err_p99"]),
+            ("params.texels", &json["params"]["texels"]),
+        ] {
+            let cell = &row[column(key)];
+            match value {
+                serde_json::Value::Null => assert_eq!(cell, "", "{key} in {row:?}"),
+                serde_json::Value::String(s) => assert_eq!(cell, s, "{key} in {row:?}"),
+                // The test's JSON parser may round the last digit; the CSV has the full value.
+                number => {
+                    let (c, j) = (cell.parse::<f64>().unwrap(), number.as_f64().unwrap());
+                    assert!((c - j).abs() <= 1e-12 * j.abs(), "{key}: {c} against {j}");
+                }
+            }
+        }
     }
 
     // Plots: charts and, per level, the render and its error image beside the exact render;

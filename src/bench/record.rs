@@ -63,7 +63,7 @@
 //!
 //! # CSV (`--csv`)
 //!
-//! RFC 4180: a header line ([`CSV_COLUMNS`]), then one line per record: first the run's provenance
+//! RFC 4180: a header line ([`csv_columns`]), then one line per record: first the run's provenance
 //! (`device`, `driver`, `date`, `git`, `version`), so that rows from several runs can be pasted
 //! into one table, then the record's fields flattened (`params.*`, `mrays_per_s.*`,
 //! `memory_bytes.*`, `error.*`, `counters.*` and the traffic figures without their prefix, except
@@ -77,14 +77,14 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
-use super::traffic::{Traffic, CACHE_SIZES};
+use super::traffic::{CacheTraffic, Traffic, CACHE_SIZES};
 use crate::gpu::ShaderStatistic;
 use crate::io::write_atomically;
 use crate::lod::LodParams;
 use crate::probe::MeanCounters;
 use crate::rays::RayType;
 use crate::rbvh::{RbvhParams, Refinement, Subdivision};
-use crate::Result;
+use crate::{Error, Result};
 
 /// A whole run: provenance and records.
 #[derive(Clone, Debug, Serialize)]
@@ -280,7 +280,7 @@ impl Spread {
 }
 
 /// Bytes of one structure, as uploaded.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
 pub struct Memory {
     /// Nodes, plus height-field leaf records for an RBVH and coarse columns for `rbvh-lod`.
     pub tree: u64,
@@ -356,7 +356,7 @@ impl Record {
 }
 
 /// Errors against the exact BVH (see the module docs for which are null when).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct Errors {
     /// Fraction of rays hit by one side and missed by the other, in [0, 1].
     pub miss_mismatch_rate: f64,
@@ -384,207 +384,140 @@ pub fn write_json(path: &Path, report: &BenchReport) -> Result<()> {
     })
 }
 
-/// The CSV header: one column per field of a [`Record`], flattened.
-pub const CSV_COLUMNS: [&str; 77] = [
-    "device",
-    "driver",
-    "date",
-    "git",
-    "version",
-    "scene",
-    "triangles",
-    "method",
-    "quality",
-    "texels_per_diagonal",
-    "refinement",
-    "max_angle_deg",
-    "min_ratio",
-    "subdivision",
-    "object_split",
-    "max_tile",
-    "min_leaf_texels",
-    "texels",
-    "lod_columns",
-    "lod_min_leaves",
-    "lod_bias",
-    "ray_type",
-    "rays",
-    "mrays_median",
-    "mrays_min",
-    "mrays_max",
-    "speedup_vs_exact",
-    "build_ms",
-    "tree_bytes",
-    "atlas_bytes",
-    "triangle_bytes",
-    "total_bytes",
-    "memory_ratio_vs_exact",
-    "miss_mismatch_rate",
-    "t_err_mean",
-    "t_err_p99",
-    "t_err_max",
-    "normal_err_deg_mean",
-    "normal_err_deg_p99",
-    "psnr_db",
-    "flip_mean",
-    "valid",
-    "invalid_reason",
-    "timing_source",
-    "passes",
-    "block_jumps",
-    "nodes",
-    "leaves",
-    "walks",
-    "cells",
-    "cells_tested",
-    "jumps",
-    "triangle_leaves",
-    "triangles",
-    "simd8_utilisation",
-    "twin_nodes",
-    "twin_leaves",
-    "twin_walks",
-    "twin_cells",
-    "twin_cells_tested",
-    "twin_jumps",
-    "twin_triangle_leaves",
-    "twin_triangles",
-    "twin_simd8_utilisation",
-    "counter_mismatch_rate",
-    "structure_bytes",
-    "working_set_bytes",
-    "reads_per_ray",
-    "bytes_per_ray",
-    "lines64_per_ray",
-    "lines128_per_ray",
-    "dram_bytes_per_ray_4mib",
-    "dram_bytes_per_ray_32mib",
-    "dram_bytes_per_ray_72mib",
-    "miss_rate_4mib",
-    "miss_rate_32mib",
-    "miss_rate_72mib",
-];
+/// The provenance columns that lead every CSV row.
+const PROVENANCE: [&str; 5] = ["device", "driver", "date", "git", "version"];
 
-// The traffic columns name the modelled caches.
-const _: () = assert!(
-    CACHE_SIZES.len() == 3
-        && CACHE_SIZES[0] == 4 << 20
-        && CACHE_SIZES[1] == 32 << 20
-        && CACHE_SIZES[2] == 72 << 20
-);
-
-/// The nine counter cells of `c`, in [`CSV_COLUMNS`] order; empty without one.
-fn counter_cells(c: Option<&MeanCounters>) -> [String; 9] {
-    let cell = |f: fn(&MeanCounters) -> f64| c.map(|c| f(c).to_string()).unwrap_or_default();
-    [
-        cell(|c| c.nodes),
-        cell(|c| c.leaves),
-        cell(|c| c.walks),
-        cell(|c| c.cells),
-        cell(|c| c.cells_tested),
-        cell(|c| c.jumps),
-        cell(|c| c.triangle_leaves),
-        cell(|c| c.triangles),
-        cell(|c| c.simd8_utilisation),
-    ]
+/// The CSV header: the provenance, then the dotted key of every value of a record's JSON with
+/// every section present (see the module docs), in the record's field order.
+pub fn csv_columns() -> Result<Vec<String>> {
+    let mut columns: Vec<String> = PROVENANCE.iter().map(|c| c.to_string()).collect();
+    let mut cells = Vec::new();
+    flatten("", &json_of(&Record::with_every_section())?, &mut cells);
+    columns.extend(cells.into_iter().map(|(key, _)| key));
+    Ok(columns)
 }
 
-/// One record's CSV cells, in the order of [`CSV_COLUMNS`], unquoted: the report's provenance
-/// on every row, then the record's fields.
-fn csv_row(report: &BenchReport, r: &Record) -> Vec<String> {
-    fn opt<T: ToString>(v: Option<T>) -> String {
-        v.map(|v| v.to_string()).unwrap_or_default()
+/// A record's JSON value: the one serialization both files are written from.
+fn json_of(record: &Record) -> Result<serde_json::Value> {
+    serde_json::to_value(record)
+        .map_err(|e| Error::param("bench record", format!("cannot serialize it: {e}")))
+}
+
+/// Appends every value below `value` as (dotted key, value): objects by key, arrays of objects by
+/// position, arrays of numbers (the per-run samples) not at all.
+fn flatten(prefix: &str, value: &serde_json::Value, out: &mut Vec<(String, serde_json::Value)>) {
+    use serde_json::Value;
+    let key = |k: &str| {
+        if prefix.is_empty() {
+            k.to_string()
+        } else {
+            format!("{prefix}.{k}")
+        }
+    };
+    match value {
+        Value::Object(map) => {
+            for (k, v) in map {
+                flatten(&key(k), v, out);
+            }
+        }
+        Value::Array(items) => {
+            for (k, v) in items.iter().enumerate().filter(|(_, v)| v.is_object()) {
+                flatten(&key(&k.to_string()), v, out);
+            }
+        }
+        leaf => out.push((prefix.to_string(), leaf.clone())),
     }
-    let p = r.params.as_ref();
-    let e = r.error.as_ref();
-    let t = r.traffic.as_ref();
-    let cache = |k: usize| t.and_then(|t| t.traffic.caches.get(k));
-    let mut row = vec![
+}
+
+/// A CSV cell: strings as they are, numbers and booleans as JSON writes them, null empty.
+fn cell(value: &serde_json::Value) -> String {
+    match value {
+        serde_json::Value::Null => String::new(),
+        serde_json::Value::String(s) => s.clone(),
+        other => other.to_string(),
+    }
+}
+
+impl Record {
+    /// A record with every optional section present (its values meaningless), whose JSON keys
+    /// are the CSV's columns: a run writes the same header whatever it measured.
+    fn with_every_section() -> Record {
+        let counters = MeanCounters::default();
+        Record {
+            scene: String::new(),
+            triangles: 0,
+            method: Method::RbvhLod,
+            quality: None,
+            params: RbvhParams::quality(0).ok().as_ref().map(Params::from),
+            lod: Some(LodParams::default()),
+            ray_type: RayType::Primary,
+            rays: 0,
+            mrays_per_s: Spread::of(&[0.0]),
+            speedup_vs_exact: 0.0,
+            build_ms: 0.0,
+            memory_bytes: Memory::default(),
+            memory_ratio_vs_exact: 0.0,
+            error: Some(Errors::default()),
+            valid: true,
+            invalid_reason: None,
+            timing_source: TimingSource::GpuTimestamps,
+            passes: 1,
+            block_jumps: None,
+            counters,
+            traffic: Some(TrafficRecord {
+                twin_counters: counters,
+                counter_mismatch_rate: 0.0,
+                traffic: Traffic {
+                    caches: CACHE_SIZES
+                        .iter()
+                        .map(|&capacity_bytes| CacheTraffic {
+                            capacity_bytes,
+                            ..CacheTraffic::default()
+                        })
+                        .collect(),
+                    ..Traffic::default()
+                },
+            }),
+        }
+    }
+}
+
+/// Writes `report`'s records as CSV (see the module docs), atomically.
+pub fn write_csv(path: &Path, report: &BenchReport) -> Result<()> {
+    let columns = csv_columns()?;
+    let provenance = [
         report.device.clone(),
         report.driver.clone(),
         report.date.clone(),
-        opt(report.git.as_ref()),
+        report.git.clone().unwrap_or_default(),
         report.version.clone(),
-        r.scene.clone(),
-        r.triangles.to_string(),
-        r.method.name().into(),
-        opt(r.quality.as_ref()),
-        opt(p.map(|p| p.texels_per_diagonal)),
-        opt(p.map(|p| p.refinement)),
-        opt(p.and_then(|p| p.max_angle_deg)),
-        opt(p.and_then(|p| p.min_ratio)),
-        opt(p.map(|p| p.subdivision)),
-        opt(p.map(|p| p.object_split)),
-        opt(p.map(|p| p.max_tile)),
-        opt(p.map(|p| p.min_leaf_texels)),
-        opt(p.map(|p| p.texels)),
-        opt(r.lod.map(|l| l.columns)),
-        opt(r.lod.map(|l| l.min_leaves)),
-        opt(r.lod.map(|l| l.bias)),
-        r.ray_type.name().into(),
-        r.rays.to_string(),
-        r.mrays_per_s.median.to_string(),
-        r.mrays_per_s.min.to_string(),
-        r.mrays_per_s.max.to_string(),
-        r.speedup_vs_exact.to_string(),
-        r.build_ms.to_string(),
-        r.memory_bytes.tree.to_string(),
-        r.memory_bytes.atlas.to_string(),
-        r.memory_bytes.triangles.to_string(),
-        r.memory_bytes.total.to_string(),
-        r.memory_ratio_vs_exact.to_string(),
-        opt(e.map(|e| e.miss_mismatch_rate)),
-        opt(e.and_then(|e| e.t_err_mean)),
-        opt(e.and_then(|e| e.t_err_p99)),
-        opt(e.and_then(|e| e.t_err_max)),
-        opt(e.and_then(|e| e.normal_err_deg_mean)),
-        opt(e.and_then(|e| e.normal_err_deg_p99)),
-        opt(e.and_then(|e| e.psnr_db)),
-        opt(e.and_then(|e| e.flip_mean)),
-        r.valid.to_string(),
-        opt(r.invalid_reason.as_ref()),
-        r.timing_source.name().into(),
-        r.passes.to_string(),
-        opt(r.block_jumps),
     ];
-    row.extend(counter_cells(Some(&r.counters)));
-    row.extend(counter_cells(t.map(|t| &t.twin_counters)));
-    row.extend([
-        opt(t.map(|t| t.counter_mismatch_rate)),
-        opt(t.map(|t| t.traffic.structure_bytes)),
-        opt(t.map(|t| t.traffic.working_set_bytes)),
-        opt(t.map(|t| t.traffic.reads_per_ray)),
-        opt(t.map(|t| t.traffic.bytes_per_ray)),
-        opt(t.map(|t| t.traffic.lines64_per_ray)),
-        opt(t.map(|t| t.traffic.lines128_per_ray)),
-    ]);
-    row.extend((0..3).map(|k| opt(cache(k).map(|c| c.dram_bytes_per_ray))));
-    row.extend((0..3).map(|k| opt(cache(k).map(|c| c.miss_rate))));
-    debug_assert_eq!(row.len(), CSV_COLUMNS.len());
-    row
-}
-
-/// A CSV cell: quoted, with inner quotes doubled, when it holds a comma, quote or line break.
-fn csv_cell(s: &str) -> String {
-    if s.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
-    }
-}
-
-/// Writes `report`'s records as CSV, atomically.
-pub fn write_csv(path: &Path, report: &BenchReport) -> Result<()> {
-    write_atomically(path, |w| {
-        writeln!(w, "{}", CSV_COLUMNS.join(","))?;
-        for record in &report.results {
-            let cells: Vec<String> = csv_row(report, record)
+    let rows = report
+        .results
+        .iter()
+        .map(|record| {
+            let mut cells = Vec::new();
+            flatten("", &json_of(record)?, &mut cells);
+            let by_key: std::collections::HashMap<String, serde_json::Value> =
+                cells.into_iter().collect();
+            Ok(provenance
                 .iter()
-                .map(|c| csv_cell(c))
-                .collect();
-            writeln!(w, "{}", cells.join(","))?;
+                .cloned()
+                .chain(
+                    columns[PROVENANCE.len()..]
+                        .iter()
+                        .map(|c| by_key.get(c).map(cell).unwrap_or_default()),
+                )
+                .collect::<Vec<String>>())
+        })
+        .collect::<Result<Vec<_>>>()?;
+    write_atomically(path, |w| {
+        let mut csv = csv::Writer::from_writer(w);
+        csv.write_record(&columns)?;
+        for row in &rows {
+            csv.write_record(row)?;
         }
-        Ok(())
+        csv.flush()
     })
 }
 
@@ -607,9 +540,23 @@ mod tests {
     }
 
     #[test]
-    fn cells_are_quoted_only_when_needed() {
-        assert_eq!(csv_cell("sphere"), "sphere");
-        assert_eq!(csv_cell("a,b"), "\"a,b\"");
-        assert_eq!(csv_cell("say \"hi\""), "\"say \"\"hi\"\"\"");
+    fn every_section_gives_a_column_and_no_column_twice() {
+        let columns = csv_columns().unwrap();
+        for c in [
+            "device",
+            "scene",
+            "mrays_per_s.median",
+            "params.texels",
+            "lod.bias",
+            "error.psnr_db",
+            "counters.nodes",
+            "traffic.twin_counters.nodes",
+            "traffic.caches.2.dram_bytes_per_ray",
+        ] {
+            assert!(columns.iter().any(|k| k == c), "{c} not in {columns:?}");
+        }
+        assert!(!columns.iter().any(|k| k.contains("samples")));
+        let unique: std::collections::HashSet<&String> = columns.iter().collect();
+        assert_eq!(unique.len(), columns.len());
     }
 }
