@@ -79,6 +79,7 @@ pub mod ibl;
 pub mod io;
 pub mod lod;
 pub mod output;
+pub mod preview;
 pub mod probe;
 pub mod progress;
 pub mod random;

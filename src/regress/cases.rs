@@ -9,10 +9,10 @@ use crate::bvh::Bvh;
 use crate::geom::Hit;
 use crate::gpu::{Context, Query, Tracer};
 use crate::lod::{Lod, LodParams, RayCone};
-use crate::output::{shade, shade_with_albedo, Image};
+use crate::output::Image;
+use crate::preview;
 use crate::rbvh::{Rbvh, RbvhParams};
 use crate::scene::Scene;
-use crate::surface::hit_albedo;
 use crate::{Error, Result};
 
 /// The acceleration structure a case traces through.
@@ -163,8 +163,7 @@ pub struct Render {
 
 /// Renders `scene` through `tracer` (made for `structure`) as `rbvh render` does: the scene's
 /// camera (or the framing one) at `width` × `height`, one primary ray per pixel centre (with its
-/// pixel's cone for level of detail), preview shading under the scene's light with the surfaces'
-/// base colour where the scene or RBVH has one. Nothing here is random, so a render depends only
+/// pixel's cone for level of detail), shaded by [`preview::shade`] as `rbvh render` shades. Nothing here is random, so a render depends only
 /// on the scene, the structure and the device's arithmetic.
 pub fn render(
     tracer: &Tracer,
@@ -182,15 +181,11 @@ pub fn render(
         }
         _ => tracer.trace(&rays, Query::Closest)?.hits,
     };
-    let light = scene.light.as_ref();
     let lod = match structure {
         Structure::RbvhLod(_, lod) => Some(&**lod),
         _ => None,
     };
-    let image = match hit_albedo(scene, structure.rbvh(), lod, &rays, &hits) {
-        Some(albedo) => shade_with_albedo(&rays, &hits, width, height, light, &albedo)?,
-        None => shade(&rays, &hits, width, height, light)?,
-    };
+    let image = preview::shade(scene, structure.rbvh(), lod, &rays, &hits, width, height)?;
     Ok(Render { image, hits })
 }
 

@@ -9,14 +9,13 @@ use anyhow::{bail, Context as _, Result};
 use rbvh::bvh::LEAF_BIT;
 use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{Painter, Query, Tracer};
-use rbvh::output;
 use rbvh::surface::{strokes, Brush};
+use rbvh::{output, preview};
 
 use crate::prepare::{
     check_image_size, prepare, Common, LodArgs, Method, Prepared, Source, Structure,
 };
 use crate::progress::step;
-use crate::render::lambert;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -139,7 +138,15 @@ pub fn run(a: Args) -> Result<()> {
 
 /// The before or after picture: the preview shading of `hits` with the RBVH's colours.
 fn write_render(path: &Path, p: &Prepared, rays: &[Ray], hits: &[Hit], a: &Args) -> Result<()> {
-    let image = lambert(&p.scene, &p.structure, None, rays, hits, a.width, a.height)?;
+    let image = preview::shade(
+        &p.scene,
+        p.structure.rbvh(),
+        None,
+        rays,
+        hits,
+        a.width,
+        a.height,
+    )?;
     output::write_png(path, &image)?;
     eprintln!("wrote {}", path.display());
     Ok(())

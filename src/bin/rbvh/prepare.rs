@@ -175,6 +175,14 @@ pub enum Structure {
 }
 
 impl Structure {
+    /// The RBVH traced, if any (for the colour of its hits).
+    pub fn rbvh(&self) -> Option<&Rbvh> {
+        match self {
+            Structure::Exact(_) => None,
+            Structure::Rbvh(r) => Some(r),
+        }
+    }
+
     /// "exact BVH" or "RBVH": for messages.
     pub fn label(&self) -> &'static str {
         match self {

@@ -16,6 +16,7 @@ use rbvh::gpu::{Query, Tracer};
 use rbvh::ibl::{self, Environment, Frame, Settings, Sky};
 use rbvh::lod::{Lod, RayCone};
 use rbvh::output::{self, Image};
+use rbvh::preview;
 use rbvh::probe::RayCounters;
 use rbvh::rbvh::Rbvh;
 use rbvh::scene::{Light, Scene};
@@ -148,9 +149,9 @@ pub fn run(a: Args) -> Result<()> {
         }
     }
     let image = match a.shading {
-        Shading::Lambert => lambert(
+        Shading::Lambert => preview::shade(
             &p.scene,
-            &p.structure,
+            p.structure.rbvh(),
             p.lod.as_ref(),
             &rays,
             &traced.hits,
@@ -340,26 +341,4 @@ fn report_ibl(what: &str, r: &ibl::Rendered) {
         "IBL {what}: {} visibility rays, {gpu}; passes wall {:.1} ms",
         r.rays, r.wall_ms
     );
-}
-
-/// The preview shading, with the base colour of the hit surfaces as albedo when the scene has
-/// materials or the RBVH a colour channel (`rbvh::surface::hit_albedo`), else plain grey.
-pub fn lambert(
-    scene: &Scene,
-    structure: &Structure,
-    lod: Option<&Lod>,
-    rays: &[Ray],
-    hits: &[Hit],
-    width: u32,
-    height: u32,
-) -> Result<Image> {
-    let rbvh = match structure {
-        Structure::Rbvh(r) => Some(&**r),
-        Structure::Exact(_) => None,
-    };
-    let light = scene.light.as_ref();
-    Ok(match hit_albedo(scene, rbvh, lod, rays, hits) {
-        Some(albedo) => output::shade_with_albedo(rays, hits, width, height, light, &albedo)?,
-        None => output::shade(rays, hits, width, height, light)?,
-    })
 }
