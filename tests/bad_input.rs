@@ -305,7 +305,7 @@ fn bad_mesh_and_scene_files_fail_cleanly() {
 /// **Bad ray files fail `trace` cleanly, naming the file**, on both methods and with `--cpu`:
 /// empty, one byte, 31 and 33 bytes (not whole records), missing, a directory, and a PNG whose
 /// length is not a multiple of 32. A *well-framed* file of garbage floats is not an error: its
-/// rays are answered (invalid ones as misses; see `tests/stability.rs`).
+/// rays are answered (invalid ones as misses; see `tests/stability/invalid_rays.rs`).
 #[test]
 fn bad_ray_files_fail_cleanly() {
     let dir = tempfile::tempdir().unwrap();

@@ -171,7 +171,7 @@ impl Scene {
     /// How finely float32 resolves this scene: the spacing of representable coordinates at the
     /// scene's largest coordinate (`max |x| · 2⁻²³`) as a fraction of its bounding-box diagonal.
     /// Near the origin this is ~1e-7; a scene far from the origin loses precision in its vertices,
-    /// hits and (for RBVHs) leaf frames — `tests/stability.rs` measures the consequences.
+    /// hits and (for RBVHs) leaf frames — `tests/stability/scale_and_offset.rs` measures the consequences.
     pub fn coordinate_resolution(&self) -> f32 {
         let b = self.bounds();
         let diagonal = b.diagonal();
