@@ -1,5 +1,7 @@
 //! The `rbvh` binary end to end: render, trace, and clear errors that leave no output behind.
 
+mod common;
+
 use std::path::Path;
 use std::process::Command;
 
@@ -609,7 +611,7 @@ fn render_ibl_refuses_bad_environments_and_samples() {
         ),
         (vec!["--seed", "3"], "--seed is for an image-based render"),
     ];
-    for (extra, needle) in cases {
+    common::every_case(cases, |(extra, needle)| {
         let mut args = vec![
             "render",
             "--width",
@@ -622,11 +624,17 @@ fn render_ibl_refuses_bad_environments_and_samples() {
         args.extend(extra);
         let out = rbvh(&args);
         let stderr = String::from_utf8_lossy(&out.stderr);
-        assert!(!out.status.success(), "{args:?} succeeded");
-        assert_ne!(out.status.code(), Some(101), "{args:?} panicked:\n{stderr}");
-        assert!(stderr.contains(needle), "{needle:?} not in:\n{stderr}");
-        assert!(!png.exists(), "{args:?} wrote {}", png.display());
-    }
+        common::ensure(!out.status.success(), || format!("{args:?} succeeded"))?;
+        common::ensure(out.status.code() != Some(101), || {
+            format!("{args:?} panicked:\n{stderr}")
+        })?;
+        common::ensure(stderr.contains(needle), || {
+            format!("{args:?}: {needle:?} not in:\n{stderr}")
+        })?;
+        common::ensure(!png.exists(), || {
+            format!("{args:?} wrote {}", png.display())
+        })
+    });
 }
 
 #[test]

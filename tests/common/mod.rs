@@ -132,3 +132,27 @@ impl Agreement {
         self.hit_miss as f64 / self.total.max(1) as f64
     }
 }
+
+/// Runs `check` on every case of a table and fails once, listing every case that failed with its
+/// message, rather than stopping at the first: a table-driven test reports the whole table.
+pub fn every_case<T>(
+    cases: impl IntoIterator<Item = T>,
+    mut check: impl FnMut(T) -> Result<(), String>,
+) {
+    let failures: Vec<String> = cases.into_iter().filter_map(|c| check(c).err()).collect();
+    assert!(
+        failures.is_empty(),
+        "{} case(s) failed:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
+}
+
+/// `Ok` when `condition` holds, else the message `why` makes: a case check of [`every_case`].
+pub fn ensure(condition: bool, why: impl FnOnce() -> String) -> Result<(), String> {
+    if condition {
+        Ok(())
+    } else {
+        Err(why())
+    }
+}
