@@ -90,6 +90,7 @@ pub mod regress;
 pub mod rgba;
 pub mod scene;
 mod srgb;
+pub mod structure;
 pub mod surface;
 
 pub use error::{Error, Result};

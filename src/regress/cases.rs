@@ -7,12 +7,13 @@ use std::path::Path;
 
 use crate::bvh::Bvh;
 use crate::geom::Hit;
-use crate::gpu::{Context, Query, Tracer};
+use crate::gpu::{Query, Tracer};
 use crate::lod::{Lod, LodParams, RayCone};
 use crate::output::Image;
 use crate::preview;
 use crate::rbvh::{Rbvh, RbvhParams};
 use crate::scene::Scene;
+pub use crate::structure::Structure;
 use crate::{Error, Result};
 
 /// The acceleration structure a case traces through.
@@ -110,21 +111,10 @@ pub fn cross(scenes: &[String], methods: &[Method]) -> Vec<Case> {
         .collect()
 }
 
-/// A case's structure, built and ready to upload: what a custom tracer factory receives (see
-/// [`super::run_with`]), so that a caller can trace it with its own shader.
-pub enum Structure {
-    /// The exact triangle BVH, for [`Method::Exact`].
-    Exact(Bvh),
-    /// An RBVH at the case's preset, for [`Method::Rbvh`].
-    Rbvh(Box<Rbvh>),
-    /// An RBVH with its levels of detail.
-    RbvhLod(Box<Rbvh>, Box<Lod>),
-}
-
-impl Structure {
-    /// Builds the structure `method` traces through, for `scene`.
-    pub fn build(scene: &Scene, method: Method) -> Result<Structure> {
-        Ok(match method {
+impl Method {
+    /// Builds the structure this method traces through, for `scene`.
+    pub fn build(self, scene: &Scene) -> Result<Structure> {
+        Ok(match self {
             Method::Exact => Structure::Exact(Bvh::build(scene)?),
             Method::Rbvh(level) => {
                 Structure::Rbvh(Box::new(Rbvh::build(scene, &RbvhParams::quality(level)?)?))
@@ -135,23 +125,6 @@ impl Structure {
                 Structure::RbvhLod(Box::new(rbvh), Box::new(lod))
             }
         })
-    }
-
-    /// The RBVH traced, if any (for the colour of its hits).
-    pub fn rbvh(&self) -> Option<&Rbvh> {
-        match self {
-            Structure::Exact(_) => None,
-            Structure::Rbvh(rbvh) | Structure::RbvhLod(rbvh, _) => Some(rbvh),
-        }
-    }
-
-    /// The tracer `rbvh render` would use: the crate's own shaders.
-    pub fn tracer(ctx: &Context, structure: &Structure) -> Result<Tracer> {
-        match structure {
-            Structure::Exact(bvh) => Tracer::exact(ctx, bvh),
-            Structure::Rbvh(rbvh) => Tracer::rbvh(ctx, rbvh),
-            Structure::RbvhLod(rbvh, lod) => Tracer::rbvh_lod(ctx, rbvh, lod),
-        }
     }
 }
 
@@ -181,11 +154,15 @@ pub fn render(
         }
         _ => tracer.trace(&rays, Query::Closest)?.hits,
     };
-    let lod = match structure {
-        Structure::RbvhLod(_, lod) => Some(&**lod),
-        _ => None,
-    };
-    let image = preview::shade(scene, structure.rbvh(), lod, &rays, &hits, width, height)?;
+    let image = preview::shade(
+        scene,
+        structure.rbvh(),
+        structure.lod(),
+        &rays,
+        &hits,
+        width,
+        height,
+    )?;
     Ok(Render { image, hits })
 }
 

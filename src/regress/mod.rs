@@ -156,7 +156,7 @@ impl Config {
 
 /// Runs `config` with the crate's own shaders.
 pub fn run(ctx: &Context, config: &Config) -> Result<Report> {
-    run_with(ctx, config, Structure::tracer)
+    run_with(ctx, config, |ctx, structure| structure.tracer(ctx))
 }
 
 /// Runs `config`, tracing each case through the tracer `make_tracer` makes from the case's built
@@ -181,7 +181,7 @@ pub fn run_with(
             _ => Scene::load(&case.scene)?,
         };
         loaded_spec = &case.scene;
-        let structure = Structure::build(&scene, case.method)?;
+        let structure = case.method.build(&scene)?;
         let tracer = make_tracer(ctx, &structure)?;
         let render = cases::render(&tracer, &structure, &scene, config.width, config.height)?;
         results.push(match config.mode {

@@ -168,50 +168,12 @@ pub enum Method {
     Rbvh,
 }
 
-/// The structure a command traces through.
-pub enum Structure {
-    Exact(Bvh),
-    Rbvh(Box<Rbvh>),
-}
-
-impl Structure {
-    /// The RBVH traced, if any (for the colour of its hits).
-    pub fn rbvh(&self) -> Option<&Rbvh> {
-        match self {
-            Structure::Exact(_) => None,
-            Structure::Rbvh(r) => Some(r),
-        }
-    }
-
-    /// "exact BVH" or "RBVH": for messages.
-    pub fn label(&self) -> &'static str {
-        match self {
-            Structure::Exact(_) => "exact BVH",
-            Structure::Rbvh(_) => "RBVH",
-        }
-    }
-
-    pub fn tracer(&self, ctx: &Context) -> Result<Tracer> {
-        match self {
-            Structure::Exact(b) => Tracer::exact(ctx, b),
-            Structure::Rbvh(r) => Tracer::rbvh(ctx, r),
-        }
-        .context("uploading the acceleration structure")
-    }
-
-    pub fn trace_cpu(&self, rays: &[Ray], any_hit: bool) -> Vec<Hit> {
-        match self {
-            Structure::Exact(b) => b.trace_cpu(rays, any_hit),
-            Structure::Rbvh(r) => r.trace_cpu(rays, any_hit),
-        }
-    }
-}
+pub use rbvh::structure::Structure;
 
 pub struct Prepared {
     pub scene: Scene,
+    /// With `--lod`, the RBVH with its levels of detail.
     pub structure: Structure,
-    /// Levels of detail of the RBVH, with `--lod`.
-    pub lod: Option<Lod>,
     pub ctx: Context,
 }
 
@@ -220,11 +182,10 @@ impl Prepared {
     /// Says so on stderr when the structure is too large for storage-buffer bindings and is read
     /// through buffer device addresses instead.
     pub fn tracer(&self) -> Result<Tracer> {
-        let tracer = match (&self.structure, &self.lod) {
-            (Structure::Rbvh(r), Some(lod)) => Tracer::rbvh_lod(&self.ctx, r, lod)
-                .context("uploading the RBVH and its levels of detail"),
-            _ => self.structure.tracer(&self.ctx),
-        }?;
+        let tracer = self
+            .structure
+            .tracer(&self.ctx)
+            .with_context(|| format!("uploading the {}", self.structure.label()))?;
         if tracer.reach() == Reach::DeviceAddresses && self.ctx.addressing() == Addressing::Auto {
             eprintln!(
                 "note: an array of the structure exceeds maxStorageBufferRange ({} bytes); it is \
@@ -246,16 +207,13 @@ impl Prepared {
         counters: bool,
         progress: &dyn rbvh::progress::Progress,
     ) -> Result<Traced> {
-        let cones = self.lod.is_some().then(cones);
+        let cones = self.structure.lod().is_some().then(cones);
         Ok(tracer.trace_observed(rays, cones.as_deref(), query, counters, progress)?)
     }
 
     /// The CPU reference of [`Prepared::trace`].
     pub fn trace_cpu(&self, rays: &[Ray], cones: &[RayCone], any_hit: bool) -> Result<Vec<Hit>> {
-        match (&self.structure, &self.lod) {
-            (Structure::Rbvh(r), Some(lod)) => Ok(r.trace_cpu_lod(lod, rays, cones, any_hit)?),
-            _ => Ok(self.structure.trace_cpu(rays, any_hit)),
-        }
+        Ok(self.structure.trace_cpu(rays, cones, any_hit)?)
     }
 }
 
@@ -355,17 +313,16 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
         }
     }
     let structure_ms = t.elapsed().as_secs_f64() * 1e3;
-    let lod = match (&structure, c.lod.lod) {
-        (_, false) => None,
-        (Structure::Exact(_), true) => {
-            anyhow::bail!("--lod needs an RBVH: add --method rbvh (or --rbvh FILE)")
-        }
+    let structure = match (structure, c.lod.lod) {
+        (structure, false) => structure,
         (Structure::Rbvh(r), true) => {
             let params = c.lod.build.params();
-            Some(step("building levels of detail", |_| {
-                Lod::build(r, &params).map_err(flag_error)
-            })?)
+            let lod = step("building levels of detail", |_| {
+                Lod::build(&r, &params).map_err(flag_error)
+            })?;
+            Structure::RbvhLod(r, Box::new(lod))
         }
+        (_, true) => anyhow::bail!("--lod needs an RBVH: add --method rbvh (or --rbvh FILE)"),
     };
     let ctx = Context::new(&context_options(
         c.source.device.as_deref(),
@@ -387,7 +344,7 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
                 bvh.tree_bytes(),
                 bvh.triangle_bytes()
             ),
-            Structure::Rbvh(r) => eprintln!(
+            Structure::Rbvh(r) | Structure::RbvhLod(r, _) => eprintln!(
                 "RBVH: {} nodes, {} height-field + {} triangle leaves, depth {}, {}, {} bytes (tree {}, atlas {}, triangles {})",
                 r.nodes.len(),
                 r.stats.heightfield_leaves,
@@ -407,7 +364,7 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
                 r.triangle_bytes()
             ),
         }
-        if let Some(lod) = &lod {
+        if let Some(lod) = structure.lod() {
             eprintln!(
                 "levels of detail: {} coarse nodes, {} columns, built in {:.1} ms, {} bytes",
                 lod.stats.coarse_nodes,
@@ -421,7 +378,6 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
     Ok(Prepared {
         scene,
         structure,
-        lod,
         ctx,
     })
 }
@@ -458,7 +414,7 @@ pub fn report_throughput(
         mrays(cpu_ms),
         cpu_ms / gpu_ms
     );
-    if let (Structure::Rbvh(r), Some(_)) = (&p.structure, &p.lod) {
+    if let Structure::RbvhLod(r, _) = &p.structure {
         let plain = Tracer::rbvh(&p.ctx, r)?.trace(rays, query)?;
         if let Some(plain_ms) = plain.timing.gpu_ms {
             eprintln!(
@@ -468,7 +424,7 @@ pub fn report_throughput(
             );
         }
     }
-    if let Structure::Rbvh(_) = p.structure {
+    if p.structure.rbvh().is_some() {
         let bvh = Bvh::build(&p.scene)?;
         let exact = Tracer::exact(&p.ctx, &bvh)?;
         let timed = exact.trace(rays, query)?;

@@ -23,7 +23,7 @@ use rbvh::scene::{Light, Scene};
 use rbvh::surface::hit_albedo;
 
 use crate::prepare::{
-    check_image_size, prepare, report_counters, report_throughput, Common, Prepared, Structure,
+    check_image_size, prepare, report_counters, report_throughput, Common, Prepared,
 };
 use crate::progress::step;
 
@@ -152,7 +152,7 @@ pub fn run(a: Args) -> Result<()> {
         Shading::Lambert => preview::shade(
             &p.scene,
             p.structure.rbvh(),
-            p.lod.as_ref(),
+            p.structure.lod(),
             &rays,
             &traced.hits,
             a.width,
@@ -221,22 +221,16 @@ fn render_ibl(
     env: &Environment,
     cone: RayCone,
 ) -> Result<Image> {
-    let surface_offset = match &p.structure {
-        Structure::Exact(_) => 0.0,
-        Structure::Rbvh(r) => r.texel_size,
-    };
+    let rbvh = p.structure.rbvh();
+    let surface_offset = rbvh.map_or(0.0, |r| r.texel_size);
     // The surfaces' base colour where the scene or RBVH has one, else the neutral grey.
-    let rbvh = match &p.structure {
-        Structure::Rbvh(r) => Some(&**r),
-        Structure::Exact(_) => None,
-    };
-    let albedo = ibl_albedo(&p.scene, rbvh, p.lod.as_ref(), rays, hits);
+    let albedo = ibl_albedo(&p.scene, rbvh, p.structure.lod(), rays, hits);
     let settings = Settings {
         samples: a.samples(),
         seed: a.seed.unwrap_or(0),
         diagonal: p.scene.bounds().diagonal(),
         surface_offset,
-        cone: p.lod.as_ref().map(|_| cone),
+        cone: p.structure.lod().map(|_| cone),
     };
     let frame = Frame {
         width: a.width,
@@ -245,16 +239,13 @@ fn render_ibl(
         hits,
         albedo: &albedo,
     };
-    let label = match &p.structure {
-        Structure::Exact(_) => "IBL (exact BVH)",
-        Structure::Rbvh(_) => "IBL (RBVH)",
-    };
-    let rendered = progressive(label, a.samples(), |on_pass| {
+    let label = format!("IBL ({})", p.structure.label());
+    let rendered = progressive(&label, a.samples(), |on_pass| {
         ibl::render(tracer, &frame, env, &settings, on_pass)
     })?;
     if a.common.source.stats {
         report_ibl("this render", &rendered);
-        if let Structure::Rbvh(_) = p.structure {
+        if rbvh.is_some() {
             compare_with_exact(p, env, &frame, &settings, &rendered)?;
         }
     }

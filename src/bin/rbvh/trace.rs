@@ -46,7 +46,11 @@ pub fn run(a: Args) -> Result<()> {
             width: 0.0,
             spread: a.common.lod.lod_spread,
         };
-        if p.lod.is_some() { rays.len() } else { 0 }
+        if p.structure.lod().is_some() {
+            rays.len()
+        } else {
+            0
+        }
     ];
     let hits = if a.cpu {
         p.trace_cpu(&rays, &cones, a.any_hit)?

@@ -1,0 +1,75 @@
+//! Which structure rays are traced through: the exact BVH, an RBVH, or an RBVH with its levels of
+//! detail. One type for the CLI, the image regression and embedders alike (pbrt-v4 has one
+//! `CreateAccelerator` behind one interface), so that "which structure" is decided once and every
+//! user uploads, traces and names it the same way.
+
+use crate::bvh::Bvh;
+use crate::geom::{Hit, Ray};
+use crate::gpu::{Context, Tracer};
+use crate::lod::{Lod, RayCone};
+use crate::rbvh::Rbvh;
+use crate::Result;
+
+/// A built structure, ready to upload ([`Structure::tracer`]) or to trace on the CPU.
+pub enum Structure {
+    /// The exact triangle BVH, the referee.
+    Exact(Bvh),
+    /// An RBVH traced at full resolution.
+    Rbvh(Box<Rbvh>),
+    /// An RBVH with its levels of detail (built for it), traced with one cone per ray.
+    RbvhLod(Box<Rbvh>, Box<Lod>),
+}
+
+impl Structure {
+    /// The RBVH traced, if any (for the colour of its hits, its texel size).
+    pub fn rbvh(&self) -> Option<&Rbvh> {
+        match self {
+            Structure::Exact(_) => None,
+            Structure::Rbvh(rbvh) | Structure::RbvhLod(rbvh, _) => Some(rbvh),
+        }
+    }
+
+    /// The RBVH traced, if any, to change (painting its colour channel, say).
+    pub fn rbvh_mut(&mut self) -> Option<&mut Rbvh> {
+        match self {
+            Structure::Exact(_) => None,
+            Structure::Rbvh(rbvh) | Structure::RbvhLod(rbvh, _) => Some(rbvh),
+        }
+    }
+
+    /// The levels of detail, when traced with them.
+    pub fn lod(&self) -> Option<&Lod> {
+        match self {
+            Structure::RbvhLod(_, lod) => Some(lod),
+            _ => None,
+        }
+    }
+
+    /// "exact BVH", "RBVH" or "RBVH with levels of detail": for messages.
+    pub fn label(&self) -> &'static str {
+        match self {
+            Structure::Exact(_) => "exact BVH",
+            Structure::Rbvh(_) => "RBVH",
+            Structure::RbvhLod(..) => "RBVH with levels of detail",
+        }
+    }
+
+    /// Uploads the structure with the crate's own trace shaders.
+    pub fn tracer(&self, ctx: &Context) -> Result<Tracer> {
+        match self {
+            Structure::Exact(bvh) => Tracer::exact(ctx, bvh),
+            Structure::Rbvh(rbvh) => Tracer::rbvh(ctx, rbvh),
+            Structure::RbvhLod(rbvh, lod) => Tracer::rbvh_lod(ctx, rbvh, lod),
+        }
+    }
+
+    /// The CPU reference of a trace of `rays`: closest hits, or with `any_hit` any hits. `cones`
+    /// (one per ray) are read only with levels of detail, which fail without them.
+    pub fn trace_cpu(&self, rays: &[Ray], cones: &[RayCone], any_hit: bool) -> Result<Vec<Hit>> {
+        Ok(match self {
+            Structure::Exact(bvh) => bvh.trace_cpu(rays, any_hit),
+            Structure::Rbvh(rbvh) => rbvh.trace_cpu(rays, any_hit),
+            Structure::RbvhLod(rbvh, lod) => rbvh.trace_cpu_lod(lod, rays, cones, any_hit)?,
+        })
+    }
+}
