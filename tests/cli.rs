@@ -596,7 +596,7 @@ fn render_ibl_refuses_bad_environments_and_samples() {
     let bad = dir.path().join("bad.exr");
     std::fs::write(&bad, b"not an exr").unwrap();
     let missing = dir.path().join("missing.exr");
-    let cases: [(Vec<&str>, &str); 6] = [
+    let cases: [(Vec<&str>, &str); 7] = [
         (
             vec!["--shading", "ibl", "--env", arg(&missing)],
             "missing.exr",
@@ -610,6 +610,11 @@ fn render_ibl_refuses_bad_environments_and_samples() {
             "--samples is for an image-based render",
         ),
         (vec!["--seed", "3"], "--seed is for an image-based render"),
+        // One structure to trace: both texel formats are for build and bench.
+        (
+            vec!["--method", "rbvh", "--texels", "normals,height"],
+            "one level in one texel format",
+        ),
     ];
     common::every_case(cases, |(extra, needle)| {
         let mut args = vec![

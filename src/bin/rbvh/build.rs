@@ -43,7 +43,7 @@ pub fn run(a: Args) -> Result<()> {
     let levels = a.quality.levels()?;
     anyhow::ensure!(
         a.out.is_none() || levels.len() == 1,
-        "--out saves one level: give a single --quality"
+        "--out saves one level: give a single --quality and a single --texels"
     );
     let table = a.stats || a.out.is_none();
     let exact = step("building exact BVH", |bar| {

@@ -293,7 +293,10 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
         })?),
         (None, Method::Rbvh) => {
             let mut levels = c.source.quality.levels()?;
-            anyhow::ensure!(levels.len() == 1, "--quality: give one level to trace");
+            anyhow::ensure!(
+                levels.len() == 1,
+                "--quality and --texels: give one level in one texel format to trace"
+            );
             let (_, params) = levels.remove(0);
             Structure::Rbvh(Box::new(step("building RBVH", |bar| {
                 Rbvh::build_observed(&scene, &params, bar).map_err(flag_error)
