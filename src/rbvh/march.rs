@@ -22,7 +22,8 @@
 //!    hole, none with more), tested after a cheap height rejection with the same watertight test
 //!    in frame space. Neighbouring cells share their edge's two vertices bit for bit, so no ray
 //!    slips between cells. The first cell with a hit ends the march.
-//! 5. **Normal**: the stored normal of the corner sample nearest the hit.
+//! 5. **Normal**: the stored normal of the corner sample nearest the hit; with height-only texels
+//!    ([`super::TexelFormat::Height`]) the normal of the cell triangle hit.
 //!
 //! Corrupt data never panics and never loops forever: every index goes through `get` (out of range
 //! = absent), node visits are capped by the node count, a march by the tile's cell count.
@@ -106,8 +107,9 @@ impl Rbvh {
     /// The hit `id` tells the two kinds of leaf apart: a triangle-leaf hit reports the scene
     /// triangle index (`prim`, below 2³¹); a height-field hit reports `LEAF_BIT | leaf index`
     /// (bit 31 set; the index is into [`Rbvh::leaves`]). A height-field hit's normal is the stored
-    /// (world-space, dilated, octahedral-quantized) normal of the sample nearest the hit; a
-    /// triangle's is its geometric normal as wound.
+    /// (world-space, dilated, octahedral-quantized) normal of the sample nearest the hit (with
+    /// height-only texels, the normal of the cell triangle hit); a triangle's is its geometric
+    /// normal as wound.
     pub fn closest_hit(&self, ray: &Ray) -> (Hit, TraceStats) {
         self.traverse(ray, false, None, Walk::Plain, &mut ())
     }
