@@ -6,6 +6,8 @@
 //!    against the CPU reference tracer ([`Bvh::trace_cpu`]), so a broken referee is caught too;
 //! 2. **timing** — `runs` rounds, each tracing with every method in turn (A B C A B C …), so that
 //!    a slow spell of the machine lands on all methods alike instead of on whichever ran then.
+//!    A method whose warm-up trace was shorter than [`BenchConfig::min_run_ms`] traces the rays
+//!    several times back to back in each run ([`passes_for`]), so that a fast GPU is timed busy.
 //!
 //! 3. **counting** — every method traces once more through its counting pipeline
 //!    ([`crate::probe::RayCounters`]: untimed, so that timed runs compile the counting away);
@@ -713,12 +715,9 @@ impl<'a> SceneBench<'a> {
     }
 }
 
-/// `level`'s name, with `h` appended when built height-only (as [`Record::level_label`]).
+/// `level`'s name with its texel format's suffix ([`TexelFormat::level_suffix`]).
 fn level_label(level: &Level, params: &RbvhParams) -> String {
-    match params.texels {
-        TexelFormat::HeightNormal => level.name(),
-        TexelFormat::Height => format!("{}h", level.name()),
-    }
+    format!("{}{}", level.name(), params.texels.level_suffix())
 }
 
 /// Most trace passes in one timed run: on lavapipe a pass takes milliseconds, on a large GPU tens

@@ -83,7 +83,7 @@ use crate::io::write_atomically;
 use crate::lod::LodParams;
 use crate::probe::MeanCounters;
 use crate::rays::RayType;
-use crate::rbvh::{RbvhParams, Refinement, Subdivision};
+use crate::rbvh::{RbvhParams, Refinement, Subdivision, TexelFormat};
 use crate::{Error, Result};
 
 /// A whole run: provenance and records.
@@ -346,10 +346,17 @@ impl Record {
     /// The level as tables and charts show it: the quality (`-` for exact), with `h` appended for
     /// a height-only RBVH (`"Q2h"`), so that both texel formats of one level tell apart.
     pub fn level_label(&self) -> String {
-        let height_only = self.params.as_ref().is_some_and(|p| p.texels == "height");
+        let height_only = self
+            .params
+            .as_ref()
+            .is_some_and(|p| p.texels == TexelFormat::Height.name());
+        let suffix = if height_only {
+            TexelFormat::Height.level_suffix()
+        } else {
+            ""
+        };
         match &self.quality {
-            Some(q) if height_only => format!("{q}h"),
-            Some(q) => q.clone(),
+            Some(q) => format!("{q}{suffix}"),
             None => "-".into(),
         }
     }
@@ -537,6 +544,20 @@ mod tests {
             }
         );
         assert_eq!(Spread::of(&[4.0, 1.0, 2.0, 3.0]).median, 2.5);
+    }
+
+    #[test]
+    fn a_height_only_level_is_labelled_with_its_suffix() {
+        let mut r = Record::with_every_section();
+        assert_eq!(r.level_label(), "-");
+        r.quality = Some("Q2".into());
+        assert_eq!(r.level_label(), "Q2");
+        let height = RbvhParams {
+            texels: TexelFormat::Height,
+            ..RbvhParams::quality(2).unwrap()
+        };
+        r.params = Some(Params::from(&height));
+        assert_eq!(r.level_label(), "Q2h");
     }
 
     #[test]

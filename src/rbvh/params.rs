@@ -58,6 +58,15 @@ impl TexelFormat {
         }
     }
 
+    /// What a level's name gets appended for this format: nothing, or `h` for height-only
+    /// (`Q2h`), so that both formats of one level tell apart in tables, charts and file names.
+    pub fn level_suffix(self) -> &'static str {
+        match self {
+            TexelFormat::HeightNormal => "",
+            TexelFormat::Height => "h",
+        }
+    }
+
     /// `"height_normal"` or `"height"`, as the bench records and the CLI name it.
     pub fn name(self) -> &'static str {
         match self {

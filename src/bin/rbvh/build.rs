@@ -61,7 +61,7 @@ pub fn run(a: Args) -> Result<()> {
             peak_host_mb()
         );
         println!(
-            "{:>6} {:>9} {:>9} {:>9} {:>8} {:>9} {:>11} {:>10} {:>7} {:>9} {:>9} {:>9} {:>9} {:>10} {:>9}",
+            "{:>7} {:>9} {:>9} {:>9} {:>8} {:>9} {:>11} {:>10} {:>7} {:>9} {:>9} {:>9} {:>9} {:>10} {:>9}",
             "level",
             "texel",
             "build ms",
@@ -85,7 +85,7 @@ pub fn run(a: Args) -> Result<()> {
         })?;
         if table {
             println!(
-            "{:>6} {:>9.3e} {:>9.0} {:>9} {:>8} {:>9} {:>11} {:>10} {:>6.1}% {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.1}x {:>9}",
+            "{:>7} {:>9.3e} {:>9.0} {:>9} {:>8} {:>9} {:>11} {:>10} {:>6.1}% {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.1}x {:>9}",
             name,
             r.texel_size,
             r.stats.build_ms,
@@ -104,7 +104,7 @@ pub fn run(a: Args) -> Result<()> {
         );
             if r.colours.is_some() {
                 println!(
-                    "{:>6} colour channel (baked from the scene's materials): {:.3} MB, not in total",
+                    "{:>7} colour channel (baked from the scene's materials): {:.3} MB, not in total",
                     name,
                     mb(r.colour_bytes())
                 );
@@ -145,7 +145,7 @@ fn compare_splits(scene: &Scene, level: &str, params: &RbvhParams) -> Result<()>
             stats.iter().map(|s| f(s) as f64).sum::<f64>() / rays.len() as f64
         };
         println!(
-            "{level:>6} {name:<24} build {:>6.0} ms, {:>6} nodes, {:>6} leaves; per ray {:>5.2} nodes + {:>5.2} triangles + {:>5.2} cells; CPU {:>6.2} MRays/s",
+            "{level:>7} {name:<24} build {:>6.0} ms, {:>6} nodes, {:>6} leaves; per ray {:>5.2} nodes + {:>5.2} triangles + {:>5.2} cells; CPU {:>6.2} MRays/s",
             r.stats.build_ms,
             r.nodes.len(),
             r.stats.heightfield_leaves + r.stats.triangle_leaves,

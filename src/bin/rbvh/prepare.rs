@@ -547,20 +547,18 @@ impl Quality {
     }
 
     /// Every requested level in every requested texel format: named as
-    /// [`Quality::quality_levels`] names them, with `h` appended for height-only texels.
+    /// [`Quality::quality_levels`] names them, with the format's suffix (`Q2h`).
     pub fn levels(&self) -> Result<Vec<(String, rbvh::rbvh::RbvhParams)>> {
-        use rbvh::rbvh::TexelFormat;
         let formats = self.texel_formats();
         Ok(self
             .quality_levels()?
             .into_iter()
             .flat_map(|(name, params)| {
                 formats.iter().map(move |&texels| {
-                    let name = match texels {
-                        TexelFormat::HeightNormal => name.clone(),
-                        TexelFormat::Height => format!("{name}h"),
-                    };
-                    (name, rbvh::rbvh::RbvhParams { texels, ..params })
+                    (
+                        format!("{name}{}", texels.level_suffix()),
+                        rbvh::rbvh::RbvhParams { texels, ..params },
+                    )
                 })
             })
             .collect())
