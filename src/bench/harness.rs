@@ -7,7 +7,7 @@
 //! 2. **timing** — `runs` rounds, each tracing with every method in turn (A B C A B C …), so that
 //!    a slow spell of the machine lands on all methods alike instead of on whichever ran then.
 //!    A method whose warm-up trace was shorter than [`BenchConfig::min_run_ms`] traces the rays
-//!    several times back to back in each run ([`passes_for`]), so that a fast GPU is timed busy.
+//!    several times back to back in each run, so that a fast GPU is timed busy.
 //!
 //! 3. **counting** — every method traces once more through its counting pipeline
 //!    ([`crate::probe::RayCounters`]: untimed, so that timed runs compile the counting away);
