@@ -376,7 +376,7 @@ fn bad_rbvh_files_fail_cleanly() {
     };
     let bytes = Rbvh::build(&scene, &params).unwrap().to_bytes();
     let mut flipped = bytes.clone();
-    flipped[104] ^= 0x40;
+    flipped[116] ^= 0x40;
     let mut trailing = bytes.clone();
     trailing.extend([0u8; 7]);
     let mut version = bytes.clone();

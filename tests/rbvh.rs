@@ -316,3 +316,101 @@ fn save_load_round_trip_is_byte_identical() {
     assert_eq!(back, r);
     assert_eq!(back.to_bytes(), std::fs::read(&path).unwrap());
 }
+
+/// A scan small against its scene (issue "The paper's scale", item 6): a sphere of radius 1 whose
+/// vertices carry radial noise of ±0.02, 0.025 apart (so that many of its triangles lean more than
+/// 60° off any axis), on a 20 × 20 ground. The scan spans about 18 texels at Q0 and its noise is
+/// below a texel at every preset. By the paper's rule (`sampled_criterion_texels` = 0) the noise
+/// fails the cone at every size and cuts the sphere into leaves of a few texels; judged on the
+/// samples, sets of up to 4 texels pass, for fewer leaves and a smaller tree at the same
+/// accuracy against the exact BVH (mean hit-distance error and hit/miss mismatches).
+#[test]
+fn a_small_noisy_scan_is_judged_at_the_sampling_rate() {
+    let (segments, rings) = (256usize, 128usize);
+    let mut rng = common::Rng::new(17);
+    let mut positions = Vec::new();
+    for j in 0..=rings {
+        let theta = std::f32::consts::PI * j as f32 / rings as f32;
+        for i in 0..segments {
+            let phi = std::f32::consts::TAU * i as f32 / segments as f32;
+            let radius = 1.0 + 0.04 * (rng.next_f32() - 0.5);
+            positions.push(
+                radius
+                    * Vec3::new(
+                        theta.sin() * phi.cos(),
+                        theta.cos(),
+                        theta.sin() * phi.sin(),
+                    ),
+            );
+        }
+    }
+    let vertex = |i: usize, j: usize| (j * segments + i % segments) as u32;
+    let mut triangles = Vec::new();
+    for j in 0..rings {
+        for i in 0..segments {
+            let (a, b, c, d) = (
+                vertex(i, j),
+                vertex(i + 1, j),
+                vertex(i + 1, j + 1),
+                vertex(i, j + 1),
+            );
+            triangles.push([a, c, b]);
+            triangles.push([a, d, c]);
+        }
+    }
+    let mut scene = Scene::new("noisy scan");
+    scene.push_object("scan", &positions, &triangles);
+    let ground = [-10.0f32, 10.0].map(|x| [-10.0f32, 10.0].map(|z| Vec3::new(x, -1.0, z)));
+    scene.push_object(
+        "ground",
+        &[ground[0][0], ground[1][0], ground[1][1], ground[0][1]],
+        &[[0, 2, 1], [0, 3, 2]],
+    );
+
+    let mut rng = common::Rng::new(5);
+    let rays: Vec<Ray> = (0..3000)
+        .map(|_| {
+            let origin = rng.unit_vector() * 3.0;
+            let target = rng.unit_vector() * 0.6;
+            Ray::new(origin, target - origin, 0.0, f32::INFINITY)
+        })
+        .collect();
+    for level in [0, 2] {
+        let paper = RbvhParams {
+            sampled_criterion_texels: 0.0,
+            ..q(level)
+        };
+        let by_rule = Rbvh::build(&scene, &paper).unwrap();
+        let sampled = Rbvh::build(&scene, &q(level)).unwrap();
+        let (rule_error, sampled_error) = (
+            error_vs_exact(&scene, &by_rule, &rays),
+            error_vs_exact(&scene, &sampled, &rays),
+        );
+        println!(
+            "Q{level}, texel {:.4}: paper's rule {} leaves, {} tree bytes, error (mean, max, \
+             mismatch) {rule_error:?}; sampled {} leaves, {} tree bytes, {sampled_error:?}",
+            sampled.texel_size,
+            by_rule.leaves.len(),
+            by_rule.tree_bytes(),
+            sampled.leaves.len(),
+            sampled.tree_bytes(),
+        );
+        // Measured: 9× and 2.2× fewer leaves, 15× and 3.7× smaller trees (Q0, Q2); mean errors
+        // 0.58× and 1.09× the paper's rule's, and no hit/miss mismatch with either.
+        assert!(
+            2 * sampled.leaves.len() <= by_rule.leaves.len(),
+            "Q{level}: {} leaves against {}",
+            sampled.leaves.len(),
+            by_rule.leaves.len()
+        );
+        assert!(3 * sampled.tree_bytes() <= by_rule.tree_bytes());
+        assert!(
+            sampled_error.0 <= 1.25 * rule_error.0,
+            "Q{level}: {sampled_error:?} against {rule_error:?}"
+        );
+        assert!(
+            sampled_error.2 <= rule_error.2 + 0.001,
+            "Q{level}: {sampled_error:?} against {rule_error:?}"
+        );
+    }
+}

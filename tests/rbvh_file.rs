@@ -13,7 +13,7 @@ use rbvh::rbvh::{
 use rbvh::Error;
 
 /// Bytes before the arrays, per the format table in `src/rbvh/file.rs`.
-const HEADER_BYTES: usize = 136;
+const HEADER_BYTES: usize = 148;
 
 /// A small hybrid RBVH built by hand: a root over an inner node (two height-field leaves) and a
 /// triangle leaf, in a 8 × 9 atlas holding a 4 × 4 and a 3 × 5 tile.
@@ -74,6 +74,7 @@ fn sample() -> Rbvh {
             refinement: Refinement::ProjectedArea { min_ratio: 0.75 },
             subdivision: Subdivision::AreaSah,
             object_split: false,
+            sampled_criterion_texels: 2.5,
             ..RbvhParams::quality(3).unwrap()
         },
         nodes,
@@ -123,15 +124,30 @@ fn save_load_round_trips_exactly() {
     loaded.save(&again).unwrap();
     assert_eq!(std::fs::read(&again).unwrap(), bytes);
 
-    // The documented framing: magic, version 1 (no colour channel), then the arrays after a
-    // 136-byte header.
+    // The documented framing: magic, version 4, the sampling judgement's size, normal texels, no
+    // colour channel, then the arrays after a 148-byte header.
     assert_eq!(&bytes[..8], b"RBVHv\0\0\0");
-    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 1);
+    assert_eq!(word(&bytes, 8), 4);
+    assert_eq!(f32::from_bits(word(&bytes, 40)), 2.5);
+    assert_eq!((word(&bytes, 44), word(&bytes, 48)), (0, 0));
     let arrays = 2 * 64 + 2 * 48 + 2 * 64 + 72 * 4;
     assert_eq!(bytes.len(), HEADER_BYTES + arrays);
     let first_texel = HEADER_BYTES + arrays - 72 * 4;
     let word = u32::from_le_bytes(bytes[first_texel..first_texel + 4].try_into().unwrap());
     assert_eq!(word, original.atlas.texels[0].0);
+}
+
+/// The little-endian u32 at byte `at`.
+fn word(bytes: &[u8], at: usize) -> u32 {
+    u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap())
+}
+
+/// `bytes` (version 4) as the older `version` (1–3) wrote them: without header bytes 40..52.
+fn as_old_version(bytes: &[u8], version: u32) -> Vec<u8> {
+    let mut old = bytes[..40].to_vec();
+    old[8..12].copy_from_slice(&version.to_le_bytes());
+    old.extend_from_slice(&bytes[52..]);
+    old
 }
 
 #[test]
@@ -179,15 +195,53 @@ fn bad_magic_and_unknown_versions_are_rejected() {
     let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
     assert!(message.contains("not an RBVH file"), "{message}");
 
-    let mut bytes = sample().to_bytes();
-    bytes[8..12].copy_from_slice(&4u32.to_le_bytes());
-    let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
-    assert!(message.contains("unsupported version 4"), "{message}");
-    assert!(message.contains("reads versions 1, 2 and 3"), "{message}");
+    for version in [0, 5, u32::MAX] {
+        let mut bytes = sample().to_bytes();
+        bytes[8..12].copy_from_slice(&version.to_le_bytes());
+        let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
+        assert!(
+            message.contains(&format!("unsupported version {version}")),
+            "{message}"
+        );
+        assert!(message.contains("reads versions 1 to 4"), "{message}");
+    }
+}
+
+/// Files written before version 4 (1: normal texels; 2: with colours; 3: height-only) load as
+/// the RBVHs they described, built by the paper's rule alone, and are saved again as version 4.
+#[test]
+fn older_versions_load_as_what_they_described() {
+    let path = Path::new("old.rbvh");
+    let plain = sample();
+    let mut painted = sample();
+    painted.colours = Some((0..72u32).map(|k| k.wrapping_mul(0x0101_0107)).collect());
+    let mut height = sample();
+    height.params.texels = TexelFormat::Height;
+    for t in &mut height.atlas.texels {
+        *t = Texel(u32::from(t.height_code()));
+    }
+    for (version, rbvh) in [(1, plain), (2, painted), (3, height)] {
+        let old = as_old_version(&rbvh.to_bytes(), version);
+        let loaded = Rbvh::from_bytes(&old, path).unwrap();
+        let expected = Rbvh {
+            params: RbvhParams {
+                sampled_criterion_texels: 0.0,
+                ..rbvh.params
+            },
+            ..rbvh
+        };
+        assert_eq!(loaded, expected, "version {version}");
+        assert_eq!(word(&loaded.to_bytes(), 8), 4);
+        let message = parse_error(Rbvh::from_bytes(&old[..old.len() - 1], path), path);
+        assert!(
+            message.contains("truncated") && message.contains("136-byte header"),
+            "version {version}: {message}"
+        );
+    }
 }
 
 #[test]
-fn height_only_texels_round_trip_as_version_3_in_half_the_bytes() {
+fn height_only_texels_round_trip_in_half_the_bytes() {
     let path = Path::new("height.rbvh");
     let mut height = sample();
     height.params.texels = TexelFormat::Height;
@@ -196,11 +250,12 @@ fn height_only_texels_round_trip_as_version_3_in_half_the_bytes() {
     }
     let bytes = height.to_bytes();
     assert_eq!(Rbvh::from_bytes(&bytes, path).unwrap(), height);
-    // Version 3: version 1's header and arrays, with two-byte texels.
-    let v1 = sample().to_bytes();
-    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 3);
-    assert_eq!(bytes.len(), v1.len() - 72 * 2);
-    assert_eq!(bytes[12..HEADER_BYTES], v1[12..HEADER_BYTES]);
+    // The header says height-only; the arrays are the same, with two-byte texels.
+    let normals = sample().to_bytes();
+    assert_eq!(word(&bytes, 44), 1);
+    assert_eq!(bytes.len(), normals.len() - 72 * 2);
+    assert_eq!(bytes[..44], normals[..44]);
+    assert_eq!(bytes[48..HEADER_BYTES], normals[48..HEADER_BYTES]);
     let first_texel = bytes.len() - 72 * 2;
     assert_eq!(
         u16::from_le_bytes([bytes[first_texel], bytes[first_texel + 1]]),
@@ -289,29 +344,41 @@ fn inconsistent_contents_are_rejected_with_the_reason() {
     bytes[HEADER_BYTES - 8..HEADER_BYTES].copy_from_slice(&u64::MAX.to_le_bytes());
     let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
     assert!(message.contains("counts"), "{message}");
-    // An unknown enum tag.
+    // Unknown enum tags and flags, and a height-only RBVH claiming colours.
+    for (at, value, expect) in [
+        (24, 7u32, "params.subdivision has tag 7"),
+        (44, 2, "params.texels has tag 2"),
+        (48, 3, "the colour channel flag is 3"),
+    ] {
+        let mut bytes = sample().to_bytes();
+        bytes[at..at + 4].copy_from_slice(&value.to_le_bytes());
+        let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
+        assert!(message.contains(expect), "{message}");
+    }
     let mut bytes = sample().to_bytes();
-    bytes[24..28].copy_from_slice(&7u32.to_le_bytes());
+    bytes[44..52].copy_from_slice(&[1, 0, 0, 0, 1, 0, 0, 0]);
     let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
     assert!(
-        message.contains("params.subdivision has tag 7"),
+        message.contains("height-only RBVH claims a colour channel"),
         "{message}"
     );
 }
 
 #[test]
-fn colours_round_trip_as_version_2() {
+fn colours_round_trip_after_the_texels() {
     let path = Path::new("painted.rbvh");
     let mut painted = sample();
     painted.colours = Some((0..72u32).map(|k| k.wrapping_mul(0x0101_0107)).collect());
     let bytes = painted.to_bytes();
     assert_eq!(Rbvh::from_bytes(&bytes, path).unwrap(), painted);
-    // Version 2: version 1's bytes, then the colour count and the colours.
-    let v1 = sample().to_bytes();
-    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 2);
-    assert_eq!(bytes.len(), v1.len() + 8 + 72 * 4);
-    assert_eq!(bytes[12..v1.len()], v1[12..]);
-    assert_eq!(bytes[v1.len()..v1.len() + 8], 72u64.to_le_bytes());
+    // The header's flag says so; the bytes without colours follow, then the colour count and
+    // the colours.
+    let plain = sample().to_bytes();
+    assert_eq!(word(&bytes, 48), 1);
+    assert_eq!(bytes.len(), plain.len() + 8 + 72 * 4);
+    assert_eq!(bytes[..48], plain[..48]);
+    assert_eq!(bytes[52..plain.len()], plain[52..]);
+    assert_eq!(bytes[plain.len()..plain.len() + 8], 72u64.to_le_bytes());
 
     // A colour section cut short, or with a count that is neither 0 nor one per texel.
     for cut in [1, 4, 72 * 4, 72 * 4 + 7] {

@@ -48,7 +48,7 @@
 //! `params`: `texels_per_diagonal`, `refinement` (`"normal_cone"` \| `"projected_area"`),
 //! `max_angle_deg` (normal cone, else null), `min_ratio` (projected area, else null),
 //! `subdivision` (`"spatial_median"` \| `"area_sah"`), `object_split`, `max_tile`,
-//! `min_leaf_texels`, `texels` (`"height_normal"` \| `"height"`) — the fields of [`RbvhParams`].
+//! `min_leaf_texels`, `sampled_criterion_texels`, `texels` (`"height_normal"` \| `"height"`) — the fields of [`RbvhParams`].
 //!
 //! `lod` (`rbvh-lod` records, else null): `columns`, `min_leaves`, `bias` — the fields of
 //! [`LodParams`].
@@ -315,6 +315,9 @@ pub struct Params {
     /// Box diagonal in texels below which a set that is no height field stays triangles
     /// ([`RbvhParams::min_leaf_texels`]).
     pub min_leaf_texels: f32,
+    /// Box diagonal in texels up to which a set whose triangles fail the criterion is judged on
+    /// its sampled surface ([`RbvhParams::sampled_criterion_texels`]).
+    pub sampled_criterion_texels: f32,
     /// What each texel holds: `"height_normal"` or `"height"` ([`RbvhParams::texels`]).
     pub texels: &'static str,
 }
@@ -337,6 +340,7 @@ impl From<&RbvhParams> for Params {
             object_split: p.object_split,
             max_tile: p.max_tile,
             min_leaf_texels: p.min_leaf_texels,
+            sampled_criterion_texels: p.sampled_criterion_texels,
             texels: p.texels.name(),
         }
     }

@@ -10,6 +10,9 @@
 //!
 //! "Can be represented" means: one connected part (with object split on), a projection axis
 //! exists, the refinement criterion holds along it, and the rasterization is single-valued.
+//! Beyond the paper, a set of at most `sampled_criterion_texels` texels whose triangles fail the
+//! criterion passes if the cells of its rasterized tile meet it: below the sampling rate a scan's
+//! noise cannot be represented, and judging it would cut the scan into leaves of a few texels.
 //! A representable set larger than `max_tile` samples per side is cut into several tiles (the
 //! paper's "subdivide large height fields") that overlap by one cell, so they meet without gaps.
 //! A set that is not representable and spans fewer than `min_leaf_texels` texels stays as
@@ -278,14 +281,22 @@ impl Builder<'_> {
     /// The tiles of `tris` as one height field, or None when they are not representable.
     fn heightfield(&self, tris: &[[Vec3; 3]]) -> Option<Vec<Tile>> {
         let w = projection_axis(tris)?;
-        if !passes(self.params.refinement, tris, w) {
-            return None;
+        let triangles_pass = passes(self.params.refinement, tris, w);
+        if !triangles_pass {
+            let bounds = tris
+                .iter()
+                .fold(Aabb::EMPTY, |b, t| b.union(Aabb::from_points(*t)));
+            if bounds.diagonal() > self.params.sampled_criterion_texels * self.texel {
+                return None;
+            }
         }
+        // Triangles that fail the criterion get a second hearing on their surface as sampled.
+        let judge = (!triangles_pass).then_some(self.params.refinement);
         let frame = fit(tris, w, self.texel);
         let mut tiles = Vec::new();
         for window in windows(&frame, self.params.max_tile) {
             // Layers closer than a texel are one surface at this sampling rate.
-            let tile = rasterize(tris, &window, self.texel)?;
+            let tile = rasterize(tris, &window, self.texel, judge)?;
             if tile.covered > 0 {
                 tiles.push(tile);
             }

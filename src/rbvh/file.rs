@@ -10,35 +10,37 @@
 //! | bytes | type | field |
 //! |---|---|---|
 //! | 0..8 | `[u8; 8]` | magic `RBVHv` followed by three zero bytes |
-//! | 8..12 | u32 | format version: 1 without a colour channel, 2 with one, 3 for height-only texels ([`super::TexelFormat::Height`]) |
+//! | 8..12 | u32 | format version: 4 (this build writes it; it reads 1–3 as well, see below) |
 //! | 12..16 | f32 | `params.texels_per_diagonal` |
 //! | 16..20, 20..24 | u32, f32 | `params.refinement`: tag (0 = `NormalCone`, 1 = `ProjectedArea`), its value (`max_angle_deg` or `min_ratio`) |
 //! | 24..28 | u32 | `params.subdivision`: 0 = `SpatialMedian`, 1 = `AreaSah` |
 //! | 28..32 | u32 | `params.object_split`: 0 or 1 |
 //! | 32..36 | u32 | `params.max_tile` |
 //! | 36..40 | f32 | `params.min_leaf_texels` |
-//! | 40..64 | 6 × f32 | `bounds`: min x, y, z, max x, y, z |
-//! | 64..68 | u32 | `depth` |
-//! | 68..72 | f32 | `texel_size` |
-//! | 72..80 | f64 | `stats.build_ms` |
-//! | 80..84, 84..88 | u32, u32 | `stats.heightfield_leaves`, `stats.triangle_leaves` |
-//! | 88..96 | u64 | `stats.tile_texels` |
-//! | 96..100, 100..104 | u32, u32 | `atlas.pitch`, `atlas.rows` |
-//! | 104..136 | 4 × u64 | counts: nodes `N`, triangles `T`, leaves `L`, texels `X` |
-//! | 136.. | `N` × 64 bytes | `nodes` ([`crate::bvh::GpuNode`], 16 words each) |
+//! | 40..44 | f32 | `params.sampled_criterion_texels` |
+//! | 44..48 | u32 | `params.texels`: 0 = `HeightNormal`, 1 = `Height` |
+//! | 48..52 | u32 | colour channel: 0 = none, 1 = the colour section follows the texels |
+//! | 52..76 | 6 × f32 | `bounds`: min x, y, z, max x, y, z |
+//! | 76..80 | u32 | `depth` |
+//! | 80..84 | f32 | `texel_size` |
+//! | 84..92 | f64 | `stats.build_ms` |
+//! | 92..96, 96..100 | u32, u32 | `stats.heightfield_leaves`, `stats.triangle_leaves` |
+//! | 100..108 | u64 | `stats.tile_texels` |
+//! | 108..112, 112..116 | u32, u32 | `atlas.pitch`, `atlas.rows` |
+//! | 116..148 | 4 × u64 | counts: nodes `N`, triangles `T`, leaves `L`, texels `X` |
+//! | 148.. | `N` × 64 bytes | `nodes` ([`crate::bvh::GpuNode`], 16 words each) |
 //! | then | `T` × 48 bytes | `triangles` ([`crate::bvh::GpuTriangle`], 12 words each) |
 //! | then | `L` × 64 bytes | `leaves` ([`super::GpuHeightfield`], 16 words each) |
-//! | then | `X` × 4 bytes | `atlas.texels` ([`super::Texel`], one word each), row by row; version 3: `X` × 2 bytes, each texel's height code (u16) |
-//! | then | u64 | version 2 only: colour count `C`, which must equal `X` |
-//! | then | `C` × 4 bytes | version 2 only: `colours` (packed RGBA8, see [`crate::rgba`]), parallel to the texels |
+//! | then | `X` × 4 bytes | `atlas.texels` ([`super::Texel`], one word each), row by row; height-only texels: `X` × 2 bytes, each texel's height code (u16) |
+//! | then | u64 | with a colour channel only: colour count `C`, which must equal `X` |
+//! | then | `C` × 4 bytes | with a colour channel only: `colours` (packed RGBA8, see [`crate::rgba`]), parallel to the texels |
 //!
-//! Version 3 is version 1 with texels of two bytes, the height codes alone: the file of an RBVH
-//! built with [`super::TexelFormat::Height`], which has no colour channel. The texel format is
-//! the version's, not a header field, so versions 1 and 2 read as before.
+//! A height-only RBVH has no colour channel: a file that claims both is malformed.
 //!
-//! Version 2 appended the optional colour channel (`crate::surface`). An RBVH without one is
-//! written as version 1, byte for byte as before the channel existed, so old files load and
-//! every file round-trips exactly; an RBVH with one is written as version 2. A colour section
+//! **Older versions** load as the RBVHs they described. Their header lacks bytes 40..52: the
+//! texel format and the colour channel were the version's (1: normals, no colours; 2: normals and
+//! colours; 3: height-only), and they were built by the paper's rule alone
+//! (`sampled_criterion_texels` = 0). Saving such an RBVH writes version 4. A colour section
 //! that is cut short, or whose count is not `X`, is an [`Error::Parse`] like any other
 //! malformation.
 //!
@@ -67,14 +69,12 @@ use crate::{Error, Result};
 
 /// The first eight bytes of every RBVH file.
 const MAGIC: [u8; 8] = *b"RBVHv\0\0\0";
-/// The format version of files with a colour channel.
-const VERSION: u32 = 2;
-/// The format version of files without one: the same bytes without the colour section.
-const VERSION_WITHOUT_COLOURS: u32 = 1;
-/// The format version of height-only RBVHs: version 1 with two-byte texels.
-const VERSION_HEIGHT_ONLY: u32 = 3;
+/// The format version this build writes.
+const VERSION: u32 = 4;
 /// Bytes before the arrays (see the table in the module docs).
-const HEADER_BYTES: usize = 136;
+const HEADER_BYTES: usize = 148;
+/// Bytes before the arrays in versions 1–3, whose header lacks bytes 40..52 of version 4's.
+const OLD_HEADER_BYTES: usize = 136;
 
 impl Rbvh {
     /// Writes the versioned binary file described in the module docs, atomically (through
@@ -112,14 +112,7 @@ impl Rbvh {
             + self.colour_bytes() as usize;
         let mut out = Vec::with_capacity(HEADER_BYTES + arrays);
         out.extend_from_slice(&MAGIC);
-        put_u32(
-            &mut out,
-            match (self.params.texels, &self.colours) {
-                (TexelFormat::Height, _) => VERSION_HEIGHT_ONLY,
-                (TexelFormat::HeightNormal, Some(_)) => VERSION,
-                (TexelFormat::HeightNormal, None) => VERSION_WITHOUT_COLOURS,
-            },
-        );
+        put_u32(&mut out, VERSION);
 
         let p = &self.params;
         put_f32(&mut out, p.texels_per_diagonal);
@@ -139,6 +132,15 @@ impl Rbvh {
         put_u32(&mut out, u32::from(p.object_split));
         put_u32(&mut out, p.max_tile);
         put_f32(&mut out, p.min_leaf_texels);
+        put_f32(&mut out, p.sampled_criterion_texels);
+        put_u32(
+            &mut out,
+            match p.texels {
+                TexelFormat::HeightNormal => 0,
+                TexelFormat::Height => 1,
+            },
+        );
+        put_u32(&mut out, u32::from(self.has_colour_section()));
 
         for x in self.bounds.min.to_array() {
             put_f32(&mut out, x);
@@ -175,12 +177,17 @@ impl Rbvh {
                 }
             }
         }
-        // A height-only RBVH has no colour channel (the builder bakes none).
-        if let (TexelFormat::HeightNormal, Some(colours)) = (self.params.texels, &self.colours) {
+        if let (true, Some(colours)) = (self.has_colour_section(), &self.colours) {
             out.extend_from_slice(&(colours.len() as u64).to_le_bytes());
             put_records(&mut out, colours);
         }
         out
+    }
+
+    /// Whether the file carries the colour channel: a height-only RBVH has none (the builder
+    /// bakes none, and [`Rbvh::save`] refuses one painted later).
+    fn has_colour_section(&self) -> bool {
+        self.params.texels == TexelFormat::HeightNormal && self.colours.is_some()
     }
 
     /// Parses the bytes of an RBVH file; `name_for_errors` is the file named in every error.
@@ -200,16 +207,11 @@ impl Rbvh {
         };
         r.take(MAGIC.len(), "the magic")?;
         let version = r.u32("the version")?;
-        let texel_format = match version {
-            VERSION | VERSION_WITHOUT_COLOURS => TexelFormat::HeightNormal,
-            VERSION_HEIGHT_ONLY => TexelFormat::Height,
-            _ => {
-                return Err(err(format!(
-                    "unsupported version {version} (this build reads versions \
-                     {VERSION_WITHOUT_COLOURS}, {VERSION} and {VERSION_HEIGHT_ONLY})"
-                )))
-            }
-        };
+        if !(1..=VERSION).contains(&version) {
+            return Err(err(format!(
+                "unsupported version {version} (this build reads versions 1 to {VERSION})"
+            )));
+        }
 
         let texels_per_diagonal = r.f32("params.texels_per_diagonal")?;
         let refinement = match (
@@ -238,14 +240,51 @@ impl Rbvh {
             1 => true,
             x => return Err(err(format!("params.object_split is {x}, not 0 or 1"))),
         };
+        let max_tile = r.u32("params.max_tile")?;
+        let min_leaf_texels = r.f32("params.min_leaf_texels")?;
+        let (sampled_criterion_texels, texels, colour_channel) = match version {
+            1 => (0.0, TexelFormat::HeightNormal, false),
+            2 => (0.0, TexelFormat::HeightNormal, true),
+            3 => (0.0, TexelFormat::Height, false),
+            _ => {
+                let sampled = r.f32("params.sampled_criterion_texels")?;
+                let texels = match r.u32("params.texels")? {
+                    0 => TexelFormat::HeightNormal,
+                    1 => TexelFormat::Height,
+                    tag => {
+                        return Err(err(format!(
+                            "params.texels has tag {tag}; known are 0 (HeightNormal) and 1 (Height)"
+                        )))
+                    }
+                };
+                let colour_channel = match r.u32("the colour channel flag")? {
+                    0 => false,
+                    1 => true,
+                    x => return Err(err(format!("the colour channel flag is {x}, not 0 or 1"))),
+                };
+                if colour_channel && texels == TexelFormat::Height {
+                    return Err(err(
+                        "a height-only RBVH claims a colour channel (it cannot have one)"
+                            .to_string(),
+                    ));
+                }
+                (sampled, texels, colour_channel)
+            }
+        };
+        let header_bytes = if version < 4 {
+            OLD_HEADER_BYTES
+        } else {
+            HEADER_BYTES
+        };
         let params = RbvhParams {
             texels_per_diagonal,
             refinement,
             subdivision,
             object_split,
-            max_tile: r.u32("params.max_tile")?,
-            min_leaf_texels: r.f32("params.min_leaf_texels")?,
-            texels: texel_format,
+            max_tile,
+            min_leaf_texels,
+            sampled_criterion_texels,
+            texels,
         };
         let bounds = Aabb {
             min: [r.f32("bounds")?, r.f32("bounds")?, r.f32("bounds")?].into(),
@@ -272,6 +311,7 @@ impl Rbvh {
             ("params.texels_per_diagonal", texels_per_diagonal),
             ("params.refinement value", refinement_value(refinement)),
             ("params.min_leaf_texels", params.min_leaf_texels),
+            ("params.sampled_criterion_texels", sampled_criterion_texels),
             ("texel_size", texel_size),
         ];
         for (name, x) in floats {
@@ -291,7 +331,7 @@ impl Rbvh {
             std::mem::size_of::<GpuNode>(),
             std::mem::size_of::<GpuTriangle>(),
             std::mem::size_of::<GpuHeightfield>(),
-            texel_format.bytes() as usize,
+            texels.bytes() as usize,
         ];
         let mut needed = Some(0u64);
         for k in 0..4 {
@@ -299,8 +339,8 @@ impl Rbvh {
         }
         let remaining = (bytes.len() - r.pos) as u64;
         let [n_nodes, n_triangles, n_leaves, n_texels] = counts;
-        // Version 2: the colour section follows the arrays; its length is checked below.
-        let colour_section = if version == VERSION {
+        // The colour section follows the arrays; its length is checked below.
+        let colour_section = if colour_channel {
             let colour_count = needed.and_then(|n| {
                 let at = usize::try_from(n).ok()?.checked_add(r.pos)?;
                 let b = bytes.get(at..at.checked_add(8)?)?;
@@ -332,11 +372,11 @@ impl Rbvh {
             return Err(err(format!(
                 "the header counts {n_nodes} nodes, {n_triangles} triangles, {n_leaves} leaves and \
                  {n_texels} texels (and the colour section {n_colours} colours), which take \
-                 {needed} bytes, but {remaining} bytes follow the {HEADER_BYTES}-byte header: \
+                 {needed} bytes, but {remaining} bytes follow the {header_bytes}-byte header: \
                  {verdict}"
             )));
         }
-        if version == VERSION && n_colours != n_texels {
+        if colour_channel && n_colours != n_texels {
             return Err(err(format!(
                 "the colour section has {n_colours} colours for {n_texels} texels (it must have \
                  one per texel)"
@@ -358,7 +398,7 @@ impl Rbvh {
         let nodes: Vec<GpuNode> = r.records(n_nodes as usize)?;
         let triangles: Vec<GpuTriangle> = r.records(n_triangles as usize)?;
         let leaves: Vec<GpuHeightfield> = r.records(n_leaves as usize)?;
-        let texels: Vec<Texel> = match texel_format {
+        let texel_words: Vec<Texel> = match texels {
             TexelFormat::HeightNormal => r.records(n_texels as usize)?,
             TexelFormat::Height => r
                 .take(n_texels as usize * 2, "the arrays")?
@@ -366,7 +406,7 @@ impl Rbvh {
                 .map(|b| Texel(u32::from(u16::from_le_bytes([b[0], b[1]]))))
                 .collect(),
         };
-        let colours = if version == VERSION {
+        let colours = if colour_channel {
             r.u64("the colour count")?;
             Some(r.records(n_colours as usize)?)
         } else {
@@ -375,7 +415,7 @@ impl Rbvh {
         let atlas = Atlas {
             pitch,
             rows,
-            texels,
+            texels: texel_words,
         };
 
         for (index, node) in nodes.iter().enumerate() {

@@ -95,6 +95,13 @@ pub struct RbvhParams {
     /// A set that cannot be one height field and whose box diagonal spans fewer texels than this
     /// stays as triangles (hybrid leaf), traced exactly.
     pub min_leaf_texels: f32,
+    /// A set whose box diagonal spans at most this many texels, and whose triangles fail
+    /// `refinement`, is judged again on its surface *as sampled*: the cells of its rasterized
+    /// tile must pass the same criterion (see `raster.rs`). Detail below the sampling rate cannot
+    /// be represented anyway, and on a scanned mesh its noise fails the criterion at every size,
+    /// so the paper's rule (0: triangles only) cuts a small or distant scan into leaves of a few
+    /// texels each, a 64-byte record and a node apiece (issue "The paper's scale", item 6).
+    pub sampled_criterion_texels: f32,
     /// What each texel holds: height and normal (the default), or height alone.
     pub texels: TexelFormat,
 }
@@ -121,6 +128,7 @@ impl RbvhParams {
             object_split: true,
             max_tile: 64,
             min_leaf_texels: 3.0,
+            sampled_criterion_texels: 4.0,
             texels: TexelFormat::HeightNormal,
         })
     }
@@ -157,6 +165,13 @@ impl RbvhParams {
             return Err(Error::param(
                 "min_leaf_texels",
                 format!("{m} is outside 0..=1e4"),
+            ));
+        }
+        let k = self.sampled_criterion_texels;
+        if !(k.is_finite() && (0.0..=1.0e4).contains(&k)) {
+            return Err(Error::param(
+                "sampled_criterion_texels",
+                format!("{k} is outside 0..=1e4"),
             ));
         }
         Ok(())
@@ -206,6 +221,14 @@ mod tests {
             RbvhParams { max_tile: 2, ..q },
             RbvhParams {
                 min_leaf_texels: -1.0,
+                ..q
+            },
+            RbvhParams {
+                sampled_criterion_texels: f32::INFINITY,
+                ..q
+            },
+            RbvhParams {
+                sampled_criterion_texels: -0.5,
                 ..q
             },
         ];

@@ -20,7 +20,12 @@
 //!    (first writer wins, which is deterministic because triangles are processed in order) unless
 //!    the heights differ by more than `fold_tolerance`: then two layers fold onto one texel, the
 //!    set is not a height field, and [`rasterize`] returns `None`.
-//! 3. `covered` counts the samples written in 1–2.
+//! 3. `covered` counts the samples written in 1–2. When [`rasterize`] is given a criterion to
+//!    judge, the surface as sampled must meet it here or the set is not a height field
+//!    (`None`): the cells whose corners were all written — two triangles each, as the march
+//!    splits them, or the one triangle of three written corners — are the surface, and their
+//!    normals stand in for the triangles' in [`Refinement`]'s test (every cell normal within
+//!    φ_max of `w`, or cells' projected over true area ≥ a). A tile with no such cell fails.
 //! 4. **Dilation** (the paper's crack avoidance: "allow overlaps + dilation filter"). One pass over
 //!    the state after step 2: each hole with at least one covered 4-neighbour gets the mean, over
 //!    those neighbour directions, of a linear extrapolation (`2h₁ − h₂` when the sample two steps
@@ -43,6 +48,7 @@
 use glam::{DVec2, DVec3, Vec3};
 
 use super::layout::{GpuHeightfield, Texel};
+use super::Refinement;
 use crate::geom::Aabb;
 
 /// Triangles whose unit normal makes `|n·w|` at most this are treated as edge-on and skipped. A
@@ -188,8 +194,14 @@ impl Tile {
 /// by more than `fold_tolerance` (world units; it should exceed f32 rounding of the heights, e.g. a
 /// fraction of a texel, or samples on shared edges count as folds). See the module docs for the
 /// steps. The grid of `res_u × res_v` samples is allocated in full; the builder keeps both sides
-/// at most `max_tile` (≤ 4096).
-pub fn rasterize(triangles: &[[Vec3; 3]], frame: &Frame, fold_tolerance: f32) -> Option<Tile> {
+/// at most `max_tile` (≤ 4096). With `judge`, the sampled surface must also pass that criterion
+/// (step 3).
+pub fn rasterize(
+    triangles: &[[Vec3; 3]],
+    frame: &Frame,
+    fold_tolerance: f32,
+    judge: Option<Refinement>,
+) -> Option<Tile> {
     let res_u = frame.res_u as usize;
     let res_v = frame.res_v as usize;
     let n = frame.samples();
@@ -247,6 +259,11 @@ pub fn rasterize(triangles: &[[Vec3; 3]], frame: &Frame, fold_tolerance: f32) ->
         }
     }
 
+    if let Some(refinement) = judge {
+        if !sampled_passes(refinement, &height, &source, res_u, res_v, frame.texel) {
+            return None;
+        }
+    }
     let (height, source) = dilate(&height, &source, res_u, res_v);
     let mut tile = quantize(frame, &height, &source, &normals, covered);
     tile.sources = source
@@ -254,6 +271,68 @@ pub fn rasterize(triangles: &[[Vec3; 3]], frame: &Frame, fold_tolerance: f32) ->
         .map(|&s| input_index.get(s as usize).copied().unwrap_or(NO_SOURCE))
         .collect();
     Some(tile)
+}
+
+/// Step 3's judgement: whether the surface as sampled (`height`, world units along `w`, where
+/// `source` is not [`NONE`]) passes `refinement`. Sample `(i, j)` is the point
+/// `(i·texel, j·texel, height)`; each cell contributes the march's triangles over its written
+/// corners (c00, c10, c11 and c00, c11, c01; with one corner missing, the other three in that
+/// cycle), each judged by its normal's `w` component.
+fn sampled_passes(
+    refinement: Refinement,
+    height: &[f32],
+    source: &[u32],
+    res_u: usize,
+    res_v: usize,
+    texel: f32,
+) -> bool {
+    let texel = texel as f64;
+    let point = |i: usize, j: usize| {
+        let k = j * res_u + i;
+        (source[k] != NONE)
+            .then(|| DVec3::new(i as f64 * texel, j as f64 * texel, height[k] as f64))
+    };
+    // Σ |n·w|, Σ |n| over the cell triangles (twice their projected and true areas), and the
+    // smallest cosine between a cell normal and `w`.
+    let (mut projected, mut total, mut min_cos) = (0.0f64, 0.0f64, 1.0f64);
+    let mut judged = false;
+    for j in 0..res_v.saturating_sub(1) {
+        for i in 0..res_u.saturating_sub(1) {
+            let corners = [
+                point(i, j),
+                point(i + 1, j),
+                point(i + 1, j + 1),
+                point(i, j + 1),
+            ];
+            let written: Vec<DVec3> = corners.iter().flatten().copied().collect();
+            let triangles = match written.len() {
+                4 => [
+                    [written[0], written[1], written[2]],
+                    [written[0], written[2], written[3]],
+                ]
+                .to_vec(),
+                3 => vec![[written[0], written[1], written[2]]],
+                _ => Vec::new(),
+            };
+            for [a, b, c] in triangles {
+                let n = (b - a).cross(c - a);
+                let len = n.length();
+                if len > 0.0 {
+                    judged = true;
+                    projected += n.z.abs();
+                    total += len;
+                    min_cos = min_cos.min(n.z.abs() / len);
+                }
+            }
+        }
+    }
+    judged
+        && match refinement {
+            Refinement::NormalCone { max_angle_deg } => {
+                min_cos >= f64::from(max_angle_deg).to_radians().cos()
+            }
+            Refinement::ProjectedArea { min_ratio } => projected >= f64::from(min_ratio) * total,
+        }
 }
 
 /// Marks a hole in the per-sample source index.
@@ -408,7 +487,7 @@ mod tests {
     #[test]
     fn flat_square_is_exact() {
         let frame = xy_frame(8);
-        let tile = rasterize(&square(&frame, 0.0, 8.0, |_, _| 2.0), &frame, 0.01).unwrap();
+        let tile = rasterize(&square(&frame, 0.0, 8.0, |_, _| 2.0), &frame, 0.01, None).unwrap();
         assert_eq!(tile.covered, 64);
         assert_eq!(tile.h_scale, 0.0);
         assert_eq!(tile.frame.origin, Vec3::new(0.0, 0.0, 2.0));
@@ -426,7 +505,7 @@ mod tests {
             ..xy_frame(16)
         };
         let plane = |s: f32, t: f32| 0.3 * s + 0.2 * t + 1.0;
-        let tile = rasterize(&square(&frame, 0.0, 16.0, plane), &frame, 0.01).unwrap();
+        let tile = rasterize(&square(&frame, 0.0, 16.0, plane), &frame, 0.01, None).unwrap();
         assert_eq!(tile.covered, 256);
         let range = plane(15.5, 15.5) - plane(0.5, 0.5);
         let bound = range / (2.0 * Texel::MAX_CODE as f32) + 1e-5;
@@ -447,11 +526,11 @@ mod tests {
         let frame = xy_frame(8);
         let mut two = square(&frame, 0.0, 8.0, |_, _| 0.0);
         two.extend(square(&frame, 0.0, 8.0, |_, _| 10.0));
-        assert_eq!(rasterize(&two, &frame, 1.0), None);
+        assert_eq!(rasterize(&two, &frame, 1.0, None), None);
 
         let mut close = square(&frame, 0.0, 8.0, |_, _| 0.0);
         close.extend(square(&frame, 0.0, 8.0, |_, _| 0.05));
-        let tile = rasterize(&close, &frame, 0.1).unwrap();
+        let tile = rasterize(&close, &frame, 0.1, None).unwrap();
         assert_eq!(tile.covered, 64);
         // First writer wins: the lower layer.
         assert_eq!(tile.frame.origin.z, 0.0);
@@ -463,7 +542,7 @@ mod tests {
         let frame = xy_frame(16);
         let plane = |s: f32, t: f32| 0.5 * s - 0.25 * t + 3.0;
         // Samples 4..=11 in each direction are covered (centres 4.5 ..= 11.5).
-        let tile = rasterize(&square(&frame, 4.0, 12.0, plane), &frame, 0.01).unwrap();
+        let tile = rasterize(&square(&frame, 4.0, 12.0, plane), &frame, 0.01, None).unwrap();
         assert_eq!(tile.covered, 64);
         let core = |x: u32| (4..=11).contains(&x);
         let ring = |x: u32| x == 3 || x == 12;
@@ -518,7 +597,7 @@ mod tests {
                 }
             }
         }
-        let tile = rasterize(&tris, &frame, 1e-3).unwrap();
+        let tile = rasterize(&tris, &frame, 1e-3, None).unwrap();
         assert_eq!(tile.covered, 17 * 17);
     }
 
@@ -539,7 +618,7 @@ mod tests {
             ]],
         ];
         for tris in inputs {
-            let tile = rasterize(&tris, &frame, 0.1).unwrap();
+            let tile = rasterize(&tris, &frame, 0.1, None).unwrap();
             assert_eq!(tile.covered, 0);
             assert_eq!(tile.h_scale, 0.0);
             assert_eq!(tile.texels.len(), 64);
@@ -550,13 +629,19 @@ mod tests {
             res_v: 0,
             ..frame
         };
-        let tile = rasterize(&square(&frame, 0.0, 8.0, |_, _| 1.0), &empty, 0.1).unwrap();
+        let tile = rasterize(&square(&frame, 0.0, 8.0, |_, _| 1.0), &empty, 0.1, None).unwrap();
         assert!(tile.texels.is_empty() && tile.covered == 0);
         let zero_texel = Frame {
             texel: 0.0,
             ..frame
         };
-        let tile = rasterize(&square(&frame, 0.0, 8.0, |_, _| 1.0), &zero_texel, 0.1).unwrap();
+        let tile = rasterize(
+            &square(&frame, 0.0, 8.0, |_, _| 1.0),
+            &zero_texel,
+            0.1,
+            None,
+        )
+        .unwrap();
         assert_eq!(tile.covered, 0);
     }
 
@@ -573,7 +658,7 @@ mod tests {
             res_v: 9,
         };
         let bumpy = |s: f32, t: f32| (0.7 * s).sin() + 0.3 * t;
-        let tile = rasterize(&square(&frame, 1.0, 11.0, bumpy), &frame, 0.01).unwrap();
+        let tile = rasterize(&square(&frame, 1.0, 11.0, bumpy), &frame, 0.01, None).unwrap();
         assert!(tile.covered > 0 && tile.h_scale > 0.0);
         let b = tile.world_bounds();
         // The tilted, bumpy tile's samples fill much less than the box of its tile box (the two
@@ -602,7 +687,7 @@ mod tests {
             ..xy_frame(8)
         };
         let plane = |s: f32, _| 0.1 * s;
-        let tile = rasterize(&square(&frame, 0.0, 8.0, plane), &frame, 0.01).unwrap();
+        let tile = rasterize(&square(&frame, 0.0, 8.0, plane), &frame, 0.01, None).unwrap();
         let r = tile.heightfield(1234);
         let f = &tile.frame;
         assert_eq!(r.atlas_base, 1234);
@@ -613,5 +698,70 @@ mod tests {
         assert!((Vec3::from(r.axis_v).dot(f.v) - 1.0 / f.texel).abs() < 1e-5);
         assert!(Vec3::from(r.axis_u).dot(f.v).abs() < 1e-6);
         assert_eq!(Vec3::from(r.axis_w), f.w);
+    }
+
+    /// A grid of `n × n` vertices spaced `spacing` over the xy plane at heights `h(i, j)`, two
+    /// triangles per grid cell, wound to face +z.
+    fn grid_mesh(n: usize, spacing: f32, h: impl Fn(usize, usize) -> f32) -> Vec<[Vec3; 3]> {
+        let p = |i: usize, j: usize| Vec3::new(i as f32 * spacing, j as f32 * spacing, h(i, j));
+        let mut tris = Vec::new();
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                tris.push([p(i, j), p(i + 1, j), p(i + 1, j + 1)]);
+                tris.push([p(i, j), p(i + 1, j + 1), p(i, j + 1)]);
+            }
+        }
+        tris
+    }
+
+    /// Sub-texel noise (a checkerboard of 0.4-texel bumps on a quarter-texel mesh: its triangles
+    /// slope 66° off the axis) fails the triangles' cone of 60° and their projected-area ratio of
+    /// 0.9, but its samples (at texel centres, every fourth vertex, all at height 0) pass both; a ridge sloping 63°
+    /// at texel scale fails both on its samples as well.
+    #[test]
+    fn the_sampled_surface_is_judged_at_the_sampling_rate() {
+        let frame = xy_frame(8);
+        let noisy = grid_mesh(33, 0.25, |i, j| if (i + j) % 2 == 1 { 0.4 } else { 0.0 });
+        let ridge = grid_mesh(33, 0.25, |i, _| 2.0 * (i as f32 * 0.25 - 4.0).abs());
+        let criteria = [
+            Refinement::NormalCone {
+                max_angle_deg: 60.0,
+            },
+            Refinement::ProjectedArea { min_ratio: 0.9 },
+        ];
+        for criterion in criteria {
+            for tris in [&noisy, &ridge] {
+                assert!(!super::super::frame::passes(criterion, tris, Vec3::Z));
+                assert!(rasterize(tris, &frame, 1.0, None).is_some());
+            }
+            let tile = rasterize(&noisy, &frame, 1.0, Some(criterion)).expect("noise passes");
+            assert_eq!(tile.covered, 64);
+            assert!(
+                rasterize(&ridge, &frame, 1.0, Some(criterion)).is_none(),
+                "{criterion:?}: the ridge passed"
+            );
+        }
+        // At 70° the ridge's 63° passes on its samples.
+        let wide = Refinement::NormalCone {
+            max_angle_deg: 70.0,
+        };
+        assert!(rasterize(&ridge, &frame, 1.0, Some(wide)).is_some());
+    }
+
+    /// A tile whose written samples form no cell (one sliver covering a single sample centre) has
+    /// no sampled surface to judge, so it fails: the judgement never passes for want of cells.
+    #[test]
+    fn a_tile_without_cells_fails_the_sampled_judgement() {
+        let frame = xy_frame(4);
+        let sliver = vec![[
+            Vec3::new(1.4, 1.4, 0.0),
+            Vec3::new(1.6, 1.4, 0.0),
+            Vec3::new(1.5, 1.7, 0.0),
+        ]];
+        let criterion = Refinement::NormalCone {
+            max_angle_deg: 60.0,
+        };
+        assert_eq!(rasterize(&sliver, &frame, 1.0, None).unwrap().covered, 1);
+        assert!(rasterize(&sliver, &frame, 1.0, Some(criterion)).is_none());
     }
 }

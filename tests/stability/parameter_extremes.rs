@@ -6,7 +6,8 @@ use super::*;
 /// parameter pushed to its extreme, 2500 camera and random rays:
 /// * every extreme builds; depth ≤ `STACK_SIZE`; GPU and CPU agree (hit/miss on fewer than 1 in
 ///   1000 rays, `t` to 1e-4 relative otherwise); nothing is NaN.
-/// * against the exact path: `max_tile` 4 and 4096, `min_leaf_texels` 0 and 1e4, φ_max = 10°,
+/// * against the exact path: `max_tile` 4 and 4096, `min_leaf_texels` 0 and 1e4,
+///   `sampled_criterion_texels` 0 and 1e4, φ_max = 10°,
 ///   A⊥/A = 0.9 and 4096 texels per diagonal keep the preset's accuracy: hit/miss on ≤ 0.5% of
 ///   the rays, leaks ≤ 0.1%. (Not zero: where four height fields meet at a corner, one dilation
 ///   ring can leave a gap; the Q0 preset itself lets ~1 in 40 000 random rays through on the
@@ -99,6 +100,24 @@ fn parameter_extremes_build_valid_results_or_clear_errors() {
             "max_tile 4096",
             RbvhParams {
                 max_tile: 4096,
+                ..base
+            },
+            0.005,
+            0.001,
+        ),
+        (
+            "sampled_criterion_texels 0",
+            RbvhParams {
+                sampled_criterion_texels: 0.0,
+                ..base
+            },
+            0.005,
+            0.001,
+        ),
+        (
+            "sampled_criterion_texels 1e4",
+            RbvhParams {
+                sampled_criterion_texels: 1e4,
                 ..base
             },
             0.005,

@@ -246,12 +246,13 @@ pub fn check_image_size(width: u32, height: u32) -> Result<()> {
 /// (the library names its fields: `texels_per_diagonal`, `lod columns`, ...); any other error as
 /// it is.
 pub fn flag_error(e: rbvh::Error) -> anyhow::Error {
-    const FLAGS: [(&str, &str); 8] = [
+    const FLAGS: [(&str, &str); 9] = [
         ("texels_per_diagonal", "--texels-per-diagonal"),
         ("max_angle_deg", "--max-angle"),
         ("min_ratio", "--min-area-ratio"),
         ("max_tile", "--max-tile"),
         ("min_leaf_texels", "--min-leaf-texels"),
+        ("sampled_criterion_texels", "--sampled-criterion-texels"),
         ("lod columns", "--lod-columns"),
         ("lod min leaves", "--lod-min-leaves"),
         ("lod bias", "--lod-bias"),
@@ -496,6 +497,10 @@ pub struct Quality {
     /// Free parameter: unrepresentable sets smaller than this many texels stay triangles.
     #[arg(long)]
     pub min_leaf_texels: Option<f32>,
+    /// Free parameter: sets of at most this many texels whose triangles fail the criterion are
+    /// judged on their surface as sampled (0: triangles only, the paper's rule; presets: 4).
+    #[arg(long)]
+    pub sampled_criterion_texels: Option<f32>,
     /// What each atlas texel holds: `normals` (height and normal, 4 bytes) or `height` (height
     /// alone, 2 bytes: facet normals, no colours, no levels of detail); comma-separate both to
     /// build each level in each (a height-only level is named with an `h`, e.g. Q2h).
@@ -528,6 +533,7 @@ impl Quality {
             || self.no_object_split
             || self.max_tile.is_some()
             || self.min_leaf_texels.is_some()
+            || self.sampled_criterion_texels.is_some()
     }
 
     /// The texel formats asked for, each once, in the order given.
@@ -613,6 +619,9 @@ impl Quality {
                 }
                 if let Some(m) = self.min_leaf_texels {
                     p.min_leaf_texels = m;
+                }
+                if let Some(k) = self.sampled_criterion_texels {
+                    p.sampled_criterion_texels = k;
                 }
                 p.validate().map_err(flag_error)?;
                 let name = if self.is_custom() {
