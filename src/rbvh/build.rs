@@ -228,6 +228,9 @@ impl Rbvh {
 impl Builder<'_> {
     fn build(&self, order: &mut [u32], offset: u32, depth: u32) -> Node {
         let n = order.len();
+        let bounds = order
+            .iter()
+            .fold(Aabb::EMPTY, |b, &i| b.union(self.prims[i as usize].bounds));
         let first = &self.prims[order[0] as usize];
         let one_part = !self.params.object_split
             || order
@@ -235,7 +238,7 @@ impl Builder<'_> {
                 .all(|&i| self.prims[i as usize].component == first.component);
         if one_part {
             let tris: Vec<[Vec3; 3]> = order.iter().map(|&i| self.tris[i as usize]).collect();
-            if let Some(mut tiles) = self.heightfield(&tris) {
+            if let Some(mut tiles) = self.heightfield(&tris, bounds.diagonal()) {
                 for tile in &mut tiles {
                     tile.sources = if self.keep_sources {
                         let scene_index = |s: u32| order.get(s as usize).copied();
@@ -251,9 +254,6 @@ impl Builder<'_> {
                 return tiles_subtree(tiles);
             }
         }
-        let bounds = order
-            .iter()
-            .fold(Aabb::EMPTY, |b, &i| b.union(self.prims[i as usize].bounds));
         let small = bounds.diagonal() < self.params.min_leaf_texels * self.texel;
         if n == 1 || (n <= MAX_TRIANGLE_LEAF && small) {
             self.progress.advance(n as u64);
@@ -278,17 +278,13 @@ impl Builder<'_> {
         Node::Inner(Box::new([a, b]))
     }
 
-    /// The tiles of `tris` as one height field, or None when they are not representable.
-    fn heightfield(&self, tris: &[[Vec3; 3]]) -> Option<Vec<Tile>> {
+    /// The tiles of `tris` (whose box diagonal is `diagonal`) as one height field, or None when
+    /// they are not representable.
+    fn heightfield(&self, tris: &[[Vec3; 3]], diagonal: f32) -> Option<Vec<Tile>> {
         let w = projection_axis(tris)?;
         let triangles_pass = passes(self.params.refinement, tris, w);
-        if !triangles_pass {
-            let bounds = tris
-                .iter()
-                .fold(Aabb::EMPTY, |b, t| b.union(Aabb::from_points(*t)));
-            if bounds.diagonal() > self.params.sampled_criterion_texels * self.texel {
-                return None;
-            }
+        if !triangles_pass && diagonal > self.params.sampled_criterion_texels * self.texel {
+            return None;
         }
         // Triangles that fail the criterion get a second hearing on their surface as sampled.
         let judge = (!triangles_pass).then_some(self.params.refinement);

@@ -197,6 +197,27 @@ impl SampleGrid {
     }
 }
 
+/// The surface of one cell from its corners in cycle order c00, c10, c11, c01 (`None` for a
+/// hole): with all four, the triangles (c00, c10, c11) and (c00, c11, c01); with one hole, the
+/// triangle of the other three in that cycle (so the winding stays the quad's); with two or more,
+/// none. The march (`march.rs`, steps 4–5, and `glsl/rbvh.glsl`) inlines this choice for speed;
+/// everything else that needs a cell's triangles takes them from here.
+pub(crate) fn cell_triangles<T: Copy>(corners: [Option<T>; 4]) -> impl Iterator<Item = [T; 3]> {
+    let mut present = corners.into_iter().flatten();
+    let first_four = [
+        present.next(),
+        present.next(),
+        present.next(),
+        present.next(),
+    ];
+    let triangles = match first_four {
+        [Some(a), Some(b), Some(c), Some(d)] => [Some([a, b, c]), Some([a, c, d])],
+        [Some(a), Some(b), Some(c), None] => [Some([a, b, c]), None],
+        _ => [None, None],
+    };
+    triangles.into_iter().flatten()
+}
+
 /// 8:8 octahedral encoding of a unit vector.
 pub fn encode_octahedral(n: Vec3) -> u16 {
     let n = n / (n.x.abs() + n.y.abs() + n.z.abs()).max(f32::MIN_POSITIVE);
@@ -262,6 +283,22 @@ mod tests {
                 "{n}"
             );
         }
+    }
+
+    #[test]
+    fn a_cell_is_two_triangles_one_with_a_hole_none_with_two() {
+        let all: Vec<[u8; 3]> = cell_triangles([Some(0), Some(1), Some(2), Some(3)]).collect();
+        assert_eq!(all, [[0, 1, 2], [0, 2, 3]]);
+        // One hole: the other three in cycle order, wherever the hole is.
+        for hole in 0..4 {
+            let mut corners = [Some(0u8), Some(1), Some(2), Some(3)];
+            corners[hole] = None;
+            let kept: Vec<u8> = (0..4).filter(|&k| k != hole as u8).collect();
+            let tris: Vec<[u8; 3]> = cell_triangles(corners).collect();
+            assert_eq!(tris, [[kept[0], kept[1], kept[2]]], "hole {hole}");
+        }
+        assert_eq!(cell_triangles([Some(0), None, Some(2), None]).count(), 0);
+        assert_eq!(cell_triangles::<u8>([None; 4]).count(), 0);
     }
 
     #[test]

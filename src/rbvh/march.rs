@@ -868,6 +868,7 @@ impl Cells<'_> {
 mod tests {
     use super::*;
     use crate::bvh::{GpuNode, GpuTriangle};
+    use crate::rbvh::layout::cell_triangles;
     use crate::rbvh::{RbvhParams, RbvhStats};
 
     /// World size of one texel in the test leaves.
@@ -1496,16 +1497,7 @@ mod tests {
                     vertex(i + 1, j + 1),
                     vertex(i, j + 1),
                 ];
-                let present: Vec<Vec3> = c.iter().flatten().copied().collect();
-                let tris = match present.len() {
-                    4 => vec![
-                        [present[0], present[1], present[2]],
-                        [present[0], present[2], present[3]],
-                    ],
-                    3 => vec![[present[0], present[1], present[2]]],
-                    _ => vec![],
-                };
-                for [a, b, c] in tris {
+                for [a, b, c] in cell_triangles(c) {
                     if let Some(t) = intersect_triangle(&shear, a, b, c, frame.tmin, frame.tmax) {
                         best = Some(best.map_or(t, |x| x.min(t)));
                     }

@@ -47,7 +47,7 @@
 
 use glam::{DVec2, DVec3, Vec3};
 
-use super::layout::{GpuHeightfield, Texel};
+use super::layout::{cell_triangles, GpuHeightfield, Texel};
 use super::Refinement;
 use crate::geom::Aabb;
 
@@ -276,8 +276,7 @@ pub fn rasterize(
 /// Step 3's judgement: whether the surface as sampled (`height`, world units along `w`, where
 /// `source` is not [`NONE`]) passes `refinement`. Sample `(i, j)` is the point
 /// `(i·texel, j·texel, height)`; each cell contributes the march's triangles over its written
-/// corners (c00, c10, c11 and c00, c11, c01; with one corner missing, the other three in that
-/// cycle), each judged by its normal's `w` component.
+/// corners ([`cell_triangles`]), each judged by its normal's `w` component.
 fn sampled_passes(
     refinement: Refinement,
     height: &[f32],
@@ -304,17 +303,7 @@ fn sampled_passes(
                 point(i + 1, j + 1),
                 point(i, j + 1),
             ];
-            let written: Vec<DVec3> = corners.iter().flatten().copied().collect();
-            let triangles = match written.len() {
-                4 => [
-                    [written[0], written[1], written[2]],
-                    [written[0], written[2], written[3]],
-                ]
-                .to_vec(),
-                3 => vec![[written[0], written[1], written[2]]],
-                _ => Vec::new(),
-            };
-            for [a, b, c] in triangles {
+            for [a, b, c] in cell_triangles(corners) {
                 let n = (b - a).cross(c - a);
                 let len = n.length();
                 if len > 0.0 {
