@@ -7,6 +7,7 @@ use crate::bvh::Bvh;
 use crate::geom::{Hit, Ray};
 use crate::gpu::{Context, Tracer};
 use crate::lod::{Lod, RayCone};
+use crate::progress::{Progress, Quiet};
 use crate::rbvh::Rbvh;
 use crate::Result;
 
@@ -56,10 +57,16 @@ impl Structure {
 
     /// Uploads the structure with the crate's own trace shaders.
     pub fn tracer(&self, ctx: &Context) -> Result<Tracer> {
+        self.tracer_observed(ctx, &Quiet)
+    }
+
+    /// [`Structure::tracer`], reporting the upload to `progress` as one step counting bytes
+    /// (written in 64 MiB steps, so a structure of gigabytes shows a moving bar).
+    pub fn tracer_observed(&self, ctx: &Context, progress: &dyn Progress) -> Result<Tracer> {
         match self {
-            Structure::Exact(bvh) => Tracer::exact(ctx, bvh),
-            Structure::Rbvh(rbvh) => Tracer::rbvh(ctx, rbvh),
-            Structure::RbvhLod(rbvh, lod) => Tracer::rbvh_lod(ctx, rbvh, lod),
+            Structure::Exact(bvh) => Tracer::exact_observed(ctx, bvh, progress),
+            Structure::Rbvh(rbvh) => Tracer::rbvh_observed(ctx, rbvh, progress),
+            Structure::RbvhLod(rbvh, lod) => Tracer::rbvh_lod_observed(ctx, rbvh, lod, progress),
         }
     }
 

@@ -163,3 +163,70 @@ fn a_watched_trace_counts_its_rays_in_batches_and_answers_as_an_unwatched_one() 
         .trace_observed(&rays, None, Query::Closest, false, &tally)
         .is_err());
 }
+
+/// An upload is one counted step of the structure's bytes on the device (an RBVH's atlas with
+/// its blocks' height ranges), and the uploaded structure traces as the unwatched one does.
+#[test]
+fn an_upload_counts_the_bytes_of_every_array() {
+    use rbvh::structure::Structure;
+
+    let ctx = common::context();
+    let scene = Scene::load("sphere").unwrap();
+    let rays = scene.camera_or_framed(1.0).primary_rays(64, 64);
+    let bvh = Bvh::build(&scene).unwrap();
+    let rbvh = Rbvh::build(&scene, &RbvhParams::quality(1).unwrap()).unwrap();
+    let lod = Lod::build(&rbvh, &LodParams::default()).unwrap();
+    let rbvh_bytes =
+        rbvh.tree_bytes() + rbvh.triangle_bytes() + 4 * rbvh.atlas_words().len() as u64;
+    let exact_bytes = bvh.tree_bytes() + bvh.triangle_bytes();
+    let cases = [
+        (Structure::Exact(bvh), exact_bytes),
+        (Structure::Rbvh(Box::new(rbvh.clone())), rbvh_bytes),
+    ];
+    for (structure, bytes) in cases {
+        let tally = Tally::default();
+        let watched = structure.tracer_observed(&ctx, &tally).unwrap();
+        assert_eq!(
+            tally.counted(),
+            [format!("uploading the structure (bytes) {bytes}")],
+            "{}",
+            structure.label()
+        );
+        let plain = structure.tracer(&ctx).unwrap();
+        assert_eq!(
+            watched.trace(&rays, Query::Closest).unwrap().hits,
+            plain.trace(&rays, Query::Closest).unwrap().hits
+        );
+    }
+    // With levels of detail the nodes carry their columns and the columns are uploaded too: more
+    // bytes, all of them counted (Tally checks that the advances add up to the total).
+    let tally = Tally::default();
+    Structure::RbvhLod(Box::new(rbvh), Box::new(lod))
+        .tracer_observed(&ctx, &tally)
+        .unwrap();
+    let counted = tally.counted();
+    assert_eq!(counted.len(), 1, "{counted:?}");
+    let total: u64 = counted[0].rsplit(' ').next().unwrap().parse().unwrap();
+    assert!(total > rbvh_bytes, "{counted:?}");
+}
+
+/// Uploads are written in 64 MiB steps: an array of more than one step (its last one partial)
+/// reads back whole, and a write larger than its buffer is an error, not a panic.
+#[test]
+fn an_upload_of_several_steps_reads_back_whole() {
+    let ctx = common::context();
+    let words: Vec<u32> = (0..(64u32 << 20) / 4 + 1003)
+        .map(|k| k.wrapping_mul(0x9E37_79B9))
+        .collect();
+    let mut buffer = ctx.upload_storage("several steps", &words).unwrap();
+    assert_eq!(ctx.read::<u32>(&mut buffer).unwrap(), words);
+    let mut small = ctx.upload_storage("small", &[1u32, 2]).unwrap();
+    let err = ctx
+        .write(&mut small, bytemuck::cast_slice(&[1u32, 2, 3]))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("12 bytes do not fit the 8-byte buffer small"),
+        "{err}"
+    );
+}

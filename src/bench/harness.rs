@@ -278,7 +278,7 @@ impl<'a> SceneBench<'a> {
         let mut candidates = vec![Candidate {
             method: Method::Exact,
             level: None,
-            tracer: Tracer::exact(ctx, &bvh)?,
+            tracer: Tracer::exact_observed(ctx, &bvh, progress)?,
             twin: Twin::Exact,
             build_ms: bvh.build_ms,
             memory: Memory {
@@ -317,7 +317,10 @@ impl<'a> SceneBench<'a> {
             candidates.push(Candidate {
                 method: Method::Rbvh,
                 level: Some((*level, params)),
-                tracer: with_jumps(Tracer::rbvh(ctx, &rbvh)?, config.block_jumps)?,
+                tracer: with_jumps(
+                    Tracer::rbvh_observed(ctx, &rbvh, progress)?,
+                    config.block_jumps,
+                )?,
                 twin: Twin::Rbvh(Arc::clone(&rbvh)),
                 build_ms: rbvh.stats.build_ms,
                 memory,
@@ -334,7 +337,10 @@ impl<'a> SceneBench<'a> {
                 candidates.push(Candidate {
                     method: Method::RbvhLod,
                     level: Some((*level, params)),
-                    tracer: with_jumps(Tracer::rbvh_lod(ctx, &rbvh, &lod)?, config.block_jumps)?,
+                    tracer: with_jumps(
+                        Tracer::rbvh_lod_observed(ctx, &rbvh, &lod, progress)?,
+                        config.block_jumps,
+                    )?,
                     build_ms: rbvh.stats.build_ms + lod.stats.build_ms,
                     memory: Memory {
                         tree: memory.tree + lod.bytes(),

@@ -23,7 +23,7 @@ use crate::geom::{Hit, Ray};
 use crate::lod::cone::check_cones;
 use crate::lod::{Lod, RayCone};
 use crate::probe::RayCounters;
-use crate::progress::{step, Progress};
+use crate::progress::{step, Progress, Quiet};
 use crate::rbvh::{Rbvh, TexelFormat};
 use crate::{Error, Result};
 
@@ -333,6 +333,15 @@ const PER_TRACE_BUFFERS: u32 = 4;
 impl Tracer {
     /// Uploads the exact BVH: nodes and triangles, reached as [`Context::reach`] decides.
     pub fn exact(ctx: &Context, bvh: &Bvh) -> Result<Self> {
+        Self::exact_observed(ctx, bvh, &Quiet)
+    }
+
+    /// [`Tracer::exact`], counting the bytes uploaded on `progress`.
+    pub(crate) fn exact_observed(
+        ctx: &Context,
+        bvh: &Bvh,
+        progress: &dyn Progress,
+    ) -> Result<Self> {
         check_depth("bvh", bvh.depth)?;
         let (sizes, arrays) = exact_parts(bvh);
         Self::uploaded(
@@ -342,15 +351,26 @@ impl Tracer {
             None,
             &arrays,
             sizes,
+            progress,
         )
     }
 
     /// Uploads an RBVH: nodes, triangle-leaf triangles, height-field leaves and the atlas.
     pub fn rbvh(ctx: &Context, rbvh: &Rbvh) -> Result<Self> {
+        Self::rbvh_observed(ctx, rbvh, &Quiet)
+    }
+
+    /// [`Tracer::rbvh`], counting the bytes uploaded on `progress`.
+    pub(crate) fn rbvh_observed(
+        ctx: &Context,
+        rbvh: &Rbvh,
+        progress: &dyn Progress,
+    ) -> Result<Self> {
         check_depth("rbvh", rbvh.depth)?;
         let words = rbvh.atlas_words();
         let (sizes, arrays) = rbvh_parts(rbvh, &words)?;
-        Self::uploaded(ctx, Kind::Rbvh, rbvh.params.texels, None, &arrays, sizes)
+        let texels = rbvh.params.texels;
+        Self::uploaded(ctx, Kind::Rbvh, texels, None, &arrays, sizes, progress)
     }
 
     /// As [`Tracer::rbvh`], with another build of `trace_rbvh.comp` (same bindings and push
@@ -367,12 +387,23 @@ impl Tracer {
             Some(spirv),
             &arrays,
             sizes,
+            &Quiet,
         )
     }
 
     /// Uploads an RBVH with its levels of detail (`lod`, built for it by [`Lod::build`]): traces
     /// then take one [`RayCone`] per ray ([`Tracer::trace_lod`]).
     pub fn rbvh_lod(ctx: &Context, rbvh: &Rbvh, lod: &Lod) -> Result<Self> {
+        Self::rbvh_lod_observed(ctx, rbvh, lod, &Quiet)
+    }
+
+    /// [`Tracer::rbvh_lod`], counting the bytes uploaded on `progress`.
+    pub(crate) fn rbvh_lod_observed(
+        ctx: &Context,
+        rbvh: &Rbvh,
+        lod: &Lod,
+        progress: &dyn Progress,
+    ) -> Result<Self> {
         check_depth("rbvh", rbvh.depth)?;
         let nodes = lod.annotated_nodes(rbvh);
         let words = rbvh.atlas_words();
@@ -384,6 +415,7 @@ impl Tracer {
             None,
             &arrays,
             sizes,
+            progress,
         )
     }
 
@@ -482,8 +514,9 @@ impl Tracer {
         Ok(())
     }
 
-    /// Uploads `arrays` (every one checked before the first is uploaded) and makes the pipeline;
-    /// `spirv` replaces the bindings build of the kind's shader.
+    /// Uploads `arrays` (every one checked before the first is uploaded) as one step of
+    /// `progress` counting their bytes, and makes the pipeline; `spirv` replaces the bindings
+    /// build of the kind's shader.
     fn uploaded(
         ctx: &Context,
         kind: Kind,
@@ -491,6 +524,7 @@ impl Tracer {
         spirv: Option<&[u8]>,
         arrays: &[(&str, &[u8])],
         sizes: TraceParams,
+        progress: &dyn Progress,
     ) -> Result<Self> {
         let reach = reach_of(ctx, arrays)?;
         let spirv =
@@ -503,10 +537,13 @@ impl Tracer {
                      through device addresses",
                 )),
             };
-        let structure = arrays
-            .iter()
-            .map(|(array, bytes)| ctx.upload_unchecked(array, bytes).map(Arc::new))
-            .collect::<Result<Vec<_>>>()?;
+        let total = arrays.iter().map(|(_, bytes)| bytes.len() as u64).sum();
+        let structure = step(progress, "uploading the structure (bytes)", total, || {
+            arrays
+                .iter()
+                .map(|(array, bytes)| ctx.upload_observed(array, bytes, progress).map(Arc::new))
+                .collect::<Result<Vec<_>>>()
+        })?;
         Self::new(ctx, kind, texels, reach, spirv, structure, sizes)
     }
 

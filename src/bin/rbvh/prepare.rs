@@ -178,13 +178,13 @@ pub struct Prepared {
 }
 
 impl Prepared {
-    /// The structure uploaded, with its levels of detail when there are any.
-    /// Says so on stderr when the structure is too large for storage-buffer bindings and is read
-    /// through buffer device addresses instead.
-    pub fn tracer(&self) -> Result<Tracer> {
+    /// The structure uploaded, with its levels of detail when there are any, its bytes counted
+    /// on `progress`. Says so on stderr when the structure is too large for storage-buffer
+    /// bindings and is read through buffer device addresses instead.
+    pub fn tracer(&self, progress: &dyn rbvh::progress::Progress) -> Result<Tracer> {
         let tracer = self
             .structure
-            .tracer(&self.ctx)
+            .tracer_observed(&self.ctx, progress)
             .with_context(|| format!("uploading the {}", self.structure.label()))?;
         if tracer.reach() == Reach::DeviceAddresses && self.ctx.addressing() == Addressing::Auto {
             eprintln!(

@@ -127,7 +127,7 @@ pub fn run(a: Args) -> Result<()> {
     let p = prepare(&a.common)?;
     let camera = p.scene.camera_or_framed(a.width as f32 / a.height as f32);
     let rays = camera.primary_rays(a.width, a.height);
-    let tracer = step("uploading", |_| p.tracer())?;
+    let tracer = step("uploading", |bar| p.tracer(bar))?;
     let cone = RayCone::pixel(&camera, a.height);
     let cones = || vec![cone; rays.len()];
     let traced = step("tracing", |bar| {

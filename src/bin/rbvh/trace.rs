@@ -55,7 +55,7 @@ pub fn run(a: Args) -> Result<()> {
     let hits = if a.cpu {
         p.trace_cpu(&rays, &cones, a.any_hit)?
     } else {
-        let tracer = p.tracer()?;
+        let tracer = step("uploading", |bar| p.tracer(bar))?;
         let traced = step("tracing", |bar| {
             p.trace(&tracer, &rays, || cones.clone(), query, false, bar)
         })?;
