@@ -101,7 +101,9 @@ const HEIGHT_ONLY_CONSTANT_ID: u32 = 2;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Kind {
     Exact,
-    Rbvh,
+    /// An RBVH, whose atlas holds texels of this format (the shader is specialised for it).
+    Rbvh(TexelFormat),
+    /// An RBVH with levels of detail (always built with normal texels).
     RbvhLod,
 }
 
@@ -109,7 +111,7 @@ impl Kind {
     fn name(self) -> &'static str {
         match self {
             Kind::Exact => "trace_exact",
-            Kind::Rbvh => "trace_rbvh",
+            Kind::Rbvh(_) => "trace_rbvh",
             Kind::RbvhLod => "trace_rbvh_lod",
         }
     }
@@ -118,8 +120,8 @@ impl Kind {
         match (self, reach) {
             (Kind::Exact, Reach::Bindings) => shaders::TRACE_EXACT,
             (Kind::Exact, Reach::DeviceAddresses) => shaders::TRACE_EXACT_BDA,
-            (Kind::Rbvh, Reach::Bindings) => shaders::TRACE_RBVH,
-            (Kind::Rbvh, Reach::DeviceAddresses) => shaders::TRACE_RBVH_BDA,
+            (Kind::Rbvh(_), Reach::Bindings) => shaders::TRACE_RBVH,
+            (Kind::Rbvh(_), Reach::DeviceAddresses) => shaders::TRACE_RBVH_BDA,
             (Kind::RbvhLod, Reach::Bindings) => shaders::TRACE_RBVH_LOD,
             (Kind::RbvhLod, Reach::DeviceAddresses) => shaders::TRACE_RBVH_LOD_BDA,
         }
@@ -129,7 +131,7 @@ impl Kind {
     fn leading_arrays(self) -> u32 {
         match self {
             Kind::Exact => 2,
-            Kind::Rbvh | Kind::RbvhLod => 4,
+            Kind::Rbvh(_) | Kind::RbvhLod => 4,
         }
     }
 
@@ -153,22 +155,22 @@ impl Kind {
 }
 
 /// The trace pipeline of `kind`'s shader `spirv`, specialised: `rbvh_count` to `counting` (the
-/// pipeline that counts each ray's work; the timed one compiles the counting away) and, for the
-/// RBVH kinds, `rbvh_block_jumps` to `block_jumps`.
+/// pipeline that counts each ray's work; the timed one compiles the counting away), for the
+/// RBVH kinds `rbvh_block_jumps` to `block_jumps`, and for a plain RBVH `rbvh_height_only` to
+/// its texel format.
 fn make_pipeline(
     ctx: &Context,
     kind: Kind,
     reach: Reach,
     spirv: &[u8],
     block_jumps: bool,
-    texels: TexelFormat,
     counting: bool,
 ) -> Result<ComputePipeline> {
     let mut constants = vec![(COUNT_CONSTANT_ID, u32::from(counting))];
     if kind != Kind::Exact {
         constants.push((JUMPS_CONSTANT_ID, u32::from(block_jumps)));
     }
-    if kind == Kind::Rbvh {
+    if let Kind::Rbvh(texels) = kind {
         constants.push((
             HEIGHT_ONLY_CONSTANT_ID,
             u32::from(texels == TexelFormat::Height),
@@ -201,8 +203,6 @@ pub struct Tracer {
     counting: OnceLock<ComputePipeline>,
     /// Whether the RBVH march jumps over blocks the ray passes above or below.
     block_jumps: bool,
-    /// What the atlas texels hold ([`TexelFormat::HeightNormal`] but for a height-only RBVH).
-    texels: TexelFormat,
     /// The structure's leading arrays, in the shader's binding order (shared: a [`super::Painter`]
     /// may paint with the RBVH's atlas).
     structure: Vec<Arc<Buffer>>,
@@ -344,15 +344,7 @@ impl Tracer {
     ) -> Result<Self> {
         check_depth("bvh", bvh.depth)?;
         let (sizes, arrays) = exact_parts(bvh);
-        Self::uploaded(
-            ctx,
-            Kind::Exact,
-            TexelFormat::HeightNormal,
-            None,
-            &arrays,
-            sizes,
-            progress,
-        )
+        Self::uploaded(ctx, Kind::Exact, None, &arrays, sizes, progress)
     }
 
     /// Uploads an RBVH: nodes, triangle-leaf triangles, height-field leaves and the atlas.
@@ -369,8 +361,8 @@ impl Tracer {
         check_depth("rbvh", rbvh.depth)?;
         let words = rbvh.atlas_words();
         let (sizes, arrays) = rbvh_parts(rbvh, &words)?;
-        let texels = rbvh.params.texels;
-        Self::uploaded(ctx, Kind::Rbvh, texels, None, &arrays, sizes, progress)
+        let kind = Kind::Rbvh(rbvh.params.texels);
+        Self::uploaded(ctx, kind, None, &arrays, sizes, progress)
     }
 
     /// As [`Tracer::rbvh`], with another build of `trace_rbvh.comp` (same bindings and push
@@ -382,8 +374,7 @@ impl Tracer {
         let (sizes, arrays) = rbvh_parts(rbvh, &words)?;
         Self::uploaded(
             ctx,
-            Kind::Rbvh,
-            rbvh.params.texels,
+            Kind::Rbvh(rbvh.params.texels),
             Some(spirv),
             &arrays,
             sizes,
@@ -408,15 +399,7 @@ impl Tracer {
         let nodes = lod.annotated_nodes(rbvh);
         let words = rbvh.atlas_words();
         let (sizes, arrays) = lod_parts(rbvh, &words, lod, &nodes)?;
-        Self::uploaded(
-            ctx,
-            Kind::RbvhLod,
-            TexelFormat::HeightNormal,
-            None,
-            &arrays,
-            sizes,
-            progress,
-        )
+        Self::uploaded(ctx, Kind::RbvhLod, None, &arrays, sizes, progress)
     }
 
     /// Embedded use: uploads the exact BVH with the context's (the engine's) allocator, *recording*
@@ -425,14 +408,7 @@ impl Tracer {
     pub fn record_exact(ctx: &Context, bvh: &Bvh, cmd: vk::CommandBuffer) -> Result<Self> {
         check_depth("bvh", bvh.depth)?;
         let (sizes, arrays) = exact_parts(bvh);
-        Self::recorded(
-            ctx,
-            Kind::Exact,
-            TexelFormat::HeightNormal,
-            &arrays,
-            sizes,
-            cmd,
-        )
+        Self::recorded(ctx, Kind::Exact, &arrays, sizes, cmd)
     }
 
     /// Embedded use: as [`Tracer::record_exact`], for an RBVH.
@@ -440,7 +416,8 @@ impl Tracer {
         check_depth("rbvh", rbvh.depth)?;
         let words = rbvh.atlas_words();
         let (sizes, arrays) = rbvh_parts(rbvh, &words)?;
-        Self::recorded(ctx, Kind::Rbvh, rbvh.params.texels, &arrays, sizes, cmd)
+        let kind = Kind::Rbvh(rbvh.params.texels);
+        Self::recorded(ctx, kind, &arrays, sizes, cmd)
     }
 
     /// Embedded use: as [`Tracer::record_exact`], for an RBVH with its levels of detail; bind the
@@ -455,14 +432,7 @@ impl Tracer {
         let nodes = lod.annotated_nodes(rbvh);
         let words = rbvh.atlas_words();
         let (sizes, arrays) = lod_parts(rbvh, &words, lod, &nodes)?;
-        Self::recorded(
-            ctx,
-            Kind::RbvhLod,
-            TexelFormat::HeightNormal,
-            &arrays,
-            sizes,
-            cmd,
-        )
+        Self::recorded(ctx, Kind::RbvhLod, &arrays, sizes, cmd)
     }
 
     /// How the structure's arrays reach the shader: bound, or through device addresses (when one
@@ -500,15 +470,7 @@ impl Tracer {
                 "the exact BVH has no march to jump in",
             ));
         }
-        self.pipeline = make_pipeline(
-            &self.ctx,
-            self.kind,
-            self.reach,
-            &self.spirv,
-            on,
-            self.texels,
-            false,
-        )?;
+        self.pipeline = make_pipeline(&self.ctx, self.kind, self.reach, &self.spirv, on, false)?;
         self.block_jumps = on;
         self.counting = OnceLock::new();
         Ok(())
@@ -520,7 +482,6 @@ impl Tracer {
     fn uploaded(
         ctx: &Context,
         kind: Kind,
-        texels: TexelFormat,
         spirv: Option<&[u8]>,
         arrays: &[(&str, &[u8])],
         sizes: TraceParams,
@@ -544,13 +505,12 @@ impl Tracer {
                 .map(|(array, bytes)| ctx.upload_observed(array, bytes, progress).map(Arc::new))
                 .collect::<Result<Vec<_>>>()
         })?;
-        Self::new(ctx, kind, texels, reach, spirv, structure, sizes)
+        Self::new(ctx, kind, reach, spirv, structure, sizes)
     }
 
     fn recorded(
         ctx: &Context,
         kind: Kind,
-        texels: TexelFormat,
         arrays: &[(&str, &[u8])],
         sizes: TraceParams,
         cmd: vk::CommandBuffer,
@@ -567,7 +527,7 @@ impl Tracer {
             ctx.record_transfer_to_compute(cmd);
         }
         let spirv = Cow::Borrowed(kind.spirv(reach));
-        let mut tracer = Self::new(ctx, kind, texels, reach, spirv, structure, sizes)?;
+        let mut tracer = Self::new(ctx, kind, reach, spirv, structure, sizes)?;
         tracer.staging = staging;
         Ok(tracer)
     }
@@ -677,7 +637,6 @@ impl Tracer {
     fn new(
         ctx: &Context,
         kind: Kind,
-        texels: TexelFormat,
         reach: Reach,
         spirv: Cow<'static, [u8]>,
         mut structure: Vec<Arc<Buffer>>,
@@ -702,12 +661,11 @@ impl Tracer {
             None
         };
         let block_jumps = kind != Kind::Exact && !ctx.limits().cpu;
-        let pipeline = make_pipeline(ctx, kind, reach, &spirv, block_jumps, texels, false)?;
+        let pipeline = make_pipeline(ctx, kind, reach, &spirv, block_jumps, false)?;
         Ok(Tracer {
             ctx: ctx.clone(),
             reach,
             kind,
-            texels,
             pipeline,
             spirv,
             counting: OnceLock::new(),
@@ -730,7 +688,6 @@ impl Tracer {
             self.reach,
             &self.spirv,
             self.block_jumps,
-            self.texels,
             true,
         )?;
         Ok(self.counting.get_or_init(|| pipeline))
