@@ -8,8 +8,10 @@
 //! Data flows one way, and the modules follow it:
 //!
 //! ```text
+//! points (PLY / XYZ readers; normals and spacing estimated from nearest neighbours)
+//!   → scene (load / built-in / camera; points sampled from triangles)
 //! scene (load / built-in / camera) → bvh  (exact: build, GPU layout, CPU reference tracer)
-//!                                  → rbvh (build, raster, atlas, GPU layout, CPU reference caster)
+//!                                  → rbvh (build, raster or splat, atlas, GPU layout, CPU caster)
 //!                                       → lod (coarse column grids at inner nodes, ray cones)
 //!                                       → surface (colour channel, hit → texel, painting)
 //!        → gpu (Vulkan context, own or embedded; uploads, pipelines, tracer, painter)
@@ -79,6 +81,7 @@ pub mod ibl;
 pub mod io;
 pub mod lod;
 pub mod output;
+pub mod points;
 pub mod preview;
 pub mod probe;
 pub mod progress;

@@ -6,8 +6,7 @@
 
 use glam::Vec4;
 
-use crate::scene::texture::linear;
-use crate::srgb::encode_u8 as srgb_u8;
+use crate::srgb::{decode_rgba8, encode_u8 as srgb_u8};
 
 /// Linear RGBA (each clamped to `[0, 1]`, NaN as 0) → packed RGBA8.
 pub fn pack(rgba: Vec4) -> u32 {
@@ -26,7 +25,7 @@ pub fn pack(rgba: Vec4) -> u32 {
 
 /// Packed RGBA8 → linear RGBA.
 pub fn unpack(word: u32) -> Vec4 {
-    linear(word.to_le_bytes())
+    decode_rgba8(word.to_le_bytes())
 }
 
 /// `src` composited over `dst` (Porter & Duff, "Compositing Digital Images", SIGGRAPH 1984), per

@@ -1,6 +1,10 @@
 //! The sRGB transfer function (IEC 61966-2-1), both ways: images are linear in memory, PNGs are
 //! sRGB-encoded, and colour maps are published as sRGB values.
 
+use std::sync::OnceLock;
+
+use glam::Vec4;
+
 /// Linear `[0, 1]` → sRGB-encoded `[0, 1]`. Out-of-range values are clamped, and NaN becomes 0,
 /// so that a stray invalid pixel shows as black instead of poisoning the conversion.
 pub(crate) fn encode(linear: f32) -> f32 {
@@ -34,6 +38,19 @@ pub(crate) fn decode(encoded: f32) -> f32 {
 pub(crate) fn encode_u8(linear: f32) -> u8 {
     // `encode` returns [0, 1], so the rounded product is in [0, 255].
     (encode(linear) * 255.0).round() as u8
+}
+
+/// An 8-bit sRGB-encoded RGB, linear alpha texel as linear RGBA: how textures (`scene`) and
+/// packed texel colours ([`crate::rgba`]) decode, through one table of the 256 codes.
+pub(crate) fn decode_rgba8(rgba: [u8; 4]) -> Vec4 {
+    static TABLE: OnceLock<[f32; 256]> = OnceLock::new();
+    let table = TABLE.get_or_init(|| std::array::from_fn(|c| decode(c as f32 / 255.0)));
+    Vec4::new(
+        table[rgba[0] as usize],
+        table[rgba[1] as usize],
+        table[rgba[2] as usize],
+        rgba[3] as f32 / 255.0,
+    )
 }
 
 #[cfg(test)]

@@ -163,6 +163,7 @@ fn empty_scene_and_empty_batch() {
         camera: None,
         light: None,
         surface: None,
+        points: None,
     };
     let bvh = Bvh::build(&empty).unwrap();
     let tracer = Tracer::exact(&ctx, &bvh).unwrap();

@@ -18,6 +18,7 @@ fn scene_from(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Scene {
         camera: None,
         light: None,
         surface: None,
+        points: None,
     }
 }
 

@@ -804,3 +804,89 @@ fn camera_flags_place_the_camera() {
         );
     }
 }
+
+/// A point cloud is a scene of its own: rendered and built through an RBVH of its points, refused
+/// by the exact BVH with the flag to use; `--points` builds a mesh's RBVH from points sampled on
+/// it, and `bench --points` measures them against the exact BVH of the mesh.
+#[test]
+fn point_clouds_render_build_and_bench() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/points/sphere.ply");
+    let png = dir.path().join("points.png");
+    let out = rbvh(&[
+        "render",
+        "--scene",
+        arg(&ply),
+        "--method",
+        "rbvh",
+        "--quality",
+        "0",
+        "--width",
+        "48",
+        "--height",
+        "48",
+        "--out",
+        arg(&png),
+        "--stats",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("200 points"), "{stderr}");
+    assert!(stderr.contains("no exact BVH to compare with"), "{stderr}");
+    assert!(png.exists());
+
+    let out = rbvh(&["render", "--scene", arg(&ply), "--out", arg(&png)]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("point cloud") && stderr.contains("--method rbvh"),
+        "{stderr}"
+    );
+
+    let out = rbvh(&[
+        "build",
+        "--scene",
+        "sphere",
+        "--points",
+        "20000",
+        "--quality",
+        "1",
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("built from 20000 points"), "{stdout}");
+    assert!(stdout.contains(" Q1 "), "{stdout}");
+
+    let out = rbvh(&[
+        "bench",
+        "--scene",
+        "sphere",
+        "--points",
+        "20000",
+        "--quality",
+        "0",
+        "--rays",
+        "primary",
+        "--width",
+        "32",
+        "--height",
+        "32",
+        "--runs",
+        "1",
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("sphere (20000 points)"), "{stdout}");
+
+    let out = rbvh(&["build", "--scene", "sphere", "--points", "0"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--points"));
+}

@@ -656,9 +656,17 @@ fn load_errors_say_what_and_where() {
         Err(Error::UnknownScene { .. })
     ));
     let dir = tempfile::tempdir().unwrap();
+    let e = load(&write(dir.path(), "model.stl", "solid\n")).unwrap_err();
+    assert!(
+        e.to_string().contains("model.stl")
+            && e.to_string().contains(".obj")
+            && e.to_string().contains(".ply"),
+        "{e}"
+    );
+    // A point cloud is a scene type of its own: its reader's errors name the file and line.
     let e = load(&write(dir.path(), "model.ply", "ply\n")).unwrap_err();
     assert!(
-        e.to_string().contains("model.ply") && e.to_string().contains(".obj"),
+        e.to_string().contains("model.ply:2") && e.to_string().contains("end_header"),
         "{e}"
     );
 }
@@ -799,5 +807,48 @@ fn devices_and_directories_are_refused_not_read_forever() {
     assert!(
         err.contains("/dev/zero") && err.contains("not a regular file"),
         "{err}"
+    );
+}
+
+/// A scene file places point clouds as it places meshes: transformed (normals turned with them,
+/// spacing scaled), two copies appended. Mixing point clouds with triangle meshes is refused at
+/// the entry that mixes them, since an RBVH is built from one or the other.
+#[test]
+fn scene_files_place_point_clouds_but_not_beside_meshes() {
+    let dir = tempfile::tempdir().unwrap();
+    let sphere =
+        std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/points/sphere.ply"))
+            .unwrap();
+    write(dir.path(), "sphere.ply", sphere);
+    let single = load(&dir.path().join("sphere.ply")).unwrap();
+    let one = single.points.as_ref().unwrap();
+    let scan = write(
+        dir.path(),
+        "scan.toml",
+        "[[mesh]]\npath = \"sphere.ply\"\n\n[[mesh]]\npath = \"sphere.ply\"\ntranslate = [3.0, 0.0, 0.0]\nscale = 2.0\nrotate = [0.0, 90.0, 0.0]\n",
+    );
+    let scene = load(&scan).unwrap();
+    assert_eq!(scene.triangle_count(), 0);
+    let cloud = scene.points.as_ref().unwrap();
+    assert_eq!(cloud.len(), 2 * one.len());
+    let n = one.len();
+    for i in 0..n {
+        // The second copy: still on its sphere (radius 2 about (3, 0, 0)), normals outward.
+        let p = cloud.positions[n + i] - Vec3::new(3.0, 0.0, 0.0);
+        assert!((p.length() - 2.0).abs() < 1e-3, "{p}");
+        assert!(cloud.normals[n + i].dot(p.normalize()) > 0.999);
+        assert!(
+            (cloud.spacing[n + i] - 2.0 * one.spacing[i]).abs() <= 1e-5 * one.spacing[i].max(1.0)
+        );
+    }
+    let mixed = write(
+        dir.path(),
+        "mixed.toml",
+        "[[mesh]]\nbuiltin = \"plane\"\n\n[[mesh]]\npath = \"sphere.ply\"\n",
+    );
+    let e = load(&mixed).unwrap_err().to_string();
+    assert!(
+        e.contains("mixed.toml:4") && e.contains("point cloud"),
+        "{e}"
     );
 }

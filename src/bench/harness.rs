@@ -105,10 +105,16 @@ pub fn run_observed(
     let measurements = config.scenes.len() * config.ray_types.len();
     let mut measurement = 0;
     for spec in &config.scenes {
-        let scene = {
+        let mut scene = {
             observe(Event::Progress(format!("{spec}: loading")));
             Scene::load_observed(spec, progress)?
         };
+        if let Some(count) = config.points {
+            observe(Event::Progress(format!("{spec}: sampling {count} points")));
+            scene.points = Some(scene.sample_points(count, config.seed)?);
+            // Every row says that its RBVHs are of points, not of the triangles.
+            scene.name = format!("{} ({count} points)", scene.name);
+        }
         let mut bench = SceneBench::new(&ctx, config, scene, observe, progress)?;
         for c in &bench.candidates {
             let (pipeline, statistics) = c.tracer.shader_statistics();
@@ -519,6 +525,7 @@ impl<'a> SceneBench<'a> {
             self.records.push(Record {
                 scene: name.clone(),
                 triangles: self.scene.triangle_count() as u64,
+                points: self.scene.point_count() as u64,
                 method: c.method,
                 quality: c.level.map(|(level, _)| level.name()),
                 params: c.level.map(|(_, params)| Params::from(&params)),

@@ -142,6 +142,11 @@ pub struct BenchConfig {
     /// Block jumps in the RBVH march on or off; None: the tracer's choice for the device
     /// ([`crate::gpu::Tracer::block_jumps`]).
     pub block_jumps: Option<bool>,
+    /// Build every RBVH level from this many points sampled over each scene's triangles
+    /// ([`crate::scene::Scene::sample_points`], seeded by `seed`), as from a scan of it, while
+    /// the exact BVH stays on the triangles: the referee of point-built RBVHs. None: RBVHs of the
+    /// triangles (or of a point-cloud scene's own points).
+    pub points: Option<usize>,
 }
 
 /// Longest timed run that may be asked for: ten seconds a run is already far past any need.
@@ -170,6 +175,7 @@ impl BenchConfig {
             traffic: false,
             texels: vec![TexelFormat::HeightNormal],
             block_jumps: None,
+            points: None,
         }
     }
 
@@ -215,6 +221,12 @@ impl BenchConfig {
         }
         if let Some(lod) = &self.lod {
             lod.validate()?;
+        }
+        if self.points == Some(0) {
+            return Err(Error::param(
+                "points",
+                "0 points to sample: give at least one",
+            ));
         }
         if self.plot_dir.is_some() && !self.ray_types.contains(&RayType::Primary) {
             return Err(Error::param(

@@ -131,6 +131,9 @@ pub struct Record {
     pub scene: String,
     /// Triangles in the scene.
     pub triangles: u64,
+    /// Points the scene's RBVHs were built from (a point cloud's, or sampled from the triangles
+    /// by [`BenchConfig::points`](super::BenchConfig::points)); 0: built from the triangles.
+    pub points: u64,
     /// Which structure traced the rays.
     pub method: Method,
     /// RBVH level, `"Q0"`…`"Q4"` or `"custom"` ([`Level::name`](super::Level::name)); None for
@@ -457,6 +460,7 @@ impl Record {
         Record {
             scene: String::new(),
             triangles: 0,
+            points: 0,
             method: Method::RbvhLod,
             quality: None,
             params: RbvhParams::quality(0).ok().as_ref().map(Params::from),

@@ -99,8 +99,8 @@ impl Bvh {
     /// Builds with explicit `params`. Fails with [`Error::InvalidParameter`] when `bins` is
     /// outside 2..=256, `max_leaf` outside 1..=64, `median_below_depth` leaves no room in
     /// [`STACK_SIZE`], the scene has 2^31 triangles or more, or the tree still comes out deeper
-    /// than the stack; with [`Error::InvalidGeometry`] from [`Scene::validate`] for a malformed
-    /// scene.
+    /// than the stack, or the scene is a point cloud without triangles; with
+    /// [`Error::InvalidGeometry`] from [`Scene::validate`] for a malformed scene.
     pub fn build_with(scene: &Scene, params: &BuildParams) -> Result<Bvh> {
         Self::build_observed(scene, params, &Quiet)
     }
@@ -137,6 +137,16 @@ impl Bvh {
             return Err(Error::param(
                 "scene",
                 format!("{} triangles exceed 2^31", scene.triangle_count()),
+            ));
+        }
+        if scene.triangle_count() == 0 && scene.points.is_some() {
+            return Err(Error::param(
+                "scene",
+                format!(
+                    "{} is a point cloud: it has no triangles for an exact BVH to trace; build an RBVH \
+                     of its points instead",
+                    scene.name
+                ),
             ));
         }
         let start = Instant::now();

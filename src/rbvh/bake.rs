@@ -82,9 +82,42 @@ pub(crate) fn bake(
         .par_iter()
         .map(|t| bake_tile(scene, surface, &mips, t))
         .collect();
+    place(tiles, &per_tile, bases, pitch, atlas_len)
+}
+
+/// [`bake`] for an RBVH of points, whose tiles carry point indices in `sources`: each texel
+/// takes the colour (packed as [`crate::rgba`]) of the point it samples, as a scan's colours are
+/// its samples of the surface's.
+pub(crate) fn point_colours(
+    colours: &[u32],
+    tiles: &[Tile],
+    bases: &[u32],
+    pitch: u32,
+    atlas_len: usize,
+) -> Vec<u32> {
+    let per_tile: Vec<Vec<u32>> = tiles
+        .iter()
+        .map(|t| {
+            t.sources
+                .iter()
+                .map(|&s| colours.get(s as usize).copied().unwrap_or(0))
+                .collect()
+        })
+        .collect();
+    place(tiles, &per_tile, bases, pitch, atlas_len)
+}
+
+/// The atlas-wide channel of `per_tile` row-major texel words, each tile's at its base.
+fn place(
+    tiles: &[Tile],
+    per_tile: &[Vec<u32>],
+    bases: &[u32],
+    pitch: u32,
+    atlas_len: usize,
+) -> Vec<u32> {
     let mut colours = vec![0u32; atlas_len];
     let pitch = pitch as usize;
-    for ((tile, &base), tile_colours) in tiles.iter().zip(bases).zip(&per_tile) {
+    for ((tile, &base), tile_colours) in tiles.iter().zip(bases).zip(per_tile) {
         let res_u = tile.frame.res_u as usize;
         if res_u == 0 {
             continue;

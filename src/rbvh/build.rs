@@ -18,6 +18,13 @@
 //! A set that is not representable and spans fewer than `min_leaf_texels` texels stays as
 //! triangles, traced exactly (the hybrid leaves).
 //!
+//! A scene with points ([`Scene::points`]) is built from them instead, by the same recursion: a
+//! point is an element of surface with a normal and the area its spacing gives it, so the
+//! criteria, frames and splits read it as they read a triangle, and leaves are splatted
+//! (`splat.rs`) instead of rasterized. Points have no exact leaf to fall back on: a set that is
+//! still not representable when it is a single point or smaller than `min_leaf_texels` is
+//! splatted regardless (a forced leaf), its error bounded by its size.
+//!
 //! Parallel with `rayon::join` over subtrees; every per-node computation is sequential and ordered,
 //! so the output is byte-identical for any thread count.
 
@@ -28,9 +35,10 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::atlas;
-use super::frame::{fit, passes, projection_axis, rounding_pad};
+use super::frame::{fit, passes, projection_axis, rounding_pad, triangle_elements};
 use super::layout::{Texel, HEIGHTFIELD_COUNT};
 use super::raster::{rasterize, Frame, Tile, NO_SOURCE};
+use super::splat::{splat, Splat};
 use super::split::{split, SplitPrim};
 use super::{Rbvh, RbvhParams, RbvhStats, TexelFormat};
 use crate::bvh::{join_halves, ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
@@ -55,9 +63,15 @@ enum Node {
     Triangles { start: u32, count: u32 },
 }
 
+/// What the leaves sample: the scene's triangles, or its points.
+enum Input<'a> {
+    Triangles(&'a [[Vec3; 3]]),
+    Points(&'a [Splat]),
+}
+
 struct Builder<'a> {
-    tris: &'a [[Vec3; 3]],
-    /// Keep [`Tile::sources`] (as scene triangle indices) for baking surface data.
+    input: Input<'a>,
+    /// Keep [`Tile::sources`] (as scene triangle or point indices) for the colour channel.
     keep_sources: bool,
     prims: &'a [SplitPrim],
     params: &'a RbvhParams,
@@ -81,10 +95,14 @@ impl Rbvh {
     ) -> Result<Rbvh> {
         params.validate()?;
         scene.validate()?;
-        if scene.triangle_count() >= LEAF_BIT as usize {
+        let points = scene.points.as_ref().map_or(0, |c| c.len());
+        if scene.triangle_count() >= LEAF_BIT as usize || points >= LEAF_BIT as usize {
             return Err(Error::param(
                 "scene",
-                format!("{} triangles exceed 2^31", scene.triangle_count()),
+                format!(
+                    "{} triangles and {points} points: each must stay below 2^31",
+                    scene.triangle_count()
+                ),
             ));
         }
         let start = Instant::now();
@@ -95,13 +113,31 @@ impl Rbvh {
         } else {
             1.0
         };
-        let tris: Vec<[Vec3; 3]> = (0..scene.triangle_count())
-            .map(|i| scene.triangle(i))
-            .collect();
-        let area: f64 = tris
-            .iter()
-            .map(|[a, b, c]| 0.5 * (*b - *a).cross(*c - *a).length() as f64)
-            .sum();
+        let tris: Vec<[Vec3; 3]>;
+        let splats: Vec<Splat>;
+        let (input, elements, area): (Input, &str, f64) = match &scene.points {
+            Some(cloud) => {
+                splats = (0..cloud.len())
+                    .map(|i| Splat {
+                        position: cloud.positions[i],
+                        normal: cloud.normals[i],
+                        spacing: cloud.spacing[i],
+                    })
+                    .collect();
+                let area = splats.iter().map(|p| f64::from(p.spacing).powi(2)).sum();
+                (Input::Points(&splats), "points", area)
+            }
+            None => {
+                tris = (0..scene.triangle_count())
+                    .map(|i| scene.triangle(i))
+                    .collect();
+                let area = tris
+                    .iter()
+                    .map(|[a, b, c]| 0.5 * (*b - *a).cross(*c - *a).length() as f64)
+                    .sum();
+                (Input::Triangles(&tris), "triangles", area)
+            }
+        };
         let estimate = area / (texel as f64 * texel as f64);
         if estimate > MAX_ESTIMATED_TEXELS {
             return Err(Error::param(
@@ -112,35 +148,56 @@ impl Rbvh {
                 ),
             ));
         }
-        let components = step(progress, "finding the scene's connected parts", 0, || {
-            connected_parts(scene)
-        });
-        let prims: Vec<SplitPrim> = tris
-            .iter()
-            .zip(&components)
-            .map(|(t, &component)| {
-                let bounds = Aabb::from_points(*t);
-                SplitPrim {
-                    bounds,
-                    centroid: bounds.center(),
-                    area: 0.5 * (t[1] - t[0]).cross(t[2] - t[0]).length(),
-                    component,
-                }
-            })
-            .collect();
+        let prims: Vec<SplitPrim> = match &input {
+            Input::Triangles(tris) => {
+                let components = step(progress, "finding the scene's connected parts", 0, || {
+                    connected_parts(scene)
+                });
+                tris.iter()
+                    .zip(&components)
+                    .map(|(t, &component)| {
+                        let bounds = Aabb::from_points(*t);
+                        SplitPrim {
+                            bounds,
+                            centroid: bounds.center(),
+                            area: 0.5 * (t[1] - t[0]).cross(t[2] - t[0]).length(),
+                            component,
+                        }
+                    })
+                    .collect()
+            }
+            // Points are not connected: a scan is one part, split by space alone.
+            Input::Points(points) => points
+                .iter()
+                .map(|p| SplitPrim {
+                    bounds: Aabb {
+                        min: p.position - p.reach(),
+                        max: p.position + p.reach(),
+                    },
+                    centroid: p.position,
+                    area: p.spacing * p.spacing,
+                    component: 0,
+                })
+                .collect(),
+        };
+        let keep_sources = match &input {
+            Input::Triangles(_) => scene.surface.is_some(),
+            Input::Points(_) => scene.points.as_ref().is_some_and(|c| c.colours.is_some()),
+        };
+        let count = prims.len();
         let builder = Builder {
-            tris: &tris,
-            keep_sources: scene.surface.is_some(),
+            input,
+            keep_sources,
             prims: &prims,
             params,
             texel,
             progress,
         };
-        let mut order: Vec<u32> = (0..tris.len() as u32).collect();
+        let mut order: Vec<u32> = (0..count as u32).collect();
         let root = step(
             progress,
-            "building the RBVH (triangles into leaves)",
-            tris.len() as u64,
+            &format!("building the RBVH ({elements} into leaves)"),
+            count as u64,
             || (!order.is_empty()).then(|| builder.build(&mut order, 0, 0)),
         );
 
@@ -187,19 +244,25 @@ impl Rbvh {
                 *t = Texel(u32::from(t.height_code()));
             }
         }
-        let surface = scene.surface.as_ref().filter(|_| !height_only);
-        let colours = surface.map(|surface| {
-            step(progress, "baking the colour channel", 0, || {
-                super::bake::bake(
-                    scene,
-                    surface,
-                    &out.tiles,
-                    &packing.bases,
-                    packing.pitch,
-                    atlas.texels.len(),
-                )
-            })
-        });
+        let (tiles, bases, pitch, len) = (
+            &out.tiles,
+            &packing.bases,
+            packing.pitch,
+            atlas.texels.len(),
+        );
+        let colours = match (&builder.input, &scene.points, &scene.surface) {
+            _ if height_only => None,
+            (Input::Points(_), Some(cloud), _) => cloud
+                .colours
+                .as_ref()
+                .map(|colours| super::bake::point_colours(colours, tiles, bases, pitch, len)),
+            (Input::Triangles(_), _, Some(surface)) => {
+                Some(step(progress, "baking the colour channel", 0, || {
+                    super::bake::bake(scene, surface, tiles, bases, pitch, len)
+                }))
+            }
+            _ => None,
+        };
         let stats = RbvhStats {
             build_ms: start.elapsed().as_secs_f64() * 1e3,
             heightfield_leaves: out.leaves.len() as u32,
@@ -237,30 +300,34 @@ impl Builder<'_> {
                 .iter()
                 .all(|&i| self.prims[i as usize].component == first.component);
         if one_part {
-            let tris: Vec<[Vec3; 3]> = order.iter().map(|&i| self.tris[i as usize]).collect();
-            if let Some(mut tiles) = self.heightfield(&tris, bounds.diagonal()) {
-                for tile in &mut tiles {
-                    tile.sources = if self.keep_sources {
-                        let scene_index = |s: u32| order.get(s as usize).copied();
-                        tile.sources
-                            .iter()
-                            .map(|&s| scene_index(s).unwrap_or(NO_SOURCE))
-                            .collect()
-                    } else {
-                        Vec::new()
-                    };
-                }
+            if let Some(tiles) = self.heightfield(order, bounds.diagonal()) {
                 self.progress.advance(n as u64);
-                return tiles_subtree(tiles);
+                return tiles_subtree(self.scene_sources(tiles, order));
             }
         }
         let small = bounds.diagonal() < self.params.min_leaf_texels * self.texel;
-        if n == 1 || (n <= MAX_TRIANGLE_LEAF && small) {
-            self.progress.advance(n as u64);
-            return Node::Triangles {
-                start: offset,
-                count: n as u32,
-            };
+        match self.input {
+            Input::Triangles(_) if n == 1 || (n <= MAX_TRIANGLE_LEAF && small) => {
+                self.progress.advance(n as u64);
+                return Node::Triangles {
+                    start: offset,
+                    count: n as u32,
+                };
+            }
+            Input::Points(points) if n == 1 || small => {
+                self.progress.advance(n as u64);
+                let tiles = self.forced_heightfield(points, order);
+                if tiles.is_empty() {
+                    // Unreachable for finite points (each marks the sample nearest to it); an
+                    // empty leaf keeps the tree whole if it were not.
+                    return Node::Triangles {
+                        start: offset,
+                        count: 0,
+                    };
+                }
+                return tiles_subtree(self.scene_sources(tiles, order));
+            }
+            _ => {}
         }
         let mid = split(
             self.prims,
@@ -278,27 +345,108 @@ impl Builder<'_> {
         Node::Inner(Box::new([a, b]))
     }
 
-    /// The tiles of `tris` (whose box diagonal is `diagonal`) as one height field, or None when
-    /// they are not representable.
-    fn heightfield(&self, tris: &[[Vec3; 3]], diagonal: f32) -> Option<Vec<Tile>> {
-        let w = projection_axis(tris)?;
-        let triangles_pass = passes(self.params.refinement, tris, w);
-        if !triangles_pass && diagonal > self.params.sampled_criterion_texels * self.texel {
+    /// `tiles` of the set `order` with their sources turned from indices into the set to scene
+    /// triangle or point indices, or dropped when no colour channel needs them.
+    fn scene_sources(&self, mut tiles: Vec<Tile>, order: &[u32]) -> Vec<Tile> {
+        for tile in &mut tiles {
+            tile.sources = if self.keep_sources {
+                let scene_index = |s: u32| order.get(s as usize).copied();
+                tile.sources
+                    .iter()
+                    .map(|&s| scene_index(s).unwrap_or(NO_SOURCE))
+                    .collect()
+            } else {
+                Vec::new()
+            };
+        }
+        tiles
+    }
+
+    /// The tiles of the set `order` (whose box diagonal is `diagonal`) as one height field, or
+    /// None when it is not representable.
+    fn heightfield(&self, order: &[u32], diagonal: f32) -> Option<Vec<Tile>> {
+        match self.input {
+            Input::Triangles(all) => {
+                let tris: Vec<[Vec3; 3]> = order.iter().map(|&i| all[i as usize]).collect();
+                let elements = triangle_elements(&tris);
+                let (frame, judge) =
+                    self.judged_frame(&elements, tris.as_flattened(), 0.0, diagonal)?;
+                // Layers closer than a texel are one surface at this sampling rate.
+                self.tiles(&frame, |window| rasterize(&tris, window, self.texel, judge))
+            }
+            Input::Points(all) => {
+                let points: Vec<Splat> = order.iter().map(|&i| all[i as usize]).collect();
+                let elements = point_elements(&points);
+                let positions: Vec<Vec3> = points.iter().map(|p| p.position).collect();
+                let reach = points.iter().map(Splat::reach).fold(0.0, f32::max);
+                let (frame, judge) = self.judged_frame(&elements, &positions, reach, diagonal)?;
+                self.tiles(&frame, |window| {
+                    splat(&points, window, self.texel, judge, false)
+                })
+            }
+        }
+    }
+
+    /// The frame of a set of surface `elements` (see `frame::triangle_elements`) with corner or
+    /// point `positions` reaching `margin` beyond them, and the criterion its samples must pass
+    /// (None: its elements passed already); None when it is not representable as one height field
+    /// at any sampling: no projection axis, or failing the criterion while larger than
+    /// `sampled_criterion_texels`.
+    fn judged_frame(
+        &self,
+        elements: &[Vec3],
+        positions: &[Vec3],
+        margin: f32,
+        diagonal: f32,
+    ) -> Option<(Frame, Option<super::Refinement>)> {
+        let w = projection_axis(elements)?;
+        let elements_pass = passes(self.params.refinement, elements, w);
+        if !elements_pass && diagonal > self.params.sampled_criterion_texels * self.texel {
             return None;
         }
-        // Triangles that fail the criterion get a second hearing on their surface as sampled.
-        let judge = (!triangles_pass).then_some(self.params.refinement);
-        let frame = fit(tris, w, self.texel);
+        // Elements that fail the criterion get a second hearing on their surface as sampled.
+        let judge = (!elements_pass).then_some(self.params.refinement);
+        Some((fit(positions, w, self.texel, margin), judge))
+    }
+
+    /// The covered tiles of `frame`'s windows (at most `max_tile` samples a side), each sampled
+    /// by `sample`; None when any window is not a height field, or none is covered.
+    fn tiles(&self, frame: &Frame, sample: impl Fn(&Frame) -> Option<Tile>) -> Option<Vec<Tile>> {
         let mut tiles = Vec::new();
-        for window in windows(&frame, self.params.max_tile) {
-            // Layers closer than a texel are one surface at this sampling rate.
-            let tile = rasterize(tris, &window, self.texel, judge)?;
+        for window in windows(frame, self.params.max_tile) {
+            let tile = sample(&window)?;
             if tile.covered > 0 {
                 tiles.push(tile);
             }
         }
         (!tiles.is_empty()).then_some(tiles)
     }
+
+    /// A forced leaf of the points `order` (see `splat.rs`): splatted along their area-weighted
+    /// normal (or the first point's, when their normals cancel), the nearest point winning where
+    /// they overlap.
+    fn forced_heightfield(&self, all: &[Splat], order: &[u32]) -> Vec<Tile> {
+        let points: Vec<Splat> = order.iter().map(|&i| all[i as usize]).collect();
+        let w = projection_axis(&point_elements(&points))
+            .or_else(|| points.first().map(|p| p.normal))
+            .unwrap_or(Vec3::Z);
+        let positions: Vec<Vec3> = points.iter().map(|p| p.position).collect();
+        let reach = points.iter().map(Splat::reach).fold(0.0, f32::max);
+        let frame = fit(&positions, w, self.texel, reach);
+        self.tiles(&frame, |window| {
+            splat(&points, window, self.texel, None, true)
+        })
+        .unwrap_or_default()
+    }
+}
+
+/// The surface elements of points (see `frame::triangle_elements`): each normal times the area
+/// its spacing stands for.
+fn point_elements(points: &[Splat]) -> Vec<Vec3> {
+    points
+        .iter()
+        .map(|p| p.normal * (p.spacing * p.spacing))
+        .collect()
 }
 
 /// Cuts `frame` into windows of at most `max` samples per side. Neighbouring windows overlap by
@@ -403,8 +551,12 @@ impl Flattened {
             Node::Triangles { start, count } => {
                 let first = self.triangles.len() as u32;
                 let mut bounds = Aabb::EMPTY;
+                let Input::Triangles(tris) = b.input else {
+                    // A point set's empty leaf (see `Builder::build`).
+                    return ChildRef::ABSENT;
+                };
                 for &i in &order[*start as usize..(*start + *count) as usize] {
-                    let t = b.tris[i as usize];
+                    let t = tris[i as usize];
                     bounds = bounds.union(Aabb::from_points(t));
                     self.triangles.push(GpuTriangle::new(t, i));
                 }

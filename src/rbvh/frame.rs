@@ -8,39 +8,39 @@ use glam::{DVec3, Vec3};
 use super::params::Refinement;
 use super::raster::Frame;
 
-/// `Σ (b − a) × (c − a)` = 2 Σ nᵢAᵢ over `tris`.
-pub(crate) fn weighted_normal_sum(tris: &[[Vec3; 3]]) -> Vec3 {
+/// The surface elements of a set as the criteria see them: per element its normal scaled by its
+/// area (any common factor is harmless). A triangle's is `(b − a) × (c − a)` (twice its area, as
+/// wound); a point's is its normal times the square of its spacing, the area it stands for
+/// (`crate::points::PointCloud::spacing`). Both inputs of the RBVH are judged, and framed, alike.
+pub(crate) fn triangle_elements(tris: &[[Vec3; 3]]) -> Vec<Vec3> {
     tris.iter()
-        .fold(Vec3::ZERO, |s, [a, b, c]| s + (*b - *a).cross(*c - *a))
+        .map(|[a, b, c]| (*b - *a).cross(*c - *a))
+        .collect()
 }
 
-/// The projection axis, or None when the normals cancel out (a closed or folded surface).
-pub(crate) fn projection_axis(tris: &[[Vec3; 3]]) -> Option<Vec3> {
-    let n = weighted_normal_sum(tris);
+/// The projection axis: the normalised area-weighted normal sum Σ nᵢAᵢ of `elements` (see
+/// [`triangle_elements`]), or None when the normals cancel out (a closed or folded surface).
+pub(crate) fn projection_axis(elements: &[Vec3]) -> Option<Vec3> {
+    let n = elements.iter().fold(Vec3::ZERO, |s, &e| s + e);
     let len = n.length();
-    let area2: f32 = tris
-        .iter()
-        .map(|[a, b, c]| (*b - *a).cross(*c - *a).length())
-        .sum();
+    let area: f32 = elements.iter().map(|e| e.length()).sum();
     // Below this the axis is noise (e.g. both sides of a closed surface).
-    (len > 1e-6 * area2 && len.is_finite()).then(|| n / len)
+    (len > 1e-6 * area && len.is_finite()).then(|| n / len)
 }
 
-/// Whether `tris`, seen along `w`, pass the refinement criterion.
-pub(crate) fn passes(refinement: Refinement, tris: &[[Vec3; 3]], w: Vec3) -> bool {
+/// Whether `elements` (see [`triangle_elements`]), seen along `w`, pass the refinement criterion.
+pub(crate) fn passes(refinement: Refinement, elements: &[Vec3], w: Vec3) -> bool {
     match refinement {
         Refinement::NormalCone { max_angle_deg } => {
             let min_cos = max_angle_deg.to_radians().cos();
-            tris.iter().all(|[a, b, c]| {
-                let n = (*b - *a).cross(*c - *a);
+            elements.iter().all(|&n| {
                 let len = n.length();
-                // Zero-area triangles have no normal and cover nothing; they do not count.
+                // Zero-area elements have no normal and cover nothing; they do not count.
                 len == 0.0 || n.dot(w) >= min_cos * len
             })
         }
         Refinement::ProjectedArea { min_ratio } => {
-            let (projected, total) = tris.iter().fold((0.0f32, 0.0f32), |(p, t), [a, b, c]| {
-                let n = (*b - *a).cross(*c - *a);
+            let (projected, total) = elements.iter().fold((0.0f32, 0.0f32), |(p, t), &n| {
                 (p + n.dot(w), t + n.length())
             });
             total > 0.0 && projected >= min_ratio * total
@@ -85,19 +85,24 @@ const ORIENTATIONS: u32 = 18;
 /// The frame of a leaf projected along `w` at `texel` size: of [`ORIENTATIONS`] tangent directions
 /// `u` (with `v = w × u`), the one whose enclosing rectangle needs the fewest samples — texels are
 /// memory, so an elongated leaf gets a narrow tile — with `res = ceil(extent / texel) + 2` samples
-/// per side, centred, so that the samples reach at least half a texel beyond the triangles on every
-/// side (dilation then fills that rim and neighbouring leaves overlap instead of cracking).
+/// per side, centred, so that the samples reach at least half a texel beyond `points` (a leaf's
+/// triangle corners, or its points) grown by `margin` on every side (dilation then fills that rim
+/// and neighbouring leaves overlap instead of cracking). `margin` is 0 for triangles and a
+/// point leaf's splat reach for points.
 /// Projections are taken in f64 relative to a vertex of the leaf, and the origin rounded to f32
 /// once; far from the world origin the margin grows by [`rounding_pad`] samples per side.
-pub(crate) fn fit(tris: &[[Vec3; 3]], w: Vec3, texel: f32) -> Frame {
+pub(crate) fn fit(points: &[Vec3], w: Vec3, texel: f32, margin: f32) -> Frame {
     let (b1, b2) = basis(w);
-    let reference = tris.first().map_or(DVec3::ZERO, |t| t[0].as_dvec3());
+    let reference = points.first().map_or(DVec3::ZERO, |p| p.as_dvec3());
     let texel64 = f64::from(texel);
-    let res = |extent: f64| ((extent / texel64).ceil().max(0.0) as u32).saturating_add(2);
+    let margin = f64::from(margin.max(0.0));
+    let res = |extent: f64| {
+        (((extent + 2.0 * margin) / texel64).ceil().max(0.0) as u32).saturating_add(2)
+    };
     let wd = w.as_dvec3();
     let extents = |u: DVec3, v: DVec3| {
         let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
-        for p in tris.iter().flatten() {
+        for p in points {
             let d = p.as_dvec3() - reference;
             let q = DVec3::new(d.dot(u), d.dot(v), d.dot(wd));
             lo = lo.min(q);
@@ -120,7 +125,7 @@ pub(crate) fn fit(tris: &[[Vec3; 3]], w: Vec3, texel: f32) -> Frame {
     let (mut res_u, mut res_v) = (res(hi.x - lo.x), res(hi.y - lo.y));
     // Far from the world origin the f32 origin cannot be placed to within a texel: widen the
     // margin by what rounding may take from it (nothing near the origin).
-    let reach = reference.abs().max_element() + (hi - lo).max_element();
+    let reach = reference.abs().max_element() + (hi - lo).max_element() + 2.0 * margin;
     let pad = rounding_pad(reach as f32, texel);
     res_u = res_u.saturating_add(2 * pad);
     res_v = res_v.saturating_add(2 * pad);
@@ -157,7 +162,7 @@ mod tests {
 
     #[test]
     fn axis_is_the_area_weighted_normal() {
-        let w = projection_axis(&QUAD).unwrap();
+        let w = projection_axis(&triangle_elements(&QUAD)).unwrap();
         assert!((w - Vec3::Y).length() < 1e-6, "{w}");
         // Two opposite faces cancel: no axis.
         let flipped: Vec<[Vec3; 3]> = QUAD
@@ -165,7 +170,7 @@ mod tests {
             .map(|[a, b, c]| [*a, *c, *b])
             .chain(QUAD)
             .collect();
-        assert!(projection_axis(&flipped).is_none());
+        assert!(projection_axis(&triangle_elements(&flipped)).is_none());
     }
 
     #[test]
@@ -173,12 +178,12 @@ mod tests {
         let w = Vec3::Y;
         assert!(passes(
             Refinement::NormalCone { max_angle_deg: 1.0 },
-            &QUAD,
+            &triangle_elements(&QUAD),
             w
         ));
         assert!(passes(
             Refinement::ProjectedArea { min_ratio: 0.999 },
-            &QUAD,
+            &triangle_elements(&QUAD),
             w
         ));
         // A 45° tent: cone half-angle 45°.
@@ -198,24 +203,24 @@ mod tests {
             Refinement::NormalCone {
                 max_angle_deg: 46.0
             },
-            &tent,
+            &triangle_elements(&tent),
             w
         ));
         assert!(!passes(
             Refinement::NormalCone {
                 max_angle_deg: 44.0
             },
-            &tent,
+            &triangle_elements(&tent),
             w
         ));
         assert!(passes(
             Refinement::ProjectedArea { min_ratio: 0.70 },
-            &tent,
+            &triangle_elements(&tent),
             w
         ));
         assert!(!passes(
             Refinement::ProjectedArea { min_ratio: 0.71 },
-            &tent,
+            &triangle_elements(&tent),
             w
         ));
     }
@@ -223,7 +228,7 @@ mod tests {
     #[test]
     fn frame_encloses_triangles_with_a_margin_and_follows_the_long_axis() {
         let texel = 0.1;
-        let f = fit(&QUAD, Vec3::Y, texel);
+        let f = fit(QUAD.as_flattened(), Vec3::Y, texel, 0.0);
         assert!((f.u.dot(f.v)).abs() < 1e-6 && (f.u.cross(f.v) - f.w).length() < 1e-5);
         // The quad is 4 × 1: the tightest tile runs along x.
         assert!(f.u.x.abs() > 0.999, "{}", f.u);
@@ -240,5 +245,37 @@ mod tests {
             assert!(t >= 1.0 - 1e-3 && t <= f.res_v as f32 - 1.0 + 1e-3, "{t}");
             assert!((*p - f.origin).dot(f.w).abs() < 1e-6);
         }
+    }
+
+    #[test]
+    fn a_margin_widens_the_frame_by_as_many_samples_on_each_side() {
+        let texel = 0.1;
+        let points = QUAD.as_flattened();
+        let plain = fit(points, Vec3::Y, texel, 0.0);
+        let grown = fit(points, Vec3::Y, texel, 0.5);
+        assert_eq!(grown.u, plain.u);
+        assert!(
+            (grown.res_u as i64 - plain.res_u as i64 - 10).abs() <= 1
+                && (grown.res_v as i64 - plain.res_v as i64 - 10).abs() <= 1,
+            "{} × {} against {} × {}",
+            grown.res_u,
+            grown.res_v,
+            plain.res_u,
+            plain.res_v
+        );
+    }
+
+    #[test]
+    fn points_are_judged_by_their_normals_weighted_by_their_areas() {
+        // A point's element is its normal times its area: two points 60° apart, one with four
+        // times the other's area, tilt the axis towards the larger.
+        let tilted = Vec3::new(60f32.to_radians().sin(), 0.0, 60f32.to_radians().cos());
+        let elements = [Vec3::Z * 4.0, tilted];
+        let w = projection_axis(&elements).unwrap();
+        let angle = w.angle_between(Vec3::Z).to_degrees();
+        assert!((10.0..14.0).contains(&angle), "{angle}");
+        let cone = |max_angle_deg| Refinement::NormalCone { max_angle_deg };
+        assert!(passes(cone(50.0), &elements, w));
+        assert!(!passes(cone(45.0), &elements, w));
     }
 }

@@ -4,6 +4,7 @@
 //! * [`params`]: quality presets and free parameters;
 //! * `build`: the top-down recursion — refinement criteria, subdivision, leaf frames;
 //! * `raster`: rasterizing a leaf's triangles into its tile, dilation, quantization;
+//! * `splat`: splatting a leaf's points (a scan's samples) into its tile, for RBVHs of point clouds;
 //! * `atlas`: packing tiles into one atlas;
 //! * `bake`: the scene's base colour into the per-texel colour channel (packed as [`crate::rgba`]);
 //! * [`layout`]: the packed data the GPU reads;
@@ -21,6 +22,7 @@ pub(crate) mod march;
 pub mod params;
 pub mod ranges;
 pub(crate) mod raster;
+mod splat;
 mod split;
 
 pub use layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT};

@@ -74,7 +74,7 @@ pub struct Frame {
 
 impl Frame {
     /// Sample-space coordinates `(x, y, h)` of a world point (see the module docs).
-    fn project(&self, p: Vec3) -> DVec3 {
+    pub(super) fn project(&self, p: Vec3) -> DVec3 {
         let d = p.as_dvec3() - self.origin.as_dvec3();
         let texel = self.texel as f64;
         DVec3::new(
@@ -277,7 +277,7 @@ pub fn rasterize(
 /// `source` is not [`NONE`]) passes `refinement`. Sample `(i, j)` is the point
 /// `(i·texel, j·texel, height)`; each cell contributes the march's triangles over its written
 /// corners ([`cell_triangles`]), each judged by its normal's `w` component.
-fn sampled_passes(
+pub(super) fn sampled_passes(
     refinement: Refinement,
     height: &[f32],
     source: &[u32],
@@ -325,7 +325,7 @@ fn sampled_passes(
 }
 
 /// Marks a hole in the per-sample source index.
-const NONE: u32 = u32::MAX;
+pub(super) const NONE: u32 = u32::MAX;
 
 /// Twice the signed area of `(a, b, p)`. The endpoints are put in a canonical (lexicographic) order
 /// and the result negated when swapped, so `edge(a, b, p) == -edge(b, a, p)` exactly: the shared
@@ -340,7 +340,12 @@ fn edge(a: DVec2, b: DVec2, p: DVec2) -> f64 {
 }
 
 /// Step 4 of the module docs: one dilation pass, reading only the undilated state.
-fn dilate(height: &[f32], source: &[u32], res_u: usize, res_v: usize) -> (Vec<f32>, Vec<u32>) {
+pub(super) fn dilate(
+    height: &[f32],
+    source: &[u32],
+    res_u: usize,
+    res_v: usize,
+) -> (Vec<f32>, Vec<u32>) {
     let mut out_h = height.to_vec();
     let mut out_s = source.to_vec();
     let at = |i: isize, j: isize| -> Option<usize> {
@@ -382,7 +387,13 @@ fn dilate(height: &[f32], source: &[u32], res_u: usize, res_v: usize) -> (Vec<f3
 }
 
 /// Step 5 of the module docs: 16-bit heights over the tile's own range, origin moved to `h_lo`.
-fn quantize(frame: &Frame, height: &[f32], source: &[u32], normals: &[Vec3], covered: u32) -> Tile {
+pub(super) fn quantize(
+    frame: &Frame,
+    height: &[f32],
+    source: &[u32],
+    normals: &[Vec3],
+    covered: u32,
+) -> Tile {
     let valid = || {
         height
             .iter()
@@ -430,11 +441,12 @@ fn quantize(frame: &Frame, height: &[f32], source: &[u32], normals: &[Vec3], cov
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
 
-    /// Axis-aligned frame over `[0, res]²` in x, y with unit texels, heights along +z.
-    fn xy_frame(res: u32) -> Frame {
+    /// Axis-aligned frame over `[0, res]²` in x, y with unit texels, heights along +z (also for
+    /// `splat.rs`'s tests).
+    pub(in crate::rbvh) fn xy_frame(res: u32) -> Frame {
         Frame {
             origin: Vec3::ZERO,
             u: Vec3::X,
@@ -720,7 +732,11 @@ mod tests {
         ];
         for criterion in criteria {
             for tris in [&noisy, &ridge] {
-                assert!(!super::super::frame::passes(criterion, tris, Vec3::Z));
+                assert!(!super::super::frame::passes(
+                    criterion,
+                    &super::super::frame::triangle_elements(tris),
+                    Vec3::Z
+                ));
                 assert!(rasterize(tris, &frame, 1.0, None).is_some());
             }
             let tile = rasterize(&noisy, &frame, 1.0, Some(criterion)).expect("noise passes");

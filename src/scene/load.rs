@@ -3,6 +3,7 @@
 use std::path::Path;
 
 use super::{builtin, gltf, obj, scene_file, Scene};
+use crate::points::PointCloud;
 use crate::progress::{step, Progress, Quiet};
 use crate::{Error, Result};
 
@@ -11,6 +12,8 @@ use crate::{Error, Result};
 pub(super) enum FileType {
     Obj,
     Gltf,
+    /// A point cloud: `.ply` or `.xyz` (see [`crate::points`]).
+    Points,
     SceneFile,
 }
 
@@ -24,11 +27,12 @@ impl FileType {
         match ext.as_deref() {
             Some("obj") => Ok(FileType::Obj),
             Some("gltf" | "glb") => Ok(FileType::Gltf),
+            Some("ply" | "xyz") => Ok(FileType::Points),
             Some("toml") => Ok(FileType::SceneFile),
             _ => Err(Error::parse(
                 path,
                 None,
-                "unsupported file type: expected .obj, .gltf, .glb or .toml",
+                "unsupported file type: expected .obj, .gltf, .glb, .ply, .xyz or .toml",
             )),
         }
     }
@@ -36,7 +40,8 @@ impl FileType {
 
 impl Scene {
     /// Loads `spec`: a built-in name (see [`builtin::NAMES`]) or a path ending in `.obj`,
-    /// `.gltf`, `.glb` or `.toml` (a scene file), case-insensitively. Built-in names win, so
+    /// `.gltf`, `.glb`, `.ply` or `.xyz` (a point cloud, see [`Scene::points`]) or `.toml` (a
+    /// scene file), case-insensitively. Built-in names win, so
     /// a stray file called `sphere` cannot shadow them. A missing path is an I/O error naming
     /// it when `spec` looks like a path (has an extension or a separator), and otherwise an
     /// unknown-scene error listing the built-ins, since it was most likely a mistyped name.
@@ -50,7 +55,7 @@ impl Scene {
         match resolve(spec)? {
             None => Scene::builtin(spec),
             Some((path, FileType::SceneFile)) => scene_file::load(path, progress),
-            Some((path, FileType::Obj | FileType::Gltf)) => {
+            Some((path, FileType::Obj | FileType::Gltf | FileType::Points)) => {
                 step(progress, &format!("loading {}", path.display()), 0, || {
                     load_mesh_file(path)
                 })
@@ -114,7 +119,7 @@ pub(super) fn check_mesh_file(path: &Path) -> Result<FileType> {
         return Err(Error::parse(
             path,
             None,
-            "a scene file cannot be used as a mesh: expected .obj, .gltf or .glb",
+            "a scene file cannot be used as a mesh: expected .obj, .gltf, .glb, .ply or .xyz",
         ));
     }
     let metadata = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
@@ -122,16 +127,21 @@ pub(super) fn check_mesh_file(path: &Path) -> Result<FileType> {
     Ok(file_type)
 }
 
-/// Loads an OBJ, glTF or GLB file. Scene files refer to meshes through this, which is why it
-/// refuses scene files: one level of arrangement keeps them simple and free of cycles. A file
-/// with nothing to trace (empty, or only vertices, points or lines) is an error, as an empty
-/// scene file is: it is almost certainly the wrong file, and would render a blank image.
+/// Loads an OBJ, glTF or GLB file, or a point cloud (a scene of points alone, named by its
+/// file). Scene files refer to meshes through this, which is why it refuses scene files: one
+/// level of arrangement keeps them simple and free of cycles. A mesh file with nothing to trace
+/// (empty, or only vertices, points or lines) is an error, as an empty scene file is: it is
+/// almost certainly the wrong file, and would render a blank image.
 pub(super) fn load_mesh_file(path: &Path) -> Result<Scene> {
     let file_type = check_mesh_file(path)?;
-    let scene = if file_type == FileType::Obj {
-        obj::load(path)?
-    } else {
-        gltf::load(path)?
+    let scene = match file_type {
+        FileType::Obj => obj::load(path)?,
+        FileType::Points => {
+            let mut scene = Scene::new(path.display().to_string());
+            scene.points = Some(PointCloud::load(path)?);
+            return Ok(scene);
+        }
+        _ => gltf::load(path)?,
     };
     if scene.triangle_count() == 0 {
         return Err(Error::parse(

@@ -7,6 +7,7 @@ use glam::{Mat4, Vec2, Vec3, Vec4};
 use super::material::{Material, SurfaceMaterials, NO_MATERIAL};
 use super::{Camera, Light};
 use crate::geom::Aabb;
+use crate::points::PointCloud;
 use crate::{Error, Result};
 
 /// Coarsest float32 resolution, as a fraction of the scene diagonal, that
@@ -33,6 +34,10 @@ pub struct Scene {
     pub light: Option<Light>,
     /// Materials and texture coordinates, only when some loaded file had materials.
     pub surface: Option<SurfaceMaterials>,
+    /// Points of a scan (a `.ply` or `.xyz` file, placed by a scene file, or sampled from the
+    /// triangles by [`Scene::sample_points`]). When present, an RBVH is built from them rather
+    /// than from the triangles, which stay for the exact BVH: the referee of a point-built RBVH.
+    pub points: Option<PointCloud>,
 }
 
 /// The surface data of one object for [`Scene::push_textured_object`]: per triangle, a material
@@ -158,14 +163,24 @@ impl Scene {
         self.triangles.len()
     }
 
-    /// Bounds of the vertices that triangles use: unreferenced vertices (OBJ files often carry
-    /// them) must not widen the box a camera frames or a BVH root covers.
+    /// Bounds of the vertices that triangles use, and of the points: unreferenced vertices (OBJ
+    /// files often carry them) must not widen the box a camera frames or a BVH root covers.
     pub fn bounds(&self) -> Aabb {
-        self.triangles
+        let triangles = self
+            .triangles
             .iter()
             .flatten()
             .filter_map(|&i| self.positions.get(i as usize))
-            .fold(Aabb::EMPTY, |b, &p| b.grow(p))
+            .fold(Aabb::EMPTY, |b, &p| b.grow(p));
+        match &self.points {
+            Some(cloud) => triangles.union(cloud.bounds()),
+            None => triangles,
+        }
+    }
+
+    /// Points of the scene (0 without a point cloud).
+    pub fn point_count(&self) -> usize {
+        self.points.as_ref().map_or(0, PointCloud::len)
     }
 
     /// How finely float32 resolves this scene: the spacing of representable coordinates at the
@@ -254,6 +269,34 @@ impl Scene {
             return Err(invalid(format!(
                 "triangle {t} belongs to object {o}, but there are only {object_count} objects"
             )));
+        }
+        if let Some(cloud) = &self.points {
+            let n = cloud.len();
+            if cloud.normals.len() != n || cloud.spacing.len() != n {
+                return Err(invalid(format!(
+                    "{} normals and {} spacings for {n} points",
+                    cloud.normals.len(),
+                    cloud.spacing.len()
+                )));
+            }
+            if let Some(colours) = cloud.colours.as_ref().filter(|c| c.len() != n) {
+                return Err(invalid(format!(
+                    "{} point colours for {n} points",
+                    colours.len()
+                )));
+            }
+            let bad = (0..n).find(|&i| {
+                !(cloud.positions[i].is_finite()
+                    && cloud.normals[i].is_normalized()
+                    && cloud.spacing[i].is_finite()
+                    && cloud.spacing[i] > 0.0)
+            });
+            if let Some(i) = bad {
+                return Err(invalid(format!(
+                    "point {i} at {} has normal {} and spacing {}: positions must be finite, normals unit length, spacings positive",
+                    cloud.positions[i], cloud.normals[i], cloud.spacing[i]
+                )));
+            }
         }
         if let Some(surface) = &self.surface {
             let n = self.triangles.len();
@@ -365,6 +408,13 @@ impl Scene {
             }
         });
         self.extend_surface(before, added);
+        if let Some(theirs) = &other.points {
+            let placed = theirs.transformed(m);
+            match &mut self.points {
+                Some(mine) => mine.append(&placed),
+                None => self.points = Some(placed),
+            }
+        }
     }
 
     /// Linear RGBA base colour of triangle `triangle` at world point `p` (on or near it), or

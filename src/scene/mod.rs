@@ -19,6 +19,7 @@ pub mod material;
 mod mesh;
 pub mod mipmap;
 mod obj;
+mod sample;
 mod scene_file;
 pub mod texture;
 

@@ -114,6 +114,15 @@ pub(super) fn load(path: &Path, progress: &dyn Progress) -> Result<Scene> {
                 Entry::Occupied(known) => known.into_mut(),
                 Entry::Vacant(new) => new.insert(source.mesh(named, dir)?),
             };
+            if (scene.points.is_some() && mesh.triangle_count() > 0)
+                || (scene.triangle_count() > 0 && mesh.points.is_some())
+            {
+                return Err(source.error(
+                    entry.span(),
+                    "this entry mixes a point cloud with triangle meshes: an RBVH is built from one \
+                     or the other, so a scene file places point clouds or meshes, not both",
+                ));
+            }
             scene.append(mesh, transform);
             progress.advance(1);
         }

@@ -9,7 +9,6 @@
 
 use std::io::Cursor;
 use std::path::Path;
-use std::sync::OnceLock;
 
 use glam::{Vec2, Vec4};
 use image::{DynamicImage, ImageDecoder, ImageFormat, ImageReader, Limits};
@@ -151,19 +150,7 @@ fn wrap_index(i: i64, n: u32, wrap: Wrap) -> usize {
 
 /// An 8-bit sRGB-encoded RGB, linear alpha texel as linear RGBA.
 pub fn linear(rgba: [u8; 4]) -> Vec4 {
-    let table = srgb_table();
-    Vec4::new(
-        table[rgba[0] as usize],
-        table[rgba[1] as usize],
-        table[rgba[2] as usize],
-        rgba[3] as f32 / 255.0,
-    )
-}
-
-/// The sRGB decode of every 8-bit code (IEC 61966-2-1).
-fn srgb_table() -> &'static [f32; 256] {
-    static TABLE: OnceLock<[f32; 256]> = OnceLock::new();
-    TABLE.get_or_init(|| std::array::from_fn(|c| crate::srgb::decode(c as f32 / 255.0)))
+    crate::srgb::decode_rgba8(rgba)
 }
 
 #[cfg(test)]

@@ -7,7 +7,7 @@ use crate::progress::Bar;
 use anyhow::{Context as _, Result};
 use rbvh::bench::{self, BenchConfig, Device, Event, Level, RayType};
 
-use crate::prepare::{context_options, flag_error, LodBuildArgs, Quality};
+use crate::prepare::{context_options, flag_error, LodBuildArgs, PointsArg, Quality};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("quality", |a| a.default_value("all")))]
@@ -17,6 +17,8 @@ pub struct Args {
     scene: Vec<String>,
     #[command(flatten)]
     quality: Quality,
+    #[command(flatten)]
+    points: PointsArg,
     /// Ray types to trace, comma-separated: primary, ao, shadow, diffuse.
     #[arg(
         long,
@@ -113,6 +115,7 @@ pub fn run(a: Args) -> Result<()> {
     config.lod = a.lod.then(|| a.lod_build.params());
     config.traffic = a.traffic;
     config.block_jumps = a.block_jumps;
+    config.points = a.points.points.map(|n| n as usize);
 
     let bar = Bar::new("benchmark");
     let result = bench::run_observed(

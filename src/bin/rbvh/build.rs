@@ -11,14 +11,16 @@ use rbvh::probe::TraceStats;
 use rbvh::rbvh::{Rbvh, RbvhParams, Subdivision};
 use rbvh::scene::Scene;
 
-use crate::prepare::{flag_error, Quality};
+use crate::prepare::{flag_error, PointsArg, Quality};
 use crate::progress::step;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Built-in scene name, OBJ/glTF/GLB file, or scene file (.toml).
+    /// Built-in scene name, OBJ/glTF/GLB file, point cloud (.ply, .xyz), or scene file (.toml).
     #[arg(long, default_value = "default")]
     scene: String,
+    #[command(flatten)]
+    points: PointsArg,
     #[command(flatten)]
     quality: Quality,
     /// Save the built RBVH to this file (load it with --rbvh on render/trace).
@@ -35,8 +37,9 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let scene = step("loading scene", |bar| Scene::load_observed(&a.scene, bar))
+    let mut scene = step("loading scene", |bar| Scene::load_observed(&a.scene, bar))
         .with_context(|| format!("loading scene {:?}", a.scene))?;
+    a.points.apply(&mut scene)?;
     if let Some(warning) = scene.precision_warning() {
         eprintln!("warning: {warning}");
     }
@@ -46,20 +49,40 @@ pub fn run(a: Args) -> Result<()> {
         "--out saves one level: give a single --quality and a single --texels"
     );
     let table = a.stats || a.out.is_none();
-    let exact = step("building exact BVH", |bar| {
-        Bvh::build_observed(&scene, &BuildParams::DEFAULT, bar)
-    })?;
-    let exact_bytes = exact.tree_bytes() + exact.triangle_bytes();
+    // A point cloud has no triangles: nothing for the exact BVH, and no ratio to it.
+    let exact_bytes = if scene.triangle_count() == 0 {
+        if table {
+            println!(
+                "{}: {} points, no triangles: no exact BVH to compare with; peak host memory so far {}",
+                scene.name,
+                scene.point_count(),
+                peak_host_mb()
+            );
+        }
+        None
+    } else {
+        let exact = step("building exact BVH", |bar| {
+            Bvh::build_observed(&scene, &BuildParams::DEFAULT, bar)
+        })?;
+        let bytes = exact.tree_bytes() + exact.triangle_bytes();
+        if table {
+            let points = match scene.point_count() {
+                0 => String::new(),
+                n => format!(" (RBVHs built from {n} points sampled on them)"),
+            };
+            println!(
+                "{}: {} triangles{points}; exact BVH {} nodes, {:.2} MB (tree + triangles), built in {:.0} ms; peak host memory so far {}",
+                scene.name,
+                scene.triangle_count(),
+                exact.nodes.len(),
+                mb(bytes),
+                exact.build_ms,
+                peak_host_mb()
+            );
+        }
+        Some(bytes)
+    };
     if table {
-        println!(
-            "{}: {} triangles; exact BVH {} nodes, {:.2} MB (tree + triangles), built in {:.0} ms; peak host memory so far {}",
-            scene.name,
-            scene.triangle_count(),
-            exact.nodes.len(),
-            mb(exact_bytes),
-            exact.build_ms,
-            peak_host_mb()
-        );
         println!(
             "{:>7} {:>9} {:>9} {:>9} {:>8} {:>9} {:>11} {:>10} {:>7} {:>9} {:>9} {:>9} {:>9} {:>10} {:>9}",
             "level",
@@ -85,7 +108,7 @@ pub fn run(a: Args) -> Result<()> {
         })?;
         if table {
             println!(
-            "{:>7} {:>9.3e} {:>9.0} {:>9} {:>8} {:>9} {:>11} {:>10} {:>6.1}% {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.1}x {:>9}",
+            "{:>7} {:>9.3e} {:>9.0} {:>9} {:>8} {:>9} {:>11} {:>10} {:>6.1}% {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>10} {:>9}",
             name,
             r.texel_size,
             r.stats.build_ms,
@@ -99,7 +122,10 @@ pub fn run(a: Args) -> Result<()> {
             mb(r.atlas_bytes()),
             mb(r.triangle_bytes()),
             mb(r.total_bytes()),
-            exact_bytes as f64 / r.total_bytes().max(1) as f64,
+            exact_bytes.map_or("-".into(), |e| format!(
+                "{:.1}x",
+                e as f64 / r.total_bytes().max(1) as f64
+            )),
             peak_host_mb()
         );
             if r.colours.is_some() {

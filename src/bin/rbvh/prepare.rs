@@ -36,9 +36,12 @@ pub struct Common {
     "Quality preset of the RBVH: one of 0..4 or Q0..Q4 (Q0 coarsest, Q4 finest)"
 )))]
 pub struct Source {
-    /// Built-in scene name (`rbvh scenes` lists them), OBJ/glTF/GLB file, or scene file (.toml).
+    /// Built-in scene name (`rbvh scenes` lists them), OBJ/glTF/GLB file, point cloud (.ply,
+    /// .xyz; traced through an RBVH of its points), or scene file (.toml).
     #[arg(long, default_value = "default")]
     pub scene: String,
+    #[command(flatten)]
+    pub points: PointsArg,
     #[command(flatten)]
     pub quality: Quality,
     /// Trace this saved RBVH (from `rbvh build --out`) instead of building one (implies --method rbvh).
@@ -99,6 +102,32 @@ impl Source {
         Camera::look_at(eye, target, Vec3::Y, vfov)
             .map(Some)
             .map_err(|fault| anyhow::anyhow!("--camera-eye/--camera-target/--vfov: {fault}"))
+    }
+}
+
+/// `--points`: an RBVH of points sampled from the scene, refereed by the exact BVH of its triangles.
+#[derive(Args, Clone, Debug)]
+pub struct PointsArg {
+    /// Build the RBVH from N points sampled uniformly over the scene's triangles (with their
+    /// normals and colours), as from a scan of it; the exact BVH stays on the triangles.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=1 << 30))]
+    pub points: Option<u64>,
+}
+
+/// The seed of `--points`' sampling, fixed so that a command line names one RBVH.
+pub const POINTS_SEED: u64 = 0x5EED_2012;
+
+impl PointsArg {
+    /// `scene` with `--points` sampled into it, if asked for.
+    pub fn apply(&self, scene: &mut Scene) -> Result<()> {
+        if let Some(count) = self.points {
+            let points = step(&format!("sampling {count} points"), |_| {
+                scene.sample_points(count as usize, POINTS_SEED)
+            })
+            .context("--points")?;
+            scene.points = Some(points);
+        }
+        Ok(())
     }
 }
 
@@ -272,6 +301,7 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
         Scene::load_observed(&c.source.scene, bar)
     })
     .with_context(|| format!("loading scene {:?}", c.source.scene))?;
+    c.source.points.apply(&mut scene)?;
     if camera.is_some() {
         scene.camera = camera;
     }
@@ -288,6 +318,12 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
                 format!("RBVH {} with scene {:?}", path.display(), c.source.scene)
             })?;
             Structure::Rbvh(Box::new(r))
+        }
+        (None, Method::Exact) if scene.triangle_count() == 0 && scene.points.is_some() => {
+            anyhow::bail!(
+                "{} is a point cloud: there are no triangles for the exact BVH; trace it with --method rbvh",
+                scene.name
+            )
         }
         (None, Method::Exact) => Structure::Exact(step("building BVH", |bar| {
             Bvh::build_observed(&scene, &BuildParams::DEFAULT, bar)
@@ -335,9 +371,10 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
     .context("creating the Vulkan device")?;
     if c.source.stats {
         eprintln!(
-            "scene {}: {} triangles, loaded in {load_ms:.1} ms",
+            "scene {}: {} triangles, {} points, loaded in {load_ms:.1} ms",
             scene.name,
-            scene.triangle_count()
+            scene.triangle_count(),
+            scene.point_count()
         );
         match &structure {
             Structure::Exact(bvh) => eprintln!(
@@ -428,7 +465,9 @@ pub fn report_throughput(
             );
         }
     }
-    if p.structure.rbvh().is_some() {
+    if p.structure.rbvh().is_some() && p.scene.triangle_count() == 0 {
+        eprintln!("no exact BVH to compare with: the scene is a point cloud, without triangles");
+    } else if p.structure.rbvh().is_some() {
         let bvh = Bvh::build(&p.scene)?;
         let exact = Tracer::exact(&p.ctx, &bvh)?;
         let timed = exact.trace(rays, query)?;

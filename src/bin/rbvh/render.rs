@@ -262,6 +262,10 @@ fn compare_with_exact(
     settings: &Settings,
     rendered: &ibl::Rendered,
 ) -> Result<()> {
+    if p.scene.triangle_count() == 0 {
+        eprintln!("no exact BVH to compare with: the scene is a point cloud, without triangles");
+        return Ok(());
+    }
     let t = Instant::now();
     let bvh = step("building BVH", |_| Bvh::build(&p.scene))?;
     let exact = Tracer::exact(&p.ctx, &bvh).context("uploading the exact BVH")?;
