@@ -49,9 +49,10 @@ fn radial_errors(r: &Rbvh, seed: u64) -> (Vec<f32>, usize) {
     (errors, misses)
 }
 
-/// A point-built RBVH of the sphere lies on the sphere: every ray aimed into it hits, 99% of hits
-/// within a quarter texel plus the sampled mesh's chord error, all within a texel plus that
-/// (nearest-point splats on tangent planes err by about spacing² / radius, far below a texel).
+/// A point-built RBVH of the sphere lies on the sphere as closely as a triangle-built one must
+/// (`tests/rbvh.rs`): every ray aimed into it hits, 99% of hits within a tenth of a texel plus
+/// the sampled mesh's chord error, all within half a texel plus that (nearest-point splats on
+/// tangent planes err by about spacing² / radius, far below a texel).
 /// Against the exact BVH of the mesh on random rays, hit/miss disagreements stay below 0.5%
 /// (rays grazing the silhouette, where a texel's rim decides).
 #[test]
@@ -79,10 +80,10 @@ fn sphere_from_points_lies_on_the_sphere_at_every_level() {
         common::ensure(r.stats.triangle_leaves == 0, || {
             format!("Q{level}: a point-built RBVH has triangle leaves")
         })?;
-        common::ensure(p99 <= chord + 0.25 * texel, || {
+        common::ensure(p99 <= chord + 0.1 * texel, || {
             format!("Q{level}: radial p99 {p99} (texel {texel})")
         })?;
-        common::ensure(worst <= chord + texel, || {
+        common::ensure(worst <= chord + 0.5 * texel, || {
             format!("Q{level}: radial max {worst} (texel {texel})")
         })?;
         common::ensure(mismatches * 200 <= rays.len(), || {
@@ -104,7 +105,7 @@ fn estimated_normals_build_the_same_sphere_facing_outward() {
     let (errors, misses) = radial_errors(&r, 11);
     assert_eq!(misses, 0);
     let p99 = errors[errors.len() * 99 / 100];
-    assert!(p99 <= chord + 0.25 * r.texel_size, "radial p99 {p99}");
+    assert!(p99 <= chord + 0.1 * r.texel_size, "radial p99 {p99}");
     let mut rng = common::Rng::new(5);
     let mut inward = 0;
     for _ in 0..2000 {
@@ -120,6 +121,34 @@ fn estimated_normals_build_the_same_sphere_facing_outward() {
         inward <= 20,
         "{inward} of 2000 hit normals do not face outward"
     );
+}
+
+/// No ray aimed into a closed scan slips between its splats or its leaves: 200,000 rays from all
+/// sides at points within 0.95 of the radius, into a sphere of 20,000 points (at Q4 a spacing of
+/// seven texels, where splats must reach across texels the points leave empty). A reach of one
+/// spacing let 3 of them through at Q4; `splat::REACH_SPACINGS` lets none.
+#[test]
+fn no_ray_slips_through_a_sparse_closed_scan() {
+    let scene = sampled("sphere", 20_000);
+    let (center, radius, _) = common::sphere_oracle();
+    let mut rng = common::Rng::new(21);
+    let rays: Vec<Ray> = (0..200_000)
+        .map(|_| {
+            let origin = center + rng.unit_vector() * 3.0 * radius;
+            let target = center + rng.unit_vector() * 0.95 * radius * rng.next_f32().sqrt();
+            Ray::new(origin, (target - origin).normalize(), 0.0, f32::INFINITY)
+        })
+        .collect();
+    common::every_case([0, 2, 4], |level| {
+        let r = Rbvh::build(&scene, &q(level)).map_err(|e| e.to_string())?;
+        let leaks = rays
+            .iter()
+            .filter(|ray| !r.closest_hit(ray).0.is_hit())
+            .count();
+        common::ensure(leaks == 0, || {
+            format!("Q{level}: {leaks} of {} rays slipped through", rays.len())
+        })
+    });
 }
 
 /// The device march reads a point-built RBVH as any other: GPU and CPU casters agree as

@@ -314,6 +314,9 @@ impl Builder<'_> {
                     count: n as u32,
                 };
             }
+            Input::Points(points) if n > 1 && small && facing_classes(points, order) > 1 => {
+                return self.split_by_facing(points, order, offset, depth);
+            }
             Input::Points(points) if n == 1 || small => {
                 self.progress.advance(n as u64);
                 let tiles = self.forced_heightfield(points, order);
@@ -343,6 +346,29 @@ impl Builder<'_> {
             || self.build(right, offset + mid as u32, depth + 1),
         );
         Node::Inner(Box::new([a, b]))
+    }
+
+    /// A small set of points that is not one height field, split by which of the six axis
+    /// directions each normal is nearest (at most 54.7° away, within every preset's 60° cone):
+    /// where space can no longer be split usefully, a closed speck (a claw, a horn's tip) still
+    /// separates into the sides it shows each way, each a height field, instead of being squashed
+    /// into one forced leaf. Triangles need no such split: they fall back to exact leaves.
+    fn split_by_facing(&self, all: &[Splat], order: &mut [u32], offset: u32, depth: u32) -> Node {
+        order.sort_by_key(|&i| facing_class(all[i as usize].normal));
+        let mut children = Vec::new();
+        let (mut rest, mut start) = (order, 0usize);
+        while !rest.is_empty() {
+            let class = facing_class(all[rest[0] as usize].normal);
+            let len = rest
+                .iter()
+                .position(|&i| facing_class(all[i as usize].normal) != class)
+                .unwrap_or(rest.len());
+            let (group, tail) = rest.split_at_mut(len);
+            children.push(self.build(group, offset + start as u32, depth + 1));
+            start += len;
+            rest = tail;
+        }
+        balanced(children)
     }
 
     /// `tiles` of the set `order` with their sources turned from indices into the set to scene
@@ -440,6 +466,36 @@ impl Builder<'_> {
     }
 }
 
+/// Which of the six axis directions (+x, −x, +y, −y, +z, −z: 0…5) `normal` is nearest.
+fn facing_class(normal: Vec3) -> u8 {
+    let a = normal.abs();
+    let axis = if a.x >= a.y && a.x >= a.z {
+        0
+    } else if a.y >= a.z {
+        1
+    } else {
+        2
+    };
+    2 * axis + u8::from(normal[axis as usize] < 0.0)
+}
+
+/// How many of the six facing classes the points `order` fall into.
+fn facing_classes(all: &[Splat], order: &[u32]) -> u32 {
+    let mask = order
+        .iter()
+        .fold(0u8, |m, &i| m | 1 << facing_class(all[i as usize].normal));
+    mask.count_ones()
+}
+
+/// A balanced subtree over `nodes` (at least one), in their order.
+fn balanced(mut nodes: Vec<Node>) -> Node {
+    if nodes.len() == 1 {
+        return nodes.pop().expect("one node");
+    }
+    let right = nodes.split_off(nodes.len() / 2);
+    Node::Inner(Box::new([balanced(nodes), balanced(right)]))
+}
+
 /// The surface elements of points (see `frame::triangle_elements`): each normal times the area
 /// its spacing stands for.
 fn point_elements(points: &[Splat]) -> Vec<Vec3> {
@@ -497,12 +553,13 @@ fn windows(frame: &Frame, max: u32) -> Vec<Frame> {
 
 /// A balanced subtree over the tiles of one subdivided height field (in window order, so halves
 /// are spatially coherent).
-fn tiles_subtree(mut tiles: Vec<Tile>) -> Node {
-    if tiles.len() == 1 {
-        return Node::Heightfield(Box::new(tiles.pop().expect("one tile")));
-    }
-    let right = tiles.split_off(tiles.len() / 2);
-    Node::Inner(Box::new([tiles_subtree(tiles), tiles_subtree(right)]))
+fn tiles_subtree(tiles: Vec<Tile>) -> Node {
+    balanced(
+        tiles
+            .into_iter()
+            .map(|tile| Node::Heightfield(Box::new(tile)))
+            .collect(),
+    )
 }
 
 fn depth_of(node: &Node) -> u32 {
