@@ -889,4 +889,29 @@ fn point_clouds_render_build_and_bench() {
     let out = rbvh(&["build", "--scene", "sphere", "--points", "0"]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--points"));
+
+    // A scan of the same object from a file is refereed by the mesh; a scan of another is refused.
+    let out = rbvh(&[
+        "build",
+        "--scene",
+        "sphere",
+        "--points",
+        arg(&ply),
+        "--quality",
+        "0",
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("built from 200 points"), "{stdout}");
+    let out = rbvh(&["build", "--scene", "plane", "--points", arg(&ply)]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("sphere.ply") && stderr.contains("must cover the mesh"),
+        "{stderr}"
+    );
 }

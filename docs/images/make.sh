@@ -28,6 +28,9 @@ for q in 0 1 2 3 4; do
     "$rbvh" render $close --method rbvh --quality $q --out $out/closeup-q$q.png
 done
 
+# The same close view through an RBVH built from 300,000 points sampled over the scene (Q2).
+"$rbvh" render $close --method rbvh --quality 2 --points 300000 --out $out/closeup-points-q2.png
+
 # Heat maps of traversal steps per pixel, exact BVH and RBVH Q2, on one scale (0..40 steps).
 "$rbvh" render --width 320 --height 240 --out "$tmp/exact.png" \
     --heatmap $out/heatmap-exact.png --heatmap-max 40

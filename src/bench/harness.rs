@@ -109,11 +109,12 @@ pub fn run_observed(
             observe(Event::Progress(format!("{spec}: loading")));
             Scene::load_observed(spec, progress)?
         };
-        if let Some(count) = config.points {
-            observe(Event::Progress(format!("{spec}: sampling {count} points")));
-            scene.points = Some(scene.sample_points(count, config.seed)?);
+        if let Some(source) = &config.points {
+            let label = source.label();
+            observe(Event::Progress(format!("{spec}: {label}")));
+            scene.add_points(source, config.seed)?;
             // Every row says that its RBVHs are of points, not of the triangles.
-            scene.name = format!("{} ({count} points)", scene.name);
+            scene.name = format!("{} ({label})", scene.name);
         }
         let mut bench = SceneBench::new(&ctx, config, scene, observe, progress)?;
         for c in &bench.candidates {

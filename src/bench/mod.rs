@@ -46,7 +46,9 @@ use crate::gpu::Context;
 #[cfg(feature = "loaded")]
 use crate::gpu::ContextOptions;
 use crate::lod::LodParams;
+use crate::points::MIN_POINTS;
 use crate::rbvh::{RbvhParams, TexelFormat, QUALITY_NAMES};
+use crate::scene::PointSource;
 use crate::{Error, Result};
 
 /// Where the benchmark's Vulkan device comes from.
@@ -142,11 +144,11 @@ pub struct BenchConfig {
     /// Block jumps in the RBVH march on or off; None: the tracer's choice for the device
     /// ([`crate::gpu::Tracer::block_jumps`]).
     pub block_jumps: Option<bool>,
-    /// Build every RBVH level from this many points sampled over each scene's triangles
-    /// ([`crate::scene::Scene::sample_points`], seeded by `seed`), as from a scan of it, while
+    /// Build every RBVH level from points ([`crate::scene::Scene::add_points`]): sampled over
+    /// each scene's triangles (seeded by `seed`), as from a scan of it, or a scan's file, while
     /// the exact BVH stays on the triangles: the referee of point-built RBVHs. None: RBVHs of the
-    /// triangles (or of a point-cloud scene's own points).
-    pub points: Option<usize>,
+    /// triangles.
+    pub points: Option<PointSource>,
 }
 
 /// Longest timed run that may be asked for: ten seconds a run is already far past any need.
@@ -222,11 +224,13 @@ impl BenchConfig {
         if let Some(lod) = &self.lod {
             lod.validate()?;
         }
-        if self.points == Some(0) {
-            return Err(Error::param(
-                "points",
-                "0 points to sample: give at least one",
-            ));
+        if let Some(PointSource::Sampled(count)) = self.points {
+            if count < MIN_POINTS {
+                return Err(Error::param(
+                    "points",
+                    format!("{count} point(s) to sample: give at least {MIN_POINTS}"),
+                ));
+            }
         }
         if self.plot_dir.is_some() && !self.ray_types.contains(&RayType::Primary) {
             return Err(Error::param(

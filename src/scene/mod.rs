@@ -28,4 +28,5 @@ pub use light::Light;
 pub use material::{Material, SurfaceMaterials, NO_MATERIAL};
 pub use mesh::{ObjectSurface, Scene};
 pub use mipmap::MipChain;
+pub use sample::{PointSource, SCAN_MATCH};
 pub use texture::{Texture, Wrap};

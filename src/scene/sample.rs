@@ -3,6 +3,8 @@
 //! exact BVH of the very mesh it was sampled from, which measures what building from points
 //! costs in accuracy, apart from everything a real scan adds.
 
+use std::path::PathBuf;
+
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
@@ -11,7 +13,76 @@ use crate::points::{PointCloud, MIN_POINTS};
 use crate::random::{mix64, SplitMix64};
 use crate::{rgba, Error, Result};
 
+/// Where the points come from when a mesh's RBVH is to be built from points, to be refereed by
+/// the exact BVH of the mesh's own triangles ([`Scene::add_points`]).
+#[derive(Clone, Debug, PartialEq)]
+pub enum PointSource {
+    /// This many points sampled over the triangles ([`Scene::sample_points`]).
+    Sampled(usize),
+    /// A scan of the same object, from a point-cloud file (`.ply`, `.xyz`), such as the vertices
+    /// of the PLY the mesh was reconstructed from.
+    File(PathBuf),
+}
+
+/// How far, as a fraction of the mesh's box diagonal, a scan's box may lie from the mesh's on
+/// any side and still be taken as a scan of it: loose enough for a scan's stray points and a
+/// mesh's hole filling, tight enough to catch a scan of another object, or in other units.
+pub const SCAN_MATCH: f32 = 0.05;
+
+impl PointSource {
+    /// "437645 points" or "points of dragon.ply": what a benchmark row adds to its scene's name.
+    pub fn label(&self) -> String {
+        match self {
+            PointSource::Sampled(count) => format!("{count} points"),
+            PointSource::File(path) => format!(
+                "points of {}",
+                path.file_name()
+                    .unwrap_or(path.as_os_str())
+                    .to_string_lossy()
+            ),
+        }
+    }
+}
+
 impl Scene {
+    /// Sets [`Scene::points`] from `source` (sampled with `seed`), so that an RBVH of the scene
+    /// is built from them while the exact BVH stays on the triangles, its referee. A scan from a
+    /// file must lie where the triangles do: its box within [`SCAN_MATCH`] of the diagonal of
+    /// theirs on every side, or it is an error naming both.
+    pub fn add_points(&mut self, source: &PointSource, seed: u64) -> Result<()> {
+        let cloud = match source {
+            PointSource::Sampled(count) => self.sample_points(*count, seed)?,
+            PointSource::File(path) => {
+                let cloud = PointCloud::load(path)?;
+                let mesh = self.bounds();
+                let scan = cloud.bounds();
+                let off = (scan.min - mesh.min)
+                    .abs()
+                    .max((scan.max - mesh.max).abs())
+                    .max_element();
+                if !(off <= SCAN_MATCH * mesh.diagonal()) {
+                    return Err(Error::param(
+                        "points",
+                        format!(
+                            "{} spans {:?}..{:?} but {} spans {:?}..{:?}: a scan must cover the mesh it is \
+                             compared with (each side within {}% of its diagonal)",
+                            path.display(),
+                            scan.min,
+                            scan.max,
+                            self.name,
+                            mesh.min,
+                            mesh.max,
+                            SCAN_MATCH * 100.0
+                        ),
+                    ));
+                }
+                cloud
+            }
+        };
+        self.points = Some(cloud);
+        Ok(())
+    }
+
     /// `count` points spread uniformly by area over the scene's triangles, as a scan of the
     /// scene would give, to build an RBVH from points that the exact BVH of the same triangles
     /// then referees. Each point carries its triangle's geometric normal as wound (`(b − a) ×

@@ -115,7 +115,7 @@ pub fn run(a: Args) -> Result<()> {
     config.lod = a.lod.then(|| a.lod_build.params());
     config.traffic = a.traffic;
     config.block_jumps = a.block_jumps;
-    config.points = a.points.points.map(|n| n as usize);
+    config.points = a.points.points.clone();
 
     let bar = Bar::new("benchmark");
     let result = bench::run_observed(

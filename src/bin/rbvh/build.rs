@@ -68,7 +68,7 @@ pub fn run(a: Args) -> Result<()> {
         if table {
             let points = match scene.point_count() {
                 0 => String::new(),
-                n => format!(" (RBVHs built from {n} points sampled on them)"),
+                n => format!(" (RBVHs built from {n} points instead)"),
             };
             println!(
                 "{}: {} triangles{points}; exact BVH {} nodes, {:.2} MB (tree + triangles), built in {:.0} ms; peak host memory so far {}",

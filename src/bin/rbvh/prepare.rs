@@ -13,9 +13,10 @@ use rbvh::geom::{Hit, Ray};
 use rbvh::glam::Vec3;
 use rbvh::gpu::{Addressing, Context, ContextOptions, Query, Reach, Traced, Tracer, Validation};
 use rbvh::lod::{Lod, LodParams, RayCone};
+use rbvh::points::MIN_POINTS;
 use rbvh::probe::{MeanCounters, RayCounters};
 use rbvh::rbvh::{Rbvh, TexelFormat};
-use rbvh::scene::{Camera, Scene, DEFAULT_VFOV_DEG};
+use rbvh::scene::{Camera, PointSource, Scene, DEFAULT_VFOV_DEG};
 
 /// Options shared by the commands that trace through a structure of their choice.
 #[derive(Args, Clone, Debug)]
@@ -105,27 +106,42 @@ impl Source {
     }
 }
 
-/// `--points`: an RBVH of points sampled from the scene, refereed by the exact BVH of its triangles.
+/// `--points`: an RBVH of points sampled from the scene, or of a scan of it, refereed by the exact
+/// BVH of its triangles.
 #[derive(Args, Clone, Debug)]
 pub struct PointsArg {
-    /// Build the RBVH from N points sampled uniformly over the scene's triangles (with their
-    /// normals and colours), as from a scan of it; the exact BVH stays on the triangles.
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=1 << 30))]
-    pub points: Option<u64>,
+    /// Build the RBVH from points instead of the scene's triangles, which the exact BVH keeps: N
+    /// points sampled uniformly over them (with their normals and colours), as from a scan, or a
+    /// scan of the same object from a .ply/.xyz file (such as the PLY of the vertices the mesh
+    /// was made from).
+    #[arg(long, value_name = "N|FILE", value_parser = parse_points)]
+    pub points: Option<PointSource>,
+}
+
+/// `--points`' value: a count of at least 3, or a file.
+fn parse_points(value: &str) -> Result<PointSource, String> {
+    match value.parse::<u64>() {
+        Ok(count) if count >= MIN_POINTS as u64 && count <= 1 << 30 => {
+            Ok(PointSource::Sampled(count as usize))
+        }
+        Ok(count) => Err(format!(
+            "{count} points: sample {MIN_POINTS} to 2^30, or name a .ply/.xyz file"
+        )),
+        Err(_) => Ok(PointSource::File(PathBuf::from(value))),
+    }
 }
 
 /// The seed of `--points`' sampling, fixed so that a command line names one RBVH.
 pub const POINTS_SEED: u64 = 0x5EED_2012;
 
 impl PointsArg {
-    /// `scene` with `--points` sampled into it, if asked for.
+    /// `scene` with `--points` added to it, if asked for.
     pub fn apply(&self, scene: &mut Scene) -> Result<()> {
-        if let Some(count) = self.points {
-            let points = step(&format!("sampling {count} points"), |_| {
-                scene.sample_points(count as usize, POINTS_SEED)
+        if let Some(source) = &self.points {
+            step(&format!("adding {}", source.label()), |_| {
+                scene.add_points(source, POINTS_SEED)
             })
             .context("--points")?;
-            scene.points = Some(points);
         }
         Ok(())
     }
