@@ -60,7 +60,7 @@ impl Scene {
                     .abs()
                     .max((scan.max - mesh.max).abs())
                     .max_element();
-                if !(off <= SCAN_MATCH * mesh.diagonal()) {
+                if off.is_nan() || off > SCAN_MATCH * mesh.diagonal() {
                     return Err(Error::param(
                         "points",
                         format!(
