@@ -25,6 +25,9 @@ use rbvh::surface::strokes;
 /// file can name the 120k-triangle built-ins; loading them is tested, building them is slow).
 const MAX_BUILD_TRIANGLES: usize = 5_000;
 
+/// Point clouds with more points than this are loaded but not built.
+const MAX_BUILD_POINTS: usize = 5_000;
+
 /// A scratch directory for this process and thread, with `mesh.obj` (one triangle) in it for
 /// fuzzed scene files to refer to.
 fn scratch() -> PathBuf {
@@ -99,8 +102,40 @@ fn check_scene(scene: &Scene) {
         .validate()
         .expect("a loaded scene validates (the loaders validate before returning)");
     assert!(scene.positions.iter().all(|p| p.is_finite()));
-    if scene.triangle_count() <= MAX_BUILD_TRIANGLES {
+    if let Some(cloud) = &scene.points {
+        assert!(cloud.normals.iter().all(|n| n.is_normalized()));
+        assert!(cloud.spacing.iter().all(|&s| s.is_finite() && s > 0.0));
+        if cloud.len() <= MAX_BUILD_POINTS {
+            check_rbvh(scene, &RbvhParams::quality(0).expect("Q0"));
+        }
+    }
+    if scene.triangle_count() > 0 && scene.triangle_count() <= MAX_BUILD_TRIANGLES {
         check_exact(scene);
+    }
+}
+
+/// Builds an RBVH of `scene` with `params` (a refusal must name a parameter: the texel estimate
+/// or the atlas limit) and checks its depth, file round trip and CPU caster on probe rays.
+fn check_rbvh(scene: &Scene, params: &RbvhParams) {
+    let r = match Rbvh::build(scene, params) {
+        Ok(r) => r,
+        Err(rbvh::Error::InvalidParameter { .. }) => return,
+        Err(e) => panic!("Rbvh::build: {e}"),
+    };
+    assert!(r.depth <= STACK_SIZE, "RBVH depth {}", r.depth);
+    let bytes = r.to_bytes();
+    let back = Rbvh::from_bytes(&bytes, Path::new("fuzz.rbvh")).expect("a built RBVH loads");
+    assert_eq!(back.to_bytes(), bytes);
+    for ray in probe_rays(scene.bounds()) {
+        for any in [false, true] {
+            let (hit, stats) = if any {
+                r.any_hit(&ray)
+            } else {
+                r.closest_hit(&ray)
+            };
+            assert!(!stats.overflow, "{ray:?}: RBVH traversal overflow");
+            check_hit(&ray, &hit);
+        }
     }
 }
 
@@ -130,6 +165,25 @@ pub fn obj(data: &[u8]) {
     let path = scratch_file("fuzz.obj", data);
     if let Ok(scene) = Scene::load(path.to_str().expect("utf-8 path")) {
         check_scene(&scene);
+    }
+}
+
+/// Fuzz target: a point cloud, `.ply` when the first byte is even and `.xyz` when odd (the rest
+/// of the bytes are the file). What loads has unit normals and positive spacings, and a small
+/// cloud builds an RBVH of its points that traces without overflow; what fails names the file.
+pub fn points(data: &[u8]) {
+    let Some((&selector, body)) = data.split_first() else {
+        return;
+    };
+    let name = if selector % 2 == 0 {
+        "fuzz.ply"
+    } else {
+        "fuzz.xyz"
+    };
+    let path = scratch_file(name, body);
+    match Scene::load(path.to_str().expect("utf-8 path")) {
+        Ok(scene) => check_scene(&scene),
+        Err(e) => check_error(&e, Some(&path)),
     }
 }
 
@@ -325,27 +379,7 @@ pub fn builders(data: &[u8]) {
     };
     let bvh = Bvh::build_with(&scene, &median).expect("median build");
     bvh.validate().expect("median BVH validates");
-    let r = match Rbvh::build(&scene, &params) {
-        Ok(r) => r,
-        // Only a refusal that names a parameter: the estimate or the atlas limit.
-        Err(rbvh::Error::InvalidParameter { .. }) => return,
-        Err(e) => panic!("Rbvh::build: {e}"),
-    };
-    assert!(r.depth <= STACK_SIZE, "RBVH depth {}", r.depth);
-    let bytes = r.to_bytes();
-    let back = Rbvh::from_bytes(&bytes, Path::new("fuzz.rbvh")).expect("a built RBVH loads");
-    assert_eq!(back.to_bytes(), bytes);
-    for ray in probe_rays(scene.bounds()) {
-        for any in [false, true] {
-            let (hit, stats) = if any {
-                r.any_hit(&ray)
-            } else {
-                r.closest_hit(&ray)
-            };
-            assert!(!stats.overflow, "{ray:?}: RBVH traversal overflow");
-            check_hit(&ray, &hit);
-        }
-    }
+    check_rbvh(&scene, &params);
 }
 
 /// A failed load must say what and where: an I/O or parse error naming a file (`file`, when
@@ -710,7 +744,37 @@ pub fn seeds() -> Vec<(&'static str, Vec<u8>)> {
         ),
     ];
     seeds.extend(texture_seeds().into_iter().map(|s| ("textures", s)));
+    seeds.extend(point_seeds().into_iter().map(|s| ("points", s)));
     seeds
+}
+
+/// Seeds of the `points` target (selector byte first): an ASCII PLY with normals and colours, a
+/// binary little-endian PLY with a face element to skip, and an XYZ file with normals.
+fn point_seeds() -> Vec<Vec<u8>> {
+    let mut ascii =
+        b"\0ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\n\
+        property float z\nproperty float nx\nproperty float ny\nproperty float nz\n\
+        property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n"
+            .to_vec();
+    for (x, z) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0), (0.5, 0.4)] {
+        ascii.extend(format!("{x} 0 {z} 0 1 0 200 100 50\n").into_bytes());
+    }
+    let mut binary = b"\0ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\n\
+        property float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\n\
+        end_header\n"
+        .to_vec();
+    for p in [[0f32, 0., 0.], [1., 0., 0.], [0., 1., 0.], [0.3, 0.3, 0.2]] {
+        for c in p {
+            binary.extend(c.to_le_bytes());
+        }
+    }
+    binary.push(3);
+    for i in [0i32, 1, 2] {
+        binary.extend(i.to_le_bytes());
+    }
+    let xyz =
+        b"\x01# x y z nx ny nz\n0 0 0 0 0 1\n1 0 0 0 0 1\n0 1 0 0 0 1\n1 1 0.1 0 0 1\n".to_vec();
+    vec![ascii, binary, xyz]
 }
 
 /// Runs target `name` on `data`.
@@ -724,12 +788,13 @@ pub fn run(name: &str, data: &[u8]) {
         "strokes" => strokes(data),
         "environment" => environment(data),
         "textures" => textures(data),
+        "points" => points(data),
         other => panic!("no fuzz target {other:?}"),
     }
 }
 
 /// The target names, as the binaries in `fuzz_targets/` are called.
-pub const TARGETS: [&str; 8] = [
+pub const TARGETS: [&str; 9] = [
     "obj",
     "gltf",
     "scene_file",
@@ -738,4 +803,5 @@ pub const TARGETS: [&str; 8] = [
     "strokes",
     "environment",
     "textures",
+    "points",
 ];
