@@ -5,8 +5,10 @@
 //! * [`layout`]: the GPU node in the style of Aila & Laine, "Understanding the efficiency of ray
 //!   traversal on GPUs" (HPG 2009): one 64-byte node holds both children's boxes, so one fetch
 //!   answers "which children does the ray enter, and in which order".
-//! * `traverse`: the CPU reference tracer, operation for operation the same as
-//!   `glsl/bvh.glsl`, on the same packed data.
+//! * `traverse`: the one CPU traversal of the node array, generic over what a leaf is (its
+//!   `Leaves` hook: the exact BVH's triangles here, an RBVH's height fields and levels of detail
+//!   in `crate::rbvh`), operation for operation the same as `glsl/bvh.glsl`, on the same packed
+//!   data; with it the exact BVH's CPU reference tracer.
 
 mod build;
 pub mod layout;
@@ -16,3 +18,4 @@ mod validate;
 pub(crate) use build::{join_halves, partition};
 pub use build::{BuildParams, Bvh};
 pub use layout::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
+pub(crate) use traverse::{traverse, Leaves};

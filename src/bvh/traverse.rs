@@ -1,6 +1,15 @@
-//! CPU reference tracer for the exact BVH: the same traversal order, box test and triangle test as
-//! `glsl/bvh.glsl`, so that CPU and GPU answers can be compared ray by ray, with the same counters
-//! ([`crate::probe::RayCounters`]: nodes, triangle leaves, triangles) and the same reads.
+//! The one nearest-first traversal of the node array, for every structure (the madmann91/bvh
+//! `intersect(ray, ..., leaf_fn)` and obvhs `traverse(ray, hit, intersection_fn)` shape): the
+//! exact BVH's triangle leaves, an RBVH's height fields and hybrid triangles, and coarse columns
+//! with level of detail are each a [`Leaves`] hook. It follows `glsl/bvh.glsl`'s and
+//! `glsl/rbvh.glsl`'s "while-while" loop step for step (nearest child first with the same tie
+//! rule, leaves pushed and popped like inner nodes and handled when they come up, the same
+//! bounded stack and robust box test), so that CPU and GPU answers and counters compare ray by
+//! ray. The exact BVH's CPU reference tracer below is its first user.
+//!
+//! Corrupt data never panics and never loops forever: a node index out of range has no
+//! children, and more node visits than nodes (only a cycle can make them) end the ray as an
+//! overflow.
 
 use rayon::prelude::*;
 
@@ -8,6 +17,154 @@ use super::layout::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
 use super::Bvh;
 use crate::geom::{intersect_triangle, safe_inverse, Hit, Ray, RayShear};
 use crate::probe::{element, Array, Probe, TraceStats};
+
+/// What a traversal does where it stops descending: the leaf test of one structure.
+pub(crate) trait Leaves<P: Probe> {
+    /// Whether child reference `reference` is handled by [`Leaves::test`] rather than descended
+    /// into; by default the leaves ([`LEAF_BIT`]).
+    fn is_leaf(&self, reference: u32) -> bool {
+        reference & LEAF_BIT != 0
+    }
+
+    /// The reference an inner child `child`, entered at `t_entry`, is pushed as: itself by
+    /// default, or one that [`Leaves::is_leaf`] takes (level of detail marks a node whose coarse
+    /// representation the ray selects).
+    fn enter(&self, child: u32, _t_entry: f32) -> u32 {
+        child
+    }
+
+    /// Tests leaf `reference` (with its child `count`) for the ray's interval `[tmin,
+    /// *t_closest)`: on a hit, lowers `*t_closest`, keeps the hit and returns true.
+    fn test(
+        &mut self,
+        reference: u32,
+        count: u32,
+        t_closest: &mut f32,
+        stats: &mut TraceStats,
+        probe: &mut P,
+    ) -> bool;
+}
+
+/// Traverses `nodes` (node 0 the root) for `ray`, handing leaves to `leaves`, which keeps the
+/// hit; with `any_hit`, stops at the first leaf that reports one. Counts inner nodes and reports
+/// each node read to `probe`, as the shaders read them. Invalid rays ([`Ray::is_valid`]) visit
+/// nothing.
+pub(crate) fn traverse<P: Probe, L: Leaves<P>>(
+    nodes: &[GpuNode],
+    ray: &Ray,
+    any_hit: bool,
+    leaves: &mut L,
+    probe: &mut P,
+) -> TraceStats {
+    let mut stats = TraceStats::default();
+    if !ray.is_valid() {
+        return stats;
+    }
+    let origin = ray.origin();
+    let inv_dir = safe_inverse(ray.dir());
+    let mut t_closest = ray.tmax;
+    let mut stack = [(0u32, 0u32); STACK_SIZE as usize];
+    let mut sp = 0usize;
+    let mut entry = (0u32, 0u32);
+    loop {
+        let (reference, count) = entry;
+        let mut next = None;
+        if leaves.is_leaf(reference) {
+            if leaves.test(reference, count, &mut t_closest, &mut stats, probe) && any_hit {
+                return stats;
+            }
+        } else if let Some(node) = nodes.get(reference as usize) {
+            // In a tree every node is entered at most once per ray; more visits than nodes can
+            // only come from a cycle in corrupt data.
+            if stats.counters.nodes as usize >= nodes.len() {
+                stats.overflow = true;
+                break;
+            }
+            stats.counters.nodes += 1;
+            probe.read(element::<GpuNode>(Array::Nodes, reference as usize));
+            let children = node.children();
+            let enter = |c: &ChildRef| c.bounds.intersect(origin, inv_dir, ray.tmin, t_closest);
+            let (ta, tb) = (enter(&children[0]), enter(&children[1]));
+            // Nearest child first; `b` only goes first when strictly nearer (as the shaders do).
+            let order = match (ta, tb) {
+                (Some(a), Some(b)) if b < a => [1, 0],
+                _ => [0, 1],
+            };
+            for k in order {
+                let c = &children[k];
+                let Some(t_entry) = [ta, tb][k] else { continue };
+                if t_entry > t_closest {
+                    continue;
+                }
+                let child = if c.child & LEAF_BIT == 0 {
+                    leaves.enter(c.child, t_entry)
+                } else {
+                    c.child
+                };
+                if next.is_none() {
+                    next = Some((child, c.count));
+                } else if sp < STACK_SIZE as usize {
+                    stack[sp] = (child, c.count);
+                    sp += 1;
+                } else {
+                    stats.overflow = true;
+                }
+            }
+        }
+        entry = match next {
+            Some(n) => n,
+            None if sp > 0 => {
+                sp -= 1;
+                stack[sp]
+            }
+            None => break,
+        };
+    }
+    stats
+}
+
+/// The exact BVH's leaves: its triangles, tested with the watertight test; keeps the slot (leaf
+/// order) and distance of the nearest hit.
+struct Triangles<'a> {
+    triangles: &'a [GpuTriangle],
+    shear: RayShear,
+    tmin: f32,
+    /// Stop at the first hit, in the leaf as in the tree.
+    any_hit: bool,
+    best: Option<(usize, f32)>,
+}
+
+impl<P: Probe> Leaves<P> for Triangles<'_> {
+    fn test(
+        &mut self,
+        reference: u32,
+        count: u32,
+        t_closest: &mut f32,
+        stats: &mut TraceStats,
+        probe: &mut P,
+    ) -> bool {
+        let first = (reference & !LEAF_BIT) as usize;
+        let end = first
+            .saturating_add(count as usize)
+            .min(self.triangles.len());
+        stats.counters.triangle_leaves += 1;
+        let mut found = false;
+        for slot in first..end {
+            stats.counters.triangles += 1;
+            probe.read(element::<GpuTriangle>(Array::Triangles, slot));
+            let [a, b, c] = self.triangles[slot].vertices();
+            if let Some(t) = intersect_triangle(&self.shear, a, b, c, self.tmin, *t_closest) {
+                *t_closest = t;
+                self.best = Some((slot, t));
+                found = true;
+                if self.any_hit {
+                    break;
+                }
+            }
+        }
+        found
+    }
+}
 
 impl Bvh {
     /// Closest hit of one ray, or [`Hit::MISS`]. Invalid rays ([`Ray::is_valid`]) miss.
@@ -39,75 +196,18 @@ impl Bvh {
     }
 
     fn traverse<P: Probe>(&self, ray: &Ray, any_hit: bool, probe: &mut P) -> (Hit, TraceStats) {
-        let mut stats = TraceStats::default();
-        if !ray.is_valid() {
-            return (Hit::MISS, stats);
-        }
-        let origin = ray.origin();
-        let inv_dir = safe_inverse(ray.dir());
-        let shear = RayShear::new(ray);
-        let mut t_closest = ray.tmax;
-        let mut best = None;
-        // Children as (reference, count); leaves are pushed and popped like inner nodes and
-        // tested when they come up, in the order of glsl/bvh.glsl's "while-while" traversal.
-        let mut stack = [(0u32, 0u32); STACK_SIZE as usize];
-        let mut sp = 0usize;
-        let mut node = (0u32, 0u32);
-        loop {
-            let (reference, count) = node;
-            let mut next = None;
-            if reference & LEAF_BIT != 0 {
-                let first = (reference & !LEAF_BIT) as usize;
-                stats.counters.triangle_leaves += 1;
-                for slot in first..first + count as usize {
-                    stats.counters.triangles += 1;
-                    probe.read(element::<GpuTriangle>(Array::Triangles, slot));
-                    let [a, b, c] = self.triangles[slot].vertices();
-                    if let Some(t) = intersect_triangle(&shear, a, b, c, ray.tmin, t_closest) {
-                        t_closest = t;
-                        best = Some(slot);
-                        if any_hit {
-                            return (self.hit(slot, t_closest, probe), stats);
-                        }
-                    }
-                }
-            } else {
-                stats.counters.nodes += 1;
-                probe.read(element::<GpuNode>(Array::Nodes, reference as usize));
-                let children = self.nodes[reference as usize].children();
-                let entry = |c: &ChildRef| c.bounds.intersect(origin, inv_dir, ray.tmin, t_closest);
-                let (ta, tb) = (entry(&children[0]), entry(&children[1]));
-                // Nearest child first; `b` only goes first when strictly nearer (same rule as GLSL).
-                let order = match (ta, tb) {
-                    (Some(a), Some(b)) if b < a => [1, 0],
-                    _ => [0, 1],
-                };
-                for k in order {
-                    let c = &children[k];
-                    let Some(t_entry) = [ta, tb][k] else { continue };
-                    if t_entry > t_closest {
-                        continue;
-                    }
-                    if next.is_none() {
-                        next = Some((c.child, c.count));
-                    } else if sp < STACK_SIZE as usize {
-                        stack[sp] = (c.child, c.count);
-                        sp += 1;
-                    } else {
-                        stats.overflow = true;
-                    }
-                }
-            }
-            node = match next {
-                Some(n) => n,
-                None if sp > 0 => {
-                    sp -= 1;
-                    stack[sp]
-                }
-                None => break,
-            };
-        }
-        let hit = best.map_or(Hit::MISS, |slot| self.hit(slot, t_closest, probe));
+        let mut leaves = Triangles {
+            triangles: &self.triangles,
+            shear: RayShear::new(ray),
+            tmin: ray.tmin,
+            any_hit,
+            best: None,
+        };
+        let stats = traverse(&self.nodes, ray, any_hit, &mut leaves, probe);
+        let hit = match leaves.best {
+            Some((slot, t)) => self.hit(slot, t, probe),
+            None => Hit::MISS,
+        };
         (hit, stats)
     }
 

@@ -1,9 +1,9 @@
 //! CPU reference caster of the RBVH, on exactly the packed data the GPU reads ([`super::layout`]).
 //! It is the oracle of the GLSL march: every step below is meant to be mirrored line by line.
 //!
-//! **Tree**: the exact BVH's traversal (`crate::bvh`'s `traverse.rs`): nearest child first, the
-//! same tie rule, the same bounded stack, the same robust box test (Ize, "Robust BVH Ray
-//! Traversal", JCGT 2013). A triangle-leaf child is tested in place with the watertight test of
+//! **Tree**: the one traversal of `crate::bvh` (`traverse.rs`), with this module's leaves as its
+//! hook (`RbvhLeaves`): nearest child first, the same tie rule, the same bounded stack, the same
+//! robust box test (Ize, "Robust BVH Ray Traversal", JCGT 2013). A triangle-leaf child is tested in place with the watertight test of
 //! Woop, Benthin & Wald ("Watertight Ray/Triangle Intersection", JCGT 2013); a height-field leaf
 //! (Novák & Dachsbacher 2012) takes an inner node's near-first/stack path and is marched when it
 //! comes up — the order `glsl/rbvh.glsl` needs to keep its traversal loop lean. The paper gives no detail of the march; this is our
@@ -37,7 +37,7 @@ use super::layout::{
 };
 use super::ranges::{block_ranges, BLOCK};
 use super::{Rbvh, TexelFormat};
-use crate::bvh::{ChildRef, GpuNode, GpuTriangle, STACK_SIZE};
+use crate::bvh::{GpuTriangle, Leaves};
 use crate::geom::{intersect_triangle, safe_inverse, Aabb, Hit, Ray, RayShear};
 use crate::lod::cone::check_cones;
 use crate::lod::march::march as lod_march;
@@ -98,6 +98,123 @@ impl DeviceTwin<'_> {
             Walk::Plain
         };
         self.rbvh.traverse(ray, any_hit, lod, walk, probe)
+    }
+}
+
+/// An RBVH's leaves for the shared traversal (`crate::bvh::traverse`): hybrid triangle leaves
+/// tested exactly, height fields marched, and with level of detail the coarse representation of
+/// a node the ray's cone selects (pushed as `LOD_BIT | node`) marched in its columns.
+struct RbvhLeaves<'a> {
+    rbvh: &'a Rbvh,
+    ray: &'a Ray,
+    shear: RayShear,
+    any_hit: bool,
+    lod: Option<(&'a Lod, &'a RayCone)>,
+    walk: Walk<'a>,
+    best: Hit,
+    /// The slot of the best hit when it is a triangle's.
+    best_slot: Option<usize>,
+}
+
+impl<P: Probe> Leaves<P> for RbvhLeaves<'_> {
+    fn is_leaf(&self, reference: u32) -> bool {
+        reference & (LEAF_BIT | LOD_BIT) != 0
+    }
+
+    fn enter(&self, child: u32, t_entry: f32) -> u32 {
+        let coarse = self.lod.is_some_and(|(l, cone)| {
+            l.nodes
+                .get(child as usize)
+                .is_some_and(|r| selects(l.params.selection_width(r.texel_size), cone, t_entry))
+        });
+        if coarse {
+            LOD_BIT | child
+        } else {
+            child
+        }
+    }
+
+    fn test(
+        &mut self,
+        node: u32,
+        count: u32,
+        t_closest: &mut f32,
+        stats: &mut TraceStats,
+        probe: &mut P,
+    ) -> bool {
+        let (ray, rbvh) = (self.ray, self.rbvh);
+        if node & LEAF_BIT != 0 && count != HEIGHTFIELD_COUNT {
+            // A triangle leaf (hybrid RBVH): tested exactly.
+            let first = (node & !LEAF_BIT) as usize;
+            let end = first
+                .saturating_add(count as usize)
+                .min(rbvh.triangles.len());
+            stats.counters.triangle_leaves += 1;
+            let mut found = false;
+            for slot in first..end {
+                let Some(tri) = rbvh.triangles.get(slot) else {
+                    break;
+                };
+                stats.counters.triangles += 1;
+                probe.read(element::<GpuTriangle>(Array::Triangles, slot));
+                let [a, b, v2] = tri.vertices();
+                if let Some(t) = intersect_triangle(&self.shear, a, b, v2, ray.tmin, *t_closest) {
+                    *t_closest = t;
+                    self.best = Hit {
+                        t,
+                        normal: tri.normal().to_array(),
+                        id: tri.prim,
+                        reserved: [0; 3],
+                    };
+                    self.best_slot = Some(slot);
+                    found = true;
+                    if self.any_hit {
+                        break;
+                    }
+                }
+            }
+            return found;
+        }
+        let marched = if node & LEAF_BIT != 0 {
+            // A height-field leaf that came up from the near-first order or the stack.
+            stats.counters.leaves += 1;
+            rbvh.march(node & !LEAF_BIT, ray, *t_closest, self.walk, stats, probe)
+                .map(|(t, normal)| (t, normal, node))
+        } else {
+            // A coarse representation chosen for this ray (only with `lod`).
+            let n = node & !LOD_BIT;
+            stats.counters.leaves += 1;
+            self.lod.and_then(|(l, _)| {
+                let record = match l.nodes.get(n as usize) {
+                    Some(r) => {
+                        probe.read(element::<GpuLod>(Array::LodRecords, n as usize));
+                        r
+                    }
+                    None => &GpuLod::NONE,
+                };
+                lod_march(
+                    record,
+                    &l.texels,
+                    ray,
+                    *t_closest,
+                    &mut stats.counters,
+                    probe,
+                )
+                .map(|(t, normal)| (t, normal, LEAF_BIT | node))
+            })
+        };
+        let Some((t, normal, id)) = marched else {
+            return false;
+        };
+        *t_closest = t;
+        self.best = Hit {
+            t,
+            normal: normal.to_array(),
+            id,
+            reserved: [0; 3],
+        };
+        self.best_slot = None;
+        true
     }
 }
 
@@ -185,166 +302,23 @@ impl Rbvh {
         walk: Walk,
         probe: &mut P,
     ) -> (Hit, TraceStats) {
-        let mut stats = TraceStats::default();
-        if !ray.is_valid() {
-            return (Hit::MISS, stats);
-        }
-        let origin = ray.origin();
-        let inv_dir = safe_inverse(ray.dir());
-        let shear = RayShear::new(ray);
-        let mut t_closest = ray.tmax;
-        let mut best = Hit::MISS;
-        // The device reads the nearest triangle once more, after its loops, for the hit's id and
-        // normal; `hit_read` reports that read when the best hit is a triangle.
-        let mut best_slot = None;
-        let hit_read = |best_slot: Option<usize>, probe: &mut P| {
-            if let Some(slot) = best_slot {
-                probe.read(element::<GpuTriangle>(Array::Triangles, slot));
-            }
+        let mut leaves = RbvhLeaves {
+            rbvh: self,
+            ray,
+            shear: RayShear::new(ray),
+            any_hit,
+            lod,
+            walk,
+            best: Hit::MISS,
+            best_slot: None,
         };
-        // Children as (reference, count): leaves of both kinds are pushed and popped like inner
-        // nodes and handled when they come up, in the order of glsl/rbvh.glsl's "while-while"
-        // traversal.
-        let mut stack = [(0u32, 0u32); STACK_SIZE as usize];
-        let mut sp = 0usize;
-        let mut entry = (0u32, 0u32);
-        loop {
-            let (node, count) = entry;
-            let mut next = None;
-            if node & LEAF_BIT != 0 && count != HEIGHTFIELD_COUNT {
-                // A triangle leaf (hybrid RBVH): tested exactly.
-                let first = (node & !LEAF_BIT) as usize;
-                let end = first
-                    .saturating_add(count as usize)
-                    .min(self.triangles.len());
-                stats.counters.triangle_leaves += 1;
-                for slot in first..end {
-                    let Some(tri) = self.triangles.get(slot) else {
-                        break;
-                    };
-                    stats.counters.triangles += 1;
-                    probe.read(element::<GpuTriangle>(Array::Triangles, slot));
-                    let [a, b, v2] = tri.vertices();
-                    if let Some(t) = intersect_triangle(&shear, a, b, v2, ray.tmin, t_closest) {
-                        t_closest = t;
-                        best = Hit {
-                            t,
-                            normal: tri.normal().to_array(),
-                            id: tri.prim,
-                            reserved: [0; 3],
-                        };
-                        best_slot = Some(slot);
-                        if any_hit {
-                            hit_read(best_slot, probe);
-                            return (best, stats);
-                        }
-                    }
-                }
-            } else if node & LEAF_BIT != 0 {
-                // A height-field leaf that came up from the near-first order or the stack.
-                let leaf = node & !LEAF_BIT;
-                stats.counters.leaves += 1;
-                if let Some((t, normal)) = self.march(leaf, ray, t_closest, walk, &mut stats, probe)
-                {
-                    t_closest = t;
-                    best = Hit {
-                        t,
-                        normal: normal.to_array(),
-                        id: node,
-                        reserved: [0; 3],
-                    };
-                    best_slot = None;
-                    if any_hit {
-                        return (best, stats);
-                    }
-                }
-            } else if node & LOD_BIT != 0 {
-                // A coarse representation chosen for this ray (only with `lod`).
-                let n = node & !LOD_BIT;
-                stats.counters.leaves += 1;
-                if let Some((l, _)) = lod {
-                    let record = match l.nodes.get(n as usize) {
-                        Some(r) => {
-                            probe.read(element::<GpuLod>(Array::LodRecords, n as usize));
-                            r
-                        }
-                        None => &GpuLod::NONE,
-                    };
-                    if let Some((t, normal)) = lod_march(
-                        record,
-                        &l.texels,
-                        ray,
-                        t_closest,
-                        &mut stats.counters,
-                        probe,
-                    ) {
-                        t_closest = t;
-                        best = Hit {
-                            t,
-                            normal: normal.to_array(),
-                            id: LEAF_BIT | node,
-                            reserved: [0; 3],
-                        };
-                        best_slot = None;
-                        if any_hit {
-                            return (best, stats);
-                        }
-                    }
-                }
-            } else if let Some(gpu_node) = self.nodes.get(node as usize) {
-                // A missing node (an index out of range, in corrupt data) has no children. In a
-                // tree every node is entered at most once per ray; more visits than nodes can
-                // only come from a cycle in corrupt data.
-                if stats.counters.nodes as usize >= self.nodes.len() {
-                    stats.overflow = true;
-                    break;
-                }
-                stats.counters.nodes += 1;
-                probe.read(element::<GpuNode>(Array::Nodes, node as usize));
-                let children = gpu_node.children();
-                let enter = |c: &ChildRef| c.bounds.intersect(origin, inv_dir, ray.tmin, t_closest);
-                let (ta, tb) = (enter(&children[0]), enter(&children[1]));
-                // Nearest child first; `b` only goes first when strictly nearer (as in the BVH).
-                let order = match (ta, tb) {
-                    (Some(a), Some(b)) if b < a => [1, 0],
-                    _ => [0, 1],
-                };
-                for k in order {
-                    let c = &children[k];
-                    let Some(t_entry) = [ta, tb][k] else { continue };
-                    if t_entry > t_closest {
-                        continue;
-                    }
-                    // Inner nodes and leaves alike take the near-first/stack path; a leaf is
-                    // marched or tested when it comes up (see `glsl/rbvh.glsl` for why).
-                    let coarse = c.child & LEAF_BIT == 0
-                        && lod.is_some_and(|(l, cone)| {
-                            l.nodes.get(c.child as usize).is_some_and(|r| {
-                                selects(l.params.selection_width(r.texel_size), cone, t_entry)
-                            })
-                        });
-                    let child = if coarse { LOD_BIT | c.child } else { c.child };
-                    if next.is_none() {
-                        next = Some((child, c.count));
-                    } else if sp < STACK_SIZE as usize {
-                        stack[sp] = (child, c.count);
-                        sp += 1;
-                    } else {
-                        stats.overflow = true;
-                    }
-                }
-            }
-            entry = match next {
-                Some(n) => n,
-                None if sp > 0 => {
-                    sp -= 1;
-                    stack[sp]
-                }
-                None => break,
-            };
+        let stats = crate::bvh::traverse(&self.nodes, ray, any_hit, &mut leaves, probe);
+        // The device reads the nearest triangle once more, after its loops, for the hit's id
+        // and normal, when the best hit is a triangle.
+        if let Some(slot) = leaves.best_slot {
+            probe.read(element::<GpuTriangle>(Array::Triangles, slot));
         }
-        hit_read(best_slot, probe);
-        (best, stats)
+        (leaves.best, stats)
     }
 
     /// Marches height-field leaf `leaf_index` for the ray's interval `[tmin, t_closest)`; returns
@@ -867,7 +841,7 @@ impl Cells<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bvh::{GpuNode, GpuTriangle};
+    use crate::bvh::{ChildRef, GpuNode, GpuTriangle};
     use crate::rbvh::layout::cell_triangles;
     use crate::rbvh::{RbvhParams, RbvhStats};
 
