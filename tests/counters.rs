@@ -85,12 +85,12 @@ fn device_and_cpu_twin_count_the_same_work() {
             ] {
                 tracer.set_block_jumps(jumping).unwrap();
                 assert_eq!(tracer.block_jumps(), jumping);
-                let twin = r.device_twin(None).unwrap().with_block_jumps(jumping);
+                let twin = r.device_twin().with_block_jumps(jumping);
                 let any = query == Query::Any;
                 let gpu = tracer.trace_with(&rays, query, true).unwrap();
                 let cpu: Vec<_> = rays
                     .iter()
-                    .map(|ray| twin.trace(ray, any, None, &mut ()))
+                    .map(|ray| twin.trace(ray, any, &mut ()))
                     .collect();
                 let counters = gpu.counters.as_ref().unwrap();
                 let (n, first) = mismatches(counters, &gpu.hits, &cpu);
@@ -149,13 +149,13 @@ fn level_of_detail_counts_agree_too() {
     let gpu = tracer
         .trace_lod(&rays, &cones, Query::Closest, true)
         .unwrap();
-    let twin = r
-        .device_twin(Some(&lod))
+    let twin = lod
+        .device_twin(&r)
         .unwrap()
         .with_block_jumps(tracer.block_jumps());
     let cpu: Vec<_> = rays
         .iter()
-        .map(|ray| twin.trace(ray, false, Some(&cone), &mut ()))
+        .map(|ray| twin.trace(ray, false, &cone, &mut ()))
         .collect();
     let coarse = gpu
         .hits
@@ -182,7 +182,7 @@ fn the_twins_block_jumps_change_no_hit_and_save_cells() {
     }));
     for level in [0, 2, 4] {
         let r = Rbvh::build(&scene, &RbvhParams::quality(level).unwrap()).unwrap();
-        let twin = r.device_twin(None).unwrap();
+        let twin = r.device_twin();
         let (mut plain_cells, mut twin_cells) = (0u64, 0u64);
         for any in [false, true] {
             for ray in &rays {
@@ -191,7 +191,7 @@ fn the_twins_block_jumps_change_no_hit_and_save_cells() {
                 } else {
                     r.closest_hit(ray)
                 };
-                let (jumping, js) = twin.trace(ray, any, None, &mut ());
+                let (jumping, js) = twin.trace(ray, any, &mut ());
                 assert_eq!(
                     (plain.t.to_bits(), plain.id),
                     (jumping.t.to_bits(), jumping.id),
@@ -219,13 +219,13 @@ fn the_twins_reads_match_their_counters() {
     let scene = Scene::builtin("default").unwrap();
     let rays = rays_for(&scene, 48, 1000, 5);
     let r = Rbvh::build(&scene, &RbvhParams::quality(2).unwrap()).unwrap();
-    let twin = r.device_twin(None).unwrap();
+    let twin = r.device_twin();
     let bvh = Bvh::build(&scene).unwrap();
     let count = |reads: &[Read], array: Array| reads.iter().filter(|r| r.array == array).count();
     let texel_bytes = 4 * r.atlas.texels.len() as u64;
     for ray in &rays {
         let mut reads = Vec::new();
-        let (hit, s) = twin.trace(ray, false, None, &mut reads);
+        let (hit, s) = twin.trace(ray, false, &mut reads);
         let c = s.counters;
         assert_eq!(count(&reads, Array::Nodes), c.nodes as usize);
         assert_eq!(count(&reads, Array::Leaves), c.leaves as usize);

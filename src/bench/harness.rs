@@ -565,7 +565,23 @@ impl<'a> SceneBench<'a> {
         device: &[crate::probe::RayCounters],
     ) -> Result<TrafficRecord> {
         let any = m.query == Query::Any;
-        let lod_twin;
+        let (plain_twin, lod_twin);
+        let rbvh_arrays = |r: &Rbvh, lod: Option<&Lod>| {
+            let lod_bytes = lod.map_or([0, 0], |l| {
+                [
+                    std::mem::size_of_val(l.nodes.as_slice()) as u64,
+                    std::mem::size_of_val(l.texels.as_slice()) as u64,
+                ]
+            });
+            [
+                std::mem::size_of_val(r.nodes.as_slice()) as u64,
+                r.triangle_bytes(),
+                std::mem::size_of_val(r.leaves.as_slice()) as u64,
+                r.atlas_bytes(),
+                lod_bytes[0],
+                lod_bytes[1],
+            ]
+        };
         let (arrays, trace): ([u64; 6], TwinTrace) = match &c.twin {
             Twin::Exact => {
                 let b = &self.bvh;
@@ -574,29 +590,26 @@ impl<'a> SceneBench<'a> {
                     Box::new(move |k, reads| b.trace_probed(&m.rays[k], any, reads).1),
                 )
             }
-            Twin::Rbvh(r) | Twin::Lod(r, _) => {
-                let lod = match &c.twin {
-                    Twin::Lod(_, lod) => Some(lod.as_ref()),
-                    _ => None,
-                };
-                lod_twin = r.device_twin(lod)?.with_block_jumps(c.tracer.block_jumps());
-                let twin = &lod_twin;
-                let lod_bytes = lod.map_or([0, 0], |l| {
-                    [
-                        std::mem::size_of_val(l.nodes.as_slice()) as u64,
-                        std::mem::size_of_val(l.texels.as_slice()) as u64,
-                    ]
-                });
+            Twin::Rbvh(r) => {
+                plain_twin = r.device_twin().with_block_jumps(c.tracer.block_jumps());
+                let twin = &plain_twin;
                 (
-                    [
-                        std::mem::size_of_val(r.nodes.as_slice()) as u64,
-                        r.triangle_bytes(),
-                        std::mem::size_of_val(r.leaves.as_slice()) as u64,
-                        r.atlas_bytes(),
-                        lod_bytes[0],
-                        lod_bytes[1],
-                    ],
-                    Box::new(move |k, reads| twin.trace(&m.rays[k], any, cones.get(k), reads).1),
+                    rbvh_arrays(r, None),
+                    Box::new(move |k, reads| twin.trace(&m.rays[k], any, reads).1),
+                )
+            }
+            Twin::Lod(r, lod) => {
+                if cones.len() != m.rays.len() {
+                    return Err(Error::param(
+                        "cones",
+                        format!("{} cones for {} rays", cones.len(), m.rays.len()),
+                    ));
+                }
+                lod_twin = lod.device_twin(r)?.with_block_jumps(c.tracer.block_jumps());
+                let twin = &lod_twin;
+                (
+                    rbvh_arrays(r, Some(lod)),
+                    Box::new(move |k, reads| twin.trace(&m.rays[k], any, &cones[k], reads).1),
                 )
             }
         };

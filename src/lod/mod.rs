@@ -24,15 +24,19 @@
 //! * [`cone`]: ray cones and the selection rule;
 //! * `build`: splatting the subtree's surface samples into each node's columns;
 //! * [`layout`]: the records the GPU reads;
-//! * `march`: the CPU reference of the column march (the traversal hook is in `rbvh::march`).
+//! * `march`: the CPU reference of the column march;
+//! * `trace`: the CPU caster with level of detail, a hook of the shared traversal around the
+//!   RBVH's leaves, and its device twin ([`LodTwin`]).
 
 mod build;
 pub mod cone;
 pub mod layout;
 pub(crate) mod march;
+mod trace;
 
 pub use cone::{selects, RayCone};
 pub use layout::{Column, GpuLod, LOD_BIT};
+pub use trace::LodTwin;
 
 use crate::{Error, Result};
 

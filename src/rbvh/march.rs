@@ -39,15 +39,11 @@ use super::ranges::{block_ranges, BLOCK};
 use super::{Rbvh, TexelFormat};
 use crate::bvh::{GpuTriangle, Leaves};
 use crate::geom::{intersect_triangle, safe_inverse, Aabb, Hit, Ray, RayShear};
-use crate::lod::cone::check_cones;
-use crate::lod::march::march as lod_march;
-use crate::lod::{selects, GpuLod, Lod, RayCone, LOD_BIT};
 use crate::probe::{element, Array, Probe, Read, TraceStats};
-use crate::Result;
 
 /// How the caster walks a leaf's cells.
 #[derive(Clone, Copy, Debug)]
-enum Walk<'a> {
+pub(crate) enum Walk<'a> {
     /// Every cell the ray crosses: the referee of the device's block jumps, and the twin of a
     /// device that does not jump ([`DeviceTwin::with_block_jumps`]).
     Plain,
@@ -63,15 +59,14 @@ enum Walk<'a> {
 /// equal the device's counters ray by ray, and reports to a [`Probe`] every
 /// read the shader makes of the structure's arrays, at its byte offset in the device buffers
 /// (`src/gpu/tracer.rs` binds them in [`Array`] order; the atlas buffer holds the texels, then the
-/// block ranges). Made by [`Rbvh::device_twin`].
+/// block ranges). Made by [`Rbvh::device_twin`]; with level of detail, `crate::lod::LodTwin`.
 pub struct DeviceTwin<'a> {
     rbvh: &'a Rbvh,
     ranges: Vec<u32>,
-    lod: Option<&'a Lod>,
     block_jumps: bool,
 }
 
-impl DeviceTwin<'_> {
+impl<'a> DeviceTwin<'a> {
     /// The twin of a device trace with block jumps on (the default) or off
     /// ([`crate::gpu::Tracer::block_jumps`]): off, it walks every cell, as the CPU reference does.
     pub fn with_block_jumps(self, on: bool) -> Self {
@@ -82,58 +77,73 @@ impl DeviceTwin<'_> {
     }
 
     /// Traces one ray (closest hit, or any hit) as the device does, reporting its reads to
-    /// `probe`. With level of detail ([`Rbvh::device_twin`] given a [`Lod`]) `cone` is the
-    /// ray's footprint; without, it is ignored.
-    pub fn trace<P: Probe>(
-        &self,
-        ray: &Ray,
-        any_hit: bool,
-        cone: Option<&RayCone>,
-        probe: &mut P,
-    ) -> (Hit, TraceStats) {
-        let lod = self.lod.zip(cone);
-        let walk = if self.block_jumps {
+    /// `probe`.
+    pub fn trace<P: Probe>(&self, ray: &Ray, any_hit: bool, probe: &mut P) -> (Hit, TraceStats) {
+        self.rbvh.traverse_with(
+            self.rbvh.leaves(ray, any_hit, self.walk()),
+            ray,
+            any_hit,
+            probe,
+        )
+    }
+
+    /// The RBVH it traces.
+    pub(crate) fn rbvh(&self) -> &'a Rbvh {
+        self.rbvh
+    }
+
+    /// How it walks a leaf's cells.
+    pub(crate) fn walk(&self) -> Walk<'_> {
+        if self.block_jumps {
             Walk::Blocks(&self.ranges)
         } else {
             Walk::Plain
-        };
-        self.rbvh.traverse(ray, any_hit, lod, walk, probe)
+        }
     }
 }
 
 /// An RBVH's leaves for the shared traversal (`crate::bvh::traverse`): hybrid triangle leaves
-/// tested exactly, height fields marched, and with level of detail the coarse representation of
-/// a node the ray's cone selects (pushed as `LOD_BIT | node`) marched in its columns.
-struct RbvhLeaves<'a> {
+/// tested exactly, height fields marched. Level of detail wraps it (`crate::lod`'s `LodLeaves`),
+/// recording the hits of the coarse nodes it marches here ([`RbvhLeaves::record`]).
+pub(crate) struct RbvhLeaves<'a> {
     rbvh: &'a Rbvh,
     ray: &'a Ray,
     shear: RayShear,
     any_hit: bool,
-    lod: Option<(&'a Lod, &'a RayCone)>,
     walk: Walk<'a>,
     best: Hit,
     /// The slot of the best hit when it is a triangle's.
     best_slot: Option<usize>,
 }
 
-impl<P: Probe> Leaves<P> for RbvhLeaves<'_> {
-    fn is_leaf(&self, reference: u32) -> bool {
-        reference & (LEAF_BIT | LOD_BIT) != 0
+impl<'a> RbvhLeaves<'a> {
+    /// The ray traced.
+    pub(crate) fn ray(&self) -> &'a Ray {
+        self.ray
     }
 
-    fn enter(&self, child: u32, t_entry: f32) -> u32 {
-        let coarse = self.lod.is_some_and(|(l, cone)| {
-            l.nodes
-                .get(child as usize)
-                .is_some_and(|r| selects(l.params.selection_width(r.texel_size), cone, t_entry))
-        });
-        if coarse {
-            LOD_BIT | child
-        } else {
-            child
+    /// Keeps a hit at `t` with `normal` and `id` found by a hook around these leaves.
+    pub(crate) fn record(&mut self, t: f32, normal: Vec3, id: u32) {
+        self.best = Hit {
+            t,
+            normal: normal.to_array(),
+            id,
+            reserved: [0; 3],
+        };
+        self.best_slot = None;
+    }
+
+    /// The hit kept. The device reads the nearest triangle once more, after its loops, for the
+    /// hit's id and normal, when the best hit is a triangle: that read goes to `probe`.
+    pub(crate) fn finish<P: Probe>(self, probe: &mut P) -> Hit {
+        if let Some(slot) = self.best_slot {
+            probe.read(element::<GpuTriangle>(Array::Triangles, slot));
         }
+        self.best
     }
+}
 
+impl<P: Probe> Leaves<P> for RbvhLeaves<'_> {
     fn test(
         &mut self,
         node: u32,
@@ -143,7 +153,7 @@ impl<P: Probe> Leaves<P> for RbvhLeaves<'_> {
         probe: &mut P,
     ) -> bool {
         let (ray, rbvh) = (self.ray, self.rbvh);
-        if node & LEAF_BIT != 0 && count != HEIGHTFIELD_COUNT {
+        if count != HEIGHTFIELD_COUNT {
             // A triangle leaf (hybrid RBVH): tested exactly.
             let first = (node & !LEAF_BIT) as usize;
             let end = first
@@ -175,45 +185,15 @@ impl<P: Probe> Leaves<P> for RbvhLeaves<'_> {
             }
             return found;
         }
-        let marched = if node & LEAF_BIT != 0 {
-            // A height-field leaf that came up from the near-first order or the stack.
-            stats.counters.leaves += 1;
+        // A height-field leaf that came up from the near-first order or the stack.
+        stats.counters.leaves += 1;
+        let Some((t, normal)) =
             rbvh.march(node & !LEAF_BIT, ray, *t_closest, self.walk, stats, probe)
-                .map(|(t, normal)| (t, normal, node))
-        } else {
-            // A coarse representation chosen for this ray (only with `lod`).
-            let n = node & !LOD_BIT;
-            stats.counters.leaves += 1;
-            self.lod.and_then(|(l, _)| {
-                let record = match l.nodes.get(n as usize) {
-                    Some(r) => {
-                        probe.read(element::<GpuLod>(Array::LodRecords, n as usize));
-                        r
-                    }
-                    None => &GpuLod::NONE,
-                };
-                lod_march(
-                    record,
-                    &l.texels,
-                    ray,
-                    *t_closest,
-                    &mut stats.counters,
-                    probe,
-                )
-                .map(|(t, normal)| (t, normal, LEAF_BIT | node))
-            })
-        };
-        let Some((t, normal, id)) = marched else {
+        else {
             return false;
         };
         *t_closest = t;
-        self.best = Hit {
-            t,
-            normal: normal.to_array(),
-            id,
-            reserved: [0; 3],
-        };
-        self.best_slot = None;
+        self.record(t, normal, node);
         true
     }
 }
@@ -228,97 +208,73 @@ impl Rbvh {
     /// height-only texels, the normal of the cell triangle hit); a triangle's is its geometric
     /// normal as wound.
     pub fn closest_hit(&self, ray: &Ray) -> (Hit, TraceStats) {
-        self.traverse(ray, false, None, Walk::Plain, &mut ())
+        self.traverse(ray, false, Walk::Plain, &mut ())
     }
 
     /// Whether anything is hit in `[tmin, tmax)`: the hit returned is *some* hit, not the closest.
     /// Ids and normals as in [`Rbvh::closest_hit`].
     pub fn any_hit(&self, ray: &Ray) -> (Hit, TraceStats) {
-        self.traverse(ray, true, None, Walk::Plain, &mut ())
+        self.traverse(ray, true, Walk::Plain, &mut ())
     }
 
-    /// The device's twin ([`DeviceTwin`]), with level of detail when `lod` (built for this RBVH)
-    /// is given. Fails when `lod` was built for another tree.
-    pub fn device_twin<'a>(&'a self, lod: Option<&'a Lod>) -> Result<DeviceTwin<'a>> {
-        if let Some(l) = lod {
-            l.check_for(self)?;
-        }
-        Ok(DeviceTwin {
+    /// The device's twin ([`DeviceTwin`]); with level of detail, `Lod::device_twin`.
+    pub fn device_twin(&self) -> DeviceTwin<'_> {
+        DeviceTwin {
             rbvh: self,
             ranges: block_ranges(&self.atlas),
-            lod,
             block_jumps: true,
-        })
-    }
-
-    /// As [`Rbvh::closest_hit`] (or [`Rbvh::any_hit`]) with level of detail: an inner child whose
-    /// coarse representation in `lod` (built for this RBVH) is selected by `cone` at the child's
-    /// box entry ([`crate::lod::selects`]) is marched instead of descended into. A hit on a
-    /// coarse representation reports `id = LEAF_BIT | LOD_BIT | node`. The columns it visits
-    /// count as `cells`.
-    pub fn hit_lod(
-        &self,
-        lod: &Lod,
-        ray: &Ray,
-        cone: &RayCone,
-        any_hit: bool,
-    ) -> (Hit, TraceStats) {
-        self.traverse(ray, any_hit, Some((lod, cone)), Walk::Plain, &mut ())
+        }
     }
 
     /// Traces many rays in parallel with `rayon`; hits in ray order.
     pub fn trace_cpu(&self, rays: &[Ray], any_hit: bool) -> Vec<Hit> {
         rays.par_iter()
-            .map(|r| self.traverse(r, any_hit, None, Walk::Plain, &mut ()).0)
+            .map(|r| self.traverse(r, any_hit, Walk::Plain, &mut ()).0)
             .collect()
-    }
-
-    /// [`Rbvh::hit_lod`] for many rays, one cone each, in parallel; hits in ray order. Fails when
-    /// `lod` was built for another tree or the cones do not match the rays.
-    pub fn trace_cpu_lod(
-        &self,
-        lod: &Lod,
-        rays: &[Ray],
-        cones: &[RayCone],
-        any_hit: bool,
-    ) -> Result<Vec<Hit>> {
-        lod.check_for(self)?;
-        check_cones(rays, cones)?;
-        Ok(rays
-            .par_iter()
-            .zip(cones)
-            .map(|(r, c)| {
-                self.traverse(r, any_hit, Some((lod, c)), Walk::Plain, &mut ())
-                    .0
-            })
-            .collect())
     }
 
     fn traverse<P: Probe>(
         &self,
         ray: &Ray,
         any_hit: bool,
-        lod: Option<(&Lod, &RayCone)>,
         walk: Walk,
         probe: &mut P,
     ) -> (Hit, TraceStats) {
-        let mut leaves = RbvhLeaves {
+        self.traverse_with(self.leaves(ray, any_hit, walk), ray, any_hit, probe)
+    }
+
+    /// This RBVH's leaves for `ray`, walking cells as `walk` says.
+    pub(crate) fn leaves<'a>(
+        &'a self,
+        ray: &'a Ray,
+        any_hit: bool,
+        walk: Walk<'a>,
+    ) -> RbvhLeaves<'a> {
+        RbvhLeaves {
             rbvh: self,
             ray,
             shear: RayShear::new(ray),
             any_hit,
-            lod,
             walk,
             best: Hit::MISS,
             best_slot: None,
-        };
-        let stats = crate::bvh::traverse(&self.nodes, ray, any_hit, &mut leaves, probe);
-        // The device reads the nearest triangle once more, after its loops, for the hit's id
-        // and normal, when the best hit is a triangle.
-        if let Some(slot) = leaves.best_slot {
-            probe.read(element::<GpuTriangle>(Array::Triangles, slot));
         }
-        (leaves.best, stats)
+    }
+
+    /// The shared traversal of this RBVH's nodes with `leaves` (its own, or a hook around them),
+    /// and the hit they kept.
+    pub(crate) fn traverse_with<'a, P: Probe, L>(
+        &self,
+        mut leaves: L,
+        ray: &Ray,
+        any_hit: bool,
+        probe: &mut P,
+    ) -> (Hit, TraceStats)
+    where
+        L: Leaves<P> + Into<RbvhLeaves<'a>>,
+    {
+        let stats = crate::bvh::traverse(&self.nodes, ray, any_hit, &mut leaves, probe);
+        (leaves.into().finish(probe), stats)
     }
 
     /// Marches height-field leaf `leaf_index` for the ray's interval `[tmin, t_closest)`; returns
@@ -976,9 +932,9 @@ mod tests {
     #[test]
     fn the_device_twin_counts_and_reports_each_read() {
         let r = flat_plane();
-        let twin = r.device_twin(None).unwrap();
+        let twin = r.device_twin();
         let mut reads = Vec::new();
-        let (hit, stats) = twin.trace(&down(0.3, 0.2), false, None, &mut reads);
+        let (hit, stats) = twin.trace(&down(0.3, 0.2), false, &mut reads);
         assert_eq!(hit.id, LEAF_BIT);
         let c = stats.counters;
         assert_eq!(
