@@ -890,6 +890,81 @@ fn point_clouds_render_build_and_bench() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--points"));
 
+    // A point RBVH saved and loaded back with its cloud (its splats reach past the points).
+    let xyz = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/points/plane.xyz");
+    let saved = dir.path().join("plane.rbvh");
+    let out = rbvh(&[
+        "build",
+        "--scene",
+        arg(&xyz),
+        "--quality",
+        "0",
+        "--out",
+        arg(&saved),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = rbvh(&[
+        "render",
+        "--scene",
+        arg(&xyz),
+        "--rbvh",
+        arg(&saved),
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--out",
+        arg(&png),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+
+    // What points cannot mean is refused, saying why.
+    for (args, says) in [
+        (
+            vec![
+                "render",
+                "--scene",
+                "sphere",
+                "--points",
+                "100",
+                "--out",
+                arg(&png),
+            ],
+            "--method rbvh",
+        ),
+        (
+            vec!["build", "--scene", arg(&ply), "--points", "100"],
+            "points are added to a mesh",
+        ),
+        (
+            vec![
+                "bench",
+                "--scene",
+                arg(&ply),
+                "--rays",
+                "primary",
+                "--runs",
+                "1",
+            ],
+            "--points SCAN",
+        ),
+    ] {
+        let out = rbvh(&args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && stderr.contains(says),
+            "{args:?}: {stderr}"
+        );
+    }
+
     // A scan of the same object from a file is refereed by the mesh; a scan of another is refused.
     let out = rbvh(&[
         "build",

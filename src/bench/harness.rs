@@ -109,6 +109,17 @@ pub fn run_observed(
             observe(Event::Progress(format!("{spec}: loading")));
             Scene::load_observed(spec, progress)?
         };
+        if scene.triangle_count() == 0 && scene.points.is_some() {
+            return Err(Error::param(
+                "scenes",
+                format!(
+                    "{} is a point cloud: the bench referees RBVHs against the exact BVH of \
+                     triangles, so give the mesh as the scene and the scan as its points \
+                     (rbvh bench --scene MESH --points SCAN)",
+                    scene.name
+                ),
+            ));
+        }
         if let Some(source) = &config.points {
             let label = source.label();
             observe(Event::Progress(format!("{spec}: {label}")));

@@ -25,6 +25,7 @@
 //! |---|---|---|
 //! | `scene` | string | scene name (built-in name, file name, or the scene file's `name`) |
 //! | `triangles` | int | triangles in the scene |
+//! | `points` | int | points the RBVHs were built from (`--points`: sampled over the triangles, or a scan's file); 0: built from the triangles |
 //! | `method` | `"exact"` \| `"rbvh"` \| `"rbvh-lod"` | exact triangle BVH, RBVH, or RBVH traced with level of detail |
 //! | `quality` | null \| `"Q0"`…`"Q4"` \| `"custom"` | RBVH level; null for exact |
 //! | `params` | object \| null | RBVH build parameters (below); null for exact |

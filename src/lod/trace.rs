@@ -99,7 +99,7 @@ fn trace<P: Probe>(
     probe: &mut P,
 ) -> (Hit, TraceStats) {
     let leaves = LodLeaves {
-        inner: rbvh.leaves(ray, any_hit, walk),
+        inner: rbvh.leaf_hook(ray, any_hit, walk),
         lod,
         cone,
     };

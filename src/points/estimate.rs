@@ -44,7 +44,9 @@
 //! (fewer in clouds of fewer distinct positions). Counting distinct positions keeps it above 0;
 //! it is floored anyway, at the step between float32 values at the cloud's largest coordinate
 //! (finer than that, positions are not resolved across the whole cloud), so that it is positive
-//! for any input, even positions a denormal apart.
+//! for any input, even positions a denormal apart. It is capped at [`OUTLIER_CAP`] times the
+//! median of its neighbours' spacings, so that a stray point is not splatted as a disc as wide
+//! as its distance from the rest.
 //!
 //! Every step is deterministic: per-point work is written to its own slot, sums over points
 //! run in index order, and sorts are by total orders with indices breaking ties, so the result
@@ -110,7 +112,7 @@ pub(super) fn spacing(positions: &[Vec3]) -> Vec<f32> {
         .fold(0.0f32, f32::max);
     let floor = (largest * f32::EPSILON).max(f32::MIN_POSITIVE);
     let factor = (PI / hoods.k.max(1) as f64).sqrt();
-    let per_distinct: Vec<f32> = (0..hoods.distinct.len())
+    let raw: Vec<f32> = (0..hoods.distinct.len())
         .into_par_iter()
         .map(|u| {
             let r_k = hoods
@@ -120,12 +122,31 @@ pub(super) fn spacing(positions: &[Vec3]) -> Vec<f32> {
             ((factor * r_k) as f32).max(floor)
         })
         .collect();
+    // A point at a border, a corner or apart from the rest (a stray return of the scanner)
+    // finds its k-th neighbour far away, and would stand for a disc reaching far past the
+    // surface: no point stands for more than OUTLIER_CAP times the median of its neighbours'.
+    let per_distinct: Vec<f32> = (0..hoods.distinct.len())
+        .into_par_iter()
+        .map(|u| {
+            let mut around: Vec<f32> = hoods.row(u).iter().map(|&v| raw[v as usize]).collect();
+            if around.is_empty() {
+                return raw[u];
+            }
+            around.sort_by(f32::total_cmp);
+            raw[u].min(OUTLIER_CAP * around[around.len() / 2])
+        })
+        .collect();
     hoods
         .of_point
         .iter()
         .map(|&u| per_distinct[u as usize])
         .collect()
 }
+
+/// Most a point's spacing may exceed the median of its neighbours' ([`spacing`]): a border
+/// point of a regular grid measures about 1.4 times an interior one, a corner about 2, so 2
+/// leaves borders as they are and brings a lone point's disc down to its surroundings'.
+const OUTLIER_CAP: f32 = 2.0;
 
 /// The distinct positions of a cloud, a k-d tree over them, and the `k` nearest other distinct
 /// positions of each: the neighbour search [`normals`] and [`spacing`] share.

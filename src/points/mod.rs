@@ -22,7 +22,7 @@ mod xyz;
 
 use std::path::Path;
 
-use glam::{Mat4, Vec3};
+use glam::{DVec3, Mat4, Vec3};
 
 use crate::geom::Aabb;
 use crate::{Error, Result};
@@ -159,24 +159,32 @@ impl PointCloud {
     }
 
     /// The cloud placed by `m`: positions transformed, normals by the inverse transpose (so they
-    /// stay normal to the surface, mirrors included), spacing scaled by the cube root of the
-    /// volume scale.
+    /// stay normal to the surface, mirrors included), and each spacing by the square root of the
+    /// factor by which `m` scales the area of the surface there: `|det M|·|M⁻ᵀn|` for unit
+    /// normal `n` (Nanson's formula), so that a cloud squashed along one axis keeps its splats
+    /// as wide as its points are apart.
     pub fn transformed(&self, m: Mat4) -> PointCloud {
         let normal_matrix = m.inverse().transpose();
-        let scale = m.determinant().abs().cbrt();
+        let det = m.determinant().abs();
+        let (normals, spacing) = self
+            .normals
+            .iter()
+            .zip(&self.spacing)
+            .map(|(&n, &s)| {
+                let turned = normal_matrix.transform_vector3(n);
+                let area = det * turned.length();
+                (turned.normalize_or(n), s * area.sqrt())
+            })
+            .unzip();
         PointCloud {
             positions: self
                 .positions
                 .iter()
                 .map(|&p| m.transform_point3(p))
                 .collect(),
-            normals: self
-                .normals
-                .iter()
-                .map(|&n| normal_matrix.transform_vector3(n).normalize_or(n))
-                .collect(),
+            normals,
             colours: self.colours.clone(),
-            spacing: self.spacing.iter().map(|&s| s * scale).collect(),
+            spacing,
         }
     }
 
@@ -204,11 +212,12 @@ impl PointCloud {
 /// Fails, saying why, when `positions` cannot span a surface: fewer than [`MIN_POINTS`] distinct
 /// points, or all of them within a millionth of the cloud's extent of one line.
 fn check_spans_a_surface(positions: &[Vec3]) -> std::result::Result<(), String> {
-    let first = positions.first().copied().unwrap_or(Vec3::ZERO);
-    let farthest = |from: Vec3| {
+    // In f64: squared distances of f32 coordinates overflow near 1e19 and underflow near 1e-19.
+    let first = positions.first().map_or(DVec3::ZERO, |p| p.as_dvec3());
+    let farthest = |from: DVec3| {
         positions
             .iter()
-            .copied()
+            .map(|p| p.as_dvec3())
             .max_by(|a, b| {
                 a.distance_squared(from)
                     .total_cmp(&b.distance_squared(from))
@@ -226,11 +235,11 @@ fn check_spans_a_surface(positions: &[Vec3]) -> std::result::Result<(), String> 
     let axis = (b - a).normalize_or_zero();
     let off_line = positions
         .iter()
-        .map(|&p| {
-            let d = p - a;
+        .map(|p| {
+            let d = p.as_dvec3() - a;
             (d - d.dot(axis) * axis).length()
         })
-        .fold(0.0f32, f32::max);
+        .fold(0.0f64, f64::max);
     if positions.len() < MIN_POINTS || distinct < 2 {
         return Err(format!(
             "{} point(s) at {} distinct position(s): a surface needs at least {MIN_POINTS} points not on one line",

@@ -10,7 +10,8 @@
 //! * values are decimal numbers, in scientific notation or not (`-1.5`, `2e-3`).
 //!
 //! There are no colours: six columns are always a normal, never `r g b` (a file with colours
-//! belongs in a PLY, where its header says what each column is). An error names the line.
+//! belongs in a PLY, where its header says what each column is), and columns 4–6 with a value
+//! beyond ±1.5, as colours of 0–255 have, are refused as no normal. An error names the line.
 
 use std::fs::File;
 use std::io::{BufRead, BufReader};
@@ -87,7 +88,17 @@ fn read_from(path: &Path, mut reader: impl BufRead) -> Result<RawPoints> {
         let [x, y, z, nx, ny, nz] = values;
         positions.push(Vec3::new(x, y, z));
         if count == 6 {
-            normals.push(Vec3::new(nx, ny, nz));
+            let normal = Vec3::new(nx, ny, nz);
+            // Many tools write `x y z r g b` with colours 0–255 under the same extension; read
+            // as normals they would tilt every point. A normal's components lie within ±1
+            // (unnormalized ones rarely far beyond).
+            if normal.abs().max_element() > MAX_NORMAL_COMPONENT {
+                return Err(fail(format!(
+                    "columns 4–6 ({nx} {ny} {nz}) are not a normal: an XYZ line is `x y z` or `x y z nx ny nz`; \
+                     colours are not read from XYZ files (write a PLY with red green blue)"
+                )));
+            }
+            normals.push(normal);
         }
     }
     Ok(RawPoints {
@@ -96,6 +107,9 @@ fn read_from(path: &Path, mut reader: impl BufRead) -> Result<RawPoints> {
         colours: None,
     })
 }
+
+/// Largest normal component accepted in columns 4–6 (see [`read`]).
+const MAX_NORMAL_COMPONENT: f32 = 1.5;
 
 #[cfg(test)]
 mod tests {
@@ -239,5 +253,19 @@ mod tests {
             Err(Error::Io { path, .. }) => assert_eq!(path, missing),
             other => panic!("expected an I/O error, got {other:?}"),
         }
+    }
+
+    #[test]
+    fn colours_in_the_normal_columns_are_refused() {
+        let (line, message) = parse_error(b"0 0 0 0 0 1\n1 0 0 200 30 10\n");
+        assert_eq!(line, Some(2));
+        assert!(
+            message.contains("not a normal") && message.contains("PLY"),
+            "{message}"
+        );
+        assert!(
+            load(b"0 0 0 0 0 1.2\n").is_ok(),
+            "an unnormalized normal is still one"
+        );
     }
 }

@@ -51,6 +51,9 @@ use crate::{Error, Result};
 const MAX_TRIANGLE_LEAF: usize = 8;
 /// From this depth on, splits are object medians, bounding the depth by 32 + log2(n) < STACK_SIZE.
 const MEDIAN_BELOW_DEPTH: u32 = 32;
+/// A set of points whose box is thinner than this fraction of its length is a slab: split by
+/// facing when it is not one height field (`Builder::split_by_facing`).
+const SLAB: f32 = 0.25;
 /// Subtrees smaller than this are built on the calling thread.
 const PARALLEL_THRESHOLD: usize = 2048;
 /// Upper bound on tile texels before building: beyond it the atlas would not fit 32-bit indices
@@ -291,9 +294,16 @@ impl Rbvh {
 impl Builder<'_> {
     fn build(&self, order: &mut [u32], offset: u32, depth: u32) -> Node {
         let n = order.len();
-        let bounds = order
-            .iter()
-            .fold(Aabb::EMPTY, |b, &i| b.union(self.prims[i as usize].bounds));
+        // The box of the surface the set samples: its triangles, or its points (whose splits
+        // see them with their reach, but whose size is that of the samples).
+        let bounds = match self.input {
+            Input::Triangles(_) => order
+                .iter()
+                .fold(Aabb::EMPTY, |b, &i| b.union(self.prims[i as usize].bounds)),
+            Input::Points(_) => order
+                .iter()
+                .fold(Aabb::EMPTY, |b, &i| b.grow(self.prims[i as usize].centroid)),
+        };
         let first = &self.prims[order[0] as usize];
         let one_part = !self.params.object_split
             || order
@@ -306,6 +316,12 @@ impl Builder<'_> {
             }
         }
         let small = bounds.diagonal() < self.params.min_leaf_texels * self.texel;
+        // A slab (thinner than that, or than a quarter of its length: two sides of a thin sheet,
+        // scanned from both): space splits along its length and never between its sides, only
+        // their facing does.
+        let extent = bounds.extent();
+        let thin = extent.min_element()
+            < (self.params.min_leaf_texels * self.texel).max(SLAB * extent.max_element());
         match self.input {
             Input::Triangles(_) if n == 1 || (n <= MAX_TRIANGLE_LEAF && small) => {
                 self.progress.advance(n as u64);
@@ -314,22 +330,17 @@ impl Builder<'_> {
                     count: n as u32,
                 };
             }
-            Input::Points(points) if n > 1 && small && facing_classes(points, order) > 1 => {
-                return self.split_by_facing(points, order, offset, depth);
-            }
-            Input::Points(points) if n == 1 || small => {
-                self.progress.advance(n as u64);
-                let tiles = self.forced_heightfield(points, order);
-                if tiles.is_empty() {
-                    // Unreachable for finite points (each marks the sample nearest to it); an
-                    // empty leaf keeps the tree whole if it were not.
-                    return Node::Triangles {
-                        start: offset,
-                        count: 0,
-                    };
+            Input::Points(points) if n > 1 && (small || thin) => {
+                let classes = facing_classes(points, order);
+                let two_sided = (0..3).any(|axis| classes >> (2 * axis) & 0b11 == 0b11);
+                if (small && classes.count_ones() > 1) || (thin && two_sided) {
+                    return self.split_by_facing(points, order, offset, depth);
                 }
-                return tiles_subtree(self.scene_sources(tiles, order));
+                if n == 1 || small {
+                    return self.forced(points, order, offset);
+                }
             }
+            Input::Points(points) if n == 1 => return self.forced(points, order, offset),
             _ => {}
         }
         let mid = split(
@@ -348,11 +359,28 @@ impl Builder<'_> {
         Node::Inner(Box::new([a, b]))
     }
 
-    /// A small set of points that is not one height field, split by which of the six axis
-    /// directions each normal is nearest (at most 54.7° away, within every preset's 60° cone):
-    /// where space can no longer be split usefully, a closed speck (a claw, a horn's tip) still
-    /// separates into the sides it shows each way, each a height field, instead of being squashed
-    /// into one forced leaf. Triangles need no such split: they fall back to exact leaves.
+    /// The forced leaf of the points `order` (see [`Builder::forced_heightfield`]).
+    fn forced(&self, points: &[Splat], order: &[u32], offset: u32) -> Node {
+        self.progress.advance(order.len() as u64);
+        let tiles = self.forced_heightfield(points, order);
+        if tiles.is_empty() {
+            // Unreachable for finite points (each marks the sample nearest to it); an empty
+            // leaf keeps the tree whole if it were not.
+            return Node::Triangles {
+                start: offset,
+                count: 0,
+            };
+        }
+        tiles_subtree(self.scene_sources(tiles, order))
+    }
+
+    /// A small or thin set of points that is not one height field, split by which of the six
+    /// axis directions each normal is nearest (at most 54.7° away): where space can no longer be
+    /// split usefully (a closed speck: a claw, a horn's tip) or never between the sides (a thin
+    /// sheet scanned from both), the sides a set shows each way are split apart, each a better
+    /// candidate for a height field than the whole, instead of being cut into leaves of a few
+    /// points or squashed into one forced leaf. Triangles need no such split: they fall back to
+    /// exact leaves.
     fn split_by_facing(&self, all: &[Splat], order: &mut [u32], offset: u32, depth: u32) -> Node {
         order.sort_by_key(|&i| facing_class(all[i as usize].normal));
         let mut children = Vec::new();
@@ -401,10 +429,8 @@ impl Builder<'_> {
                 self.tiles(&frame, |window| rasterize(&tris, window, self.texel, judge))
             }
             Input::Points(all) => {
-                let points: Vec<Splat> = order.iter().map(|&i| all[i as usize]).collect();
+                let (points, positions, reach) = gather(all, order);
                 let elements = point_elements(&points);
-                let positions: Vec<Vec3> = points.iter().map(|p| p.position).collect();
-                let reach = points.iter().map(Splat::reach).fold(0.0, f32::max);
                 let (frame, judge) = self.judged_frame(&elements, &positions, reach, diagonal)?;
                 self.tiles(&frame, |window| {
                     splat(&points, window, self.texel, judge, false)
@@ -452,12 +478,10 @@ impl Builder<'_> {
     /// normal (or the first point's, when their normals cancel), the nearest point winning where
     /// they overlap.
     fn forced_heightfield(&self, all: &[Splat], order: &[u32]) -> Vec<Tile> {
-        let points: Vec<Splat> = order.iter().map(|&i| all[i as usize]).collect();
+        let (points, positions, reach) = gather(all, order);
         let w = projection_axis(&point_elements(&points))
             .or_else(|| points.first().map(|p| p.normal))
             .unwrap_or(Vec3::Z);
-        let positions: Vec<Vec3> = points.iter().map(|p| p.position).collect();
-        let reach = points.iter().map(Splat::reach).fold(0.0, f32::max);
         let frame = fit(&positions, w, self.texel, reach);
         self.tiles(&frame, |window| {
             splat(&points, window, self.texel, None, true)
@@ -479,12 +503,11 @@ fn facing_class(normal: Vec3) -> u8 {
     2 * axis + u8::from(normal[axis as usize] < 0.0)
 }
 
-/// How many of the six facing classes the points `order` fall into.
-fn facing_classes(all: &[Splat], order: &[u32]) -> u32 {
-    let mask = order
+/// The facing classes the points `order` fall into, as a mask (bit `c` for class `c`).
+fn facing_classes(all: &[Splat], order: &[u32]) -> u8 {
+    order
         .iter()
-        .fold(0u8, |m, &i| m | 1 << facing_class(all[i as usize].normal));
-    mask.count_ones()
+        .fold(0u8, |m, &i| m | 1 << facing_class(all[i as usize].normal))
 }
 
 /// A balanced subtree over `nodes` (at least one), in their order.
@@ -494,6 +517,14 @@ fn balanced(mut nodes: Vec<Node>) -> Node {
     }
     let right = nodes.split_off(nodes.len() / 2);
     Node::Inner(Box::new([balanced(nodes), balanced(right)]))
+}
+
+/// The points `order` of `all`, their positions, and the farthest any of their splats reaches.
+fn gather(all: &[Splat], order: &[u32]) -> (Vec<Splat>, Vec<Vec3>, f32) {
+    let points: Vec<Splat> = order.iter().map(|&i| all[i as usize]).collect();
+    let positions = points.iter().map(|p| p.position).collect();
+    let reach = points.iter().map(Splat::reach).fold(0.0, f32::max);
+    (points, positions, reach)
 }
 
 /// The surface elements of points (see `frame::triangle_elements`): each normal times the area

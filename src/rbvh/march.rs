@@ -80,7 +80,7 @@ impl<'a> DeviceTwin<'a> {
     /// `probe`.
     pub fn trace<P: Probe>(&self, ray: &Ray, any_hit: bool, probe: &mut P) -> (Hit, TraceStats) {
         self.rbvh.traverse_with(
-            self.rbvh.leaves(ray, any_hit, self.walk()),
+            self.rbvh.leaf_hook(ray, any_hit, self.walk()),
             ray,
             any_hit,
             probe,
@@ -240,11 +240,11 @@ impl Rbvh {
         walk: Walk,
         probe: &mut P,
     ) -> (Hit, TraceStats) {
-        self.traverse_with(self.leaves(ray, any_hit, walk), ray, any_hit, probe)
+        self.traverse_with(self.leaf_hook(ray, any_hit, walk), ray, any_hit, probe)
     }
 
     /// This RBVH's leaves for `ray`, walking cells as `walk` says.
-    pub(crate) fn leaves<'a>(
+    pub(crate) fn leaf_hook<'a>(
         &'a self,
         ray: &'a Ray,
         any_hit: bool,

@@ -124,13 +124,21 @@ impl Rbvh {
     /// wrong geometry without a word. Its box must be the scene's to within
     /// [`SCENE_MATCH_TEXELS`] texels on every side: leaves reach past the triangles by their
     /// dilated rims (extrapolated along steep slopes) and may fall short by a sliver that no
-    /// sample met. The error names both boxes.
+    /// sample met. A scene of points widens that by the farthest a splat reaches past its point
+    /// (`splat::REACH_SPACINGS` spacings along its plane, up to 1/`splat::MIN_FACING` times that
+    /// across it). The error names both boxes.
     pub fn check_built_from(&self, scene: &Scene) -> Result<()> {
         let expected = scene.bounds();
         if expected.is_empty() && self.bounds.is_empty() {
             return Ok(());
         }
-        let tolerance = SCENE_MATCH_TEXELS * self.texel_size.max(0.0) + 1e-5 * expected.diagonal();
+        let splat_reach = scene.points.as_ref().map_or(0.0, |cloud| {
+            let widest = cloud.spacing.iter().copied().fold(0.0f32, f32::max);
+            widest * splat::REACH_SPACINGS * (1.0 + 1.0 / splat::MIN_FACING as f32)
+        });
+        let tolerance = SCENE_MATCH_TEXELS * self.texel_size.max(0.0)
+            + splat_reach
+            + 1e-5 * expected.diagonal();
         let apart = (self.bounds.min - expected.min)
             .abs()
             .max((self.bounds.max - expected.max).abs())

@@ -38,8 +38,9 @@ use super::Refinement;
 /// reach is also how far a leaf's surface runs on along its tangent planes past its last points,
 /// a fin beside every thin part and silhouette. Measured on the dragon sampled at its vertex
 /// count (primary rays, Q0–Q4): a reach of 2 erred 2.5–3.4× more than 1.2 (t p99 0.29–1.5% of
-/// the diagonal) with 1.3–2.6× the hit/miss disagreements; 1.0 erred least but let 2 of 200,000
-/// rays through a sphere of 20,000 points at Q4, where 1.2 let none through down to 5,000 points.
+/// the diagonal) with 1.3–2.6× the hit/miss disagreements; 1.0 erred least but let 2 and 3 of
+/// 200,000 rays (in two sets) through a sphere of 20,000 points at Q4, where 1.2 let none
+/// through down to 5,000 points. 1.25 is 1.2 with a margin.
 pub const REACH_SPACINGS: f32 = 1.25;
 
 /// Smallest `|n·w|` a splat's slope is divided by: its tangent plane rises at most 1/0.25 = 4

@@ -272,6 +272,12 @@ impl Scene {
         }
         if let Some(cloud) = &self.points {
             let n = cloud.len();
+            if n < crate::points::MIN_POINTS {
+                return Err(invalid(format!(
+                    "{n} point(s): a point cloud needs at least {}",
+                    crate::points::MIN_POINTS
+                )));
+            }
             if cloud.normals.len() != n || cloud.spacing.len() != n {
                 return Err(invalid(format!(
                     "{} normals and {} spacings for {n} points",

@@ -50,6 +50,16 @@ impl Scene {
     /// file must lie where the triangles do: its box within [`SCAN_MATCH`] of the diagonal of
     /// theirs on every side, or it is an error naming both.
     pub fn add_points(&mut self, source: &PointSource, seed: u64) -> Result<()> {
+        if self.triangle_count() == 0 {
+            return Err(Error::param(
+                "points",
+                format!(
+                    "{} has no triangles to sample points from or to compare a scan with: points \
+                     are added to a mesh",
+                    self.name
+                ),
+            ));
+        }
         let cloud = match source {
             PointSource::Sampled(count) => self.sample_points(*count, seed)?,
             PointSource::File(path) => {

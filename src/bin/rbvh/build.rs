@@ -130,7 +130,7 @@ pub fn run(a: Args) -> Result<()> {
         );
             if r.colours.is_some() {
                 println!(
-                    "{:>7} colour channel (baked from the scene's materials): {:.3} MB, not in total",
+                    "{:>7} colour channel (baked from the scene's materials or its points' colours): {:.3} MB, not in total",
                     name,
                     mb(r.colour_bytes())
                 );

@@ -317,6 +317,10 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
         Scene::load_observed(&c.source.scene, bar)
     })
     .with_context(|| format!("loading scene {:?}", c.source.scene))?;
+    anyhow::ensure!(
+        c.source.points.points.is_none() || c.method == Method::Rbvh || c.source.rbvh.is_some(),
+        "--points builds the RBVH from points: add --method rbvh (the exact BVH traces the triangles)"
+    );
     c.source.points.apply(&mut scene)?;
     if camera.is_some() {
         scene.camera = camera;
