@@ -86,16 +86,29 @@ const OPEN: f64 = 0.5;
 /// (kiddo's default).
 type Tree = ImmutableKdTree<f32, u32, 3, 32>;
 
-/// Unit normals of a cloud that has none, oriented consistently per connected part (module
-/// documentation). `positions` are finite ([`super::PointCloud::new`] checks); any number of
-/// them is accepted, including duplicates and tiny clouds.
-pub(super) fn normals(positions: &[Vec3]) -> Vec<Vec3> {
-    let hoods = Neighbourhoods::new(positions, NORMAL_NEIGHBOURS);
+/// What a cloud's points lack: unit normals when `normals` (for a cloud that has none), oriented
+/// consistently per connected part, and the spacing around each point (module documentation),
+/// from one neighbour search. `positions` are finite ([`super::PointCloud::new`] checks); any
+/// number of them is accepted, including duplicates and tiny clouds.
+pub(super) fn estimate(positions: &[Vec3], normals: bool) -> (Option<Vec<Vec3>>, Vec<f32>) {
+    let k = if normals {
+        NORMAL_NEIGHBOURS.max(SPACING_NEIGHBOURS)
+    } else {
+        SPACING_NEIGHBOURS
+    };
+    let hoods = Neighbourhoods::new(positions, k);
+    let normals = normals.then(|| normals_of(&hoods));
+    (normals, spacing_of(&hoods, positions))
+}
+
+/// Unit normals of every point of `hoods`, oriented (the first [`NORMAL_NEIGHBOURS`] of each
+/// row are its plane's).
+fn normals_of(hoods: &Neighbourhoods) -> Vec<Vec3> {
     let planes: Vec<Vec3> = (0..hoods.distinct.len())
         .into_par_iter()
         .map(|u| hoods.plane_normal(u))
         .collect();
-    let oriented = orient(&hoods, &planes);
+    let oriented = orient(hoods, &planes);
     hoods
         .of_point
         .iter()
@@ -103,20 +116,20 @@ pub(super) fn normals(positions: &[Vec3]) -> Vec<Vec3> {
         .collect()
 }
 
-/// Per point, the local sample spacing `√(π/k)·r_k`, never 0 (module documentation).
-pub(super) fn spacing(positions: &[Vec3]) -> Vec<f32> {
-    let hoods = Neighbourhoods::new(positions, SPACING_NEIGHBOURS);
+/// The spacing of every point of `hoods` (the first [`SPACING_NEIGHBOURS`] of each row are the
+/// ones it is measured to).
+fn spacing_of(hoods: &Neighbourhoods, positions: &[Vec3]) -> Vec<f32> {
+    let k = SPACING_NEIGHBOURS.min(hoods.k);
     let largest = positions
         .iter()
         .map(|p| p.abs().max_element())
         .fold(0.0f32, f32::max);
     let floor = (largest * f32::EPSILON).max(f32::MIN_POSITIVE);
-    let factor = (PI / hoods.k.max(1) as f64).sqrt();
+    let factor = (PI / k.max(1) as f64).sqrt();
     let raw: Vec<f32> = (0..hoods.distinct.len())
         .into_par_iter()
         .map(|u| {
-            let r_k = hoods
-                .row(u)
+            let r_k = hoods.row(u)[..k]
                 .last()
                 .map_or(0.0, |&v| hoods.distance(u, v as usize));
             ((factor * r_k) as f32).max(floor)
@@ -128,7 +141,7 @@ pub(super) fn spacing(positions: &[Vec3]) -> Vec<f32> {
     let per_distinct: Vec<f32> = (0..hoods.distinct.len())
         .into_par_iter()
         .map(|u| {
-            let mut around: Vec<f32> = hoods.row(u).iter().map(|&v| raw[v as usize]).collect();
+            let mut around: Vec<f32> = hoods.row(u)[..k].iter().map(|&v| raw[v as usize]).collect();
             if around.is_empty() {
                 return raw[u];
             }
@@ -143,13 +156,13 @@ pub(super) fn spacing(positions: &[Vec3]) -> Vec<f32> {
         .collect()
 }
 
-/// Most a point's spacing may exceed the median of its neighbours' ([`spacing`]): a border
+/// Most a point's spacing may exceed the median of its neighbours' ([`spacing_of`]): a border
 /// point of a regular grid measures about 1.4 times an interior one, a corner about 2, so 2
 /// leaves borders as they are and brings a lone point's disc down to its surroundings'.
 const OUTLIER_CAP: f32 = 2.0;
 
 /// The distinct positions of a cloud, a k-d tree over them, and the `k` nearest other distinct
-/// positions of each: the neighbour search [`normals`] and [`spacing`] share.
+/// positions of each: the neighbour search [`normals_of`] and [`spacing_of`] share.
 struct Neighbourhoods {
     /// Distinct positions, in the order of their first occurrence.
     distinct: Vec<Vec3>,
@@ -525,6 +538,20 @@ fn symmetric_eigen(mut a: [[f64; 3]; 3]) -> ([f64; 3], [DVec3; 3]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn normals(positions: &[Vec3]) -> Vec<Vec3> {
+        estimate(positions, true).0.expect("normals asked for")
+    }
+
+    fn spacing(positions: &[Vec3]) -> Vec<f32> {
+        let (_, spacing) = estimate(positions, false);
+        assert_eq!(
+            spacing,
+            estimate(positions, true).1,
+            "one search serves both"
+        );
+        spacing
+    }
     use crate::random::{mix64, SplitMix64};
 
     /// `n` points spread evenly over the sphere of `radius` about `centre` (the Fibonacci

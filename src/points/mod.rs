@@ -119,6 +119,7 @@ impl PointCloud {
             }
         }
         check_spans_a_surface(&raw.positions).map_err(invalid)?;
+        let (estimated, spacing) = estimate::estimate(&raw.positions, raw.normals.is_none());
         let normals = match raw.normals {
             Some(given) => given
                 .into_iter()
@@ -131,9 +132,8 @@ impl PointCloud {
                     })
                 })
                 .collect::<Result<Vec<Vec3>>>()?,
-            None => estimate::normals(&raw.positions),
+            None => estimated.unwrap_or_default(),
         };
-        let spacing = estimate::spacing(&raw.positions);
         Ok(PointCloud {
             positions: raw.positions,
             normals,
