@@ -926,6 +926,33 @@ fn point_clouds_render_build_and_bench() {
         String::from_utf8_lossy(&out.stderr)
     );
 
+    // Painting a point RBVH: the dab lands in its colour channel, saved with it.
+    let strokes = dir.path().join("s.txt");
+    std::fs::write(&strokes, "dab 0.5 0.5 0.1 #ff0000\n").unwrap();
+    let painted = dir.path().join("painted.rbvh");
+    let out = rbvh(&[
+        "paint",
+        "--scene",
+        arg(&ply),
+        "--quality",
+        "0",
+        "--strokes",
+        arg(&strokes),
+        "--out",
+        arg(&painted),
+        "--width",
+        "32",
+        "--height",
+        "32",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let colours = rbvh::rbvh::Rbvh::load(&painted).unwrap().colours.unwrap();
+    assert!(colours.contains(&0xFF00_00FF));
+
     // What points cannot mean is refused, saying why.
     for (args, says) in [
         (
