@@ -11,6 +11,31 @@ use crate::progress::{Progress, Quiet};
 use crate::rbvh::Rbvh;
 use crate::Result;
 
+/// Which structure, without it: the `method` of benchmark records (`"exact"`, `"rbvh"`,
+/// `"rbvh-lod"`) and what [`Structure::kind`] says.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Kind {
+    /// The exact triangle BVH ([`crate::bvh`]), the referee.
+    Exact,
+    /// An RBVH ([`crate::rbvh`]) traced at full resolution.
+    Rbvh,
+    /// An RBVH traced with its levels of detail ([`crate::lod`]).
+    #[serde(rename = "rbvh-lod")]
+    RbvhLod,
+}
+
+impl Kind {
+    /// `"exact"`, `"rbvh"` or `"rbvh-lod"`, as records and file names write it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Kind::Exact => "exact",
+            Kind::Rbvh => "rbvh",
+            Kind::RbvhLod => "rbvh-lod",
+        }
+    }
+}
+
 /// A built structure, ready to upload ([`Structure::tracer`]) or to trace on the CPU.
 pub enum Structure {
     /// The exact triangle BVH, the referee.
@@ -43,6 +68,15 @@ impl Structure {
         match self {
             Structure::RbvhLod(_, lod) => Some(lod),
             _ => None,
+        }
+    }
+
+    /// Which of the three it is.
+    pub fn kind(&self) -> Kind {
+        match self {
+            Structure::Exact(_) => Kind::Exact,
+            Structure::Rbvh(_) => Kind::Rbvh,
+            Structure::RbvhLod(..) => Kind::RbvhLod,
         }
     }
 

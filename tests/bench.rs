@@ -9,7 +9,7 @@ use std::path::Path;
 use std::process::Command;
 
 use rbvh::bench::metrics::hit_errors;
-use rbvh::bench::record::{csv_columns, Method};
+use rbvh::bench::record::csv_columns;
 use rbvh::bench::validate::invalid_reason;
 use rbvh::bench::{self, BenchConfig, Device, Level, RayType};
 use rbvh::bvh::Bvh;
@@ -17,6 +17,7 @@ use rbvh::geom::Hit;
 use rbvh::gpu::Query;
 use rbvh::rays::{generate, offset_origin, Secondary, DEFAULT_LIGHT};
 use rbvh::scene::{Light, Scene};
+use rbvh::structure::Kind;
 
 fn small_config(plot: Option<&Path>) -> BenchConfig {
     let mut config = BenchConfig::new(vec!["sphere".into()], Device::Existing(common::context()));
@@ -69,14 +70,14 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
             assert_eq!(m.total, m.tree + m.atlas + m.triangles);
         }
         let exact = &chunk[0];
-        assert_eq!(exact.method, Method::Exact);
+        assert_eq!(exact.method, Kind::Exact);
         assert!(exact.error.is_none() && exact.params.is_none());
         assert_eq!(exact.speedup_vs_exact, 1.0);
         assert_eq!(exact.memory_ratio_vs_exact, 1.0);
         assert_eq!(exact.memory_bytes.atlas, 0);
         assert!(exact.valid, "{:?}", exact.invalid_reason);
         for r in &chunk[1..] {
-            assert_eq!(r.method, Method::Rbvh);
+            assert_eq!(r.method, Kind::Rbvh);
             assert!(r.params.is_some());
             assert!(r.memory_bytes.atlas > 0);
             assert_eq!(r.valid, r.invalid_reason.is_none());
@@ -112,14 +113,14 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
         "shaders"
     ])));
     // One entry per trace pipeline, in the order first used; statistics where the driver gives them.
-    let pipelines: Vec<(&str, Method)> = report
+    let pipelines: Vec<(&str, Kind)> = report
         .shaders
         .iter()
         .map(|s| (s.pipeline.as_str(), s.method))
         .collect();
     assert_eq!(
         pipelines,
-        [("trace_exact", Method::Exact), ("trace_rbvh", Method::Rbvh)]
+        [("trace_exact", Kind::Exact), ("trace_rbvh", Kind::Rbvh)]
     );
     assert_eq!(json["shaders"].as_array().unwrap().len(), 2);
     let listed = bench::shader_table(&report);
@@ -299,7 +300,7 @@ fn traffic_records_come_from_a_twin_that_counts_as_the_device() {
             c.nodes > 0.0 && (0.0..=1.0).contains(&c.simd8_utilisation),
             "{what}"
         );
-        if r.method == Method::Exact {
+        if r.method == Kind::Exact {
             assert!(
                 c.leaves == 0.0 && c.cells == 0.0 && c.triangles > 0.0,
                 "{what}"

@@ -30,8 +30,7 @@ use super::metrics::{self, HitErrors, Summary};
 use super::plot;
 use super::provenance;
 use super::record::{
-    BenchReport, Errors, Memory, Method, Params, Record, ShaderRecord, Spread, TimingSource,
-    TrafficRecord,
+    BenchReport, Errors, Memory, Params, Record, ShaderRecord, Spread, TimingSource, TrafficRecord,
 };
 use super::traffic::{self, TrafficModel, CACHE_SIZES, DRAM_LINE};
 use super::validate;
@@ -46,6 +45,7 @@ use crate::progress::{Progress, Quiet};
 use crate::rays::{self, RayType, Secondary, DEFAULT_LIGHT};
 use crate::rbvh::{Rbvh, RbvhParams, TexelFormat};
 use crate::scene::Scene;
+use crate::structure::Kind;
 use crate::{Error, Result};
 
 /// What the run tells its caller while it works.
@@ -161,7 +161,7 @@ pub fn run_observed(
 
 /// A structure under test, uploaded.
 struct Candidate {
-    method: Method,
+    method: Kind,
     /// None for the exact BVH.
     level: Option<(Level, RbvhParams)>,
     tracer: Tracer,
@@ -196,7 +196,7 @@ impl Candidate {
     fn file_stem(&self) -> String {
         match &self.level {
             None => "exact".into(),
-            Some((level, params)) if self.method == Method::RbvhLod => {
+            Some((level, params)) if self.method == Kind::RbvhLod => {
                 format!("{}_lod", level_label(level, params).to_ascii_lowercase())
             }
             Some((level, params)) => level_label(level, params).to_ascii_lowercase(),
@@ -212,7 +212,7 @@ impl Candidate {
         query: Query,
         counters: bool,
     ) -> Result<Traced> {
-        if self.method == Method::RbvhLod {
+        if self.method == Kind::RbvhLod {
             self.tracer.trace_lod(rays, cones, query, counters)
         } else {
             self.tracer.trace_with(rays, query, counters)
@@ -227,7 +227,7 @@ impl Candidate {
         query: Query,
         passes: u32,
     ) -> Result<Traced> {
-        let cones = (self.method == Method::RbvhLod).then_some(cones);
+        let cones = (self.method == Kind::RbvhLod).then_some(cones);
         self.tracer.trace_repeated(rays, cones, query, passes)
     }
 }
@@ -294,7 +294,7 @@ impl<'a> SceneBench<'a> {
         )));
         let bvh = Bvh::build_observed(&scene, &BuildParams::DEFAULT, progress)?;
         let mut candidates = vec![Candidate {
-            method: Method::Exact,
+            method: Kind::Exact,
             level: None,
             tracer: Tracer::exact_observed(ctx, &bvh, progress)?,
             twin: Twin::Exact,
@@ -333,7 +333,7 @@ impl<'a> SceneBench<'a> {
                 total: rbvh.total_bytes(),
             };
             candidates.push(Candidate {
-                method: Method::Rbvh,
+                method: Kind::Rbvh,
                 level: Some((*level, params)),
                 tracer: with_jumps(
                     Tracer::rbvh_observed(ctx, &rbvh, progress)?,
@@ -353,7 +353,7 @@ impl<'a> SceneBench<'a> {
                 let lod = Lod::build(&rbvh, lod_params)?;
                 // The coarse columns are counted with the tree: they are traversal data.
                 candidates.push(Candidate {
-                    method: Method::RbvhLod,
+                    method: Kind::RbvhLod,
                     level: Some((*level, params)),
                     tracer: with_jumps(
                         Tracer::rbvh_lod_observed(ctx, &rbvh, &lod, progress)?,
@@ -541,7 +541,7 @@ impl<'a> SceneBench<'a> {
                 method: c.method,
                 quality: c.level.map(|(level, _)| level.name()),
                 params: c.level.map(|(_, params)| Params::from(&params)),
-                lod: (c.method == Method::RbvhLod)
+                lod: (c.method == Kind::RbvhLod)
                     .then_some(self.config.lod)
                     .flatten(),
                 ray_type,
@@ -556,7 +556,7 @@ impl<'a> SceneBench<'a> {
                 invalid_reason: invalid,
                 timing_source: m.source,
                 passes: m.passes[i],
-                block_jumps: (c.method != Method::Exact).then(|| c.tracer.block_jumps()),
+                block_jumps: (c.method != Kind::Exact).then(|| c.tracer.block_jumps()),
                 counters: counted[i].0,
                 traffic: counted[i].1.clone(),
             });

@@ -29,9 +29,10 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 
-use super::record::{Method, Record};
+use super::record::Record;
 use crate::io::write_atomically;
 use crate::rays::RayType;
+use crate::structure::Kind;
 use crate::{Error, Result};
 
 /// One marker of a chart.
@@ -40,7 +41,7 @@ struct Point {
     /// Hit-distance error p99, in percent of the scene diagonal.
     x: f64,
     y: f64,
-    method: Method,
+    method: Kind,
 }
 
 /// Chart size: pixels of the PNG, user units of the SVG.
@@ -129,14 +130,14 @@ pub fn write_charts(dir: &Path, records: &[Record]) -> Result<Vec<PathBuf>> {
         primary
             .iter()
             .filter_map(|r| {
-                let exact = r.method == Method::Exact;
+                let exact = r.method == Kind::Exact;
                 let x = if exact {
                     0.0
                 } else {
                     100.0 * r.error.as_ref()?.t_err_p99?
                 };
                 let level = match r.method {
-                    Method::Exact => "exact".to_string(),
+                    Kind::Exact => "exact".to_string(),
                     _ => r.level_label(),
                 };
                 Some(Point {
@@ -182,9 +183,9 @@ pub fn write_charts(dir: &Path, records: &[Record]) -> Result<Vec<PathBuf>> {
                 let traffic = &r.traffic.as_ref()?.traffic;
                 let level = r.level_label();
                 let name = match r.method {
-                    Method::Exact => "exact".to_string(),
-                    Method::Rbvh => level,
-                    Method::RbvhLod => format!("{level} LOD"),
+                    Kind::Exact => "exact".to_string(),
+                    Kind::Rbvh => level,
+                    Kind::RbvhLod => format!("{level} LOD"),
                 };
                 Some(Line {
                     label: format!(
@@ -196,7 +197,7 @@ pub fn write_charts(dir: &Path, records: &[Record]) -> Result<Vec<PathBuf>> {
                         .iter()
                         .map(|c| (c.capacity_bytes as f64 / MIB, c.dram_bytes_per_ray))
                         .collect(),
-                    exact: r.method == Method::Exact,
+                    exact: r.method == Kind::Exact,
                 })
             })
             .collect();
@@ -303,16 +304,16 @@ where
     // BVH a marker at zero error.
     let font = (FAMILY, 13).into_font();
     for (method, colour) in [
-        (Method::Rbvh, BLUE.to_rgba()),
-        (Method::RbvhLod, GREEN.to_rgba()),
-        (Method::Exact, RED.to_rgba()),
+        (Kind::Rbvh, BLUE.to_rgba()),
+        (Kind::RbvhLod, GREEN.to_rgba()),
+        (Kind::Exact, RED.to_rgba()),
     ] {
         let mut mine: Vec<&Point> = points.iter().filter(|p| p.method == method).collect();
         if mine.is_empty() {
             continue;
         }
         mine.sort_by(|a, b| a.x.total_cmp(&b.x));
-        let series = if method == Method::Exact {
+        let series = if method == Kind::Exact {
             chart.draw_series(
                 mine.iter()
                     .map(|p| TriangleMarker::new((p.x, p.y), 7, colour.filled())),
@@ -324,7 +325,7 @@ where
             .label(method.name())
             .legend(move |(x, y)| Rectangle::new([(x, y - 4), (x + 16, y + 4)], colour.filled()));
         chart.draw_series(mine.iter().map(|p| {
-            let marker = if method == Method::Exact {
+            let marker = if method == Kind::Exact {
                 TriangleMarker::new((0, 0), 7, colour.filled()).into_dyn()
             } else {
                 Circle::new((0, 0), 4, colour.filled()).into_dyn()

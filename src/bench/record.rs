@@ -78,6 +78,8 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
+use crate::structure::Kind;
+
 use super::traffic::{CacheTraffic, Traffic, CACHE_SIZES};
 use crate::gpu::ShaderStatistic;
 use crate::io::write_atomically;
@@ -136,7 +138,7 @@ pub struct Record {
     /// by [`BenchConfig::points`](super::BenchConfig::points)); 0: built from the triangles.
     pub points: u64,
     /// Which structure traced the rays.
-    pub method: Method,
+    pub method: Kind,
     /// RBVH level, `"Q0"`…`"Q4"` or `"custom"` ([`Level::name`](super::Level::name)); None for
     /// exact.
     pub quality: Option<String>,
@@ -185,7 +187,7 @@ pub struct ShaderRecord {
     /// The pipeline's name (the shader and its variant).
     pub pipeline: String,
     /// The first method traced with it.
-    pub method: Method,
+    pub method: Kind,
     /// In the driver's order and words; empty where the device does not report them
     /// (`VK_KHR_pipeline_executable_properties`).
     pub statistics: Vec<ShaderStatistic>,
@@ -202,30 +204,6 @@ pub struct TrafficRecord {
     /// The traffic model's figures (`bench::traffic`).
     #[serde(flatten)]
     pub traffic: Traffic,
-}
-
-/// The structure a record measures.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Method {
-    /// The exact triangle BVH ([`crate::bvh`]), the referee.
-    Exact,
-    /// An RBVH ([`crate::rbvh`]) traced at full resolution.
-    Rbvh,
-    /// The RBVH of the same level traced with level of detail ([`crate::lod`]).
-    #[serde(rename = "rbvh-lod")]
-    RbvhLod,
-}
-
-impl Method {
-    /// `"exact"`, `"rbvh"` or `"rbvh-lod"`: the `method` of the JSON and CSV records.
-    pub fn name(self) -> &'static str {
-        match self {
-            Method::Exact => "exact",
-            Method::Rbvh => "rbvh",
-            Method::RbvhLod => "rbvh-lod",
-        }
-    }
 }
 
 /// What the timed runs were measured with.
@@ -462,7 +440,7 @@ impl Record {
             scene: String::new(),
             triangles: 0,
             points: 0,
-            method: Method::RbvhLod,
+            method: Kind::RbvhLod,
             quality: None,
             params: RbvhParams::quality(0).ok().as_ref().map(Params::from),
             lod: Some(LodParams::default()),
