@@ -3,6 +3,8 @@
 //! `CreateAccelerator` behind one interface), so that "which structure" is decided once and every
 //! user uploads, traces and names it the same way.
 
+use std::sync::Arc;
+
 use crate::bvh::Bvh;
 use crate::geom::{Hit, Ray};
 use crate::gpu::{Context, Tracer};
@@ -40,10 +42,11 @@ impl Kind {
 pub enum Structure {
     /// The exact triangle BVH, the referee.
     Exact(Bvh),
-    /// An RBVH traced at full resolution.
-    Rbvh(Box<Rbvh>),
+    /// An RBVH traced at full resolution. Shared, so that one RBVH can be traced both with and
+    /// without levels of detail (as the benchmark does) without a copy.
+    Rbvh(Arc<Rbvh>),
     /// An RBVH with its levels of detail (built for it), traced with one cone per ray.
-    RbvhLod(Box<Rbvh>, Box<Lod>),
+    RbvhLod(Arc<Rbvh>, Box<Lod>),
 }
 
 impl Structure {
@@ -55,11 +58,12 @@ impl Structure {
         }
     }
 
-    /// The RBVH traced, if any, to change (painting its colour channel, say).
+    /// The RBVH traced, if any, to change (painting its colour channel, say); a copy of it
+    /// when it is shared with another structure.
     pub fn rbvh_mut(&mut self) -> Option<&mut Rbvh> {
         match self {
             Structure::Exact(_) => None,
-            Structure::Rbvh(rbvh) | Structure::RbvhLod(rbvh, _) => Some(rbvh),
+            Structure::Rbvh(rbvh) | Structure::RbvhLod(rbvh, _) => Some(Arc::make_mut(rbvh)),
         }
     }
 

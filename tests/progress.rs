@@ -2,6 +2,7 @@
 //! announced (a bar that stops at 97% or runs past 100% misleads the user it is for).
 
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
 use std::sync::Mutex;
 
 mod common;
@@ -181,7 +182,7 @@ fn an_upload_counts_the_bytes_of_every_array() {
     let exact_bytes = bvh.tree_bytes() + bvh.triangle_bytes();
     let cases = [
         (Structure::Exact(bvh), exact_bytes),
-        (Structure::Rbvh(Box::new(rbvh.clone())), rbvh_bytes),
+        (Structure::Rbvh(Arc::new(rbvh.clone())), rbvh_bytes),
     ];
     for (structure, bytes) in cases {
         let tally = Tally::default();
@@ -201,7 +202,7 @@ fn an_upload_counts_the_bytes_of_every_array() {
     // With levels of detail the nodes carry their columns and the columns are uploaded too: more
     // bytes, all of them counted (Tally checks that the advances add up to the total).
     let tally = Tally::default();
-    Structure::RbvhLod(Box::new(rbvh), Box::new(lod))
+    Structure::RbvhLod(Arc::new(rbvh), Box::new(lod))
         .tracer_observed(&ctx, &tally)
         .unwrap();
     let counted = tally.counted();

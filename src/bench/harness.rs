@@ -45,7 +45,7 @@ use crate::progress::{Progress, Quiet};
 use crate::rays::{self, RayType, Secondary, DEFAULT_LIGHT};
 use crate::rbvh::{Rbvh, RbvhParams, TexelFormat};
 use crate::scene::Scene;
-use crate::structure::Kind;
+use crate::structure::{Kind, Structure};
 use crate::{Error, Result};
 
 /// What the run tells its caller while it works.
@@ -133,7 +133,7 @@ pub fn run_observed(
             if !report.shaders.iter().any(|s| s.pipeline == pipeline) {
                 report.shaders.push(ShaderRecord {
                     pipeline: pipeline.to_string(),
-                    method: c.method,
+                    method: c.method(),
                     statistics: statistics.to_vec(),
                 });
             }
@@ -159,14 +159,12 @@ pub fn run_observed(
     Ok(report)
 }
 
-/// A structure under test, uploaded.
+/// A structure under test, uploaded. Its host copy is what its CPU twin traces.
 struct Candidate {
-    method: Kind,
+    structure: Structure,
     /// None for the exact BVH.
     level: Option<(Level, RbvhParams)>,
     tracer: Tracer,
-    /// What its CPU twin traces (the exact BVH's is the scene's [`SceneBench::bvh`]).
-    twin: Twin,
     build_ms: f64,
     memory: Memory,
 }
@@ -174,20 +172,18 @@ struct Candidate {
 /// Ray `k` of a batch traced by a CPU twin, its reads pushed to the vector.
 type TwinTrace<'a> = Box<dyn Fn(usize, &mut Vec<Read>) -> TraceStats + Sync + 'a>;
 
-/// The host copy of a candidate's structure, for its CPU twin.
-enum Twin {
-    Exact,
-    Rbvh(Arc<Rbvh>),
-    Lod(Arc<Rbvh>, Box<Lod>),
-}
-
 impl Candidate {
+    /// Which structure it is.
+    fn method(&self) -> Kind {
+        self.structure.kind()
+    }
+
     /// "exact", "rbvh Q2", "rbvh custom": for messages.
     fn label(&self) -> String {
         match &self.level {
-            None => self.method.name().into(),
+            None => self.method().name().into(),
             Some((level, params)) => {
-                format!("{} {}", self.method.name(), level_label(level, params))
+                format!("{} {}", self.method().name(), level_label(level, params))
             }
         }
     }
@@ -196,7 +192,7 @@ impl Candidate {
     fn file_stem(&self) -> String {
         match &self.level {
             None => "exact".into(),
-            Some((level, params)) if self.method == Kind::RbvhLod => {
+            Some((level, params)) if self.method() == Kind::RbvhLod => {
                 format!("{}_lod", level_label(level, params).to_ascii_lowercase())
             }
             Some((level, params)) => level_label(level, params).to_ascii_lowercase(),
@@ -212,7 +208,7 @@ impl Candidate {
         query: Query,
         counters: bool,
     ) -> Result<Traced> {
-        if self.method == Kind::RbvhLod {
+        if self.method() == Kind::RbvhLod {
             self.tracer.trace_lod(rays, cones, query, counters)
         } else {
             self.tracer.trace_with(rays, query, counters)
@@ -227,7 +223,7 @@ impl Candidate {
         query: Query,
         passes: u32,
     ) -> Result<Traced> {
-        let cones = (self.method == Kind::RbvhLod).then_some(cones);
+        let cones = (self.method() == Kind::RbvhLod).then_some(cones);
         self.tracer.trace_repeated(rays, cones, query, passes)
     }
 }
@@ -237,9 +233,8 @@ struct SceneBench<'a> {
     config: &'a BenchConfig,
     scene: Scene,
     diagonal: f32,
-    /// Kept for the CPU reference tracer that referees the exact BVH's GPU hits.
-    bvh: Bvh,
-    /// The exact BVH first.
+    /// The exact BVH first: its host copy is also the CPU reference tracer that referees its
+    /// GPU hits.
     candidates: Vec<Candidate>,
     primary: Vec<Ray>,
     /// The cone of every primary ray (its pixel's), for level-of-detail candidates.
@@ -293,18 +288,22 @@ impl<'a> SceneBench<'a> {
             scene.name
         )));
         let bvh = Bvh::build_observed(&scene, &BuildParams::DEFAULT, progress)?;
-        let mut candidates = vec![Candidate {
-            method: Kind::Exact,
-            level: None,
-            tracer: Tracer::exact_observed(ctx, &bvh, progress)?,
-            twin: Twin::Exact,
-            build_ms: bvh.build_ms,
-            memory: Memory {
+        let (build_ms, memory) = (
+            bvh.build_ms,
+            Memory {
                 tree: bvh.tree_bytes(),
                 atlas: 0,
                 triangles: bvh.triangle_bytes(),
                 total: bvh.tree_bytes() + bvh.triangle_bytes(),
             },
+        );
+        let structure = Structure::Exact(bvh);
+        let mut candidates = vec![Candidate {
+            tracer: structure.tracer_observed(ctx, progress)?,
+            structure,
+            level: None,
+            build_ms,
+            memory,
         }];
         // Secondary rays leave the exact surface by at least the coarsest RBVH's texel: an RBVH
         // surface may lie up to a fraction of a texel off the exact one, and a ray starting
@@ -332,14 +331,14 @@ impl<'a> SceneBench<'a> {
                 triangles: rbvh.triangle_bytes(),
                 total: rbvh.total_bytes(),
             };
+            let structure = Structure::Rbvh(Arc::clone(&rbvh));
             candidates.push(Candidate {
-                method: Kind::Rbvh,
-                level: Some((*level, params)),
                 tracer: with_jumps(
-                    Tracer::rbvh_observed(ctx, &rbvh, progress)?,
+                    structure.tracer_observed(ctx, progress)?,
                     config.block_jumps,
                 )?,
-                twin: Twin::Rbvh(Arc::clone(&rbvh)),
+                structure,
+                level: Some((*level, params)),
                 build_ms: rbvh.stats.build_ms,
                 memory,
             });
@@ -352,20 +351,21 @@ impl<'a> SceneBench<'a> {
                 )));
                 let lod = Lod::build(&rbvh, lod_params)?;
                 // The coarse columns are counted with the tree: they are traversal data.
+                let (build_ms, lod_bytes) = (rbvh.stats.build_ms + lod.stats.build_ms, lod.bytes());
+                let structure = Structure::RbvhLod(Arc::clone(&rbvh), Box::new(lod));
                 candidates.push(Candidate {
-                    method: Kind::RbvhLod,
-                    level: Some((*level, params)),
                     tracer: with_jumps(
-                        Tracer::rbvh_lod_observed(ctx, &rbvh, &lod, progress)?,
+                        structure.tracer_observed(ctx, progress)?,
                         config.block_jumps,
                     )?,
-                    build_ms: rbvh.stats.build_ms + lod.stats.build_ms,
+                    structure,
+                    level: Some((*level, params)),
+                    build_ms,
                     memory: Memory {
-                        tree: memory.tree + lod.bytes(),
-                        total: memory.total + lod.bytes(),
+                        tree: memory.tree + lod_bytes,
+                        total: memory.total + lod_bytes,
                         ..memory
                     },
-                    twin: Twin::Lod(Arc::clone(&rbvh), Box::new(lod)),
                 });
             }
         }
@@ -385,7 +385,6 @@ impl<'a> SceneBench<'a> {
             config,
             scene,
             diagonal,
-            bvh,
             candidates,
             primary,
             pixel_cone,
@@ -463,7 +462,10 @@ impl<'a> SceneBench<'a> {
                     Spread::of(&mrays)
                 })
                 .collect();
-        let exact_cpu = self.bvh.trace_cpu(&m.rays, m.query == Query::Any);
+        let exact_cpu =
+            self.candidates[0]
+                .structure
+                .trace_cpu(&m.rays, &[], m.query == Query::Any)?;
         // The pixel each ray belongs to (secondary rays: one per exact primary hit, in order), for
         // the traffic model's screen tiles.
         let pixels: Vec<u32> = if ray_type == RayType::Primary {
@@ -538,10 +540,10 @@ impl<'a> SceneBench<'a> {
                 scene: name.clone(),
                 triangles: self.scene.triangle_count() as u64,
                 points: self.scene.point_count() as u64,
-                method: c.method,
+                method: c.method(),
                 quality: c.level.map(|(level, _)| level.name()),
                 params: c.level.map(|(_, params)| Params::from(&params)),
-                lod: (c.method == Kind::RbvhLod)
+                lod: (c.method() == Kind::RbvhLod)
                     .then_some(self.config.lod)
                     .flatten(),
                 ray_type,
@@ -556,7 +558,7 @@ impl<'a> SceneBench<'a> {
                 invalid_reason: invalid,
                 timing_source: m.source,
                 passes: m.passes[i],
-                block_jumps: (c.method != Kind::Exact).then(|| c.tracer.block_jumps()),
+                block_jumps: (c.method() != Kind::Exact).then(|| c.tracer.block_jumps()),
                 counters: counted[i].0,
                 traffic: counted[i].1.clone(),
             });
@@ -593,15 +595,12 @@ impl<'a> SceneBench<'a> {
                 lod_bytes[1],
             ]
         };
-        let (arrays, trace): ([u64; 6], TwinTrace) = match &c.twin {
-            Twin::Exact => {
-                let b = &self.bvh;
-                (
-                    [b.tree_bytes(), b.triangle_bytes(), 0, 0, 0, 0],
-                    Box::new(move |k, reads| b.trace_probed(&m.rays[k], any, reads).1),
-                )
-            }
-            Twin::Rbvh(r) => {
+        let (arrays, trace): ([u64; 6], TwinTrace) = match &c.structure {
+            Structure::Exact(b) => (
+                [b.tree_bytes(), b.triangle_bytes(), 0, 0, 0, 0],
+                Box::new(move |k, reads| b.trace_probed(&m.rays[k], any, reads).1),
+            ),
+            Structure::Rbvh(r) => {
                 plain_twin = r.device_twin().with_block_jumps(c.tracer.block_jumps());
                 let twin = &plain_twin;
                 (
@@ -609,7 +608,7 @@ impl<'a> SceneBench<'a> {
                     Box::new(move |k, reads| twin.trace(&m.rays[k], any, reads).1),
                 )
             }
-            Twin::Lod(r, lod) => {
+            Structure::RbvhLod(r, lod) => {
                 if cones.len() != m.rays.len() {
                     return Err(Error::param(
                         "cones",

@@ -4,6 +4,7 @@
 
 use std::fmt;
 use std::path::Path;
+use std::sync::Arc;
 
 use crate::bvh::Bvh;
 use crate::geom::Hit;
@@ -117,12 +118,12 @@ impl Method {
         Ok(match self {
             Method::Exact => Structure::Exact(Bvh::build(scene)?),
             Method::Rbvh(level) => {
-                Structure::Rbvh(Box::new(Rbvh::build(scene, &RbvhParams::quality(level)?)?))
+                Structure::Rbvh(Arc::new(Rbvh::build(scene, &RbvhParams::quality(level)?)?))
             }
             Method::RbvhLod(level) => {
                 let rbvh = Rbvh::build(scene, &RbvhParams::quality(level)?)?;
                 let lod = Lod::build(&rbvh, &LodParams::default())?;
-                Structure::RbvhLod(Box::new(rbvh), Box::new(lod))
+                Structure::RbvhLod(Arc::new(rbvh), Box::new(lod))
             }
         })
     }

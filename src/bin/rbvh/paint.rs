@@ -108,7 +108,7 @@ pub fn run(a: Args) -> Result<()> {
         );
     }
 
-    let Structure::Rbvh(rbvh) = &mut p.structure else {
+    let Some(rbvh) = p.structure.rbvh_mut() else {
         bail!("painting needs an RBVH");
     };
     let start = Instant::now();

@@ -2,6 +2,7 @@
 //! structure — with a spinner on long steps (hidden when stderr is not a terminal).
 
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{Context as _, Result};
@@ -337,7 +338,7 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
             r.check_built_from(&scene).with_context(|| {
                 format!("RBVH {} with scene {:?}", path.display(), c.source.scene)
             })?;
-            Structure::Rbvh(Box::new(r))
+            Structure::Rbvh(Arc::new(r))
         }
         (None, Method::Exact) if scene.triangle_count() == 0 && scene.points.is_some() => {
             anyhow::bail!(
@@ -355,7 +356,7 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
                 "--quality and --texels: give one level in one texel format to trace"
             );
             let (_, params) = levels.remove(0);
-            Structure::Rbvh(Box::new(step("building RBVH", |bar| {
+            Structure::Rbvh(Arc::new(step("building RBVH", |bar| {
                 Rbvh::build_observed(&scene, &params, bar).map_err(flag_error)
             })?))
         }
