@@ -18,4 +18,4 @@ mod validate;
 pub(crate) use build::{join_halves, partition};
 pub use build::{BuildParams, Bvh};
 pub use layout::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
-pub(crate) use traverse::{traverse, Leaves};
+pub(crate) use traverse::{traverse, Leaves, Triangles};

@@ -123,15 +123,43 @@ pub(crate) fn traverse<P: Probe, L: Leaves<P>>(
     stats
 }
 
-/// The exact BVH's leaves: its triangles, tested with the watertight test; keeps the slot (leaf
-/// order) and distance of the nearest hit.
-struct Triangles<'a> {
+/// Triangle leaves, tested with the watertight test: the exact BVH's leaves, and an RBVH's hybrid
+/// ones. Keeps the slot (leaf order) and distance of the nearest hit.
+pub(crate) struct Triangles<'a> {
     triangles: &'a [GpuTriangle],
     shear: RayShear,
     tmin: f32,
     /// Stop at the first hit, in the leaf as in the tree.
     any_hit: bool,
     best: Option<(usize, f32)>,
+}
+
+impl<'a> Triangles<'a> {
+    /// The leaves over `triangles` (in leaf order) for `ray`; with `any_hit`, a leaf stops at its
+    /// first hit.
+    pub(crate) fn new(triangles: &'a [GpuTriangle], ray: &Ray, any_hit: bool) -> Self {
+        Triangles {
+            triangles,
+            shear: RayShear::new(ray),
+            tmin: ray.tmin,
+            any_hit,
+            best: None,
+        }
+    }
+
+    /// The nearest hit kept, if any. The device reads its triangle once more, after its loops,
+    /// for the hit's id and normal: that read goes to `probe`.
+    pub(crate) fn hit<P: Probe>(&self, probe: &mut P) -> Option<Hit> {
+        let (slot, t) = self.best?;
+        probe.read(element::<GpuTriangle>(Array::Triangles, slot));
+        let tri = &self.triangles[slot];
+        Some(Hit {
+            t,
+            normal: tri.normal().to_array(),
+            id: tri.prim,
+            reserved: [0; 3],
+        })
+    }
 }
 
 impl<P: Probe> Leaves<P> for Triangles<'_> {
@@ -196,31 +224,8 @@ impl Bvh {
     }
 
     fn traverse<P: Probe>(&self, ray: &Ray, any_hit: bool, probe: &mut P) -> (Hit, TraceStats) {
-        let mut leaves = Triangles {
-            triangles: &self.triangles,
-            shear: RayShear::new(ray),
-            tmin: ray.tmin,
-            any_hit,
-            best: None,
-        };
+        let mut leaves = Triangles::new(&self.triangles, ray, any_hit);
         let stats = traverse(&self.nodes, ray, any_hit, &mut leaves, probe);
-        let hit = match leaves.best {
-            Some((slot, t)) => self.hit(slot, t, probe),
-            None => Hit::MISS,
-        };
-        (hit, stats)
-    }
-
-    /// The hit record of triangle slot `slot` (its position in leaf order) at distance `t`; the
-    /// device reads the triangle once more for it.
-    fn hit<P: Probe>(&self, slot: usize, t: f32, probe: &mut P) -> Hit {
-        probe.read(element::<GpuTriangle>(Array::Triangles, slot));
-        let tri = &self.triangles[slot];
-        Hit {
-            t,
-            normal: tri.normal().to_array(),
-            id: tri.prim,
-            reserved: [0; 3],
-        }
+        (leaves.hit(probe).unwrap_or(Hit::MISS), stats)
     }
 }

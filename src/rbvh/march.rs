@@ -37,7 +37,7 @@ use super::layout::{
 };
 use super::ranges::{block_ranges, BLOCK};
 use super::{Rbvh, TexelFormat};
-use crate::bvh::{GpuTriangle, Leaves};
+use crate::bvh::{Leaves, Triangles};
 use crate::geom::{intersect_triangle, safe_inverse, Aabb, Hit, Ray, RayShear};
 use crate::probe::{element, Array, Probe, Read, TraceStats};
 
@@ -108,12 +108,14 @@ impl<'a> DeviceTwin<'a> {
 pub(crate) struct RbvhLeaves<'a> {
     rbvh: &'a Rbvh,
     ray: &'a Ray,
-    shear: RayShear,
-    any_hit: bool,
+    /// The hybrid triangle leaves, tested as the exact BVH tests its own.
+    triangles: Triangles<'a>,
     walk: Walk<'a>,
+    /// The nearest hit on a height field (or a coarse node): the best unless a triangle's is
+    /// nearer.
     best: Hit,
-    /// The slot of the best hit when it is a triangle's.
-    best_slot: Option<usize>,
+    /// Whether the triangles' hit is the nearest.
+    triangle_nearest: bool,
 }
 
 impl<'a> RbvhLeaves<'a> {
@@ -130,16 +132,17 @@ impl<'a> RbvhLeaves<'a> {
             id,
             reserved: [0; 3],
         };
-        self.best_slot = None;
+        self.triangle_nearest = false;
     }
 
     /// The hit kept. The device reads the nearest triangle once more, after its loops, for the
     /// hit's id and normal, when the best hit is a triangle: that read goes to `probe`.
     pub(crate) fn finish<P: Probe>(self, probe: &mut P) -> Hit {
-        if let Some(slot) = self.best_slot {
-            probe.read(element::<GpuTriangle>(Array::Triangles, slot));
+        if self.triangle_nearest {
+            self.triangles.hit(probe).unwrap_or(Hit::MISS)
+        } else {
+            self.best
         }
-        self.best
     }
 }
 
@@ -155,34 +158,8 @@ impl<P: Probe> Leaves<P> for RbvhLeaves<'_> {
         let (ray, rbvh) = (self.ray, self.rbvh);
         if count != HEIGHTFIELD_COUNT {
             // A triangle leaf (hybrid RBVH): tested exactly.
-            let first = (node & !LEAF_BIT) as usize;
-            let end = first
-                .saturating_add(count as usize)
-                .min(rbvh.triangles.len());
-            stats.counters.triangle_leaves += 1;
-            let mut found = false;
-            for slot in first..end {
-                let Some(tri) = rbvh.triangles.get(slot) else {
-                    break;
-                };
-                stats.counters.triangles += 1;
-                probe.read(element::<GpuTriangle>(Array::Triangles, slot));
-                let [a, b, v2] = tri.vertices();
-                if let Some(t) = intersect_triangle(&self.shear, a, b, v2, ray.tmin, *t_closest) {
-                    *t_closest = t;
-                    self.best = Hit {
-                        t,
-                        normal: tri.normal().to_array(),
-                        id: tri.prim,
-                        reserved: [0; 3],
-                    };
-                    self.best_slot = Some(slot);
-                    found = true;
-                    if self.any_hit {
-                        break;
-                    }
-                }
-            }
+            let found = self.triangles.test(node, count, t_closest, stats, probe);
+            self.triangle_nearest |= found;
             return found;
         }
         // A height-field leaf that came up from the near-first order or the stack.
@@ -253,11 +230,10 @@ impl Rbvh {
         RbvhLeaves {
             rbvh: self,
             ray,
-            shear: RayShear::new(ray),
-            any_hit,
+            triangles: Triangles::new(&self.triangles, ray, any_hit),
             walk,
             best: Hit::MISS,
-            best_slot: None,
+            triangle_nearest: false,
         }
     }
 
