@@ -810,40 +810,52 @@ fn camera_flags_place_the_camera() {
 /// it, and `bench --points` measures them against the exact BVH of the mesh.
 #[test]
 fn point_clouds_render_build_and_bench() {
+    /// Runs `args`, which must succeed; its stdout and stderr.
+    fn succeeds(args: &[&str]) -> (String, String) {
+        let out = rbvh(args);
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(out.status.success(), "{args:?}: {stderr}");
+        (String::from_utf8_lossy(&out.stdout).into_owned(), stderr)
+    }
+    /// Runs `args`, which must fail saying each of `says` on stderr.
+    fn fails(args: &[&str], says: &[&str]) {
+        let out = rbvh(args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && says.iter().all(|s| stderr.contains(s)),
+            "{args:?}: {stderr}"
+        );
+    }
     let dir = tempfile::tempdir().unwrap();
-    let ply = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/points/sphere.ply");
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/points");
+    let (ply, xyz) = (data.join("sphere.ply"), data.join("plane.xyz"));
     let png = dir.path().join("points.png");
-    let out = rbvh(&[
-        "render",
-        "--scene",
-        arg(&ply),
-        "--method",
-        "rbvh",
-        "--quality",
-        "0",
-        "--width",
-        "48",
-        "--height",
-        "48",
-        "--out",
-        arg(&png),
-        "--stats",
-    ]);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{stderr}");
+    let small = ["--width", "32", "--height", "32"];
+
+    let render = [
+        &[
+            "render",
+            "--scene",
+            arg(&ply),
+            "--method",
+            "rbvh",
+            "--quality",
+            "0",
+        ][..],
+        &small,
+        &["--out", arg(&png), "--stats"],
+    ]
+    .concat();
+    let (_, stderr) = succeeds(&render);
     assert!(stderr.contains("200 points"), "{stderr}");
     assert!(stderr.contains("no exact BVH to compare with"), "{stderr}");
     assert!(png.exists());
-
-    let out = rbvh(&["render", "--scene", arg(&ply), "--out", arg(&png)]);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
-    assert!(
-        stderr.contains("point cloud") && stderr.contains("--method rbvh"),
-        "{stderr}"
+    fails(
+        &["render", "--scene", arg(&ply), "--out", arg(&png)],
+        &["point cloud", "--method rbvh"],
     );
 
-    let out = rbvh(&[
+    let (stdout, _) = succeeds(&[
         "build",
         "--scene",
         "sphere",
@@ -852,48 +864,28 @@ fn point_clouds_render_build_and_bench() {
         "--quality",
         "1",
     ]);
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     assert!(stdout.contains("built from 20000 points"), "{stdout}");
     assert!(stdout.contains(" Q1 "), "{stdout}");
-
-    let out = rbvh(&[
-        "bench",
-        "--scene",
-        "sphere",
-        "--points",
-        "20000",
-        "--quality",
-        "0",
-        "--rays",
-        "primary",
-        "--width",
-        "32",
-        "--height",
-        "32",
-        "--runs",
-        "1",
-    ]);
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let bench = [
+        &[
+            "bench",
+            "--scene",
+            "sphere",
+            "--points",
+            "20000",
+            "--quality",
+            "0",
+        ][..],
+        &small,
+        &["--rays", "primary", "--runs", "1"],
+    ]
+    .concat();
+    let (stdout, _) = succeeds(&bench);
     assert!(stdout.contains("sphere (20000 points)"), "{stdout}");
 
-    let out = rbvh(&["build", "--scene", "sphere", "--points", "0"]);
-    assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--points"));
-
     // A point RBVH saved and loaded back with its cloud (its splats reach past the points).
-    let xyz = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/points/plane.xyz");
     let saved = dir.path().join("plane.rbvh");
-    let out = rbvh(&[
+    succeeds(&[
         "build",
         "--scene",
         arg(&xyz),
@@ -902,98 +894,46 @@ fn point_clouds_render_build_and_bench() {
         "--out",
         arg(&saved),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let out = rbvh(&[
-        "render",
-        "--scene",
-        arg(&xyz),
-        "--rbvh",
-        arg(&saved),
-        "--width",
-        "16",
-        "--height",
-        "16",
-        "--out",
-        arg(&png),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    succeeds(
+        &[
+            &[
+                "render",
+                "--scene",
+                arg(&xyz),
+                "--rbvh",
+                arg(&saved),
+                "--out",
+                arg(&png),
+            ][..],
+            &small,
+        ]
+        .concat(),
     );
 
     // Painting a point RBVH: the dab lands in its colour channel, saved with it.
     let strokes = dir.path().join("s.txt");
     std::fs::write(&strokes, "dab 0.5 0.5 0.1 #ff0000\n").unwrap();
     let painted = dir.path().join("painted.rbvh");
-    let out = rbvh(&[
-        "paint",
-        "--scene",
-        arg(&ply),
-        "--quality",
-        "0",
-        "--strokes",
-        arg(&strokes),
-        "--out",
-        arg(&painted),
-        "--width",
-        "32",
-        "--height",
-        "32",
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let paint = [
+        &[
+            "paint",
+            "--scene",
+            arg(&ply),
+            "--quality",
+            "0",
+            "--strokes",
+            arg(&strokes),
+        ][..],
+        &["--out", arg(&painted)],
+        &small,
+    ]
+    .concat();
+    succeeds(&paint);
     let colours = rbvh::rbvh::Rbvh::load(&painted).unwrap().colours.unwrap();
     assert!(colours.contains(&0xFF00_00FF));
 
-    // What points cannot mean is refused, saying why.
-    for (args, says) in [
-        (
-            vec![
-                "render",
-                "--scene",
-                "sphere",
-                "--points",
-                "100",
-                "--out",
-                arg(&png),
-            ],
-            "--method rbvh",
-        ),
-        (
-            vec!["build", "--scene", arg(&ply), "--points", "100"],
-            "points are added to a mesh",
-        ),
-        (
-            vec![
-                "bench",
-                "--scene",
-                arg(&ply),
-                "--rays",
-                "primary",
-                "--runs",
-                "1",
-            ],
-            "--points SCAN",
-        ),
-    ] {
-        let out = rbvh(&args);
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert!(
-            !out.status.success() && stderr.contains(says),
-            "{args:?}: {stderr}"
-        );
-    }
-
-    // A scan of the same object from a file is refereed by the mesh; a scan of another is refused.
-    let out = rbvh(&[
+    // A scan of the same object from a file is refereed by the mesh.
+    let (stdout, _) = succeeds(&[
         "build",
         "--scene",
         "sphere",
@@ -1002,18 +942,43 @@ fn point_clouds_render_build_and_bench() {
         "--quality",
         "0",
     ]);
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     assert!(stdout.contains("built from 200 points"), "{stdout}");
-    let out = rbvh(&["build", "--scene", "plane", "--points", arg(&ply)]);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
-    assert!(
-        stderr.contains("sphere.ply") && stderr.contains("must cover the mesh"),
-        "{stderr}"
+
+    // What points cannot mean is refused, saying why.
+    fails(
+        &["build", "--scene", "sphere", "--points", "0"],
+        &["--points"],
+    );
+    fails(
+        &[
+            "render",
+            "--scene",
+            "sphere",
+            "--points",
+            "100",
+            "--out",
+            arg(&png),
+        ],
+        &["--method rbvh"],
+    );
+    fails(
+        &["build", "--scene", arg(&ply), "--points", "100"],
+        &["points are added to a mesh"],
+    );
+    fails(
+        &[
+            "bench",
+            "--scene",
+            arg(&ply),
+            "--rays",
+            "primary",
+            "--runs",
+            "1",
+        ],
+        &["--points SCAN"],
+    );
+    fails(
+        &["build", "--scene", "plane", "--points", arg(&ply)],
+        &["sphere.ply", "must cover the mesh"],
     );
 }

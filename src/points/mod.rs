@@ -255,3 +255,20 @@ fn check_spans_a_surface(positions: &[Vec3]) -> std::result::Result<(), String> 
     }
     Ok(())
 }
+
+/// For the readers' tests: the line and message of the parse error that `result` must be, for
+/// the file `path`.
+#[cfg(test)]
+fn parse_error_of(result: Result<RawPoints>, path: &str) -> (Option<usize>, String) {
+    match result {
+        Err(Error::Parse {
+            path: named,
+            line,
+            message,
+        }) => {
+            assert_eq!(named, Path::new(path));
+            (line, message)
+        }
+        other => panic!("expected a parse error, got {other:?}"),
+    }
+}

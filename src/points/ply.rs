@@ -783,17 +783,7 @@ mod tests {
 
     /// The line and message of the parse error that `bytes` must give.
     fn parse_error(bytes: &[u8]) -> (Option<usize>, String) {
-        match load(bytes) {
-            Err(Error::Parse {
-                path,
-                line,
-                message,
-            }) => {
-                assert_eq!(path, Path::new(PATH));
-                (line, message)
-            }
-            other => panic!("expected a parse error, got {other:?}"),
-        }
+        super::super::parse_error_of(load(bytes), PATH)
     }
 
     fn ascii(rest: &str) -> Vec<u8> {

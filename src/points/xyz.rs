@@ -123,17 +123,7 @@ mod tests {
 
     /// The line and message of the parse error that `text` must give.
     fn parse_error(text: &[u8]) -> (Option<usize>, String) {
-        match load(text) {
-            Err(Error::Parse {
-                path,
-                line,
-                message,
-            }) => {
-                assert_eq!(path, Path::new(PATH));
-                (line, message)
-            }
-            other => panic!("expected a parse error, got {other:?}"),
-        }
+        super::super::parse_error_of(load(text), PATH)
     }
 
     fn vecs(points: &[[f32; 3]]) -> Vec<Vec3> {
