@@ -1,5 +1,5 @@
-// The exact triangle BVH: layouts of src/bvh/layout.rs and the stack traversal of
-// src/bvh/traverse.rs, operation for operation.
+// The exact triangle BVH: layouts of src/bvh/layout.rs, and its leaf hook for the one traversal
+// (traverse.glsl), the twins of src/bvh/traverse.rs operation for operation.
 //
 // The includer chooses where the two buffers live by defining, before the #include:
 //   RBVH_BVH_SET            descriptor set              (default 0)
@@ -72,141 +72,91 @@ layout(std430, set = RBVH_BVH_SET, binding = RBVH_BVH_TRIS_BINDING) readonly buf
 #define RBVH_BVH_TRIANGLE(i) rbvh_bvh_triangles[i]
 #endif
 
-// Traverses nearest child first with a bounded stack. `node_count` bounds the loop (a tree visits
-// each node at most once). `overflow` is set when the stack or the loop bound was exceeded, or when
-// the device ended a loop early; the hit is then not trustworthy, and the caller reports it.
-// `steps` = nodes visited + triangles tested.
-//
-// Ended early: lavapipe (llvmpipe) stops any shader loop once the loops of an invocation's SIMD
-// group have run LP_MAX_TGSI_LOOP_ITERATIONS (65535) iterations in all, silently, as if the loop
-// condition had failed; a traversal of ~4000 nodes reaches that. So every loop below records how
-// it ended, and one that stopped with its condition still true and no break of its own flags
-// `overflow`. This adds no arithmetic: the hit is computed exactly as in src/bvh/traverse.rs.
-Hit rbvh_trace_bvh(Ray ray, bool any_hit, uint node_count, out uint steps, out bool overflow) {
-    steps = 0u;
-    RBVH_COUNT_RESET();
-    overflow = false;
-    if (!rbvh_ray_valid(ray)) {
+// Sizes the exact traversal needs to bound its reads.
+struct BvhSizes {
+    uint node_count;
+    uint tri_count;
+};
+
+// Tests the triangles in slots [first, end) over [tmin, t_closest) with the watertight test: the
+// leaves of the exact BVH and the RBVH's hybrid leaves alike (bvh::Triangles in
+// src/bvh/traverse.rs). On a hit, lowers t_closest, keeps the slot in `best_slot` and returns
+// true; with `any_hit` it stops at the first. `steps` counts the triangles tested.
+bool rbvh_test_triangles(RbvhShear sh, Ray ray, bool any_hit, uint first, uint end, inout float t_closest,
+                         inout uint best_slot, inout uint steps, inout bool cut) {
+    RBVH_COUNT_ADD(triangle_leaves, 1u);
+    bool hit = false;
+    bool stop = false;
+    uint slot = first;
+    for (; slot < end; ++slot) {
+        steps += 1u;
+        RBVH_COUNT_ADD(triangles, 1u);
+        BvhTriangle tri = RBVH_BVH_TRIANGLE(slot);
+        float t = rbvh_intersect_triangle(sh, tri.v0, tri.v1, tri.v2, ray.tmin, t_closest);
+        if (t >= 0.0) {
+            t_closest = t;
+            best_slot = slot;
+            hit = true;
+            if (any_hit) {
+                stop = true;
+                break;
+            }
+        }
+    }
+    if (slot < end && !stop) {
+        cut = true;  // ended early by the device
+    }
+    return hit;
+}
+
+// The exact BVH's leaf hook for traverse.glsl: its triangles, with the ray's shear made once.
+struct BvhLeafHook {
+    BvhSizes sz;
+    RbvhShear shear;
+    uint best_slot;  // the nearest hit's triangle slot, RBVH_INVALID while none
+};
+
+uint rbvh_node_count(BvhLeafHook leaves) {
+    return leaves.sz.node_count;
+}
+
+// A binary tree has one leaf more than it has inner nodes.
+uint rbvh_round_bound(BvhLeafHook leaves) {
+    return 2u * leaves.sz.node_count + 1u;
+}
+
+bool rbvh_is_leaf(BvhLeafHook leaves, uint reference) {
+    return (reference & RBVH_LEAF_BIT) != 0u;
+}
+
+uint rbvh_enter(BvhLeafHook leaves, uint child, uint count, float t_entry) {
+    return child;
+}
+
+bool rbvh_test(inout BvhLeafHook leaves, Ray ray, bool any_hit, uint reference, uint count,
+               inout float t_closest, inout uint steps, inout bool cut) {
+    uint first = reference & ~RBVH_LEAF_BIT;
+    uint end = min(first + count, leaves.sz.tri_count);
+    return rbvh_test_triangles(leaves.shear, ray, any_hit, first, end, t_closest, leaves.best_slot, steps, cut);
+}
+
+#define RBVH_TRAVERSE rbvh_traverse_bvh
+#define RBVH_LEAVES BvhLeafHook
+#include "traverse.glsl"
+#undef RBVH_TRAVERSE
+#undef RBVH_LEAVES
+
+// The exact BVH's closest (or, with `any_hit`, any) hit: traverse.glsl over its triangles.
+// `steps` = nodes visited + triangles tested; `overflow` as in traverse.glsl.
+Hit rbvh_trace_bvh(Ray ray, bool any_hit, BvhSizes sz, out uint steps, out bool overflow) {
+    BvhLeafHook leaves = BvhLeafHook(sz, rbvh_shear(ray), RBVH_INVALID);
+    float t = rbvh_traverse_bvh(ray, any_hit, leaves, steps, overflow);
+    if (leaves.best_slot == RBVH_INVALID) {
         return rbvh_miss();
     }
-    vec3 inv_dir = rbvh_safe_inverse(ray.dir);
-    RbvhShear sh = rbvh_shear(ray);
-    float t_closest = ray.tmax;
-    uint best = RBVH_INVALID;
-    uint stack[RBVH_STACK_SIZE];
-    uint sp = 0u;
-    uint node = 0u;
-    // Each stack entry is a child reference with its count (the triangles of a leaf).
-    uint stack_count[RBVH_STACK_SIZE];
-    uint count_of_node = 0u;
-    bool finished = false;
-    // "While-while" (Aila & Laine 2009): leaves are pushed and popped like inner nodes; the inner
-    // loop visits inner nodes only and leaves for the outer loop, which tests the leaf's
-    // triangles and resumes it. On SIMD hardware the triangle tests then run for all lanes that
-    // reached a leaf together (about 1.4x faster on lavapipe than testing leaves in the per-child
-    // loop). A binary tree has one leaf more than it has inner nodes, which bounds the rounds.
-    uint leaf = RBVH_INVALID;
-    uint leaf_count = 0u;
-    uint visit = 0u;
-    for (uint round = 0u; round <= node_count + 1u; ++round) {
-        if (leaf != RBVH_INVALID) {
-            uint first = leaf & ~RBVH_LEAF_BIT;
-            uint slot = first;
-            RBVH_COUNT_ADD(triangle_leaves, 1u);
-            for (; slot < first + leaf_count; ++slot) {
-                steps += 1u;
-                RBVH_COUNT_ADD(triangles, 1u);
-                BvhTriangle tri = RBVH_BVH_TRIANGLE(slot);
-                float t = rbvh_intersect_triangle(sh, tri.v0, tri.v1, tri.v2, ray.tmin, t_closest);
-                if (t >= 0.0) {
-                    t_closest = t;
-                    best = slot;
-                    if (any_hit) {
-                        break;
-                    }
-                }
-            }
-            if (any_hit && best != RBVH_INVALID) {
-                finished = true;
-                break;
-            }
-            if (slot < first + leaf_count) {
-                overflow = true;  // ended early by the device
-            }
-            leaf = RBVH_INVALID;
-            if (sp == 0u) {
-                finished = true;
-                break;
-            }
-            sp -= 1u;
-            node = stack[sp];
-            count_of_node = stack_count[sp];
-        }
-        for (; visit <= node_count; ++visit) {
-            if ((node & RBVH_LEAF_BIT) != 0u) {
-                leaf = node;
-                leaf_count = count_of_node;
-                break;
-            }
-            steps += 1u;
-            RBVH_COUNT_ADD(nodes, 1u);
-            BvhNode n = RBVH_BVH_NODE(node);
-            float ta;
-            float tb;
-            bool ha = rbvh_intersect_box(n.a_min, n.a_max, ray.origin, inv_dir, ray.tmin, t_closest, ta);
-            bool hb = rbvh_intersect_box(n.b_min, n.b_max, ray.origin, inv_dir, ray.tmin, t_closest, tb);
-            bool b_first = ha && hb && tb < ta;
-            uint next = RBVH_INVALID;
-            uint next_count = 0u;
-            int k = 0;
-            for (; k < 2; ++k) {
-                bool use_b = (k == 0) == b_first;
-                bool h = use_b ? hb : ha;
-                float t_entry = use_b ? tb : ta;
-                uint child = use_b ? n.b_child : n.a_child;
-                uint count = use_b ? n.b_count : n.a_count;
-                if (!h || t_entry > t_closest) {
-                    continue;
-                }
-                if (next == RBVH_INVALID) {
-                    next = child;
-                    next_count = count;
-                } else if (sp < RBVH_STACK_SIZE) {
-                    stack[sp] = child;
-                    stack_count[sp] = count;
-                    sp += 1u;
-                } else {
-                    overflow = true;
-                }
-            }
-            if (k < 2) {
-                overflow = true;  // ended early by the device
-            }
-            if (next == RBVH_INVALID) {
-                if (sp == 0u) {
-                    finished = true;
-                    break;
-                }
-                sp -= 1u;
-                next = stack[sp];
-                next_count = stack_count[sp];
-            }
-            node = next;
-            count_of_node = next_count;
-        }
-        if (leaf == RBVH_INVALID) {
-            break;
-        }
-    }
-    if (!finished) {
-        overflow = true;  // the loop bound, or ended early by the device
-    }
-    if (best == RBVH_INVALID) {
-        return rbvh_miss();
-    }
-    BvhTriangle tri = RBVH_BVH_TRIANGLE(best);
+    BvhTriangle tri = RBVH_BVH_TRIANGLE(leaves.best_slot);
     vec3 n = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
-    return Hit(t_closest, n.x, n.y, n.z, tri.prim, 0u, 0u, 0u);
+    return Hit(t, n.x, n.y, n.z, tri.prim, 0u, 0u, 0u);
 }
 
 #endif

@@ -24,8 +24,8 @@ struct Hit {
 // One ray's work (src/probe.rs, RayCounters; 32 bytes, tests/layout.rs checks the order): counted
 // by the traversals only where the includer defines RBVH_COUNT as a true condition before the
 // #include (the trace shaders define it as a specialization constant, so that their timed runs
-// compile the counting away); other includers pay nothing. rbvh_trace_bvh and rbvh_trace_rbvh(_lod)
-// reset the counters when they start.
+// compile the counting away); other includers pay nothing. The traversal (traverse.glsl) resets
+// the counters when it starts.
 struct RbvhCounters {
     uint nodes;            // inner nodes visited
     uint leaves;           // height-field leaves (and chosen LOD nodes) handed to the march

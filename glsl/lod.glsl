@@ -1,7 +1,8 @@
 // Coarse representations of inner nodes for level-of-detail traversal: the GLSL twin of
-// src/lod/march.rs, step for step, on the packed data of src/lod/layout.rs. Included by rbvh.glsl
-// (after its march helpers, which it uses) when RBVH_LOD is defined (trace_rbvh_lod.comp); shaders
-// that do not define it are unchanged.
+// src/lod/march.rs, step for step, on the packed data of src/lod/layout.rs, and its leaf hook for
+// the one traversal (traverse.glsl). Included at the end of rbvh.glsl (whose march helpers and
+// RBVH hook it uses) when RBVH_LOD is defined (trace_rbvh_lod.comp); shaders that do not define
+// it are unchanged.
 //
 // The includer chooses where the buffers live by defining, before the #include:
 //   RBVH_LODS_BINDING       binding of the per-node records (default 8)
@@ -82,7 +83,7 @@ float rbvh_lod_boundary_t(int c, int step, float o, float inv) {
 // Marches the columns of node `node`'s record over [tmin, t_closest); returns t (< 0 on a miss)
 // and, on a hit, the word whose normal it reports (decode with rbvh_decode_normal). `columns`
 // counts the columns visited. `cut` is set when the device ended the walk early (see
-// rbvh_trace_bvh in bvh.glsl).
+// traverse.glsl).
 float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inout uint columns,
                      out uint normal_texel, inout bool cut) {
     normal_texel = RBVH_HOLE_CODE;
@@ -191,6 +192,70 @@ float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inou
         cut = true;
     }
     return -1.0;
+}
+
+// The level-of-detail leaf hook for traverse.glsl (LodLeaves in src/lod/trace.rs): an inner child
+// whose coarse representation the ray's cone selects at the child's box entry is pushed as
+// LOD_BIT | node and its columns are marched when it comes up, instead of descending; such hits
+// report id = LEAF_BIT | LOD_BIT | node. The RBVH's own leaves go to its hook.
+struct RbvhLodLeafHook {
+    RbvhLeafHook rbvh;
+    RbvhLodSizes lsz;
+    vec2 cone;  // the ray's (width, spread): see RayCone in src/lod/cone.rs
+};
+
+uint rbvh_node_count(RbvhLodLeafHook leaves) {
+    return rbvh_node_count(leaves.rbvh);
+}
+
+uint rbvh_round_bound(RbvhLodLeafHook leaves) {
+    return rbvh_round_bound(leaves.rbvh);
+}
+
+bool rbvh_is_leaf(RbvhLodLeafHook leaves, uint reference) {
+    return (reference & (RBVH_LEAF_BIT | RBVH_LOD_BIT)) != 0u;
+}
+
+// The LOD trace's tree carries an inner child's column width in its `count`
+// (Lod::annotated_nodes), so choosing needs no further read.
+uint rbvh_enter(RbvhLodLeafHook leaves, uint child, uint count, float t_entry) {
+    return rbvh_lod_selects(uintBitsToFloat(count), leaves.cone, t_entry) ? child | RBVH_LOD_BIT : child;
+}
+
+bool rbvh_test(inout RbvhLodLeafHook leaves, Ray ray, bool any_hit, uint reference, uint count,
+               inout float t_closest, inout uint steps, inout bool cut) {
+    if ((reference & RBVH_LOD_BIT) == 0u) {
+        return rbvh_test(leaves.rbvh, ray, any_hit, reference, count, t_closest, steps, cut);
+    }
+    RBVH_COUNT_ADD(leaves, 1u);
+    uint columns = 0u;
+    uint normal_texel;
+    float t = rbvh_lod_march(reference & ~RBVH_LOD_BIT, leaves.lsz, ray, t_closest, columns, normal_texel, cut);
+    steps += columns;
+    RBVH_COUNT_ADD(cells, columns);
+    if (t < 0.0) {
+        return false;
+    }
+    t_closest = t;
+    leaves.rbvh.best_id = RBVH_LEAF_BIT | reference;
+    leaves.rbvh.best_slot = RBVH_INVALID;
+    leaves.rbvh.best_texel = normal_texel;
+    return true;
+}
+
+#define RBVH_TRAVERSE rbvh_traverse_rbvh_lod
+#define RBVH_LEAVES RbvhLodLeafHook
+#include "traverse.glsl"
+#undef RBVH_TRAVERSE
+#undef RBVH_LEAVES
+
+// The RBVH traced with level of detail for a ray whose cone is `cone`: as rbvh_trace_rbvh, but
+// with the hook above.
+Hit rbvh_trace_rbvh_lod(Ray ray, vec2 cone, bool any_hit, RbvhSizes sz, RbvhLodSizes lsz,
+                        out uint steps, out bool overflow) {
+    RbvhLodLeafHook leaves = RbvhLodLeafHook(rbvh_leaf_hook(sz), lsz, cone);
+    float t = rbvh_traverse_rbvh_lod(ray, any_hit, leaves, steps, overflow);
+    return rbvh_rbvh_hit(leaves.rbvh, t);
 }
 
 #endif

@@ -6,8 +6,8 @@
 //   RBVH_LEAVES_BINDING  binding of the height-field leaves (default 2)
 //   RBVH_ATLAS_BINDING   binding of the texel atlas         (default 3)
 // or, with RBVH_DEVICE_ADDRESS (see bvh.glsl), RBVH_LEAVES_ADDRESS and RBVH_ATLAS_ADDRESS.
-// and, to trace with level of detail, RBVH_LOD (see lod.glsl for its two bindings): the traversal
-// is then rbvh_trace_rbvh_lod, taking each ray's cone and the LOD array sizes.
+// and, to trace with level of detail, RBVH_LOD (see lod.glsl for its two bindings): then
+// rbvh_trace_rbvh_lod is defined too, taking each ray's cone and the LOD array sizes.
 // RBVH_BLOCK_JUMPS (default true) is the condition under which the march jumps over blocks the
 // ray passes above or below; the hits are the same either way. On CPU implementations such as
 // lavapipe, which run every branch, the walk is faster without (see Tracer::block_jumps).
@@ -180,8 +180,7 @@ bool rbvh_cell_candidate(RbvhLeaf leaf, RbvhSizes sz, RbvhFrameRay fr, float sla
 
 // Step 4 of march.rs, its costly half: the cell's two (or one) triangles; returns t (< 0 on a
 // miss) and, on a hit, the frame-space normal of the triangle hit, (b - a) x (c - a) (used by
-// height-only RBVHs). `cut` is set when the device ended the loop early (see rbvh_trace_bvh in
-// bvh.glsl).
+// height-only RBVHs). `cut` is set when the device ended the loop early (see traverse.glsl).
 float rbvh_cell_triangles(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, out vec3 facet, inout bool cut) {
     bool v00 = !rbvh_is_hole(cell.c00);
     bool v10 = !rbvh_is_hole(cell.c10);
@@ -253,7 +252,7 @@ uint rbvh_cell_normal_texel(RbvhFrameRay fr, RbvhCell cell, float t_hit) {
 // Marches leaf `li` over [tmin, t_closest); returns t (< 0 on a miss) and, on a hit, the texel
 // whose normal it reports (decode with rbvh_decode_normal), or with RBVH_HEIGHT_ONLY the world
 // normal of the cell triangle hit (`facet_normal`, as facet_normal in march.rs). `cells` counts
-// cells visited. `cut` is set when the device ended a loop early (see rbvh_trace_bvh in bvh.glsl).
+// cells visited. `cut` is set when the device ended a loop early (see traverse.glsl).
 float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cells, out uint normal_texel,
                  out vec3 facet_normal, inout bool cut) {
     normal_texel = RBVH_HOLE_CODE;
@@ -518,229 +517,104 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     return t_hit;
 }
 
-#ifdef RBVH_LOD
-#include "lod.glsl"
-// What the outer loop of the traversal marches: height-field leaves and chosen nodes.
-#define RBVH_MARCHED_BITS (RBVH_LEAF_BIT | RBVH_LOD_BIT)
-#else
-#define RBVH_MARCHED_BITS RBVH_LEAF_BIT
-#endif
+// The RBVH's leaf hook for traverse.glsl: height fields marched, hybrid triangle leaves tested as
+// the exact BVH's (RbvhLeaves in src/rbvh/march.rs). It keeps the nearest hit: a triangle's slot,
+// or the id of a height field (or, with level of detail, a chosen node) and the texel its normal
+// comes from. Its id and normal are read and decoded once, after the loops (rbvh_rbvh_hit), so
+// that the SIMD loops do not carry them.
+struct RbvhLeafHook {
+    RbvhSizes sz;
+    uint best_id;
+    uint best_slot;
+    uint best_texel;
+    vec3 best_facet;  // RBVH_HEIGHT_ONLY: the hit's normal, made by the march
+};
 
-// Nearest-first stack traversal of the RBVH (as rbvh_trace_bvh): leaves of both kinds take the
-// same near-first/stack path as inner nodes and are marched (height fields) or tested (triangle
-// leaves) when they come up, in the outer loop of a "while-while" traversal (see below).
-// Inlined in the per-child loop instead, the march's registers weighed on every node visit (4x
-// slower traversal on lavapipe), and so, less, did the triangle tests. Height-field hits report
-// id = LEAF_BIT | leaf index.
-//
-// With RBVH_LOD (src/lod, src/rbvh/march.rs): an inner child whose coarse representation the ray's
-// cone selects at the child's box entry is pushed as LOD_BIT | node and its columns are marched
-// when it comes up, instead of descending; such hits report id = LEAF_BIT | LOD_BIT | node.
-#ifdef RBVH_LOD
-Hit rbvh_trace_rbvh_lod(Ray ray, vec2 cone, bool any_hit, RbvhSizes sz, RbvhLodSizes lsz,
-                        out uint steps, out bool overflow) {
-#else
-Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out bool overflow) {
-#endif
-    steps = 0u;
-    RBVH_COUNT_RESET();
-    overflow = false;
-    if (!rbvh_ray_valid(ray)) {
-        return rbvh_miss();
+RbvhLeafHook rbvh_leaf_hook(RbvhSizes sz) {
+    return RbvhLeafHook(sz, RBVH_INVALID, RBVH_INVALID, RBVH_HOLE_CODE, vec3(0.0));
+}
+
+uint rbvh_node_count(RbvhLeafHook leaves) {
+    return leaves.sz.node_count;
+}
+
+// One round per marched or tested leaf (a tree has at most one leaf more than it has inner nodes;
+// with level of detail, chosen nodes replace subtrees), plus the first.
+uint rbvh_round_bound(RbvhLeafHook leaves) {
+    return leaves.sz.node_count + leaves.sz.leaf_count + 1u;
+}
+
+bool rbvh_is_leaf(RbvhLeafHook leaves, uint reference) {
+    return (reference & RBVH_LEAF_BIT) != 0u;
+}
+
+uint rbvh_enter(RbvhLeafHook leaves, uint child, uint count, float t_entry) {
+    return child;
+}
+
+bool rbvh_test(inout RbvhLeafHook leaves, Ray ray, bool any_hit, uint reference, uint count,
+               inout float t_closest, inout uint steps, inout bool cut) {
+    if (count != RBVH_HEIGHTFIELD_COUNT) {
+        uint first = reference & ~RBVH_LEAF_BIT;
+        // The shear is made per leaf rather than kept across the loops: see RbvhFrameRay.
+        return rbvh_test_triangles(rbvh_shear(ray), ray, any_hit, first, min(first + count, leaves.sz.tri_count),
+                                   t_closest, leaves.best_slot, steps, cut);
     }
-    vec3 inv_dir = rbvh_safe_inverse(ray.dir);
-    float t_closest = ray.tmax;
-    // The nearest hit so far: a triangle's slot, or the id of a height field or chosen node and
-    // the texel its normal comes from. Its id and normal are read and decoded once, after the
-    // loops, so that the SIMD loops do not carry them.
-    uint best_id = RBVH_INVALID;
-    uint best_slot = RBVH_INVALID;
-    uint best_texel = RBVH_HOLE_CODE;
-    vec3 best_facet = vec3(0.0);  // RBVH_HEIGHT_ONLY: the hit's normal, made by the march
-    uint stack[RBVH_STACK_SIZE];
-    uint sp = 0u;
-    uint node = 0u;
-    uint visits = 0u;
-    // Rounds: one per marched or tested leaf or chosen node (a tree has at most one leaf more
-    // than it has inner nodes; chosen nodes replace subtrees), plus the first.
-    uint bound = sz.node_count + sz.leaf_count + 1u;
-    // Loops the device ended early (see rbvh_trace_bvh in bvh.glsl) flag `overflow` too.
-    bool cut = false;
-    bool finished = false;
-    uint iter = 0u;
-    // "While-while" (Aila & Laine 2009): the inner loop visits inner nodes only and leaves for the
-    // outer loop when it meets a leaf (or, with LOD, a chosen node), which the outer loop marches
-    // or tests before resuming it. On SIMD hardware the heavy march then runs for all lanes
-    // that reached a leaf together, instead of beside node visits in every iteration. Each round
-    // marches one leaf or chosen node, so the node and leaf counts bound the rounds too.
-    // Each stack entry is a child reference with its count (a triangle leaf's triangles).
-    uint stack_count[RBVH_STACK_SIZE];
-    uint count_of_node = 0u;
-    uint pending = RBVH_INVALID;
-    uint pending_count = 0u;
-    uint round = 0u;
-    for (; round <= bound; ++round) {
-        if (pending != RBVH_INVALID) {
-            bool triangles = (pending & RBVH_MARCHED_BITS) == RBVH_LEAF_BIT &&
-                             pending_count != RBVH_HEIGHTFIELD_COUNT;
-            if (triangles) {
-                uint first = pending & ~RBVH_LEAF_BIT;
-                uint end = min(first + pending_count, sz.tri_count);
-                uint slot = first;
-                bool found = false;
-                // Made per leaf rather than kept across the loops: see RbvhFrameRay.
-                RbvhShear sh = rbvh_shear(ray);
-                RBVH_COUNT_ADD(triangle_leaves, 1u);
-                for (; slot < end; ++slot) {
-                    steps += 1u;
-                    RBVH_COUNT_ADD(triangles, 1u);
-                    BvhTriangle tri = RBVH_BVH_TRIANGLE(slot);
-                    float t = rbvh_intersect_triangle(sh, tri.v0, tri.v1, tri.v2, ray.tmin, t_closest);
-                    if (t >= 0.0) {
-                        t_closest = t;
-                        best_slot = slot;
-                        if (any_hit) {
-                            found = true;
-                            break;
-                        }
-                    }
-                }
-                if (found) {
-                    finished = true;
-                    break;
-                }
-                if (slot < end) {
-                    cut = true;
-                }
-            } else {
-                uint normal_texel;
-                vec3 facet_normal = vec3(0.0);
-                uint cells = 0u;
-                float t;
-                RBVH_COUNT_ADD(leaves, 1u);
-#ifdef RBVH_LOD
-                if ((pending & RBVH_LOD_BIT) != 0u) {
-                    t = rbvh_lod_march(pending & ~(RBVH_LEAF_BIT | RBVH_LOD_BIT), lsz, ray,
-                                       t_closest, cells, normal_texel, cut);
-                } else
-#endif
-                {
-                    t = rbvh_march(pending & ~RBVH_LEAF_BIT, sz, ray, t_closest, cells, normal_texel,
-                                   facet_normal, cut);
-                }
-                steps += cells;
-                RBVH_COUNT_ADD(cells, cells);
-                if (t >= 0.0) {
-                    t_closest = t;
-                    best_id = RBVH_LEAF_BIT | pending;
-                    best_slot = RBVH_INVALID;
-                    best_texel = normal_texel;
-                    best_facet = facet_normal;
-                    if (any_hit) {
-                        finished = true;
-                        break;
-                    }
-                }
-            }
-            pending = RBVH_INVALID;
-            if (sp == 0u) {
-                finished = true;
-                break;
-            }
-            sp -= 1u;
-            node = stack[sp];
-            count_of_node = stack_count[sp];
-        }
-        for (; iter <= bound; ++iter) {
-            uint next = RBVH_INVALID;
-            uint next_count = 0u;
-            if ((node & RBVH_MARCHED_BITS) != 0u) {
-                pending = node;
-                pending_count = count_of_node;
-                break;
-            }
-            if (node < sz.node_count) {
-                if (visits >= sz.node_count) {
-                    overflow = true;
-                    finished = true;
-                    break;
-                }
-                visits += 1u;
-                steps += 1u;
-                RBVH_COUNT_ADD(nodes, 1u);
-                BvhNode n = RBVH_BVH_NODE(node);
-                float ta;
-                float tb;
-                bool ha = rbvh_intersect_box(n.a_min, n.a_max, ray.origin, inv_dir, ray.tmin, t_closest, ta);
-                bool hb = rbvh_intersect_box(n.b_min, n.b_max, ray.origin, inv_dir, ray.tmin, t_closest, tb);
-                bool b_first = ha && hb && tb < ta;
-                int k = 0;
-                for (; k < 2; ++k) {
-                    bool use_b = (k == 0) == b_first;
-                    bool h = use_b ? hb : ha;
-                    float t_entry = use_b ? tb : ta;
-                    uint child = use_b ? n.b_child : n.a_child;
-                    uint count = use_b ? n.b_count : n.a_count;
-                    if (!h || t_entry > t_closest) {
-                        continue;
-                    }
-#ifdef RBVH_LOD
-                    // The LOD trace's tree carries an inner child's column width in its `count`
-                    // (Lod::annotated_nodes), so choosing needs no further read.
-                    if ((child & RBVH_LEAF_BIT) == 0u &&
-                        rbvh_lod_selects(uintBitsToFloat(count), cone, t_entry)) {
-                        child |= RBVH_LOD_BIT;
-                    }
-#endif
-                    if (next == RBVH_INVALID) {
-                        next = child;
-                        next_count = count;
-                    } else if (sp < RBVH_STACK_SIZE) {
-                        stack[sp] = child;
-                        stack_count[sp] = count;
-                        sp += 1u;
-                    } else {
-                        overflow = true;
-                    }
-                }
-                if (k < 2) {
-                    cut = true;
-                }
-            }
-            if (next == RBVH_INVALID) {
-                if (sp == 0u) {
-                    finished = true;
-                    break;
-                }
-                sp -= 1u;
-                next = stack[sp];
-                next_count = stack_count[sp];
-            }
-            node = next;
-            count_of_node = next_count;
-        }
-        if (pending == RBVH_INVALID) {
-            break;
-        }
+    RBVH_COUNT_ADD(leaves, 1u);
+    uint cells = 0u;
+    uint normal_texel;
+    vec3 facet_normal;
+    float t = rbvh_march(reference & ~RBVH_LEAF_BIT, leaves.sz, ray, t_closest, cells, normal_texel, facet_normal, cut);
+    steps += cells;
+    RBVH_COUNT_ADD(cells, cells);
+    if (t < 0.0) {
+        return false;
     }
-    // Every normal ending (an empty stack, an any-hit, a visit bound) sets `finished`; a loop the
-    // device cut short, or bounds run out, does not.
-    if (cut || !finished) {
-        overflow = true;
-    }
+    t_closest = t;
+    leaves.best_id = reference;
+    leaves.best_slot = RBVH_INVALID;
+    leaves.best_texel = normal_texel;
+    leaves.best_facet = facet_normal;
+    return true;
+}
+
+#define RBVH_TRAVERSE rbvh_traverse_rbvh
+#define RBVH_LEAVES RbvhLeafHook
+#include "traverse.glsl"
+#undef RBVH_TRAVERSE
+#undef RBVH_LEAVES
+
+// The hit that `leaves` kept at distance t: a triangle's id and normal, read now, or a height
+// field's id (LEAF_BIT | leaf index; with level of detail LEAF_BIT | LOD_BIT | node) and its
+// texel's normal (RBVH_HEIGHT_ONLY: the facet's, made by the march).
+Hit rbvh_rbvh_hit(RbvhLeafHook leaves, float t) {
     vec3 nrm;
-    if (best_slot != RBVH_INVALID) {
-        BvhTriangle tri = RBVH_BVH_TRIANGLE(best_slot);
-        best_id = tri.prim;
+    uint id = leaves.best_id;
+    if (leaves.best_slot != RBVH_INVALID) {
+        BvhTriangle tri = RBVH_BVH_TRIANGLE(leaves.best_slot);
+        id = tri.prim;
         nrm = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
-    } else if (best_id == RBVH_INVALID) {
+    } else if (id == RBVH_INVALID) {
         return rbvh_miss();
     } else if (RBVH_HEIGHT_ONLY) {
-        nrm = best_facet;
+        nrm = leaves.best_facet;
     } else {
-        nrm = rbvh_decode_normal(best_texel);
+        nrm = rbvh_decode_normal(leaves.best_texel);
     }
-    return Hit(t_closest, nrm.x, nrm.y, nrm.z, best_id, 0u, 0u, 0u);
+    return Hit(t, nrm.x, nrm.y, nrm.z, id, 0u, 0u, 0u);
 }
+
+// The RBVH's closest (or, with `any_hit`, any) hit: traverse.glsl with the RBVH's leaves.
+// `steps` = nodes visited + triangles tested + cells marched; `overflow` as in traverse.glsl.
+Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out bool overflow) {
+    RbvhLeafHook leaves = rbvh_leaf_hook(sz);
+    float t = rbvh_traverse_rbvh(ray, any_hit, leaves, steps, overflow);
+    return rbvh_rbvh_hit(leaves, t);
+}
+
+// With RBVH_LOD, also rbvh_trace_rbvh_lod: the same traversal with lod.glsl's hook.
+#ifdef RBVH_LOD
+#include "lod.glsl"
+#endif
 
 #endif

@@ -24,7 +24,7 @@ void main() {
     }
     uint steps;
     bool overflow;
-    Hit h = rbvh_trace_bvh(rays[i], (pc.flags & 1u) != 0u, pc.node_count, steps, overflow);
+    Hit h = rbvh_trace_bvh(rays[i], (pc.flags & 1u) != 0u, BvhSizes(pc.node_count, pc.tri_count), steps, overflow);
     rbvh_trace_store(i, h, overflow);
 }
 

@@ -1,8 +1,9 @@
 //! The one nearest-first traversal of the node array, for every structure (the madmann91/bvh
 //! `intersect(ray, ..., leaf_fn)` and obvhs `traverse(ray, hit, intersection_fn)` shape): the
 //! exact BVH's triangle leaves, an RBVH's height fields and hybrid triangles, and coarse columns
-//! with level of detail are each a [`Leaves`] hook. It follows `glsl/bvh.glsl`'s and
-//! `glsl/rbvh.glsl`'s "while-while" loop step for step (nearest child first with the same tie
+//! with level of detail are each a [`Leaves`] hook, as they are in GLSL, where `glsl/traverse.glsl`
+//! is the one traversal that `bvh.glsl`, `rbvh.glsl` and `lod.glsl` instantiate with their hooks.
+//! It follows that "while-while" loop step for step (nearest child first with the same tie
 //! rule, leaves pushed and popped like inner nodes and handled when they come up, the same
 //! bounded stack and robust box test), so that CPU and GPU answers and counters compare ray by
 //! ray. The exact BVH's CPU reference tracer below is its first user.
