@@ -70,16 +70,6 @@ bool rbvh_lod_selects(float texel_size, vec2 cone, float t_entry) {
     return !isinf(texel_size) && texel_size > 0.0 && texel_size <= footprint;
 }
 
-int rbvh_lod_step(float d) {
-    return d > 0.0 ? 1 : (d < 0.0 ? -1 : 0);
-}
-
-float rbvh_lod_boundary_t(int c, int step, float o, float inv) {
-    precise float far_side = (float(c + 1) - o) * inv;
-    precise float near_side = (float(c) - o) * inv;
-    return step > 0 ? far_side : (step < 0 ? near_side : RBVH_INF);
-}
-
 // Marches the columns of node `node`'s record over [tmin, t_closest); returns t (< 0 on a miss)
 // and, on a hit, the word whose normal it reports (decode with rbvh_decode_normal). `columns`
 // counts the columns visited. `cut` is set when the device ended the walk early (see
@@ -126,12 +116,12 @@ float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inou
     float t1 = min(min(min(e.x, e.y), e.z), t_closest);
     // 3. Walk.
     precise vec3 entry = go + gd * t0;
-    int ci = int(clamp(floor(entry.x), 0.0, float(lod.res_u - 1u)));
-    int cj = int(clamp(floor(entry.y), 0.0, float(lod.res_v - 1u)));
-    int step_i = rbvh_lod_step(gd.x);
-    int step_j = rbvh_lod_step(gd.y);
-    float next_i = rbvh_lod_boundary_t(ci, step_i, go.x, inv.x);
-    float next_j = rbvh_lod_boundary_t(cj, step_j, go.y, inv.y);
+    int ci = rbvh_grid_cell(RBVH_COLUMNS, entry.x, int(lod.res_u) - 1);
+    int cj = rbvh_grid_cell(RBVH_COLUMNS, entry.y, int(lod.res_v) - 1);
+    int step_i = rbvh_grid_step(gd.x);
+    int step_j = rbvh_grid_step(gd.y);
+    float next_i = rbvh_grid_boundary_t(RBVH_COLUMNS, ci, step_i, go.x, inv.x);
+    float next_j = rbvh_grid_boundary_t(RBVH_COLUMNS, cj, step_j, go.y, inv.y);
     float t_in = t0;
     uint limit = lod.res_u + lod.res_v;
     // A walk crosses at most res_u + res_v - 1 columns, so every normal ending is a `break`.
@@ -177,7 +167,7 @@ float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inou
                 stopped = true;
                 break;
             }
-            next_i = rbvh_lod_boundary_t(ci, step_i, go.x, inv.x);
+            next_i = rbvh_grid_boundary_t(RBVH_COLUMNS, ci, step_i, go.x, inv.x);
         } else {
             cj += step_j;
             t_in = next_j;
@@ -185,7 +175,7 @@ float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inou
                 stopped = true;
                 break;
             }
-            next_j = rbvh_lod_boundary_t(cj, step_j, go.y, inv.y);
+            next_j = rbvh_grid_boundary_t(RBVH_COLUMNS, cj, step_j, go.y, inv.y);
         }
     }
     if (!stopped) {

@@ -18,6 +18,7 @@
 #define RBVH_RBVH_GLSL
 
 #include "bvh.glsl"
+#include "grid.glsl"
 
 #ifndef RBVH_LEAVES_BINDING
 #define RBVH_LEAVES_BINDING 2
@@ -110,17 +111,6 @@ uint rbvh_texel(RbvhLeaf leaf, RbvhSizes sz, int i, int j) {
 // Where the blocks' height ranges start in the atlas words: after the texels' words.
 uint rbvh_texel_words(RbvhSizes sz) {
     return RBVH_HEIGHT_ONLY ? (sz.atlas_len >> 1) + (sz.atlas_len & 1u) : sz.atlas_len;
-}
-
-float rbvh_height_at(float o, float d, float t) {
-    precise float h = o + d * t;
-    return d == 0.0 ? o : h;
-}
-
-float rbvh_boundary_t(int c, int step, float o, float inv) {
-    precise float far_side = (float(c + 1) + 0.5 - o) * inv;
-    precise float near_side = (float(c) + 0.5 - o) * inv;
-    return step > 0 ? far_side : (step < 0 ? near_side : RBVH_INF);
 }
 
 // Frame-space ray of one leaf. Its shear (for the cells' triangles) is not kept here but made
@@ -323,12 +313,12 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     int last_i = int(leaf.res_u) - 2;
     int last_j = int(leaf.res_v) - 2;
     precise vec3 entry = o + d * t0;
-    int ci = int(clamp(floor(entry.x - 0.5), 0.0, float(last_i)));
-    int cj = int(clamp(floor(entry.y - 0.5), 0.0, float(last_j)));
-    int step_i = d.x > 0.0 ? 1 : (d.x < 0.0 ? -1 : 0);
-    int step_j = d.y > 0.0 ? 1 : (d.y < 0.0 ? -1 : 0);
-    float next_i = rbvh_boundary_t(ci, step_i, o.x, inv.x);
-    float next_j = rbvh_boundary_t(cj, step_j, o.y, inv.y);
+    int ci = rbvh_grid_cell(RBVH_BETWEEN_SAMPLES, entry.x, last_i);
+    int cj = rbvh_grid_cell(RBVH_BETWEEN_SAMPLES, entry.y, last_j);
+    int step_i = rbvh_grid_step(d.x);
+    int step_j = rbvh_grid_step(d.y);
+    float next_i = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, ci, step_i, o.x, inv.x);
+    float next_j = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, cj, step_j, o.y, inv.y);
     precise float corner_slack = RBVH_MARCH_SLACK * (((abs(o.x) + abs(o.y)) + float(leaf.res_u)) + float(leaf.res_v));
     uint max_steps = (leaf.res_u - 1u) + (leaf.res_v - 1u) - 1u;
     // The walk of march.rs: a main cell, then (when the ray passes a grid vertex too closely to
@@ -386,7 +376,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
                             if (ci < 0 || ci > last_i) {
                                 finished = true;
                             } else {
-                                next_i = rbvh_boundary_t(ci, step_i, o.x, inv.x);
+                                next_i = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, ci, step_i, o.x, inv.x);
                             }
                         }
                     } else {
@@ -395,7 +385,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
                         if (cj < 0 || cj > last_j) {
                             finished = true;
                         } else {
-                            next_j = rbvh_boundary_t(cj, step_j, o.y, inv.y);
+                            next_j = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, cj, step_j, o.y, inv.y);
                         }
                     }
                     if (finished && !is_extra) {
@@ -422,8 +412,8 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
                     int j0 = int(ay & ~7u) - int(tile_v);
                     int edge_i = step_i > 0 ? min(i0 + 7, last_i) : max(i0, 0);
                     int edge_j = step_j > 0 ? min(j0 + 7, last_j) : max(j0, 0);
-                    float leave_i = rbvh_boundary_t(edge_i, step_i, o.x, inv.x);
-                    float leave_j = rbvh_boundary_t(edge_j, step_j, o.y, inv.y);
+                    float leave_i = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, edge_i, step_i, o.x, inv.x);
+                    float leave_j = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, edge_j, step_j, o.y, inv.y);
                     uint range = RBVH_ATLAS(rbvh_texel_words(sz) + block);
                     uint code_lo = range & 0xFFFFu;
                     uint code_hi = range >> 16;
@@ -453,7 +443,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
                         for (int m = 0; m < 8 && minor_step != 0 && (out_i ? next < leave : next <= leave); ++m) {
                             t_last = next;
                             minor += minor_step;
-                            next = rbvh_boundary_t(minor, minor_step, minor_o, minor_inv);
+                            next = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, minor, minor_step, minor_o, minor_inv);
                         }
                         if (minor_step != 0 && (out_i ? next < leave : next <= leave)) {
                             cut = true;  // ended early by the device
@@ -462,7 +452,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
                         int edge = out_i ? edge_i : edge_j;
                         float major_next = out_i ? next_i : next_j;
                         if (major != edge) {
-                            t_last = max(t_last, rbvh_boundary_t(edge - major_step, major_step,
+                            t_last = max(t_last, rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, edge - major_step, major_step,
                                                                  out_i ? o.x : o.y, out_i ? inv.x : inv.y));
                             major = edge;
                             major_next = leave;

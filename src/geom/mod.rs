@@ -1,8 +1,10 @@
 //! Geometry shared by every stage: boxes, rays and hits, and the two robust intersection tests
 //! (watertight ray/triangle, conservative ray/box) that the CPU reference tracers use. The GLSL
 //! twins of these tests live in `glsl/intersect.glsl` and must stay operation-for-operation equal.
+//! `grid` steps a ray through a 2D grid of cells, for the two marches (`glsl/grid.glsl`).
 
 mod aabb;
+pub(crate) mod grid;
 mod ray;
 mod triangle;
 

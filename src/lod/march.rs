@@ -14,10 +14,10 @@
 use glam::Vec3;
 
 use super::layout::GpuLod;
+use crate::geom::grid::{height_at, step_of, Grid};
 use crate::geom::{safe_inverse, Aabb, Ray};
 use crate::probe::{Array, Probe, RayCounters, Read};
 use crate::rbvh::layout::{decode_octahedral, MARCH_SLACK};
-use crate::rbvh::march::{height_at, step_of};
 use crate::rbvh::Texel;
 
 /// Marches `lod`'s columns (words in `texels`) over `[tmin, t_closest)`; returns the hit distance
@@ -62,12 +62,12 @@ pub(crate) fn march<P: Probe>(
     let t1 = e0.max(e1).min_element().min(t_closest);
     // 3. Walk.
     let entry = go + gd * t0;
-    let mut ci = start_column(entry.x, lod.res_u);
-    let mut cj = start_column(entry.y, lod.res_v);
+    let mut ci = Grid::COLUMNS.cell_of(entry.x, i64::from(lod.res_u) - 1);
+    let mut cj = Grid::COLUMNS.cell_of(entry.y, i64::from(lod.res_v) - 1);
     let step_i = step_of(gd.x);
     let step_j = step_of(gd.y);
-    let mut next_i = boundary_t(ci, step_i, go.x, inv.x);
-    let mut next_j = boundary_t(cj, step_j, go.y, inv.y);
+    let mut next_i = Grid::COLUMNS.boundary_t(ci, step_i, go.x, inv.x);
+    let mut next_j = Grid::COLUMNS.boundary_t(cj, step_j, go.y, inv.y);
     let mut t_in = t0;
     for _ in 0..lod.res_u + lod.res_v {
         if t_in > t1 {
@@ -115,31 +115,15 @@ pub(crate) fn march<P: Probe>(
             if ci < 0 || ci >= i64::from(lod.res_u) {
                 break;
             }
-            next_i = boundary_t(ci, step_i, go.x, inv.x);
+            next_i = Grid::COLUMNS.boundary_t(ci, step_i, go.x, inv.x);
         } else {
             cj += step_j;
             t_in = next_j;
             if cj < 0 || cj >= i64::from(lod.res_v) {
                 break;
             }
-            next_j = boundary_t(cj, step_j, go.y, inv.y);
+            next_j = Grid::COLUMNS.boundary_t(cj, step_j, go.y, inv.y);
         }
     }
     None
-}
-
-/// The column holding grid coordinate `x`, clamped to the grid (NaN → 0).
-fn start_column(x: f32, res: u32) -> i64 {
-    (x.floor() as i64).clamp(0, i64::from(res) - 1)
-}
-
-/// Where the ray leaves column `c` along one axis; `+inf` along an axis it never steps.
-fn boundary_t(c: i64, step: i64, o: f32, inv: f32) -> f32 {
-    if step > 0 {
-        ((c + 1) as f32 - o) * inv
-    } else if step < 0 {
-        (c as f32 - o) * inv
-    } else {
-        f32::INFINITY
-    }
 }

@@ -38,8 +38,12 @@ use super::layout::{
 use super::ranges::{block_ranges, BLOCK};
 use super::{Rbvh, TexelFormat};
 use crate::bvh::{Leaves, Triangles};
+use crate::geom::grid::{height_at, step_of, Grid};
 use crate::geom::{intersect_triangle, safe_inverse, Aabb, Hit, Ray, RayShear};
 use crate::probe::{element, Array, Probe, Read, TraceStats};
+
+/// The cells the walk steps through: between the tile's samples.
+const CELLS: Grid = Grid::BETWEEN_SAMPLES;
 
 /// How the caster walks a leaf's cells.
 #[derive(Clone, Copy, Debug)]
@@ -331,12 +335,12 @@ impl Rbvh {
         let last_i = i64::from(leaf.res_u) - 2;
         let last_j = i64::from(leaf.res_v) - 2;
         let entry = o + d * t0;
-        let mut ci = start_cell(entry.x, last_i);
-        let mut cj = start_cell(entry.y, last_j);
+        let mut ci = CELLS.cell_of(entry.x, last_i);
+        let mut cj = CELLS.cell_of(entry.y, last_j);
         let step_i = step_of(d.x);
         let step_j = step_of(d.y);
-        let mut next_i = boundary_t(ci, step_i, o.x, inv.x);
-        let mut next_j = boundary_t(cj, step_j, o.y, inv.y);
+        let mut next_i = CELLS.boundary_t(ci, step_i, o.x, inv.x);
+        let mut next_j = CELLS.boundary_t(cj, step_j, o.y, inv.y);
         // Where the ray passes a grid vertex closer than rounding can resolve, the walk goes
         // round it on one side while the watertight test may report the hit in the cell on the
         // other side; that cell is then tested too. `corner_slack` bounds, in texels, the
@@ -372,8 +376,8 @@ impl Rbvh {
                     } else {
                         j0.max(0)
                     };
-                    let leave_i = boundary_t(edge_i, step_i, o.x, inv.x);
-                    let leave_j = boundary_t(edge_j, step_j, o.y, inv.y);
+                    let leave_i = CELLS.boundary_t(edge_i, step_i, o.x, inv.x);
+                    let leave_j = CELLS.boundary_t(edge_j, step_j, o.y, inv.y);
                     probe.read(Read {
                         array: Array::Atlas,
                         offset: 4 * (self.atlas.texel_words(self.params.texels) + block),
@@ -408,7 +412,7 @@ impl Rbvh {
                             }
                             t_last = *minor_next;
                             *minor += minor_step;
-                            *minor_next = boundary_t(*minor, minor_step, minor_o, minor_inv);
+                            *minor_next = CELLS.boundary_t(*minor, minor_step, minor_o, minor_inv);
                         }
                         let (major, major_next, major_step, major_o, major_inv, edge) = if out_i {
                             (&mut ci, &mut next_i, step_i, o.x, inv.x, edge_i)
@@ -417,7 +421,7 @@ impl Rbvh {
                         };
                         if *major != edge {
                             let into_edge =
-                                boundary_t(edge - major_step, major_step, major_o, major_inv);
+                                CELLS.boundary_t(edge - major_step, major_step, major_o, major_inv);
                             t_last = t_last.max(into_edge);
                             *major = edge;
                             *major_next = leave;
@@ -465,14 +469,14 @@ impl Rbvh {
                 if ci < 0 || ci > last_i {
                     break;
                 }
-                next_i = boundary_t(ci, step_i, o.x, inv.x);
+                next_i = CELLS.boundary_t(ci, step_i, o.x, inv.x);
             } else {
                 cj += step_j;
                 t_in = next_j;
                 if cj < 0 || cj > last_j {
                     break;
                 }
-                next_j = boundary_t(cj, step_j, o.y, inv.y);
+                next_j = CELLS.boundary_t(cj, step_j, o.y, inv.y);
             }
         }
         None
@@ -582,48 +586,6 @@ fn box_exit(b: &Aabb, o: Vec3, inv: Vec3) -> f32 {
     let t0 = (b.min - o) * inv;
     let t1 = (b.max - o) * inv;
     t0.max(t1).min_element()
-}
-
-/// The cell index holding coordinate `x` (samples sit at `i + ½`, so cell `i` starts there),
-/// clamped to `0..=last`. `as` saturates and maps NaN to 0, so any input gives a valid cell.
-fn start_cell(x: f32, last: i64) -> i64 {
-    ((x - 0.5).floor() as i64).clamp(0, last)
-}
-
-/// The DDA's step along one axis: the sign of the frame-space direction; a zero component never
-/// steps. Shared with the column march of `crate::lod`.
-pub(crate) fn step_of(d: f32) -> i64 {
-    if d > 0.0 {
-        1
-    } else if d < 0.0 {
-        -1
-    } else {
-        0
-    }
-}
-
-/// The ray parameter at which the ray leaves cell `c` through its far boundary along one axis,
-/// `+inf` for an axis it never steps along. Computed from the boundary itself rather than by
-/// accumulating `1/d` per step as Amanatides & Woo do, so that long marches do not drift and every
-/// boundary has the same distance whichever way the ray reaches it.
-fn boundary_t(c: i64, step: i64, o: f32, inv: f32) -> f32 {
-    if step > 0 {
-        ((c + 1) as f32 + 0.5 - o) * inv
-    } else if step < 0 {
-        (c as f32 + 0.5 - o) * inv
-    } else {
-        f32::INFINITY
-    }
-}
-
-/// The ray's height at `t`; exactly `o` for a ray parallel to the tile, so that `0 · ∞` cannot make
-/// a NaN when the cell's exit distance is infinite. Shared with the column march of `crate::lod`.
-pub(crate) fn height_at(o: f32, d: f32, t: f32) -> f32 {
-    if d == 0.0 {
-        o
-    } else {
-        o + d * t
-    }
 }
 
 /// Texel `(i, j)` of the leaf's tile and its index in the atlas, or a hole (and no index) when
