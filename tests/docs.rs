@@ -149,3 +149,32 @@ fn anchors_follow_github() {
         ["b.md#c", "d.png"]
     );
 }
+
+/// CI runs exactly the README's test command (and then the lints), so that what a user runs is
+/// what lands: the command under the README's "Run the whole test suite" comment is a line of
+/// `.ci/run`, which also denies clippy's warnings and checks the formatting.
+#[test]
+fn ci_runs_the_readme_test_command_and_the_lints() {
+    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
+    let lines: Vec<&str> = readme.lines().collect();
+    let comment = lines
+        .iter()
+        .position(|l| l.starts_with("# Run the whole test suite"))
+        .expect("the README's test command comment");
+    let command = lines[comment..]
+        .iter()
+        .find(|l| !l.starts_with('#'))
+        .expect("a command after the comment");
+    let ci = std::fs::read_to_string(root().join(".ci/run")).unwrap();
+    let ci_lines: Vec<&str> = ci.lines().collect();
+    assert!(
+        ci_lines.contains(command),
+        "README test command {command:?} is not a line of .ci/run"
+    );
+    for lint in [
+        "cargo clippy --release --all-targets -- -D warnings",
+        "cargo fmt --check",
+    ] {
+        assert!(ci_lines.contains(&lint), ".ci/run does not run {lint:?}");
+    }
+}
