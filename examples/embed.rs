@@ -23,6 +23,7 @@ use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{Addressing, BufferView, Context, External, Query, Reach, Tracer};
 use rbvh::rbvh::{Rbvh, RbvhParams};
 use rbvh::scene::Scene;
+use rbvh::structure::Structure;
 
 const WIDTH: u32 = 320;
 const HEIGHT: u32 = 240;
@@ -77,7 +78,7 @@ fn main() -> Result<(), Box<dyn Error>> {
         .map(std::path::PathBuf::from)
         .unwrap_or_else(|| std::env::temp_dir().join("rbvh-embed.png"));
     let scene = Scene::load(args.get(2).map_or("default", String::as_str))?;
-    let rbvh = Rbvh::build(&scene, &RbvhParams::quality(2)?)?;
+    let rbvh = Structure::from(Rbvh::build(&scene, &RbvhParams::quality(2)?)?);
     let bindless = match args.get(3).map_or("device", String::as_str) {
         "device" => true,
         "bindings" => false,
@@ -274,7 +275,7 @@ fn main() -> Result<(), Box<dyn Error>> {
         },
     })?;
     unsafe { device.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default())? };
-    let mut tracer = Tracer::record_rbvh(&ctx, &rbvh, cmd)?;
+    let mut tracer = Tracer::new_recorded(&ctx, &rbvh, cmd)?;
     let reach = tracer.reach();
     if addresses != (reach == Reach::DeviceAddresses) {
         return Err(format!("the library chose {reach:?}").into());

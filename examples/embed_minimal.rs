@@ -13,7 +13,7 @@ use rbvh::gpu_allocator::vulkan::{
     Allocation, AllocationCreateDesc, AllocationScheme, Allocator, AllocatorCreateDesc,
 };
 use rbvh::gpu_allocator::MemoryLocation;
-use rbvh::{Context, External, Hit, Query, Rbvh, RbvhParams, Scene, Tracer};
+use rbvh::{Context, External, Hit, Query, Rbvh, RbvhParams, Scene, Structure, Tracer};
 
 fn main() -> Result<(), Box<dyn Error>> {
     // The engine: instance, device, queue, allocator and a command buffer.
@@ -68,9 +68,9 @@ fn main() -> Result<(), Box<dyn Error>> {
         buffer_device_address: false,
         addressing: Addressing::Auto,
     })?;
-    let rbvh = Rbvh::build(&scene, &RbvhParams::quality(2)?)?;
+    let rbvh = Structure::from(Rbvh::build(&scene, &RbvhParams::quality(2)?)?);
     unsafe { device.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default())? };
-    let mut tracer = Tracer::record_rbvh(&ctx, &rbvh, cmd)?;
+    let mut tracer = Tracer::new_recorded(&ctx, &rbvh, cmd)?;
     let view = |buffer| BufferView { buffer, offset: 0 };
     let mut trace = tracer.bind(view(ray_buffer), view(hit_buffer), rays.len() as u32)?;
     tracer.record(cmd, &trace, Query::Closest);
@@ -97,7 +97,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     let same = |(g, c): &(&Hit, Hit)| (g.id, g.t) == (c.id, c.t);
     let agree = hits
         .iter()
-        .zip(rbvh.trace_cpu(&rays, false))
+        .zip(rbvh.trace_cpu(&rays, &[], false)?)
         .filter(same)
         .count();
     let hit_count = hits.iter().filter(|h| h.is_hit()).count();

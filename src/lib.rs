@@ -28,17 +28,18 @@
 //! The types most users need are at the crate root:
 //!
 //! ```
-//! use rbvh::{Bvh, Context, ContextOptions, Query, Rbvh, RbvhParams, Scene, Tracer};
+//! use rbvh::{Bvh, Context, ContextOptions, Query, Rbvh, RbvhParams, Scene, Structure, Tracer};
 //!
 //! let scene = Scene::load("sphere")?;
 //! let rays = scene.camera_or_framed(1.0).primary_rays(64, 64);
 //! let ctx = Context::new(&ContextOptions::default())?;
 //!
 //! // The referee: the exact triangle BVH.
-//! let exact = Tracer::exact(&ctx, &Bvh::build(&scene)?)?.trace(&rays, Query::Closest)?;
+//! let exact = Structure::from(Bvh::build(&scene)?);
+//! let exact = Tracer::new(&ctx, &exact)?.trace(&rays, Query::Closest)?;
 //! // The approximation: an RBVH at quality Q2.
-//! let rbvh = Rbvh::build(&scene, &RbvhParams::quality(2)?)?;
-//! let approx = Tracer::rbvh(&ctx, &rbvh)?.trace(&rays, Query::Closest)?;
+//! let rbvh = Structure::from(Rbvh::build(&scene, &RbvhParams::quality(2)?)?);
+//! let approx = Tracer::new(&ctx, &rbvh)?.trace(&rays, Query::Closest)?;
 //!
 //! for (e, a) in exact.hits.iter().zip(&approx.hits) {
 //!     if e.is_hit() && a.is_hit() {
@@ -49,7 +50,7 @@
 //! ```
 //!
 //! Engines that own their Vulkan device use [`gpu::Context::embedded`] and record the trace
-//! into their own command buffers ([`gpu::Tracer::record_rbvh`], [`gpu::Tracer::bind`],
+//! into their own command buffers ([`gpu::Tracer::new_recorded`], [`gpu::Tracer::bind`],
 //! [`gpu::Tracer::record`]); `examples/embed.rs` shows the whole contract, and
 //! `glsl/rbvh.glsl` can be included in an engine's own shaders.
 //!
@@ -105,6 +106,7 @@ pub use gpu::{Context, ContextOptions, External, Query, Tracer};
 pub use lod::{Lod, LodParams, RayCone};
 pub use rbvh::{Rbvh, RbvhParams};
 pub use scene::{Camera, Scene};
+pub use structure::Structure;
 
 // The crates whose types appear in the public API (`gpu::External` holds `ash` handles and a
 // `gpu_allocator` allocator; rays and cameras take `glam` vectors), re-exported so that an engine

@@ -1,15 +1,15 @@
 //! Which structure rays are traced through: the exact BVH, an RBVH, or an RBVH with its levels of
 //! detail. One type for the CLI, the image regression and embedders alike (pbrt-v4 has one
 //! `CreateAccelerator` behind one interface), so that "which structure" is decided once and every
-//! user uploads, traces and names it the same way.
+//! user uploads ([`crate::gpu::Tracer::new`] takes one), traces and names it the same way. It
+//! sits below the GPU side: a structure is data, and the tracer chooses its shader by
+//! [`Structure::kind`].
 
 use std::sync::Arc;
 
 use crate::bvh::Bvh;
 use crate::geom::{Hit, Ray};
-use crate::gpu::{Context, Tracer};
 use crate::lod::{Lod, RayCone};
-use crate::progress::{Progress, Quiet};
 use crate::rbvh::Rbvh;
 use crate::Result;
 
@@ -38,7 +38,7 @@ impl Kind {
     }
 }
 
-/// A built structure, ready to upload ([`Structure::tracer`]) or to trace on the CPU.
+/// A built structure, ready to upload ([`crate::gpu::Tracer::new`]) or to trace on the CPU.
 pub enum Structure {
     /// The exact triangle BVH, the referee.
     Exact(Bvh),
@@ -49,7 +49,38 @@ pub enum Structure {
     RbvhLod(Arc<Rbvh>, Box<Lod>),
 }
 
+impl From<Bvh> for Structure {
+    fn from(bvh: Bvh) -> Self {
+        Structure::Exact(bvh)
+    }
+}
+
+impl From<Rbvh> for Structure {
+    fn from(rbvh: Rbvh) -> Self {
+        Structure::Rbvh(Arc::new(rbvh))
+    }
+}
+
+impl From<Arc<Rbvh>> for Structure {
+    fn from(rbvh: Arc<Rbvh>) -> Self {
+        Structure::Rbvh(rbvh)
+    }
+}
+
 impl Structure {
+    /// `rbvh` traced with its levels of detail `lod` (built for it by [`Lod::build`]).
+    pub fn with_lod(rbvh: impl Into<Arc<Rbvh>>, lod: Lod) -> Self {
+        Structure::RbvhLod(rbvh.into(), Box::new(lod))
+    }
+
+    /// The exact BVH, if that is what is traced.
+    pub fn bvh(&self) -> Option<&Bvh> {
+        match self {
+            Structure::Exact(bvh) => Some(bvh),
+            _ => None,
+        }
+    }
+
     /// The RBVH traced, if any (for the colour of its hits, its texel size).
     pub fn rbvh(&self) -> Option<&Rbvh> {
         match self {
@@ -90,21 +121,6 @@ impl Structure {
             Structure::Exact(_) => "exact BVH",
             Structure::Rbvh(_) => "RBVH",
             Structure::RbvhLod(..) => "RBVH with levels of detail",
-        }
-    }
-
-    /// Uploads the structure with the crate's own trace shaders.
-    pub fn tracer(&self, ctx: &Context) -> Result<Tracer> {
-        self.tracer_observed(ctx, &Quiet)
-    }
-
-    /// [`Structure::tracer`], reporting the upload to `progress` as one step counting bytes
-    /// (written in 64 MiB steps, so a structure of gigabytes shows a moving bar).
-    pub fn tracer_observed(&self, ctx: &Context, progress: &dyn Progress) -> Result<Tracer> {
-        match self {
-            Structure::Exact(bvh) => Tracer::exact_observed(ctx, bvh, progress),
-            Structure::Rbvh(rbvh) => Tracer::rbvh_observed(ctx, rbvh, progress),
-            Structure::RbvhLod(rbvh, lod) => Tracer::rbvh_lod_observed(ctx, rbvh, lod, progress),
         }
     }
 

@@ -11,6 +11,7 @@ use rbvh::bvh::Bvh;
 use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{Query, Tracer};
 use rbvh::scene::Scene;
+use rbvh::structure::Structure;
 
 /// Smallest barycentric coordinate of the point where `ray` meets the plane of triangle `id`.
 fn edge_closeness(scene: &Scene, ray: &Ray, hit: &Hit) -> f32 {
@@ -113,12 +114,12 @@ fn gpu_and_cpu_tracers_agree() {
     ];
     for (k, (name, side, random)) in cases.into_iter().enumerate() {
         let scene = Scene::load(name).unwrap();
-        let bvh = Bvh::build(&scene).unwrap();
-        let tracer = Tracer::exact(&ctx, &bvh).unwrap();
+        let exact = Structure::from(Bvh::build(&scene).unwrap());
+        let tracer = Tracer::new(&ctx, &exact).unwrap();
         let rays = rays_for(&scene, side, random, k as u64 + 1);
         for (query, any) in [(Query::Closest, false), (Query::Any, true)] {
             let gpu = tracer.trace(&rays, query).unwrap().hits;
-            let cpu = bvh.trace_cpu(&rays, any);
+            let cpu = exact.trace_cpu(&rays, &[], any).unwrap();
             compare(&scene, &rays, &gpu, &cpu, any, &mut tally);
         }
     }
@@ -136,7 +137,7 @@ fn gpu_and_cpu_tracers_agree() {
 fn invalid_rays_miss_on_the_gpu() {
     let ctx = common::context();
     let bvh = Bvh::build(&Scene::builtin("sphere").unwrap()).unwrap();
-    let tracer = Tracer::exact(&ctx, &bvh).unwrap();
+    let tracer = Tracer::new(&ctx, &Structure::from(bvh)).unwrap();
     let o = Vec3::new(0.0, 0.0, -3.0);
     let rays = [
         Ray::new(Vec3::splat(f32::NAN), Vec3::Z, 0.0, f32::INFINITY),
@@ -166,7 +167,7 @@ fn empty_scene_and_empty_batch() {
         points: None,
     };
     let bvh = Bvh::build(&empty).unwrap();
-    let tracer = Tracer::exact(&ctx, &bvh).unwrap();
+    let tracer = Tracer::new(&ctx, &Structure::from(bvh)).unwrap();
     let rays = [Ray::new(Vec3::ZERO, Vec3::X, 0.0, f32::INFINITY)];
     assert_eq!(
         tracer.trace(&rays, Query::Closest).unwrap().hits,
@@ -184,8 +185,8 @@ fn repeated_passes_trace_the_same_hits_and_time_one_pass() {
         rbvh::rbvh::Rbvh::build(&scene, &rbvh::rbvh::RbvhParams::quality(1).unwrap()).unwrap();
     let rays = rays_for(&scene, 48, 500, 9);
     for tracer in [
-        Tracer::exact(&ctx, &bvh).unwrap(),
-        Tracer::rbvh(&ctx, &rbvh).unwrap(),
+        Tracer::new(&ctx, &Structure::from(bvh)).unwrap(),
+        Tracer::new(&ctx, &Structure::from(rbvh)).unwrap(),
     ] {
         for query in [Query::Closest, Query::Any] {
             let once = tracer.trace(&rays, query).unwrap();

@@ -8,17 +8,19 @@ use rbvh::bvh::Bvh;
 use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{Query, Tracer};
 use rbvh::scene::Scene;
+use rbvh::structure::Structure;
 
 fn trace_both(name: &str, rays: &[Ray]) -> [Vec<Hit>; 2] {
     let scene = Scene::builtin(name).unwrap();
     let bvh = Bvh::build(&scene).unwrap();
     let ctx = common::context();
-    let gpu = Tracer::exact(&ctx, &bvh)
+    let cpu = bvh.trace_cpu(rays, false);
+    let gpu = Tracer::new(&ctx, &Structure::from(bvh))
         .unwrap()
         .trace(rays, Query::Closest)
         .unwrap()
         .hits;
-    [gpu, bvh.trace_cpu(rays, false)]
+    [gpu, cpu]
 }
 
 #[test]

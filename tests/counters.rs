@@ -13,6 +13,8 @@ use rbvh::lod::{Lod, LodParams, RayCone};
 use rbvh::probe::{Array, RayCounters, Read, TraceStats};
 use rbvh::rbvh::{Rbvh, RbvhParams, TexelFormat};
 use rbvh::scene::Scene;
+use rbvh::structure::Structure;
+use std::sync::Arc;
 
 fn rays_for(scene: &Scene, side: u32, random: usize, seed: u64) -> Vec<Ray> {
     let mut rays = scene.camera_or_framed(1.0).primary_rays(side, side);
@@ -56,8 +58,9 @@ fn device_and_cpu_twin_count_the_same_work() {
     for (k, name) in ["default", "blob", "sphere"].into_iter().enumerate() {
         let scene = Scene::builtin(name).unwrap();
         let rays = rays_for(&scene, 64, 2000, 40 + k as u64);
-        let bvh = Bvh::build(&scene).unwrap();
-        let mut exact = Tracer::exact(&ctx, &bvh).unwrap();
+        let structure = Structure::from(Bvh::build(&scene).unwrap());
+        let bvh = structure.bvh().unwrap();
+        let mut exact = Tracer::new(&ctx, &structure).unwrap();
         assert!(!exact.block_jumps());
         let e = exact.set_block_jumps(true).unwrap_err().to_string();
         assert!(e.contains("no march"), "{e}");
@@ -73,8 +76,8 @@ fn device_and_cpu_twin_count_the_same_work() {
                 texels,
                 ..RbvhParams::quality(level).unwrap()
             };
-            let r = Rbvh::build(&scene, &params).unwrap();
-            let mut tracer = Tracer::rbvh(&ctx, &r).unwrap();
+            let r = Arc::new(Rbvh::build(&scene, &params).unwrap());
+            let mut tracer = Tracer::new(&ctx, &Structure::from(r.clone())).unwrap();
             // Off is this CPU device's default; both are what some device runs.
             assert_eq!(tracer.block_jumps(), !ctx.limits().cpu);
             for (jumping, query) in [
@@ -135,9 +138,10 @@ fn device_and_cpu_twin_count_the_same_work() {
 fn level_of_detail_counts_agree_too() {
     let ctx = common::context();
     let scene = Scene::builtin("grove").unwrap();
-    let r = Rbvh::build(&scene, &RbvhParams::quality(2).unwrap()).unwrap();
-    let lod = Lod::build(&r, &LodParams::default()).unwrap();
-    let tracer = Tracer::rbvh_lod(&ctx, &r, &lod).unwrap();
+    let r = Arc::new(Rbvh::build(&scene, &RbvhParams::quality(2).unwrap()).unwrap());
+    let with_lod = Structure::with_lod(r.clone(), Lod::build(&r, &LodParams::default()).unwrap());
+    let lod = with_lod.lod().unwrap();
+    let tracer = Tracer::new(&ctx, &with_lod).unwrap();
     let camera = scene.camera_or_framed(1.0);
     let rays = camera.primary_rays(96, 96);
     // A wide cone, so that many coarse nodes are chosen.

@@ -13,7 +13,7 @@ use std::process::Command;
 /// the standalone context, and compare every hit with the exact sphere.
 const MAIN_RS: &str = r#"
 use rbvh::scene::builtin::{analytic, Analytic};
-use rbvh::{Context, ContextOptions, Query, Rbvh, RbvhParams, Scene, Tracer};
+use rbvh::{Context, ContextOptions, Query, Rbvh, RbvhParams, Scene, Structure, Tracer};
 
 fn main() -> Result<(), rbvh::Error> {
     let scene = Scene::load("sphere")?;
@@ -24,7 +24,7 @@ fn main() -> Result<(), rbvh::Error> {
     let context = Context::new(&ContextOptions::default())?;
     let params = RbvhParams::quality(2)?;
     let rbvh = Rbvh::build(&scene, &params)?;
-    let hits = Tracer::rbvh(&context, &rbvh)?.trace(&rays, Query::Closest)?.hits;
+    let hits = Tracer::new(&context, &Structure::from(rbvh))?.trace(&rays, Query::Closest)?.hits;
 
     // A hit lies within a texel of the tessellated sphere.
     let tolerance = max_chord_error + scene.bounds().diagonal() / params.texels_per_diagonal;

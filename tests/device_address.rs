@@ -11,8 +11,10 @@ use rbvh::gpu::{Addressing, Painter, Query, Reach, Tracer};
 use rbvh::lod::{Lod, LodParams, RayCone, LOD_BIT};
 use rbvh::rbvh::{Rbvh, RbvhParams};
 use rbvh::scene::Scene;
+use rbvh::structure::Structure;
 use rbvh::surface::Brush;
 use rbvh::Error;
+use std::sync::Arc;
 
 /// Fails, naming the first ray that differs, unless both traces gave bit-identical hits.
 fn assert_identical(what: &str, a: &[Hit], b: &[Hit]) {
@@ -39,21 +41,26 @@ fn every_tracer_gives_identical_hits_through_device_addresses() {
     let addressed = common::context_with(Addressing::DeviceAddress);
     let scene = Scene::load("default").unwrap();
     let rays = common::random_rays(&scene, 20_000, &mut common::Rng::new(7));
-    let bvh = Bvh::build(&scene).unwrap();
-    let rbvh = Rbvh::build(&scene, &RbvhParams::quality(2).unwrap()).unwrap();
-    let lod = Lod::build(&rbvh, &LodParams::default()).unwrap();
+    let exact = Structure::from(Bvh::build(&scene).unwrap());
+    let rbvh = Arc::new(Rbvh::build(&scene, &RbvhParams::quality(2).unwrap()).unwrap());
+    let with_lod = Structure::with_lod(
+        rbvh.clone(),
+        Lod::build(&rbvh, &LodParams::default()).unwrap(),
+    );
+    let lod = with_lod.lod().unwrap();
     let cones = cones(&rays, rbvh.texel_size);
+    let plain = Structure::from(rbvh.clone());
     for query in [Query::Closest, Query::Any] {
         let pairs = [
             (
                 "exact",
-                Tracer::exact(&bound, &bvh).unwrap(),
-                Tracer::exact(&addressed, &bvh).unwrap(),
+                Tracer::new(&bound, &exact).unwrap(),
+                Tracer::new(&addressed, &exact).unwrap(),
             ),
             (
                 "rbvh",
-                Tracer::rbvh(&bound, &rbvh).unwrap(),
-                Tracer::rbvh(&addressed, &rbvh).unwrap(),
+                Tracer::new(&bound, &plain).unwrap(),
+                Tracer::new(&addressed, &plain).unwrap(),
             ),
         ];
         for (what, b, a) in &pairs {
@@ -65,15 +72,15 @@ fn every_tracer_gives_identical_hits_through_device_addresses() {
             assert_identical(&format!("{what} {query:?}"), &hb.hits, &ha.hits);
             assert_eq!(hb.counters, ha.counters, "{what} {query:?}: counters");
         }
-        let b = Tracer::rbvh_lod(&bound, &rbvh, &lod).unwrap();
-        let a = Tracer::rbvh_lod(&addressed, &rbvh, &lod).unwrap();
+        let b = Tracer::new(&bound, &with_lod).unwrap();
+        let a = Tracer::new(&addressed, &with_lod).unwrap();
         assert_eq!(a.reach(), Reach::DeviceAddresses);
         let hb = b.trace_lod(&rays, &cones, query, true).unwrap();
         let ha = a.trace_lod(&rays, &cones, query, true).unwrap();
         assert_identical(&format!("LOD {query:?}"), &hb.hits, &ha.hits);
         assert_eq!(hb.counters, ha.counters, "LOD {query:?}: counters");
         let any = query == Query::Any;
-        let cpu = rbvh.trace_cpu_lod(&lod, &rays, &cones, any).unwrap();
+        let cpu = rbvh.trace_cpu_lod(lod, &rays, &cones, any).unwrap();
         let mut agreement = common::Agreement::default();
         agreement.add("LOD through addresses vs CPU", &ha.hits, &cpu, any);
         assert_eq!(agreement.hit_miss, 0, "{agreement:?}");
@@ -136,7 +143,7 @@ fn big_square() -> Rbvh {
 fn an_atlas_over_the_storage_buffer_range_is_traced_and_painted_through_device_addresses() {
     let ctx = common::context();
     let range = ctx.limits().max_storage_buffer_range;
-    let r = big_square();
+    let r = Arc::new(big_square());
     let atlas_bytes = std::mem::size_of_val(r.atlas.texels.as_slice()) as u64;
     if atlas_bytes <= range {
         // A device whose bindings reach this far (desktop GPUs: 4 GiB) needs no addresses here.
@@ -149,7 +156,7 @@ fn an_atlas_over_the_storage_buffer_range_is_traced_and_painted_through_device_a
 
     // Bindings alone cannot hold it: a clear error naming the array and the limit.
     let bound = common::context_with(Addressing::Bindings);
-    match Tracer::rbvh(&bound, &r) {
+    match Tracer::new(&bound, &Structure::from(r.clone())) {
         Err(Error::DeviceLimit {
             resource, limit, ..
         }) => {
@@ -160,7 +167,7 @@ fn an_atlas_over_the_storage_buffer_range_is_traced_and_painted_through_device_a
     }
 
     // Auto reads it through its device address, and agrees with the CPU caster.
-    let tracer = Tracer::rbvh(&ctx, &r).unwrap();
+    let tracer = Tracer::new(&ctx, &Structure::from(r.clone())).unwrap();
     assert_eq!(tracer.reach(), Reach::DeviceAddresses);
     let mut rng = common::Rng::new(11);
     let rays: Vec<Ray> = (0..4096)
@@ -192,7 +199,7 @@ fn an_atlas_over_the_storage_buffer_range_is_traced_and_painted_through_device_a
     assert_eq!(painter.reach(), Reach::DeviceAddresses);
     painter.paint(&brushes).unwrap();
     let painted = painter.colours().unwrap();
-    let mut cpu_r = r.clone();
+    let mut cpu_r = Rbvh::clone(&r);
     assert!(cpu_r.paint_cpu(&brushes) > 0);
     assert!(painted == *cpu_r.colours.as_ref().unwrap());
     ctx.check_validation().unwrap();

@@ -15,29 +15,31 @@ use rbvh::ibl::{self, Environment, Frame, LatLongMap, Settings, Sky};
 use rbvh::output::Image;
 use rbvh::rbvh::{Rbvh, RbvhParams};
 use rbvh::scene::Scene;
+use rbvh::structure::Structure;
 use rbvh::Error;
 
 const WIDTH: u32 = 64;
 const HEIGHT: u32 = 48;
 
 /// A structure uploaded for tracing, with the origin offset its surfaces need.
-struct Structure {
+struct Uploaded {
     tracer: Tracer,
     surface_offset: f32,
 }
 
 /// The exact BVH (`None`) or the RBVH at quality `Some(level)` of `scene`.
-fn structure(ctx: &Context, scene: &Scene, level: Option<u32>) -> Structure {
+fn structure(ctx: &Context, scene: &Scene, level: Option<u32>) -> Uploaded {
     match level {
-        None => Structure {
-            tracer: Tracer::exact(ctx, &Bvh::build(scene).unwrap()).unwrap(),
+        None => Uploaded {
+            tracer: Tracer::new(ctx, &Structure::from(Bvh::build(scene).unwrap())).unwrap(),
             surface_offset: 0.0,
         },
         Some(q) => {
             let rbvh = Rbvh::build(scene, &RbvhParams::quality(q).unwrap()).unwrap();
-            Structure {
-                tracer: Tracer::rbvh(ctx, &rbvh).unwrap(),
-                surface_offset: rbvh.texel_size,
+            let surface_offset = rbvh.texel_size;
+            Uploaded {
+                tracer: Tracer::new(ctx, &Structure::from(rbvh)).unwrap(),
+                surface_offset,
             }
         }
     }
@@ -47,7 +49,7 @@ fn structure(ctx: &Context, scene: &Scene, level: Option<u32>) -> Structure {
 /// uniform `albedo`.
 #[allow(clippy::too_many_arguments)]
 fn render_rays(
-    s: &Structure,
+    s: &Uploaded,
     scene: &Scene,
     rays: &[Ray],
     (width, height): (u32, u32),
@@ -84,7 +86,7 @@ fn render_rays(
 
 /// [`render_rays`] with the scene's framing camera at [`WIDTH`] × [`HEIGHT`].
 fn render_camera(
-    s: &Structure,
+    s: &Uploaded,
     scene: &Scene,
     env: &Environment,
     samples: u32,

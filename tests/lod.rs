@@ -13,7 +13,9 @@ use rbvh::lod::{Lod, LodParams, RayCone};
 use rbvh::output;
 use rbvh::rbvh::{Rbvh, RbvhParams};
 use rbvh::scene::Scene;
+use rbvh::structure::Structure;
 use rbvh::Error;
+use std::sync::Arc;
 
 const W: u32 = 160;
 const H: u32 = 120;
@@ -58,15 +60,19 @@ fn grove_lod_is_near_fine_never_worse_than_coarse_and_ends_traversal_sooner() {
             .unwrap(),
     )
     .unwrap();
-    let exact = Tracer::exact(&ctx, &Bvh::build(&scene).unwrap()).unwrap();
-    let fine = Rbvh::build(&scene, &fine_params()).unwrap();
+    let exact = Tracer::new(&ctx, &Structure::from(Bvh::build(&scene).unwrap())).unwrap();
+    let fine = Arc::new(Rbvh::build(&scene, &fine_params()).unwrap());
     let coarse = Rbvh::build(&scene, &RbvhParams::quality(0).unwrap()).unwrap();
-    let lod = Lod::build(&fine, &LodParams::default()).unwrap();
-    let (fine_tracer, coarse_tracer) = (
-        Tracer::rbvh(&ctx, &fine).unwrap(),
-        Tracer::rbvh(&ctx, &coarse).unwrap(),
+    let fine_lod = Structure::with_lod(
+        fine.clone(),
+        Lod::build(&fine, &LodParams::default()).unwrap(),
     );
-    let lod_tracer = Tracer::rbvh_lod(&ctx, &fine, &lod).unwrap();
+    let lod = fine_lod.lod().unwrap();
+    let (fine_tracer, coarse_tracer) = (
+        Tracer::new(&ctx, &Structure::from(fine.clone())).unwrap(),
+        Tracer::new(&ctx, &Structure::from(coarse)).unwrap(),
+    );
+    let lod_tracer = Tracer::new(&ctx, &fine_lod).unwrap();
     // Measured at eye level: 601 pixels, LOD vs fine 0.0102, LOD vs exact 0.0208, Q0 vs exact
     // 0.0792, steps 22.7 vs 22.8. From above: 2325 pixels, 0.0212, 0.0219, 0.0294, steps 9.0 vs
     // 10.3.
@@ -205,13 +211,14 @@ fn gpu_and_cpu_agree_with_lod_and_point_cones_change_nothing() {
     .enumerate()
     {
         let scene = Scene::builtin(name).unwrap();
-        let r = Rbvh::build(&scene, &RbvhParams::quality(level).unwrap()).unwrap();
-        let lod = Lod::build(&r, &lod_params).unwrap();
-        let tracer = Tracer::rbvh_lod(&ctx, &r, &lod).unwrap();
+        let r = Arc::new(Rbvh::build(&scene, &RbvhParams::quality(level).unwrap()).unwrap());
+        let with_lod = Structure::with_lod(r.clone(), Lod::build(&r, &lod_params).unwrap());
+        let lod = with_lod.lod().unwrap();
+        let tracer = Tracer::new(&ctx, &with_lod).unwrap();
         let (rays, cones) = rays_and_cones(&scene, 96, 4000, k as u64);
         for (query, any) in [(Query::Closest, false), (Query::Any, true)] {
             let gpu = tracer.trace_lod(&rays, &cones, query, false).unwrap().hits;
-            let cpu = r.trace_cpu_lod(&lod, &rays, &cones, any).unwrap();
+            let cpu = r.trace_cpu_lod(lod, &rays, &cones, any).unwrap();
             let chosen = cpu
                 .iter()
                 .filter(|c| c.is_hit() && c.id & rbvh::lod::LOD_BIT != 0)
@@ -226,7 +233,7 @@ fn gpu_and_cpu_agree_with_lod_and_point_cones_change_nothing() {
         }
         // With point cones nothing is coarse: the plain RBVH's hits, bit for bit.
         let points = vec![RayCone::POINT; rays.len()];
-        let plain = Tracer::rbvh(&ctx, &r)
+        let plain = Tracer::new(&ctx, &Structure::from(r.clone()))
             .unwrap()
             .trace(&rays, Query::Closest)
             .unwrap()
@@ -238,7 +245,7 @@ fn gpu_and_cpu_agree_with_lod_and_point_cones_change_nothing() {
         assert_eq!(plain, pointed, "{name} Q{level}: GPU");
         assert_eq!(
             r.trace_cpu(&rays, false),
-            r.trace_cpu_lod(&lod, &rays, &points, false).unwrap(),
+            r.trace_cpu_lod(lod, &rays, &points, false).unwrap(),
             "{name} Q{level}: CPU"
         );
     }
@@ -257,13 +264,16 @@ fn gpu_and_cpu_agree_with_lod_and_point_cones_change_nothing() {
 fn lod_refuses_mismatched_input() {
     let ctx = common::context();
     let scene = Scene::builtin("sphere").unwrap();
-    let r = Rbvh::build(&scene, &RbvhParams::quality(1).unwrap()).unwrap();
-    let other = Rbvh::build(
-        &Scene::builtin("blob").unwrap(),
-        &RbvhParams::quality(1).unwrap(),
-    )
-    .unwrap();
-    let lod = Lod::build(&r, &LodParams::default()).unwrap();
+    let r = Arc::new(Rbvh::build(&scene, &RbvhParams::quality(1).unwrap()).unwrap());
+    let other = Arc::new(
+        Rbvh::build(
+            &Scene::builtin("blob").unwrap(),
+            &RbvhParams::quality(1).unwrap(),
+        )
+        .unwrap(),
+    );
+    let with_lod = Structure::with_lod(r.clone(), Lod::build(&r, &LodParams::default()).unwrap());
+    let lod = with_lod.lod().unwrap();
     let (rays, cones) = rays_and_cones(&scene, 8, 0, 1);
     let is_param = |e: Error, what: &str| {
         assert!(
@@ -271,12 +281,14 @@ fn lod_refuses_mismatched_input() {
             "{e}"
         )
     };
-    is_param(Tracer::rbvh_lod(&ctx, &other, &lod).err().unwrap(), "nodes");
+    // Levels of detail built for `r`, given with `other`: a copy, as a structure owns its own.
+    let mismatched = Structure::with_lod(other.clone(), lod.clone());
+    is_param(Tracer::new(&ctx, &mismatched).err().unwrap(), "nodes");
     is_param(
-        other.trace_cpu_lod(&lod, &rays, &cones, false).unwrap_err(),
+        other.trace_cpu_lod(lod, &rays, &cones, false).unwrap_err(),
         "nodes",
     );
-    let tracer = Tracer::rbvh_lod(&ctx, &r, &lod).unwrap();
+    let tracer = Tracer::new(&ctx, &with_lod).unwrap();
     is_param(
         tracer
             .trace_lod(&rays, &cones[1..], Query::Closest, false)
@@ -296,14 +308,14 @@ fn lod_refuses_mismatched_input() {
         spread: 0.0,
     };
     is_param(
-        r.trace_cpu_lod(&lod, &rays, &bad, false).unwrap_err(),
+        r.trace_cpu_lod(lod, &rays, &bad, false).unwrap_err(),
         "cone 3",
     );
     is_param(
         tracer.trace(&rays, Query::Closest).unwrap_err(),
         "trace_lod",
     );
-    let plain = Tracer::rbvh(&ctx, &r).unwrap();
+    let plain = Tracer::new(&ctx, &Structure::from(r.clone())).unwrap();
     is_param(
         plain
             .trace_lod(&rays, &cones, Query::Closest, false)
@@ -353,7 +365,7 @@ fn ibl_visibility_rays_trace_with_level_of_detail() {
     let camera = scene.camera_or_framed(w as f32 / h as f32);
     let rays = camera.primary_rays(w, h);
     let cone = RayCone::pixel(&camera, h);
-    let r = Rbvh::build(&scene, &RbvhParams::quality(4).unwrap()).unwrap();
+    let r = Arc::new(Rbvh::build(&scene, &RbvhParams::quality(4).unwrap()).unwrap());
     let env = Environment::Sky(Sky::default());
     let render = |tracer: &Tracer, hits: &[Hit], surface_offset: f32, cone: Option<RayCone>| {
         let albedo = vec![glam::Vec3::splat(ibl::GREY); rays.len()];
@@ -375,7 +387,7 @@ fn ibl_visibility_rays_trace_with_level_of_detail() {
             .unwrap()
             .image
     };
-    let exact = Tracer::exact(&ctx, &Bvh::build(&scene).unwrap()).unwrap();
+    let exact = Tracer::new(&ctx, &Structure::from(Bvh::build(&scene).unwrap())).unwrap();
     let exact_hits = exact.trace(&rays, Query::Closest).unwrap().hits;
     let reference = render(&exact, &exact_hits, 0.0, None);
     let cones = vec![cone; rays.len()];
@@ -388,7 +400,7 @@ fn ibl_visibility_rays_trace_with_level_of_detail() {
             },
         )
         .unwrap();
-        let tracer = Tracer::rbvh_lod(&ctx, &r, &lod).unwrap();
+        let tracer = Tracer::new(&ctx, &Structure::with_lod(r.clone(), lod)).unwrap();
         let hits = tracer
             .trace_lod(&rays, &cones, Query::Closest, false)
             .unwrap()
@@ -397,7 +409,7 @@ fn ibl_visibility_rays_trace_with_level_of_detail() {
         image_errors(&reference, &image).unwrap().flip_mean
     };
     let (flip, sharper_flip) = (lod_flip(LodParams::default().bias), lod_flip(-2.0));
-    let plain = Tracer::rbvh(&ctx, &r).unwrap();
+    let plain = Tracer::new(&ctx, &Structure::from(r.clone())).unwrap();
     let plain_hits = plain.trace(&rays, Query::Closest).unwrap().hits;
     let plain_flip = image_errors(&reference, &render(&plain, &plain_hits, r.texel_size, None))
         .unwrap()
@@ -439,11 +451,11 @@ fn recorded_lod_trace_matches_the_submitted_one() {
     use rbvh::gpu::BufferView;
     let ctx = common::context();
     let scene = Scene::builtin("blob").unwrap();
-    let r = Rbvh::build(&scene, &RbvhParams::quality(3).unwrap()).unwrap();
-    let lod = Lod::build(&r, &LodParams::default()).unwrap();
+    let r = Arc::new(Rbvh::build(&scene, &RbvhParams::quality(3).unwrap()).unwrap());
+    let with_lod = Structure::with_lod(r.clone(), Lod::build(&r, &LodParams::default()).unwrap());
     let (rays, cones) = rays_and_cones(&scene, 48, 500, 11);
     let n = rays.len() as u32;
-    let expected = Tracer::rbvh_lod(&ctx, &r, &lod)
+    let expected = Tracer::new(&ctx, &with_lod)
         .unwrap()
         .trace_lod(&rays, &cones, Query::Closest, false)
         .unwrap()
@@ -460,7 +472,7 @@ fn recorded_lod_trace_matches_the_submitted_one() {
     let mut made = None;
     ctx.submit("recorded LOD trace", |_, cmd| {
         made = Some(
-            Tracer::record_rbvh_lod(&ctx, &r, &lod, cmd).and_then(|tracer| {
+            Tracer::new_recorded(&ctx, &with_lod, cmd).and_then(|tracer| {
                 let binding =
                     tracer.bind_with_cones(view(&ray_buf), view(&hit_buf), view(&cone_buf), n)?;
                 // A plain binding is refused: the LOD trace needs the cones.
@@ -479,7 +491,7 @@ fn recorded_lod_trace_matches_the_submitted_one() {
     assert!(expected
         .iter()
         .any(|h| h.is_hit() && h.id & rbvh::lod::LOD_BIT != 0));
-    let plain = Tracer::rbvh(&ctx, &r).unwrap();
+    let plain = Tracer::new(&ctx, &Structure::from(r)).unwrap();
     assert!(plain
         .bind_with_cones(view(&ray_buf), view(&hit_buf), view(&cone_buf), n)
         .is_err());
@@ -497,12 +509,13 @@ fn coarse_hits_carry_the_colour_of_the_surface_they_stand_for() {
     let lod = Lod::build(&r, &LodParams::default()).unwrap();
     assert_eq!(lod.colours.as_ref().map(Vec::len), Some(lod.texels.len()));
     let (rays, cones) = rays_and_cones(&scene, 64, 0, 3);
-    let hits = Tracer::rbvh_lod(&ctx, &r, &lod)
+    let mut with_lod = Structure::with_lod(r, lod);
+    let hits = Tracer::new(&ctx, &with_lod)
         .unwrap()
         .trace_lod(&rays, &cones, Query::Closest, false)
         .unwrap()
         .hits;
-    let albedo = hit_albedo(&scene, Some(&r), Some(&lod), &rays, &hits).unwrap();
+    let albedo = hit_albedo(&scene, with_lod.rbvh(), with_lod.lod(), &rays, &hits).unwrap();
     let mut coarse = 0;
     for (hit, colour) in hits.iter().zip(&albedo) {
         if hit.is_hit() {
@@ -516,8 +529,9 @@ fn coarse_hits_carry_the_colour_of_the_surface_they_stand_for() {
     }
     assert!(coarse > 100, "{coarse} coarse hits");
     // Without a colour channel the levels of detail carry none either.
+    let r = with_lod.rbvh_mut().unwrap();
     r.colours = None;
-    assert!(Lod::build(&r, &LodParams::default())
+    assert!(Lod::build(r, &LodParams::default())
         .unwrap()
         .colours
         .is_none());
@@ -540,12 +554,15 @@ fn lod_refuses_a_height_only_rbvh() {
     .unwrap();
     let lod = Lod::build(&normals, &LodParams::default()).unwrap();
     let (rays, cones) = rays_and_cones(&scene, 8, 0, 1);
+    let height_with_lod = Structure::with_lod(height, lod);
+    let (height, lod) = (
+        height_with_lod.rbvh().unwrap(),
+        height_with_lod.lod().unwrap(),
+    );
     for e in [
-        Lod::build(&height, &LodParams::default()).err().unwrap(),
-        Tracer::rbvh_lod(&ctx, &height, &lod).err().unwrap(),
-        height
-            .trace_cpu_lod(&lod, &rays, &cones, false)
-            .unwrap_err(),
+        Lod::build(height, &LodParams::default()).err().unwrap(),
+        Tracer::new(&ctx, &height_with_lod).err().unwrap(),
+        height.trace_cpu_lod(lod, &rays, &cones, false).unwrap_err(),
     ] {
         assert!(
             matches!(e, Error::InvalidParameter { .. }) && e.to_string().contains("height-only"),

@@ -10,7 +10,9 @@ use rbvh::gpu::{Painter, Query, Tracer, MAX_BRUSHES_PER_PASS};
 use rbvh::rbvh::{Rbvh, RbvhParams};
 use rbvh::rgba;
 use rbvh::scene::Scene;
+use rbvh::structure::Structure;
 use rbvh::surface::Brush;
+use std::sync::Arc;
 
 const RED: u32 = 0xFF00_00FF;
 
@@ -42,7 +44,7 @@ fn surface_texels(r: &Rbvh) -> Vec<(usize, Vec3, usize, Vec3)> {
 #[test]
 fn a_stroke_on_a_cube_edge_paints_both_faces_and_nothing_else() {
     let ctx = common::context();
-    let mut r = cube();
+    let mut r = Arc::new(cube());
     assert!(
         r.colours.is_none(),
         "a scene without materials has no colour channel"
@@ -51,7 +53,7 @@ fn a_stroke_on_a_cube_edge_paints_both_faces_and_nothing_else() {
     let target = Vec3::new(1.0, 1.0, 0.1);
     let from = Vec3::new(3.0, 3.0, 0.1);
     let ray = Ray::new(from, target - from, 0.0, f32::INFINITY);
-    let hits = Tracer::rbvh(&ctx, &r)
+    let hits = Tracer::new(&ctx, &Structure::from(r.clone()))
         .unwrap()
         .trace(&[ray], Query::Closest)
         .unwrap()
@@ -69,7 +71,7 @@ fn a_stroke_on_a_cube_edge_paints_both_faces_and_nothing_else() {
         "{stats:?}"
     );
     let gpu = painter.colours().unwrap();
-    let mut cpu = r.clone();
+    let mut cpu = Rbvh::clone(&r);
     let painted = cpu.paint_cpu(&brushes);
     assert!(painted > 0);
     let cpu_colours = cpu.colours.as_ref().unwrap();
@@ -103,7 +105,7 @@ fn a_stroke_on_a_cube_edge_paints_both_faces_and_nothing_else() {
     assert!(leaves.len() >= 2, "painted leaves: {leaves:?}");
 
     // The aimed hit's own texel is painted, and reads back as red.
-    r.colours = Some(gpu);
+    Arc::make_mut(&mut r).colours = Some(gpu);
     let loc = r.locate(&ray, &hits[0]).expect("a height-field hit");
     assert_eq!(r.surface_colour(loc), Some(Vec4::new(1.0, 0.0, 0.0, 1.0)));
 }
@@ -170,8 +172,8 @@ fn a_height_only_rbvh_has_no_colours_to_paint() {
         texels: rbvh::rbvh::TexelFormat::Height,
         ..RbvhParams::quality(1).unwrap()
     };
-    let r = Rbvh::build(&scene, &params).unwrap();
-    let tracer = Tracer::rbvh(&ctx, &r).unwrap();
+    let r = Arc::new(Rbvh::build(&scene, &params).unwrap());
+    let tracer = Tracer::new(&ctx, &Structure::from(r.clone())).unwrap();
     for e in [
         Painter::new(&ctx, &r).err().unwrap(),
         Painter::sharing(&tracer, &r).err().unwrap(),
@@ -244,7 +246,7 @@ fn translucent_brushes_composite_in_order_on_the_device_as_on_the_cpu() {
 #[test]
 fn a_painter_sharing_the_tracers_atlas_paints_the_same_and_uploads_only_colours() {
     let ctx = common::context();
-    let r = cube();
+    let r = Arc::new(cube());
     let brushes = [
         Brush::new(Vec3::new(1.0, 1.0, 0.1), 0.3, RED),
         Brush::new(Vec3::new(-1.0, 0.2, 0.5), 0.4, 0x80FF_0000),
@@ -256,7 +258,7 @@ fn a_painter_sharing_the_tracers_atlas_paints_the_same_and_uploads_only_colours(
     let colour_bytes = 4 * r.atlas.texels.len() as u64;
     assert_eq!(own.device_bytes(), atlas_bytes + colour_bytes);
 
-    let tracer = Tracer::rbvh(&ctx, &r).unwrap();
+    let tracer = Tracer::new(&ctx, &Structure::from(r.clone())).unwrap();
     let mut shared = Painter::sharing(&tracer, &r).unwrap();
     assert_eq!(shared.device_bytes(), colour_bytes, "no second atlas");
     shared.paint(&brushes).unwrap();
@@ -287,14 +289,14 @@ fn a_painter_sharing_the_tracers_atlas_paints_the_same_and_uploads_only_colours(
         &RbvhParams::quality(0).unwrap(),
     )
     .unwrap();
-    let e = Painter::sharing(&Tracer::rbvh(&ctx, &other).unwrap(), &r)
+    let e = Painter::sharing(&Tracer::new(&ctx, &Structure::from(other)).unwrap(), &r)
         .err()
         .unwrap()
         .to_string();
     assert!(e.contains("not this RBVH"), "{e}");
-    let exact = Tracer::exact(
+    let exact = Tracer::new(
         &ctx,
-        &rbvh::bvh::Bvh::build(&Scene::load("cube").unwrap()).unwrap(),
+        &Structure::from(rbvh::bvh::Bvh::build(&Scene::load("cube").unwrap()).unwrap()),
     )
     .unwrap();
     let e = Painter::sharing(&exact, &r).err().unwrap().to_string();

@@ -12,6 +12,8 @@ use rbvh::gpu::{Query, Tracer};
 use rbvh::points::PointCloud;
 use rbvh::rbvh::{Rbvh, RbvhParams};
 use rbvh::scene::Scene;
+use rbvh::structure::Structure;
+use std::sync::Arc;
 
 /// Points per unit sphere in these tests: a spacing of about 0.011, a little coarser than a Q4
 /// texel (0.0034) and finer than a Q0 texel (0.0135), as scans are against the levels.
@@ -160,8 +162,8 @@ fn gpu_and_cpu_agree_on_point_built_rbvhs() {
     for (name, count) in [("blob", 60_000), ("default", 80_000)] {
         let scene = sampled(name, count);
         for level in [0, 3] {
-            let r = Rbvh::build(&scene, &q(level)).unwrap();
-            let tracer = Tracer::rbvh(&ctx, &r).unwrap();
+            let r = Arc::new(Rbvh::build(&scene, &q(level)).unwrap());
+            let tracer = Tracer::new(&ctx, &Structure::from(r.clone())).unwrap();
             let mut rays = scene.camera_or_framed(1.0).primary_rays(96, 96);
             rays.extend(common::random_rays(
                 &scene,

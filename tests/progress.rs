@@ -13,6 +13,7 @@ use rbvh::lod::{Lod, LodParams, RayCone};
 use rbvh::progress::Progress;
 use rbvh::rbvh::{Rbvh, RbvhParams};
 use rbvh::scene::Scene;
+use rbvh::structure::Structure;
 
 /// Steps as (what, announced total, units advanced), in order; advances may come from any thread.
 #[derive(Default)]
@@ -133,9 +134,9 @@ fn a_watched_trace_counts_its_rays_in_batches_and_answers_as_an_unwatched_one() 
     // More than two batches, the last one partial.
     let rays = camera.primary_rays(768, 768);
     assert!(rays.len() > 2 * OBSERVED_BATCH && rays.len() % OBSERVED_BATCH != 0);
-    let rbvh = Rbvh::build(&scene, &RbvhParams::quality(2).unwrap()).unwrap();
+    let rbvh = Arc::new(Rbvh::build(&scene, &RbvhParams::quality(2).unwrap()).unwrap());
 
-    let tracer = Tracer::rbvh(&ctx, &rbvh).unwrap();
+    let tracer = Tracer::new(&ctx, &Structure::from(rbvh.clone())).unwrap();
     let tally = Tally::default();
     let watched = tracer
         .trace_observed(&rays, None, Query::Closest, false, &tally)
@@ -147,7 +148,7 @@ fn a_watched_trace_counts_its_rays_in_batches_and_answers_as_an_unwatched_one() 
     );
 
     let lod = Lod::build(&rbvh, &LodParams::default()).unwrap();
-    let tracer = Tracer::rbvh_lod(&ctx, &rbvh, &lod).unwrap();
+    let tracer = Tracer::new(&ctx, &Structure::with_lod(rbvh, lod)).unwrap();
     let cones = vec![RayCone::pixel(&camera, 768); rays.len()];
     let tally = Tally::default();
     let watched = tracer
@@ -169,31 +170,29 @@ fn a_watched_trace_counts_its_rays_in_batches_and_answers_as_an_unwatched_one() 
 /// its blocks' height ranges), and the uploaded structure traces as the unwatched one does.
 #[test]
 fn an_upload_counts_the_bytes_of_every_array() {
-    use rbvh::structure::Structure;
-
     let ctx = common::context();
     let scene = Scene::load("sphere").unwrap();
     let rays = scene.camera_or_framed(1.0).primary_rays(64, 64);
     let bvh = Bvh::build(&scene).unwrap();
-    let rbvh = Rbvh::build(&scene, &RbvhParams::quality(1).unwrap()).unwrap();
+    let rbvh = Arc::new(Rbvh::build(&scene, &RbvhParams::quality(1).unwrap()).unwrap());
     let lod = Lod::build(&rbvh, &LodParams::default()).unwrap();
     let rbvh_bytes =
         rbvh.tree_bytes() + rbvh.triangle_bytes() + 4 * rbvh.atlas_words().len() as u64;
     let exact_bytes = bvh.tree_bytes() + bvh.triangle_bytes();
     let cases = [
-        (Structure::Exact(bvh), exact_bytes),
-        (Structure::Rbvh(Arc::new(rbvh.clone())), rbvh_bytes),
+        (Structure::from(bvh), exact_bytes),
+        (Structure::from(rbvh.clone()), rbvh_bytes),
     ];
     for (structure, bytes) in cases {
         let tally = Tally::default();
-        let watched = structure.tracer_observed(&ctx, &tally).unwrap();
+        let watched = Tracer::observed(&ctx, &structure, &tally).unwrap();
         assert_eq!(
             tally.counted(),
             [format!("uploading the structure (bytes) {bytes}")],
             "{}",
             structure.label()
         );
-        let plain = structure.tracer(&ctx).unwrap();
+        let plain = Tracer::new(&ctx, &structure).unwrap();
         assert_eq!(
             watched.trace(&rays, Query::Closest).unwrap().hits,
             plain.trace(&rays, Query::Closest).unwrap().hits
@@ -202,9 +201,7 @@ fn an_upload_counts_the_bytes_of_every_array() {
     // With levels of detail the nodes carry their columns and the columns are uploaded too: more
     // bytes, all of them counted (Tally checks that the advances add up to the total).
     let tally = Tally::default();
-    Structure::RbvhLod(Arc::new(rbvh), Box::new(lod))
-        .tracer_observed(&ctx, &tally)
-        .unwrap();
+    Tracer::observed(&ctx, &Structure::with_lod(rbvh, lod), &tally).unwrap();
     let counted = tally.counted();
     assert_eq!(counted.len(), 1, "{counted:?}");
     let total: u64 = counted[0].rsplit(' ').next().unwrap().parse().unwrap();

@@ -11,6 +11,8 @@ use rbvh::geom::Ray;
 use rbvh::gpu::{Query, Tracer};
 use rbvh::rbvh::{Rbvh, RbvhParams, TexelFormat};
 use rbvh::scene::Scene;
+use rbvh::structure::Structure;
+use std::sync::Arc;
 
 fn rays_for(scene: &Scene, side: u32, random: usize, seed: u64) -> Vec<Ray> {
     let mut rays = scene.camera_or_framed(1.0).primary_rays(side, side);
@@ -29,8 +31,8 @@ fn gpu_and_cpu_rbvh_casters_agree_at_every_level() {
     for (k, name) in ["default", "blob", "sphere"].into_iter().enumerate() {
         let scene = Scene::builtin(name).unwrap();
         for level in 0..5 {
-            let r = Rbvh::build(&scene, &RbvhParams::quality(level).unwrap()).unwrap();
-            let tracer = Tracer::rbvh(&ctx, &r).unwrap();
+            let r = Arc::new(Rbvh::build(&scene, &RbvhParams::quality(level).unwrap()).unwrap());
+            let tracer = Tracer::new(&ctx, &Structure::from(r.clone())).unwrap();
             let rays = rays_for(&scene, 96, 4000, (k * 5 + level as usize) as u64);
             for (query, any) in [(Query::Closest, false), (Query::Any, true)] {
                 let gpu = tracer.trace(&rays, query).unwrap().hits;
@@ -60,7 +62,7 @@ fn gpu_and_cpu_rbvh_casters_agree_at_every_level() {
 fn block_jumps_skip_many_cells_of_grazing_rays_and_change_no_hit() {
     let ctx = common::context();
     let scene = Scene::builtin("sphere").unwrap();
-    let r = Rbvh::build(&scene, &RbvhParams::quality(4).unwrap()).unwrap();
+    let r = Arc::new(Rbvh::build(&scene, &RbvhParams::quality(4).unwrap()).unwrap());
     let mut rng = common::Rng::new(5);
     let rays: Vec<Ray> = (0..4096)
         .map(|_| {
@@ -70,7 +72,7 @@ fn block_jumps_skip_many_cells_of_grazing_rays_and_change_no_hit() {
             Ray::new(origin, glam::Vec3::X, 0.0, f32::INFINITY)
         })
         .collect();
-    let mut tracer = Tracer::rbvh(&ctx, &r).unwrap();
+    let mut tracer = Tracer::new(&ctx, &Structure::from(r.clone())).unwrap();
     // On whatever this device's default.
     tracer.set_block_jumps(true).unwrap();
     for (query, any) in [(Query::Closest, false), (Query::Any, true)] {
@@ -204,7 +206,7 @@ fn a_tree_of_triangle_leaves_alone_is_traversed_to_its_end() {
     let r = hand_made(vec![GpuNode::new(a, b)], vec![far, near], vec![], atlas);
     let ray = Ray::new(Vec3::new(-0.5, 10.0, -0.5), -Vec3::Y, 0.0, f32::INFINITY);
     let cpu = r.closest_hit(&ray).0;
-    let gpu = Tracer::rbvh(&ctx, &r)
+    let gpu = Tracer::new(&ctx, &Structure::from(r))
         .unwrap()
         .trace(&[ray], Query::Closest)
         .unwrap()
@@ -232,13 +234,13 @@ fn a_tile_that_wraps_across_atlas_rows_is_refused_or_empty() {
         rows,
         texels,
     };
-    let r = one_leaf(
+    let r = Arc::new(one_leaf(
         base,
         (res_u, res_v),
         0.001,
         atlas,
         Vec3::new(5.0, 70.0, 1.0),
-    );
+    ));
     let e = Rbvh::from_bytes(&r.to_bytes(), std::path::Path::new("wrapped.rbvh"))
         .expect_err("the loader refuses a wrapped tile")
         .to_string();
@@ -254,7 +256,7 @@ fn a_tile_that_wraps_across_atlas_rows_is_refused_or_empty() {
             )
         })
         .collect();
-    let gpu = Tracer::rbvh(&ctx, &r)
+    let gpu = Tracer::new(&ctx, &Structure::from(r.clone()))
         .unwrap()
         .trace(&rays, Query::Closest)
         .unwrap()
@@ -276,8 +278,8 @@ fn an_atlas_pitch_that_is_not_a_power_of_two_is_refused() {
         rows,
         texels: vec![Texel::new(0, Vec3::Y); (pitch * rows) as usize],
     };
-    let r = one_leaf(0, (4, 4), 0.001, atlas, Vec3::new(5.0, 70.0, 1.0));
-    let e = Tracer::rbvh(&ctx, &r)
+    let r = Arc::new(one_leaf(0, (4, 4), 0.001, atlas, Vec3::new(5.0, 70.0, 1.0)));
+    let e = Tracer::new(&ctx, &Structure::from(r.clone()))
         .err()
         .expect("the upload refuses the pitch")
         .to_string();
@@ -333,13 +335,13 @@ fn block_jumps_agree_with_the_plain_walk_on_steep_unaligned_tiles() {
             rows,
             texels,
         };
-        let r = one_leaf(
+        let r = Arc::new(one_leaf(
             base,
             (res_u, res_v),
             h_scale,
             atlas,
             Vec3::new(30.0, 5.0, 30.0),
-        );
+        ));
         let rays: Vec<Ray> = (0..10_000)
             .map(|_| {
                 let (s, t) = if rng.next_f32() < 0.5 {
@@ -369,7 +371,7 @@ fn block_jumps_agree_with_the_plain_walk_on_steep_unaligned_tiles() {
                 Ray::new(target - distance * dir, dir, 0.0, f32::INFINITY)
             })
             .collect();
-        let mut tracer = Tracer::rbvh(&ctx, &r).unwrap();
+        let mut tracer = Tracer::new(&ctx, &Structure::from(r.clone())).unwrap();
         tracer.set_block_jumps(true).unwrap();
         let gpu = tracer.trace_with(&rays, Query::Closest, true).unwrap();
         let cpu = r.trace_cpu(&rays, false);
@@ -409,14 +411,14 @@ fn height_only_texels_hit_the_same_and_report_the_facet_normal() {
                 texels: TexelFormat::Height,
                 ..normals.params
             };
-            let height = Rbvh::build(&scene, &params).unwrap();
+            let height = Arc::new(Rbvh::build(&scene, &params).unwrap());
             assert_eq!(
                 (&height.nodes, &height.leaves),
                 (&normals.nodes, &normals.leaves)
             );
             assert!(height.colours.is_none());
             assert!(height.atlas_bytes() < normals.atlas_bytes() * 3 / 4);
-            let tracer = Tracer::rbvh(&ctx, &height).unwrap();
+            let tracer = Tracer::new(&ctx, &Structure::from(height.clone())).unwrap();
             let rays = rays_for(&scene, 64, 2000, 70 + (k * 5 + level as usize) as u64);
             let (mut sphere_err, mut sphere_err_normals, mut sphere_hits) = (0.0f64, 0.0f64, 0);
             for (query, any) in [(Query::Closest, false), (Query::Any, true)] {

@@ -8,7 +8,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use rbvh::gpu::Tracer;
-use rbvh::regress::{self, Case, Check, Config, Method, Mode, Structure};
+use rbvh::regress::{self, Case, Check, Config, Method, Mode};
+use rbvh::structure::Structure;
 
 fn shipped_goldens() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(regress::GOLDEN_DIR)
@@ -84,7 +85,7 @@ fn run_with_shader(case: Case, spirv: &[u8], out: &Path) -> regress::Report {
         &common::context(),
         &config,
         |ctx, structure| match structure {
-            Structure::Rbvh(rbvh) => Tracer::rbvh_with_shader(ctx, rbvh, spirv),
+            Structure::Rbvh(_) => Tracer::with_shader(ctx, structure, spirv),
             _ => panic!("only plain RBVH cases here"),
         },
     )

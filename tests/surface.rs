@@ -13,8 +13,10 @@ use rbvh::geom::Ray;
 use rbvh::gpu::{Query, Tracer};
 use rbvh::rbvh::{Rbvh, RbvhParams};
 use rbvh::scene::Scene;
+use rbvh::structure::Structure;
 use rbvh::surface::hit_albedo;
 use rbvh::Error;
+use std::sync::Arc;
 
 /// The checker's texels, top-left, top-right, bottom-left, bottom-right (sRGB codes); chosen so
 /// that each is 0 or 255 per channel and so exact in linear light.
@@ -66,20 +68,20 @@ fn down_ray(x: f32, y: f32) -> Ray {
 fn check_quadrants(scene: &Scene, expect: [Vec3; 4]) {
     let ctx = common::context();
     let rays: Vec<Ray> = QUADRANTS.iter().map(|&(x, y)| down_ray(x, y)).collect();
-    let exact = Tracer::exact(&ctx, &Bvh::build(scene).unwrap())
+    let exact = Tracer::new(&ctx, &Structure::from(Bvh::build(scene).unwrap()))
         .unwrap()
         .trace(&rays, Query::Closest)
         .unwrap()
         .hits;
-    let rbvh = Rbvh::build(scene, &RbvhParams::quality(4).unwrap()).unwrap();
+    let rbvh = Arc::new(Rbvh::build(scene, &RbvhParams::quality(4).unwrap()).unwrap());
     assert!(rbvh.colours.is_some());
     assert!(rbvh.stats.heightfield_leaves > 0);
-    let approx = Tracer::rbvh(&ctx, &rbvh)
+    let approx = Tracer::new(&ctx, &Structure::from(rbvh.clone()))
         .unwrap()
         .trace(&rays, Query::Closest)
         .unwrap()
         .hits;
-    for (name, hits, structure) in [("exact", &exact, None), ("rbvh", &approx, Some(&rbvh))] {
+    for (name, hits, structure) in [("exact", &exact, None), ("rbvh", &approx, Some(&*rbvh))] {
         let albedo = hit_albedo(scene, structure, None, &rays, hits).unwrap();
         for (k, (&got, want)) in albedo.iter().zip(expect).enumerate() {
             assert!(

@@ -299,7 +299,7 @@ impl<'a> SceneBench<'a> {
         );
         let structure = Structure::Exact(bvh);
         let mut candidates = vec![Candidate {
-            tracer: structure.tracer_observed(ctx, progress)?,
+            tracer: Tracer::observed(ctx, &structure, progress)?,
             structure,
             level: None,
             build_ms,
@@ -334,7 +334,7 @@ impl<'a> SceneBench<'a> {
             let structure = Structure::Rbvh(Arc::clone(&rbvh));
             candidates.push(Candidate {
                 tracer: with_jumps(
-                    structure.tracer_observed(ctx, progress)?,
+                    Tracer::observed(ctx, &structure, progress)?,
                     config.block_jumps,
                 )?,
                 structure,
@@ -355,7 +355,7 @@ impl<'a> SceneBench<'a> {
                 let structure = Structure::RbvhLod(Arc::clone(&rbvh), Box::new(lod));
                 candidates.push(Candidate {
                     tracer: with_jumps(
-                        structure.tracer_observed(ctx, progress)?,
+                        Tracer::observed(ctx, &structure, progress)?,
                         config.block_jumps,
                     )?,
                     structure,

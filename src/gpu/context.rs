@@ -172,7 +172,7 @@ impl Context {
     /// Wraps an engine's own instance, device and allocator. Nothing is created but what the
     /// library's own objects need (buffers, pipelines, descriptor sets), all through the engine's
     /// allocator and device; nothing is ever submitted — the tracer records into the engine's
-    /// command buffers ([`crate::gpu::Tracer::record_rbvh`], [`crate::gpu::Tracer::record`]) — and
+    /// command buffers ([`crate::gpu::Tracer::new_recorded`], [`crate::gpu::Tracer::record`]) — and
     /// nothing of the engine's is destroyed. Validation is the engine's business: its messenger
     /// sees our calls like its own.
     pub fn embedded(external: External) -> Result<Context> {

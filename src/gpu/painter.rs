@@ -200,8 +200,8 @@ impl Painter {
         Self::with_buffers(ctx, rbvh, reach, Arc::new(atlas), colours)
     }
 
-    /// As [`Painter::new`], painting with the atlas `tracer` (made for `rbvh` by [`Tracer::rbvh`]
-    /// or [`Tracer::rbvh_lod`]) already holds on the device: only the colour channel is uploaded,
+    /// As [`Painter::new`], painting with the atlas `tracer` (made by [`Tracer::new`] for `rbvh`,
+    /// with or without levels of detail) already holds on the device: only the colour channel is uploaded,
     /// which saves the atlas's size again on the device.
     pub fn sharing(tracer: &Tracer, rbvh: &Rbvh) -> Result<Painter> {
         let (ctx, atlas, colours, reach) = shared_parts(tracer, rbvh)?;

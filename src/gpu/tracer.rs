@@ -25,6 +25,7 @@ use crate::lod::{Lod, RayCone};
 use crate::probe::RayCounters;
 use crate::progress::{step, Progress, Quiet};
 use crate::rbvh::{Rbvh, TexelFormat};
+use crate::structure::{Kind, Structure};
 use crate::{Error, Result};
 
 /// What a ray asks for.
@@ -97,70 +98,60 @@ const JUMPS_CONSTANT_ID: u32 = 1;
 /// (`glsl/trace_rbvh_main.glsl`): the atlas holds height codes alone, two to a word.
 const HEIGHT_ONLY_CONSTANT_ID: u32 = 2;
 
-/// What a tracer traces, which fixes its shaders and bindings.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Kind {
-    Exact,
-    /// An RBVH, whose atlas holds texels of this format (the shader is specialised for it).
-    Rbvh(TexelFormat),
-    /// An RBVH with levels of detail (always built with normal texels).
-    RbvhLod,
+/// The name of `kind`'s trace shader (its pipeline's name).
+fn shader_name(kind: Kind) -> &'static str {
+    match kind {
+        Kind::Exact => "trace_exact",
+        Kind::Rbvh => "trace_rbvh",
+        Kind::RbvhLod => "trace_rbvh_lod",
+    }
 }
 
-impl Kind {
-    fn name(self) -> &'static str {
-        match self {
-            Kind::Exact => "trace_exact",
-            Kind::Rbvh(_) => "trace_rbvh",
-            Kind::RbvhLod => "trace_rbvh_lod",
-        }
+/// The SPIR-V of `kind`'s trace shader for arrays reached by `reach`.
+fn shader_spirv(kind: Kind, reach: Reach) -> &'static [u8] {
+    match (kind, reach) {
+        (Kind::Exact, Reach::Bindings) => shaders::TRACE_EXACT,
+        (Kind::Exact, Reach::DeviceAddresses) => shaders::TRACE_EXACT_BDA,
+        (Kind::Rbvh, Reach::Bindings) => shaders::TRACE_RBVH,
+        (Kind::Rbvh, Reach::DeviceAddresses) => shaders::TRACE_RBVH_BDA,
+        (Kind::RbvhLod, Reach::Bindings) => shaders::TRACE_RBVH_LOD,
+        (Kind::RbvhLod, Reach::DeviceAddresses) => shaders::TRACE_RBVH_LOD_BDA,
     }
+}
 
-    fn spirv(self, reach: Reach) -> &'static [u8] {
-        match (self, reach) {
-            (Kind::Exact, Reach::Bindings) => shaders::TRACE_EXACT,
-            (Kind::Exact, Reach::DeviceAddresses) => shaders::TRACE_EXACT_BDA,
-            (Kind::Rbvh(_), Reach::Bindings) => shaders::TRACE_RBVH,
-            (Kind::Rbvh(_), Reach::DeviceAddresses) => shaders::TRACE_RBVH_BDA,
-            (Kind::RbvhLod, Reach::Bindings) => shaders::TRACE_RBVH_LOD,
-            (Kind::RbvhLod, Reach::DeviceAddresses) => shaders::TRACE_RBVH_LOD_BDA,
-        }
+/// The structure arrays bound before the per-trace buffers (the LOD's two come after them).
+fn leading_arrays(kind: Kind) -> u32 {
+    match kind {
+        Kind::Exact => 2,
+        Kind::Rbvh | Kind::RbvhLod => 4,
     }
+}
 
-    /// The structure arrays bound before the per-trace buffers (the LOD's two come after them).
-    fn leading_arrays(self) -> u32 {
-        match self {
-            Kind::Exact => 2,
-            Kind::Rbvh(_) | Kind::RbvhLod => 4,
+/// The shader's bindings, in the order buffers are given: the leading structure arrays, the
+/// per-trace buffers, then for LOD its two arrays and the cones; arrays reached through device
+/// addresses have none.
+fn bindings(kind: Kind, reach: Reach) -> Vec<u32> {
+    let lead = leading_arrays(kind);
+    let bound = reach == Reach::Bindings;
+    let mut b: Vec<u32> = if bound { (0..lead).collect() } else { vec![] };
+    b.extend(lead..lead + PER_TRACE_BUFFERS);
+    if kind == Kind::RbvhLod {
+        let after = lead + PER_TRACE_BUFFERS;
+        if bound {
+            b.extend([after, after + 1]);
         }
+        b.push(after + 2);
     }
-
-    /// The shader's bindings, in the order buffers are given: the leading structure arrays, the
-    /// per-trace buffers, then for LOD its two arrays and the cones; arrays reached through device
-    /// addresses have none.
-    fn bindings(self, reach: Reach) -> Vec<u32> {
-        let lead = self.leading_arrays();
-        let bound = reach == Reach::Bindings;
-        let mut b: Vec<u32> = if bound { (0..lead).collect() } else { vec![] };
-        b.extend(lead..lead + PER_TRACE_BUFFERS);
-        if self == Kind::RbvhLod {
-            let after = lead + PER_TRACE_BUFFERS;
-            if bound {
-                b.extend([after, after + 1]);
-            }
-            b.push(after + 2);
-        }
-        b
-    }
+    b
 }
 
 /// The trace pipeline of `kind`'s shader `spirv`, specialised: `rbvh_count` to `counting` (the
 /// pipeline that counts each ray's work; the timed one compiles the counting away), for the
 /// RBVH kinds `rbvh_block_jumps` to `block_jumps`, and for a plain RBVH `rbvh_height_only` to
-/// its texel format.
+/// its texel format `texels`.
 fn make_pipeline(
     ctx: &Context,
-    kind: Kind,
+    (kind, texels): (Kind, TexelFormat),
     reach: Reach,
     spirv: &[u8],
     block_jumps: bool,
@@ -170,22 +161,22 @@ fn make_pipeline(
     if kind != Kind::Exact {
         constants.push((JUMPS_CONSTANT_ID, u32::from(block_jumps)));
     }
-    if let Kind::Rbvh(texels) = kind {
+    if kind == Kind::Rbvh {
         constants.push((
             HEIGHT_ONLY_CONSTANT_ID,
             u32::from(texels == TexelFormat::Height),
         ));
     }
     let name = if counting {
-        format!("{} (counting)", kind.name())
+        format!("{} (counting)", shader_name(kind))
     } else {
-        kind.name().to_string()
+        shader_name(kind).to_string()
     };
     ComputePipeline::specialized(
         ctx,
         &name,
         spirv,
-        &kind.bindings(reach),
+        &bindings(kind, reach),
         std::mem::size_of::<TraceParams>() as u32,
         &constants,
     )
@@ -195,7 +186,9 @@ fn make_pipeline(
 pub struct Tracer {
     ctx: Context,
     reach: Reach,
-    kind: Kind,
+    /// What it traces, and the texel format its RBVH's atlas holds (which the plain RBVH shader
+    /// is specialised for).
+    shader: (Kind, TexelFormat),
     pipeline: ComputePipeline,
     /// The shader `pipeline` was made from, for the counting pipeline.
     spirv: Cow<'static, [u8]>,
@@ -211,7 +204,7 @@ pub struct Tracer {
     lod: Option<[Arc<Buffer>; 2]>,
     /// Sizes the shader needs (`ray_offset`, `ray_count` and `flags` are set per dispatch).
     sizes: TraceParams,
-    /// Staging buffers of recorded uploads ([`Tracer::record_rbvh`]), kept until released.
+    /// Staging buffers of recorded uploads ([`Tracer::new_recorded`]), kept until released.
     staging: Vec<Buffer>,
 }
 
@@ -244,6 +237,39 @@ impl TraceBinding {
         let count = ctx.read::<u32>(&mut self.status)?[0];
         ctx.write(&mut self.status, &[0; 4])?;
         Ok(count)
+    }
+}
+
+/// Calls `f` with what uploading `structure` takes: the shader (its kind and texel format), the
+/// sizes the shader needs, and the named arrays in binding order. Fails for a tree deeper than
+/// the traversal's stack.
+fn with_parts<T>(
+    structure: &Structure,
+    f: impl FnOnce((Kind, TexelFormat), TraceParams, &[(&str, &[u8])]) -> Result<T>,
+) -> Result<T> {
+    let texels = structure
+        .rbvh()
+        .map_or(TexelFormat::default(), |rbvh| rbvh.params.texels);
+    let shader = (structure.kind(), texels);
+    match structure {
+        Structure::Exact(bvh) => {
+            check_depth("bvh", bvh.depth)?;
+            let (sizes, arrays) = exact_parts(bvh);
+            f(shader, sizes, &arrays)
+        }
+        Structure::Rbvh(rbvh) => {
+            check_depth("rbvh", rbvh.depth)?;
+            let words = rbvh.atlas_words();
+            let (sizes, arrays) = rbvh_parts(rbvh, &words)?;
+            f(shader, sizes, &arrays)
+        }
+        Structure::RbvhLod(rbvh, lod) => {
+            check_depth("rbvh", rbvh.depth)?;
+            let nodes = lod.annotated_nodes(rbvh);
+            let words = rbvh.atlas_words();
+            let (sizes, arrays) = lod_parts(rbvh, &words, lod, &nodes)?;
+            f(shader, sizes, &arrays)
+        }
     }
 }
 
@@ -331,108 +357,45 @@ fn lod_parts<'a>(
 const PER_TRACE_BUFFERS: u32 = 4;
 
 impl Tracer {
-    /// Uploads the exact BVH: nodes and triangles, reached as [`Context::reach`] decides.
-    pub fn exact(ctx: &Context, bvh: &Bvh) -> Result<Self> {
-        Self::exact_observed(ctx, bvh, &Quiet)
+    /// Uploads `structure` (its arrays reached as [`Context::reach`] decides) with the crate's
+    /// own trace shader for it: the exact BVH's nodes and triangles; an RBVH's nodes,
+    /// triangle-leaf triangles, height-field leaves and atlas; with levels of detail, also their
+    /// records and columns (traces then take one [`RayCone`] per ray, [`Tracer::trace_lod`]).
+    pub fn new(ctx: &Context, structure: &Structure) -> Result<Self> {
+        Self::observed(ctx, structure, &Quiet)
     }
 
-    /// [`Tracer::exact`], counting the bytes uploaded on `progress`.
-    pub(crate) fn exact_observed(
+    /// [`Tracer::new`], reporting the upload to `progress` as one step counting bytes (written
+    /// in 64 MiB steps, so a structure of gigabytes shows a moving bar).
+    pub fn observed(ctx: &Context, structure: &Structure, progress: &dyn Progress) -> Result<Self> {
+        with_parts(structure, |shader, sizes, arrays| {
+            Self::uploaded(ctx, shader, None, arrays, sizes, progress)
+        })
+    }
+
+    /// As [`Tracer::new`], with another build of the structure's trace shader (same bindings and
+    /// push constants): for checking modified shaders, e.g. that image regression catches a
+    /// broken one. Fails where the structure must be reached through device addresses, which
+    /// that build cannot.
+    pub fn with_shader(ctx: &Context, structure: &Structure, spirv: &[u8]) -> Result<Self> {
+        with_parts(structure, |shader, sizes, arrays| {
+            Self::uploaded(ctx, shader, Some(spirv), arrays, sizes, &Quiet)
+        })
+    }
+
+    /// Embedded use: uploads `structure` with the context's (the engine's) allocator,
+    /// *recording* any staging copies into `cmd`, followed by a barrier that makes them visible
+    /// to compute shaders. Nothing is submitted. Call [`Tracer::release_staging`] once `cmd` has
+    /// executed. With levels of detail, bind the engine's rays, hits and cones with
+    /// [`Tracer::bind_with_cones`].
+    pub fn new_recorded(
         ctx: &Context,
-        bvh: &Bvh,
-        progress: &dyn Progress,
-    ) -> Result<Self> {
-        check_depth("bvh", bvh.depth)?;
-        let (sizes, arrays) = exact_parts(bvh);
-        Self::uploaded(ctx, Kind::Exact, None, &arrays, sizes, progress)
-    }
-
-    /// Uploads an RBVH: nodes, triangle-leaf triangles, height-field leaves and the atlas.
-    pub fn rbvh(ctx: &Context, rbvh: &Rbvh) -> Result<Self> {
-        Self::rbvh_observed(ctx, rbvh, &Quiet)
-    }
-
-    /// [`Tracer::rbvh`], counting the bytes uploaded on `progress`.
-    pub(crate) fn rbvh_observed(
-        ctx: &Context,
-        rbvh: &Rbvh,
-        progress: &dyn Progress,
-    ) -> Result<Self> {
-        check_depth("rbvh", rbvh.depth)?;
-        let words = rbvh.atlas_words();
-        let (sizes, arrays) = rbvh_parts(rbvh, &words)?;
-        let kind = Kind::Rbvh(rbvh.params.texels);
-        Self::uploaded(ctx, kind, None, &arrays, sizes, progress)
-    }
-
-    /// As [`Tracer::rbvh`], with another build of `trace_rbvh.comp` (same bindings and push
-    /// constants): for checking modified shaders, e.g. that image regression catches a broken one.
-    /// Fails where the RBVH must be reached through device addresses, which that build cannot.
-    pub fn rbvh_with_shader(ctx: &Context, rbvh: &Rbvh, spirv: &[u8]) -> Result<Self> {
-        check_depth("rbvh", rbvh.depth)?;
-        let words = rbvh.atlas_words();
-        let (sizes, arrays) = rbvh_parts(rbvh, &words)?;
-        Self::uploaded(
-            ctx,
-            Kind::Rbvh(rbvh.params.texels),
-            Some(spirv),
-            &arrays,
-            sizes,
-            &Quiet,
-        )
-    }
-
-    /// Uploads an RBVH with its levels of detail (`lod`, built for it by [`Lod::build`]): traces
-    /// then take one [`RayCone`] per ray ([`Tracer::trace_lod`]).
-    pub fn rbvh_lod(ctx: &Context, rbvh: &Rbvh, lod: &Lod) -> Result<Self> {
-        Self::rbvh_lod_observed(ctx, rbvh, lod, &Quiet)
-    }
-
-    /// [`Tracer::rbvh_lod`], counting the bytes uploaded on `progress`.
-    pub(crate) fn rbvh_lod_observed(
-        ctx: &Context,
-        rbvh: &Rbvh,
-        lod: &Lod,
-        progress: &dyn Progress,
-    ) -> Result<Self> {
-        check_depth("rbvh", rbvh.depth)?;
-        let nodes = lod.annotated_nodes(rbvh);
-        let words = rbvh.atlas_words();
-        let (sizes, arrays) = lod_parts(rbvh, &words, lod, &nodes)?;
-        Self::uploaded(ctx, Kind::RbvhLod, None, &arrays, sizes, progress)
-    }
-
-    /// Embedded use: uploads the exact BVH with the context's (the engine's) allocator, *recording*
-    /// any staging copies into `cmd`, followed by a barrier that makes them visible to compute
-    /// shaders. Nothing is submitted. Call [`Tracer::release_staging`] once `cmd` has executed.
-    pub fn record_exact(ctx: &Context, bvh: &Bvh, cmd: vk::CommandBuffer) -> Result<Self> {
-        check_depth("bvh", bvh.depth)?;
-        let (sizes, arrays) = exact_parts(bvh);
-        Self::recorded(ctx, Kind::Exact, &arrays, sizes, cmd)
-    }
-
-    /// Embedded use: as [`Tracer::record_exact`], for an RBVH.
-    pub fn record_rbvh(ctx: &Context, rbvh: &Rbvh, cmd: vk::CommandBuffer) -> Result<Self> {
-        check_depth("rbvh", rbvh.depth)?;
-        let words = rbvh.atlas_words();
-        let (sizes, arrays) = rbvh_parts(rbvh, &words)?;
-        let kind = Kind::Rbvh(rbvh.params.texels);
-        Self::recorded(ctx, kind, &arrays, sizes, cmd)
-    }
-
-    /// Embedded use: as [`Tracer::record_exact`], for an RBVH with its levels of detail; bind the
-    /// engine's rays, hits and cones with [`Tracer::bind_with_cones`].
-    pub fn record_rbvh_lod(
-        ctx: &Context,
-        rbvh: &Rbvh,
-        lod: &Lod,
+        structure: &Structure,
         cmd: vk::CommandBuffer,
     ) -> Result<Self> {
-        check_depth("rbvh", rbvh.depth)?;
-        let nodes = lod.annotated_nodes(rbvh);
-        let words = rbvh.atlas_words();
-        let (sizes, arrays) = lod_parts(rbvh, &words, lod, &nodes)?;
-        Self::recorded(ctx, Kind::RbvhLod, &arrays, sizes, cmd)
+        with_parts(structure, |shader, sizes, arrays| {
+            Self::recorded(ctx, shader, arrays, sizes, cmd)
+        })
     }
 
     /// How the structure's arrays reach the shader: bound, or through device addresses (when one
@@ -464,13 +427,13 @@ impl Tracer {
         if on == self.block_jumps {
             return Ok(());
         }
-        if self.kind == Kind::Exact {
+        if self.shader.0 == Kind::Exact {
             return Err(Error::param(
                 "block_jumps",
                 "the exact BVH has no march to jump in",
             ));
         }
-        self.pipeline = make_pipeline(&self.ctx, self.kind, self.reach, &self.spirv, on, false)?;
+        self.pipeline = make_pipeline(&self.ctx, self.shader, self.reach, &self.spirv, on, false)?;
         self.block_jumps = on;
         self.counting = OnceLock::new();
         Ok(())
@@ -481,7 +444,7 @@ impl Tracer {
     /// build of the kind's shader.
     fn uploaded(
         ctx: &Context,
-        kind: Kind,
+        shader: (Kind, TexelFormat),
         spirv: Option<&[u8]>,
         arrays: &[(&str, &[u8])],
         sizes: TraceParams,
@@ -490,7 +453,7 @@ impl Tracer {
         let reach = reach_of(ctx, arrays)?;
         let spirv =
             match (spirv, reach) {
-                (None, _) => Cow::Borrowed(kind.spirv(reach)),
+                (None, _) => Cow::Borrowed(shader_spirv(shader.0, reach)),
                 (Some(s), Reach::Bindings) => Cow::Owned(s.to_vec()),
                 (Some(_), Reach::DeviceAddresses) => return Err(Error::param(
                     "trace shader",
@@ -505,12 +468,12 @@ impl Tracer {
                 .map(|(array, bytes)| ctx.upload_observed(array, bytes, progress).map(Arc::new))
                 .collect::<Result<Vec<_>>>()
         })?;
-        Self::new(ctx, kind, reach, spirv, structure, sizes)
+        Self::assemble(ctx, shader, reach, spirv, structure, sizes)
     }
 
     fn recorded(
         ctx: &Context,
-        kind: Kind,
+        shader: (Kind, TexelFormat),
         arrays: &[(&str, &[u8])],
         sizes: TraceParams,
         cmd: vk::CommandBuffer,
@@ -526,8 +489,8 @@ impl Tracer {
         if !staging.is_empty() {
             ctx.record_transfer_to_compute(cmd);
         }
-        let spirv = Cow::Borrowed(kind.spirv(reach));
-        let mut tracer = Self::new(ctx, kind, reach, spirv, structure, sizes)?;
+        let spirv = Cow::Borrowed(shader_spirv(shader.0, reach));
+        let mut tracer = Self::assemble(ctx, shader, reach, spirv, structure, sizes)?;
         tracer.staging = staging;
         Ok(tracer)
     }
@@ -548,7 +511,7 @@ impl Tracer {
         self.bind_views(rays, hits, None, count)
     }
 
-    /// As [`Tracer::bind`], for a level-of-detail tracer ([`Tracer::record_rbvh_lod`]): also
+    /// As [`Tracer::bind`], for a level-of-detail tracer ([`Tracer::new_recorded`] of an RBVH with levels of detail): also
     /// `count` cones (the [`RayCone`] layout, 8 bytes each) read from `cones`.
     pub fn bind_with_cones(
         &self,
@@ -612,7 +575,7 @@ impl Tracer {
     /// Records the trace of `binding`'s rays into the engine's `cmd` (in the recording state).
     /// Nothing is submitted and no barrier is recorded; the engine orders the work:
     /// * before: its writes of the rays must be made available to `COMPUTE_SHADER` /
-    ///   `SHADER_READ` (and a recorded upload, [`Tracer::record_rbvh`], must precede this in
+    ///   `SHADER_READ` (and a recorded upload, [`Tracer::new_recorded`], must precede this in
     ///   submission order — it ends with its own transfer-to-compute barrier);
     /// * after: the hits are written at `COMPUTE_SHADER` with `SHADER_WRITE`; add a barrier from
     ///   there to whatever reads them (a shader, a transfer, or `HOST` / `HOST_READ`).
@@ -634,9 +597,9 @@ impl Tracer {
             });
     }
 
-    fn new(
+    fn assemble(
         ctx: &Context,
-        kind: Kind,
+        shader: (Kind, TexelFormat),
         reach: Reach,
         spirv: Cow<'static, [u8]>,
         mut structure: Vec<Arc<Buffer>>,
@@ -651,6 +614,7 @@ impl Tracer {
         }
         // The LOD shader binds the last two structure arrays (records and columns) and the cones
         // after the per-trace buffers.
+        let kind = shader.0;
         let lod = if kind == Kind::RbvhLod {
             let tail = structure.split_off(structure.len().saturating_sub(2));
             let [records, columns]: [Arc<Buffer>; 2] = tail
@@ -661,11 +625,11 @@ impl Tracer {
             None
         };
         let block_jumps = kind != Kind::Exact && !ctx.limits().cpu;
-        let pipeline = make_pipeline(ctx, kind, reach, &spirv, block_jumps, false)?;
+        let pipeline = make_pipeline(ctx, shader, reach, &spirv, block_jumps, false)?;
         Ok(Tracer {
             ctx: ctx.clone(),
             reach,
-            kind,
+            shader,
             pipeline,
             spirv,
             counting: OnceLock::new(),
@@ -684,7 +648,7 @@ impl Tracer {
         }
         let pipeline = make_pipeline(
             &self.ctx,
-            self.kind,
+            self.shader,
             self.reach,
             &self.spirv,
             self.block_jumps,
@@ -693,7 +657,7 @@ impl Tracer {
         Ok(self.counting.get_or_init(|| pipeline))
     }
 
-    /// The buffers of one trace in the pipeline's binding order ([`Kind::bindings`]): the
+    /// The buffers of one trace in the pipeline's binding order ([`bindings`]): the
     /// structure's when bound, the per-trace four (rays, hits, status, counters), then the LOD arrays
     /// when bound and the cones.
     fn views(
@@ -732,7 +696,7 @@ impl Tracer {
                 self.expect_lod(
                     true,
                     "trace",
-                    "this tracer has no levels of detail: make it with Tracer::rbvh_lod",
+                    "this tracer has no levels of detail: make it from a Structure::RbvhLod",
                 )?;
                 check_cones(rays, cones)
             }
@@ -775,7 +739,7 @@ impl Tracer {
     }
 
     /// Traces `rays` with level of detail, `cones[i]` the footprint of `rays[i]` (see
-    /// [`crate::lod`]); only for a tracer made by [`Tracer::rbvh_lod`]. Otherwise as
+    /// [`crate::lod`]); only for a tracer made for a [`Structure::RbvhLod`]. Otherwise as
     /// [`Tracer::trace_with`].
     pub fn trace_lod(
         &self,

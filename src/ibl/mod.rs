@@ -12,13 +12,14 @@
 //! use rbvh::bvh::Bvh;
 //! use rbvh::gpu::{Context, ContextOptions, Query, Tracer};
 //! use rbvh::ibl::{self, Environment, Frame, Settings, Sky};
+//! use rbvh::structure::Structure;
 //! use rbvh::scene::Scene;
 //!
 //! let scene = Scene::load("default")?;
 //! let (width, height) = (64, 48);
 //! let rays = scene.camera_or_framed(width as f32 / height as f32).primary_rays(width, height);
 //! let ctx = Context::new(&ContextOptions::default())?;
-//! let tracer = Tracer::exact(&ctx, &Bvh::build(&scene)?)?;
+//! let tracer = Tracer::new(&ctx, &Structure::from(Bvh::build(&scene)?))?;
 //! let hits = tracer.trace(&rays, Query::Closest)?.hits;
 //! let albedo = vec![Vec3::splat(ibl::GREY); rays.len()];
 //! let frame = Frame { width, height, rays: &rays, hits: &hits, albedo: &albedo };

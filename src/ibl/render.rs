@@ -59,12 +59,13 @@ pub struct Settings {
     /// BVH. Without it an RBVH surface, which may lie a fraction of a texel off the exact one,
     /// would shadow itself.
     pub surface_offset: f32,
-    /// Level of detail: the cone of the primary rays, when `tracer` was made with
-    /// [`Tracer::rbvh_lod`]. Each visibility ray then gets a cone from its origin with this
-    /// spread and no width, so that the surface a ray leaves is never coarsened under it. The
-    /// cone is not widened by the sampling lobe as ray cones for glossy bounces are
-    /// (Akenine-Möller et al. 2019): solid coarse columns then swallow concave neighbourhoods,
-    /// and the default scene's FLIP against the exact render rose from 0.006 to 0.045.
+    /// Level of detail: the cone of the primary rays, when `tracer` was made with levels of
+    /// detail ([`crate::structure::Structure::RbvhLod`]). Each visibility ray then gets a cone
+    /// from its origin with this spread and no width, so that the surface a ray leaves is never
+    /// coarsened under it. The cone is not widened by the sampling lobe as ray cones for glossy
+    /// bounces are (Akenine-Möller et al. 2019): solid coarse columns then swallow concave
+    /// neighbourhoods, and the default scene's FLIP against the exact render rose from 0.006 to
+    /// 0.045.
     pub cone: Option<RayCone>,
 }
 

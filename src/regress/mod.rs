@@ -23,7 +23,7 @@
 //! ```
 //!
 //! [`run_with`] lets the caller make each case's tracer — to check that a modified shader
-//! (through [`Tracer::rbvh_with_shader`]) still renders the goldens, or that the suite catches a
+//! (through [`Tracer::with_shader`]) still renders the goldens, or that the suite catches a
 //! broken one.
 
 mod cases;
@@ -156,11 +156,11 @@ impl Config {
 
 /// Runs `config` with the crate's own shaders.
 pub fn run(ctx: &Context, config: &Config) -> Result<Report> {
-    run_with(ctx, config, |ctx, structure| structure.tracer(ctx))
+    run_with(ctx, config, Tracer::new)
 }
 
 /// Runs `config`, tracing each case through the tracer `make_tracer` makes from the case's built
-/// structure — e.g. an RBVH through [`Tracer::rbvh_with_shader`] with a modified shader.
+/// structure — e.g. an RBVH through [`Tracer::with_shader`] with a modified shader.
 ///
 /// A golden that is missing, unreadable or of another size fails its case (with a message saying
 /// what to do) and the run goes on, so one report lists every problem. Errors that make the run

@@ -210,10 +210,11 @@ fn degenerate_and_adversarial_geometry_builds_and_traces() {
     .enumerate()
     {
         let name = &scene.name;
-        let bvh = Bvh::build(scene).unwrap();
+        let exact = Structure::from(Bvh::build(scene).unwrap());
+        let bvh = exact.bvh().unwrap();
         bvh.validate().unwrap_or_else(|e| panic!("{name}: {e}"));
         assert!(bvh.depth <= STACK_SIZE, "{name}: depth {}", bvh.depth);
-        let r = Rbvh::build(scene, &q(0)).unwrap();
+        let r = Arc::new(Rbvh::build(scene, &q(0)).unwrap());
         assert!(r.depth <= STACK_SIZE, "{name}: RBVH depth {}", r.depth);
         println!(
             "{name}: {} triangles, BVH depth {}, RBVH depth {} ({} height-field and {} triangle leaves)",
@@ -246,8 +247,11 @@ fn degenerate_and_adversarial_geometry_builds_and_traces() {
             }
             let rbvh_cpu = r.trace_cpu(&crowd, false);
             let gpu = [
-                (Tracer::exact(&ctx, &bvh).unwrap(), &cpu),
-                (Tracer::rbvh(&ctx, &r).unwrap(), &rbvh_cpu),
+                (Tracer::new(&ctx, &exact).unwrap(), &cpu),
+                (
+                    Tracer::new(&ctx, &Structure::from(r.clone())).unwrap(),
+                    &rbvh_cpu,
+                ),
             ];
             for (tracer, cpu) in gpu {
                 match tracer.trace(&crowd, Query::Closest) {
@@ -271,7 +275,7 @@ fn degenerate_and_adversarial_geometry_builds_and_traces() {
                 }
             }
         }
-        let [gpu, cpu] = exact_hits(&ctx, &bvh, &rays, Query::Closest);
+        let [gpu, cpu] = exact_hits(&ctx, &exact, &rays, Query::Closest);
         let brute_every = if name == "spot" { 100 } else { 1 };
         let (mut disagree, mut phantoms, mut ambiguous) = (0, 0, 0);
         for (i, ((ray, g), c)) in rays.iter().zip(&gpu).zip(&cpu).enumerate() {

@@ -67,8 +67,8 @@ fn nan_and_inf_rays_from_a_ray_file_are_misses() {
         bytemuck::cast_slice::<Ray, u32>(&rays)
     );
     let scene = Scene::builtin("sphere").unwrap();
-    let bvh = Bvh::build(&scene).unwrap();
-    let r = Rbvh::build(&scene, &q(0)).unwrap();
+    let exact = Structure::from(Bvh::build(&scene).unwrap());
+    let r = Arc::new(Rbvh::build(&scene, &q(0)).unwrap());
     let check = |what: &str, hits: &[Hit]| {
         assert_eq!(hits.len(), read.len());
         for ((ray, ok), h) in read.iter().zip(&valid).zip(hits) {
@@ -80,7 +80,7 @@ fn nan_and_inf_rays_from_a_ray_file_are_misses() {
         }
     };
     for query in [Query::Closest, Query::Any] {
-        for (which, hits) in PATHS.iter().zip(exact_hits(&ctx, &bvh, &read, query)) {
+        for (which, hits) in PATHS.iter().zip(exact_hits(&ctx, &exact, &read, query)) {
             check(&format!("exact {which} {query:?}"), &hits);
         }
         for (which, hits) in PATHS.iter().zip(rbvh_hits(&ctx, &r, &read, query)) {

@@ -15,7 +15,9 @@ use rbvh::geom::{intersect_triangle, Hit, Ray, RayShear};
 use rbvh::gpu::{Context, Query, Tracer};
 use rbvh::rbvh::{Rbvh, RbvhParams, Refinement};
 use rbvh::scene::Scene;
+use rbvh::structure::Structure;
 use rbvh::Error;
+use std::sync::Arc;
 
 mod degenerate_geometry;
 mod invalid_rays;
@@ -30,19 +32,23 @@ mod watertight;
 
 const PATHS: [&str; 2] = ["GPU", "CPU"];
 
-/// The exact path's answers to `rays`: GPU, then CPU.
-fn exact_hits(ctx: &Context, bvh: &Bvh, rays: &[Ray], query: Query) -> [Vec<Hit>; 2] {
-    let gpu = Tracer::exact(ctx, bvh)
+/// The exact path's answers to `rays` (`exact` holds the exact BVH): GPU, then CPU.
+fn exact_hits(ctx: &Context, exact: &Structure, rays: &[Ray], query: Query) -> [Vec<Hit>; 2] {
+    assert!(exact.bvh().is_some(), "{}", exact.label());
+    let gpu = Tracer::new(ctx, exact)
         .unwrap()
         .trace(rays, query)
         .unwrap()
         .hits;
-    [gpu, bvh.trace_cpu(rays, query == Query::Any)]
+    [
+        gpu,
+        exact.trace_cpu(rays, &[], query == Query::Any).unwrap(),
+    ]
 }
 
 /// The RBVH path's answers to `rays`: GPU, then CPU.
-fn rbvh_hits(ctx: &Context, r: &Rbvh, rays: &[Ray], query: Query) -> [Vec<Hit>; 2] {
-    let gpu = Tracer::rbvh(ctx, r)
+fn rbvh_hits(ctx: &Context, r: &Arc<Rbvh>, rays: &[Ray], query: Query) -> [Vec<Hit>; 2] {
+    let gpu = Tracer::new(ctx, &Structure::from(r.clone()))
         .unwrap()
         .trace(rays, query)
         .unwrap()

@@ -181,7 +181,9 @@ fn parameter_extremes_build_valid_results_or_clear_errors() {
         }));
         let exact = Bvh::build(&scene).unwrap().trace_cpu(&rays, false);
         for (what, params, max_mismatch, max_leaks) in &cases {
-            let r = Rbvh::build(&scene, params).unwrap_or_else(|e| panic!("{name} {what}: {e}"));
+            let r = Arc::new(
+                Rbvh::build(&scene, params).unwrap_or_else(|e| panic!("{name} {what}: {e}")),
+            );
             assert!(r.depth <= STACK_SIZE, "{name} {what}: depth {}", r.depth);
             let [gpu, cpu] = rbvh_hits(&ctx, &r, &rays, Query::Closest);
             for (ray, h) in rays.iter().zip(gpu.iter().chain(&cpu)) {

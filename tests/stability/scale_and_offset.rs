@@ -114,10 +114,10 @@ fn scale_and_offset_keep_their_bounds_or_degrade_as_measured() {
         let diag = scene.bounds().diagonal() as f64;
         let what = format!("scale {:e} offset {:e}", p.scale, p.offset);
 
-        let bvh = Bvh::build(&scene).unwrap();
+        let exact = Structure::from(Bvh::build(&scene).unwrap());
         for (which, hits) in PATHS
             .iter()
-            .zip(exact_hits(&ctx, &bvh, &rays, Query::Closest))
+            .zip(exact_hits(&ctx, &exact, &rays, Query::Closest))
         {
             let (worst, misses) = placed_errors(&rays, &truth, &hits);
             println!(
@@ -135,7 +135,7 @@ fn scale_and_offset_keep_their_bounds_or_degrade_as_measured() {
             }
         }
 
-        let r = Rbvh::build(&scene, &q(0)).unwrap();
+        let r = Arc::new(Rbvh::build(&scene, &q(0)).unwrap());
         for (which, hits) in PATHS.iter().zip(rbvh_hits(&ctx, &r, &rays, Query::Closest)) {
             let (worst, misses) = placed_errors(&rays, &truth, &hits);
             let leaks = rays

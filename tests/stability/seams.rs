@@ -50,7 +50,7 @@ fn border_targets(r: &Rbvh, cap: usize) -> Vec<DVec3> {
 fn plane_tiles_do_not_leak_at_seams_samples_or_grazing_angles() {
     let ctx = common::context();
     let plane = Scene::builtin("plane").unwrap();
-    let bvh = Bvh::build(&plane).unwrap();
+    let exact = Structure::from(Bvh::build(&plane).unwrap());
     for params in [
         q(2),
         RbvhParams {
@@ -58,7 +58,7 @@ fn plane_tiles_do_not_leak_at_seams_samples_or_grazing_angles() {
             ..q(0)
         },
     ] {
-        let r = Rbvh::build(&plane, &params).unwrap();
+        let r = Arc::new(Rbvh::build(&plane, &params).unwrap());
         assert!(r.leaves.len() > 8, "{} leaves", r.leaves.len());
         let u = Vec3::from(r.leaves[0].axis_u).normalize();
         let v = Vec3::from(r.leaves[0].axis_v).normalize();
@@ -99,7 +99,7 @@ fn plane_tiles_do_not_leak_at_seams_samples_or_grazing_angles() {
         }
         for (which, hits) in PATHS
             .iter()
-            .zip(exact_hits(&ctx, &bvh, &rays, Query::Closest))
+            .zip(exact_hits(&ctx, &exact, &rays, Query::Closest))
         {
             check(&format!("exact {which}"), &hits, 1e-6);
         }
@@ -115,7 +115,7 @@ fn plane_tiles_do_not_leak_at_seams_samples_or_grazing_angles() {
         }
         let hits = rbvh_hits(&ctx, &r, &in_plane, Query::Closest)
             .into_iter()
-            .chain(exact_hits(&ctx, &bvh, &in_plane, Query::Closest));
+            .chain(exact_hits(&ctx, &exact, &in_plane, Query::Closest));
         for hits in hits {
             for (ray, h) in in_plane.iter().zip(&hits) {
                 assert_well_formed("in-plane", ray, h);
@@ -147,7 +147,7 @@ fn sphere_silhouettes_and_leaf_seams_hold_their_bounds() {
     let ctx = common::context();
     let (center, radius, chord) = common::sphere_oracle();
     let sphere = Scene::builtin("sphere").unwrap();
-    let bvh = Bvh::build(&sphere).unwrap();
+    let exact = Structure::from(Bvh::build(&sphere).unwrap());
     let mut rng = common::Rng::new(31);
     // Impact parameters in [0.9, 1.1] of the radius, dense near 1.
     let grazing: Vec<(Ray, f32)> = (0..6000)
@@ -173,12 +173,12 @@ fn sphere_silhouettes_and_leaf_seams_hold_their_bounds() {
     };
     for (which, hits) in PATHS
         .iter()
-        .zip(exact_hits(&ctx, &bvh, &rays, Query::Closest))
+        .zip(exact_hits(&ctx, &exact, &rays, Query::Closest))
     {
         check(&format!("exact {which}"), &hits, 0.0);
     }
     for level in [0, 2] {
-        let r = Rbvh::build(&sphere, &q(level)).unwrap();
+        let r = Arc::new(Rbvh::build(&sphere, &q(level)).unwrap());
         for (which, hits) in PATHS.iter().zip(rbvh_hits(&ctx, &r, &rays, Query::Closest)) {
             check(&format!("RBVH Q{level} {which}"), &hits, r.texel_size);
         }

@@ -46,17 +46,17 @@ fn secondary_rays_leave_a_convex_surface_without_acne() {
             }
             out
         };
-        let bvh = Bvh::build(&scene).unwrap();
-        let hits = bvh.trace_cpu(&primary, false);
+        let exact = Structure::from(Bvh::build(&scene).unwrap());
+        let hits = exact.trace_cpu(&primary, &[], false).unwrap();
         let rays = secondary(&hits, 1e-4 * diag, &mut rng);
         for query in [Query::Closest, Query::Any] {
-            for (which, hits) in PATHS.iter().zip(exact_hits(&ctx, &bvh, &rays, query)) {
+            for (which, hits) in PATHS.iter().zip(exact_hits(&ctx, &exact, &rays, query)) {
                 let acne = hits.iter().filter(|h| h.is_hit()).count();
                 assert_eq!(acne, 0, "scale {scale} exact {which} {query:?}: acne");
             }
         }
         for level in [0, 2, 4] {
-            let r = Rbvh::build(&scene, &q(level)).unwrap();
+            let r = Arc::new(Rbvh::build(&scene, &q(level)).unwrap());
             let hits = r.trace_cpu(&primary, false);
             let rays = secondary(&hits, 0.5 * r.texel_size, &mut rng);
             for query in [Query::Closest, Query::Any] {
@@ -122,7 +122,7 @@ fn thin_closed_walls_do_not_leak_light() {
                 .map(move |l| Ray::new(*o, *l - *o, 0.0, 0.999))
         })
         .collect();
-    let bvh = Bvh::build(&scene).unwrap();
+    let exact = Structure::from(Bvh::build(&scene).unwrap());
     let check = |what: &str, hits: &[Hit], slack: f32| {
         for ((r, h), t_out) in rays.iter().zip(hits).zip(&walls) {
             assert!(h.is_hit(), "{what}: {r:?} leaked out of the box");
@@ -147,11 +147,11 @@ fn thin_closed_walls_do_not_leak_light() {
     };
     for (which, hits) in PATHS
         .iter()
-        .zip(exact_hits(&ctx, &bvh, &rays, Query::Closest))
+        .zip(exact_hits(&ctx, &exact, &rays, Query::Closest))
     {
         check(&format!("exact {which}"), &hits, 1e-5);
         let again = offset_rays(&hits, 1e-4 * scene.bounds().diagonal());
-        let back = exact_hits(&ctx, &bvh, &again, Query::Closest);
+        let back = exact_hits(&ctx, &exact, &again, Query::Closest);
         for hits in back {
             assert!(
                 hits.iter().all(Hit::is_hit),
@@ -161,7 +161,7 @@ fn thin_closed_walls_do_not_leak_light() {
     }
     for (which, hits) in PATHS
         .iter()
-        .zip(exact_hits(&ctx, &bvh, &shadow, Query::Any))
+        .zip(exact_hits(&ctx, &exact, &shadow, Query::Any))
     {
         assert!(
             hits.iter().all(Hit::is_hit),
@@ -169,7 +169,7 @@ fn thin_closed_walls_do_not_leak_light() {
         );
     }
     for level in [0, 2] {
-        let r = Rbvh::build(&scene, &q(level)).unwrap();
+        let r = Arc::new(Rbvh::build(&scene, &q(level)).unwrap());
         for (which, hits) in PATHS.iter().zip(rbvh_hits(&ctx, &r, &rays, Query::Closest)) {
             check(&format!("RBVH Q{level} {which}"), &hits, 0.5 * r.texel_size);
             let again = offset_rays(&hits, 0.5 * r.texel_size);

@@ -37,8 +37,8 @@ fn signed_zero_and_tiny_direction_components_hit_the_analytic_surfaces() {
     let ctx = common::context();
     // --- Plane.
     let plane = Scene::builtin("plane").unwrap();
-    let bvh = Bvh::build(&plane).unwrap();
-    let rbvh = Rbvh::build(&plane, &q(2)).unwrap();
+    let exact = Structure::from(Bvh::build(&plane).unwrap());
+    let rbvh = Arc::new(Rbvh::build(&plane, &q(2)).unwrap());
     let mut rng = common::Rng::new(21);
     let mut points: Vec<(f32, f32)> = Vec::new();
     for i in -3..=3 {
@@ -84,7 +84,7 @@ fn signed_zero_and_tiny_direction_components_hit_the_analytic_surfaces() {
     };
     for (which, hits) in PATHS
         .iter()
-        .zip(exact_hits(&ctx, &bvh, &rays, Query::Closest))
+        .zip(exact_hits(&ctx, &exact, &rays, Query::Closest))
     {
         check_plane(&format!("plane exact {which}"), &hits, 1e-6);
     }
@@ -107,7 +107,7 @@ fn signed_zero_and_tiny_direction_components_hit_the_analytic_surfaces() {
             )
         })
         .collect();
-    let all = exact_hits(&ctx, &bvh, &far, Query::Closest)
+    let all = exact_hits(&ctx, &exact, &far, Query::Closest)
         .into_iter()
         .chain(rbvh_hits(&ctx, &rbvh, &far, Query::Closest));
     for hits in all {
@@ -142,7 +142,7 @@ fn signed_zero_and_tiny_direction_components_hit_the_analytic_surfaces() {
             f32::INFINITY,
         ),
     ];
-    let all = exact_hits(&ctx, &bvh, &denormal, Query::Closest)
+    let all = exact_hits(&ctx, &exact, &denormal, Query::Closest)
         .into_iter()
         .chain(rbvh_hits(&ctx, &rbvh, &denormal, Query::Closest));
     for hits in all {
@@ -152,7 +152,7 @@ fn signed_zero_and_tiny_direction_components_hit_the_analytic_surfaces() {
     // --- Sphere.
     let (center, radius, chord) = common::sphere_oracle();
     let sphere = Scene::builtin("sphere").unwrap();
-    let bvh = Bvh::build(&sphere).unwrap();
+    let exact = Structure::from(Bvh::build(&sphere).unwrap());
     let mut rays = Vec::new();
     for axis in 0..3 {
         for sign in [1.0f32, -1.0] {
@@ -192,12 +192,12 @@ fn signed_zero_and_tiny_direction_components_hit_the_analytic_surfaces() {
     };
     for (which, hits) in PATHS
         .iter()
-        .zip(exact_hits(&ctx, &bvh, &rays, Query::Closest))
+        .zip(exact_hits(&ctx, &exact, &rays, Query::Closest))
     {
         check_sphere(&format!("sphere exact {which}"), &hits, 0.0);
     }
     for level in [0, 2] {
-        let r = Rbvh::build(&sphere, &q(level)).unwrap();
+        let r = Arc::new(Rbvh::build(&sphere, &q(level)).unwrap());
         for (which, hits) in PATHS.iter().zip(rbvh_hits(&ctx, &r, &rays, Query::Closest)) {
             check_sphere(
                 &format!("sphere RBVH Q{level} {which}"),

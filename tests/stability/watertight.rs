@@ -93,7 +93,7 @@ fn exact_path_is_watertight_at_vertices_and_edge_midpoints() {
         .enumerate()
     {
         let scene = Scene::builtin(name).unwrap();
-        let bvh = Bvh::build(&scene).unwrap();
+        let exact = Structure::from(Bvh::build(&scene).unwrap());
         let dist = 0.02 * scene.bounds().diagonal();
         let rays = rays_at_vertices_and_edges(&scene, dist, k as u64 + 1);
         let targets = scene.positions.len() + 3 * scene.triangle_count() / 2;
@@ -104,7 +104,7 @@ fn exact_path_is_watertight_at_vertices_and_edge_midpoints() {
         );
         total += rays.len();
         for query in [Query::Closest, Query::Any] {
-            for (which, hits) in PATHS.iter().zip(exact_hits(&ctx, &bvh, &rays, query)) {
+            for (which, hits) in PATHS.iter().zip(exact_hits(&ctx, &exact, &rays, query)) {
                 let misses: Vec<_> = rays
                     .iter()
                     .zip(&hits)

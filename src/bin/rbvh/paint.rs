@@ -52,10 +52,10 @@ pub fn run(a: Args) -> Result<()> {
     };
     let mut p = prepare(&common)?;
     let camera = p.scene.camera_or_framed(a.width as f32 / a.height as f32);
-    let Structure::Rbvh(rbvh) = &p.structure else {
+    if !matches!(p.structure, Structure::Rbvh(_)) {
         bail!("painting needs an RBVH");
-    };
-    let tracer = Tracer::rbvh(&p.ctx, rbvh).context("uploading the RBVH")?;
+    }
+    let tracer = Tracer::new(&p.ctx, &p.structure).context("uploading the RBVH")?;
 
     let (rays, hits) = if a.before.is_some() || a.after.is_some() {
         let rays = camera.primary_rays(a.width, a.height);

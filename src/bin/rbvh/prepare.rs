@@ -228,9 +228,7 @@ impl Prepared {
     /// on `progress`. Says so on stderr when the structure is too large for storage-buffer
     /// bindings and is read through buffer device addresses instead.
     pub fn tracer(&self, progress: &dyn rbvh::progress::Progress) -> Result<Tracer> {
-        let tracer = self
-            .structure
-            .tracer_observed(&self.ctx, progress)
+        let tracer = Tracer::observed(&self.ctx, &self.structure, progress)
             .with_context(|| format!("uploading the {}", self.structure.label()))?;
         if tracer.reach() == Reach::DeviceAddresses && self.ctx.addressing() == Addressing::Auto {
             eprintln!(
@@ -477,7 +475,7 @@ pub fn report_throughput(
         cpu_ms / gpu_ms
     );
     if let Structure::RbvhLod(r, _) = &p.structure {
-        let plain = Tracer::rbvh(&p.ctx, r)?.trace(rays, query)?;
+        let plain = Tracer::new(&p.ctx, &Structure::from(r.clone()))?.trace(rays, query)?;
         if let Some(plain_ms) = plain.timing.gpu_ms {
             eprintln!(
                 "same RBVH without level of detail: GPU {plain_ms:.2} ms = {:.2} MRays/s; LOD speedup {:.2}x",
@@ -489,8 +487,7 @@ pub fn report_throughput(
     if p.structure.rbvh().is_some() && p.scene.triangle_count() == 0 {
         eprintln!("no exact BVH to compare with: the scene is a point cloud, without triangles");
     } else if p.structure.rbvh().is_some() {
-        let bvh = Bvh::build(&p.scene)?;
-        let exact = Tracer::exact(&p.ctx, &bvh)?;
+        let exact = Tracer::new(&p.ctx, &Structure::from(Bvh::build(&p.scene)?))?;
         let timed = exact.trace(rays, query)?;
         if let Some(exact_ms) = timed.timing.gpu_ms {
             eprintln!(

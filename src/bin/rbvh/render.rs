@@ -20,6 +20,7 @@ use rbvh::preview;
 use rbvh::probe::RayCounters;
 use rbvh::rbvh::Rbvh;
 use rbvh::scene::{Light, Scene};
+use rbvh::structure::Structure;
 use rbvh::surface::hit_albedo;
 
 use crate::prepare::{
@@ -268,7 +269,7 @@ fn compare_with_exact(
     }
     let t = Instant::now();
     let bvh = step("building BVH", |_| Bvh::build(&p.scene))?;
-    let exact = Tracer::exact(&p.ctx, &bvh).context("uploading the exact BVH")?;
+    let exact = Tracer::new(&p.ctx, &Structure::from(bvh)).context("uploading the exact BVH")?;
     let setup_ms = t.elapsed().as_secs_f64() * 1e3;
     let exact_hits = exact.trace(frame.rays, Query::Closest)?.hits;
     let exact_albedo = ibl_albedo(&p.scene, None, None, frame.rays, &exact_hits);
