@@ -11,17 +11,18 @@ use std::process::Command;
 use rbvh::bench::metrics::hit_errors;
 use rbvh::bench::record::csv_columns;
 use rbvh::bench::validate::invalid_reason;
-use rbvh::bench::{self, BenchConfig, Device, Level, RayType};
+use rbvh::bench::{self, BenchConfig, Device, RayType};
 use rbvh::bvh::Bvh;
 use rbvh::geom::Hit;
 use rbvh::gpu::Query;
 use rbvh::rays::{generate, offset_origin, Secondary, DEFAULT_LIGHT};
+use rbvh::rbvh::RbvhParams;
 use rbvh::scene::{Light, Scene};
 use rbvh::structure::Kind;
 
 fn small_config(plot: Option<&Path>) -> BenchConfig {
     let mut config = BenchConfig::new(vec!["sphere".into()], Device::Existing(common::context()));
-    config.levels = vec![Level::Preset(0), Level::Preset(2)];
+    config.levels = vec![q(0), q(2)];
     config.width = 32;
     config.height = 32;
     config.runs = 2;
@@ -39,6 +40,11 @@ fn keys(v: &serde_json::Value) -> HashSet<&str> {
 
 fn set<'a>(names: &[&'a str]) -> HashSet<&'a str> {
     names.iter().copied().collect()
+}
+
+/// Preset `level`'s parameters.
+fn q(level: u32) -> RbvhParams {
+    RbvhParams::quality(level).unwrap()
 }
 
 #[test]
@@ -363,7 +369,7 @@ fn traffic_records_come_from_a_twin_that_counts_as_the_device() {
 fn lod_adds_a_valid_rbvh_lod_record_per_level_and_ray_type() {
     let dir = tempfile::tempdir().unwrap();
     let mut config = small_config(Some(dir.path()));
-    config.levels = vec![Level::Preset(4)];
+    config.levels = vec![q(4)];
     // At 32 pixels a side the sphere is about 20 pixels wide and the defaults choose nodes up to
     // 12 pixels across, whole halves of it, whose solid columns move its silhouette: hit/miss on
     // 1.9% of the rays, t p99 4.2% of the diagonal, which the validator rightly calls wrong. At 64
@@ -534,7 +540,12 @@ fn bad_configurations_are_errors_naming_the_field() {
         ("min_run_ms", |c| c.min_run_ms = -1.0),
         ("min_run_ms", |c| c.min_run_ms = f64::NAN),
         ("ao_radius", |c| c.ao_radius = f32::NAN),
-        ("quality", |c| c.levels = vec![Level::Preset(7)]),
+        ("texels_per_diagonal", |c| {
+            c.levels = vec![RbvhParams {
+                texels_per_diagonal: 0.0,
+                ..q(2)
+            }]
+        }),
         ("lod columns", |c| {
             c.lod = Some(rbvh::lod::LodParams {
                 columns: 0,

@@ -105,7 +105,7 @@ fn a_broken_rbvh_shader_fails_with_a_diff_image() {
         "rbvh.glsl changed; update this test's edit"
     );
     let broken = source.replacen(correct, "vec3 p11 = vec3(s1, r1, h11 * 0.5);", 1);
-    let case = Case::new("blob", Method::Rbvh(2));
+    let case = Case::new("blob", Method::rbvh(2));
 
     // Control: the same compile path with the source unchanged renders the golden.
     let out = tempfile::tempdir().unwrap();
@@ -163,7 +163,7 @@ fn a_missing_golden_fails_with_advice_and_bless_creates_it() {
     // The folder is there; the case's golden files are not.
     std::fs::create_dir(&golden).unwrap();
     let mut config = Config {
-        cases: vec![Case::new("sphere", Method::Exact)],
+        cases: vec![Case::new("sphere", Method::EXACT)],
         width: 48,
         height: 32,
         ..Config::new(&golden, &out)

@@ -34,7 +34,7 @@ use super::record::{
 };
 use super::traffic::{self, TrafficModel, CACHE_SIZES, DRAM_LINE};
 use super::validate;
-use super::{BenchConfig, Device, Level};
+use super::{BenchConfig, Device};
 use crate::bvh::{BuildParams, Bvh};
 use crate::geom::{Hit, Ray};
 use crate::gpu::{Context, Query, Timing, Traced, Tracer};
@@ -162,8 +162,8 @@ pub fn run_observed(
 /// A structure under test, uploaded. Its host copy is what its CPU twin traces.
 struct Candidate {
     structure: Structure,
-    /// None for the exact BVH.
-    level: Option<(Level, RbvhParams)>,
+    /// The RBVH's parameters; None for the exact BVH.
+    level: Option<RbvhParams>,
     tracer: Tracer,
     build_ms: f64,
     memory: Memory,
@@ -182,9 +182,7 @@ impl Candidate {
     fn label(&self) -> String {
         match &self.level {
             None => self.method().name().into(),
-            Some((level, params)) => {
-                format!("{} {}", self.method().name(), level_label(level, params))
-            }
+            Some(params) => format!("{} {}", self.method().name(), params.level_label()),
         }
     }
 
@@ -192,10 +190,10 @@ impl Candidate {
     fn file_stem(&self) -> String {
         match &self.level {
             None => "exact".into(),
-            Some((level, params)) if self.method() == Kind::RbvhLod => {
-                format!("{}_lod", level_label(level, params).to_ascii_lowercase())
+            Some(params) if self.method() == Kind::RbvhLod => {
+                format!("{}_lod", params.level_label().to_ascii_lowercase())
             }
-            Some((level, params)) => level_label(level, params).to_ascii_lowercase(),
+            Some(params) => params.level_label().to_ascii_lowercase(),
         }
     }
 
@@ -314,14 +312,12 @@ impl<'a> SceneBench<'a> {
             .iter()
             .flat_map(|level| config.texels.iter().map(move |&texels| (level, texels)));
         for (level, texels) in builds {
-            let params = RbvhParams {
-                texels,
-                ..level.params()?
-            };
+            level.validate()?;
+            let params = RbvhParams { texels, ..*level };
             observe(Event::Progress(format!(
                 "{}: building RBVH {}",
                 scene.name,
-                level_label(level, &params)
+                params.level_label()
             )));
             let rbvh = Arc::new(Rbvh::build_observed(&scene, &params, progress)?);
             surface_offset = surface_offset.max(rbvh.texel_size);
@@ -338,7 +334,7 @@ impl<'a> SceneBench<'a> {
                     config.block_jumps,
                 )?,
                 structure,
-                level: Some((*level, params)),
+                level: Some(params),
                 build_ms: rbvh.stats.build_ms,
                 memory,
             });
@@ -347,7 +343,7 @@ impl<'a> SceneBench<'a> {
                 observe(Event::Progress(format!(
                     "{}: building levels of detail of {}",
                     scene.name,
-                    level.name()
+                    params.quality_name()
                 )));
                 let lod = Lod::build(&rbvh, lod_params)?;
                 // The coarse columns are counted with the tree: they are traversal data.
@@ -359,7 +355,7 @@ impl<'a> SceneBench<'a> {
                         config.block_jumps,
                     )?,
                     structure,
-                    level: Some((*level, params)),
+                    level: Some(params),
                     build_ms,
                     memory: Memory {
                         tree: memory.tree + lod_bytes,
@@ -541,8 +537,8 @@ impl<'a> SceneBench<'a> {
                 triangles: self.scene.triangle_count() as u64,
                 points: self.scene.point_count() as u64,
                 method: c.method(),
-                quality: c.level.map(|(level, _)| level.name()),
-                params: c.level.map(|(_, params)| Params::from(&params)),
+                quality: c.level.map(|params| params.quality_name().to_string()),
+                params: c.level.map(|params| Params::from(&params)),
                 lod: (c.method() == Kind::RbvhLod)
                     .then_some(self.config.lod)
                     .flatten(),
@@ -750,11 +746,6 @@ impl<'a> SceneBench<'a> {
         written.extend(plot::write_charts(&dir, &self.records)?);
         Ok(written)
     }
-}
-
-/// `level`'s name with its texel format's suffix ([`TexelFormat::level_suffix`]).
-fn level_label(level: &Level, params: &RbvhParams) -> String {
-    format!("{}{}", level.name(), params.texels.level_suffix())
 }
 
 /// Most trace passes in one timed run: on lavapipe a pass takes milliseconds, on a large GPU tens

@@ -14,11 +14,12 @@
 //! [`table()`], and optionally charts and error images ([`plot`], [`error_image`]).
 //!
 //! ```no_run
-//! use rbvh::bench::{self, BenchConfig, Device, Level};
+//! use rbvh::bench::{self, BenchConfig, Device};
 //! use rbvh::gpu::ContextOptions;
+//! use rbvh::rbvh::RbvhParams;
 //!
 //! let mut config = BenchConfig::new(vec!["sphere".into()], Device::Create(ContextOptions::default()));
-//! config.levels = vec![Level::Preset(0), Level::Preset(2)];
+//! config.levels = vec![RbvhParams::quality(0)?, RbvhParams::quality(2)?];
 //! let report = bench::run(&config)?;
 //! print!("{}", bench::table(&report));
 //! bench::write_json(std::path::Path::new("bench.json"), &report)?;
@@ -61,51 +62,15 @@ pub enum Device {
     Create(ContextOptions),
 }
 
-/// One RBVH quality level under test.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Level {
-    /// Preset `Q0`…`Q4` ([`RbvhParams::quality`]).
-    Preset(u32),
-    /// Free parameters; reported as quality `"custom"`.
-    Custom(RbvhParams),
-}
-
-impl Level {
-    /// `"Q0"`…`"Q4"` or `"custom"`: the `quality` of the records.
-    pub fn name(&self) -> String {
-        match self {
-            Level::Preset(level) => format!("Q{level}"),
-            Level::Custom(_) => "custom".into(),
-        }
-    }
-
-    /// The build parameters, validated.
-    pub fn params(&self) -> Result<RbvhParams> {
-        let params = match self {
-            Level::Preset(level) => RbvhParams::quality(*level)?,
-            Level::Custom(params) => *params,
-        };
-        params.validate()?;
-        Ok(params)
-    }
-
-    /// The level called `name` (`"Q0"`…`"Q4"`, as [`Level::name`] writes it), or `Custom(params)`
-    /// for any other name: how the CLI maps its `--quality` levels.
-    pub fn named(name: &str, params: RbvhParams) -> Level {
-        match QUALITY_NAMES.iter().position(|n| *n == name) {
-            Some(level) => Level::Preset(level as u32),
-            None => Level::Custom(params),
-        }
-    }
-}
-
 /// What to measure. [`BenchConfig::new`] gives the defaults of `rbvh bench`.
 #[derive(Clone, Debug)]
 pub struct BenchConfig {
     /// Scene specs for [`crate::scene::Scene::load`]: built-in names, OBJ/glTF files, scene files.
     pub scenes: Vec<String>,
-    /// RBVH levels, each measured against the exact BVH (which is always measured).
-    pub levels: Vec<Level>,
+    /// RBVH levels, each measured against the exact BVH (which is always measured) and named by
+    /// [`RbvhParams::quality_name`] (a preset's name, or "custom"); their texel formats are
+    /// `texels`'.
+    pub levels: Vec<RbvhParams>,
     /// Ray types to measure, in this order; at least one, and primary when plotting.
     pub ray_types: Vec<RayType>,
     /// Primary-ray image width in pixels, 1..=16384; secondary rays start at its exact hits, one
@@ -163,7 +128,9 @@ impl BenchConfig {
     pub fn new(scenes: Vec<String>, device: Device) -> BenchConfig {
         BenchConfig {
             scenes,
-            levels: (0..QUALITY_NAMES.len() as u32).map(Level::Preset).collect(),
+            levels: (0..QUALITY_NAMES.len() as u32)
+                .map(|level| RbvhParams::quality(level).expect("a preset"))
+                .collect(),
             ray_types: RayType::ALL.to_vec(),
             width: 256,
             height: 256,
@@ -219,7 +186,7 @@ impl BenchConfig {
             ));
         }
         for level in &self.levels {
-            level.params()?;
+            level.validate()?;
         }
         if let Some(lod) = &self.lod {
             lod.validate()?;

@@ -139,7 +139,7 @@ pub struct Record {
     pub points: u64,
     /// Which structure traced the rays.
     pub method: Kind,
-    /// RBVH level, `"Q0"`…`"Q4"` or `"custom"` ([`Level::name`](super::Level::name)); None for
+    /// RBVH level, `"Q0"`…`"Q4"` or `"custom"` ([`RbvhParams::quality_name`](crate::rbvh::RbvhParams::quality_name)); None for
     /// exact.
     pub quality: Option<String>,
     /// RBVH build parameters; None for exact.

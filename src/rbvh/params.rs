@@ -133,6 +133,37 @@ impl RbvhParams {
         })
     }
 
+    /// The preset these parameters are, if any: the level whose [`RbvhParams::quality`] they equal
+    /// in everything but the texel format (which every preset can take). The rate is compared to
+    /// a millionth: `powi` folded at compile time may round its odd powers of √2 differently from
+    /// the same call at run time.
+    pub fn preset(&self) -> Option<u32> {
+        (0..QUALITY_NAMES.len() as u32).find(|&level| {
+            RbvhParams::quality(level).is_ok_and(|p| {
+                let rate = p.texels_per_diagonal;
+                (self.texels_per_diagonal - rate).abs() <= 1e-6 * rate
+                    && RbvhParams {
+                        texels: self.texels,
+                        texels_per_diagonal: self.texels_per_diagonal,
+                        ..p
+                    } == *self
+            })
+        })
+    }
+
+    /// `"Q0"`…`"Q4"` for a preset ([`RbvhParams::preset`]), `"custom"` for any other parameters:
+    /// the `quality` of benchmark records, and how the CLI names a level.
+    pub fn quality_name(&self) -> &'static str {
+        self.preset()
+            .map_or("custom", |level| QUALITY_NAMES[level as usize])
+    }
+
+    /// [`RbvhParams::quality_name`] with the texel format's suffix
+    /// ([`TexelFormat::level_suffix`]): `Q2`, `Q2h`, `customh`.
+    pub fn level_label(&self) -> String {
+        format!("{}{}", self.quality_name(), self.texels.level_suffix())
+    }
+
     /// Checks every parameter's range; the error names the parameter and the allowed range.
     pub fn validate(&self) -> Result<()> {
         let rate = self.texels_per_diagonal;
@@ -235,5 +266,33 @@ mod tests {
         for p in bad {
             assert!(p.validate().is_err(), "{p:?}");
         }
+    }
+
+    #[test]
+    fn presets_are_named_by_their_parameters() {
+        for level in 0..5 {
+            let p = RbvhParams::quality(level).unwrap();
+            assert_eq!(p.preset(), Some(level));
+            assert_eq!(p.quality_name(), QUALITY_NAMES[level as usize]);
+            let height = RbvhParams {
+                texels: TexelFormat::Height,
+                ..p
+            };
+            assert_eq!(height.level_label(), format!("Q{level}h"));
+        }
+        let q2 = RbvhParams::quality(2).unwrap();
+        let custom = RbvhParams {
+            texels_per_diagonal: 2048.0,
+            ..q2
+        };
+        assert_eq!(
+            (custom.preset(), custom.level_label().as_str()),
+            (None, "custom")
+        );
+        let no_split = RbvhParams {
+            object_split: false,
+            ..q2
+        };
+        assert_eq!(no_split.quality_name(), "custom");
     }
 }

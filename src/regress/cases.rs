@@ -4,7 +4,6 @@
 
 use std::fmt;
 use std::path::Path;
-use std::sync::Arc;
 
 use crate::bvh::Bvh;
 use crate::geom::Hit;
@@ -14,46 +13,69 @@ use crate::output::Image;
 use crate::preview;
 use crate::rbvh::{Rbvh, RbvhParams};
 use crate::scene::Scene;
+use crate::structure::Kind;
 pub use crate::structure::Structure;
 use crate::{Error, Result};
 
-/// The acceleration structure a case traces through.
+/// The structure a case traces through: a [`Kind`] of structure and, for the RBVH kinds, the
+/// quality preset it is built at (level of detail with its default parameters, every primary
+/// ray carrying its pixel's cone).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Method {
-    /// The exact triangle BVH, the referee.
-    Exact,
-    /// An RBVH at quality preset `Q0`…`Q4` (the level, 0..=4).
-    Rbvh(u32),
-    /// The RBVH of that preset traced with level of detail ([`crate::lod`], default parameters),
-    /// every primary ray carrying its pixel's cone.
-    RbvhLod(u32),
+pub struct Method {
+    kind: Kind,
+    /// `Q0`…`Q4` (0..=4); 0 and unused for the exact BVH.
+    level: u32,
 }
 
 impl Method {
+    /// The exact triangle BVH, the referee.
+    pub const EXACT: Method = Method {
+        kind: Kind::Exact,
+        level: 0,
+    };
+
+    /// An RBVH at quality preset `level` (`Q0`…`Q4`, 0..=4).
+    pub const fn rbvh(level: u32) -> Method {
+        Method {
+            kind: Kind::Rbvh,
+            level,
+        }
+    }
+
+    /// The RBVH of preset `level` traced with its levels of detail.
+    pub const fn rbvh_lod(level: u32) -> Method {
+        Method {
+            kind: Kind::RbvhLod,
+            level,
+        }
+    }
+
+    /// Which structure it traces.
+    pub fn kind(&self) -> Kind {
+        self.kind
+    }
+
     /// `exact`, `rbvh_q<level>` or `rbvh_lod_q<level>`: the method's part of a golden file's name.
     pub fn file_tag(&self) -> String {
-        match self {
-            Method::Exact => "exact".into(),
-            Method::Rbvh(level) => format!("rbvh_q{level}"),
-            Method::RbvhLod(level) => format!("rbvh_lod_q{level}"),
+        match self.kind {
+            Kind::Exact => "exact".into(),
+            Kind::Rbvh => format!("rbvh_q{}", self.level),
+            Kind::RbvhLod => format!("rbvh_lod_q{}", self.level),
         }
     }
 
     /// The RBVH preset the method traces, if any.
     pub fn level(&self) -> Option<u32> {
-        match *self {
-            Method::Exact => None,
-            Method::Rbvh(level) | Method::RbvhLod(level) => Some(level),
-        }
+        (self.kind != Kind::Exact).then_some(self.level)
     }
 }
 
 impl fmt::Display for Method {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Method::Exact => f.write_str("exact"),
-            Method::Rbvh(level) => write!(f, "RBVH Q{level}"),
-            Method::RbvhLod(level) => write!(f, "RBVH Q{level} with LOD"),
+        match self.kind {
+            Kind::Exact => f.write_str("exact"),
+            Kind::Rbvh => write!(f, "RBVH Q{}", self.level),
+            Kind::RbvhLod => write!(f, "RBVH Q{} with LOD", self.level),
         }
     }
 }
@@ -115,16 +137,15 @@ pub fn cross(scenes: &[String], methods: &[Method]) -> Vec<Case> {
 impl Method {
     /// Builds the structure this method traces through, for `scene`.
     pub fn build(self, scene: &Scene) -> Result<Structure> {
-        Ok(match self {
-            Method::Exact => Structure::Exact(Bvh::build(scene)?),
-            Method::Rbvh(level) => {
-                Structure::Rbvh(Arc::new(Rbvh::build(scene, &RbvhParams::quality(level)?)?))
-            }
-            Method::RbvhLod(level) => {
-                let rbvh = Rbvh::build(scene, &RbvhParams::quality(level)?)?;
-                let lod = Lod::build(&rbvh, &LodParams::default())?;
-                Structure::RbvhLod(Arc::new(rbvh), Box::new(lod))
-            }
+        if self.kind == Kind::Exact {
+            return Ok(Structure::from(Bvh::build(scene)?));
+        }
+        let rbvh = Rbvh::build(scene, &RbvhParams::quality(self.level)?)?;
+        Ok(if self.kind == Kind::RbvhLod {
+            let lod = Lod::build(&rbvh, &LodParams::default())?;
+            Structure::with_lod(rbvh, lod)
+        } else {
+            Structure::from(rbvh)
         })
     }
 }
@@ -194,22 +215,22 @@ mod tests {
 
     #[test]
     fn names_are_safe_file_stems() {
-        assert_eq!(Case::new("default", Method::Exact).name(), "default_exact");
-        assert_eq!(Case::new("blob", Method::Rbvh(2)).name(), "blob_rbvh_q2");
+        assert_eq!(Case::new("default", Method::EXACT).name(), "default_exact");
+        assert_eq!(Case::new("blob", Method::rbvh(2)).name(), "blob_rbvh_q2");
         assert_eq!(
-            Case::new("../data/my dragon.v2.obj", Method::Rbvh(4)).name(),
+            Case::new("../data/my dragon.v2.obj", Method::rbvh(4)).name(),
             "my_dragon_v2_rbvh_q4"
         );
     }
 
     #[test]
     fn clashing_names_are_an_error_naming_both() {
-        let cases = cross(&["a/x.obj".into(), "b/x.obj".into()], &[Method::Exact]);
+        let cases = cross(&["a/x.obj".into(), "b/x.obj".into()], &[Method::EXACT]);
         let err = check_unique_names(&cases).unwrap_err().to_string();
         assert!(err.contains("a/x.obj") && err.contains("b/x.obj"), "{err}");
         check_unique_names(&cross(
             &["sphere".into()],
-            &[Method::Exact, Method::Rbvh(0)],
+            &[Method::EXACT, Method::rbvh(0)],
         ))
         .unwrap();
     }

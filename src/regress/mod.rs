@@ -52,13 +52,13 @@ pub const SCENES: [&str; 3] = ["default", "sphere", "blob"];
 /// every other one, so that a change in how the sampling rate scales shows, without and with level
 /// of detail (the default of `rbvh regress`).
 pub const METHODS: [Method; 7] = [
-    Method::Exact,
-    Method::Rbvh(0),
-    Method::Rbvh(2),
-    Method::Rbvh(4),
-    Method::RbvhLod(0),
-    Method::RbvhLod(2),
-    Method::RbvhLod(4),
+    Method::EXACT,
+    Method::rbvh(0),
+    Method::rbvh(2),
+    Method::rbvh(4),
+    Method::rbvh_lod(0),
+    Method::rbvh_lod(2),
+    Method::rbvh_lod(4),
 ];
 
 /// Image size of the shipped suite: large enough that an RBVH's texel-sized steps cover several

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use crate::progress::Bar;
 use anyhow::{Context as _, Result};
-use rbvh::bench::{self, BenchConfig, Device, Event, Level, RayType};
+use rbvh::bench::{self, BenchConfig, Device, Event, RayType};
 
 use crate::prepare::{context_options, flag_error, LodBuildArgs, PointsArg, Quality};
 
@@ -90,12 +90,7 @@ pub fn run(a: Args) -> Result<()> {
         // thread is undefined behaviour in C.
         std::env::set_var("LP_NUM_THREADS", threads.to_string());
     }
-    let levels = a
-        .quality
-        .quality_levels()?
-        .into_iter()
-        .map(|(name, params)| Level::named(&name, params))
-        .collect();
+    let levels = a.quality.quality_levels()?;
     let mut config = BenchConfig::new(
         a.scene.iter().map(|s| s.trim().to_string()).collect(),
         Device::Create(context_options(a.device.as_deref(), a.validate)?),

@@ -102,7 +102,8 @@ pub fn run(a: Args) -> Result<()> {
             "peak MB"
         );
     }
-    for (name, params) in levels {
+    for params in levels {
+        let name = params.level_label();
         let r = step(&format!("building RBVH {name}"), |bar| {
             Rbvh::build_observed(&scene, &params, bar).map_err(flag_error)
         })?;

@@ -353,7 +353,7 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
                 levels.len() == 1,
                 "--quality and --texels: give one level in one texel format to trace"
             );
-            let (_, params) = levels.remove(0);
+            let params = levels.remove(0);
             Structure::Rbvh(Arc::new(step("building RBVH", |bar| {
                 Rbvh::build_observed(&scene, &params, bar).map_err(flag_error)
             })?))
@@ -609,27 +609,24 @@ impl Quality {
         formats
     }
 
-    /// Every requested level in every requested texel format: named as
-    /// [`Quality::quality_levels`] names them, with the format's suffix (`Q2h`).
-    pub fn levels(&self) -> Result<Vec<(String, rbvh::rbvh::RbvhParams)>> {
+    /// Every requested level in every requested texel format (each named by
+    /// `RbvhParams::level_label`: `Q2`, `Q2h`, `custom`).
+    pub fn levels(&self) -> Result<Vec<rbvh::rbvh::RbvhParams>> {
         let formats = self.texel_formats();
         Ok(self
             .quality_levels()?
             .into_iter()
-            .flat_map(|(name, params)| {
-                formats.iter().map(move |&texels| {
-                    (
-                        format!("{name}{}", texels.level_suffix()),
-                        rbvh::rbvh::RbvhParams { texels, ..params },
-                    )
-                })
+            .flat_map(|params| {
+                formats
+                    .iter()
+                    .map(move |&texels| rbvh::rbvh::RbvhParams { texels, ..params })
             })
             .collect())
     }
 
-    /// The requested levels, named `Q0`…`Q4` (or `custom` when free parameters change a preset),
-    /// each validated, with the default texels (see [`Quality::levels`] for the formats).
-    pub fn quality_levels(&self) -> Result<Vec<(String, rbvh::rbvh::RbvhParams)>> {
+    /// The requested levels (presets, or one preset changed by free parameters), each
+    /// validated, with the default texels (see [`Quality::levels`] for the formats).
+    pub fn quality_levels(&self) -> Result<Vec<rbvh::rbvh::RbvhParams>> {
         use rbvh::rbvh::{RbvhParams, Refinement, Subdivision};
         let mut levels = Vec::new();
         for q in &self.quality {
@@ -681,12 +678,7 @@ impl Quality {
                     p.sampled_criterion_texels = k;
                 }
                 p.validate().map_err(flag_error)?;
-                let name = if self.is_custom() {
-                    "custom".to_string()
-                } else {
-                    format!("Q{level}")
-                };
-                Ok((name, p))
+                Ok(p)
             })
             .collect()
     }

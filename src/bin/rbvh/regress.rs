@@ -86,17 +86,17 @@ fn methods(a: &Args) -> Result<Vec<Method>> {
     let mut methods = Vec::new();
     for m in &a.method {
         match m {
-            MethodArg::Exact => methods.push(Method::Exact),
+            MethodArg::Exact => methods.push(Method::EXACT),
             MethodArg::Rbvh => {
                 ensure!(!levels.is_empty(), "--method rbvh needs a --quality level");
-                methods.extend(levels.iter().map(|&l| Method::Rbvh(l)));
+                methods.extend(levels.iter().map(|&l| Method::rbvh(l)));
             }
             MethodArg::RbvhLod => {
                 ensure!(
                     !levels.is_empty(),
                     "--method rbvh-lod needs a --quality level"
                 );
-                methods.extend(levels.iter().map(|&l| Method::RbvhLod(l)));
+                methods.extend(levels.iter().map(|&l| Method::rbvh_lod(l)));
             }
         }
     }
