@@ -30,7 +30,8 @@ use super::metrics::{self, HitErrors, Summary};
 use super::plot;
 use super::provenance;
 use super::record::{
-    BenchReport, Errors, Memory, Params, Record, ShaderRecord, Spread, TimingSource, TrafficRecord,
+    BenchReport, Errors, Memory, Params, Record, SeamRecord, ShaderRecord, Spread, TimingSource,
+    TrafficRecord,
 };
 use super::traffic::{self, TrafficModel, CACHE_SIZES, DRAM_LINE};
 use super::validate;
@@ -167,6 +168,8 @@ struct Candidate {
     tracer: Tracer,
     build_ms: f64,
     memory: Memory,
+    /// Leaks through the seams (plain RBVHs, when asked for).
+    seams: Option<SeamRecord>,
 }
 
 /// Ray `k` of a batch traced by a CPU twin, its reads pushed to the vector.
@@ -302,6 +305,7 @@ impl<'a> SceneBench<'a> {
             level: None,
             build_ms,
             memory,
+            seams: None,
         }];
         // Secondary rays leave the exact surface by at least the coarsest RBVH's texel: an RBVH
         // surface may lie up to a fraction of a texel off the exact one, and a ray starting
@@ -327,6 +331,19 @@ impl<'a> SceneBench<'a> {
                 triangles: rbvh.triangle_bytes(),
                 total: rbvh.total_bytes(),
             };
+            let exact = candidates[0]
+                .structure
+                .bvh()
+                .filter(|_| config.seam_rays > 0);
+            let seams = exact.map(|exact| {
+                observe(Event::Progress(format!(
+                    "{}: {} rays at the seams of RBVH {}",
+                    scene.name,
+                    config.seam_rays,
+                    params.level_label()
+                )));
+                seam_leaks(exact, &rbvh, config.seam_rays, config.seed)
+            });
             let structure = Structure::Rbvh(Arc::clone(&rbvh));
             candidates.push(Candidate {
                 tracer: with_jumps(
@@ -337,6 +354,7 @@ impl<'a> SceneBench<'a> {
                 level: Some(params),
                 build_ms: rbvh.stats.build_ms,
                 memory,
+                seams,
             });
             let lod = config.lod.filter(|_| texels == TexelFormat::HeightNormal);
             if let Some(lod_params) = &lod {
@@ -356,6 +374,7 @@ impl<'a> SceneBench<'a> {
                     )?,
                     structure,
                     level: Some(params),
+                    seams: None,
                     build_ms,
                     memory: Memory {
                         tree: memory.tree + lod_bytes,
@@ -557,6 +576,7 @@ impl<'a> SceneBench<'a> {
                 block_jumps: (c.method() != Kind::Exact).then(|| c.tracer.block_jumps()),
                 counters: counted[i].0,
                 traffic: counted[i].1.clone(),
+                seams: c.seams,
             });
         }
         Ok(())
@@ -745,6 +765,18 @@ impl<'a> SceneBench<'a> {
         }
         written.extend(plot::write_charts(&dir, &self.records)?);
         Ok(written)
+    }
+}
+
+/// `count` rays aimed at `rbvh`'s seams ([`Rbvh::seam_rays`]), traced by the CPU twins of the
+/// exact BVH and of `rbvh`, and how many leaked ([`crate::rbvh::seams::count_leaks`]).
+fn seam_leaks(exact: &Bvh, rbvh: &Rbvh, count: usize, seed: u64) -> SeamRecord {
+    let rays = rbvh.seam_rays(count, seed);
+    let exact = exact.trace_cpu(&rays, false);
+    let approx = rbvh.trace_cpu(&rays, false);
+    SeamRecord {
+        rays: rays.len() as u64,
+        leaks: crate::rbvh::seams::count_leaks(&exact, &approx, rbvh.texel_size) as u64,
     }
 }
 

@@ -103,6 +103,9 @@ pub struct BenchConfig {
     /// and cache lines per ray, the frame's working set, DRAM bytes per ray behind 4, 32 and
     /// 72 MiB caches. Costs a CPU trace per method and ray type.
     pub traffic: bool,
+    /// Rays aimed at every plain RBVH level's seams between leaves ([`crate::rbvh::seams`]),
+    /// traced by the CPU twins of it and of the exact BVH, for the level's leak count (0: none).
+    pub seam_rays: usize,
     /// Texel formats to build every level in, each measured as its own RBVH (at least one; the
     /// default: height and normal only). A height-only level gets no level-of-detail record.
     pub texels: Vec<TexelFormat>,
@@ -142,6 +145,7 @@ impl BenchConfig {
             plot_dir: None,
             lod: None,
             traffic: false,
+            seam_rays: 100_000,
             texels: vec![TexelFormat::HeightNormal],
             block_jumps: None,
             points: None,

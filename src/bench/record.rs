@@ -178,6 +178,19 @@ pub struct Record {
     pub counters: MeanCounters,
     /// The CPU twin's counters and memory traffic, with `--traffic`.
     pub traffic: Option<TrafficRecord>,
+    /// Leaks through the seams between height fields, for plain RBVH records (the same for each
+    /// ray type of a level); None for the other methods, or with no seam rays asked for.
+    pub seams: Option<SeamRecord>,
+}
+
+/// Rays aimed at an RBVH level's seams between leaves and how many leaked through the surface
+/// ([`crate::rbvh::seams`]: the exact BVH hits, the RBVH finds nothing within two texels behind).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct SeamRecord {
+    /// Rays aimed at the leaves' rims.
+    pub rays: u64,
+    /// Of those, the ones that leaked.
+    pub leaks: u64,
 }
 
 /// A trace pipeline and the driver's statistics of it ([`crate::gpu::ShaderStatistic`]): on a GPU
@@ -472,6 +485,7 @@ impl Record {
                     ..Traffic::default()
                 },
             }),
+            seams: Some(SeamRecord { rays: 0, leaks: 0 }),
         }
     }
 }

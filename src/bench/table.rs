@@ -9,7 +9,7 @@ use super::record::{BenchReport, Record};
 
 /// Columns after the scene's: header, width, and whether values are left-aligned (names) rather
 /// than right-aligned (numbers).
-const COLUMNS: [(&str, usize, bool); 13] = [
+const COLUMNS: [(&str, usize, bool); 14] = [
     ("method", 8, true),
     ("level", 7, true),
     ("ray type", 8, true),
@@ -22,6 +22,7 @@ const COLUMNS: [(&str, usize, bool); 13] = [
     ("n err°", 7, false),
     ("PSNR", 6, false),
     ("FLIP", 6, false),
+    ("leaks", 6, false),
     ("valid", 5, true),
 ];
 
@@ -74,10 +75,21 @@ pub fn table(report: &BenchReport) -> String {
     } else {
         String::new()
     };
+    let leaks = report
+        .results
+        .iter()
+        .find_map(|r| r.seams)
+        .map_or(String::new(), |s| {
+            format!(
+                "; leaks: of {} rays aimed at each level's seams between leaves, those that \
+                 passed through the surface (rbvh::seams)",
+                s.rays
+            )
+        });
     let footnote = format!(
         "MRays/s: median of {} runs of {passes} trace pass(es){shortest} (timing: {}); mem x: \
          exact's bytes / these; t p99: hit distance error, % of the scene diagonal; n err: mean \
-         normal error; PSNR/FLIP: shaded primary image",
+         normal error; PSNR/FLIP: shaded primary image{leaks}",
         report.runs,
         sources.into_iter().collect::<Vec<_>>().join(" and ")
     );
@@ -169,6 +181,7 @@ fn cells(r: &Record) -> [String; COLUMNS.len()] {
         num(e.and_then(|e| e.normal_err_deg_mean), 1),
         num(e.and_then(|e| e.psnr_db), 1),
         num(e.and_then(|e| e.flip_mean), 3),
+        r.seams.map_or_else(dash, |s| s.leaks.to_string()),
         if r.valid { "yes" } else { "NO" }.into(),
     ]
 }

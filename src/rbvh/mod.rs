@@ -10,6 +10,7 @@
 //! * [`layout`]: the packed data the GPU reads;
 //! * [`ranges`]: height ranges of the atlas's 8 × 8 blocks, for the device march's jumps;
 //! * `march`: the CPU reference caster on exactly that packed data, and its [`DeviceTwin`];
+//! * [`seams`]: rays aimed at the seams between leaves, and the leaks they find;
 //! * `file`: save and load.
 
 mod atlas;
@@ -22,6 +23,7 @@ pub(crate) mod march;
 pub mod params;
 pub mod ranges;
 pub(crate) mod raster;
+pub mod seams;
 mod splat;
 mod split;
 

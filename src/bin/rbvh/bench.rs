@@ -68,6 +68,11 @@ pub struct Args {
     /// working set, DRAM bytes per ray behind 4, 32 and 72 MiB caches (slower: a CPU trace each).
     #[arg(long)]
     traffic: bool,
+    /// Rays aimed at each RBVH level's seams between leaves (their rims and corners), traced by
+    /// the CPU twins of the level and of the exact BVH: the `leaks` column counts those that
+    /// passed through the surface. 0: skip.
+    #[arg(long, default_value_t = 100_000)]
+    seam_rays: usize,
     /// Block jumps in the RBVH march: on or off (default: off on CPU implementations such as
     /// lavapipe, on elsewhere). The hits are the same; to measure what they are worth on a device.
     #[arg(long, value_name = "on|off", hide_possible_values = true,
@@ -109,6 +114,7 @@ pub fn run(a: Args) -> Result<()> {
     config.plot_dir = a.plot.clone();
     config.lod = a.lod.then(|| a.lod_build.params());
     config.traffic = a.traffic;
+    config.seam_rays = a.seam_rays;
     config.block_jumps = a.block_jumps;
     config.points = a.points.points.clone();
 
