@@ -109,6 +109,12 @@ pub struct RbvhParams {
 /// Quality preset names, coarsest to finest.
 pub const QUALITY_NAMES: [&str; 5] = ["Q0", "Q1", "Q2", "Q3", "Q4"];
 
+/// The presets' sampling rates, `256 · √2^level` correctly rounded to f32. A table rather than
+/// `powi`: the compiler folds `powi` at compile time where the level is a constant and rounds
+/// differently from the same call at run time (724.07733 against 724.0773 for Q3, 512 against
+/// 511.99997 for Q2), so one preset built two ways was two RBVHs.
+const PRESET_RATES: [f32; 5] = [256.0, 362.038_67, 512.0, 724.077_33, 1024.0];
+
 impl RbvhParams {
     /// Preset `level` (0 = Q0, coarsest … 4 = Q4, finest). Each level has √2× the sampling rate of
     /// the previous one, so about twice its texels.
@@ -120,7 +126,7 @@ impl RbvhParams {
             ));
         }
         Ok(RbvhParams {
-            texels_per_diagonal: 256.0 * std::f32::consts::SQRT_2.powi(level as i32),
+            texels_per_diagonal: PRESET_RATES[level as usize],
             refinement: Refinement::NormalCone {
                 max_angle_deg: 60.0,
             },
@@ -134,19 +140,14 @@ impl RbvhParams {
     }
 
     /// The preset these parameters are, if any: the level whose [`RbvhParams::quality`] they equal
-    /// in everything but the texel format (which every preset can take). The rate is compared to
-    /// a millionth: `powi` folded at compile time may round its odd powers of √2 differently from
-    /// the same call at run time.
+    /// in everything but the texel format (which every preset can take).
     pub fn preset(&self) -> Option<u32> {
         (0..QUALITY_NAMES.len() as u32).find(|&level| {
             RbvhParams::quality(level).is_ok_and(|p| {
-                let rate = p.texels_per_diagonal;
-                (self.texels_per_diagonal - rate).abs() <= 1e-6 * rate
-                    && RbvhParams {
-                        texels: self.texels,
-                        texels_per_diagonal: self.texels_per_diagonal,
-                        ..p
-                    } == *self
+                RbvhParams {
+                    texels: self.texels,
+                    ..p
+                } == *self
             })
         })
     }
@@ -294,5 +295,20 @@ mod tests {
             ..q2
         };
         assert_eq!(no_split.quality_name(), "custom");
+    }
+
+    #[test]
+    fn preset_rates_are_256_times_powers_of_root_two_correctly_rounded() {
+        for level in 0..5u32 {
+            let exact = 256.0 * 2f64.powf(f64::from(level) / 2.0);
+            let rate = RbvhParams::quality(level).unwrap().texels_per_diagonal;
+            assert_eq!(rate, exact as f32, "Q{level}");
+            // Whatever the level's origin: a literal here, a run-time value in the loop above.
+            let runtime = std::hint::black_box(level);
+            assert_eq!(
+                RbvhParams::quality(runtime).unwrap(),
+                RbvhParams::quality(level).unwrap()
+            );
+        }
     }
 }
