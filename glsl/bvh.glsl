@@ -78,6 +78,12 @@ struct BvhSizes {
     uint tri_count;
 };
 
+// The end of a leaf's triangle slots [first, first + count), clamped to the array: without the
+// wrap of uint addition that corrupt counts could cause (as saturating_add in src/bvh/traverse.rs).
+uint rbvh_slot_end(uint first, uint count, uint tri_count) {
+    return count > tri_count - min(first, tri_count) ? tri_count : first + count;
+}
+
 // Tests the triangles in slots [first, end) over [tmin, t_closest) with the watertight test: the
 // leaves of the exact BVH and the RBVH's hybrid leaves alike (bvh::Triangles in
 // src/bvh/traverse.rs). On a hit, lowers t_closest, keeps the slot in `best_slot` and returns
@@ -120,7 +126,7 @@ uint rbvh_node_count(BvhLeafHook leaves) {
     return leaves.sz.node_count;
 }
 
-// A binary tree has one leaf more than it has inner nodes.
+// A binary tree has one leaf more than it has inner nodes: n visits and n + 2 rounds at most.
 uint rbvh_round_bound(BvhLeafHook leaves) {
     return 2u * leaves.sz.node_count + 1u;
 }
@@ -136,7 +142,7 @@ uint rbvh_enter(BvhLeafHook leaves, uint child, uint count, float t_entry) {
 bool rbvh_test(inout BvhLeafHook leaves, Ray ray, bool any_hit, uint reference, uint count,
                inout float t_closest, inout uint steps, inout bool cut) {
     uint first = reference & ~RBVH_LEAF_BIT;
-    uint end = min(first + count, leaves.sz.tri_count);
+    uint end = rbvh_slot_end(first, count, leaves.sz.tri_count);
     return rbvh_test_triangles(leaves.shear, ray, any_hit, first, end, t_closest, leaves.best_slot, steps, cut);
 }
 

@@ -230,6 +230,7 @@ bool rbvh_test(inout RbvhLodLeafHook leaves, Ray ray, bool any_hit, uint referen
     leaves.rbvh.best_id = RBVH_LEAF_BIT | reference;
     leaves.rbvh.best_slot = RBVH_INVALID;
     leaves.rbvh.best_texel = normal_texel;
+    leaves.rbvh.best_facet = vec3(0.0);
     return true;
 }
 

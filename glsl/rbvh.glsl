@@ -1,5 +1,6 @@
-// RBVH traversal and height-field march: the GLSL twin of src/rbvh/march.rs, step for step, on the
-// packed data of src/rbvh/layout.rs. Includes bvh.glsl for the node and triangle buffers.
+// The RBVH's height-field march and its leaf hook for the one traversal (traverse.glsl): the GLSL
+// twin of src/rbvh/march.rs, step for step, on the packed data of src/rbvh/layout.rs. Includes
+// bvh.glsl for the node and triangle buffers.
 //
 // The includer chooses where the buffers live by defining, before the #include:
 //   RBVH_BVH_SET, RBVH_BVH_NODES_BINDING, RBVH_BVH_TRIS_BINDING   (see bvh.glsl; defaults 0, 0, 1)
@@ -547,8 +548,9 @@ bool rbvh_test(inout RbvhLeafHook leaves, Ray ray, bool any_hit, uint reference,
     if (count != RBVH_HEIGHTFIELD_COUNT) {
         uint first = reference & ~RBVH_LEAF_BIT;
         // The shear is made per leaf rather than kept across the loops: see RbvhFrameRay.
-        return rbvh_test_triangles(rbvh_shear(ray), ray, any_hit, first, min(first + count, leaves.sz.tri_count),
-                                   t_closest, leaves.best_slot, steps, cut);
+        return rbvh_test_triangles(rbvh_shear(ray), ray, any_hit, first,
+                                   rbvh_slot_end(first, count, leaves.sz.tri_count), t_closest,
+                                   leaves.best_slot, steps, cut);
     }
     RBVH_COUNT_ADD(leaves, 1u);
     uint cells = 0u;

@@ -7,7 +7,8 @@
 //   RBVH_TRAVERSE  the function's name
 //   RBVH_LEAVES    the hook: a struct type that keeps the nearest hit, with these overloads for it
 //     uint rbvh_node_count(RBVH_LEAVES leaves)    inner nodes (node 0 the root)
-//     uint rbvh_round_bound(RBVH_LEAVES leaves)   bounds the loops: nodes + leaves + 1 at least
+//     uint rbvh_round_bound(RBVH_LEAVES leaves)   bounds both loops: at least the leaves + 1
+//                                                 (rounds) and the inner nodes (visits)
 //     bool rbvh_is_leaf(RBVH_LEAVES leaves, uint reference)
 //         whether a child reference goes to rbvh_test rather than being descended into
 //     uint rbvh_enter(RBVH_LEAVES leaves, uint child, uint count, float t_entry)

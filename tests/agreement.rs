@@ -202,3 +202,61 @@ fn repeated_passes_trace_the_same_hits_and_time_one_pass() {
         assert!(err.contains("at least one pass"), "{err}");
     }
 }
+
+/// Corrupt exact BVHs neither hang nor read out of bounds, and the device answers as the CPU
+/// reference does (`glsl/traverse.glsl` and `crate::bvh::traverse` share the guards): a child
+/// index past the nodes has no children; a triangle leaf whose count runs past the array (and
+/// past `u32::MAX` when added to its first slot) tests the triangles up to the array's end; a
+/// cycle ends the rays that enter it as overflows (more visits than nodes), an error on the GPU.
+#[test]
+fn corrupt_exact_bvhs_are_bounded_on_the_device_as_on_the_cpu() {
+    use rbvh::bvh::LEAF_BIT;
+    use rbvh::Error;
+    let ctx = common::context();
+    let scene = Scene::builtin("sphere").unwrap();
+    let rays = rays_for(&scene, 32, 500, 3);
+    let built = Bvh::build(&scene).unwrap();
+    let leaf = built
+        .nodes
+        .iter()
+        .position(|n| n.a_child & LEAF_BIT != 0)
+        .expect("a node with a triangle leaf");
+    let inner = built
+        .nodes
+        .iter()
+        .position(|n| n.a_child & LEAF_BIT == 0)
+        .expect("a node with an inner child");
+
+    let mut far_child = built.clone();
+    far_child.nodes[inner].a_child = far_child.nodes.len() as u32 + 5;
+    let mut long_leaf = built.clone();
+    long_leaf.nodes[leaf].a_count = u32::MAX;
+    for (what, bvh) in [
+        ("child past the nodes", far_child),
+        ("count past the triangles", long_leaf),
+    ] {
+        let cpu = bvh.trace_cpu(&rays, false);
+        let gpu = Tracer::new(&ctx, &Structure::from(bvh))
+            .unwrap()
+            .trace(&rays, Query::Closest)
+            .unwrap_or_else(|e| panic!("{what}: {e}"))
+            .hits;
+        let differ = gpu.iter().zip(&cpu).filter(|(g, c)| g.id != c.id).count();
+        assert!(differ * 1000 <= rays.len(), "{what}: {differ} rays differ");
+    }
+
+    let mut cycle = built.clone();
+    cycle.nodes[inner].a_child = 0;
+    let overflows = rays
+        .iter()
+        .filter(|r| cycle.closest_hit(r).1.overflow)
+        .count();
+    assert!(overflows > 0, "no ray entered the cycle");
+    match Tracer::new(&ctx, &Structure::from(cycle))
+        .unwrap()
+        .trace(&rays, Query::Closest)
+    {
+        Err(Error::StackOverflow { .. }) => {}
+        other => panic!("a cycle on the device: {:?}", other.map(|t| t.hits.len())),
+    }
+}

@@ -26,6 +26,7 @@ fn small_config(plot: Option<&Path>) -> BenchConfig {
     config.width = 32;
     config.height = 32;
     config.runs = 2;
+    config.seam_rays = 2000;
     config.plot_dir = plot.map(Path::to_path_buf);
     config
 }
@@ -78,6 +79,13 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
         let exact = &chunk[0];
         assert_eq!(exact.method, Kind::Exact);
         assert!(exact.error.is_none() && exact.params.is_none());
+        // Seam leaks on the RBVH levels alone, the same for each ray type of a level.
+        assert!(exact.seams.is_none());
+        for r in &chunk[1..] {
+            let seams = r.seams.expect("a plain RBVH level's seam leaks");
+            assert_eq!(seams.rays, 2000);
+            assert!(seams.leaks < 20, "{seams:?}");
+        }
         assert_eq!(exact.speedup_vs_exact, 1.0);
         assert_eq!(exact.memory_ratio_vs_exact, 1.0);
         assert_eq!(exact.memory_bytes.atlas, 0);
@@ -278,6 +286,9 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
         1 + report.results.len() + 1,
         "{table}"
     );
+    // The leaks column, a count on the RBVH lines, and the footnote saying of how many rays.
+    assert!(table.lines().next().unwrap().contains("leaks"), "{table}");
+    assert!(table.contains("leaks: of 2000 rays"), "{table}");
 }
 
 /// With `traffic`, every record carries the CPU twin's counters (equal to the device's) and the

@@ -185,7 +185,7 @@ fn an_upload_counts_the_bytes_of_every_array() {
     ];
     for (structure, bytes) in cases {
         let tally = Tally::default();
-        let watched = Tracer::observed(&ctx, &structure, &tally).unwrap();
+        let watched = Tracer::new_observed(&ctx, &structure, &tally).unwrap();
         assert_eq!(
             tally.counted(),
             [format!("uploading the structure (bytes) {bytes}")],
@@ -201,7 +201,7 @@ fn an_upload_counts_the_bytes_of_every_array() {
     // With levels of detail the nodes carry their columns and the columns are uploaded too: more
     // bytes, all of them counted (Tally checks that the advances add up to the total).
     let tally = Tally::default();
-    Tracer::observed(&ctx, &Structure::with_lod(rbvh, lod), &tally).unwrap();
+    Tracer::new_observed(&ctx, &Structure::with_lod(rbvh, lod), &tally).unwrap();
     let counted = tally.counted();
     assert_eq!(counted.len(), 1, "{counted:?}");
     let total: u64 = counted[0].rsplit(' ').next().unwrap().parse().unwrap();

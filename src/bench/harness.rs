@@ -163,8 +163,8 @@ pub fn run_observed(
 /// A structure under test, uploaded. Its host copy is what its CPU twin traces.
 struct Candidate {
     structure: Structure,
-    /// The RBVH's parameters; None for the exact BVH.
-    level: Option<RbvhParams>,
+    /// The RBVH's parameters (its level); None for the exact BVH.
+    params: Option<RbvhParams>,
     tracer: Tracer,
     build_ms: f64,
     memory: Memory,
@@ -183,7 +183,7 @@ impl Candidate {
 
     /// "exact", "rbvh Q2", "rbvh custom": for messages.
     fn label(&self) -> String {
-        match &self.level {
+        match &self.params {
             None => self.method().name().into(),
             Some(params) => format!("{} {}", self.method().name(), params.level_label()),
         }
@@ -191,7 +191,7 @@ impl Candidate {
 
     /// "exact", "q2", "q2h" (height-only), "q2_lod", "custom": for file names.
     fn file_stem(&self) -> String {
-        match &self.level {
+        match &self.params {
             None => "exact".into(),
             Some(params) if self.method() == Kind::RbvhLod => {
                 format!("{}_lod", params.level_label().to_ascii_lowercase())
@@ -300,9 +300,9 @@ impl<'a> SceneBench<'a> {
         );
         let structure = Structure::Exact(bvh);
         let mut candidates = vec![Candidate {
-            tracer: Tracer::observed(ctx, &structure, progress)?,
+            tracer: Tracer::new_observed(ctx, &structure, progress)?,
             structure,
-            level: None,
+            params: None,
             build_ms,
             memory,
             seams: None,
@@ -335,7 +335,7 @@ impl<'a> SceneBench<'a> {
                 .structure
                 .bvh()
                 .filter(|_| config.seam_rays > 0);
-            let seams = exact.map(|exact| {
+            let seams = exact.and_then(|exact| {
                 observe(Event::Progress(format!(
                     "{}: {} rays at the seams of RBVH {}",
                     scene.name,
@@ -347,11 +347,11 @@ impl<'a> SceneBench<'a> {
             let structure = Structure::Rbvh(Arc::clone(&rbvh));
             candidates.push(Candidate {
                 tracer: with_jumps(
-                    Tracer::observed(ctx, &structure, progress)?,
+                    Tracer::new_observed(ctx, &structure, progress)?,
                     config.block_jumps,
                 )?,
                 structure,
-                level: Some(params),
+                params: Some(params),
                 build_ms: rbvh.stats.build_ms,
                 memory,
                 seams,
@@ -369,11 +369,11 @@ impl<'a> SceneBench<'a> {
                 let structure = Structure::RbvhLod(Arc::clone(&rbvh), Box::new(lod));
                 candidates.push(Candidate {
                     tracer: with_jumps(
-                        Tracer::observed(ctx, &structure, progress)?,
+                        Tracer::new_observed(ctx, &structure, progress)?,
                         config.block_jumps,
                     )?,
                     structure,
-                    level: Some(params),
+                    params: Some(params),
                     seams: None,
                     build_ms,
                     memory: Memory {
@@ -556,8 +556,8 @@ impl<'a> SceneBench<'a> {
                 triangles: self.scene.triangle_count() as u64,
                 points: self.scene.point_count() as u64,
                 method: c.method(),
-                quality: c.level.map(|params| params.quality_name().to_string()),
-                params: c.level.map(|params| Params::from(&params)),
+                quality: c.params.map(|params| params.quality_name().to_string()),
+                params: c.params.map(|params| Params::from(&params)),
                 lod: (c.method() == Kind::RbvhLod)
                     .then_some(self.config.lod)
                     .flatten(),
@@ -748,7 +748,7 @@ impl<'a> SceneBench<'a> {
                 let path = dir.join(format!("{}.png", c.file_stem()));
                 output::write_png(&path, image)?;
                 written.push(path);
-                if c.level.is_some() {
+                if c.params.is_some() {
                     let errors = error_image(
                         &self.primary,
                         exact_hits,
@@ -770,14 +770,19 @@ impl<'a> SceneBench<'a> {
 
 /// `count` rays aimed at `rbvh`'s seams ([`Rbvh::seam_rays`]), traced by the CPU twins of the
 /// exact BVH and of `rbvh`, and how many leaked ([`crate::rbvh::seams::count_leaks`]).
-fn seam_leaks(exact: &Bvh, rbvh: &Rbvh, count: usize, seed: u64) -> SeamRecord {
+/// None when there is nothing to aim at: no height-field leaf (all triangle leaves), or no
+/// triangle for the exact BVH to referee.
+fn seam_leaks(exact: &Bvh, rbvh: &Rbvh, count: usize, seed: u64) -> Option<SeamRecord> {
     let rays = rbvh.seam_rays(count, seed);
+    if rays.is_empty() || exact.triangles.is_empty() {
+        return None;
+    }
     let exact = exact.trace_cpu(&rays, false);
     let approx = rbvh.trace_cpu(&rays, false);
-    SeamRecord {
+    Some(SeamRecord {
         rays: rays.len() as u64,
         leaks: crate::rbvh::seams::count_leaks(&exact, &approx, rbvh.texel_size) as u64,
-    }
+    })
 }
 
 /// Most trace passes in one timed run: on lavapipe a pass takes milliseconds, on a large GPU tens

@@ -48,7 +48,7 @@ use crate::gpu::Context;
 use crate::gpu::ContextOptions;
 use crate::lod::LodParams;
 use crate::points::MIN_POINTS;
-use crate::rbvh::{RbvhParams, TexelFormat, QUALITY_NAMES};
+use crate::rbvh::{RbvhParams, TexelFormat};
 use crate::scene::PointSource;
 use crate::{Error, Result};
 
@@ -68,8 +68,8 @@ pub struct BenchConfig {
     /// Scene specs for [`crate::scene::Scene::load`]: built-in names, OBJ/glTF files, scene files.
     pub scenes: Vec<String>,
     /// RBVH levels, each measured against the exact BVH (which is always measured) and named by
-    /// [`RbvhParams::quality_name`] (a preset's name, or "custom"); their texel formats are
-    /// `texels`'.
+    /// [`RbvhParams::quality_name`] (a preset's name, or "custom"). Their `texels` field is not
+    /// read: each level is built in every format of [`BenchConfig::texels`].
     pub levels: Vec<RbvhParams>,
     /// Ray types to measure, in this order; at least one, and primary when plotting.
     pub ray_types: Vec<RayType>,
@@ -131,9 +131,7 @@ impl BenchConfig {
     pub fn new(scenes: Vec<String>, device: Device) -> BenchConfig {
         BenchConfig {
             scenes,
-            levels: (0..QUALITY_NAMES.len() as u32)
-                .map(|level| RbvhParams::quality(level).expect("a preset"))
-                .collect(),
+            levels: RbvhParams::presets(),
             ray_types: RayType::ALL.to_vec(),
             width: 256,
             height: 256,

@@ -7,8 +7,9 @@
 //!   answers "which children does the ray enter, and in which order".
 //! * `traverse`: the one CPU traversal of the node array, generic over what a leaf is (its
 //!   `Leaves` hook: the exact BVH's triangles here, an RBVH's height fields and levels of detail
-//!   in `crate::rbvh`), operation for operation the same as `glsl/traverse.glsl` (whose
-//!   hooks `glsl/bvh.glsl` and `glsl/rbvh.glsl` define), on the same packed data; with it the exact BVH's CPU reference tracer.
+//!   in `crate::rbvh`), operation for operation the same as `glsl/traverse.glsl` (whose hooks
+//!   `glsl/bvh.glsl`, `glsl/rbvh.glsl` and `glsl/lod.glsl` define), on the same packed data;
+//!   with it the exact BVH's CPU reference tracer.
 
 mod build;
 pub mod layout;

@@ -254,7 +254,7 @@ fn with_parts<T>(
     match structure {
         Structure::Exact(bvh) => {
             check_depth("bvh", bvh.depth)?;
-            let (sizes, arrays) = exact_parts(bvh);
+            let (sizes, arrays) = exact_parts(bvh)?;
             f(shader, sizes, &arrays)
         }
         Structure::Rbvh(rbvh) => {
@@ -274,26 +274,29 @@ fn with_parts<T>(
 }
 
 /// The shader sizes and the arrays (name, bytes) of the exact BVH, in binding order.
-fn exact_parts(bvh: &Bvh) -> (TraceParams, Arrays<'_, 2>) {
+fn exact_parts(bvh: &Bvh) -> Result<(TraceParams, Arrays<'_, 2>)> {
     let sizes = TraceParams {
-        node_count: bvh.nodes.len() as u32,
-        tri_count: bvh.triangles.len() as u32,
+        node_count: count32("bvh", "nodes", bvh.nodes.len())?,
+        tri_count: count32("bvh", "triangles", bvh.triangles.len())?,
         ..TraceParams::default()
     };
     let arrays = [
         ("BVH nodes", bytemuck::cast_slice(&bvh.nodes)),
         ("BVH triangles", bytemuck::cast_slice(&bvh.triangles)),
     ];
-    (sizes, arrays)
+    Ok((sizes, arrays))
+}
+
+/// `n` (of `what`, in `structure`) as the shaders' 32-bit count, or an error saying it is more.
+fn count32(structure: &str, what: &str, n: usize) -> Result<u32> {
+    u32::try_from(n).map_err(|_| Error::param(structure, format!("{n} {what}: more than 2^32")))
 }
 
 /// The shader sizes and the arrays (name, bytes) of an RBVH, in binding order; `atlas_words` is
 /// its atlas as the shaders read it ([`crate::rbvh::Rbvh::atlas_words`]: texels, then the
 /// blocks' height ranges).
 fn rbvh_parts<'a>(rbvh: &'a Rbvh, atlas_words: &'a [u32]) -> Result<(TraceParams, Arrays<'a, 4>)> {
-    let count = |what: &str, n: usize| {
-        u32::try_from(n).map_err(|_| Error::param("rbvh", format!("{n} {what}: more than 2^32")))
-    };
+    let count = |what: &str, n: usize| count32("rbvh", what, n);
     if !rbvh.atlas.pitch.is_power_of_two() {
         return Err(Error::param(
             "rbvh",
@@ -362,12 +365,16 @@ impl Tracer {
     /// triangle-leaf triangles, height-field leaves and atlas; with levels of detail, also their
     /// records and columns (traces then take one [`RayCone`] per ray, [`Tracer::trace_lod`]).
     pub fn new(ctx: &Context, structure: &Structure) -> Result<Self> {
-        Self::observed(ctx, structure, &Quiet)
+        Self::new_observed(ctx, structure, &Quiet)
     }
 
     /// [`Tracer::new`], reporting the upload to `progress` as one step counting bytes (written
     /// in 64 MiB steps, so a structure of gigabytes shows a moving bar).
-    pub fn observed(ctx: &Context, structure: &Structure, progress: &dyn Progress) -> Result<Self> {
+    pub fn new_observed(
+        ctx: &Context,
+        structure: &Structure,
+        progress: &dyn Progress,
+    ) -> Result<Self> {
         with_parts(structure, |shader, sizes, arrays| {
             Self::uploaded(ctx, shader, None, arrays, sizes, progress)
         })

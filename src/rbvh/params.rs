@@ -113,20 +113,33 @@ pub const QUALITY_NAMES: [&str; 5] = ["Q0", "Q1", "Q2", "Q3", "Q4"];
 /// `powi`: the compiler folds `powi` at compile time where the level is a constant and rounds
 /// differently from the same call at run time (724.07733 against 724.0773 for Q3, 512 against
 /// 511.99997 for Q2), so one preset built two ways was two RBVHs.
-const PRESET_RATES: [f32; 5] = [256.0, 362.038_67, 512.0, 724.077_33, 1024.0];
+const PRESET_RATES: [f32; QUALITY_NAMES.len()] = [256.0, 362.038_67, 512.0, 724.077_33, 1024.0];
 
 impl RbvhParams {
     /// Preset `level` (0 = Q0, coarsest … 4 = Q4, finest). Each level has √2× the sampling rate of
     /// the previous one, so about twice its texels.
     pub fn quality(level: u32) -> Result<RbvhParams> {
-        if level > 4 {
-            return Err(Error::param(
+        let rate = PRESET_RATES.get(level as usize).ok_or_else(|| {
+            Error::param(
                 "quality",
                 format!("{level} is not a preset; use 0..=4 (Q0 coarsest … Q4 finest)"),
-            ));
-        }
-        Ok(RbvhParams {
-            texels_per_diagonal: PRESET_RATES[level as usize],
+            )
+        })?;
+        Ok(Self::preset_at(*rate))
+    }
+
+    /// Every preset, Q0 to Q4.
+    pub fn presets() -> Vec<RbvhParams> {
+        PRESET_RATES
+            .iter()
+            .map(|&rate| Self::preset_at(rate))
+            .collect()
+    }
+
+    /// The presets' parameters at sampling rate `rate`.
+    fn preset_at(rate: f32) -> RbvhParams {
+        RbvhParams {
+            texels_per_diagonal: rate,
             refinement: Refinement::NormalCone {
                 max_angle_deg: 60.0,
             },
@@ -136,20 +149,19 @@ impl RbvhParams {
             min_leaf_texels: 3.0,
             sampled_criterion_texels: 4.0,
             texels: TexelFormat::HeightNormal,
-        })
+        }
     }
 
     /// The preset these parameters are, if any: the level whose [`RbvhParams::quality`] they equal
     /// in everything but the texel format (which every preset can take).
     pub fn preset(&self) -> Option<u32> {
-        (0..QUALITY_NAMES.len() as u32).find(|&level| {
-            RbvhParams::quality(level).is_ok_and(|p| {
-                RbvhParams {
-                    texels: self.texels,
-                    ..p
-                } == *self
-            })
-        })
+        let level = Self::presets().iter().position(|p| {
+            RbvhParams {
+                texels: self.texels,
+                ..*p
+            } == *self
+        })?;
+        Some(level as u32)
     }
 
     /// `"Q0"`…`"Q4"` for a preset ([`RbvhParams::preset`]), `"custom"` for any other parameters:
@@ -303,7 +315,7 @@ mod tests {
             let exact = 256.0 * 2f64.powf(f64::from(level) / 2.0);
             let rate = RbvhParams::quality(level).unwrap().texels_per_diagonal;
             assert_eq!(rate, exact as f32, "Q{level}");
-            // Whatever the level's origin: a literal here, a run-time value in the loop above.
+            // A level the compiler cannot see gives the same preset.
             let runtime = std::hint::black_box(level);
             assert_eq!(
                 RbvhParams::quality(runtime).unwrap(),

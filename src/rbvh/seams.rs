@@ -44,12 +44,8 @@ impl Rbvh {
         let pitch = self.atlas.pitch as usize;
         for leaf in &self.leaves {
             let (res_u, res_v) = (leaf.res_u as i64, leaf.res_v as i64);
-            let u = Vec3::from(leaf.axis_u);
-            let v = Vec3::from(leaf.axis_v);
-            let w = Vec3::from(leaf.axis_w);
-            // World offset of one texel along u and v (the axes hold u / texel).
-            let (du, dv) = (u / u.length_squared(), v / v.length_squared());
-            let origin = Vec3::from(leaf.origin);
+            let grid = leaf.grid();
+            let (du, dv, w) = (grid.step_u, grid.step_v, grid.axis_w);
             let texel = |i: i64, j: i64| {
                 if i < 0 || j < 0 || i >= res_u || j >= res_v {
                     return None;
@@ -64,8 +60,7 @@ impl Rbvh {
             for j in 0..res_v {
                 for i in 0..res_u {
                     let Some(sample) = texel(i, j) else { continue };
-                    let h = f32::from(sample.height_code()) * leaf.h_scale;
-                    let point = origin + (i as f32 + 0.5) * du + (j as f32 + 0.5) * dv + h * w;
+                    let point = grid.point(i as u32, j as u32, sample.height_code());
                     let normal = match self.params.texels {
                         TexelFormat::HeightNormal => sample.normal(),
                         TexelFormat::Height => w,
@@ -89,9 +84,11 @@ impl Rbvh {
         out
     }
 
-    /// `count` rays aimed at [`Rbvh::seam_targets`] (cycled through evenly when there are fewer
-    /// targets than rays, spread evenly when there are more), each starting 8 texels out along
-    /// its target's normal tilted by up to about 22° (0.4 rad), and aimed at the target.
+    /// `count` rays aimed at [`Rbvh::seam_targets`] (ray `k` at target `⌊k · targets / count⌋`:
+    /// each target a run of equal shares when there are fewer targets than rays, every
+    /// `targets / count`-th when there are more), each starting 8 texels out along its target's
+    /// normal tilted by up to about 22° (atan 0.4) in a random direction, and aimed at the
+    /// target; unit directions, so `t` is a world distance.
     /// Reproducible: each ray's tilt comes from a stream hashed from `seed` and its index.
     pub fn seam_rays(&self, count: usize, seed: u64) -> Vec<Ray> {
         let targets = self.seam_targets();
@@ -127,7 +124,9 @@ const NEIGHBOURS: [(i64, i64); 8] = [
 ];
 
 /// How many of the rays leaked: the exact BVH hit the surface (`exact`) and the RBVH found nothing
-/// before `LEAK_TEXELS` texels of `texel` behind it (`approx`, the same rays).
+/// before `LEAK_TEXELS` texels of `texel` behind it (`approx`: the same rays in the same order,
+/// with unit directions so that `t` is a world distance, as [`Rbvh::seam_rays`] makes them; pairs
+/// beyond the shorter slice are not counted).
 pub fn count_leaks(exact: &[Hit], approx: &[Hit], texel: f32) -> usize {
     exact
         .iter()

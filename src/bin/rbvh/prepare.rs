@@ -228,7 +228,7 @@ impl Prepared {
     /// on `progress`. Says so on stderr when the structure is too large for storage-buffer
     /// bindings and is read through buffer device addresses instead.
     pub fn tracer(&self, progress: &dyn rbvh::progress::Progress) -> Result<Tracer> {
-        let tracer = Tracer::observed(&self.ctx, &self.structure, progress)
+        let tracer = Tracer::new_observed(&self.ctx, &self.structure, progress)
             .with_context(|| format!("uploading the {}", self.structure.label()))?;
         if tracer.reach() == Reach::DeviceAddresses && self.ctx.addressing() == Addressing::Auto {
             eprintln!(
