@@ -8,8 +8,8 @@ use super::Bvh;
 use crate::geom::Aabb;
 
 impl Bvh {
-    /// The triangles whose leaf boxes overlap `query` (a superset of those inside it), in leaf
-    /// order, appended to `out`: what lies near a region, for builders that sample the surface
+    /// The triangles whose boxes overlap `query` (a superset of those inside it), in leaf order,
+    /// appended to `out`: what lies near a region, for builders that sample the surface
     /// around one piece of it. Bounded like the traversal: at most one visit per node.
     pub(crate) fn triangles_near(&self, query: &Aabb, out: &mut Vec<[Vec3; 3]>) {
         let overlaps = |b: &Aabb| b.min.cmple(query.max).all() && b.max.cmpge(query.min).all();
@@ -35,7 +35,8 @@ impl Bvh {
                     out.extend(
                         self.triangles[first.min(end)..end]
                             .iter()
-                            .map(|t| t.vertices()),
+                            .map(|t| t.vertices())
+                            .filter(|v| overlaps(&Aabb::from_points(*v))),
                     );
                 } else {
                     stack.push(c.child);

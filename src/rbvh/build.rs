@@ -416,8 +416,9 @@ impl Builder<'_> {
         balanced(children)
     }
 
-    /// The scene's triangles near `frame`'s tile: in its footprint, within three texels of the
-    /// height range of the leaf's own `tris` (the ring the rasterizer samples from them).
+    /// The scene's triangles near `frame`'s tile (one window of a leaf's frame): in its
+    /// footprint, within three texels of the height range of the leaf's own `tris` (the ring the
+    /// rasterizer samples from them).
     fn triangles_near(&self, frame: &Frame, tris: &[[Vec3; 3]]) -> Vec<[Vec3; 3]> {
         let Some(bvh) = &self.near else {
             return Vec::new();
@@ -469,9 +470,9 @@ impl Builder<'_> {
                 let elements = triangle_elements(&tris);
                 let (frame, judge) =
                     self.judged_frame(&elements, tris.as_flattened(), 0.0, diagonal)?;
-                let near = self.triangles_near(&frame, &tris);
                 // Layers closer than a texel are one surface at this sampling rate.
                 self.tiles(&frame, |window| {
+                    let near = self.triangles_near(window, &tris);
                     rasterize(&tris, window, self.texel, judge, &near)
                 })
             }
