@@ -40,8 +40,8 @@
 //!    triangles near the tile (the builder finds them in a BVH of the scene), taking the one over
 //!    the sample whose height lies nearest the mean of those neighbours, within three texels;
 //!    that replaces the extrapolation there. Neighbouring leaves then overlap on the real surface,
-//!    at corners too, where one extrapolated 4-neighbour ring left gaps (2 in 10,000 rays aimed at
-//!    the seams of the blob at Q0 slipped through; none now at any preset), and the ring follows
+//!    at corners too, where one extrapolated 4-neighbour ring left gaps (about 4 in 10,000 rays
+//!    aimed at the seams of the blob at Q0 slipped through; none now at any preset), and the ring follows
 //!    the surface where extrapolation stuck out at silhouettes and folds (t p99 on the dragon
 //!    Q2 0.075% → 0.031% of the diagonal). Where no triangle lies over a ring sample (an open
 //!    boundary, a face turned edge-on) the extrapolation stays.
