@@ -7,6 +7,7 @@
 use std::time::Instant;
 
 use glam::Vec3;
+use rayon::prelude::*;
 
 use super::layout::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
 use crate::geom::Aabb;
@@ -151,6 +152,7 @@ impl Bvh {
         }
         let start = Instant::now();
         let prims: Vec<Prim> = (0..scene.triangle_count())
+            .into_par_iter()
             .map(|i| {
                 let bounds = Aabb::from_points(scene.triangle(i));
                 Prim {

@@ -10,11 +10,9 @@
 //!   in `crate::rbvh`), operation for operation the same as `glsl/traverse.glsl` (whose hooks
 //!   `glsl/bvh.glsl`, `glsl/rbvh.glsl` and `glsl/lod.glsl` define), on the same packed data;
 //!   with it the exact BVH's CPU reference tracer.
-//! * `query`: the triangles near a box, for the RBVH builder's ring of samples.
 
 mod build;
 pub mod layout;
-mod query;
 mod traverse;
 mod validate;
 

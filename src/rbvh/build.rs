@@ -72,10 +72,11 @@ enum Input<'a> {
     Points(&'a [Splat]),
 }
 
-/// The builder's BVH of the scene's triangles, for [`Builder::triangles_near`].
-const NEAR_QUERY_BVH: crate::bvh::BuildParams = crate::bvh::BuildParams {
+/// The builder's BVH of the scene's triangles, which the ring of samples around each leaf is
+/// sampled from by short rays (`raster.rs`).
+const SURFACE_BVH: crate::bvh::BuildParams = crate::bvh::BuildParams {
     bins: 4,
-    max_leaf: 16,
+    max_leaf: 4,
     traversal_cost: 1.0,
     median_below_depth: 0,
 };
@@ -90,7 +91,7 @@ struct Builder<'a> {
     progress: &'a dyn Progress,
     texel: f32,
     /// The scene's triangles in a BVH, for the surface around each leaf (its ring of samples).
-    near: Option<crate::bvh::Bvh>,
+    surface: Option<crate::bvh::Bvh>,
 }
 
 impl Rbvh {
@@ -198,10 +199,11 @@ impl Rbvh {
             Input::Points(_) => scene.points.as_ref().is_some_and(|c| c.colours.is_some()),
         };
         let count = prims.len();
-        let near = match &input {
-            // Only asked which triangles lie near a box: object-median splits (no SAH binning)
-            // and larger leaves build it in a fraction of the exact BVH's time.
-            Input::Triangles(_) => Some(crate::bvh::Bvh::build_with(scene, &NEAR_QUERY_BVH)?),
+        let surface = match &input {
+            // Only traced by rays a few texels long: object-median splits (no SAH binning)
+            // build it in a fraction of the exact BVH's time, and leaves of four triangles keep
+            // a ray's triangle tests few (16 cost the dragon's Q4 a tenth more build time).
+            Input::Triangles(_) => Some(crate::bvh::Bvh::build_with(scene, &SURFACE_BVH)?),
             Input::Points(_) => None,
         };
         let builder = Builder {
@@ -211,7 +213,7 @@ impl Rbvh {
             params,
             texel,
             progress,
-            near,
+            surface,
         };
         let mut order: Vec<u32> = (0..count as u32).collect();
         let root = step(
@@ -416,34 +418,6 @@ impl Builder<'_> {
         balanced(children)
     }
 
-    /// The scene's triangles near `frame`'s tile (one window of a leaf's frame): in its
-    /// footprint, within three texels of the height range of the leaf's own `tris` (the ring the
-    /// rasterizer samples from them).
-    fn triangles_near(&self, frame: &Frame, tris: &[[Vec3; 3]]) -> Vec<[Vec3; 3]> {
-        let Some(bvh) = &self.near else {
-            return Vec::new();
-        };
-        let (lo, hi) =
-            tris.iter()
-                .flatten()
-                .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &p| {
-                    let h = (p - frame.origin).dot(frame.w);
-                    (lo.min(h), hi.max(h))
-                });
-        let pad = 3.0 * frame.texel;
-        let mut query = Aabb::EMPTY;
-        for s in [0.0, frame.res_u as f32 * frame.texel] {
-            for t in [0.0, frame.res_v as f32 * frame.texel] {
-                for h in [lo - pad, hi + pad] {
-                    query = query.grow(frame.origin + s * frame.u + t * frame.v + h * frame.w);
-                }
-            }
-        }
-        let mut out = Vec::new();
-        bvh.triangles_near(&query, &mut out);
-        out
-    }
-
     /// `tiles` of the set `order` with their sources turned from indices into the set to scene
     /// triangle or point indices, or dropped when no colour channel needs them.
     fn scene_sources(&self, mut tiles: Vec<Tile>, order: &[u32]) -> Vec<Tile> {
@@ -472,8 +446,7 @@ impl Builder<'_> {
                     self.judged_frame(&elements, tris.as_flattened(), 0.0, diagonal)?;
                 // Layers closer than a texel are one surface at this sampling rate.
                 self.tiles(&frame, |window| {
-                    let near = self.triangles_near(window, &tris);
-                    rasterize(&tris, window, self.texel, judge, &near)
+                    rasterize(&tris, window, self.texel, judge, self.surface.as_ref())
                 })
             }
             Input::Points(all) => {
