@@ -63,12 +63,12 @@ pub struct Bvh {
 }
 
 /// Per-triangle build input.
-struct Prim {
-    bounds: Aabb,
-    centroid: Vec3,
+pub(super) struct Prim {
+    pub(super) bounds: Aabb,
+    pub(super) centroid: Vec3,
 }
 
-enum BuildNode {
+pub(super) enum BuildNode {
     Leaf {
         bounds: Aabb,
         start: u32,
@@ -81,7 +81,7 @@ enum BuildNode {
 }
 
 impl BuildNode {
-    fn bounds(&self) -> Aabb {
+    pub(super) fn bounds(&self) -> Aabb {
         match self {
             BuildNode::Leaf { bounds, .. } | BuildNode::Inner { bounds, .. } => *bounds,
         }
@@ -89,7 +89,7 @@ impl BuildNode {
 }
 
 /// Subtrees smaller than this are built on the calling thread.
-const PARALLEL_THRESHOLD: usize = 4096;
+pub(super) const PARALLEL_THRESHOLD: usize = 4096;
 
 impl Bvh {
     /// Builds with [`BuildParams::DEFAULT`].
@@ -133,34 +133,8 @@ impl Bvh {
                 ),
             ));
         }
-        scene.validate()?;
-        if scene.triangle_count() >= LEAF_BIT as usize {
-            return Err(Error::param(
-                "scene",
-                format!("{} triangles exceed 2^31", scene.triangle_count()),
-            ));
-        }
-        if scene.triangle_count() == 0 && scene.points.is_some() {
-            return Err(Error::param(
-                "scene",
-                format!(
-                    "{} is a point cloud: it has no triangles for an exact BVH to trace; build an RBVH \
-                     of its points instead",
-                    scene.name
-                ),
-            ));
-        }
         let start = Instant::now();
-        let prims: Vec<Prim> = (0..scene.triangle_count())
-            .into_par_iter()
-            .map(|i| {
-                let bounds = Aabb::from_points(scene.triangle(i));
-                Prim {
-                    bounds,
-                    centroid: bounds.center(),
-                }
-            })
-            .collect();
+        let prims = prims(scene)?;
         let mut order: Vec<u32> = (0..prims.len() as u32).collect();
         let builder = Builder {
             prims: &prims,
@@ -173,43 +147,7 @@ impl Bvh {
             prims.len() as u64,
             || (!order.is_empty()).then(|| builder.build(&mut order, 0, 0)),
         );
-        let mut nodes = Vec::new();
-        let root_children = match &root {
-            None => [ChildRef::ABSENT, ChildRef::ABSENT],
-            Some(leaf @ BuildNode::Leaf { .. }) => [child_ref(leaf, 0), ChildRef::ABSENT],
-            Some(BuildNode::Inner { children, .. }) => {
-                nodes.push(GpuNode::default());
-                let refs = [
-                    flatten(&children[0], &mut nodes),
-                    flatten(&children[1], &mut nodes),
-                ];
-                nodes[0] = GpuNode::new(refs[0], refs[1]);
-                refs
-            }
-        };
-        if nodes.is_empty() {
-            nodes.push(GpuNode::new(root_children[0], root_children[1]));
-        }
-        let depth = root.as_ref().map_or(0, tree_depth).max(1);
-        if depth > STACK_SIZE {
-            return Err(Error::param(
-                "median_below_depth",
-                format!(
-                    "the tree has depth {depth}, beyond the {STACK_SIZE}-entry traversal stack"
-                ),
-            ));
-        }
-        let triangles = order
-            .iter()
-            .map(|&i| GpuTriangle::new(scene.triangle(i as usize), i))
-            .collect();
-        Ok(Bvh {
-            nodes,
-            triangles,
-            bounds: root.as_ref().map_or(Aabb::EMPTY, BuildNode::bounds),
-            depth,
-            build_ms: start.elapsed().as_secs_f64() * 1e3,
-        })
+        assemble(scene, root.as_ref(), &order, start)
     }
 
     /// Bytes of the node array.
@@ -221,6 +159,85 @@ impl Bvh {
     pub fn triangle_bytes(&self) -> u64 {
         std::mem::size_of_val(self.triangles.as_slice()) as u64
     }
+}
+
+/// The build input of `scene`'s triangles, once the scene is checked: [`Scene::validate`], fewer
+/// than 2^31 triangles, and triangles at all where it is a point cloud.
+pub(super) fn prims(scene: &Scene) -> Result<Vec<Prim>> {
+    scene.validate()?;
+    if scene.triangle_count() >= LEAF_BIT as usize {
+        return Err(Error::param(
+            "scene",
+            format!("{} triangles exceed 2^31", scene.triangle_count()),
+        ));
+    }
+    if scene.triangle_count() == 0 && scene.points.is_some() {
+        return Err(Error::param(
+            "scene",
+            format!(
+                "{} is a point cloud: it has no triangles for an exact BVH to trace; build an RBVH \
+                 of its points instead",
+                scene.name
+            ),
+        ));
+    }
+    Ok((0..scene.triangle_count())
+        .into_par_iter()
+        .map(|i| {
+            let bounds = Aabb::from_points(scene.triangle(i));
+            Prim {
+                bounds,
+                centroid: bounds.center(),
+            }
+        })
+        .collect())
+}
+
+/// The packed [`Bvh`] of the tree `root` over `scene`'s triangles in leaf `order`, built since
+/// `start`; an error when it is deeper than the traversal stack.
+fn assemble(scene: &Scene, root: Option<&BuildNode>, order: &[u32], start: Instant) -> Result<Bvh> {
+    let (nodes, depth) = pack(root)?;
+    let triangles = order
+        .par_iter()
+        .map(|&i| GpuTriangle::new(scene.triangle(i as usize), i))
+        .collect();
+    Ok(Bvh {
+        nodes,
+        triangles,
+        bounds: root.map_or(Aabb::EMPTY, BuildNode::bounds),
+        depth,
+        build_ms: start.elapsed().as_secs_f64() * 1e3,
+    })
+}
+
+/// The node array of the tree `root` (depth-first, node 0 the root) and its depth (at least 1);
+/// an error when it is deeper than the traversal stack.
+pub(super) fn pack(root: Option<&BuildNode>) -> Result<(Vec<GpuNode>, u32)> {
+    let mut nodes = Vec::new();
+    let root_children = match root {
+        None => [ChildRef::ABSENT, ChildRef::ABSENT],
+        Some(leaf @ BuildNode::Leaf { .. }) => [child_ref(leaf, 0), ChildRef::ABSENT],
+        Some(BuildNode::Inner { children, .. }) => {
+            nodes.push(GpuNode::default());
+            let refs = [
+                flatten(&children[0], &mut nodes),
+                flatten(&children[1], &mut nodes),
+            ];
+            nodes[0] = GpuNode::new(refs[0], refs[1]);
+            refs
+        }
+    };
+    if nodes.is_empty() {
+        nodes.push(GpuNode::new(root_children[0], root_children[1]));
+    }
+    let depth = root.map_or(0, tree_depth).max(1);
+    if depth > STACK_SIZE {
+        return Err(Error::param(
+            "median_below_depth",
+            format!("the tree has depth {depth}, beyond the {STACK_SIZE}-entry traversal stack"),
+        ));
+    }
+    Ok((nodes, depth))
 }
 
 fn tree_depth(node: &BuildNode) -> u32 {

@@ -41,7 +41,7 @@ use super::raster::{rasterize, Frame, Tile, NO_SOURCE};
 use super::splat::{splat, Splat};
 use super::split::{split, SplitPrim};
 use super::{Rbvh, RbvhParams, RbvhStats, TexelFormat};
-use crate::bvh::{join_halves, ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
+use crate::bvh::{join_halves, ChildRef, GpuNode, GpuTriangle, LinearBvh, LEAF_BIT, STACK_SIZE};
 use crate::geom::Aabb;
 use crate::progress::{step, Progress, Quiet};
 use crate::scene::Scene;
@@ -72,14 +72,10 @@ enum Input<'a> {
     Points(&'a [Splat]),
 }
 
-/// The builder's BVH of the scene's triangles, which the ring of samples around each leaf is
-/// sampled from by short rays (`raster.rs`).
-const SURFACE_BVH: crate::bvh::BuildParams = crate::bvh::BuildParams {
-    bins: 4,
-    max_leaf: 4,
-    traversal_cost: 1.0,
-    median_below_depth: 0,
-};
+/// Leaves of the builder's BVH of the scene, which the ring of samples around each leaf is
+/// sampled from by short rays (`raster.rs`): leaves of four keep a ray's triangle tests few (16
+/// cost the dragon's Q4 a tenth more build time).
+const SURFACE_LEAF: usize = 4;
 
 struct Builder<'a> {
     input: Input<'a>,
@@ -91,7 +87,7 @@ struct Builder<'a> {
     progress: &'a dyn Progress,
     texel: f32,
     /// The scene's triangles in a BVH, for the surface around each leaf (its ring of samples).
-    surface: Option<crate::bvh::Bvh>,
+    surface: Option<LinearBvh<'a>>,
 }
 
 impl Rbvh {
@@ -200,10 +196,9 @@ impl Rbvh {
         };
         let count = prims.len();
         let surface = match &input {
-            // Only traced by rays a few texels long: object-median splits (no SAH binning)
-            // build it in a fraction of the exact BVH's time, and leaves of four triangles keep
-            // a ray's triangle tests few (16 cost the dragon's Q4 a tenth more build time).
-            Input::Triangles(_) => Some(crate::bvh::Bvh::build_with(scene, &SURFACE_BVH)?),
+            // Only traced by rays a few texels long: a linear BVH serves, in a fraction of the
+            // exact BVH's time.
+            Input::Triangles(_) => Some(LinearBvh::build(scene, SURFACE_LEAF)?),
             Input::Points(_) => None,
         };
         let builder = Builder {

@@ -58,7 +58,7 @@
 
 use glam::{DVec2, DVec3, Vec3};
 
-use crate::bvh::Bvh;
+use crate::bvh::LinearBvh;
 use crate::geom::Ray;
 
 use super::layout::{cell_triangles, GpuHeightfield, Texel};
@@ -215,7 +215,7 @@ pub fn rasterize(
     frame: &Frame,
     fold_tolerance: f32,
     judge: Option<Refinement>,
-    surface: Option<&Bvh>,
+    surface: Option<&LinearBvh>,
 ) -> Option<Tile> {
     let res_u = frame.res_u as usize;
     let res_v = frame.res_v as usize;
@@ -337,9 +337,9 @@ struct RingSample {
 /// sample is found by two short rays along `±w` from that mean height (the second only as far
 /// as the first one's hit), so the cost follows the ring's length, not how many triangles lie
 /// near the tile: gathering and rasterizing those grew without bound where triangles are much
-/// smaller than a texel (the paper-scale scene's Q2 took 98 s instead of 16 s; 23 s by rays).
+/// smaller than a texel (the paper-scale scene's Q2 took 98 s; 24 s by rays, below its exact BVH).
 fn ring_from_surface(
-    surface: &Bvh,
+    surface: &LinearBvh,
     frame: &Frame,
     height: &[f32],
     source: &[u32],
@@ -348,7 +348,7 @@ fn ring_from_surface(
     let reach = 3.0 * frame.texel;
     // The nearest hit before `tmax` along `dir` from `from`, on a face not seen edge-on.
     let probe = |from: Vec3, dir: Vec3, tmax: f32| {
-        let (hit, _) = surface.closest_hit(&Ray::new(from, dir, 0.0, tmax));
+        let hit = surface.closest_hit(&Ray::new(from, dir, 0.0, tmax));
         (hit.is_hit() && hit.normal().dot(frame.w).abs() > EDGE_ON_COS).then_some(hit)
     };
     let mut ring = Vec::new();

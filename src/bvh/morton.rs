@@ -1,0 +1,257 @@
+//! A linear BVH: the triangles sorted along a Morton curve of their centroids and split where
+//! the codes' highest bit differs, so that every node is a cell of the curve's octree (Lauterbach
+//! et al., "Fast BVH Construction on GPUs", 2009; the split search of Karras, "Maximizing
+//! Parallelism in the Construction of BVHs, Octrees, and k-d Trees", 2012).
+//!
+//! For builders that need *a* tree of the scene quickly rather than a good one: the RBVH builder
+//! samples the ring around each leaf by rays a few texels long ([`crate::rbvh`]'s `raster.rs`),
+//! for which node quality matters little, while a median-split [`Bvh`] cost a third of the whole
+//! RBVH build at the paper's scale (a selection over scattered centroids per level, and a copy of
+//! every triangle: 1 GB there). Here one parallel sort does the ordering, each split is a binary
+//! search, boxes are merged bottom-up once, and leaves read the scene's own triangles through
+//! the sorted order.
+
+use rayon::prelude::*;
+
+use super::build::{join_halves, pack, prims, BuildNode, Prim, PARALLEL_THRESHOLD};
+use super::layout::{GpuNode, LEAF_BIT};
+use super::traverse::{traverse, Leaves};
+use crate::geom::{intersect_triangle, Aabb, Hit, Ray, RayShear};
+use crate::probe::TraceStats;
+use crate::scene::Scene;
+use crate::Result;
+
+/// Bits per axis of a code (63 in all).
+const BITS: u32 = 21;
+
+/// Depth from which nodes are split at the middle of their range rather than at a bit: equal
+/// codes have no bit to split at, and bit splits may be one-sided for many levels. Keeps the
+/// depth within `MIDDLE_BELOW_DEPTH + log2(n) < STACK_SIZE` for any input below 2^31 triangles.
+const MIDDLE_BELOW_DEPTH: u32 = 32;
+
+/// A linear BVH over a scene's triangles, which it reads in place.
+pub(crate) struct LinearBvh<'s> {
+    scene: &'s Scene,
+    /// Node 0 is the root; leaves index [`LinearBvh::order`].
+    nodes: Vec<GpuNode>,
+    /// Scene triangle indices in leaf order.
+    order: Vec<u32>,
+}
+
+impl<'s> LinearBvh<'s> {
+    /// The linear BVH of `scene`'s triangles with leaves of at most `max_leaf` (at least 1), with
+    /// the same checks and errors as [`super::Bvh::build_with`].
+    pub(crate) fn build(scene: &'s Scene, max_leaf: usize) -> Result<Self> {
+        let prims = prims(scene)?;
+        let centroids = prims
+            .par_iter()
+            .map(|p| Aabb::EMPTY.grow(p.centroid))
+            .reduce(|| Aabb::EMPTY, Aabb::union);
+        let scale =
+            ((1u32 << BITS) - 1) as f32 / centroids.extent().max_element().max(f32::MIN_POSITIVE);
+        let mut keyed: Vec<(u64, u32)> = prims
+            .par_iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let cell = ((p.centroid - centroids.min) * scale)
+                    .to_array()
+                    .map(|x| x as u32);
+                (morton(cell), i as u32)
+            })
+            .collect();
+        keyed.par_sort_unstable();
+        let (codes, order): (Vec<u64>, Vec<u32>) = keyed.into_iter().unzip();
+        let builder = Linear {
+            prims: &prims,
+            codes: &codes,
+            order: &order,
+            max_leaf: max_leaf.max(1),
+        };
+        let root = (!order.is_empty()).then(|| builder.build(0, order.len(), 0));
+        let (nodes, _) = pack(root.as_ref())?;
+        Ok(LinearBvh {
+            scene,
+            nodes,
+            order,
+        })
+    }
+
+    /// The closest hit of `ray` (its `id` the scene triangle's index), or [`Hit::MISS`].
+    pub(crate) fn closest_hit(&self, ray: &Ray) -> Hit {
+        let mut leaves = SceneTriangles {
+            bvh: self,
+            shear: RayShear::new(ray),
+            tmin: ray.tmin,
+            best: None,
+        };
+        traverse(&self.nodes, ray, false, &mut leaves, &mut ());
+        leaves.best.map_or(Hit::MISS, |(prim, t)| {
+            let [a, b, c] = self.scene.triangle(prim as usize);
+            Hit {
+                t,
+                normal: (b - a).cross(c - a).normalize_or_zero().to_array(),
+                id: prim,
+                reserved: [0; 3],
+            }
+        })
+    }
+}
+
+/// The leaf hook of [`LinearBvh`]: the scene's triangles through the leaf order.
+struct SceneTriangles<'b, 's> {
+    bvh: &'b LinearBvh<'s>,
+    shear: RayShear,
+    tmin: f32,
+    /// The scene index and distance of the nearest hit so far.
+    best: Option<(u32, f32)>,
+}
+
+impl Leaves<()> for SceneTriangles<'_, '_> {
+    fn test(
+        &mut self,
+        reference: u32,
+        count: u32,
+        t_closest: &mut f32,
+        stats: &mut TraceStats,
+        _probe: &mut (),
+    ) -> bool {
+        let order = &self.bvh.order;
+        let first = ((reference & !LEAF_BIT) as usize).min(order.len());
+        let end = first.saturating_add(count as usize).min(order.len());
+        let mut found = false;
+        for &prim in &order[first..end] {
+            stats.counters.triangles += 1;
+            let [a, b, c] = self.bvh.scene.triangle(prim as usize);
+            if let Some(t) = intersect_triangle(&self.shear, a, b, c, self.tmin, *t_closest) {
+                *t_closest = t;
+                self.best = Some((prim, t));
+                found = true;
+            }
+        }
+        found
+    }
+}
+
+/// The 3·[`BITS`]-bit code interleaving `cell`'s coordinates (x in the lowest bit of each
+/// triple); coordinates are clamped to [`BITS`] bits.
+fn morton(cell: [u32; 3]) -> u64 {
+    let spread = |x: u32| {
+        let mut x = u64::from(x.min((1 << BITS) - 1));
+        x = (x | x << 32) & 0x001f_0000_0000_ffff;
+        x = (x | x << 16) & 0x001f_0000_ff00_00ff;
+        x = (x | x << 8) & 0x100f_00f0_0f00_f00f;
+        x = (x | x << 4) & 0x10c3_0c30_c30c_30c3;
+        (x | x << 2) & 0x1249_2492_4924_9249
+    };
+    spread(cell[0]) | spread(cell[1]) << 1 | spread(cell[2]) << 2
+}
+
+struct Linear<'a> {
+    prims: &'a [Prim],
+    /// Sorted codes, `order[k]`'s at `k`.
+    codes: &'a [u64],
+    order: &'a [u32],
+    max_leaf: usize,
+}
+
+impl Linear<'_> {
+    /// The subtree over the sorted range `lo..hi` (non-empty).
+    fn build(&self, lo: usize, hi: usize, depth: u32) -> BuildNode {
+        let n = hi - lo;
+        if n <= self.max_leaf {
+            let bounds = self.order[lo..hi]
+                .iter()
+                .fold(Aabb::EMPTY, |b, &i| b.union(self.prims[i as usize].bounds));
+            return BuildNode::Leaf {
+                bounds,
+                start: lo as u32,
+                count: n as u32,
+            };
+        }
+        let (first, last) = (self.codes[lo], self.codes[hi - 1]);
+        let mid = if depth < MIDDLE_BELOW_DEPTH && first != last {
+            // The codes share every bit above the highest that differs between the range's ends;
+            // those with it clear come first.
+            let bit = 63 - (first ^ last).leading_zeros();
+            lo + self.codes[lo..hi].partition_point(|&c| c >> bit & 1 == 0)
+        } else {
+            lo + n / 2
+        };
+        let (a, b) = join_halves(
+            n >= PARALLEL_THRESHOLD,
+            || self.build(lo, mid, depth + 1),
+            || self.build(mid, hi, depth + 1),
+        );
+        BuildNode::Inner {
+            bounds: a.bounds().union(b.bounds()),
+            children: Box::new([a, b]),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Bvh;
+    use glam::Vec3;
+
+    #[test]
+    fn codes_interleave_the_axes_from_x_up() {
+        assert_eq!(morton([1, 0, 0]), 0b001);
+        assert_eq!(morton([0, 1, 0]), 0b010);
+        assert_eq!(morton([0, 0, 1]), 0b100);
+        assert_eq!(morton([3, 0, 1]), 0b001_101);
+        let top = (1 << BITS) - 1;
+        assert_eq!(morton([top, top, top]), (1u64 << 63) - 1);
+        assert_eq!(morton([u32::MAX, 0, 0]), morton([top, 0, 0]));
+    }
+
+    #[test]
+    fn the_linear_bvh_finds_what_the_sah_bvh_finds() {
+        let scene = Scene::builtin("default").expect("built-in scene");
+        let linear = LinearBvh::build(&scene, 4).expect("builds");
+        let sah = Bvh::build(&scene).expect("builds");
+        let mut order = linear.order.clone();
+        order.sort_unstable();
+        assert!(order.iter().copied().eq(0..scene.triangle_count() as u32));
+        let rays = scene.camera_or_framed(1.0).primary_rays(64, 64);
+        let mut hits = 0;
+        for ray in &rays {
+            let a = linear.closest_hit(ray);
+            let (b, _) = sah.closest_hit(ray);
+            assert_eq!(a.is_hit(), b.is_hit());
+            if a.is_hit() {
+                hits += 1;
+                assert_eq!(a.t, b.t);
+                assert_eq!(a.normal, b.normal);
+            }
+        }
+        assert!(hits > rays.len() / 8, "{hits} of {} rays hit", rays.len());
+    }
+
+    #[test]
+    fn equal_centroids_split_at_the_middle_within_the_stack() {
+        let mut scene = Scene::new("stack");
+        let triangles = vec![[0, 1, 2]; 5000];
+        scene.push_object(
+            "one triangle, many times",
+            &[Vec3::ZERO, Vec3::X, Vec3::Y],
+            &triangles,
+        );
+        let bvh = LinearBvh::build(&scene, 1).expect("builds");
+        assert_eq!(bvh.order.len(), 5000);
+        // Middle splits all the way (depth 13, which `pack` checks against the stack).
+        assert_eq!(
+            bvh.nodes.len(),
+            4999,
+            "a binary tree over 5000 leaves of one"
+        );
+        let hit = bvh.closest_hit(&Ray::new(
+            glam::Vec3::new(0.25, 0.25, 1.0),
+            glam::Vec3::NEG_Z,
+            0.0,
+            f32::INFINITY,
+        ));
+        assert_eq!(hit.t, 1.0);
+    }
+}
