@@ -196,7 +196,7 @@ pub(super) fn prims(scene: &Scene) -> Result<Vec<Prim>> {
 /// The packed [`Bvh`] of the tree `root` over `scene`'s triangles in leaf `order`, built since
 /// `start`; an error when it is deeper than the traversal stack.
 fn assemble(scene: &Scene, root: Option<&BuildNode>, order: &[u32], start: Instant) -> Result<Bvh> {
-    let (nodes, depth) = pack(root)?;
+    let (nodes, depth) = pack(root, "median_below_depth")?;
     let triangles = order
         .par_iter()
         .map(|&i| GpuTriangle::new(scene.triangle(i as usize), i))
@@ -211,8 +211,9 @@ fn assemble(scene: &Scene, root: Option<&BuildNode>, order: &[u32], start: Insta
 }
 
 /// The node array of the tree `root` (depth-first, node 0 the root) and its depth (at least 1);
-/// an error when it is deeper than the traversal stack.
-pub(super) fn pack(root: Option<&BuildNode>) -> Result<(Vec<GpuNode>, u32)> {
+/// an error naming `parameter` (what bounds the depth) when it is deeper than the traversal
+/// stack.
+pub(super) fn pack(root: Option<&BuildNode>, parameter: &str) -> Result<(Vec<GpuNode>, u32)> {
     let mut nodes = Vec::new();
     let root_children = match root {
         None => [ChildRef::ABSENT, ChildRef::ABSENT],
@@ -233,7 +234,7 @@ pub(super) fn pack(root: Option<&BuildNode>) -> Result<(Vec<GpuNode>, u32)> {
     let depth = root.map_or(0, tree_depth).max(1);
     if depth > STACK_SIZE {
         return Err(Error::param(
-            "median_below_depth",
+            parameter,
             format!("the tree has depth {depth}, beyond the {STACK_SIZE}-entry traversal stack"),
         ));
     }

@@ -5,7 +5,7 @@
 //!
 //! For builders that need *a* tree of the scene quickly rather than a good one: the RBVH builder
 //! samples the ring around each leaf by rays a few texels long ([`crate::rbvh`]'s `raster.rs`),
-//! for which node quality matters little, while a median-split [`Bvh`] cost a third of the whole
+//! for which node quality matters little, while a median-split [`super::Bvh`] cost a third of the whole
 //! RBVH build at the paper's scale (a selection over scattered centroids per level, and a copy of
 //! every triangle: 1 GB there). Here one parallel sort does the ordering, each split is a binary
 //! search, boxes are merged bottom-up once, and leaves read the scene's own triangles through
@@ -16,6 +16,8 @@ use rayon::prelude::*;
 use super::build::{join_halves, pack, prims, BuildNode, Prim, PARALLEL_THRESHOLD};
 use super::layout::{GpuNode, LEAF_BIT};
 use super::traverse::{traverse, Leaves};
+use glam::Vec3;
+
 use crate::geom::{intersect_triangle, Aabb, Hit, Ray, RayShear};
 use crate::probe::TraceStats;
 use crate::scene::Scene;
@@ -25,8 +27,9 @@ use crate::Result;
 const BITS: u32 = 21;
 
 /// Depth from which nodes are split at the middle of their range rather than at a bit: equal
-/// codes have no bit to split at, and bit splits may be one-sided for many levels. Keeps the
-/// depth within `MIDDLE_BELOW_DEPTH + log2(n) < STACK_SIZE` for any input below 2^31 triangles.
+/// codes have no bit to split at, and bit splits may peel off one triangle a level (codes 1, 2,
+/// 4, …: up to 63 levels). Keeps the depth within `MIDDLE_BELOW_DEPTH + log2(n) < STACK_SIZE`
+/// for any input below 2^31 triangles.
 const MIDDLE_BELOW_DEPTH: u32 = 32;
 
 /// A linear BVH over a scene's triangles, which it reads in place.
@@ -47,8 +50,9 @@ impl<'s> LinearBvh<'s> {
             .par_iter()
             .map(|p| Aabb::EMPTY.grow(p.centroid))
             .reduce(|| Aabb::EMPTY, Aabb::union);
-        let scale =
-            ((1u32 << BITS) - 1) as f32 / centroids.extent().max_element().max(f32::MIN_POSITIVE);
+        // Codes over the centroids' box; all 0 where it has no extent to scale (one point).
+        let scale = ((1u32 << BITS) - 1) as f32 / centroids.extent().max_element();
+        let scale = if scale.is_finite() { scale } else { 0.0 };
         let mut keyed: Vec<(u64, u32)> = prims
             .par_iter()
             .enumerate()
@@ -68,7 +72,7 @@ impl<'s> LinearBvh<'s> {
             max_leaf: max_leaf.max(1),
         };
         let root = (!order.is_empty()).then(|| builder.build(0, order.len(), 0));
-        let (nodes, _) = pack(root.as_ref())?;
+        let (nodes, _) = pack(root.as_ref(), "scene")?;
         Ok(LinearBvh {
             scene,
             nodes,
@@ -76,12 +80,15 @@ impl<'s> LinearBvh<'s> {
         })
     }
 
-    /// The closest hit of `ray` (its `id` the scene triangle's index), or [`Hit::MISS`].
-    pub(crate) fn closest_hit(&self, ray: &Ray) -> Hit {
+    /// The closest hit of `ray` on a triangle whose unit normal (as wound) `accept`s, its `id`
+    /// the scene triangle's index; or [`Hit::MISS`]. Triangles refused are passed through, as
+    /// if absent, so a nearer one refused hides nothing behind it.
+    pub(crate) fn closest_hit_where(&self, ray: &Ray, accept: impl Fn(Vec3) -> bool) -> Hit {
         let mut leaves = SceneTriangles {
             bvh: self,
             shear: RayShear::new(ray),
             tmin: ray.tmin,
+            accept,
             best: None,
         };
         traverse(&self.nodes, ray, false, &mut leaves, &mut ());
@@ -97,16 +104,18 @@ impl<'s> LinearBvh<'s> {
     }
 }
 
-/// The leaf hook of [`LinearBvh`]: the scene's triangles through the leaf order.
-struct SceneTriangles<'b, 's> {
+/// The leaf hook of [`LinearBvh`]: the scene's triangles through the leaf order, those whose
+/// normal `accept` refuses passed through.
+struct SceneTriangles<'b, 's, F> {
     bvh: &'b LinearBvh<'s>,
     shear: RayShear,
     tmin: f32,
+    accept: F,
     /// The scene index and distance of the nearest hit so far.
     best: Option<(u32, f32)>,
 }
 
-impl Leaves<()> for SceneTriangles<'_, '_> {
+impl<F: Fn(Vec3) -> bool> Leaves<()> for SceneTriangles<'_, '_, F> {
     fn test(
         &mut self,
         reference: u32,
@@ -122,7 +131,9 @@ impl Leaves<()> for SceneTriangles<'_, '_> {
         for &prim in &order[first..end] {
             stats.counters.triangles += 1;
             let [a, b, c] = self.bvh.scene.triangle(prim as usize);
-            if let Some(t) = intersect_triangle(&self.shear, a, b, c, self.tmin, *t_closest) {
+            let hit = intersect_triangle(&self.shear, a, b, c, self.tmin, *t_closest);
+            let normal = || (b - a).cross(c - a).normalize_or_zero();
+            if let Some(t) = hit.filter(|_| (self.accept)(normal())) {
                 *t_closest = t;
                 self.best = Some((prim, t));
                 found = true;
@@ -193,7 +204,6 @@ impl Linear<'_> {
 mod tests {
     use super::*;
     use crate::Bvh;
-    use glam::Vec3;
 
     #[test]
     fn codes_interleave_the_axes_from_x_up() {
@@ -217,7 +227,7 @@ mod tests {
         let rays = scene.camera_or_framed(1.0).primary_rays(64, 64);
         let mut hits = 0;
         for ray in &rays {
-            let a = linear.closest_hit(ray);
+            let a = linear.closest_hit_where(ray, |_| true);
             let (b, _) = sah.closest_hit(ray);
             assert_eq!(a.is_hit(), b.is_hit());
             if a.is_hit() {
@@ -246,12 +256,10 @@ mod tests {
             4999,
             "a binary tree over 5000 leaves of one"
         );
-        let hit = bvh.closest_hit(&Ray::new(
-            glam::Vec3::new(0.25, 0.25, 1.0),
-            glam::Vec3::NEG_Z,
-            0.0,
-            f32::INFINITY,
-        ));
-        assert_eq!(hit.t, 1.0);
+        let down = Ray::new(Vec3::new(0.25, 0.25, 1.0), Vec3::NEG_Z, 0.0, f32::INFINITY);
+        let hit = bvh.closest_hit_where(&down, |_| true);
+        assert_eq!((hit.t, hit.normal), (1.0, [0.0, 0.0, 1.0]));
+        // Refused triangles are passed through: all 5000 here.
+        assert!(!bvh.closest_hit_where(&down, |n| n.z < 0.0).is_hit());
     }
 }
