@@ -7,7 +7,7 @@ mod common;
 use rbvh::bvh::Bvh;
 use rbvh::geom::Hit;
 use rbvh::gpu::{Query, Tracer};
-use rbvh::rbvh::seams::{count_leaks, LEAK_TEXELS};
+use rbvh::rbvh::seams::{count_leaks, CLEARANCE_TEXELS, LEAK_TEXELS};
 use rbvh::rbvh::{Rbvh, RbvhParams};
 use rbvh::scene::Scene;
 use rbvh::structure::Structure;
@@ -28,7 +28,17 @@ fn hit(t: f32) -> Hit {
 #[test]
 fn a_leak_is_a_ray_that_passes_the_surface_by_two_texels_or_misses() {
     let texel = 0.5;
-    let exact = [hit(1.0), hit(1.0), hit(1.0), hit(1.0), Hit::MISS, Hit::MISS];
+    let near = CLEARANCE_TEXELS * texel;
+    let exact = [
+        hit(1.0),
+        hit(1.0),
+        hit(1.0),
+        hit(1.0),
+        Hit::MISS,
+        Hit::MISS,
+        hit(near),
+        hit(0.99 * near),
+    ];
     let approx = [
         hit(0.9),                        // in front: no leak
         hit(1.0 + LEAK_TEXELS * texel),  // just within the bound
@@ -36,8 +46,10 @@ fn a_leak_is_a_ray_that_passes_the_surface_by_two_texels_or_misses() {
         Hit::MISS,                       // nothing at all
         Hit::MISS,                       // aimed past the mesh: not counted
         hit(3.0),                        // ditto
+        Hit::MISS,                       // the surface just far enough from the origin: a leak
+        Hit::MISS,                       // too near the origin to judge: not counted
     ];
-    assert_eq!(count_leaks(&exact, &approx, texel), 2);
+    assert_eq!(count_leaks(&exact, &approx, texel), 3);
 }
 
 /// The rays start outside the unit sphere, eight texels out, and meet it next to their target
