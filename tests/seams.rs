@@ -7,7 +7,9 @@ mod common;
 use rbvh::bvh::Bvh;
 use rbvh::geom::Hit;
 use rbvh::gpu::{Query, Tracer};
-use rbvh::rbvh::seams::{count_leaks, CLEARANCE_TEXELS, LEAK_TEXELS};
+use rbvh::rbvh::seams::{
+    count_leaks, exact_entries, Entry, CLEARANCE_TEXELS, DEPTH_TEXELS, LEAK_TEXELS,
+};
 use rbvh::rbvh::{Rbvh, RbvhParams};
 use rbvh::scene::Scene;
 use rbvh::structure::Structure;
@@ -25,31 +27,93 @@ fn hit(t: f32) -> Hit {
     }
 }
 
+/// An exact entry at `t`, passing `depth` inside the solid.
+fn entry(t: f32, depth: f32) -> Option<Entry> {
+    Some(Entry { t, depth })
+}
+
 #[test]
 fn a_leak_is_a_ray_that_passes_the_surface_by_two_texels_or_misses() {
     let texel = 0.5;
-    let near = CLEARANCE_TEXELS * texel;
-    let exact = [
-        hit(1.0),
-        hit(1.0),
-        hit(1.0),
-        hit(1.0),
-        Hit::MISS,
-        Hit::MISS,
-        hit(near),
-        hit(0.99 * near),
+    let (near, deep) = (CLEARANCE_TEXELS * texel, DEPTH_TEXELS * texel);
+    let cases = [
+        (entry(1.0, 1.0), hit(0.9)),                        // in front: no leak
+        (entry(1.0, 1.0), hit(1.0 + LEAK_TEXELS * texel)),  // just within the bound
+        (entry(1.0, 1.0), hit(1.01 + LEAK_TEXELS * texel)), // behind it: through the surface
+        (entry(1.0, 1.0), Hit::MISS),                       // nothing at all
+        (None, Hit::MISS),                                  // aimed past the mesh: not counted
+        (None, hit(3.0)),                                   // ditto
+        (entry(near, 1.0), Hit::MISS), // the surface just far enough from the origin: a leak
+        (entry(0.99 * near, 1.0), Hit::MISS), // too near the origin to judge: not counted
+        (entry(1.0, deep), Hit::MISS), // just deep enough inside the solid: a leak
+        (entry(1.0, 0.99 * deep), Hit::MISS), // a skim over the solid: not counted
+        (entry(1.0, f32::INFINITY), Hit::MISS), // into an open mesh, no exit: a leak
     ];
-    let approx = [
-        hit(0.9),                        // in front: no leak
-        hit(1.0 + LEAK_TEXELS * texel),  // just within the bound
-        hit(1.01 + LEAK_TEXELS * texel), // behind it: through the surface
-        Hit::MISS,                       // nothing at all
-        Hit::MISS,                       // aimed past the mesh: not counted
-        hit(3.0),                        // ditto
-        Hit::MISS,                       // the surface just far enough from the origin: a leak
-        Hit::MISS,                       // too near the origin to judge: not counted
+    let exact: Vec<_> = cases.iter().map(|c| c.0).collect();
+    let approx: Vec<_> = cases.iter().map(|c| c.1).collect();
+    assert_eq!(count_leaks(&exact, &approx, texel), 5);
+}
+
+/// Entries into a slab of thickness 2, whose depth is known: straight through from above,
+/// depth 1 (its middle); at 60° from the normal, still 1 (the planes' distance, not half the
+/// chord); leaving by a side instead of the bottom, the two crossed faces' planes decide.
+#[test]
+fn entry_depth_is_the_deepest_point_between_the_faces_crossed() {
+    let mut scene = Scene::new("slab");
+    let v = |x: f32, y: f32, z: f32| glam::Vec3::new(x, y, z);
+    // A closed slab [-10, 10]² × [-1, 1]: top, bottom and four sides, wound outwards.
+    let corners = [
+        v(-10.0, -10.0, -1.0),
+        v(10.0, -10.0, -1.0),
+        v(10.0, 10.0, -1.0),
+        v(-10.0, 10.0, -1.0),
+        v(-10.0, -10.0, 1.0),
+        v(10.0, -10.0, 1.0),
+        v(10.0, 10.0, 1.0),
+        v(-10.0, 10.0, 1.0),
     ];
-    assert_eq!(count_leaks(&exact, &approx, texel), 3);
+    // Top, bottom, then the sides at y = -10, x = 10, y = 10 and x = -10.
+    let faces = [
+        [4, 5, 6],
+        [4, 6, 7],
+        [0, 2, 1],
+        [0, 3, 2],
+        [0, 1, 5],
+        [0, 5, 4],
+        [1, 2, 6],
+        [1, 6, 5],
+        [2, 3, 7],
+        [2, 7, 6],
+        [3, 0, 4],
+        [3, 4, 7],
+    ];
+    scene.push_object("slab", &corners, &faces);
+    let bvh = Bvh::build(&scene).unwrap();
+    let down = rbvh::geom::Ray::new(v(0.5, 0.5, 5.0), v(0.0, 0.0, -1.0), 0.0, f32::INFINITY);
+    let tilt = 60f32.to_radians();
+    let dir = v(tilt.sin(), 0.0, -tilt.cos());
+    let slanted = rbvh::geom::Ray::new(v(-4.0, 0.5, 5.0), dir, 0.0, f32::INFINITY);
+    let by_side = rbvh::geom::Ray::new(v(0.5, 0.5, 5.0), dir, 0.0, f32::INFINITY);
+    let entries = exact_entries(&bvh, &[down, slanted, by_side], 0.01);
+    let down = entries[0].expect("hits the slab");
+    assert!(
+        (down.t - 4.0).abs() < 1e-5 && (down.depth - 1.0).abs() < 1e-5,
+        "{down:?}"
+    );
+    let slanted = entries[1].expect("hits the slab");
+    assert!(
+        (slanted.t - 8.0).abs() < 1e-4 && (slanted.depth - 1.0).abs() < 1e-4,
+        "{slanted:?}"
+    );
+    // In at t = 8 through the top (cosine ½), out at x = 10 through the side (cosine sin 60°).
+    let by_side = entries[2].expect("hits the slab");
+    let (a, b) = (0.5, tilt.sin());
+    let chord = 9.5 / tilt.sin() - 8.0;
+    let want = chord * a * b / (a + b);
+    assert!(
+        (by_side.depth - want).abs() < 1e-4,
+        "{by_side:?}, want {want}"
+    );
 }
 
 /// The rays start outside the unit sphere, eight texels out, and meet it next to their target
@@ -115,7 +179,7 @@ fn no_seam_leaks_at_any_preset_on_closed_meshes() {
             let r = Rbvh::build(&scene, &q(level)).unwrap();
             let rays = r.seam_rays(200_000, 7);
             let leaks = count_leaks(
-                &bvh.trace_cpu(&rays, false),
+                &exact_entries(&bvh, &rays, r.texel_size),
                 &r.trace_cpu(&rays, false),
                 r.texel_size,
             );

@@ -777,7 +777,7 @@ fn seam_leaks(exact: &Bvh, rbvh: &Rbvh, count: usize, seed: u64) -> Option<SeamR
     if rays.is_empty() || exact.triangles.is_empty() {
         return None;
     }
-    let exact = exact.trace_cpu(&rays, false);
+    let exact = crate::rbvh::seams::exact_entries(exact, &rays, rbvh.texel_size);
     let approx = rbvh.trace_cpu(&rays, false);
     Some(SeamRecord {
         rays: rays.len() as u64,

@@ -184,8 +184,9 @@ pub struct Record {
 }
 
 /// Rays aimed at an RBVH level's seams between leaves and how many leaked through the surface
-/// ([`crate::rbvh::seams`]: the exact BVH hits, a texel or more from the ray's origin, and the
-/// RBVH finds nothing within two texels behind).
+/// ([`crate::rbvh::seams`]: the exact BVH finds the ray entering the solid a texel or more from
+/// its origin and passing half a texel or more inside, and the RBVH finds nothing within two
+/// texels behind the entry).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 pub struct SeamRecord {
     /// Rays aimed at the leaves' rims.
