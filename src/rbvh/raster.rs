@@ -36,10 +36,13 @@
 //!    surface) the surface grows a rim of at most one texel.
 //!
 //!    Then the **ring from the surface itself** (issue "No leaks between height fields"): every
-//!    hole with a covered sample among its *eight* neighbours is sampled from the scene's
-//!    triangles (two short rays along `±w` through the sample, in a BVH of the scene the builder
-//!    gives), taking the one over the sample whose height lies nearest the mean of those
-//!    neighbours, within two texels ([`RING_REACH`]); that replaces the extrapolation there.
+//!    hole with a covered sample among its *eight* neighbours, and every hole at a corner of a
+//!    cell that one of the leaf's triangles overlaps in projection (so that full cells cover the
+//!    whole footprint, slivers and triangles smaller than a texel included), is sampled from the
+//!    scene's triangles (two short rays along `±w` through the sample, in a BVH of the scene the
+//!    builder gives), taking the one over the sample whose height lies nearest the mean of those
+//!    neighbours (or, without any, the plane of the triangle whose cell needs it), within two
+//!    texels ([`RING_REACH`]); that replaces the extrapolation there.
 //!    Neighbouring leaves then overlap on the real surface, at corners too, where one
 //!    extrapolated 4-neighbour ring left gaps (about 4 in 10,000 rays aimed at the seams of the
 //!    blob at Q0 slipped through; none now at any preset), and the ring follows the surface
@@ -262,14 +265,17 @@ pub fn rasterize(
         }
     }
     let ring = match surface {
-        Some(surface) => ring_from_surface(surface, frame, &height, &source),
+        Some(surface) => {
+            let corners = cell_corners(triangles, frame);
+            ring_from_surface(surface, frame, &height, &source, &input_index, &corners)
+        }
         None => Vec::new(),
     };
     let (mut height, mut source) = dilate(&height, &source, res_u, res_v);
     for (k, fill) in ring {
         let id = normals.len() as u32;
         normals.push(fill.normal);
-        input_index.push(input_index[fill.beside as usize]);
+        input_index.push(fill.input);
         height[k] = fill.height;
         source[k] = id;
     }
@@ -328,11 +334,88 @@ fn covered_samples(
 }
 
 /// A ring sample taken from the surface itself: its height, the normal of the triangle it lies
-/// on, and the id of a written neighbour (whose source it reports for colours).
+/// on, and the index in the leaf's triangles of the one it stands beside (whose source it reports
+/// for colours).
 struct RingSample {
     height: f32,
     normal: Vec3,
-    beside: u32,
+    input: u32,
+}
+
+/// Per sample, for the corners of every cell that one of `triangles` overlaps in projection: the
+/// height of that triangle's plane over the sample and the triangle's index (the first such
+/// triangle's). A leaf's full cells must cover its whole footprint, not only the surroundings of
+/// the sample centres its triangles happen to hold: a sliver, or a triangle smaller than a texel
+/// (a leaf of one, where the criterion allows nothing larger), may hold none, and the ring
+/// around written samples left the rest of it bare.
+fn cell_corners(triangles: &[[Vec3; 3]], frame: &Frame) -> Vec<Option<(f32, u32)>> {
+    let (res_u, res_v) = (frame.res_u as i64, frame.res_v as i64);
+    let mut out = vec![None; frame.samples()];
+    for (input, tri) in triangles.iter().enumerate() {
+        let p = tri.map(|q| frame.project(q));
+        let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+        let det = e1.x * e2.y - e2.x * e1.y;
+        if !det.is_finite() || det.abs() < 1e-12 {
+            continue;
+        }
+        // The plane h(x, y) = h0 + a·(x − x0) + b·(y − y0) through the three projected corners.
+        let a = (e1.z * e2.y - e2.z * e1.y) / det;
+        let b = (e2.z * e1.x - e1.z * e2.x) / det;
+        let lo = p[0].min(p[1]).min(p[2]);
+        let hi = p[0].max(p[1]).max(p[2]);
+        let (i0, i1) = (
+            (lo.x.floor() as i64).max(0),
+            (hi.x.floor() as i64).min(res_u - 2),
+        );
+        let (j0, j1) = (
+            (lo.y.floor() as i64).max(0),
+            (hi.y.floor() as i64).min(res_v - 2),
+        );
+        for j in j0..=j1 {
+            for i in i0..=i1 {
+                if !triangle_meets_square(&p, i as f64, j as f64) {
+                    continue;
+                }
+                for (ci, cj) in [(i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)] {
+                    let k = cj as usize * res_u as usize + ci as usize;
+                    if out[k].is_none() {
+                        let h = p[0].z + a * (ci as f64 - p[0].x) + b * (cj as f64 - p[0].y);
+                        out[k] = Some((h as f32, input as u32));
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Whether the projected triangle `p` (x, y in sample space) meets the cell square
+/// `[i, i + 1] × [j, j + 1]`, edges included: no separating axis among the square's two and the
+/// triangle's three edge normals.
+fn triangle_meets_square(p: &[DVec3; 3], i: f64, j: f64) -> bool {
+    let square = [
+        DVec2::new(i, j),
+        DVec2::new(i + 1.0, j),
+        DVec2::new(i, j + 1.0),
+        DVec2::new(i + 1.0, j + 1.0),
+    ];
+    let tri = p.map(|q| DVec2::new(q.x, q.y));
+    let separated = |axis: DVec2| {
+        let span = |points: &[DVec2]| {
+            points
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), q| {
+                    let d = q.dot(axis);
+                    (lo.min(d), hi.max(d))
+                })
+        };
+        let (a, b) = (span(&square), span(&tri));
+        a.1 < b.0 || b.1 < a.0
+    };
+    ![DVec2::X, DVec2::Y]
+        .into_iter()
+        .chain((0..3).map(|e| (tri[(e + 1) % 3] - tri[e]).perp()))
+        .any(separated)
 }
 
 /// The ring around the written samples (holes with a written sample among their eight
@@ -349,6 +432,8 @@ fn ring_from_surface(
     frame: &Frame,
     height: &[f32],
     source: &[u32],
+    input_index: &[u32],
+    corners: &[Option<(f32, u32)>],
 ) -> Vec<(usize, RingSample)> {
     let (res_u, res_v) = (frame.res_u as usize, frame.res_v as usize);
     let reach = RING_REACH * frame.texel;
@@ -381,10 +466,13 @@ fn ring_from_surface(
                     }
                 }
             }
-            if n == 0 {
-                continue;
-            }
-            let estimate = sum / n as f32;
+            // Beside written samples, their mean height; else the plane of a triangle whose cell
+            // needs the sample as a corner.
+            let (estimate, input) = match (n, corners[k]) {
+                (1.., _) => (sum / n as f32, input_index[beside as usize]),
+                (0, Some(corner)) => corner,
+                (0, None) => continue,
+            };
             let from = frame.origin
                 + (i as f32 + 0.5) * frame.texel * frame.u
                 + (j as f32 + 0.5) * frame.texel * frame.v
@@ -407,7 +495,7 @@ fn ring_from_surface(
                     RingSample {
                         height,
                         normal: hit.normal(),
-                        beside,
+                        input,
                     },
                 ));
             }
