@@ -55,8 +55,8 @@ fn a_leak_is_a_ray_that_passes_the_surface_by_two_texels_or_misses() {
 }
 
 /// Entries into a slab of thickness 2, whose depth is known: straight through from above,
-/// depth 1 (its middle); at 60° from the normal, still 1 (the planes' distance, not half the
-/// chord); leaving by a side instead of the bottom, the two crossed faces' planes decide.
+/// depth 1 (its middle); at 60° from the normal, still 1 (half the planes' distance, not half
+/// the chord, 2); leaving by a side instead of the bottom, the two crossed faces' planes decide.
 #[test]
 fn entry_depth_is_the_deepest_point_between_the_faces_crossed() {
     let mut scene = Scene::new("slab");
@@ -216,13 +216,19 @@ fn no_seam_leaks_at_the_strictest_criteria() {
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
-/// How many of 200,000 rays aimed at `r`'s seams leak, refereed by `bvh`, and how many were aimed.
+/// How many of 200,000 rays aimed at `r`'s seams leak, refereed by `bvh`, and how many were
+/// aimed. Counted both as the bench counts and by the bare rule (every exact hit, however near
+/// the origin or shallow the ray), the larger returned: on these closed, smooth meshes neither
+/// filter should be needed.
 fn seam_leaks(bvh: &Bvh, r: &Rbvh) -> (usize, usize) {
     let rays = r.seam_rays(200_000, 7);
-    let leaks = count_leaks(
-        &exact_entries(bvh, &rays, r.texel_size),
-        &r.trace_cpu(&rays, false),
-        r.texel_size,
-    );
-    (leaks, rays.len())
+    let exact = exact_entries(bvh, &rays, r.texel_size);
+    let approx = r.trace_cpu(&rays, false);
+    let counted = count_leaks(&exact, &approx, r.texel_size);
+    let all = exact
+        .iter()
+        .zip(&approx)
+        .filter(|(e, a)| e.is_some_and(|e| !a.is_hit() || a.t > e.t + LEAK_TEXELS * r.texel_size))
+        .count();
+    (counted.max(all), rays.len())
 }

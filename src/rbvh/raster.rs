@@ -123,8 +123,10 @@ pub struct Tile {
     /// Samples covered by triangles (before dilation).
     pub covered: u32,
     /// Per texel, the index (into the triangles given to [`rasterize`]) of the triangle whose
-    /// surface the texel samples — the first writer of step 2, or for a dilated texel the
-    /// triangle its normal came from in step 4 — and [`NO_SOURCE`] for a hole. Baking surface
+    /// surface the texel samples — the first writer of step 2; for a dilated texel the triangle
+    /// its normal came from in step 4; for a ring sample taken from the surface, the leaf's
+    /// triangle it stands beside (that of a written neighbour, or the one whose cell needs it) —
+    /// and [`NO_SOURCE`] for a hole. Baking surface
     /// data (`crate::surface`) evaluates that triangle at the texel centre.
     pub sources: Vec<u32>,
 }
@@ -266,7 +268,7 @@ pub fn rasterize(
     }
     let ring = match surface {
         Some(surface) => {
-            let corners = cell_corners(triangles, frame);
+            let corners = cell_corners(triangles, frame, &source);
             ring_from_surface(surface, frame, &height, &source, &input_index, &corners)
         }
         None => Vec::new(),
@@ -342,20 +344,32 @@ struct RingSample {
     input: u32,
 }
 
-/// Per sample, for the corners of every cell that one of `triangles` overlaps in projection: the
-/// height of that triangle's plane over the sample and the triangle's index (the first such
-/// triangle's). A leaf's full cells must cover its whole footprint, not only the surroundings of
-/// the sample centres its triangles happen to hold: a sliver, or a triangle smaller than a texel
-/// (a leaf of one, where the criterion allows nothing larger), may hold none, and the ring
-/// around written samples left the rest of it bare.
-fn cell_corners(triangles: &[[Vec3; 3]], frame: &Frame) -> Vec<Option<(f32, u32)>> {
+/// The holes at a corner of a cell that one of `triangles` overlaps in projection and with no
+/// written sample among their eight neighbours (which the ring samples anyway), each with the
+/// height of that triangle's plane over it (clamped to the triangle's own height range) and the
+/// triangle's index, the first such triangle's; sorted by sample. A leaf's full cells must cover
+/// its whole footprint, not only the surroundings of the sample centres its triangles happen to
+/// hold: a sliver, or a triangle smaller than a texel (a leaf of one, where the criterion allows
+/// nothing larger), may hold none, and the ring around written samples left the rest of it bare.
+/// A short list, not a map over the tile: most corners are written or beside written samples.
+fn cell_corners(triangles: &[[Vec3; 3]], frame: &Frame, source: &[u32]) -> Vec<(usize, f32, u32)> {
     let (res_u, res_v) = (frame.res_u as i64, frame.res_v as i64);
-    let mut out = vec![None; frame.samples()];
+    let written = |i: i64, j: i64| {
+        (0..res_u).contains(&i)
+            && (0..res_v).contains(&j)
+            && source[(j * res_u + i) as usize] != NONE
+    };
+    let mut out = Vec::new();
     for (input, tri) in triangles.iter().enumerate() {
+        // As step 1: a face seen edge-on defines no height over a sample.
+        let facing = (tri[1] - tri[0]).cross(tri[2] - tri[0]).try_normalize();
+        if facing.is_none_or(|n| n.dot(frame.w).abs() <= EDGE_ON_COS) {
+            continue;
+        }
         let p = tri.map(|q| frame.project(q));
         let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
         let det = e1.x * e2.y - e2.x * e1.y;
-        if !det.is_finite() || det.abs() < 1e-12 {
+        if !det.is_finite() || det == 0.0 {
             continue;
         }
         // The plane h(x, y) = h0 + a·(x − x0) + b·(y − y0) through the three projected corners.
@@ -377,15 +391,21 @@ fn cell_corners(triangles: &[[Vec3; 3]], frame: &Frame) -> Vec<Option<(f32, u32)
                     continue;
                 }
                 for (ci, cj) in [(i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)] {
-                    let k = cj as usize * res_u as usize + ci as usize;
-                    if out[k].is_none() {
-                        let h = p[0].z + a * (ci as f64 - p[0].x) + b * (cj as f64 - p[0].y);
-                        out[k] = Some((h as f32, input as u32));
+                    let beside_written =
+                        (-1..=1).any(|dj| (-1..=1).any(|di| written(ci + di, cj + dj)));
+                    if beside_written {
+                        continue;
                     }
+                    let h = p[0].z + a * (ci as f64 - p[0].x) + b * (cj as f64 - p[0].y);
+                    let h = h.clamp(lo.z, hi.z) as f32;
+                    out.push(((cj * res_u + ci) as usize, h, input as u32));
                 }
             }
         }
     }
+    // First triangle wins: a stable sort keeps the order of equal samples.
+    out.sort_by_key(|&(k, _, _)| k);
+    out.dedup_by_key(|&mut (k, _, _)| k);
     out
 }
 
@@ -419,12 +439,13 @@ fn triangle_meets_square(p: &[DVec3; 3], i: f64, j: f64) -> bool {
 }
 
 /// The ring around the written samples (holes with a written sample among their eight
-/// neighbours), sampled from `surface` — the scene's triangles, the leaf's own among them — where
-/// one of them lies over the sample within [`RING_REACH`] texels of its written neighbours' mean
-/// height (the nearest such): the leaf's surface then continues onto its neighbours' real surface,
-/// corners included, instead of a linear extrapolation that sticks out at silhouettes. Each ring
-/// sample is found by two short rays along `±w` from that mean height (the second only as far
-/// as the first one's hit), so the cost follows the ring's length, not how many triangles lie
+/// neighbours) and the `corners` ([`cell_corners`]), sampled from `surface` — the scene's
+/// triangles, the leaf's own among them — where one of them lies over the sample within
+/// [`RING_REACH`] texels of an estimate (the nearest such): the written neighbours' mean height,
+/// or for a corner without any the plane of the triangle that needs it. The leaf's surface then
+/// continues onto its neighbours' real surface, corners included, instead of a linear
+/// extrapolation that sticks out at silhouettes. Each ring sample is found by two short rays
+/// along `±w` from its estimate (the second only as far as the first one's hit), so the cost follows the ring's length, not how many triangles lie
 /// near the tile: gathering and rasterizing those grew without bound where triangles are much
 /// smaller than a texel (the paper-scale scene's Q2 took 98 s; 24 s by rays, below its exact BVH).
 fn ring_from_surface(
@@ -433,7 +454,7 @@ fn ring_from_surface(
     height: &[f32],
     source: &[u32],
     input_index: &[u32],
-    corners: &[Option<(f32, u32)>],
+    corners: &[(usize, f32, u32)],
 ) -> Vec<(usize, RingSample)> {
     let (res_u, res_v) = (frame.res_u as usize, frame.res_v as usize);
     let reach = RING_REACH * frame.texel;
@@ -468,10 +489,12 @@ fn ring_from_surface(
             }
             // Beside written samples, their mean height; else the plane of a triangle whose cell
             // needs the sample as a corner.
-            let (estimate, input) = match (n, corners[k]) {
-                (1.., _) => (sum / n as f32, input_index[beside as usize]),
-                (0, Some(corner)) => corner,
-                (0, None) => continue,
+            let (estimate, input) = if n > 0 {
+                (sum / n as f32, input_index[beside as usize])
+            } else if let Ok(c) = corners.binary_search_by_key(&k, |&(k, _, _)| k) {
+                (corners[c].1, corners[c].2)
+            } else {
+                continue;
             };
             let from = frame.origin
                 + (i as f32 + 0.5) * frame.texel * frame.u
@@ -833,6 +856,36 @@ pub(super) mod tests {
             let k = (j * 16 + 3) as usize;
             assert!((decoded(&tile, k, frame.origin) - 3.0).abs() < 1e-3);
         }
+    }
+
+    #[test]
+    fn cells_under_a_triangle_without_sample_centres_get_their_corners() {
+        let frame = xy_frame(8);
+        // A triangle inside the cell between samples 3 and 4 on both axes, holding no centre,
+        // on the plane h = 2 + x (sample space): nothing written, four corners wanted.
+        let p = |x: f32, y: f32| Vec3::new(x + 0.5, y + 0.5, 2.0 + x);
+        let sliver = [[p(3.2, 3.2), p(3.8, 3.3), p(3.3, 3.8)]];
+        let source = vec![NONE; 64];
+        let corners = cell_corners(&sliver, &frame, &source);
+        let at: Vec<(usize, f32)> = corners.iter().map(|&(k, h, _)| (k, h)).collect();
+        // Corners (3, 3), (4, 3), (3, 4), (4, 4); heights from the plane, clamped to the
+        // triangle's own range [5.2, 5.8].
+        assert_eq!(at, [(27, 5.2), (28, 5.8), (35, 5.2), (36, 5.8)]);
+        // Beside a written sample, a corner is left to the ring around it.
+        let mut written = source.clone();
+        written[26] = 0;
+        let corners = cell_corners(&sliver, &frame, &written);
+        assert!(
+            corners.iter().all(|&(k, _, _)| k == 36 || k == 28),
+            "{corners:?}"
+        );
+        // Seen edge-on, a triangle wants nothing.
+        let edge_on = [[
+            Vec3::new(3.6, 3.6, 0.0),
+            Vec3::new(4.4, 3.6, 0.0),
+            Vec3::new(3.6, 3.6, 1.0),
+        ]];
+        assert!(cell_corners(&edge_on, &frame, &source).is_empty());
     }
 
     #[test]

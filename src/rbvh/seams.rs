@@ -69,7 +69,8 @@ pub fn exact_entries(exact: &Bvh, rays: &[Ray], texel: f32) -> Vec<Option<Entry>
                 return None;
             }
             let dir = ray.dir();
-            let past = Ray::new(ray.origin(), dir, entry.t + 1e-3 * texel, ray.tmax);
+            // The exit: the next crossing, however far (the ray's own end does not bound the solid).
+            let past = Ray::new(ray.origin(), dir, entry.t + 1e-3 * texel, f32::INFINITY);
             let (exit, _) = exact.closest_hit(&past);
             let depth = if exit.is_hit() {
                 let (a, b) = (dir.dot(entry.normal()).abs(), dir.dot(exit.normal()).abs());
