@@ -447,7 +447,7 @@ fn triangle_meets_square(p: &[DVec3; 3], i: f64, j: f64) -> bool {
 /// extrapolation that sticks out at silhouettes. Each ring sample is found by two short rays
 /// along `±w` from its estimate (the second only as far as the first one's hit), so the cost follows the ring's length, not how many triangles lie
 /// near the tile: gathering and rasterizing those grew without bound where triangles are much
-/// smaller than a texel (the paper-scale scene's Q2 took 98 s; 24 s by rays, below its exact BVH).
+/// smaller than a texel (the paper-scale scene's Q2 took 98 s; 22 s by rays, below its exact BVH).
 fn ring_from_surface(
     surface: &LinearBvh,
     frame: &Frame,
