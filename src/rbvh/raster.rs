@@ -354,11 +354,7 @@ struct RingSample {
 /// A short list, not a map over the tile: most corners are written or beside written samples.
 fn cell_corners(triangles: &[[Vec3; 3]], frame: &Frame, source: &[u32]) -> Vec<(usize, f32, u32)> {
     let (res_u, res_v) = (frame.res_u as i64, frame.res_v as i64);
-    let written = |i: i64, j: i64| {
-        (0..res_u).contains(&i)
-            && (0..res_v).contains(&j)
-            && source[(j * res_u + i) as usize] != NONE
-    };
+    let written = |i: i64, j: i64| written_at(source, res_u as usize, i, j).is_some();
     let mut out = Vec::new();
     for (input, tri) in triangles.iter().enumerate() {
         // As step 1: a face seen edge-on defines no height over a sample.
@@ -475,12 +471,7 @@ fn ring_from_surface(
             let (mut sum, mut n, mut beside) = (0.0f32, 0u32, NONE);
             for dj in -1i64..=1 {
                 for di in -1i64..=1 {
-                    let (x, y) = (i as i64 + di, j as i64 + dj);
-                    if x < 0 || y < 0 || x >= res_u as i64 || y >= res_v as i64 {
-                        continue;
-                    }
-                    let q = y as usize * res_u + x as usize;
-                    if source[q] != NONE {
+                    if let Some(q) = written_at(source, res_u, i as i64 + di, j as i64 + dj) {
                         sum += height[q];
                         n += 1;
                         beside = source[q];
@@ -578,6 +569,18 @@ pub(super) fn sampled_passes(
         }
 }
 
+/// The index of sample `(i, j)` of a grid `res_u` samples wide (as many rows as `source` holds)
+/// when it lies in the grid and is written (its `source` not [`NONE`]): the neighbour test of
+/// dilation, of the ring and of the cell corners.
+fn written_at(source: &[u32], res_u: usize, i: i64, j: i64) -> Option<usize> {
+    let res_v = source.len().checked_div(res_u).unwrap_or(0);
+    if !(0..res_u as i64).contains(&i) || !(0..res_v as i64).contains(&j) {
+        return None;
+    }
+    let k = j as usize * res_u + i as usize;
+    (source[k] != NONE).then_some(k)
+}
+
 /// Marks a hole in the per-sample source index.
 pub(super) const NONE: u32 = u32::MAX;
 
@@ -602,13 +605,7 @@ pub(super) fn dilate(
 ) -> (Vec<f32>, Vec<u32>) {
     let mut out_h = height.to_vec();
     let mut out_s = source.to_vec();
-    let at = |i: isize, j: isize| -> Option<usize> {
-        if !(0..res_u as isize).contains(&i) || !(0..res_v as isize).contains(&j) {
-            return None;
-        }
-        let k = j as usize * res_u + i as usize;
-        (source[k] != NONE).then_some(k)
-    };
+    let at = |i: isize, j: isize| written_at(source, res_u, i as i64, j as i64);
     for j in 0..res_v {
         for i in 0..res_u {
             let k = j * res_u + i;
