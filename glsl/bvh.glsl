@@ -30,17 +30,29 @@
 #define RBVH_STACK_SIZE 64
 const uint RBVH_LEAF_BIT = 0x80000000u;
 
-// Aila & Laine (2009) node: both children's boxes in 64 bytes.
+// Aila & Laine (2009) node, both children's boxes quantized against the node's own box (Ylitie,
+// Karras & Laine 2017) in 48 bytes: GpuNode in src/bvh/layout.rs says how.
 struct BvhNode {
-    vec3 a_min;
+    vec3 origin;
+    uint exponents;
+    uvec3 planes;
     uint a_child;
-    vec3 a_max;
     uint a_count;
-    vec3 b_min;
     uint b_child;
-    vec3 b_max;
     uint b_count;
+    uint pad;
 };
+
+// The children's boxes of node `n`, as GpuNode::boxes decodes them: plane q of axis k is
+// origin_k + q * 2^(e_k - 127); the product is exact, so the sum rounds once, fused or not, and
+// the boxes are the CPU's bit for bit.
+void rbvh_node_boxes(BvhNode n, out vec3 a_min, out vec3 a_max, out vec3 b_min, out vec3 b_max) {
+    vec3 step = uintBitsToFloat(((uvec3(n.exponents) >> uvec3(0u, 8u, 16u)) & 0xFFu) << 23);
+    a_min = n.origin + vec3(n.planes & 0xFFu) * step;
+    a_max = n.origin + vec3((n.planes >> 8) & 0xFFu) * step;
+    b_min = n.origin + vec3((n.planes >> 16) & 0xFFu) * step;
+    b_max = n.origin + vec3(n.planes >> 24) * step;
+}
 
 // 48 bytes: vertices gathered in leaf order, with the scene's triangle index.
 struct BvhTriangle {

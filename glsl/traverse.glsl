@@ -98,10 +98,15 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
                 steps += 1u;
                 RBVH_COUNT_ADD(nodes, 1u);
                 BvhNode n = RBVH_BVH_NODE(node);
+                vec3 a_min;
+                vec3 a_max;
+                vec3 b_min;
+                vec3 b_max;
+                rbvh_node_boxes(n, a_min, a_max, b_min, b_max);
                 float ta;
                 float tb;
-                bool ha = rbvh_intersect_box(n.a_min, n.a_max, ray.origin, inv_dir, ray.tmin, t_closest, ta);
-                bool hb = rbvh_intersect_box(n.b_min, n.b_max, ray.origin, inv_dir, ray.tmin, t_closest, tb);
+                bool ha = rbvh_intersect_box(a_min, a_max, ray.origin, inv_dir, ray.tmin, t_closest, ta);
+                bool hb = rbvh_intersect_box(b_min, b_max, ray.origin, inv_dir, ray.tmin, t_closest, tb);
                 // Nearest child first; b only goes first when strictly nearer.
                 bool b_first = ha && hb && tb < ta;
                 int k = 0;

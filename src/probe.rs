@@ -101,7 +101,7 @@ impl MeanCounters {
 /// The device arrays a traversal reads, in the order a tracer binds them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Array {
-    /// Inner nodes (`GpuNode`, 64 bytes each).
+    /// Inner nodes (`GpuNode`, 48 bytes each).
     Nodes = 0,
     /// Triangles of triangle leaves (`GpuTriangle`, 48 bytes each).
     Triangles = 1,

@@ -39,14 +39,14 @@ fn bvh_node_layout_matches() {
         "BvhNode",
         size_of::<GpuNode>(),
         &[
-            ("a_min", offset_of!(GpuNode, a_min)),
+            ("origin", offset_of!(GpuNode, origin)),
+            ("exponents", offset_of!(GpuNode, exponents)),
+            ("planes", offset_of!(GpuNode, planes)),
             ("a_child", offset_of!(GpuNode, a_child)),
-            ("a_max", offset_of!(GpuNode, a_max)),
             ("a_count", offset_of!(GpuNode, a_count)),
-            ("b_min", offset_of!(GpuNode, b_min)),
             ("b_child", offset_of!(GpuNode, b_child)),
-            ("b_max", offset_of!(GpuNode, b_max)),
             ("b_count", offset_of!(GpuNode, b_count)),
+            ("pad", offset_of!(GpuNode, pad)),
         ],
     );
 }

@@ -124,13 +124,13 @@ fn save_load_round_trips_exactly() {
     loaded.save(&again).unwrap();
     assert_eq!(std::fs::read(&again).unwrap(), bytes);
 
-    // The documented framing: magic, version 4, the sampling judgement's size, normal texels, no
+    // The documented framing: magic, version 5, the sampling judgement's size, normal texels, no
     // colour channel, then the arrays after a 148-byte header.
     assert_eq!(&bytes[..8], b"RBVHv\0\0\0");
-    assert_eq!(word(&bytes, 8), 4);
+    assert_eq!(word(&bytes, 8), 5);
     assert_eq!(f32::from_bits(word(&bytes, 40)), 2.5);
     assert_eq!((word(&bytes, 44), word(&bytes, 48)), (0, 0));
-    let arrays = 2 * 64 + 2 * 48 + 2 * 64 + 72 * 4;
+    let arrays = 2 * 48 + 2 * 48 + 2 * 64 + 72 * 4;
     assert_eq!(bytes.len(), HEADER_BYTES + arrays);
     let first_texel = HEADER_BYTES + arrays - 72 * 4;
     let word = u32::from_le_bytes(bytes[first_texel..first_texel + 4].try_into().unwrap());
@@ -142,11 +142,29 @@ fn word(bytes: &[u8], at: usize) -> u32 {
     u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap())
 }
 
-/// `bytes` (version 4) as the older `version` (1–3) wrote them: without header bytes 40..52.
-fn as_old_version(bytes: &[u8], version: u32) -> Vec<u8> {
-    let mut old = bytes[..40].to_vec();
+/// `rbvh` as the older `version` (1–4) wrote it: each node in 64 bytes with its children's boxes
+/// at full precision (here the decoded ones), and before version 4 without header bytes 40..52.
+fn as_old_version(rbvh: &Rbvh, version: u32) -> Vec<u8> {
+    let bytes = rbvh.to_bytes();
+    let mut old = bytes[..HEADER_BYTES].to_vec();
     old[8..12].copy_from_slice(&version.to_le_bytes());
-    old.extend_from_slice(&bytes[52..]);
+    for node in &rbvh.nodes {
+        for c in node.children() {
+            let [x, y, z] = c.bounds.min.to_array();
+            let [u, v, w] = c.bounds.max.to_array();
+            for word in [x.to_bits(), y.to_bits(), z.to_bits(), c.child] {
+                old.extend_from_slice(&word.to_le_bytes());
+            }
+            for word in [u.to_bits(), v.to_bits(), w.to_bits(), c.count] {
+                old.extend_from_slice(&word.to_le_bytes());
+            }
+        }
+    }
+    let nodes_end = HEADER_BYTES + rbvh.nodes.len() * std::mem::size_of::<GpuNode>();
+    old.extend_from_slice(&bytes[nodes_end..]);
+    if version < 4 {
+        old.drain(40..52);
+    }
     old
 }
 
@@ -195,7 +213,7 @@ fn bad_magic_and_unknown_versions_are_rejected() {
     let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
     assert!(message.contains("not an RBVH file"), "{message}");
 
-    for version in [0, 5, u32::MAX] {
+    for version in [0, 6, u32::MAX] {
         let mut bytes = sample().to_bytes();
         bytes[8..12].copy_from_slice(&version.to_le_bytes());
         let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
@@ -203,12 +221,14 @@ fn bad_magic_and_unknown_versions_are_rejected() {
             message.contains(&format!("unsupported version {version}")),
             "{message}"
         );
-        assert!(message.contains("reads versions 1 to 4"), "{message}");
+        assert!(message.contains("reads versions 1 to 5"), "{message}");
     }
 }
 
-/// Files written before version 4 (1: normal texels; 2: with colours; 3: height-only) load as
-/// the RBVHs they described, built by the paper's rule alone, and are saved again as version 4.
+/// Files written before version 5 (1: normal texels; 2: with colours; 3: height-only; 4: with
+/// the sampled judgement's size and the texel format in the header, all with 64-byte nodes) load
+/// as the RBVHs they described, their nodes quantized, and are saved again as version 5. Before
+/// version 4 they were built by the paper's rule alone.
 #[test]
 fn older_versions_load_as_what_they_described() {
     let path = Path::new("old.rbvh");
@@ -220,24 +240,65 @@ fn older_versions_load_as_what_they_described() {
     for t in &mut height.atlas.texels {
         *t = Texel(u32::from(t.height_code()));
     }
-    for (version, rbvh) in [(1, plain), (2, painted), (3, height)] {
-        let old = as_old_version(&rbvh.to_bytes(), version);
+    let mut v4 = sample();
+    v4.colours = Some((0..72u32).map(|k| k.wrapping_mul(0x0301_0701)).collect());
+    for (version, rbvh) in [(1, plain), (2, painted), (3, height), (4, v4)] {
+        let old = as_old_version(&rbvh, version);
         let loaded = Rbvh::from_bytes(&old, path).unwrap();
+        // Quantizing decoded boxes again gives the same node, so the nodes come back as they were.
+        let sampled_criterion_texels = if version < 4 {
+            0.0
+        } else {
+            rbvh.params.sampled_criterion_texels
+        };
         let expected = Rbvh {
             params: RbvhParams {
-                sampled_criterion_texels: 0.0,
+                sampled_criterion_texels,
                 ..rbvh.params
             },
             ..rbvh
         };
         assert_eq!(loaded, expected, "version {version}");
-        assert_eq!(word(&loaded.to_bytes(), 8), 4);
+        assert_eq!(word(&loaded.to_bytes(), 8), 5);
+        let header = if version < 4 { 136 } else { HEADER_BYTES };
         let message = parse_error(Rbvh::from_bytes(&old[..old.len() - 1], path), path);
         assert!(
-            message.contains("truncated") && message.contains("136-byte header"),
+            message.contains("truncated") && message.contains(&format!("{header}-byte header")),
             "version {version}: {message}"
         );
     }
+}
+
+/// A version 1–4 node whose box holds NaN has no grid to be quantized to: a parse error naming
+/// the node.
+#[test]
+fn an_old_node_with_a_nan_box_is_rejected() {
+    let path = Path::new("nan.rbvh");
+    let mut old = as_old_version(&sample(), 4);
+    // Node 1's `a_min.y`.
+    let at = HEADER_BYTES + 64 + 4;
+    old[at..at + 4].copy_from_slice(&f32::NAN.to_bits().to_le_bytes());
+    let message = parse_error(Rbvh::from_bytes(&old, path), path);
+    assert!(
+        message.contains("node 1") && message.contains("NaN"),
+        "{message}"
+    );
+}
+
+/// A version 5 node's grid is checked: an exponent of zero would decode every plane to the origin
+/// (boxes that no longer contain their children).
+#[test]
+fn a_node_with_a_broken_grid_is_rejected() {
+    let path = Path::new("grid.rbvh");
+    let mut bytes = sample().to_bytes();
+    // Node 0's `exponents`.
+    let at = HEADER_BYTES + 12;
+    bytes[at..at + 4].copy_from_slice(&0u32.to_le_bytes());
+    let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
+    assert!(
+        message.contains("node 0") && message.contains("exponent 0"),
+        "{message}"
+    );
 }
 
 #[test]

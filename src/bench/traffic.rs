@@ -23,7 +23,7 @@
 //! # Figures ([`Traffic`])
 //!
 //! - **Per ray**, as means over the frame's rays: reads, bytes requested (the sum of the reads'
-//!   sizes), and distinct lines touched at 64 bytes (a `GpuNode`; AMD GCN's cache lines) and at
+//!   sizes), and distinct lines touched at 64 bytes (AMD GCN's cache lines) and at
 //!   128 bytes (the L1 and L2 lines of NVIDIA's and AMD RDNA's GPUs). A line read twice by one
 //!   ray counts once; by two rays, once for each.
 //! - **Working set**: the distinct bytes the whole frame touches, at 4-byte word granularity (every
@@ -582,7 +582,7 @@ mod tests {
         assert_eq!(lines_of(read(Array::Nodes, 60, 8)), (2.0, 1.0));
         // Straddles both.
         assert_eq!(lines_of(read(Array::Nodes, 124, 8)), (2.0, 2.0));
-        // A 64-byte node at a 64-aligned offset.
+        // A 64-byte read at a 64-aligned offset.
         assert_eq!(lines_of(node(1)), (1.0, 1.0));
         // A straddling read is two cache accesses.
         let mut model = TrafficModel::new(ARRAYS, &[lines(4)], DRAM_LINE).unwrap();

@@ -15,39 +15,120 @@ pub const STACK_SIZE: u32 = 64;
 /// Marks a child reference as a leaf: `child = LEAF_BIT | first_triangle`, `count` triangles.
 pub const LEAF_BIT: u32 = 0x8000_0000;
 
-/// An inner node holding both children's boxes (Aila & Laine 2009). 64 bytes:
+/// An inner node holding both children's boxes (Aila & Laine 2009), quantized against the node's
+/// own box as compressed wide BVHs do (Ylitie, Karras & Laine, "Efficient Incoherent Ray Traversal
+/// on GPUs Through Compressed Wide BVHs", HPG 2017): 48 bytes where two full-precision boxes took
+/// 64.
 ///
 /// | bytes | field |
 /// |---|---|
-/// | 0..12, 12..16 | `a_min`, `a_child` |
-/// | 16..28, 28..32 | `a_max`, `a_count` |
-/// | 32..44, 44..48 | `b_min`, `b_child` |
-/// | 48..60, 60..64 | `b_max`, `b_count` |
+/// | 0..12, 12..16 | `origin` (lower corner of the node's box), `exponents` |
+/// | 16..28, 28..32 | `planes` (one word per axis), `a_child` |
+/// | 32..36, 36..40, 40..44, 44..48 | `a_count`, `b_child`, `b_count`, `pad` |
+///
+/// Along axis `k` the grid step is the power of two `2^(e_k − 127)`, `e_k` byte `k` of `exponents`
+/// (1..=254, so the step is a normal float and `float(q) · step` is exact). Word `k` of `planes`
+/// holds four 8-bit grid coordinates, `a_lo | a_hi << 8 | b_lo << 16 | b_hi << 24`, and a plane is
+/// `origin_k + q · step_k`: one rounding, the same with or without a fused multiply-add, so the
+/// CPU and every device decode the same bits. [`GpuNode::new`] rounds each plane outward and
+/// checks the decoded value, so a decoded child box always contains the exact one.
 ///
 /// A child is an inner node (`child` = node index, `count` = 0) or a leaf (`child` =
-/// [`LEAF_BIT`] | first triangle, `count` triangles; 0 for an absent child).
+/// [`LEAF_BIT`] | first triangle, `count` triangles; 0 for an absent child, whose box decodes
+/// to the point `origin`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuNode {
-    /// GLSL `BvhNode.a_min`: lower corner of child `a`'s box, world space.
-    pub a_min: [f32; 3],
+    /// GLSL `BvhNode.origin`: lower corner of the node's box (the union of its present
+    /// children's boxes), world space.
+    pub origin: [f32; 3],
+    /// GLSL `exponents`: bytes 0, 1, 2 the biased exponents (1..=254) of the grid steps along
+    /// x, y, z; byte 3 zero.
+    pub exponents: u32,
+    /// GLSL `planes`: per axis, the children's quantized planes `a_lo | a_hi << 8 | b_lo << 16 |
+    /// b_hi << 24`.
+    pub planes: [u32; 3],
     /// GLSL `a_child`: node index of child `a`, or [`LEAF_BIT`] | its first triangle.
     pub a_child: u32,
-    /// GLSL `a_max`: upper corner of child `a`'s box, world space.
-    pub a_max: [f32; 3],
     /// GLSL `a_count`: triangles of leaf `a`; 0 for an inner node or an absent child.
     pub a_count: u32,
-    /// GLSL `b_min`: lower corner of child `b`'s box, world space.
-    pub b_min: [f32; 3],
     /// GLSL `b_child`: node index of child `b`, or [`LEAF_BIT`] | its first triangle.
     pub b_child: u32,
-    /// GLSL `b_max`: upper corner of child `b`'s box, world space.
-    pub b_max: [f32; 3],
     /// GLSL `b_count`: triangles of leaf `b`; 0 for an inner node or an absent child.
     pub b_count: u32,
+    /// GLSL `pad`: keeps the record three 16-byte words (one aligned load each); always 0.
+    pub pad: u32,
 }
-const _: () = assert!(std::mem::size_of::<GpuNode>() == 64);
+const _: () = assert!(std::mem::size_of::<GpuNode>() == 48);
 
+/// Largest grid coordinate of a quantized plane.
+const MAX_PLANE: u32 = 255;
+/// Biased exponents of the grid step: 2^-126 (the smallest normal float) to 2^127.
+const MIN_EXPONENT: u32 = 1;
+const MAX_EXPONENT: u32 = 254;
+
+/// The grid step `2^(e − 127)` of biased exponent `e` (1..=254): a normal float, built from its
+/// bits as `glsl/bvh.glsl` does.
+fn grid_step(e: u32) -> f32 {
+    f32::from_bits(e << 23)
+}
+
+/// Plane `q` of a grid at `origin` with step `step`; `glsl/bvh.glsl` (`rbvh_node_boxes`) computes
+/// the same. `q · step` is exact (an 8-bit integer times a power of two), so this rounds once.
+fn plane(origin: f32, q: u32, step: f32) -> f32 {
+    origin + q as f32 * step
+}
+
+/// The smallest biased exponent whose grid of [`MAX_PLANE`] steps spans `extent`, clamped to
+/// 1..=254; [`quantize_axis`] raises it when rounding at `origin` needs one more step.
+fn first_exponent(extent: f64) -> u32 {
+    let step = extent / MAX_PLANE as f64;
+    if step.is_nan() || step <= 0.0 {
+        return MIN_EXPONENT;
+    }
+    let bits = step.to_bits();
+    let mut exp = ((bits >> 52) & 0x7ff) as i64 - 1023;
+    if bits & ((1u64 << 52) - 1) != 0 {
+        exp += 1;
+    }
+    (exp + 127).clamp(MIN_EXPONENT as i64, MAX_EXPONENT as i64) as u32
+}
+
+/// The exponent and the four planes (`[a_lo, a_hi, b_lo, b_hi]`) of one axis: lower planes rounded
+/// down and upper planes up, each checked as decoded. `spans` are the present children's
+/// `(lo, hi)` (absent ones `None`, encoded as the point `origin`), `origin` at most every `lo`.
+fn quantize_axis(origin: f32, spans: [Option<(f32, f32)>; 2]) -> (u32, [u32; 4]) {
+    let top = spans
+        .iter()
+        .flatten()
+        .fold(origin as f64, |m, &(_, hi)| m.max(hi as f64));
+    let mut e = first_exponent(top - origin as f64);
+    loop {
+        let step = grid_step(e);
+        let mut q = [0u32; 4];
+        let mut fits = true;
+        for (k, span) in spans.iter().enumerate() {
+            let Some((lo, hi)) = *span else { continue };
+            let mut q_lo = (((lo as f64 - origin as f64) / step as f64).floor())
+                .clamp(0.0, MAX_PLANE as f64) as u32;
+            while q_lo > 0 && plane(origin, q_lo, step) > lo {
+                q_lo -= 1;
+            }
+            let mut q_hi = (((hi as f64 - origin as f64) / step as f64).ceil())
+                .clamp(0.0, MAX_PLANE as f64 + 1.0) as u32;
+            while q_hi <= MAX_PLANE && plane(origin, q_hi, step) < hi {
+                q_hi += 1;
+            }
+            fits &= q_hi <= MAX_PLANE;
+            q[2 * k] = q_lo;
+            q[2 * k + 1] = q_hi.min(MAX_PLANE);
+        }
+        if fits || e == MAX_EXPONENT {
+            return (e, q);
+        }
+        e += 1;
+    }
+}
 /// One child as the builder sees it, before packing.
 #[derive(Clone, Copy, Debug)]
 pub struct ChildRef {
@@ -77,40 +158,96 @@ impl ChildRef {
 }
 
 impl GpuNode {
-    /// Packs two children, `a` and `b`, into one node; the inverse of [`GpuNode::children`].
+    /// Packs two children, `a` and `b`, into one node, each box rounded outward to the node's
+    /// grid; [`GpuNode::children`] decodes them, boxes containing the given ones. An absent child
+    /// (a leaf of no triangles) or one with an empty box keeps no box of its own: it decodes to
+    /// the point `origin`, which only reaches a leaf with nothing to test.
     pub fn new(a: ChildRef, b: ChildRef) -> Self {
+        let span = |c: &ChildRef| {
+            let present = !(c.is_leaf() && c.count == 0) && c.bounds.min.cmple(c.bounds.max).all();
+            present.then_some(c.bounds)
+        };
+        let boxes = [span(&a), span(&b)];
+        let origin = boxes
+            .iter()
+            .flatten()
+            .fold(None, |m: Option<Vec3>, b| {
+                Some(m.map_or(b.min, |m| m.min(b.min)))
+            })
+            .unwrap_or(Vec3::ZERO);
+        let mut exponents = 0u32;
+        let mut planes = [0u32; 3];
+        for axis in 0..3 {
+            let spans = boxes.map(|b| b.map(|b| (b.min[axis], b.max[axis])));
+            let (e, q) = quantize_axis(origin[axis], spans);
+            exponents |= e << (8 * axis);
+            planes[axis] = q[0] | q[1] << 8 | q[2] << 16 | q[3] << 24;
+        }
         GpuNode {
-            a_min: a.bounds.min.to_array(),
+            origin: origin.to_array(),
+            exponents,
+            planes,
             a_child: a.child,
-            a_max: a.bounds.max.to_array(),
             a_count: a.count,
-            b_min: b.bounds.min.to_array(),
             b_child: b.child,
-            b_max: b.bounds.max.to_array(),
             b_count: b.count,
+            pad: 0,
         }
     }
 
-    /// The two children, `a` then `b`.
+    /// The two children, `a` then `b`, with their boxes as decoded (as the shaders decode them).
     pub fn children(&self) -> [ChildRef; 2] {
+        let boxes = self.boxes();
         [
             ChildRef {
-                bounds: Aabb {
-                    min: self.a_min.into(),
-                    max: self.a_max.into(),
-                },
+                bounds: boxes[0],
                 child: self.a_child,
                 count: self.a_count,
             },
             ChildRef {
-                bounds: Aabb {
-                    min: self.b_min.into(),
-                    max: self.b_max.into(),
-                },
+                bounds: boxes[1],
                 child: self.b_child,
                 count: self.b_count,
             },
         ]
+    }
+
+    /// The decoded boxes of children `a` and `b` (`glsl/bvh.glsl`'s `rbvh_node_boxes`).
+    pub fn boxes(&self) -> [Aabb; 2] {
+        let origin = Vec3::from(self.origin);
+        let mut out = [Aabb {
+            min: origin,
+            max: origin,
+        }; 2];
+        for axis in 0..3 {
+            let step = grid_step((self.exponents >> (8 * axis)) & 0xff);
+            let q = |k: u32| plane(origin[axis], (self.planes[axis] >> (8 * k)) & 0xff, step);
+            out[0].min[axis] = q(0);
+            out[0].max[axis] = q(1);
+            out[1].min[axis] = q(2);
+            out[1].max[axis] = q(3);
+        }
+        out
+    }
+
+    /// Why this record cannot be a node: a non-finite origin, an exponent outside 1..=254, or a
+    /// nonzero byte 3 of `exponents` or `pad` (checked on loading a file).
+    pub fn malformation(&self) -> Option<String> {
+        if !Vec3::from(self.origin).is_finite() {
+            return Some(format!("origin {:?} is not finite", self.origin));
+        }
+        for axis in 0..3 {
+            let e = (self.exponents >> (8 * axis)) & 0xff;
+            if !(MIN_EXPONENT..=MAX_EXPONENT).contains(&e) {
+                return Some(format!(
+                    "grid exponent {e} of axis {axis} is outside 1..=254"
+                ));
+            }
+        }
+        if self.exponents >> 24 != 0 || self.pad != 0 {
+            return Some("reserved bits are set".to_string());
+        }
+        None
     }
 }
 
@@ -158,5 +295,139 @@ impl GpuTriangle {
     pub fn normal(&self) -> Vec3 {
         let [a, b, c] = self.vertices();
         (b - a).cross(c - a).normalize_or_zero()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::random::SplitMix64;
+
+    fn child(min: Vec3, max: Vec3, child: u32) -> ChildRef {
+        ChildRef {
+            bounds: Aabb { min, max },
+            child,
+            count: 0,
+        }
+    }
+
+    fn contains(outer: Aabb, inner: Aabb) -> bool {
+        outer.min.cmple(inner.min).all() && outer.max.cmpge(inner.max).all()
+    }
+
+    /// Packs `a` and `b` and checks the decoded boxes: each contains its child's and is wider by
+    /// at most two grid steps per plane (one for rounding to the grid, one for the origin's
+    /// rounding), the grid step being at most twice the node's extent over 255. Where `q · step`
+    /// passes `f32::MAX` (a node spanning more than half the float range) the plane is +∞:
+    /// still a box that contains, no longer a tight one.
+    fn check_pair(a: ChildRef, b: ChildRef) {
+        let node = GpuNode::new(a, b);
+        assert_eq!(node.malformation(), None, "{a:?} {b:?}");
+        let [da, db] = node.children();
+        let node_box = a.bounds.union(b.bounds);
+        for (given, decoded) in [(a, da), (b, db)] {
+            assert_eq!((decoded.child, decoded.count), (given.child, given.count));
+            assert!(
+                contains(decoded.bounds, given.bounds),
+                "{given:?} decoded as {decoded:?}"
+            );
+            for axis in 0..3 {
+                let extent = (node_box.max[axis] as f64 - node_box.min[axis] as f64).max(0.0);
+                let step = f32::from_bits(((node.exponents >> (8 * axis)) & 0xff) << 23) as f64;
+                let ulp = (node_box.min[axis].abs().max(node_box.max[axis].abs()) as f64)
+                    * f32::EPSILON as f64;
+                assert!(step <= (2.0 * extent / 255.0).max(f32::MIN_POSITIVE as f64) + 2.0 * ulp);
+                let slack = 2.0 * step + ulp;
+                if decoded.bounds.max[axis].is_infinite() {
+                    assert!(extent > f32::MAX as f64 / 2.0, "{decoded:?}");
+                    continue;
+                }
+                assert!(
+                    given.bounds.min[axis] as f64 - decoded.bounds.min[axis] as f64 <= slack
+                        && decoded.bounds.max[axis] as f64 - given.bounds.max[axis] as f64 <= slack,
+                    "axis {axis}: {given:?} decoded as {decoded:?} (step {step})"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn decoded_boxes_contain_the_given_ones_and_stay_tight() {
+        let mut rng = SplitMix64::new(7);
+        let mut unit = || (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
+        for scale in [1e-30f32, 1e-6, 1.0, 3.7, 1e4, 1e30] {
+            for offset in [0.0f32, -1e3, 1e6, 1e-3] {
+                for _ in 0..200 {
+                    let mut corner =
+                        || Vec3::new(unit(), unit(), unit()) * scale + Vec3::splat(offset * scale);
+                    let (p, q, r, s) = (corner(), corner(), corner(), corner());
+                    check_pair(child(p.min(q), p.max(q), 1), child(r.min(s), r.max(s), 2));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn flat_point_and_extreme_boxes_stay_conservative() {
+        let big = f32::MAX / 2.0;
+        let cases = [
+            // Flat along y, a point, far apart.
+            (
+                child(Vec3::new(0.0, 1.0, 0.0), Vec3::new(2.0, 1.0, 2.0), 1),
+                child(Vec3::splat(5.0), Vec3::splat(5.0), 2),
+            ),
+            // Across almost the whole float range.
+            (
+                child(Vec3::splat(-big), Vec3::splat(-big / 2.0), 1),
+                child(Vec3::splat(big / 3.0), Vec3::splat(big), 2),
+            ),
+            // Tiny boxes near a large offset: steps below the coordinates' ulp.
+            (
+                child(Vec3::splat(1e7), Vec3::splat(1e7 + 1.0), 1),
+                child(Vec3::splat(1e7 + 2.0), Vec3::splat(1e7 + 2.0), 2),
+            ),
+            // Subnormal coordinates.
+            (
+                child(Vec3::splat(0.0), Vec3::splat(1e-40), 1),
+                child(Vec3::splat(-1e-42), Vec3::splat(1e-39), 2),
+            ),
+        ];
+        for (a, b) in cases {
+            check_pair(a, b);
+        }
+    }
+
+    #[test]
+    fn an_absent_child_is_a_point_at_the_origin_and_takes_no_room() {
+        let a = child(Vec3::new(10.0, 20.0, 30.0), Vec3::new(11.0, 22.0, 33.0), 3);
+        let node = GpuNode::new(a, ChildRef::ABSENT);
+        let [da, db] = node.children();
+        assert!(contains(da.bounds, a.bounds));
+        assert_eq!((db.child, db.count), (LEAF_BIT, 0));
+        assert_eq!(db.bounds.min, Vec3::from(node.origin));
+        assert_eq!(db.bounds.max, Vec3::from(node.origin));
+        // The absent child's point at zero did not stretch the grid: the step fits `a` alone.
+        assert_eq!(node.origin, [10.0, 20.0, 30.0]);
+        assert!(da.bounds.max.x - a.bounds.max.x <= 2.0 / 255.0);
+        // Both absent (an empty tree's root): a valid node of two points.
+        let empty = GpuNode::new(ChildRef::ABSENT, ChildRef::ABSENT);
+        assert_eq!(empty.malformation(), None);
+    }
+
+    #[test]
+    fn malformed_records_are_named() {
+        let good = GpuNode::new(
+            child(Vec3::ZERO, Vec3::ONE, 1),
+            child(Vec3::ONE, Vec3::splat(2.0), 2),
+        );
+        let mut nan = good;
+        nan.origin[1] = f32::NAN;
+        assert!(nan.malformation().unwrap().contains("origin"));
+        let mut zero_exponent = good;
+        zero_exponent.exponents &= !0xff00;
+        assert!(zero_exponent.malformation().unwrap().contains("axis 1"));
+        let mut reserved = good;
+        reserved.pad = 1;
+        assert!(reserved.malformation().unwrap().contains("reserved"));
     }
 }

@@ -3,8 +3,9 @@
 //! * [`build`](Bvh::build): binned SAH (Wald, "On fast construction of SAH-based bounding volume
 //!   hierarchies", 2007), parallel with `rayon`, deterministic whatever the thread count.
 //! * [`layout`]: the GPU node in the style of Aila & Laine, "Understanding the efficiency of ray
-//!   traversal on GPUs" (HPG 2009): one 64-byte node holds both children's boxes, so one fetch
-//!   answers "which children does the ray enter, and in which order".
+//!   traversal on GPUs" (HPG 2009): one node holds both children's boxes, so one fetch answers
+//!   "which children does the ray enter, and in which order"; the boxes are quantized to 8 bits
+//!   per plane against the node's own box (Ylitie, Karras & Laine, HPG 2017), 48 bytes a node.
 //! * `morton`: a linear BVH (Morton order), built in a fraction of the time, for the RBVH
 //!   builder's short rays around each leaf, where a tree is needed fast rather than good.
 //! * `traverse`: the one CPU traversal of the node array, generic over what a leaf is (its

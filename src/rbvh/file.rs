@@ -10,7 +10,7 @@
 //! | bytes | type | field |
 //! |---|---|---|
 //! | 0..8 | `[u8; 8]` | magic `RBVHv` followed by three zero bytes |
-//! | 8..12 | u32 | format version: 4 (this build writes it; it reads 1–3 as well, see below) |
+//! | 8..12 | u32 | format version: 5 (this build writes it; it reads 1–4 as well, see below) |
 //! | 12..16 | f32 | `params.texels_per_diagonal` |
 //! | 16..20, 20..24 | u32, f32 | `params.refinement`: tag (0 = `NormalCone`, 1 = `ProjectedArea`), its value (`max_angle_deg` or `min_ratio`) |
 //! | 24..28 | u32 | `params.subdivision`: 0 = `SpatialMedian`, 1 = `AreaSah` |
@@ -28,7 +28,7 @@
 //! | 100..108 | u64 | `stats.tile_texels` |
 //! | 108..112, 112..116 | u32, u32 | `atlas.pitch`, `atlas.rows` |
 //! | 116..148 | 4 × u64 | counts: nodes `N`, triangles `T`, leaves `L`, texels `X` |
-//! | 148.. | `N` × 64 bytes | `nodes` ([`crate::bvh::GpuNode`], 16 words each) |
+//! | 148.. | `N` × 48 bytes | `nodes` ([`crate::bvh::GpuNode`], 12 words each) |
 //! | then | `T` × 48 bytes | `triangles` ([`crate::bvh::GpuTriangle`], 12 words each) |
 //! | then | `L` × 64 bytes | `leaves` ([`super::GpuHeightfield`], 16 words each) |
 //! | then | `X` × 4 bytes | `atlas.texels` ([`super::Texel`], one word each), row by row; height-only texels: `X` × 2 bytes, each texel's height code (u16) |
@@ -37,17 +37,21 @@
 //!
 //! A height-only RBVH has no colour channel: a file that claims both is malformed.
 //!
-//! **Older versions** load as the RBVHs they described. Their header lacks bytes 40..52: the
+//! **Older versions** load as the RBVHs they described. Versions 1–4 stored each node in 64
+//! bytes with both children's boxes at full precision (`a_min`, `a_child`, `a_max`, `a_count`,
+//! then the same for `b`); loading quantizes them as the builder does now ([`GpuNode::new`]), so
+//! every box only grows and every hit stays. The header of versions 1–3 lacks bytes 40..52: the
 //! texel format and the colour channel were the version's (1: normals, no colours; 2: normals and
 //! colours; 3: height-only), and they were built by the paper's rule alone
-//! (`sampled_criterion_texels` = 0). Saving such an RBVH writes version 4. A colour section
+//! (`sampled_criterion_texels` = 0). Saving such an RBVH writes version 5. A colour section
 //! that is cut short, or whose count is not `X`, is an [`Error::Parse`] like any other
 //! malformation.
 //!
 //! Loading checks everything a tracer relies on, so a loaded RBVH is safe to trace and to upload:
 //! the magic and version, the length (counts × record sizes must be exactly what follows the
 //! header), `X = pitch × rows` with a power-of-two pitch, no NaN in the header's floats, enum tags and flags in range, every
-//! node's children (inner: a node index, with count 0; triangle leaf: a range within `triangles`;
+//! node's grid (a finite origin, exponents in range, reserved bits zero; a version 1–4 node's
+//! boxes free of NaN), every node's children (inner: a node index, with count 0; triangle leaf: a range within `triangles`;
 //! height-field leaf: an index into `leaves`), every leaf's tile inside the atlas with finite
 //! frame and a non-negative height scale, and every triangle's scene index below 2³¹ (hit ids with
 //! bit 31 set are height-field hits, `u32::MAX` a miss). Every failure is an [`Error::Parse`]
@@ -56,13 +60,13 @@
 use std::io::Write;
 use std::path::Path;
 
-use bytemuck::Pod;
+use bytemuck::{Pod, Zeroable};
 
 use super::layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT, LEAF_BIT};
 use super::march::tile_fits;
 use super::params::{RbvhParams, Refinement, Subdivision, TexelFormat};
 use super::{Rbvh, RbvhStats};
-use crate::bvh::{GpuNode, GpuTriangle};
+use crate::bvh::{ChildRef, GpuNode, GpuTriangle};
 use crate::geom::Aabb;
 use crate::io::write_atomically;
 use crate::{Error, Result};
@@ -70,10 +74,10 @@ use crate::{Error, Result};
 /// The first eight bytes of every RBVH file.
 const MAGIC: [u8; 8] = *b"RBVHv\0\0\0";
 /// The format version this build writes.
-const VERSION: u32 = 4;
+const VERSION: u32 = 5;
 /// Bytes before the arrays (see the table in the module docs).
 const HEADER_BYTES: usize = 148;
-/// Bytes before the arrays in versions 1–3, whose header lacks bytes 40..52 of version 4's.
+/// Bytes before the arrays in versions 1–3, whose header lacks bytes 40..52 of later ones.
 const OLD_HEADER_BYTES: usize = 136;
 
 impl Rbvh {
@@ -327,8 +331,13 @@ impl Rbvh {
             return Err(err("stats.build_ms is NaN".to_string()));
         }
 
+        let node_bytes = if version < 5 {
+            std::mem::size_of::<NodeV4>()
+        } else {
+            std::mem::size_of::<GpuNode>()
+        };
         let sizes = [
-            std::mem::size_of::<GpuNode>(),
+            node_bytes,
             std::mem::size_of::<GpuTriangle>(),
             std::mem::size_of::<GpuHeightfield>(),
             texels.bytes() as usize,
@@ -395,7 +404,19 @@ impl Rbvh {
         }
 
         // The lengths now match the file, so each count fits in memory (usize).
-        let nodes: Vec<GpuNode> = r.records(n_nodes as usize)?;
+        let nodes: Vec<GpuNode> = if version < 5 {
+            let old: Vec<NodeV4> = r.records(n_nodes as usize)?;
+            let mut nodes = Vec::with_capacity(old.len());
+            for (index, node) in old.iter().enumerate() {
+                nodes.push(
+                    node.quantized()
+                        .map_err(|why| err(format!("node {index}: {why}")))?,
+                );
+            }
+            nodes
+        } else {
+            r.records(n_nodes as usize)?
+        };
         let triangles: Vec<GpuTriangle> = r.records(n_triangles as usize)?;
         let leaves: Vec<GpuHeightfield> = r.records(n_leaves as usize)?;
         let texel_words: Vec<Texel> = match texels {
@@ -419,6 +440,9 @@ impl Rbvh {
         };
 
         for (index, node) in nodes.iter().enumerate() {
+            if let Some(why) = node.malformation() {
+                return Err(err(format!("node {index}: {why}")));
+            }
             let children = [
                 ('a', node.a_child, node.a_count),
                 ('b', node.b_child, node.b_count),
@@ -457,6 +481,45 @@ impl Rbvh {
             stats,
             colours,
         })
+    }
+}
+
+/// A node as versions 1–4 stored it: both children's boxes at full precision, 64 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct NodeV4 {
+    a_min: [f32; 3],
+    a_child: u32,
+    a_max: [f32; 3],
+    a_count: u32,
+    b_min: [f32; 3],
+    b_child: u32,
+    b_max: [f32; 3],
+    b_count: u32,
+}
+const _: () = assert!(std::mem::size_of::<NodeV4>() == 64);
+
+impl NodeV4 {
+    /// The node as this version stores it, its boxes quantized outward; an error for NaN boxes,
+    /// which no grid holds.
+    fn quantized(&self) -> std::result::Result<GpuNode, String> {
+        let child = |min: [f32; 3], max: [f32; 3], child, count| {
+            if min.iter().chain(&max).any(|x| x.is_nan()) {
+                return Err(format!("a child box ({min:?}, {max:?}) contains NaN"));
+            }
+            Ok(ChildRef {
+                bounds: Aabb {
+                    min: min.into(),
+                    max: max.into(),
+                },
+                child,
+                count,
+            })
+        };
+        Ok(GpuNode::new(
+            child(self.a_min, self.a_max, self.a_child, self.a_count)?,
+            child(self.b_min, self.b_max, self.b_child, self.b_count)?,
+        ))
     }
 }
 

@@ -1,4 +1,4 @@
-//! GPU layout of the RBVH: the tree reuses the exact BVH's 64-byte node ([`GpuNode`]); triangle
+//! GPU layout of the RBVH: the tree reuses the exact BVH's 48-byte node ([`GpuNode`]); triangle
 //! leaves reuse [`GpuTriangle`]; height-field leaves are [`GpuHeightfield`] records; the atlas is
 //! an array of 32-bit texels ([`Texel`]) with a fixed row pitch.
 //!

@@ -890,7 +890,7 @@ mod tests {
         assert_eq!(
             reads,
             [
-                read(Array::Nodes, 0, 64),
+                read(Array::Nodes, 0, 48),
                 read(Array::Leaves, 0, 64),
                 read(Array::Atlas, 4 * 64, 4),
                 read(Array::Atlas, 4 * 28, 4),
