@@ -6,7 +6,8 @@ mod common;
 use glam::Vec3;
 use rbvh::bvh::Bvh;
 use rbvh::geom::Ray;
-use rbvh::rbvh::{Rbvh, RbvhParams, Refinement, Subdivision, HEIGHTFIELD_COUNT};
+use rbvh::progress::Quiet;
+use rbvh::rbvh::{Rbvh, RbvhParams, RbvhSource, Refinement, Subdivision, HEIGHTFIELD_COUNT};
 use rbvh::scene::Scene;
 
 fn q(level: u32) -> RbvhParams {
@@ -154,6 +155,29 @@ fn build_is_identical_for_any_thread_count() {
         (&b.nodes, &b.leaves, &b.triangles)
     );
     assert_eq!(a.atlas, b.atlas);
+}
+
+/// Levels built from one shared source are the levels built alone, byte for byte (their build
+/// times aside); a level too fine for the estimate fails with the error it gives alone, and the
+/// source still serves the next level.
+#[test]
+fn levels_from_one_source_are_the_levels_built_alone() {
+    let scene = Scene::builtin("default").unwrap();
+    let source = RbvhSource::new(&scene).unwrap();
+    let too_fine = RbvhParams {
+        texels_per_diagonal: 1.0e6,
+        ..q(2)
+    };
+    let err = Rbvh::build_from(&source, &too_fine, &Quiet).unwrap_err();
+    assert!(err.to_string().contains("texels_per_diagonal"), "{err}");
+    for level in [0, 2, 4] {
+        let mut shared = Rbvh::build_from(&source, &q(level), &Quiet).unwrap();
+        let mut alone = Rbvh::build(&scene, &q(level)).unwrap();
+        assert!(shared.stats.build_ms > 0.0 && alone.stats.build_ms > 0.0);
+        shared.stats.build_ms = 0.0;
+        alone.stats.build_ms = 0.0;
+        assert_eq!(shared.to_bytes(), alone.to_bytes(), "Q{level}");
+    }
 }
 
 #[test]

@@ -44,7 +44,7 @@ use crate::output::{self, Image};
 use crate::probe::{MeanCounters, Read, TraceStats};
 use crate::progress::{Progress, Quiet};
 use crate::rays::{self, RayType, Secondary, DEFAULT_LIGHT};
-use crate::rbvh::{Rbvh, RbvhParams, TexelFormat};
+use crate::rbvh::{Rbvh, RbvhParams, RbvhSource, TexelFormat};
 use crate::scene::Scene;
 use crate::structure::{Kind, Structure};
 use crate::{Error, Result};
@@ -315,6 +315,9 @@ impl<'a> SceneBench<'a> {
             .levels
             .iter()
             .flat_map(|level| config.texels.iter().map(move |&texels| (level, texels)));
+        // What every level shares (the scene's parts, the BVH its rings are sampled by) is made
+        // once, at the first level, and dropped after the last.
+        let mut shared: Option<RbvhSource> = None;
         for (level, texels) in builds {
             level.validate()?;
             let params = RbvhParams { texels, ..*level };
@@ -323,7 +326,12 @@ impl<'a> SceneBench<'a> {
                 scene.name,
                 params.level_label()
             )));
-            let rbvh = Arc::new(Rbvh::build_observed(&scene, &params, progress)?);
+            let source = match shared.take() {
+                Some(source) => source,
+                None => RbvhSource::new(&scene)?,
+            };
+            let rbvh = Arc::new(Rbvh::build_from(&source, &params, progress)?);
+            shared = Some(source);
             surface_offset = surface_offset.max(rbvh.texel_size);
             let memory = Memory {
                 tree: rbvh.tree_bytes(),
@@ -384,6 +392,7 @@ impl<'a> SceneBench<'a> {
                 });
             }
         }
+        drop(shared);
         let (width, height) = (config.width, config.height);
         let camera = scene.camera_or_framed(width as f32 / height as f32);
         let primary = camera.primary_rays(width, height);

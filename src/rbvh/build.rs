@@ -87,23 +87,44 @@ struct Builder<'a> {
     progress: &'a dyn Progress,
     texel: f32,
     /// The scene's triangles in a BVH, for the surface around each leaf (its ring of samples).
-    surface: Option<LinearBvh<'a>>,
+    surface: Option<&'a LinearBvh<'a>>,
 }
 
-impl Rbvh {
-    /// Builds an RBVH of `scene` with `params` (see [`RbvhParams::quality`] for presets).
-    pub fn build(scene: &Scene, params: &RbvhParams) -> Result<Rbvh> {
-        Rbvh::build_observed(scene, params, &Quiet)
-    }
+/// What every level of an RBVH of one scene shares, made once for all of them: the scene
+/// checked, its triangles (or points) gathered with their total area, and, at the first build
+/// that needs them, each element's split primitive (box, centroid, area, connected part) and
+/// the linear BVH of the scene that the ring samples trace. On the paper-scale scene (21.9M
+/// triangles) that is 10 of a Q2 build's 22 seconds, so `rbvh build --quality all` and `rbvh
+/// bench` build every level from one source.
+pub struct RbvhSource<'s> {
+    scene: &'s Scene,
+    /// The scene's triangles (none when it has points).
+    tris: Vec<[Vec3; 3]>,
+    /// The scene's points as splats (none when it has triangles).
+    splats: Vec<Splat>,
+    /// Total surface area, for the texel-count estimate that refuses an oversized build early.
+    area: f64,
+    /// Made by the first build that passes that estimate.
+    shared: std::sync::OnceLock<Shared<'s>>,
+    /// Milliseconds [`RbvhSource::new`] took. It and [`Shared::ms`] count into each level's
+    /// [`RbvhStats::build_ms`]: what building that level alone costs.
+    new_ms: f64,
+}
 
-    /// [`Rbvh::build`], reporting to `progress` the triangles placed in leaves (height fields,
-    /// rasterized as they are made, or triangle leaves), then the baking of the colour channel.
-    pub fn build_observed(
-        scene: &Scene,
-        params: &RbvhParams,
-        progress: &dyn Progress,
-    ) -> Result<Rbvh> {
-        params.validate()?;
+/// The costly part of an [`RbvhSource`].
+struct Shared<'s> {
+    prims: Vec<SplitPrim>,
+    /// The scene's triangles in a BVH, for the surface around each leaf (its ring of samples).
+    surface: Option<LinearBvh<'s>>,
+    /// Milliseconds making this took.
+    ms: f64,
+}
+
+impl<'s> RbvhSource<'s> {
+    /// Checks `scene` (finite, and fewer than 2^31 triangles and points) and gathers its
+    /// triangles or points.
+    pub fn new(scene: &'s Scene) -> Result<RbvhSource<'s>> {
+        let start = Instant::now();
         scene.validate()?;
         let points = scene.points.as_ref().map_or(0, |c| c.len());
         if scene.triangle_count() >= LEAF_BIT as usize || points >= LEAF_BIT as usize {
@@ -115,19 +136,9 @@ impl Rbvh {
                 ),
             ));
         }
-        let start = Instant::now();
-        let bounds = scene.bounds();
-        let diagonal = bounds.diagonal();
-        let texel = if diagonal > 0.0 {
-            diagonal / params.texels_per_diagonal
-        } else {
-            1.0
-        };
-        let tris: Vec<[Vec3; 3]>;
-        let splats: Vec<Splat>;
-        let (input, elements, area): (Input, &str, f64) = match &scene.points {
+        let (tris, splats, area): (Vec<[Vec3; 3]>, Vec<Splat>, f64) = match &scene.points {
             Some(cloud) => {
-                splats = (0..cloud.len())
+                let splats: Vec<Splat> = (0..cloud.len())
                     .map(|i| Splat {
                         position: cloud.positions[i],
                         normal: cloud.normals[i],
@@ -135,30 +146,46 @@ impl Rbvh {
                     })
                     .collect();
                 let area = splats.iter().map(|p| f64::from(p.spacing).powi(2)).sum();
-                (Input::Points(&splats), "points", area)
+                (Vec::new(), splats, area)
             }
             None => {
-                tris = (0..scene.triangle_count())
+                let tris: Vec<[Vec3; 3]> = (0..scene.triangle_count())
                     .map(|i| scene.triangle(i))
                     .collect();
                 let area = tris
                     .iter()
                     .map(|[a, b, c]| 0.5 * (*b - *a).cross(*c - *a).length() as f64)
                     .sum();
-                (Input::Triangles(&tris), "triangles", area)
+                (tris, Vec::new(), area)
             }
         };
-        let estimate = area / (texel as f64 * texel as f64);
-        if estimate > MAX_ESTIMATED_TEXELS {
-            return Err(Error::param(
-                "texels_per_diagonal",
-                format!(
-                    "{} would need about {estimate:.3e} texels for {} of surface (limit {MAX_ESTIMATED_TEXELS:.0e}); lower the sampling rate or the quality level",
-                    params.texels_per_diagonal, area
-                ),
-            ));
+        Ok(RbvhSource {
+            scene,
+            tris,
+            splats,
+            area,
+            shared: std::sync::OnceLock::new(),
+            new_ms: start.elapsed().as_secs_f64() * 1e3,
+        })
+    }
+
+    /// What the leaves sample.
+    fn input(&self) -> Input<'_> {
+        if self.scene.points.is_some() {
+            Input::Points(&self.splats)
+        } else {
+            Input::Triangles(&self.tris)
         }
-        let prims: Vec<SplitPrim> = match &input {
+    }
+
+    /// The split primitives and the surface BVH, made at the first call.
+    fn shared(&self, progress: &dyn Progress) -> Result<&Shared<'s>> {
+        if let Some(shared) = self.shared.get() {
+            return Ok(shared);
+        }
+        let start = Instant::now();
+        let scene = self.scene;
+        let prims: Vec<SplitPrim> = match self.input() {
             Input::Triangles(tris) => {
                 let components = step(progress, "finding the scene's connected parts", 0, || {
                     connected_parts(scene)
@@ -190,21 +217,82 @@ impl Rbvh {
                 })
                 .collect(),
         };
-        let keep_sources = match &input {
-            Input::Triangles(_) => scene.surface.is_some(),
-            Input::Points(_) => scene.points.as_ref().is_some_and(|c| c.colours.is_some()),
-        };
-        let count = prims.len();
-        let surface = match &input {
+        let surface = match self.input() {
             // Only traced by rays a few texels long: a linear BVH serves, in a fraction of the
             // exact BVH's time.
             Input::Triangles(_) => Some(LinearBvh::build(scene, SURFACE_LEAF)?),
             Input::Points(_) => None,
         };
+        let ms = start.elapsed().as_secs_f64() * 1e3;
+        Ok(self.shared.get_or_init(|| Shared { prims, surface, ms }))
+    }
+}
+
+impl Rbvh {
+    /// Builds an RBVH of `scene` with `params` (see [`RbvhParams::quality`] for presets).
+    pub fn build(scene: &Scene, params: &RbvhParams) -> Result<Rbvh> {
+        Rbvh::build_observed(scene, params, &Quiet)
+    }
+
+    /// [`Rbvh::build`], reporting to `progress` the triangles placed in leaves (height fields,
+    /// rasterized as they are made, or triangle leaves), then the baking of the colour channel.
+    pub fn build_observed(
+        scene: &Scene,
+        params: &RbvhParams,
+        progress: &dyn Progress,
+    ) -> Result<Rbvh> {
+        params.validate()?;
+        Rbvh::build_from(&RbvhSource::new(scene)?, params, progress)
+    }
+
+    /// [`Rbvh::build_observed`] from a `source` that other levels of the same scene share: the
+    /// same RBVH, byte for byte, without preparing the scene again. Its
+    /// [`RbvhStats::build_ms`] counts the preparation as if this level had done it alone.
+    pub fn build_from(
+        source: &RbvhSource,
+        params: &RbvhParams,
+        progress: &dyn Progress,
+    ) -> Result<Rbvh> {
+        params.validate()?;
+        let start = Instant::now();
+        let scene = source.scene;
+        let bounds = scene.bounds();
+        let diagonal = bounds.diagonal();
+        let texel = if diagonal > 0.0 {
+            diagonal / params.texels_per_diagonal
+        } else {
+            1.0
+        };
+        let (input, elements) = match source.input() {
+            input @ Input::Points(_) => (input, "points"),
+            input @ Input::Triangles(_) => (input, "triangles"),
+        };
+        let area = source.area;
+        let estimate = area / (texel as f64 * texel as f64);
+        if estimate > MAX_ESTIMATED_TEXELS {
+            return Err(Error::param(
+                "texels_per_diagonal",
+                format!(
+                    "{} would need about {estimate:.3e} texels for {} of surface (limit {MAX_ESTIMATED_TEXELS:.0e}); lower the sampling rate or the quality level",
+                    params.texels_per_diagonal, area
+                ),
+            ));
+        }
+        let made_here = source.shared.get().is_none();
+        let shared = source.shared(progress)?;
+        // What preparing took before this build started its clock.
+        let prepared_ms = source.new_ms + if made_here { 0.0 } else { shared.ms };
+        let prims = &shared.prims;
+        let keep_sources = match &input {
+            Input::Triangles(_) => scene.surface.is_some(),
+            Input::Points(_) => scene.points.as_ref().is_some_and(|c| c.colours.is_some()),
+        };
+        let count = prims.len();
+        let surface = shared.surface.as_ref();
         let builder = Builder {
             input,
             keep_sources,
-            prims: &prims,
+            prims,
             params,
             texel,
             progress,
@@ -281,7 +369,7 @@ impl Rbvh {
             _ => None,
         };
         let stats = RbvhStats {
-            build_ms: start.elapsed().as_secs_f64() * 1e3,
+            build_ms: prepared_ms + start.elapsed().as_secs_f64() * 1e3,
             heightfield_leaves: out.leaves.len() as u32,
             triangle_leaves: out.triangle_leaves,
             tile_texels: sizes.iter().map(|&(u, v)| u as u64 * v as u64).sum(),
@@ -441,7 +529,7 @@ impl Builder<'_> {
                     self.judged_frame(&elements, tris.as_flattened(), 0.0, diagonal)?;
                 // Layers closer than a texel are one surface at this sampling rate.
                 self.tiles(&frame, |window| {
-                    rasterize(&tris, window, self.texel, judge, self.surface.as_ref())
+                    rasterize(&tris, window, self.texel, judge, self.surface)
                 })
             }
             Input::Points(all) => {

@@ -27,6 +27,7 @@ pub mod seams;
 mod splat;
 mod split;
 
+pub use build::RbvhSource;
 pub use layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT};
 pub use march::DeviceTwin;
 pub use params::{RbvhParams, Refinement, Subdivision, TexelFormat, QUALITY_NAMES};

@@ -8,7 +8,7 @@ use anyhow::{Context as _, Result};
 use rayon::prelude::*;
 use rbvh::bvh::{BuildParams, Bvh};
 use rbvh::probe::TraceStats;
-use rbvh::rbvh::{Rbvh, RbvhParams, Subdivision};
+use rbvh::rbvh::{Rbvh, RbvhParams, RbvhSource, Subdivision};
 use rbvh::scene::Scene;
 
 use crate::prepare::{flag_error, PointsArg, Quality};
@@ -102,10 +102,13 @@ pub fn run(a: Args) -> Result<()> {
             "peak MB"
         );
     }
+    // What every level shares (the scene's parts, the BVH its rings are sampled by) is made once.
+    let source = RbvhSource::new(&scene).map_err(flag_error)?;
     for params in levels {
         let name = params.level_label();
         let r = step(&format!("building RBVH {name}"), |bar| {
-            Rbvh::build_observed(&scene, &params, bar).map_err(flag_error)
+            params.validate().map_err(flag_error)?;
+            Rbvh::build_from(&source, &params, bar).map_err(flag_error)
         })?;
         if table {
             println!(
@@ -138,7 +141,7 @@ pub fn run(a: Args) -> Result<()> {
             }
         }
         if a.compare_splits {
-            compare_splits(&scene, &name, &params)?;
+            compare_splits(&source, &scene, &name, &params)?;
         }
         if let Some(path) = &a.out {
             r.save(path)?;
@@ -150,7 +153,12 @@ pub fn run(a: Args) -> Result<()> {
 
 /// Build time and tracing cost of each subdivision strategy at `params`' level, on primary rays
 /// (the paper measured construction seconds and MRays/s of spatial median against its SAH).
-fn compare_splits(scene: &Scene, level: &str, params: &RbvhParams) -> Result<()> {
+fn compare_splits(
+    source: &RbvhSource,
+    scene: &Scene,
+    level: &str,
+    params: &RbvhParams,
+) -> Result<()> {
     let rays = scene.camera_or_framed(4.0 / 3.0).primary_rays(320, 240);
     for (name, subdivision, object_split) in [
         ("median", Subdivision::SpatialMedian, true),
@@ -163,7 +171,7 @@ fn compare_splits(scene: &Scene, level: &str, params: &RbvhParams) -> Result<()>
             ..*params
         };
         let r = step(&format!("building {level} ({name})"), |_| {
-            Rbvh::build(scene, &p).map_err(flag_error)
+            Rbvh::build_from(source, &p, &rbvh::progress::Quiet).map_err(flag_error)
         })?;
         let start = Instant::now();
         let stats: Vec<TraceStats> = rays.par_iter().map(|ray| r.closest_hit(ray).1).collect();
