@@ -44,14 +44,19 @@ struct BvhNode {
 };
 
 // The children's boxes of node `n`, as GpuNode::boxes decodes them: plane q of axis k is
-// origin_k + q * 2^(e_k - 127); the product is exact, so the sum rounds once, fused or not, and
-// the boxes are the CPU's bit for bit.
+// origin_k + q * 2^(e_k - 127); the product is exact, so the sum rounds once and the boxes are the
+// CPU's bit for bit. `precise` keeps it unfused as on the CPU for the one case where the product
+// is not exact (past FLT_MAX, a node spanning more than half the float range).
 void rbvh_node_boxes(BvhNode n, out vec3 a_min, out vec3 a_max, out vec3 b_min, out vec3 b_max) {
     vec3 step = uintBitsToFloat(((uvec3(n.exponents) >> uvec3(0u, 8u, 16u)) & 0xFFu) << 23);
-    a_min = n.origin + vec3(n.planes & 0xFFu) * step;
-    a_max = n.origin + vec3((n.planes >> 8) & 0xFFu) * step;
-    b_min = n.origin + vec3((n.planes >> 16) & 0xFFu) * step;
-    b_max = n.origin + vec3(n.planes >> 24) * step;
+    precise vec3 lo_a = n.origin + vec3(n.planes & 0xFFu) * step;
+    precise vec3 hi_a = n.origin + vec3((n.planes >> 8) & 0xFFu) * step;
+    precise vec3 lo_b = n.origin + vec3((n.planes >> 16) & 0xFFu) * step;
+    precise vec3 hi_b = n.origin + vec3(n.planes >> 24) * step;
+    a_min = lo_a;
+    a_max = hi_a;
+    b_min = lo_b;
+    b_max = hi_b;
 }
 
 // 48 bytes: vertices gathered in leaf order, with the scene's triangle index.

@@ -311,14 +311,16 @@ impl<'a> SceneBench<'a> {
         // surface may lie up to a fraction of a texel off the exact one, and a ray starting
         // closer would meet its own surface. One offset for all, so all trace identical rays.
         let mut surface_offset = 0.0f32;
-        let builds = config
+        let builds: Vec<_> = config
             .levels
             .iter()
-            .flat_map(|level| config.texels.iter().map(move |&texels| (level, texels)));
+            .flat_map(|level| config.texels.iter().map(move |&texels| (level, texels)))
+            .collect();
+        let last_build = builds.len().saturating_sub(1);
         // What every level shares (the scene's parts, the BVH its rings are sampled by) is made
-        // once, at the first level, and dropped after the last.
+        // once, at the first level, and dropped after the last level is built.
         let mut shared: Option<RbvhSource> = None;
-        for (level, texels) in builds {
+        for (k, (level, texels)) in builds.into_iter().enumerate() {
             level.validate()?;
             let params = RbvhParams { texels, ..*level };
             observe(Event::Progress(format!(
@@ -331,7 +333,9 @@ impl<'a> SceneBench<'a> {
                 None => RbvhSource::new(&scene)?,
             };
             let rbvh = Arc::new(Rbvh::build_from(&source, &params, progress)?);
-            shared = Some(source);
+            if k < last_build {
+                shared = Some(source);
+            }
             surface_offset = surface_offset.max(rbvh.texel_size);
             let memory = Memory {
                 tree: rbvh.tree_bytes(),
@@ -392,7 +396,6 @@ impl<'a> SceneBench<'a> {
                 });
             }
         }
-        drop(shared);
         let (width, height) = (config.width, config.height);
         let camera = scene.camera_or_framed(width as f32 / height as f32);
         let primary = camera.primary_rays(width, height);

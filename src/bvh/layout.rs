@@ -30,8 +30,11 @@ pub const LEAF_BIT: u32 = 0x8000_0000;
 /// (1..=254, so the step is a normal float and `float(q) · step` is exact). Word `k` of `planes`
 /// holds four 8-bit grid coordinates, `a_lo | a_hi << 8 | b_lo << 16 | b_hi << 24`, and a plane is
 /// `origin_k + q · step_k`: one rounding, the same with or without a fused multiply-add, so the
-/// CPU and every device decode the same bits. [`GpuNode::new`] rounds each plane outward and
-/// checks the decoded value, so a decoded child box always contains the exact one.
+/// CPU and every device decode the same bits, but for a subnormal `origin` on a device that
+/// flushes subnormals (where `q · step` passes `f32::MAX`, in a node spanning half the float
+/// range, the product is +∞ and the shader's `precise` sum keeps it so, as here).
+/// [`GpuNode::new`] rounds each plane outward and checks the decoded value, so a decoded child
+/// box always contains the exact one.
 ///
 /// A child is an inner node (`child` = node index, `count` = 0) or a leaf (`child` =
 /// [`LEAF_BIT`] | first triangle, `count` triangles; 0 for an absent child, whose box decodes

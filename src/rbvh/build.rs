@@ -95,7 +95,8 @@ struct Builder<'a> {
 /// that needs them, each element's split primitive (box, centroid, area, connected part) and
 /// the linear BVH of the scene that the ring samples trace. On the paper-scale scene (21.9M
 /// triangles) that is 10 of a Q2 build's 22 seconds, so `rbvh build --quality all` and `rbvh
-/// bench` build every level from one source.
+/// bench` build every level from one source. Its builds are meant to run one after another:
+/// two at once would each make the shared part (the same, twice).
 pub struct RbvhSource<'s> {
     scene: &'s Scene,
     /// The scene's triangles (none when it has points).
@@ -124,7 +125,6 @@ impl<'s> RbvhSource<'s> {
     /// Checks `scene` (finite, and fewer than 2^31 triangles and points) and gathers its
     /// triangles or points.
     pub fn new(scene: &'s Scene) -> Result<RbvhSource<'s>> {
-        let start = Instant::now();
         scene.validate()?;
         let points = scene.points.as_ref().map_or(0, |c| c.len());
         if scene.triangle_count() >= LEAF_BIT as usize || points >= LEAF_BIT as usize {
@@ -136,6 +136,7 @@ impl<'s> RbvhSource<'s> {
                 ),
             ));
         }
+        let start = Instant::now();
         let (tris, splats, area): (Vec<[Vec3; 3]>, Vec<Splat>, f64) = match &scene.points {
             Some(cloud) => {
                 let splats: Vec<Splat> = (0..cloud.len())
