@@ -158,6 +158,11 @@ impl ChildRef {
     pub fn is_leaf(&self) -> bool {
         self.child & LEAF_BIT != 0
     }
+
+    /// Whether this is an absent child: a leaf with nothing in it, whose box means nothing.
+    pub fn is_absent(&self) -> bool {
+        self.is_leaf() && self.count == 0
+    }
 }
 
 impl GpuNode {
@@ -167,7 +172,7 @@ impl GpuNode {
     /// the point `origin`, which only reaches a leaf with nothing to test.
     pub fn new(a: ChildRef, b: ChildRef) -> Self {
         let span = |c: &ChildRef| {
-            let present = !(c.is_leaf() && c.count == 0) && c.bounds.min.cmple(c.bounds.max).all();
+            let present = !c.is_absent() && c.bounds.min.cmple(c.bounds.max).all();
             present.then_some(c.bounds)
         };
         let boxes = [span(&a), span(&b)];

@@ -377,7 +377,7 @@ impl Rbvh {
         };
         let bounds = root_children
             .iter()
-            .filter(|c| !(c.is_leaf() && c.count == 0))
+            .filter(|c| !c.is_absent())
             .fold(Aabb::EMPTY, |b, c| b.union(c.bounds));
         Ok(Rbvh {
             params: *params,
