@@ -34,9 +34,11 @@
 #define RBVH_HEIGHT_ONLY false
 #endif
 
-// Must equal MARCH_SLACK, MARCH_EDGE_PAD and Texel::MAX_CODE / HOLE_CODE (tests/glsl_header.rs checks, on the device).
+// Must equal MARCH_SLACK, MARCH_EDGE_PAD, MARCH_SKIRT_TEXELS and Texel::MAX_CODE / HOLE_CODE
+// (tests/glsl_header.rs checks, on the device).
 #define RBVH_MARCH_SLACK 1e-5
 #define RBVH_MARCH_EDGE_PAD 0.015625
+#define RBVH_MARCH_SKIRT_TEXELS 1.0
 #define RBVH_MAX_CODE 65534u
 #define RBVH_HOLE_CODE 65535u
 const uint RBVH_HEIGHTFIELD_COUNT = 0xFFFFFFFFu;
@@ -221,6 +223,53 @@ float rbvh_cell_triangles(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, out vec
     return t_hit;
 }
 
+// The skirt of `cell` (skirt in march.rs; MARCH_SKIRT_TEXELS in layout.rs), whose four corners
+// rbvh_cell_candidate read and found present, entered at cell.t_in from a cell without four
+// samples (or through the tile's side) across its edge on `axis` (0: an s boundary, 1: a t
+// boundary) by a ray stepping `step` along it: true when both samples of that edge were sampled
+// from the surface (even codes: Texel::is_sampled) and the ray is below the edge by at most the
+// skirt's depth (`uu` = |axis_u|^2, so that no square root is needed).
+bool rbvh_skirt(RbvhLeaf leaf, RbvhFrameRay fr, float slack, float uu, RbvhCell cell, int axis, int step) {
+    bool across_s = axis == 0;
+    uint ca = across_s ? (step > 0 ? cell.c00 : cell.c10) : (step > 0 ? cell.c00 : cell.c01);
+    uint cb = across_s ? (step > 0 ? cell.c01 : cell.c11) : (step > 0 ? cell.c10 : cell.c11);
+    if (((ca | cb) & 1u) != 0u) {
+        return false;
+    }
+    precise float a = float(ca & 0xFFFFu) * leaf.h_scale;
+    precise float b = float(cb & 0xFFFFu) * leaf.h_scale;
+    precise float at_s = fr.o.x + fr.d.x * cell.t_in;
+    precise float at_t = fr.o.y + fr.d.y * cell.t_in;
+    precise float along = across_s ? at_t - (float(cell.j) + 0.5) : at_s - (float(cell.i) + 0.5);
+    float f = clamp(along, 0.0, 1.0);
+    precise float edge_h = a + (b - a) * f;
+    precise float below = edge_h - rbvh_height_at(fr.o.z, fr.d.z, cell.t_in);
+    precise float depth2 = below * below * uu;
+    return below >= -slack && depth2 <= RBVH_MARCH_SKIRT_TEXELS * RBVH_MARCH_SKIRT_TEXELS;
+}
+
+// The frame-space normal of a skirt hit at t in `cell` for height-only texels: the facet of the
+// cell triangle under the entry, (c00, c10, c11) where s >= t within the cell, as skirt in
+// march.rs.
+vec3 rbvh_skirt_facet(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, float t) {
+    precise float h00 = float(cell.c00 & 0xFFFFu) * leaf.h_scale;
+    precise float h10 = float(cell.c10 & 0xFFFFu) * leaf.h_scale;
+    precise float h01 = float(cell.c01 & 0xFFFFu) * leaf.h_scale;
+    precise float h11 = float(cell.c11 & 0xFFFFu) * leaf.h_scale;
+    float s0 = float(cell.i) + 0.5;
+    float s1 = float(cell.i + 1) + 0.5;
+    float r0 = float(cell.j) + 0.5;
+    float r1 = float(cell.j + 1) + 0.5;
+    precise float fs = (fr.o.x + fr.d.x * t) - s0;
+    precise float ft = (fr.o.y + fr.d.y * t) - r0;
+    vec3 a = vec3(s0, r0, h00);
+    vec3 b = fs >= ft ? vec3(s1, r0, h10) : vec3(s1, r1, h11);
+    vec3 c = fs >= ft ? vec3(s1, r1, h11) : vec3(s0, r1, h01);
+    precise vec3 e1 = b - a;
+    precise vec3 e2 = c - a;
+    return vec3(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
+}
+
 // Step 5 of march.rs: the texel whose normal a hit at `t_hit` in `cell` reports, its nearest
 // present corner sample. Called once, after the walk, so that the SIMD walk loop does not carry it.
 uint rbvh_cell_normal_texel(RbvhFrameRay fr, RbvhCell cell, float t_hit) {
@@ -309,6 +358,12 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     precise vec3 e1 = (bmax - o) * inv;
     vec3 e = max(e0, e1);
     float t1 = min(min(min(e.x, e.y), e.z), fr.tmax);
+    // The edge (0: s, 1: t, -1: none) the current cell was entered across, for the skirt: the
+    // first cell's when the ray enters the tile's box through its s or t side.
+    vec3 near = min(e0, e1);
+    int entered = t0 <= fr.tmin ? -1 : (t0 == near.x ? 0 : (t0 == near.y ? 1 : -1));
+    precise float uu = (leaf.axis_u.x * leaf.axis_u.x + leaf.axis_u.y * leaf.axis_u.y) + leaf.axis_u.z * leaf.axis_u.z;
+    precise float skirt_h = 1.001 * RBVH_MARCH_SKIRT_TEXELS / sqrt(uu);
 
     // 3. Walk.
     int last_i = int(leaf.res_u) - 2;
@@ -341,6 +396,12 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     bool finished = false;
     bool stopped = false;
     bool advance = false;
+    bool skirt = false;
+    // Whether the last main cell walked had four samples (prev_full in march.rs, which says why a
+    // block jump may leave it as it was).
+    bool prev_full = false;
+    bool rim = false;
+    bool tests = false;
     float t_hit = -1.0;
     vec3 facet = vec3(0.0);
     uint n = 0u;
@@ -374,6 +435,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
                         } else {
                             ci += step_i;
                             t_in = next_i;
+                            entered = 0;
                             if (ci < 0 || ci > last_i) {
                                 finished = true;
                             } else {
@@ -383,6 +445,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
                     } else {
                         cj += step_j;
                         t_in = next_j;
+                        entered = 1;
                         if (cj < 0 || cj > last_j) {
                             finished = true;
                         } else {
@@ -418,7 +481,9 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
                     uint range = RBVH_ATLAS(rbvh_texel_words(sz) + block);
                     uint code_lo = range & 0xFFFFu;
                     uint code_hi = range >> 16;
-                    precise float lo_s = float(code_lo) * leaf.h_scale - slack;
+                    // Below by less than the skirt's depth, a block may hold a skirt hit (skirt_h
+                    // has a margin for the square root's rounding).
+                    precise float lo_s = float(code_lo) * leaf.h_scale - slack - skirt_h;
                     precise float hi_s = float(code_hi) * leaf.h_scale + slack;
                     float h_a = rbvh_height_at(o.z, d.z, t_in);
                     float h_b = rbvh_height_at(o.z, d.z, min(min(leave_i, leave_j), t1));
@@ -443,6 +508,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
                         float t_last = t_in;
                         for (int m = 0; m < 8 && minor_step != 0 && (out_i ? next < leave : next <= leave); ++m) {
                             t_last = next;
+                            entered = out_i ? 1 : 0;
                             minor += minor_step;
                             next = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, minor, minor_step, minor_o, minor_inv);
                         }
@@ -453,8 +519,12 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
                         int edge = out_i ? edge_i : edge_j;
                         float major_next = out_i ? next_i : next_j;
                         if (major != edge) {
-                            t_last = max(t_last, rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, edge - major_step, major_step,
-                                                                 out_i ? o.x : o.y, out_i ? inv.x : inv.y));
+                            float into_edge = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, edge - major_step, major_step,
+                                                                   out_i ? o.x : o.y, out_i ? inv.x : inv.y);
+                            if (into_edge >= t_last) {
+                                entered = out_i ? 0 : 1;
+                            }
+                            t_last = max(t_last, into_edge);
                             major = edge;
                             major_next = leave;
                         }
@@ -474,7 +544,17 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
                 cell.t_out = t_out;
             }
             cells += 1u;
-            if (rbvh_cell_candidate(leaf, sz, fr, slack, cell)) {
+            tests = rbvh_cell_candidate(leaf, sz, fr, slack, cell);
+            // A full main cell entered from one without (or through the tile's side) may hold
+            // a skirt hit: tested in the outer loop too, so that the inner one stays small.
+            rim = false;
+            if (!is_extra) {
+                bool full = !(rbvh_is_hole(cell.c00) || rbvh_is_hole(cell.c10) || rbvh_is_hole(cell.c01) ||
+                              rbvh_is_hole(cell.c11));
+                rim = entered >= 0 && !prev_full && full;
+                prev_full = full;
+            }
+            if (tests || rim) {
                 candidate = true;
                 break;
             }
@@ -482,12 +562,20 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
         if (!candidate) {
             break;
         }
-        RBVH_COUNT_ADD(cells_tested, 1u);
-        float t = rbvh_cell_triangles(leaf, fr, cell, facet, cut);
-        if (t >= 0.0) {
-            t_hit = t;
+        if (rim && rbvh_skirt(leaf, fr, slack, uu, cell, entered, entered == 0 ? step_i : step_j)) {
+            skirt = true;
+            t_hit = cell.t_in;
             stopped = true;
             break;
+        }
+        if (tests) {
+            RBVH_COUNT_ADD(cells_tested, 1u);
+            float t = rbvh_cell_triangles(leaf, fr, cell, facet, cut);
+            if (t >= 0.0) {
+                t_hit = t;
+                stopped = true;
+                break;
+            }
         }
         n += 1u;
     }
@@ -495,6 +583,9 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
         cut = true;
     }
     if (t_hit >= 0.0) {
+        if (RBVH_HEIGHT_ONLY && skirt) {
+            facet = rbvh_skirt_facet(leaf, fr, cell, t_hit);
+        }
         if (RBVH_HEIGHT_ONLY) {
             // The leaf's frame again (read anew rather than kept through the walk): normals map
             // back by the frame's transpose.

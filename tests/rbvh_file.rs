@@ -124,10 +124,10 @@ fn save_load_round_trips_exactly() {
     loaded.save(&again).unwrap();
     assert_eq!(std::fs::read(&again).unwrap(), bytes);
 
-    // The documented framing: magic, version 5, the sampling judgement's size, normal texels, no
+    // The documented framing: magic, version 6, the sampling judgement's size, normal texels, no
     // colour channel, then the arrays after a 148-byte header.
     assert_eq!(&bytes[..8], b"RBVHv\0\0\0");
-    assert_eq!(word(&bytes, 8), 5);
+    assert_eq!(word(&bytes, 8), 6);
     assert_eq!(f32::from_bits(word(&bytes, 40)), 2.5);
     assert_eq!((word(&bytes, 44), word(&bytes, 48)), (0, 0));
     let arrays = 2 * 48 + 2 * 48 + 2 * 64 + 72 * 4;
@@ -213,7 +213,7 @@ fn bad_magic_and_unknown_versions_are_rejected() {
     let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
     assert!(message.contains("not an RBVH file"), "{message}");
 
-    for version in [0, 6, u32::MAX] {
+    for version in [0, 7, u32::MAX] {
         let mut bytes = sample().to_bytes();
         bytes[8..12].copy_from_slice(&version.to_le_bytes());
         let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
@@ -221,14 +221,16 @@ fn bad_magic_and_unknown_versions_are_rejected() {
             message.contains(&format!("unsupported version {version}")),
             "{message}"
         );
-        assert!(message.contains("reads versions 1 to 5"), "{message}");
+        assert!(message.contains("reads versions 1 to 6"), "{message}");
     }
 }
 
-/// Files written before version 5 (1: normal texels; 2: with colours; 3: height-only; 4: with
-/// the sampled judgement's size and the texel format in the header, all with 64-byte nodes) load
-/// as the RBVHs they described, their nodes quantized, and are saved again as version 5. Before
-/// version 4 they were built by the paper's rule alone.
+/// Files written before version 6 (1: normal texels; 2: with colours; 3: height-only; 4: with
+/// the sampled judgement's size and the texel format in the header, all with 64-byte nodes; 5:
+/// 48-byte nodes) load as the RBVHs they described, their nodes quantized, and are saved again as
+/// version 6. Before version 4 they were built by the paper's rule alone. Their height codes
+/// carry no mark of which were sampled, so each even one becomes odd (extrapolated: no skirt)
+/// within one code where that keeps it inside its leaf's box, the normals as they were.
 #[test]
 fn older_versions_load_as_what_they_described() {
     let path = Path::new("old.rbvh");
@@ -242,9 +244,31 @@ fn older_versions_load_as_what_they_described() {
     }
     let mut v4 = sample();
     v4.colours = Some((0..72u32).map(|k| k.wrapping_mul(0x0301_0701)).collect());
-    for (version, rbvh) in [(1, plain), (2, painted), (3, height), (4, v4)] {
-        let old = as_old_version(&rbvh, version);
-        let loaded = Rbvh::from_bytes(&old, path).unwrap();
+    let v5 = sample();
+    for (version, rbvh) in [(1, plain), (2, painted), (3, height), (4, v4), (5, v5)] {
+        let old = if version < 5 {
+            as_old_version(&rbvh, version)
+        } else {
+            let mut bytes = rbvh.to_bytes();
+            bytes[8..12].copy_from_slice(&version.to_le_bytes());
+            bytes
+        };
+        let mut loaded = Rbvh::from_bytes(&old, path).unwrap();
+        let mut unmarked = 0;
+        for (got, was) in loaded.atlas.texels.iter().zip(&rbvh.atlas.texels) {
+            let (g, w) = (got.height_code(), was.height_code());
+            assert_eq!(got.0 >> 16, was.0 >> 16, "version {version}");
+            assert!(
+                g == w || (w % 2 == 0 && g % 2 == 1 && g.abs_diff(w) == 1),
+                "{w} → {g}"
+            );
+            unmarked += usize::from(g != w);
+        }
+        assert!(
+            unmarked >= 5,
+            "version {version}: {unmarked} codes unmarked"
+        );
+        loaded.atlas.texels.clone_from(&rbvh.atlas.texels);
         // Quantizing decoded boxes again gives the same node, so the nodes come back as they were.
         let sampled_criterion_texels = if version < 4 {
             0.0
@@ -259,7 +283,7 @@ fn older_versions_load_as_what_they_described() {
             ..rbvh
         };
         assert_eq!(loaded, expected, "version {version}");
-        assert_eq!(word(&loaded.to_bytes(), 8), 5);
+        assert_eq!(word(&loaded.to_bytes(), 8), 6);
         let header = if version < 4 { 136 } else { HEADER_BYTES };
         let message = parse_error(Rbvh::from_bytes(&old[..old.len() - 1], path), path);
         assert!(

@@ -216,6 +216,28 @@ fn no_seam_leaks_at_the_strictest_criteria() {
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
+/// **Bound: the skirt under sampled rims** (`MARCH_SKIRT_TEXELS`) closes most side entries
+/// where leaves are seen nearly edge-on: on the blob at φ_max 89.5°, 118 of a million seam rays
+/// leaked without it and 19 with it; here at most 10 of 200,000. Where the ring found no surface
+/// (the sphere's hemispheres seen from their poles) no skirt hangs, and the leaks stay
+/// (docs/guarantees.md).
+#[test]
+fn the_skirt_closes_side_entries_on_the_blob_seen_edge_on() {
+    use rbvh::rbvh::Refinement;
+    let scene = Scene::builtin("blob").unwrap();
+    let bvh = Bvh::build(&scene).unwrap();
+    let params = RbvhParams {
+        refinement: Refinement::NormalCone {
+            max_angle_deg: 89.5,
+        },
+        ..q(0)
+    };
+    let r = Rbvh::build(&scene, &params).unwrap();
+    let (leaks, rays) = seam_leaks(&bvh, &r);
+    println!("blob φ_max 89.5°: {leaks} of {rays} seam rays leak");
+    assert!(leaks <= 10, "{leaks} of {rays} leak");
+}
+
 /// How many of 200,000 rays aimed at `r`'s seams leak, refereed by `bvh`, and how many were
 /// aimed. Counted both as the bench counts and by the bare rule (every exact hit, however near
 /// the origin or shallow the ray), the larger returned: on these closed, smooth meshes neither

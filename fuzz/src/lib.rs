@@ -232,9 +232,10 @@ pub fn scene_file(data: &[u8]) {
 }
 
 /// Fuzz target: the bytes of an RBVH file. A file that loads must round-trip byte for byte (a
-/// file of an older version comes back as version 5: the same header, with bytes 40..52 inserted
-/// before version 4, its 64-byte nodes quantized to 48 bytes, and the arrays after them unchanged)
-/// and trace on the CPU without overflow and with well-formed hits (the loader promises "safe to
+/// file of an older version comes back as version 6: the same header, with bytes 40..52 inserted
+/// before version 4, its 64-byte nodes quantized to 48 bytes before version 5, its height codes
+/// each within one of what they were and its normals kept, and the other arrays unchanged) and
+/// trace on the CPU without overflow and with well-formed hits (the loader promises "safe to
 /// trace and to upload").
 pub fn rbvh_file(data: &[u8]) {
     let Ok(r) = Rbvh::from_bytes(data, Path::new("fuzz.rbvh")) else {
@@ -242,7 +243,7 @@ pub fn rbvh_file(data: &[u8]) {
     };
     let saved = r.to_bytes();
     let version = u32::from_le_bytes(data[8..12].try_into().expect("a loaded file has a version"));
-    if version == 5 {
+    if version == 6 {
         assert_eq!(saved, data, "save(load(file)) differs from the file");
     } else {
         const HEADER: usize = 148;
@@ -254,11 +255,46 @@ pub fn rbvh_file(data: &[u8]) {
             "the upgraded header differs"
         );
         let nodes = r.nodes.len();
-        assert_eq!(
-            saved[HEADER + 48 * nodes..],
-            data[old_header + 64 * nodes..],
-            "the upgraded file differs after its nodes"
+        let old_node = if version < 5 { 64 } else { 48 };
+        let (saved, old) = (
+            &saved[HEADER + 48 * nodes..],
+            &data[old_header + old_node * nodes..],
         );
+        let texels_at = 48 * r.triangles.len() + 64 * r.leaves.len();
+        let texel_bytes = r.params.texels.bytes() as usize;
+        let texels_end = texels_at + texel_bytes * r.atlas.texels.len();
+        assert_eq!(
+            saved.len(),
+            old.len(),
+            "the upgraded arrays differ in length"
+        );
+        assert_eq!(
+            saved[..texels_at],
+            old[..texels_at],
+            "the upgraded triangles or leaves differ"
+        );
+        assert_eq!(
+            saved[texels_end..],
+            old[texels_end..],
+            "the upgraded colours differ"
+        );
+        let texel = |b: &[u8]| {
+            let mut w = [0u8; 4];
+            w[..texel_bytes].copy_from_slice(b);
+            u32::from_le_bytes(w)
+        };
+        for (a, b) in saved[texels_at..texels_end]
+            .chunks_exact(texel_bytes)
+            .zip(old[texels_at..texels_end].chunks_exact(texel_bytes))
+        {
+            let (a, b) = (texel(a), texel(b));
+            assert_eq!(a >> 16, b >> 16, "an upgraded texel's normal differs");
+            assert!(
+                (a & 0xFFFF).abs_diff(b & 0xFFFF) <= 1,
+                "an upgraded height code moved by more than one: {b:#x} → {a:#x}"
+            );
+        }
+        let saved = r.to_bytes();
         let again = Rbvh::from_bytes(&saved, Path::new("fuzz.rbvh")).expect("a saved file loads");
         assert_eq!(again.to_bytes(), saved, "save(load(upgraded file)) differs");
     }

@@ -10,7 +10,7 @@
 //! | bytes | type | field |
 //! |---|---|---|
 //! | 0..8 | `[u8; 8]` | magic `RBVHv` followed by three zero bytes |
-//! | 8..12 | u32 | format version: 5 (this build writes it; it reads 1–4 as well, see below) |
+//! | 8..12 | u32 | format version: 6 (this build writes it; it reads 1–5 as well, see below) |
 //! | 12..16 | f32 | `params.texels_per_diagonal` |
 //! | 16..20, 20..24 | u32, f32 | `params.refinement`: tag (0 = `NormalCone`, 1 = `ProjectedArea`), its value (`max_angle_deg` or `min_ratio`) |
 //! | 24..28 | u32 | `params.subdivision`: 0 = `SpatialMedian`, 1 = `AreaSah` |
@@ -43,7 +43,10 @@
 //! every box only grows and every hit stays. The header of versions 1–3 lacks bytes 40..52: the
 //! texel format and the colour channel were the version's (1: normals, no colours; 2: normals and
 //! colours; 3: height-only), and they were built by the paper's rule alone
-//! (`sampled_criterion_texels` = 0). Saving such an RBVH writes version 5. A colour section
+//! (`sampled_criterion_texels` = 0). Versions 1–5 carry no mark of which heights were sampled
+//! from the surface and which extrapolated (the parity of a height code, [`Texel::is_sampled`]):
+//! every sampled-looking code is made odd on loading, within one code, so that the march hangs no
+//! skirt under them and the RBVH traces as it was built. Saving such an RBVH writes version 6. A colour section
 //! that is cut short, or whose count is not `X`, is an [`Error::Parse`] like any other
 //! malformation.
 //!
@@ -61,6 +64,7 @@ use std::io::Write;
 use std::path::Path;
 
 use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
 
 use super::layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT, LEAF_BIT};
 use super::march::tile_fits;
@@ -74,7 +78,7 @@ use crate::{Error, Result};
 /// The first eight bytes of every RBVH file.
 const MAGIC: [u8; 8] = *b"RBVHv\0\0\0";
 /// The format version this build writes.
-const VERSION: u32 = 5;
+const VERSION: u32 = 6;
 /// Bytes before the arrays (see the table in the module docs).
 const HEADER_BYTES: usize = 148;
 /// Bytes before the arrays in versions 1–3, whose header lacks bytes 40..52 of later ones.
@@ -433,7 +437,7 @@ impl Rbvh {
         } else {
             None
         };
-        let atlas = Atlas {
+        let mut atlas = Atlas {
             pitch,
             rows,
             texels: texel_words,
@@ -455,6 +459,9 @@ impl Rbvh {
         for (index, leaf) in leaves.iter().enumerate() {
             check_leaf(leaf, &atlas)
                 .map_err(|why| err(format!("height-field leaf {index}: {why}")))?;
+        }
+        if version < 6 {
+            unmark(&nodes, &leaves, &mut atlas, bounds);
         }
         // A triangle's `prim` is its hit id: bit 31 marks height-field hits, and u32::MAX a miss.
         if let Some((index, t)) = triangles
@@ -531,6 +538,45 @@ fn refinement_value(r: Refinement) -> f32 {
 }
 
 /// Checks one child reference against the layout rules (see [`super::layout`]).
+/// Files before version 6 carry no mark of which heights were sampled from the surface
+/// ([`Texel::is_sampled`]): their codes' parities are arbitrary. Each even code is made odd, so
+/// that no skirt hangs under it and the RBVH traces as it was built (its heights within one code,
+/// 1/65534 of the leaf's height range): the neighbouring code that keeps the sample inside its
+/// leaf's box in the tree, so that no hit is lost. A sample that neither keeps inside stays as
+/// it was.
+fn unmark(nodes: &[GpuNode], leaves: &[GpuHeightfield], atlas: &mut Atlas, bounds: Aabb) {
+    let mut boxes = vec![bounds; leaves.len()];
+    for node in nodes {
+        for c in node.children() {
+            if c.child & LEAF_BIT != 0 && c.count == HEIGHTFIELD_COUNT {
+                boxes[(c.child & !LEAF_BIT) as usize] = c.bounds;
+            }
+        }
+    }
+    let pitch = atlas.pitch as usize;
+    for (leaf, b) in leaves.iter().zip(&boxes) {
+        let grid = leaf.grid();
+        let inside = |p: Vec3| p.cmpge(b.min).all() && p.cmple(b.max).all();
+        for j in 0..leaf.res_v {
+            for i in 0..leaf.res_u {
+                let k = leaf.atlas_base as usize + j as usize * pitch + i as usize;
+                let texel = atlas.texels[k];
+                if !texel.is_sampled() {
+                    continue;
+                }
+                let code = texel.height_code();
+                let odd = [code.checked_add(1), code.checked_sub(1)]
+                    .into_iter()
+                    .flatten()
+                    .find(|&c| c <= Texel::MAX_CODE && inside(grid.point(i, j, c)));
+                if let Some(odd) = odd {
+                    atlas.texels[k] = Texel((texel.0 & !0xFFFF) | u32::from(odd));
+                }
+            }
+        }
+    }
+}
+
 fn check_child(
     child: u32,
     count: u32,

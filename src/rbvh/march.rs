@@ -33,7 +33,7 @@ use rayon::prelude::*;
 
 use super::layout::{
     Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT, LEAF_BIT, MARCH_EDGE_PAD as EDGE_PAD,
-    MARCH_SLACK as SLACK,
+    MARCH_SKIRT_TEXELS as SKIRT_TEXELS, MARCH_SLACK as SLACK,
 };
 use super::ranges::{block_ranges, BLOCK};
 use super::{Rbvh, TexelFormat};
@@ -328,6 +328,21 @@ impl Rbvh {
             leaf_index,
             fr: &fr,
             format: self.params.texels,
+            uu: Vec3::from(leaf.axis_u).length_squared(),
+        };
+        // The edge (its axis: 0 for s, 1 for t) the current cell was entered across, for the
+        // skirt: the first cell's when the ray enters the tile's box through its s or t side, not
+        // through its top or bottom nor from inside it.
+        let near = ((tile.min - o) * inv).min((tile.max - o) * inv);
+        let skirt_h = 1.001 * SKIRT_TEXELS / cells.uu.sqrt();
+        let mut entered = if t0 <= frame.tmin {
+            None
+        } else if t0 == near.x {
+            Some(0)
+        } else if t0 == near.y {
+            Some(1)
+        } else {
+            None
         };
 
         // 3. Walk. The start cell is the one holding the entry point, clamped so that the padding
@@ -355,6 +370,11 @@ impl Rbvh {
         };
         let mut checked_block = None;
         let mut t_in = t0;
+        // Whether the last main cell walked had four samples: a skirt hangs only where a ray
+        // enters a full cell from one without. A block jump leaves it as it was: the ray passes
+        // the jumped cells above the block's heights or below them by more than the skirt's
+        // depth, so no skirt can catch it in the cell it lands in.
+        let mut prev_full = false;
         for _ in 0..max_steps {
             if t_in > t1 {
                 break;
@@ -385,7 +405,10 @@ impl Rbvh {
                     });
                     let range = b.range(block);
                     let (code_lo, code_hi) = (range & 0xFFFF, range >> 16);
-                    let lo_s = code_lo as f32 * leaf.h_scale - slack;
+                    // A block the ray passes below by less than the skirt's depth may hold a
+                    // skirt hit: only a ray below that (with a margin for the square root's
+                    // rounding on the device) jumps.
+                    let lo_s = code_lo as f32 * leaf.h_scale - slack - skirt_h;
                     let hi_s = code_hi as f32 * leaf.h_scale + slack;
                     let h_a = height_at(o.z, d.z, t_in);
                     let h_b = height_at(o.z, d.z, leave_i.min(leave_j).min(t1));
@@ -406,11 +429,13 @@ impl Rbvh {
                         } else {
                             (&mut ci, &mut next_i, step_i, o.x, inv.x)
                         };
+                        let (minor_axis, major_axis) = if out_i { (1, 0) } else { (0, 1) };
                         for _ in 0..BLOCK {
                             if minor_step == 0 || !before(*minor_next) {
                                 break;
                             }
                             t_last = *minor_next;
+                            entered = Some(minor_axis);
                             *minor += minor_step;
                             *minor_next = CELLS.boundary_t(*minor, minor_step, minor_o, minor_inv);
                         }
@@ -422,6 +447,9 @@ impl Rbvh {
                         if *major != edge {
                             let into_edge =
                                 CELLS.boundary_t(edge - major_step, major_step, major_o, major_inv);
+                            if into_edge >= t_last {
+                                entered = Some(major_axis);
+                            }
                             t_last = t_last.max(into_edge);
                             *major = edge;
                             *major_next = leave;
@@ -432,6 +460,16 @@ impl Rbvh {
             }
             stats.counters.cells += 1;
             let t_out = next_i.min(next_j).min(t1);
+            let corner = cells.corners(ci, cj);
+            let full = corner.iter().all(|c| !c.is_hole());
+            if let (Some(axis), false, true) = (entered, prev_full, full) {
+                let step = if axis == 0 { step_i } else { step_j };
+                let hit = cells.skirt(&corner, (ci, cj), axis, step, t_in, probe);
+                if hit.is_some() {
+                    return hit;
+                }
+            }
+            prev_full = full;
             let hit = cells.hit(ci, cj, t_in, t_out, stats, probe);
             if hit.is_some() {
                 return hit;
@@ -466,6 +504,7 @@ impl Rbvh {
                 }
                 ci += step_i;
                 t_in = next_i;
+                entered = Some(0);
                 if ci < 0 || ci > last_i {
                     break;
                 }
@@ -473,6 +512,7 @@ impl Rbvh {
             } else {
                 cj += step_j;
                 t_in = next_j;
+                entered = Some(1);
                 if cj < 0 || cj > last_j {
                     break;
                 }
@@ -611,6 +651,9 @@ struct Cells<'a> {
     fr: &'a FrameRay,
     /// What the texels hold: the normal of a hit comes from its sample or from its facet.
     format: TexelFormat,
+    /// `|axis_u|²`: one over the texel's size squared, in the frame's height units (for the
+    /// skirt's depth without a square root).
+    uu: f32,
 }
 
 impl Cells<'_> {
@@ -712,23 +755,115 @@ impl Cells<'_> {
             return Some((t, facet_normal(leaf, a, b, c)));
         }
 
-        // The normal of the corner sample nearest the hit: sample i sits at s = i + ½, so the nearest
-        // is floor(s) (halves round up), clamped to the cell; a hole there falls back to the first
-        // present corner in the order c00, c10, c01, c11.
+        Some((t, self.nearest_normal(&corner, ci, cj, t)))
+    }
+
+    /// The normal of the corner sample nearest the point at `t` in cell `(ci, cj)`: sample i sits
+    /// at s = i + ½, so the nearest is floor(s) (halves round up), clamped to the cell; a hole
+    /// there falls back to the first present corner in the order c00, c10, c01, c11.
+    fn nearest_normal(&self, corner: &[Texel; 4], ci: i64, cj: i64, t: f32) -> Vec3 {
+        let (o, d) = (self.fr.ray.origin(), self.fr.ray.dir());
         let s = o.x + d.x * t;
         let r = o.y + d.y * t;
         let di = ((s.floor() as i64).clamp(ci, ci + 1) - ci) as usize;
         let dj = ((r.floor() as i64).clamp(cj, cj + 1) - cj) as usize;
         let mut nearest = corner[di + 2 * dj];
         if nearest.is_hole() {
-            for c in corner {
+            for &c in corner {
                 if !c.is_hole() {
                     nearest = c;
                     break;
                 }
             }
         }
-        Some((t, nearest.normal()))
+        nearest.normal()
+    }
+
+    /// The four corner texels of cell `(ci, cj)` (c00, c10, c01, c11), read without reporting:
+    /// whether the cell is full, as the device knows from the corners it read for the cell test.
+    fn corners(&self, ci: i64, cj: i64) -> [Texel; 4] {
+        std::array::from_fn(|k| {
+            texel(
+                self.atlas,
+                self.leaf,
+                ci + (k & 1) as i64,
+                cj + (k >> 1) as i64,
+            )
+            .0
+        })
+    }
+
+    /// The skirt ([`SKIRT_TEXELS`]) of cell `(ci, cj)`, whose four `corner`s are all present,
+    /// entered at `t_in` from a cell without four samples (or through the tile's side) across
+    /// its edge on `axis` (0: an `s` boundary, 1: a `t` boundary) by a ray stepping `step` along
+    /// it. A hit at `t_in` when both samples of that edge were sampled from the surface
+    /// ([`Texel::is_sampled`]) and the ray is below the edge by at most the skirt's depth. The
+    /// normal is the sample's nearest the entry (height-only texels: the facet's under it).
+    fn skirt<P: Probe>(
+        &self,
+        corner: &[Texel; 4],
+        (ci, cj): (i64, i64),
+        axis: usize,
+        step: i64,
+        t_in: f32,
+        probe: &mut P,
+    ) -> Option<(f32, Vec3)> {
+        let (atlas, leaf, fr) = (self.atlas, self.leaf, self.fr);
+        // The entered edge's two corners: c00-c01 or c10-c11 across s, c00-c10 or c01-c11
+        // across t.
+        let edge = match (axis, step > 0) {
+            (0, true) => [0, 2],
+            (0, false) => [1, 3],
+            (_, true) => [0, 1],
+            (_, false) => [2, 3],
+        };
+        if !edge.iter().all(|&k| corner[k].is_sampled()) {
+            return None;
+        }
+        let h = corner.map(|c| c.height_code() as f32 * leaf.h_scale);
+        let (o, d) = (fr.ray.origin(), fr.ray.dir());
+        // The entry's fraction along the edge.
+        let f = if axis == 0 {
+            o.y + d.y * t_in - (cj as f32 + 0.5)
+        } else {
+            o.x + d.x * t_in - (ci as f32 + 0.5)
+        };
+        let (a, b) = (h[edge[0]], h[edge[1]]);
+        let below = (a + (b - a) * f.clamp(0.0, 1.0)) - height_at(o.z, d.z, t_in);
+        if below < -fr.slack || below * below * self.uu > SKIRT_TEXELS * SKIRT_TEXELS {
+            return None;
+        }
+        // The device read the cell's four corners before this test, as for any cell.
+        for k in 0..4 {
+            if let (_, Some(index)) = texel(atlas, leaf, ci + (k & 1) as i64, cj + (k >> 1) as i64)
+            {
+                let bytes = self.format.bytes();
+                probe.read(Read {
+                    array: Array::Atlas,
+                    offset: bytes * index as u64,
+                    bytes: bytes as u32,
+                });
+            }
+        }
+        if self.format == TexelFormat::Height {
+            probe.read(element::<GpuHeightfield>(
+                Array::Leaves,
+                self.leaf_index as usize,
+            ));
+            let pos: [Vec3; 4] = std::array::from_fn(|k| {
+                Vec3::new(
+                    (ci + (k & 1) as i64) as f32 + 0.5,
+                    (cj + (k >> 1) as i64) as f32 + 0.5,
+                    h[k],
+                )
+            });
+            // The cell's triangle under the entry: (c00, c10, c11) where s ≥ t within the cell.
+            let fs = o.x + d.x * t_in - (ci as f32 + 0.5);
+            let ft = o.y + d.y * t_in - (cj as f32 + 0.5);
+            let [a, b, c] = if fs >= ft { [0, 1, 3] } else { [0, 3, 2] }.map(|k| pos[k]);
+            return Some((t_in, facet_normal(leaf, a, b, c)));
+        }
+        Some((t_in, self.nearest_normal(corner, ci, cj, t_in)))
     }
 }
 
@@ -1002,6 +1137,55 @@ mod tests {
         );
         assert_hit(&r, &ray, 8.5 / 1.6, LEAF_BIT);
         assert!(r.closest_hit(&ray).1.counters.cells >= 3);
+    }
+
+    /// A plateau at frame height 1 over sample columns 2..=5 (holes beside it), its rim at
+    /// column 2 sampled (an even code) or extrapolated (odd): a ray running along `s` under the
+    /// surface enters it from the side, and the skirt (one texel, 0.5 here) catches it at the rim
+    /// only when the rim was sampled and the ray is within the skirt's depth.
+    #[test]
+    fn a_skirt_hangs_one_texel_under_sampled_rims_only() {
+        let l = flat_leaf(1.0, 8, 8, 0.001);
+        let plateau = |rim: u16| {
+            single(
+                l,
+                tile(8, 8, |i, _| match i {
+                    2 => Texel::new(rim, Vec3::Y),
+                    3..=5 => Texel::new(1000, Vec3::Y),
+                    _ => Texel::HOLE,
+                }),
+            )
+        };
+        let (sampled, extrapolated) = (plateau(1000), plateau(1001));
+        // Along +x at frame height h (world y = 1 + h), row t = 3.7, from x = -5: the rim column
+        // s = 2.5 lies at world x = -2 + 2.5 · 0.5 = -0.75, t = 4.25.
+        let along = |h: f32, dir: f32| {
+            let p = world(&l, 3.0, 3.7, h);
+            Ray::new(
+                Vec3::new(-0.75 - 4.25 * dir, p.y, p.z),
+                Vec3::new(dir, 0.0, 0.0),
+                0.0,
+                f32::INFINITY,
+            )
+        };
+        assert_hit(&sampled, &along(0.7, 1.0), 4.25, LEAF_BIT);
+        assert_hit(&sampled, &along(0.55, 1.0), 4.25, LEAF_BIT);
+        // Deeper than the skirt, over the surface, or under an extrapolated rim: nothing.
+        assert_miss(&sampled, &along(0.45, 1.0));
+        assert_miss(&sampled, &along(1.2, 1.0));
+        assert_miss(&extrapolated, &along(0.7, 1.0));
+        // From the other side the rim at s = 5.5 (x = 0.75) was sampled in both.
+        let back = |r: &Rbvh| {
+            let ray = Ray::new(
+                Vec3::new(5.0, 1.7, along(0.7, 1.0).origin().z),
+                Vec3::new(-1.0, 0.0, 0.0),
+                0.0,
+                f32::INFINITY,
+            );
+            assert_hit(r, &ray, 4.25, LEAF_BIT);
+        };
+        back(&sampled);
+        back(&extrapolated);
     }
 
     #[test]
@@ -1299,9 +1483,11 @@ mod tests {
             axis_w: w.to_array(),
             h_scale: 1.0e-4,
         };
+        // Odd codes (extrapolated heights): no skirt hangs under the rims, so the march meets the
+        // cells' triangles alone, as the brute force does (the skirt has its own test).
         let code = |i: u32, j: u32| {
             let x = (i * 7919 + j * 104_729) % 65_521;
-            (x * 13 % 30_000) as u16
+            (x * 13 % 30_000) as u16 | 1
         };
         // The tile starts 3 texels into each atlas row, after other (non-hole) texels.
         let samples = tile(res_u, res_v, |i, j| {

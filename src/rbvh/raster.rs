@@ -48,12 +48,15 @@
 //!    blob at Q0 slipped through; none now at any preset), and the ring follows the surface
 //!    where extrapolation stuck out at silhouettes and folds (t p99 on the dragon
 //!    Q2 0.075% → 0.031% of the diagonal). Where no triangle lies over a ring sample (an open
-//!    boundary, a face turned edge-on) the extrapolation stays.
+//!    boundary, a face turned edge-on) the extrapolation stays, and is marked as such: the
+//!    march hangs a skirt under the rims of sampled heights only ([`Texel::is_sampled`]).
 //! 5. **Quantization.** With `h_lo`, `h_hi` the extreme heights of all valid samples (after
 //!    dilation), `h_scale = (h_hi − h_lo) / MAX_CODE` (0 when flat or empty), the code of height `h`
-//!    is `round((h − h_lo) / h_scale)` and `frame.origin` moves by `h_lo · w`, so code 0 is the
-//!    lowest height. Sixteen bits over the leaf's own height range give a worst quantization error
-//!    of `(h_hi − h_lo) / (2 · 65534)` (plus f32 rounding of the moved origin).
+//!    is the code nearest `(h − h_lo) / h_scale` whose parity tells a sampled height (even) from
+//!    an extrapolated one (odd; [`Texel::code_of`]), and `frame.origin` moves by `h_lo · w`, so
+//!    code 0 is the lowest height. Sixteen bits over the leaf's own height range, one of them the
+//!    mark, give a worst quantization error of `(h_hi − h_lo) / 65534` (plus f32 rounding of the
+//!    moved origin).
 //! 6. A tile without any covered sample is still returned (`covered = 0`, all holes); the builder
 //!    decides what to do with it.
 //!
@@ -273,15 +276,16 @@ pub fn rasterize(
         }
         None => Vec::new(),
     };
-    let (mut height, mut source) = dilate(&height, &source, res_u, res_v);
+    let (mut height, mut source, mut sampled) = dilate(&height, &source, res_u, res_v);
     for (k, fill) in ring {
+        sampled[k] = true;
         let id = normals.len() as u32;
         normals.push(fill.normal);
         input_index.push(fill.input);
         height[k] = fill.height;
         source[k] = id;
     }
-    let mut tile = quantize(frame, &height, &source, &normals, covered);
+    let mut tile = quantize(frame, &height, &source, &sampled, &normals, covered);
     tile.sources = source
         .iter()
         .map(|&s| input_index.get(s as usize).copied().unwrap_or(NO_SOURCE))
@@ -596,15 +600,18 @@ fn edge(a: DVec2, b: DVec2, p: DVec2) -> f64 {
     }
 }
 
-/// Step 4 of the module docs: one dilation pass, reading only the undilated state.
+/// Step 4 of the module docs: one dilation pass, reading only the undilated state. Returns the
+/// heights, the sources and, per sample, whether it was written before the pass (sampled, not
+/// extrapolated: [`Texel::is_sampled`]).
 pub(super) fn dilate(
     height: &[f32],
     source: &[u32],
     res_u: usize,
     res_v: usize,
-) -> (Vec<f32>, Vec<u32>) {
+) -> (Vec<f32>, Vec<u32>, Vec<bool>) {
     let mut out_h = height.to_vec();
     let mut out_s = source.to_vec();
+    let sampled = source.iter().map(|&s| s != NONE).collect();
     let at = |i: isize, j: isize| written_at(source, res_u, i as i64, j as i64);
     for j in 0..res_v {
         for i in 0..res_u {
@@ -634,7 +641,7 @@ pub(super) fn dilate(
             }
         }
     }
-    (out_h, out_s)
+    (out_h, out_s, sampled)
 }
 
 /// Step 5 of the module docs: 16-bit heights over the tile's own range, origin moved to `h_lo`.
@@ -642,6 +649,7 @@ pub(super) fn quantize(
     frame: &Frame,
     height: &[f32],
     source: &[u32],
+    sampled: &[bool],
     normals: &[Vec3],
     covered: u32,
 ) -> Tile {
@@ -665,17 +673,17 @@ pub(super) fn quantize(
     let texels = height
         .iter()
         .zip(source)
-        .map(|(&h, &s)| {
+        .zip(sampled)
+        .map(|((&h, &s), &sampled)| {
             if s == NONE {
                 return Texel::HOLE;
             }
-            let code = if h_scale > 0.0 {
-                ((h as f64 - h_lo as f64) / h_scale as f64)
-                    .round()
-                    .clamp(0.0, Texel::MAX_CODE as f64) as u16
+            let q = if h_scale > 0.0 {
+                (h as f64 - h_lo as f64) / h_scale as f64
             } else {
-                0
+                0.0
             };
+            let code = Texel::code_of(q, sampled);
             Texel::new(code, normals[s as usize])
         })
         .collect();
@@ -767,7 +775,7 @@ pub(super) mod tests {
         let tile = rasterize(&square(&frame, 0.0, 16.0, plane), &frame, 0.01, None, None).unwrap();
         assert_eq!(tile.covered, 256);
         let range = plane(15.5, 15.5) - plane(0.5, 0.5);
-        let bound = range / (2.0 * Texel::MAX_CODE as f32) + 1e-5;
+        let bound = range / Texel::MAX_CODE as f32 + 1e-5;
         for j in 0..16 {
             for i in 0..16 {
                 let k = j * 16 + i;
@@ -806,12 +814,17 @@ pub(super) mod tests {
         let core = |x: u32| (4..=11).contains(&x);
         let ring = |x: u32| x == 3 || x == 12;
         let range = plane(12.5, 3.5) - plane(3.5, 12.5);
-        let bound = range / (2.0 * Texel::MAX_CODE as f32) + 1e-5;
+        let bound = range / Texel::MAX_CODE as f32 + 1e-5;
         for j in 0..16 {
             for i in 0..16 {
                 let k = (j * 16 + i) as usize;
                 let expect = (core(i) && core(j)) || (core(i) && ring(j)) || (ring(i) && core(j));
                 assert_eq!(!tile.texels[k].is_hole(), expect, "({i}, {j})");
+                assert_eq!(
+                    tile.texels[k].is_sampled(),
+                    core(i) && core(j),
+                    "({i}, {j})"
+                );
                 if expect {
                     let want = plane(i as f32 + 0.5, j as f32 + 0.5);
                     let got = decoded(&tile, k, frame.origin);
@@ -845,13 +858,17 @@ pub(super) mod tests {
         let plain = rasterize(&own, &frame, 0.01, None, None).unwrap();
         for j in 4..=11u32 {
             // +u: the bent surface at the ring sample's centre, not the flat extrapolation
-            // nor the decoy; -u, where no surface continues: the extrapolation.
+            // nor the decoy, marked as sampled; -u, where no surface continues: the
+            // extrapolation, marked as such (no skirt hangs under it).
             let k = (j * 16 + 12) as usize;
             let got = decoded(&tile, k, frame.origin);
             assert!((got - bend(12.5, 0.0)).abs() < 1e-3, "({j}): {got}");
+            assert!(tile.texels[k].is_sampled());
             assert!((decoded(&plain, k, frame.origin) - 3.0).abs() < 1e-3);
+            assert!(!plain.texels[k].is_sampled());
             let k = (j * 16 + 3) as usize;
             assert!((decoded(&tile, k, frame.origin) - 3.0).abs() < 1e-3);
+            assert!(!tile.texels[k].is_sampled());
         }
     }
 

@@ -142,9 +142,9 @@ pub(crate) fn splat(
             return None;
         }
     }
-    let (height, source) = dilate(&height, &source, res_u, res_v);
+    let (height, source, sampled) = dilate(&height, &source, res_u, res_v);
     let normals: Vec<Vec3> = points.iter().map(|p| p.normal).collect();
-    let mut tile = quantize(frame, &height, &source, &normals, covered);
+    let mut tile = quantize(frame, &height, &source, &sampled, &normals, covered);
     tile.sources = source
         .iter()
         .map(|&s| if s == NONE { NO_SOURCE } else { s })
