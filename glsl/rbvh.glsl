@@ -245,7 +245,7 @@ bool rbvh_skirt(RbvhLeaf leaf, RbvhFrameRay fr, float slack, float uu, RbvhCell 
     precise float edge_h = a + (b - a) * f;
     precise float below = edge_h - rbvh_height_at(fr.o.z, fr.d.z, cell.t_in);
     precise float depth2 = below * below * uu;
-    return below >= -slack && depth2 <= RBVH_MARCH_SKIRT_TEXELS * RBVH_MARCH_SKIRT_TEXELS;
+    return cell.t_in < fr.tmax && below >= -slack && depth2 <= RBVH_MARCH_SKIRT_TEXELS * RBVH_MARCH_SKIRT_TEXELS;
 }
 
 // The frame-space normal of a skirt hit at t in `cell` for height-only texels: the facet of the

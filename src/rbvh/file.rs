@@ -45,8 +45,9 @@
 //! colours; 3: height-only), and they were built by the paper's rule alone
 //! (`sampled_criterion_texels` = 0). Versions 1–5 carry no mark of which heights were sampled
 //! from the surface and which extrapolated (the parity of a height code, [`Texel::is_sampled`]):
-//! every sampled-looking code is made odd on loading, within one code, so that the march hangs no
-//! skirt under them and the RBVH traces as it was built. Saving such an RBVH writes version 6. A colour section
+//! every sampled-looking code is made odd on loading, within one code and inside its leaf's box
+//! (where the box allows: `unmark`), so that the march hangs no skirt under them and the RBVH
+//! traces as it was built. Saving such an RBVH writes version 6. A colour section
 //! that is cut short, or whose count is not `X`, is an [`Error::Parse`] like any other
 //! malformation.
 //!
@@ -537,13 +538,14 @@ fn refinement_value(r: Refinement) -> f32 {
     }
 }
 
-/// Checks one child reference against the layout rules (see [`super::layout`]).
 /// Files before version 6 carry no mark of which heights were sampled from the surface
 /// ([`Texel::is_sampled`]): their codes' parities are arbitrary. Each even code is made odd, so
 /// that no skirt hangs under it and the RBVH traces as it was built (its heights within one code,
-/// 1/65534 of the leaf's height range): the neighbouring code that keeps the sample inside its
-/// leaf's box in the tree, so that no hit is lost. A sample that neither keeps inside stays as
-/// it was.
+/// 1/65534 of the leaf's height range), taking the neighbouring code that keeps the sample inside
+/// its leaf's box in the tree, so that the box still holds the surface. A sample that neither
+/// keeps inside (one on a face of its box, in a leaf so tall that one code exceeds the box's
+/// margin of 1/1024 texel: more than 64 texels from its lowest sample to its highest) keeps its
+/// code, and a skirt may hang under it.
 fn unmark(nodes: &[GpuNode], leaves: &[GpuHeightfield], atlas: &mut Atlas, bounds: Aabb) {
     let mut boxes = vec![bounds; leaves.len()];
     for node in nodes {
@@ -577,6 +579,7 @@ fn unmark(nodes: &[GpuNode], leaves: &[GpuHeightfield], atlas: &mut Atlas, bound
     }
 }
 
+/// Checks one child reference against the layout rules (see [`super::layout`]).
 fn check_child(
     child: u32,
     count: u32,

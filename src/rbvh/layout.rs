@@ -45,7 +45,11 @@ pub const MARCH_EDGE_PAD: f32 = 1.0 / 64.0;
 /// and the skirt catches it there. Under an extrapolated rim the skirt would hang in the air
 /// beside a silhouette: that lip cost the dragon a quarter of its t p99 at Q0 (0.150 → 0.188%),
 /// so those rims have none. One texel: deeper would hang below thin parts, where a ray may pass
-/// outside the object.
+/// outside the object. The skirt hangs within the leaf's boxes (the march's tile box and the
+/// box of its samples in the tree), so under a rim at the leaf's lowest samples it is cut short:
+/// growing both boxes by a texel downwards took the dragon's seam leaks only from 13 / 12 / 3 /
+/// 1 / 2 to 10 / 11 / 3 / 1 / 2 per million, for 10% more leaves visited per ray at Q0 and 2–7%
+/// of the speed.
 pub const MARCH_SKIRT_TEXELS: f32 = 1.0;
 
 /// `count` of a child reference that is a height-field leaf.
@@ -189,6 +193,7 @@ impl Texel {
     /// The code nearest `q` (a height in quanta, clamped to `[0, MAX_CODE]`) whose parity says
     /// whether the height was `sampled` ([`Texel::is_sampled`]): within one code of `q`.
     pub fn code_of(q: f64, sampled: bool) -> u16 {
+        debug_assert!(!q.is_nan(), "a height code of NaN");
         let (odd, max) = (f64::from(u8::from(!sampled)), f64::from(Self::MAX_CODE));
         let half = (q.clamp(0.0, max) - odd) / 2.0;
         ((2.0 * half.round()).clamp(0.0, max - 2.0 * odd) + odd) as u16

@@ -830,7 +830,11 @@ impl Cells<'_> {
         };
         let (a, b) = (h[edge[0]], h[edge[1]]);
         let below = (a + (b - a) * f.clamp(0.0, 1.0)) - height_at(o.z, d.z, t_in);
-        if below < -fr.slack || below * below * self.uu > SKIRT_TEXELS * SKIRT_TEXELS {
+        // Within the ray's interval, which ends before tmax as the triangle test's does.
+        if t_in >= fr.ray.tmax
+            || below < -fr.slack
+            || below * below * self.uu > SKIRT_TEXELS * SKIRT_TEXELS
+        {
             return None;
         }
         // The device read the cell's four corners before this test, as for any cell.
@@ -1170,6 +1174,13 @@ mod tests {
         };
         assert_hit(&sampled, &along(0.7, 1.0), 4.25, LEAF_BIT);
         assert_hit(&sampled, &along(0.55, 1.0), 4.25, LEAF_BIT);
+        // The ray's interval ends before tmax, for the skirt as for the triangles.
+        let ends = |tmax: f32| {
+            let ray = along(0.7, 1.0);
+            Ray::new(ray.origin(), ray.dir(), 0.0, tmax)
+        };
+        assert_miss(&sampled, &ends(4.25));
+        assert_hit(&sampled, &ends(4.2501), 4.25, LEAF_BIT);
         // Deeper than the skirt, over the surface, or under an extrapolated rim: nothing.
         assert_miss(&sampled, &along(0.45, 1.0));
         assert_miss(&sampled, &along(1.2, 1.0));
