@@ -216,26 +216,48 @@ fn no_seam_leaks_at_the_strictest_criteria() {
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
-/// **Bound: the skirt under sampled rims** (`MARCH_SKIRT_TEXELS`) closes most side entries
-/// where leaves are seen nearly edge-on: on the blob at φ_max 89.5°, 118 of a million seam rays
-/// leaked without it and 19 with it; here at most 10 of 200,000. Where the ring found no surface
-/// (the sphere's hemispheres seen from their poles) no skirt hangs, and the leaks stay
-/// (docs/guarantees.md).
+/// **Bound: leaves seen nearly edge-on** (φ_max 89.5°, A⊥/A 0.01), where a leaf's rim turns
+/// edge-on and its ring can only be extrapolated: the walls (`raster.rs`, step 4) take those
+/// samples down the leaf's own triangles, and the skirt (`MARCH_SKIRT_TEXELS`) hangs under the
+/// rims sampled from the surface. Per million seam rays before both: φ_max 89.5° blob 118,
+/// sphere 38,354; A⊥/A 0.01 blob 499, sphere 81,680. Now 200,000 rays each: none on the blob;
+/// on the sphere at φ_max 89.5° a handful (32 per million), at A⊥/A 0.01 (two hemispheres,
+/// seen from their poles) still about 0.9% (docs/guarantees.md).
 #[test]
-fn the_skirt_closes_side_entries_on_the_blob_seen_edge_on() {
+fn leaves_seen_edge_on_leak_little() {
     use rbvh::rbvh::Refinement;
-    let scene = Scene::builtin("blob").unwrap();
-    let bvh = Bvh::build(&scene).unwrap();
-    let params = RbvhParams {
-        refinement: Refinement::NormalCone {
-            max_angle_deg: 89.5,
-        },
-        ..q(0)
-    };
-    let r = Rbvh::build(&scene, &params).unwrap();
-    let (leaks, rays) = seam_leaks(&bvh, &r);
-    println!("blob φ_max 89.5°: {leaks} of {rays} seam rays leak");
-    assert!(leaks <= 10, "{leaks} of {rays} leak");
+    let cases = [
+        (
+            "blob",
+            Refinement::NormalCone {
+                max_angle_deg: 89.5,
+            },
+            0,
+        ),
+        ("blob", Refinement::ProjectedArea { min_ratio: 0.01 }, 0),
+        (
+            "sphere",
+            Refinement::NormalCone {
+                max_angle_deg: 89.5,
+            },
+            20,
+        ),
+    ];
+    let mut failures = Vec::new();
+    for (name, refinement, bound) in cases {
+        let scene = Scene::builtin(name).unwrap();
+        let bvh = Bvh::build(&scene).unwrap();
+        let params = RbvhParams { refinement, ..q(0) };
+        let r = Rbvh::build(&scene, &params).unwrap();
+        let (leaks, rays) = seam_leaks(&bvh, &r);
+        println!("{name} {refinement:?}: {leaks} of {rays} seam rays leak");
+        if leaks > bound {
+            failures.push(format!(
+                "{name} {refinement:?}: {leaks} of {rays} leak (bound {bound})"
+            ));
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
 /// How many of 200,000 rays aimed at `r`'s seams leak, refereed by `bvh`, and how many were

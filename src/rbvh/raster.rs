@@ -50,6 +50,13 @@
 //!    Q2 0.075% → 0.031% of the diagonal). Where no triangle lies over a ring sample (an open
 //!    boundary, a face turned edge-on) the extrapolation stays, and is marked as such: the
 //!    march hangs a skirt under the rims of sampled heights only ([`Texel::is_sampled`]).
+//!
+//!    Then the **walls**: where the leaf's own triangles fall (or rise) further than an
+//!    extrapolated sample within the texel between it and the written samples it extends (a
+//!    rim seen nearly edge-on), the sample moves to their extreme there, so that the cell walls
+//!    the surface down to where the leaf's triangles end ([`walls`]). At φ_max 89.5° the sphere's
+//!    seam leaks fell from 26,461 to 32 per million, and t p99 from 0.43 to 0.26% of the
+//!    diagonal.
 //! 5. **Quantization.** With `h_lo`, `h_hi` the extreme heights of all valid samples (after
 //!    dilation), `h_scale = (h_hi − h_lo) / MAX_CODE` (0 when flat or empty), the code of height `h`
 //!    is the code nearest `(h − h_lo) / h_scale` whose parity tells a sampled height (even) from
@@ -277,6 +284,7 @@ pub fn rasterize(
         None => Vec::new(),
     };
     let (mut height, mut source, mut sampled) = dilate(&height, &source, res_u, res_v);
+    let written = sampled.clone();
     for (k, fill) in ring {
         sampled[k] = true;
         let id = normals.len() as u32;
@@ -285,6 +293,7 @@ pub fn rasterize(
         height[k] = fill.height;
         source[k] = id;
     }
+    walls(triangles, frame, &written, &source, &sampled, &mut height);
     let mut tile = quantize(frame, &height, &source, &sampled, &normals, covered);
     tile.sources = source
         .iter()
@@ -644,6 +653,130 @@ pub(super) fn dilate(
     (out_h, out_s, sampled)
 }
 
+/// Step 4's walls: each extrapolated sample (dilated, not taken from the surface by the ring)
+/// moves down to the lowest height of the leaf's own triangles between it and its `written`
+/// 4-neighbours, where the extrapolation goes down and the triangles fall further (up to the
+/// highest, where it goes up and they rise further). Where a leaf's surface turns edge-on at its
+/// rim (a silhouette seen from `w`), the linear extrapolation stops short of where the surface
+/// ends, and the gap to the neighbouring leaf, tens of texels tall on a hemisphere seen from its
+/// pole, let rays through; the cell from the last sample to the moved one walls it off, within
+/// the texel beside the rim. Elsewhere (the surface ends where the extrapolation continues it, at
+/// creases and open boundaries) nothing moves.
+fn walls(
+    triangles: &[[Vec3; 3]],
+    frame: &Frame,
+    written: &[bool],
+    source: &[u32],
+    sampled: &[bool],
+    height: &mut [f32],
+) {
+    let (res_u, res_v) = (frame.res_u as i64, frame.res_v as i64);
+    let wanted = |i: i64, j: i64| {
+        (0..res_u).contains(&i)
+            && (0..res_v).contains(&j)
+            && source[(j * res_u + i) as usize] != NONE
+            && !sampled[(j * res_u + i) as usize]
+    };
+    let is_written = |i: i64, j: i64| {
+        (0..res_u).contains(&i) && (0..res_v).contains(&j) && written[(j * res_u + i) as usize]
+    };
+    // Per extrapolated sample, the height range of the own triangles over its segments.
+    let mut range: std::collections::HashMap<usize, (f64, f64)> = Default::default();
+    for tri in triangles {
+        let p = tri.map(|q| frame.project(q));
+        if p.iter().any(|q| !q.is_finite()) {
+            continue;
+        }
+        let lo = p[0].min(p[1]).min(p[2]);
+        let hi = p[0].max(p[1]).max(p[2]);
+        for j in (lo.y.floor() as i64 - 1).max(0)..=(hi.y.ceil() as i64 + 1).min(res_v - 1) {
+            for i in (lo.x.floor() as i64 - 1).max(0)..=(hi.x.ceil() as i64 + 1).min(res_u - 1) {
+                if !wanted(i, j) {
+                    continue;
+                }
+                for (di, dj) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
+                    if !is_written(i + di, j + dj) {
+                        continue;
+                    }
+                    // The segment from the neighbour to the sample, along x (dj = 0) or y.
+                    let along_x = dj == 0;
+                    let (plane, a0, a1) = if along_x {
+                        (j as f64, (i + di).min(i) as f64, (i + di).max(i) as f64)
+                    } else {
+                        (i as f64, (j + dj).min(j) as f64, (j + dj).max(j) as f64)
+                    };
+                    let off = |q: DVec3| if along_x { q.y - plane } else { q.x - plane };
+                    let pos = |q: DVec3| if along_x { q.x } else { q.y };
+                    let mut pts: Vec<(f64, f64)> = Vec::new();
+                    for e in 0..3 {
+                        let (a, b) = (p[e], p[(e + 1) % 3]);
+                        let (da, db) = (off(a), off(b));
+                        if da == 0.0 {
+                            pts.push((pos(a), a.z));
+                        }
+                        if (da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0) {
+                            let t = da / (da - db);
+                            let q = a + (b - a) * t;
+                            pts.push((pos(q), q.z));
+                        }
+                    }
+                    let entry = range
+                        .entry((j * res_u + i) as usize)
+                        .or_insert((f64::INFINITY, f64::NEG_INFINITY));
+                    for x in 0..pts.len() {
+                        for y in x..pts.len() {
+                            let ((xa, ha), (xb, hb)) = (pts[x], pts[y]);
+                            let (ta, tb) = if xa == xb {
+                                if xa < a0 || xa > a1 {
+                                    continue;
+                                }
+                                (0.0, 1.0)
+                            } else {
+                                let t0 = ((a0 - xa) / (xb - xa)).clamp(0.0, 1.0);
+                                let t1 = ((a1 - xa) / (xb - xa)).clamp(0.0, 1.0);
+                                let (t0, t1) = (t0.min(t1), t0.max(t1));
+                                let (x0, x1) = (xa + (xb - xa) * t0, xa + (xb - xa) * t1);
+                                if x1 < a0 || x0 > a1 {
+                                    continue;
+                                }
+                                (t0, t1)
+                            };
+                            for t in [ta, tb] {
+                                let h = ha + (hb - ha) * t;
+                                entry.0 = entry.0.min(h);
+                                entry.1 = entry.1.max(h);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    for (k, (lo, hi)) in range {
+        if lo > hi {
+            continue;
+        }
+        let (i, j) = ((k as i64) % res_u, (k as i64) / res_u);
+        let (mut sum, mut n) = (0.0f64, 0u32);
+        for (di, dj) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
+            if is_written(i + di, j + dj) {
+                sum += height[((j + dj) * res_u + i + di) as usize] as f64;
+                n += 1;
+            }
+        }
+        if n == 0 {
+            continue;
+        }
+        let mean = sum / n as f64;
+        let d = height[k] as f64;
+        if d < mean {
+            height[k] = d.min(lo) as f32;
+        } else if d > mean {
+            height[k] = d.max(hi) as f32;
+        }
+    }
+}
+
 /// Step 5 of the module docs: 16-bit heights over the tile's own range, origin moved to `h_lo`.
 pub(super) fn quantize(
     frame: &Frame,
@@ -831,6 +964,36 @@ pub(super) mod tests {
                     assert!((got - want).abs() <= bound, "({i}, {j}): {got} vs {want}");
                 }
             }
+        }
+    }
+
+    /// A flat top (height 5) whose last texel falls steeply (slope 5) to height 0 at s = 8.2:
+    /// the dilated sample beyond it (i = 8) would continue the slope only to 2; the wall takes
+    /// it down to 0, where the leaf's own triangles end, and it stays marked extrapolated. The
+    /// flat side (i = 1) extends flat, unmoved.
+    #[test]
+    fn walls_take_extrapolated_samples_down_to_where_the_own_surface_ends() {
+        let frame = xy_frame(16);
+        let p = |s: f32, t: f32, h: f32| Vec3::new(s, t, h);
+        let tris = vec![
+            [p(2.0, 2.0, 5.0), p(7.2, 2.0, 5.0), p(7.2, 12.0, 5.0)],
+            [p(2.0, 2.0, 5.0), p(7.2, 12.0, 5.0), p(2.0, 12.0, 5.0)],
+            [p(7.2, 2.0, 5.0), p(8.2, 2.0, 0.0), p(8.2, 12.0, 0.0)],
+            [p(7.2, 2.0, 5.0), p(8.2, 12.0, 0.0), p(7.2, 12.0, 5.0)],
+        ];
+        let tile = rasterize(&tris, &frame, 0.01, None, None).unwrap();
+        let at = |i: usize, j: usize| (j * 16 + i, tile.texels[j * 16 + i]);
+        for j in 3..=10 {
+            let (k, steep) = at(7, j);
+            assert!((decoded(&tile, k, frame.origin) - 3.5).abs() < 1e-3);
+            assert!(steep.is_sampled());
+            let (k, wall) = at(8, j);
+            let h = decoded(&tile, k, frame.origin);
+            assert!(h.abs() < 1e-3, "({j}): {h}");
+            assert!(!wall.is_sampled());
+            let (k, flat) = at(1, j);
+            assert!((decoded(&tile, k, frame.origin) - 5.0).abs() < 1e-3);
+            assert!(!flat.is_sampled());
         }
     }
 
