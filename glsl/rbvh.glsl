@@ -553,6 +553,16 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
                               rbvh_is_hole(cell.c11));
                 rim = entered >= 0 && !prev_full && full;
                 prev_full = full;
+                if (rim) {
+                    // Only a ray between the cell's lowest corner less the skirt's depth and its
+                    // highest corner can be caught by its skirt (rbvh_skirt): the others need not
+                    // leave the inner loop.
+                    uint code_lo = min(min(cell.c00 & 0xFFFFu, cell.c10 & 0xFFFFu), min(cell.c01 & 0xFFFFu, cell.c11 & 0xFFFFu));
+                    uint code_hi = max(max(cell.c00 & 0xFFFFu, cell.c10 & 0xFFFFu), max(cell.c01 & 0xFFFFu, cell.c11 & 0xFFFFu));
+                    float h_in = rbvh_height_at(o.z, d.z, cell.t_in);
+                    rim = h_in >= float(code_lo) * leaf.h_scale - slack - skirt_h &&
+                          h_in <= float(code_hi) * leaf.h_scale + slack;
+                }
             }
             if (tests || rim) {
                 candidate = true;
