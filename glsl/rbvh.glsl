@@ -556,12 +556,13 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
                 if (rim) {
                     // Only a ray between the cell's lowest corner less the skirt's depth and its
                     // highest corner can be caught by its skirt (rbvh_skirt): the others need not
-                    // leave the inner loop.
+                    // leave the inner loop. Each bound has a quantum beyond the skirt's own slack,
+                    // against the rounding of the edge's height there.
                     uint code_lo = min(min(cell.c00 & 0xFFFFu, cell.c10 & 0xFFFFu), min(cell.c01 & 0xFFFFu, cell.c11 & 0xFFFFu));
                     uint code_hi = max(max(cell.c00 & 0xFFFFu, cell.c10 & 0xFFFFu), max(cell.c01 & 0xFFFFu, cell.c11 & 0xFFFFu));
                     float h_in = rbvh_height_at(o.z, d.z, cell.t_in);
-                    rim = h_in >= float(code_lo) * leaf.h_scale - slack - skirt_h &&
-                          h_in <= float(code_hi) * leaf.h_scale + slack;
+                    rim = h_in >= float(code_lo) * leaf.h_scale - slack - skirt_h - abs(leaf.h_scale) &&
+                          h_in <= float(code_hi) * leaf.h_scale + slack + abs(leaf.h_scale);
                 }
             }
             if (tests || rim) {
