@@ -1010,6 +1010,32 @@ pub(super) mod tests {
         }
     }
 
+    /// An L-shaped patch of the plane h = 2s − t: the hole in its inner corner extends two
+    /// written samples (one each way), and the walls leave it on the plane, as dilation put it.
+    #[test]
+    fn walls_leave_planes_extended_exactly() {
+        let frame = xy_frame(16);
+        let plane = |s: f32, t: f32| 2.0 * s - t;
+        let mut tris = square(&frame, 2.0, 6.0, plane);
+        let p = |s: f32, t: f32| Vec3::new(s, t, plane(s, t));
+        tris.extend([
+            [p(6.0, 2.0), p(10.0, 2.0), p(10.0, 6.0)],
+            [p(6.0, 2.0), p(10.0, 6.0), p(6.0, 6.0)],
+            [p(2.0, 6.0), p(6.0, 6.0), p(6.0, 10.0)],
+            [p(2.0, 6.0), p(6.0, 10.0), p(2.0, 10.0)],
+        ]);
+        let tile = rasterize(&tris, &frame, 0.01, None, None).unwrap();
+        let range = plane(10.5, 1.5) - plane(1.5, 10.5);
+        let bound = range / Texel::MAX_CODE as f32 + 1e-4;
+        for (i, j) in [(6, 6), (10, 4), (4, 10), (1, 4), (4, 1)] {
+            let k = j * 16 + i;
+            let got = decoded(&tile, k, frame.origin);
+            let want = plane(i as f32 + 0.5, j as f32 + 0.5);
+            assert!((got - want).abs() <= bound, "({i}, {j}): {got} vs {want}");
+            assert!(!tile.texels[k].is_sampled(), "({i}, {j})");
+        }
+    }
+
     #[test]
     fn the_ring_follows_the_neighbouring_surface_nearest_the_rim() {
         let frame = xy_frame(16);
