@@ -44,7 +44,7 @@ use super::{Rbvh, RbvhParams, RbvhStats, TexelFormat};
 use crate::bvh::{join_halves, ChildRef, GpuNode, GpuTriangle, LinearBvh, LEAF_BIT, STACK_SIZE};
 use crate::geom::Aabb;
 use crate::progress::{step, Progress, Quiet};
-use crate::scene::Scene;
+use crate::scene::{open_boundary, Scene};
 use crate::{Error, Result};
 
 /// Most triangles in a triangle leaf.
@@ -88,6 +88,9 @@ struct Builder<'a> {
     texel: f32,
     /// The scene's triangles in a BVH, for the surface around each leaf (its ring of samples).
     surface: Option<&'a LinearBvh<'a>>,
+    /// Per scene triangle, whether it touches the open boundary ([`open_boundary`]); empty
+    /// for points.
+    open: &'a [bool],
 }
 
 /// What every level of an RBVH of one scene shares, made once for all of them: the scene
@@ -117,6 +120,9 @@ struct Shared<'s> {
     prims: Vec<SplitPrim>,
     /// The scene's triangles in a BVH, for the surface around each leaf (its ring of samples).
     surface: Option<LinearBvh<'s>>,
+    /// Per scene triangle, whether it touches the open boundary ([`open_boundary`]); empty
+    /// for points.
+    open: Vec<bool>,
     /// Milliseconds making this took.
     ms: f64,
 }
@@ -224,8 +230,19 @@ impl<'s> RbvhSource<'s> {
             Input::Triangles(_) => Some(LinearBvh::build(scene, SURFACE_LEAF)?),
             Input::Points(_) => None,
         };
+        let open = match self.input() {
+            Input::Triangles(_) => step(progress, "finding the scene's open edges", 0, || {
+                open_boundary(scene)
+            }),
+            Input::Points(_) => Vec::new(),
+        };
         let ms = start.elapsed().as_secs_f64() * 1e3;
-        Ok(self.shared.get_or_init(|| Shared { prims, surface, ms }))
+        Ok(self.shared.get_or_init(|| Shared {
+            prims,
+            surface,
+            open,
+            ms,
+        }))
     }
 }
 
@@ -290,6 +307,7 @@ impl Rbvh {
         };
         let count = prims.len();
         let surface = shared.surface.as_ref();
+        let open = &shared.open;
         let builder = Builder {
             input,
             keep_sources,
@@ -298,6 +316,7 @@ impl Rbvh {
             texel,
             progress,
             surface,
+            open,
         };
         let mut order: Vec<u32> = (0..count as u32).collect();
         let root = step(
@@ -525,12 +544,13 @@ impl Builder<'_> {
         match self.input {
             Input::Triangles(all) => {
                 let tris: Vec<[Vec3; 3]> = order.iter().map(|&i| all[i as usize]).collect();
+                let open: Vec<bool> = order.iter().map(|&i| self.open[i as usize]).collect();
                 let elements = triangle_elements(&tris);
                 let (frame, judge) =
                     self.judged_frame(&elements, tris.as_flattened(), 0.0, diagonal)?;
                 // Layers closer than a texel are one surface at this sampling rate.
                 self.tiles(&frame, |window| {
-                    rasterize(&tris, window, self.texel, judge, self.surface)
+                    rasterize(&tris, window, self.texel, judge, self.surface, &open)
                 })
             }
             Input::Points(all) => {

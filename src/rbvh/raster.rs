@@ -58,8 +58,17 @@
 //!    exactly. At φ_max 89.5° the sphere's
 //!    seam leaks fell from 26,461 to 117 per million, and t p99 from 0.43 to 0.26% of the
 //!    diagonal.
+//!
+//!    Last, the **open boundary**: a corner still a hole of a cell that a triangle touching the
+//!    scene's open boundary meets ([`crate::scene::open_boundary`]) takes that triangle's plane
+//!    (clamped to its heights, marked extrapolated). Nothing continues the surface beyond such
+//!    an edge, and a corner seen only diagonally from the written samples, with no surface over
+//!    it for the ring, left the cell bare: rays entering within a texel of a hole's rim passed
+//!    through (the Stanford bunny's base: 75/62/69/24/29 of a million seam rays at Q0–Q4, now
+//!    2/2/0/0/1, t p99 the same). Filling every such corner, not only beside open edges, cost
+//!    the dragon's Q0 t p99 0.150 → 0.326% (docs/guarantees.md).
 //! 5. **Quantization.** With `h_lo`, `h_hi` the extreme heights of all valid samples (after
-//!    dilation, the ring and the walls), `h_scale = (h_hi − h_lo) / MAX_CODE` (0 when flat or empty), the code of height `h`
+//!    dilation, the ring, the walls and the open boundary), `h_scale = (h_hi − h_lo) / MAX_CODE` (0 when flat or empty), the code of height `h`
 //!    is the code nearest `(h − h_lo) / h_scale` whose parity tells a sampled height (even) from
 //!    an extrapolated one (odd; [`Texel::code_of`]), and `frame.origin` moves by `h_lo · w`, so
 //!    code 0 is the lowest height. Sixteen bits over the leaf's own height range, one of them the
@@ -231,13 +240,15 @@ impl Tile {
 /// fraction of a texel, or samples on shared edges count as folds). See the module docs for the
 /// steps. The grid of `res_u × res_v` samples is allocated in full; the builder keeps both sides
 /// at most `max_tile` (≤ 4096). With `judge`, the sampled surface must also pass that criterion
-/// (step 3).
+/// (step 3). `open` says, per triangle, whether it touches the scene's open boundary
+/// ([`crate::scene::open_boundary`]; empty: none does), for step 4's last part.
 pub fn rasterize(
     triangles: &[[Vec3; 3]],
     frame: &Frame,
     fold_tolerance: f32,
     judge: Option<Refinement>,
     surface: Option<&LinearBvh>,
+    open: &[bool],
 ) -> Option<Tile> {
     let res_u = frame.res_u as usize;
     let res_v = frame.res_v as usize;
@@ -279,7 +290,7 @@ pub fn rasterize(
     }
     let ring = match surface {
         Some(surface) => {
-            let corners = cell_corners(triangles, frame, &source);
+            let corners = ring_corners(triangles, frame, &source);
             ring_from_surface(surface, frame, &height, &source, &input_index, &corners)
         }
         None => Vec::new(),
@@ -295,6 +306,18 @@ pub fn rasterize(
         source[k] = id;
     }
     walls(triangles, frame, &written, &source, &sampled, &mut height);
+    // The open boundary (step 4's last part): every cell a triangle beside it meets is full.
+    if !open.is_empty() {
+        let hole = |i: i64, j: i64| source[j as usize * res_u + i as usize] == NONE;
+        let corners = cell_corners(triangles, frame, |t| open[t], hole);
+        for (k, h, input) in corners {
+            let tri = triangles[input as usize];
+            source[k] = normals.len() as u32;
+            normals.push((tri[1] - tri[0]).cross(tri[2] - tri[0]).normalize_or_zero());
+            input_index.push(input);
+            height[k] = h;
+        }
+    }
     let mut tile = quantize(frame, &height, &source, &sampled, &normals, covered);
     tile.sources = source
         .iter()
@@ -358,19 +381,40 @@ struct RingSample {
     input: u32,
 }
 
-/// The holes at a corner of a cell that one of `triangles` overlaps in projection and with no
-/// written sample among their eight neighbours (which the ring samples anyway), each with the
-/// height of that triangle's plane over it (clamped to the triangle's own height range) and the
-/// triangle's index, the first such triangle's; sorted by sample. A leaf's full cells must cover
-/// its whole footprint, not only the surroundings of the sample centres its triangles happen to
-/// hold: a sliver, or a triangle smaller than a texel (a leaf of one, where the criterion allows
-/// nothing larger), may hold none, and the ring around written samples left the rest of it bare.
-/// A short list, not a map over the tile: most corners are written or beside written samples.
-fn cell_corners(triangles: &[[Vec3; 3]], frame: &Frame, source: &[u32]) -> Vec<(usize, f32, u32)> {
+/// The [`cell_corners`] the ring asks for: holes with no written sample (`source`) among their
+/// eight neighbours, at the corners of any of the leaf's triangles' cells.
+fn ring_corners(triangles: &[[Vec3; 3]], frame: &Frame, source: &[u32]) -> Vec<(usize, f32, u32)> {
+    let written = |i: i64, j: i64| written_at(source, frame.res_u as usize, i, j).is_some();
+    cell_corners(
+        triangles,
+        frame,
+        |_| true,
+        |ci, cj| !(-1..=1).any(|dj| (-1..=1).any(|di| written(ci + di, cj + dj))),
+    )
+}
+
+/// The `wanted` samples `(i, j)` at a corner of a cell that one of the `triangles` that `which`
+/// picks (by index) overlaps in projection, each with the height of that triangle's plane over
+/// it (clamped to the triangle's own height range) and the triangle's index, the first such
+/// triangle's; sorted by sample. A leaf's full cells must cover its whole footprint, not only
+/// the surroundings of the sample centres its triangles happen to hold: a sliver, or a triangle
+/// smaller than a texel (a leaf of one, where the criterion allows nothing larger), may hold
+/// none, and the ring around written samples left the rest of it bare; so the ring asks for the
+/// holes with no written sample among their eight neighbours (which it samples anyway), and the
+/// open boundary for the holes left at the end. A short list, not a map over the tile: most
+/// corners are written or beside written samples.
+fn cell_corners(
+    triangles: &[[Vec3; 3]],
+    frame: &Frame,
+    which: impl Fn(usize) -> bool,
+    wanted: impl Fn(i64, i64) -> bool,
+) -> Vec<(usize, f32, u32)> {
     let (res_u, res_v) = (frame.res_u as i64, frame.res_v as i64);
-    let written = |i: i64, j: i64| written_at(source, res_u as usize, i, j).is_some();
     let mut out = Vec::new();
     for (input, tri) in triangles.iter().enumerate() {
+        if !which(input) {
+            continue;
+        }
         // As step 1: a face seen edge-on defines no height over a sample.
         let facing = (tri[1] - tri[0]).cross(tri[2] - tri[0]).try_normalize();
         if facing.is_none_or(|n| n.dot(frame.w).abs() <= EDGE_ON_COS) {
@@ -401,9 +445,7 @@ fn cell_corners(triangles: &[[Vec3; 3]], frame: &Frame, source: &[u32]) -> Vec<(
                     continue;
                 }
                 for (ci, cj) in [(i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)] {
-                    let beside_written =
-                        (-1..=1).any(|dj| (-1..=1).any(|di| written(ci + di, cj + dj)));
-                    if beside_written {
+                    if !wanted(ci, cj) {
                         continue;
                     }
                     let h = p[0].z + a * (ci as f64 - p[0].x) + b * (cj as f64 - p[0].y);
@@ -875,6 +917,11 @@ pub(super) mod tests {
         ]
     }
 
+    /// [`rasterize`] with no criterion, no surface around the leaf and no open boundary.
+    fn plain(triangles: &[[Vec3; 3]], frame: &Frame, fold_tolerance: f32) -> Option<Tile> {
+        rasterize(triangles, frame, fold_tolerance, None, None, &[])
+    }
+
     /// Height of sample `k` measured along `w` from `reference`, decoded from the tile.
     fn decoded(tile: &Tile, k: usize, reference: Vec3) -> f32 {
         let f = &tile.frame;
@@ -890,17 +937,45 @@ pub(super) mod tests {
             + tile.texels[k].height_code() as f32 * tile.h_scale * f.w
     }
 
+    /// A small triangle that touches the open boundary leaves no cell it meets bare: the corner
+    /// seen only diagonally from its one written sample, with no surface over it for the ring,
+    /// takes the triangle's plane (clamped to its heights), marked extrapolated. Without the
+    /// boundary it stays a hole, as the neighbouring leaf is then expected to cover it.
+    #[test]
+    fn cells_beside_the_open_boundary_are_full() {
+        let frame = xy_frame(8);
+        let plane = |x: f32, y: f32| 1.0 + 0.5 * x + 0.25 * y;
+        // In sample space (sample (i, j) at (i, j)): it holds sample (3, 3) alone.
+        let corner = |x: f32, y: f32| Vec3::new(x + 0.5, y + 0.5, plane(x, y));
+        let tri = [[corner(2.9, 2.9), corner(3.9, 3.2), corner(3.2, 3.9)]];
+        let closed = plain(&tri, &frame, 0.01).unwrap();
+        let open = rasterize(&tri, &frame, 0.01, None, None, &[true]).unwrap();
+        assert_eq!((closed.covered, open.covered), (1, 1));
+        let at = |tile: &Tile, i: usize, j: usize| tile.texels[j * 8 + i];
+        assert!(at(&closed, 4, 4).is_hole());
+        for (ci, cj) in [(2, 2), (3, 2), (2, 3), (3, 3)] {
+            for (i, j) in [(ci, cj), (ci + 1, cj), (ci, cj + 1), (ci + 1, cj + 1)] {
+                assert!(
+                    !at(&open, i, j).is_hole(),
+                    "cell ({ci}, {cj}), corner ({i}, {j})"
+                );
+            }
+        }
+        let filled = at(&open, 4, 4);
+        assert!(!filled.is_sampled());
+        let highest = plane(3.9, 3.2);
+        let h = decoded(&open, 4 * 8 + 4, Vec3::ZERO);
+        assert!(
+            (h - highest).abs() <= 2.0 * open.h_scale + 1e-5,
+            "{h} vs {highest}"
+        );
+        assert!(filled.normal().dot(Vec3::new(-0.5, -0.25, 1.0).normalize()) > 0.999);
+    }
+
     #[test]
     fn flat_square_is_exact() {
         let frame = xy_frame(8);
-        let tile = rasterize(
-            &square(&frame, 0.0, 8.0, |_, _| 2.0),
-            &frame,
-            0.01,
-            None,
-            None,
-        )
-        .unwrap();
+        let tile = plain(&square(&frame, 0.0, 8.0, |_, _| 2.0), &frame, 0.01).unwrap();
         assert_eq!(tile.covered, 64);
         assert_eq!(tile.h_scale, 0.0);
         assert_eq!(tile.frame.origin, Vec3::new(0.0, 0.0, 2.0));
@@ -918,7 +993,7 @@ pub(super) mod tests {
             ..xy_frame(16)
         };
         let plane = |s: f32, t: f32| 0.3 * s + 0.2 * t + 1.0;
-        let tile = rasterize(&square(&frame, 0.0, 16.0, plane), &frame, 0.01, None, None).unwrap();
+        let tile = plain(&square(&frame, 0.0, 16.0, plane), &frame, 0.01).unwrap();
         assert_eq!(tile.covered, 256);
         let range = plane(15.5, 15.5) - plane(0.5, 0.5);
         let bound = range / Texel::MAX_CODE as f32 + 1e-5;
@@ -939,11 +1014,11 @@ pub(super) mod tests {
         let frame = xy_frame(8);
         let mut two = square(&frame, 0.0, 8.0, |_, _| 0.0);
         two.extend(square(&frame, 0.0, 8.0, |_, _| 10.0));
-        assert_eq!(rasterize(&two, &frame, 1.0, None, None), None);
+        assert_eq!(plain(&two, &frame, 1.0), None);
 
         let mut close = square(&frame, 0.0, 8.0, |_, _| 0.0);
         close.extend(square(&frame, 0.0, 8.0, |_, _| 0.05));
-        let tile = rasterize(&close, &frame, 0.1, None, None).unwrap();
+        let tile = plain(&close, &frame, 0.1).unwrap();
         assert_eq!(tile.covered, 64);
         // First writer wins: the lower layer.
         assert_eq!(tile.frame.origin.z, 0.0);
@@ -955,7 +1030,7 @@ pub(super) mod tests {
         let frame = xy_frame(16);
         let plane = |s: f32, t: f32| 0.5 * s - 0.25 * t + 3.0;
         // Samples 4..=11 in each direction are covered (centres 4.5 ..= 11.5).
-        let tile = rasterize(&square(&frame, 4.0, 12.0, plane), &frame, 0.01, None, None).unwrap();
+        let tile = plain(&square(&frame, 4.0, 12.0, plane), &frame, 0.01).unwrap();
         assert_eq!(tile.covered, 64);
         let core = |x: u32| (4..=11).contains(&x);
         let ring = |x: u32| x == 3 || x == 12;
@@ -994,7 +1069,7 @@ pub(super) mod tests {
             [p(7.2, 2.0, 5.0), p(8.2, 2.0, 0.0), p(8.2, 12.0, 0.0)],
             [p(7.2, 2.0, 5.0), p(8.2, 12.0, 0.0), p(7.2, 12.0, 5.0)],
         ];
-        let tile = rasterize(&tris, &frame, 0.01, None, None).unwrap();
+        let tile = plain(&tris, &frame, 0.01).unwrap();
         let at = |i: usize, j: usize| (j * 16 + i, tile.texels[j * 16 + i]);
         for j in 3..=10 {
             let (k, steep) = at(7, j);
@@ -1024,7 +1099,7 @@ pub(super) mod tests {
             [p(2.0, 6.0), p(6.0, 6.0), p(6.0, 10.0)],
             [p(2.0, 6.0), p(6.0, 10.0), p(2.0, 10.0)],
         ]);
-        let tile = rasterize(&tris, &frame, 0.01, None, None).unwrap();
+        let tile = plain(&tris, &frame, 0.01).unwrap();
         let range = plane(10.5, 1.5) - plane(1.5, 10.5);
         let bound = range / Texel::MAX_CODE as f32 + 1e-4;
         for (i, j) in [(6, 6), (10, 4), (4, 10), (1, 4), (4, 1)] {
@@ -1056,8 +1131,8 @@ pub(super) mod tests {
             .collect();
         scene.push_object("bend", &positions, &indices);
         let surface = LinearBvh::build(&scene, 4).expect("builds");
-        let tile = rasterize(&own, &frame, 0.01, None, Some(&surface)).unwrap();
-        let plain = rasterize(&own, &frame, 0.01, None, None).unwrap();
+        let tile = rasterize(&own, &frame, 0.01, None, Some(&surface), &[]).unwrap();
+        let plain = plain(&own, &frame, 0.01).unwrap();
         for j in 4..=11u32 {
             // +u: the bent surface at the ring sample's centre, not the flat extrapolation
             // nor the decoy, marked as sampled; -u, where no surface continues: the
@@ -1082,7 +1157,7 @@ pub(super) mod tests {
         let p = |x: f32, y: f32| Vec3::new(x + 0.5, y + 0.5, 2.0 + x);
         let sliver = [[p(3.2, 3.2), p(3.8, 3.3), p(3.3, 3.8)]];
         let source = vec![NONE; 64];
-        let corners = cell_corners(&sliver, &frame, &source);
+        let corners = ring_corners(&sliver, &frame, &source);
         let at: Vec<(usize, f32)> = corners.iter().map(|&(k, h, _)| (k, h)).collect();
         // Corners (3, 3), (4, 3), (3, 4), (4, 4); heights from the plane, clamped to the
         // triangle's own range [5.2, 5.8].
@@ -1090,7 +1165,7 @@ pub(super) mod tests {
         // Beside a written sample, a corner is left to the ring around it.
         let mut written = source.clone();
         written[26] = 0;
-        let corners = cell_corners(&sliver, &frame, &written);
+        let corners = ring_corners(&sliver, &frame, &written);
         assert!(
             corners.iter().all(|&(k, _, _)| k == 36 || k == 28),
             "{corners:?}"
@@ -1101,7 +1176,7 @@ pub(super) mod tests {
             Vec3::new(4.4, 3.6, 0.0),
             Vec3::new(3.6, 3.6, 1.0),
         ]];
-        assert!(cell_corners(&edge_on, &frame, &source).is_empty());
+        assert!(ring_corners(&edge_on, &frame, &source).is_empty());
     }
 
     #[test]
@@ -1139,7 +1214,7 @@ pub(super) mod tests {
                 }
             }
         }
-        let tile = rasterize(&tris, &frame, 1e-3, None, None).unwrap();
+        let tile = plain(&tris, &frame, 1e-3).unwrap();
         assert_eq!(tile.covered, 17 * 17);
     }
 
@@ -1160,7 +1235,7 @@ pub(super) mod tests {
             ]],
         ];
         for tris in inputs {
-            let tile = rasterize(&tris, &frame, 0.1, None, None).unwrap();
+            let tile = plain(&tris, &frame, 0.1).unwrap();
             assert_eq!(tile.covered, 0);
             assert_eq!(tile.h_scale, 0.0);
             assert_eq!(tile.texels.len(), 64);
@@ -1171,27 +1246,13 @@ pub(super) mod tests {
             res_v: 0,
             ..frame
         };
-        let tile = rasterize(
-            &square(&frame, 0.0, 8.0, |_, _| 1.0),
-            &empty,
-            0.1,
-            None,
-            None,
-        )
-        .unwrap();
+        let tile = plain(&square(&frame, 0.0, 8.0, |_, _| 1.0), &empty, 0.1).unwrap();
         assert!(tile.texels.is_empty() && tile.covered == 0);
         let zero_texel = Frame {
             texel: 0.0,
             ..frame
         };
-        let tile = rasterize(
-            &square(&frame, 0.0, 8.0, |_, _| 1.0),
-            &zero_texel,
-            0.1,
-            None,
-            None,
-        )
-        .unwrap();
+        let tile = plain(&square(&frame, 0.0, 8.0, |_, _| 1.0), &zero_texel, 0.1).unwrap();
         assert_eq!(tile.covered, 0);
     }
 
@@ -1208,7 +1269,7 @@ pub(super) mod tests {
             res_v: 9,
         };
         let bumpy = |s: f32, t: f32| (0.7 * s).sin() + 0.3 * t;
-        let tile = rasterize(&square(&frame, 1.0, 11.0, bumpy), &frame, 0.01, None, None).unwrap();
+        let tile = plain(&square(&frame, 1.0, 11.0, bumpy), &frame, 0.01).unwrap();
         assert!(tile.covered > 0 && tile.h_scale > 0.0);
         let b = tile.world_bounds();
         // The tilted, bumpy tile's samples fill much less than the box of its tile box (the two
@@ -1237,7 +1298,7 @@ pub(super) mod tests {
             ..xy_frame(8)
         };
         let plane = |s: f32, _| 0.1 * s;
-        let tile = rasterize(&square(&frame, 0.0, 8.0, plane), &frame, 0.01, None, None).unwrap();
+        let tile = plain(&square(&frame, 0.0, 8.0, plane), &frame, 0.01).unwrap();
         let r = tile.heightfield(1234);
         let f = &tile.frame;
         assert_eq!(r.atlas_base, 1234);
@@ -1286,12 +1347,13 @@ pub(super) mod tests {
                     &super::super::frame::triangle_elements(tris),
                     Vec3::Z
                 ));
-                assert!(rasterize(tris, &frame, 1.0, None, None).is_some());
+                assert!(plain(tris, &frame, 1.0).is_some());
             }
-            let tile = rasterize(&noisy, &frame, 1.0, Some(criterion), None).expect("noise passes");
+            let tile =
+                rasterize(&noisy, &frame, 1.0, Some(criterion), None, &[]).expect("noise passes");
             assert_eq!(tile.covered, 64);
             assert!(
-                rasterize(&ridge, &frame, 1.0, Some(criterion), None).is_none(),
+                rasterize(&ridge, &frame, 1.0, Some(criterion), None, &[]).is_none(),
                 "{criterion:?}: the ridge passed"
             );
         }
@@ -1299,7 +1361,7 @@ pub(super) mod tests {
         let wide = Refinement::NormalCone {
             max_angle_deg: 70.0,
         };
-        assert!(rasterize(&ridge, &frame, 1.0, Some(wide), None).is_some());
+        assert!(rasterize(&ridge, &frame, 1.0, Some(wide), None, &[]).is_some());
     }
 
     /// A tile whose written samples form no cell (one sliver covering a single sample centre) has
@@ -1315,10 +1377,7 @@ pub(super) mod tests {
         let criterion = Refinement::NormalCone {
             max_angle_deg: 60.0,
         };
-        assert_eq!(
-            rasterize(&sliver, &frame, 1.0, None, None).unwrap().covered,
-            1
-        );
-        assert!(rasterize(&sliver, &frame, 1.0, Some(criterion), None).is_none());
+        assert_eq!(plain(&sliver, &frame, 1.0).unwrap().covered, 1);
+        assert!(rasterize(&sliver, &frame, 1.0, Some(criterion), None, &[]).is_none());
     }
 }

@@ -22,6 +22,7 @@ mod obj;
 mod sample;
 mod scene_file;
 pub mod texture;
+mod topology;
 
 pub use camera::{Camera, CameraFault, DEFAULT_VFOV_DEG};
 pub use light::Light;
@@ -30,3 +31,4 @@ pub use mesh::{ObjectSurface, Scene};
 pub use mipmap::MipChain;
 pub use sample::{PointSource, SCAN_MATCH};
 pub use texture::{Texture, Wrap};
+pub use topology::open_boundary;
