@@ -57,6 +57,7 @@ fn a_leak_is_a_ray_that_passes_the_surface_by_two_texels_or_misses() {
 /// Entries into a slab of thickness 2, whose depth is known: straight through from above,
 /// depth 1 (its middle); at 60° from the normal, still 1 (half the planes' distance, not half
 /// the chord, 2); leaving by a side instead of the bottom, the two crossed faces' planes decide.
+/// A ray from inside, out through the top (a back face), is no entry.
 #[test]
 fn entry_depth_is_the_deepest_point_between_the_faces_crossed() {
     let mut scene = Scene::new("slab");
@@ -94,7 +95,13 @@ fn entry_depth_is_the_deepest_point_between_the_faces_crossed() {
     let dir = v(tilt.sin(), 0.0, -tilt.cos());
     let slanted = rbvh::geom::Ray::new(v(-4.0, 0.5, 5.0), dir, 0.0, f32::INFINITY);
     let by_side = rbvh::geom::Ray::new(v(0.5, 0.5, 5.0), dir, 0.0, f32::INFINITY);
-    let entries = exact_entries(&bvh, &[down, slanted, by_side], 0.01);
+    // From inside the slab, out through its top: a back face first, not an entry.
+    let leaving = rbvh::geom::Ray::new(v(0.5, 0.5, 0.0), v(0.0, 0.0, 1.0), 0.0, f32::INFINITY);
+    let entries = exact_entries(&bvh, &[down, slanted, by_side, leaving], 0.01);
+    assert_eq!(
+        entries[3], None,
+        "a ray leaving the solid does not enter it"
+    );
     let down = entries[0].expect("hits the slab");
     assert!(
         (down.t - 4.0).abs() < 1e-5 && (down.depth - 1.0).abs() < 1e-5,
