@@ -289,6 +289,21 @@ uint rbvh_cell_normal_texel(RbvhFrameRay fr, RbvhCell cell, float t_hit) {
     return nearest;
 }
 
+// The walk's first cell along one axis (`start` in march.rs): the cell holding the entry, or
+// the one behind it where the ray crosses their boundary within `slack` texels of the entry at
+// `t0`, or after it (a flat tile's box is thinner than the rounding of the frame coordinates).
+int rbvh_walk_start(float entry, int step, int last, float o, float inv, float d, float t0, float slack) {
+    int c = rbvh_grid_cell(RBVH_BETWEEN_SAMPLES, entry, last);
+    int back = c - step;
+    if (step != 0 && back >= 0 && back <= last) {
+        precise float gap = (t0 - rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, back, step, o, inv)) * abs(d);
+        if (gap <= slack) {
+            return back;
+        }
+    }
+    return c;
+}
+
 // Marches leaf `li` over [tmin, t_closest); returns t (< 0 on a miss) and, on a hit, the texel
 // whose normal it reports (decode with rbvh_decode_normal), or with RBVH_HEIGHT_ONLY the world
 // normal of the cell triangle hit (`facet_normal`, as facet_normal in march.rs). `cells` counts
@@ -369,13 +384,14 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     int last_i = int(leaf.res_u) - 2;
     int last_j = int(leaf.res_v) - 2;
     precise vec3 entry = o + d * t0;
-    int ci = rbvh_grid_cell(RBVH_BETWEEN_SAMPLES, entry.x, last_i);
-    int cj = rbvh_grid_cell(RBVH_BETWEEN_SAMPLES, entry.y, last_j);
     int step_i = rbvh_grid_step(d.x);
     int step_j = rbvh_grid_step(d.y);
+    precise float corner_slack = RBVH_MARCH_SLACK * (((abs(o.x) + abs(o.y)) + float(leaf.res_u)) + float(leaf.res_v));
+    // Within rounding of the boundary behind the entry, the walk starts behind it (march.rs).
+    int ci = rbvh_walk_start(entry.x, step_i, last_i, o.x, inv.x, d.x, t0, corner_slack);
+    int cj = rbvh_walk_start(entry.y, step_j, last_j, o.y, inv.y, d.y, t0, corner_slack);
     float next_i = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, ci, step_i, o.x, inv.x);
     float next_j = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, cj, step_j, o.y, inv.y);
-    precise float corner_slack = RBVH_MARCH_SLACK * (((abs(o.x) + abs(o.y)) + float(leaf.res_u)) + float(leaf.res_v));
     uint max_steps = (leaf.res_u - 1u) + (leaf.res_v - 1u) - 1u;
     // The walk of march.rs: a main cell, then (when the ray passes a grid vertex too closely to
     // resolve) the extra cell across it, then the step. "While-while" as in the traversal: the
@@ -460,9 +476,13 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
             }
             advance = true;
             if (!is_extra) {
+                // Past the box's exit, the cell stepped into within rounding of it is walked too.
                 if (t_in > t1) {
-                    stopped = true;
-                    break;
+                    precise float past = (t_in - t1) * abs(entered == 0 ? d.x : d.y);
+                    if (entered < 0 || !(past <= corner_slack)) {
+                        stopped = true;
+                        break;
+                    }
                 }
                 // On entering a block: if the ray passes wholly above or below its height range
                 // (with the cell test's slack), none of its cells can be hit, and the walk moves

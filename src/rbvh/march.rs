@@ -17,7 +17,9 @@
 //!    Fast Voxel Traversal Algorithm for Ray Tracing" (Eurographics 1987), from the cell holding
 //!    the entry point. Cell `(i, j)` spans `s ∈ [i + ½, i + 3⁄2]`, `t ∈ [j + ½, j + 3⁄2]`, between
 //!    samples `(i, j)` and `(i + 1, j + 1)`. Where the ray passes a grid vertex closer than
-//!    rounding can resolve, the cell on the other side of the vertex is tested too.
+//!    rounding can resolve, the cell on the other side of the vertex is tested too; where it
+//!    enters (leaves) the tile's box that close to a cell boundary, the walk starts in the cell
+//!    behind it (goes on into the cell ahead).
 //! 4. **Cell**: its surface is two triangles through the four corner samples (three with one
 //!    hole, none with more), tested after a cheap height rejection with the same watertight test
 //!    in frame space. Neighbouring cells share their edge's two vertices bit for bit, so no ray
@@ -350,17 +352,35 @@ impl Rbvh {
         let last_i = i64::from(leaf.res_u) - 2;
         let last_j = i64::from(leaf.res_v) - 2;
         let entry = o + d * t0;
-        let mut ci = CELLS.cell_of(entry.x, last_i);
-        let mut cj = CELLS.cell_of(entry.y, last_j);
         let step_i = step_of(d.x);
         let step_j = step_of(d.y);
-        let mut next_i = CELLS.boundary_t(ci, step_i, o.x, inv.x);
-        let mut next_j = CELLS.boundary_t(cj, step_j, o.y, inv.y);
         // Where the ray passes a grid vertex closer than rounding can resolve, the walk goes
         // round it on one side while the watertight test may report the hit in the cell on the
         // other side; that cell is then tested too. `corner_slack` bounds, in texels, the
         // rounding of the frame coordinates the two tests work on.
         let corner_slack = SLACK * (o.x.abs() + o.y.abs() + leaf.res_u as f32 + leaf.res_v as f32);
+        // The same rounding at the walk's ends: a flat tile's box is a slab thinner than it,
+        // tens of texels from the origin, so where the entry lies that close to a boundary
+        // behind it the walk starts in the cell behind (and where the box's exit lies that close
+        // to the boundary ahead, it goes on into the cell there, below), lest the watertight test
+        // report the hit in a cell the walk skipped (the default scene's ground: three in four
+        // of the rays aimed at its leaves' rims that passed through).
+        let start = |entry: f32, step: i64, last: i64, o: f32, inv: f32, d: f32| {
+            let c = CELLS.cell_of(entry, last);
+            let back = c - step;
+            let behind = step != 0
+                && (0..=last).contains(&back)
+                && (t0 - CELLS.boundary_t(back, step, o, inv)) * d.abs() <= corner_slack;
+            if behind {
+                back
+            } else {
+                c
+            }
+        };
+        let mut ci = start(entry.x, step_i, last_i, o.x, inv.x, d.x);
+        let mut cj = start(entry.y, step_j, last_j, o.y, inv.y, d.y);
+        let mut next_i = CELLS.boundary_t(ci, step_i, o.x, inv.x);
+        let mut next_j = CELLS.boundary_t(cj, step_j, o.y, inv.y);
         // A straight line crosses each of the (res − 2) inner boundaries per axis at most once, so
         // it takes at most this many steps, each visiting one cell (two near a grid vertex).
         let max_steps = u64::from(leaf.res_u - 1) + u64::from(leaf.res_v - 1) - 1;
@@ -376,8 +396,13 @@ impl Rbvh {
         // depth, so no skirt can catch it in the cell it lands in.
         let mut prev_full = false;
         for _ in 0..max_steps {
+            // Past the box's exit, the cell stepped into within rounding of it is walked too.
             if t_in > t1 {
-                break;
+                let across = if entered == Some(0) { d.x } else { d.y };
+                let past = (t_in - t1) * across.abs();
+                if entered.is_none() || past > corner_slack || past.is_nan() {
+                    break;
+                }
             }
             if let Some(b) = &blocks {
                 // On entering a block whose height range the ray passes wholly above or below,
