@@ -150,8 +150,9 @@ impl GpuHeightfield {
 /// Representations for Independent Unit Vectors", JCGT 2014), worst-case error about 1.2°.
 ///
 /// The height code's lowest bit tells where the height came from ([`Texel::is_sampled`]): even
-/// for a sample of the surface (a leaf's own triangle, or the ring taken from the neighbouring
-/// surface), odd for an extrapolated one (dilation). The march hangs a skirt only under rims of
+/// for a sample of the surface (a leaf's own triangle, the ring taken from the neighbouring
+/// surface, or a wall steeper than 45° down the leaf's own triangles at an edge-on rim), odd for
+/// an extrapolated one (dilation). The march hangs a skirt only under rims of
 /// sampled heights ([`MARCH_SKIRT_TEXELS`]). The bit costs the quantization one bit: heights
 /// round to the nearest code of their parity, within one code.
 #[repr(transparent)]
