@@ -733,9 +733,11 @@ fn walls(
         (0..res_u).contains(&i) && (0..res_v).contains(&j) && written[(j * res_u + i) as usize]
     };
     const DIRECTIONS: [(i64, i64); 4] = [(-1, 0), (1, 0), (0, -1), (0, 1)];
-    // Per extrapolated sample and direction towards a written neighbour, the height range of the
-    // own triangles over the segment between them.
-    let mut range: std::collections::HashMap<(usize, usize), (f64, f64)> = Default::default();
+    // Per extrapolated sample met (`slot` into `ranges`, in `samples`) and direction towards a
+    // written neighbour, the height range of the own triangles over the segment between them.
+    let mut slot = vec![u32::MAX; source.len()];
+    let mut ranges: Vec<[(f64, f64); 4]> = Vec::new();
+    let mut samples: Vec<usize> = Vec::new();
     for tri in triangles {
         let p = tri.map(|q| frame.project(q));
         if p.iter().any(|q| !q.is_finite()) {
@@ -761,22 +763,32 @@ fn walls(
                     };
                     let off = |q: DVec3| if along_x { q.y - plane } else { q.x - plane };
                     let pos = |q: DVec3| if along_x { q.x } else { q.y };
-                    let mut pts: Vec<(f64, f64)> = Vec::new();
+                    // Where the triangle meets the segment's vertical plane: at most a corner
+                    // and a crossing per edge.
+                    let mut pts = [(0.0f64, 0.0f64); 6];
+                    let mut count = 0;
                     for e in 0..3 {
                         let (a, b) = (p[e], p[(e + 1) % 3]);
                         let (da, db) = (off(a), off(b));
                         if da == 0.0 {
-                            pts.push((pos(a), a.z));
+                            pts[count] = (pos(a), a.z);
+                            count += 1;
                         }
                         if (da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0) {
                             let t = da / (da - db);
                             let q = a + (b - a) * t;
-                            pts.push((pos(q), q.z));
+                            pts[count] = (pos(q), q.z);
+                            count += 1;
                         }
                     }
-                    let entry = range
-                        .entry(((j * res_u + i) as usize, dir))
-                        .or_insert((f64::INFINITY, f64::NEG_INFINITY));
+                    let pts = &pts[..count];
+                    let k = (j * res_u + i) as usize;
+                    if slot[k] == u32::MAX {
+                        slot[k] = ranges.len() as u32;
+                        ranges.push([(f64::INFINITY, f64::NEG_INFINITY); 4]);
+                        samples.push(k);
+                    }
+                    let entry = &mut ranges[slot[k] as usize][dir];
                     for x in 0..pts.len() {
                         for y in x..pts.len() {
                             let ((xa, ha), (xb, hb)) = (pts[x], pts[y]);
@@ -810,16 +822,15 @@ fn walls(
     // (highest) of their extremes where some fall (rise) further; the sample as dilated where
     // none do.
     let mut steep_walls = Vec::new();
-    let mut samples: Vec<usize> = range.keys().map(|&(k, _)| k).collect();
     samples.sort_unstable();
-    samples.dedup();
     for k in samples {
         let (i, j) = ((k as i64) % res_u, (k as i64) / res_u);
         let (mut down, mut up) = (f64::INFINITY, f64::NEG_INFINITY);
         for (dir, &(di, dj)) in DIRECTIONS.iter().enumerate() {
-            let Some(&(lo, hi)) = range.get(&(k, dir)) else {
+            let (lo, hi) = ranges[slot[k] as usize][dir];
+            if lo > hi {
                 continue;
-            };
+            }
             let h1 = height[((j + dj) * res_u + i + di) as usize] as f64;
             let e = if is_written(i + 2 * di, j + 2 * dj) {
                 2.0 * h1 - height[((j + 2 * dj) * res_u + i + 2 * di) as usize] as f64
