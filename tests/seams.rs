@@ -282,8 +282,8 @@ fn no_seam_leaks_at_the_strictest_criteria() {
 /// before the walls and skirt: φ_max 89.5° blob 118, sphere 38,354; A⊥/A 0.01 blob 499, sphere
 /// 81,680; with them, before the skirt hung under steep walls, sphere 117 and 9,029. Now 200,000
 /// rays each: none on the blob; on the sphere 1 at φ_max 89.5° (at most 5 here) and 33 at A⊥/A
-/// 0.01 (at most 70), where rays rise into a leaf's box from under its lowest rim, beneath the
-/// skirt's reach (docs/guarantees.md).
+/// 0.01 (at most 70), rays along the seam between two caps that reach the cell under their hit
+/// from a full neighbour, where no skirt hangs (docs/guarantees.md).
 #[test]
 fn leaves_seen_edge_on_leak_little() {
     use rbvh::rbvh::Refinement;
