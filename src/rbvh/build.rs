@@ -89,7 +89,7 @@ struct Builder<'a> {
     /// The scene's triangles in a BVH, for the surface around each leaf (its ring of samples).
     surface: Option<&'a LinearBvh<'a>>,
     /// Per scene triangle, whether it touches the open boundary ([`open_boundary`]); empty
-    /// for points.
+    /// for points and for scenes with no open edge.
     open: &'a [bool],
 }
 
@@ -121,7 +121,7 @@ struct Shared<'s> {
     /// The scene's triangles in a BVH, for the surface around each leaf (its ring of samples).
     surface: Option<LinearBvh<'s>>,
     /// Per scene triangle, whether it touches the open boundary ([`open_boundary`]); empty
-    /// for points.
+    /// for points and for scenes with no open edge.
     open: Vec<bool>,
     /// Milliseconds making this took.
     ms: f64,
@@ -230,11 +230,17 @@ impl<'s> RbvhSource<'s> {
             Input::Triangles(_) => Some(LinearBvh::build(scene, SURFACE_LEAF)?),
             Input::Points(_) => None,
         };
+        // Kept only where some triangle touches the open boundary: a closed scene has none to fill.
         let open = match self.input() {
             Input::Triangles(_) => step(progress, "finding the scene's open edges", 0, || {
                 open_boundary(scene)
             }),
             Input::Points(_) => Vec::new(),
+        };
+        let open = if open.contains(&true) {
+            open
+        } else {
+            Vec::new()
         };
         let ms = start.elapsed().as_secs_f64() * 1e3;
         Ok(self.shared.get_or_init(|| Shared {
@@ -544,7 +550,11 @@ impl Builder<'_> {
         match self.input {
             Input::Triangles(all) => {
                 let tris: Vec<[Vec3; 3]> = order.iter().map(|&i| all[i as usize]).collect();
-                let open: Vec<bool> = order.iter().map(|&i| self.open[i as usize]).collect();
+                let open: Vec<bool> = if self.open.is_empty() {
+                    Vec::new()
+                } else {
+                    order.iter().map(|&i| self.open[i as usize]).collect()
+                };
                 let elements = triangle_elements(&tris);
                 let (frame, judge) =
                     self.judged_frame(&elements, tris.as_flattened(), 0.0, diagonal)?;

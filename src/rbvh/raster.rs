@@ -319,7 +319,7 @@ pub fn rasterize(
         for (k, h, input) in corners {
             let tri = triangles[input as usize];
             source[k] = normals.len() as u32;
-            normals.push((tri[1] - tri[0]).cross(tri[2] - tri[0]).normalize_or_zero());
+            normals.push(unit_normal(&tri).unwrap_or(Vec3::ZERO));
             input_index.push(input);
             height[k] = h;
         }
@@ -342,7 +342,7 @@ fn covered_samples(
     mut visit: impl FnMut(usize, f32) -> bool,
 ) -> Option<Vec3> {
     let (res_u, res_v) = (frame.res_u as usize, frame.res_v as usize);
-    let normal = (tri[1] - tri[0]).cross(tri[2] - tri[0]).try_normalize()?;
+    let normal = unit_normal(tri)?;
     if normal.dot(frame.w).abs() <= EDGE_ON_COS {
         return None;
     }
@@ -376,6 +376,11 @@ fn covered_samples(
         }
     }
     Some(normal)
+}
+
+/// A triangle's unit normal as wound (step 1); None when it has no area.
+fn unit_normal(tri: &[Vec3; 3]) -> Option<Vec3> {
+    (tri[1] - tri[0]).cross(tri[2] - tri[0]).try_normalize()
 }
 
 /// A ring sample taken from the surface itself: its height, the normal of the triangle it lies
@@ -422,7 +427,7 @@ fn cell_corners(
             continue;
         }
         // As step 1: a face seen edge-on defines no height over a sample.
-        let facing = (tri[1] - tri[0]).cross(tri[2] - tri[0]).try_normalize();
+        let facing = unit_normal(tri);
         if facing.is_none_or(|n| n.dot(frame.w).abs() <= EDGE_ON_COS) {
             continue;
         }
@@ -850,11 +855,14 @@ fn walls(
         } else if up.is_finite() {
             height[k] = height[k].max(up as f32);
         }
-        let steep = DIRECTIONS.iter().any(|&(di, dj)| {
-            is_written(i + di, j + dj)
-                && (height[((j + dj) * res_u + i + di) as usize] - height[k]).abs() >= frame.texel
-        });
-        if height[k] != before && steep {
+        let steep = || {
+            DIRECTIONS.iter().any(|&(di, dj)| {
+                is_written(i + di, j + dj)
+                    && (height[((j + dj) * res_u + i + di) as usize] - height[k]).abs()
+                        >= frame.texel
+            })
+        };
+        if height[k] != before && steep() {
             steep_walls.push(k);
         }
     }
