@@ -34,11 +34,12 @@
 #define RBVH_HEIGHT_ONLY false
 #endif
 
-// Must equal MARCH_SLACK, MARCH_EDGE_PAD, MARCH_SKIRT_TEXELS and Texel::MAX_CODE / HOLE_CODE
-// (tests/glsl_header.rs checks, on the device).
+// Must equal MARCH_SLACK, MARCH_EDGE_PAD, MARCH_SKIRT_TEXELS, MARCH_DIAGONAL_SKIRT_TEXELS and
+// Texel::MAX_CODE / HOLE_CODE (tests/glsl_header.rs checks, on the device).
 #define RBVH_MARCH_SLACK 1e-5
 #define RBVH_MARCH_EDGE_PAD 0.015625
 #define RBVH_MARCH_SKIRT_TEXELS 1.0
+#define RBVH_MARCH_DIAGONAL_SKIRT_TEXELS 0.1
 #define RBVH_MAX_CODE 65534u
 #define RBVH_HOLE_CODE 65535u
 const uint RBVH_HEIGHTFIELD_COUNT = 0xFFFFFFFFu;
@@ -171,6 +172,16 @@ bool rbvh_cell_candidate(RbvhLeaf leaf, RbvhSizes sz, RbvhFrameRay fr, float sla
     return !(max(h_a, h_b) < lo_s || min(h_a, h_b) > hi_s);
 }
 
+// The first triangle of a cell with three or four corners present (`v..`, at frame points
+// `p..`): (c00, c10, c11) with all four, else the three present in the cycle order c00, c10,
+// c11, c01 (the winding stays the quad's), as `hit` and `surface_under` in march.rs take it.
+void rbvh_first_triangle(bool v00, bool v10, bool v11, vec3 p00, vec3 p10, vec3 p01, vec3 p11,
+                         out vec3 a, out vec3 b, out vec3 c) {
+    a = v00 ? p00 : p10;
+    b = v00 ? (v10 ? p10 : p11) : p11;
+    c = (v00 && v10) ? (v11 ? p11 : p01) : p01;
+}
+
 // Step 4 of march.rs, its costly half: the cell's two (or one) triangles; returns t (< 0 on a
 // miss) and, on a hit, the frame-space normal of the triangle hit, (b - a) x (c - a) (used by
 // height-only RBVHs). `cut` is set when the device ended the loop early (see traverse.glsl).
@@ -191,11 +202,10 @@ float rbvh_cell_triangles(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, out vec
     vec3 p10 = vec3(s1, r0, h10);
     vec3 p01 = vec3(s0, r1, h01);
     vec3 p11 = vec3(s1, r1, h11);
-    // The first triangle: (c00, c10, c11) with all four present, else the three present corners in
-    // the cycle order c00, c10, c11, c01.
-    vec3 a = v00 ? p00 : p10;
-    vec3 b = v00 ? (v10 ? p10 : p11) : p11;
-    vec3 c = (v00 && v10) ? (v11 ? p11 : p01) : p01;
+    vec3 a;
+    vec3 b;
+    vec3 c;
+    rbvh_first_triangle(v00, v10, v11, p00, p10, p01, p11, a, b, c);
     // Then, with all four, (c00, c11, c01) when nearer; one call site for both triangles.
     RbvhShear shear = rbvh_shear(Ray(fr.o, fr.tmin, fr.d, fr.tmax));
     float t_hit = -1.0;
@@ -223,48 +233,101 @@ float rbvh_cell_triangles(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, out vec
     return t_hit;
 }
 
-// The skirt of `cell` (skirt in march.rs; MARCH_SKIRT_TEXELS in layout.rs), whose four corners
-// rbvh_cell_candidate read and found present, entered at cell.t_in from a cell without four
-// samples (or through the tile's side) across its edge on `axis` (0: an s boundary, 1: a t
-// boundary) by a ray stepping `step` along it: true when both samples of that edge were sampled
-// from the surface (even codes: Texel::is_sampled) and the ray is below the edge by at most the
-// skirt's depth (`uu` = |axis_u|^2, so that no square root is needed).
-bool rbvh_skirt(RbvhLeaf leaf, RbvhFrameRay fr, float slack, float uu, RbvhCell cell, int axis, int step) {
+// The skirt of `full` texels under the edge from corner texel `ca` to `cb`, met at fraction `f`
+// along it (clamped) at `t` (skirt_hit and skirt_depth in march.rs): true when `t` lies in the
+// ray's interval and the ray is below the edge there by at most the skirt's depth: `full` under
+// an edge of two samples taken from the surface (even codes: Texel::is_sampled); from such a
+// sample to an extrapolated one, `full` at the sampled end tapering to nothing half-way; none
+// under two extrapolated ones (`uu` = |axis_u|^2, so that no square root is needed).
+bool rbvh_skirt_at(RbvhLeaf leaf, RbvhFrameRay fr, float slack, float uu, uint ca, uint cb, float f, float full,
+                   float t) {
+    bool sa = (ca & 1u) == 0u;
+    bool sb = (cb & 1u) == 0u;
+    if (!sa && !sb) {
+        return false;
+    }
+    float g = clamp(f, 0.0, 1.0);
+    precise float share = (sa && sb) ? 1.0 : max(sa ? 1.0 - 2.0 * g : 2.0 * g - 1.0, 0.0);
+    precise float a = float(ca & 0xFFFFu) * leaf.h_scale;
+    precise float b = float(cb & 0xFFFFu) * leaf.h_scale;
+    precise float edge_h = a + (b - a) * g;
+    precise float below = edge_h - rbvh_height_at(fr.o.z, fr.d.z, t);
+    precise float depth = full * share;
+    precise float depth2 = below * below * uu;
+    return t >= fr.tmin && t < fr.tmax && below >= -slack && depth2 <= depth * depth;
+}
+
+// The skirt under the edge of `cell` (skirt in march.rs) that the ray entered at cell.t_in from a
+// cell with fewer than four samples or through the tile's side, across its edge
+// on `axis` (0: an s boundary, 1: a t boundary) stepping `step` along it, when both samples of
+// that edge are present: t_in on a hit, else -1.
+float rbvh_skirt(RbvhLeaf leaf, RbvhFrameRay fr, float slack, float uu, RbvhCell cell, int axis, int step) {
     bool across_s = axis == 0;
     uint ca = across_s ? (step > 0 ? cell.c00 : cell.c10) : (step > 0 ? cell.c00 : cell.c01);
     uint cb = across_s ? (step > 0 ? cell.c01 : cell.c11) : (step > 0 ? cell.c10 : cell.c11);
-    if (((ca | cb) & 1u) != 0u) {
-        return false;
+    if (rbvh_is_hole(ca) || rbvh_is_hole(cb)) {
+        return -1.0;
     }
-    precise float a = float(ca & 0xFFFFu) * leaf.h_scale;
-    precise float b = float(cb & 0xFFFFu) * leaf.h_scale;
     precise float at_s = fr.o.x + fr.d.x * cell.t_in;
     precise float at_t = fr.o.y + fr.d.y * cell.t_in;
     precise float along = across_s ? at_t - (float(cell.j) + 0.5) : at_s - (float(cell.i) + 0.5);
-    float f = clamp(along, 0.0, 1.0);
-    precise float edge_h = a + (b - a) * f;
-    precise float below = edge_h - rbvh_height_at(fr.o.z, fr.d.z, cell.t_in);
-    precise float depth2 = below * below * uu;
-    return cell.t_in < fr.tmax && below >= -slack && depth2 <= RBVH_MARCH_SKIRT_TEXELS * RBVH_MARCH_SKIRT_TEXELS;
+    return rbvh_skirt_at(leaf, fr, slack, uu, ca, cb, along, RBVH_MARCH_SKIRT_TEXELS, cell.t_in) ? cell.t_in : -1.0;
+}
+
+// The skirt under the diagonal of `cell`, whose corners are three samples and a hole
+// (diagonal_skirt in march.rs; MARCH_DIAGONAL_SKIRT_TEXELS deep): where the ray crosses the
+// diagonal that faces the hole, within [t_in, t_out], from the hole's side. That t on a hit,
+// else -1.
+float rbvh_diagonal_skirt(RbvhLeaf leaf, RbvhFrameRay fr, float slack, float uu, RbvhCell cell) {
+    bool h00 = rbvh_is_hole(cell.c00);
+    bool h01 = rbvh_is_hole(cell.c01);
+    bool h11 = rbvh_is_hole(cell.c11);
+    // Through c10 and c01 (fs + ft = 1) for a hole at c00 or c11, else through c00 and c11.
+    bool anti = h00 || h11;
+    uint ca = anti ? cell.c10 : cell.c00;
+    uint cb = anti ? cell.c01 : cell.c11;
+    float side = (h00 || h01) ? -1.0 : 1.0;
+    precise float fs0 = fr.o.x - (float(cell.i) + 0.5);
+    precise float ft0 = fr.o.y - (float(cell.j) + 0.5);
+    precise float q0 = anti ? (fs0 + ft0) - 1.0 : fs0 - ft0;
+    precise float dq = anti ? fr.d.x + fr.d.y : fr.d.x - fr.d.y;
+    if (!(dq * side < 0.0)) {
+        return -1.0;
+    }
+    precise float t = -q0 / dq;
+    if (!(t >= cell.t_in && t <= cell.t_out)) {
+        return -1.0;
+    }
+    precise float f = anti ? ft0 + fr.d.y * t : fs0 + fr.d.x * t;
+    return rbvh_skirt_at(leaf, fr, slack, uu, ca, cb, f, RBVH_MARCH_DIAGONAL_SKIRT_TEXELS, t) ? t : -1.0;
 }
 
 // The frame-space normal of a skirt hit at t in `cell` for height-only texels: the facet of the
-// cell triangle under the entry, (c00, c10, c11) where s >= t within the cell, as skirt in
-// march.rs.
+// cell's triangle over the point (surface_under in march.rs): with four corners (c00, c10, c11)
+// where s >= t within the cell, else (c00, c11, c01); with three, the one triangle.
 vec3 rbvh_skirt_facet(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, float t) {
-    precise float h00 = float(cell.c00 & 0xFFFFu) * leaf.h_scale;
-    precise float h10 = float(cell.c10 & 0xFFFFu) * leaf.h_scale;
-    precise float h01 = float(cell.c01 & 0xFFFFu) * leaf.h_scale;
-    precise float h11 = float(cell.c11 & 0xFFFFu) * leaf.h_scale;
+    bool v00 = !rbvh_is_hole(cell.c00);
+    bool v10 = !rbvh_is_hole(cell.c10);
+    bool v01 = !rbvh_is_hole(cell.c01);
+    bool v11 = !rbvh_is_hole(cell.c11);
     float s0 = float(cell.i) + 0.5;
     float s1 = float(cell.i + 1) + 0.5;
     float r0 = float(cell.j) + 0.5;
     float r1 = float(cell.j + 1) + 0.5;
+    vec3 p00 = vec3(s0, r0, float(cell.c00 & 0xFFFFu) * leaf.h_scale);
+    vec3 p10 = vec3(s1, r0, float(cell.c10 & 0xFFFFu) * leaf.h_scale);
+    vec3 p01 = vec3(s0, r1, float(cell.c01 & 0xFFFFu) * leaf.h_scale);
+    vec3 p11 = vec3(s1, r1, float(cell.c11 & 0xFFFFu) * leaf.h_scale);
+    vec3 a;
+    vec3 b;
+    vec3 c;
+    rbvh_first_triangle(v00, v10, v11, p00, p10, p01, p11, a, b, c);
     precise float fs = (fr.o.x + fr.d.x * t) - s0;
     precise float ft = (fr.o.y + fr.d.y * t) - r0;
-    vec3 a = vec3(s0, r0, h00);
-    vec3 b = fs >= ft ? vec3(s1, r0, h10) : vec3(s1, r1, h11);
-    vec3 c = fs >= ft ? vec3(s1, r1, h11) : vec3(s0, r1, h01);
+    if (v00 && v10 && v01 && v11 && fs < ft) {
+        b = p11;
+        c = p01;
+    }
     precise vec3 e1 = b - a;
     precise vec3 e2 = c - a;
     return vec3(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
@@ -413,10 +476,12 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     bool stopped = false;
     bool advance = false;
     bool skirt = false;
-    // Whether the last main cell walked had four samples (prev_full in march.rs, which says why a
-    // block jump may leave it as it was).
-    bool prev_full = false;
+    // Whether the last main cell walked had fewer than four samples, or there was none
+    // (prev_open in march.rs, which says why, and why a block jump may leave it as it was).
+    bool prev_open = true;
     bool rim = false;
+    bool edge_rim = false;
+    bool diagonal = false;
     bool tests = false;
     float t_hit = -1.0;
     vec3 facet = vec3(0.0);
@@ -565,24 +630,32 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
             }
             cells += 1u;
             tests = rbvh_cell_candidate(leaf, sz, fr, slack, cell);
-            // A full main cell entered from one without (or through the tile's side) may hold
-            // a skirt hit: tested in the outer loop too, so that the inner one stays small.
+            // A main cell with a surface entered from one with a hole (or through the tile's
+            // side), or with three samples (its diagonal faces the hole), may hold a skirt hit:
+            // tested in the outer loop too, so that the inner one stays small.
             rim = false;
             if (!is_extra) {
-                bool full = !(rbvh_is_hole(cell.c00) || rbvh_is_hole(cell.c10) || rbvh_is_hole(cell.c01) ||
-                              rbvh_is_hole(cell.c11));
-                rim = entered >= 0 && !prev_full && full;
-                prev_full = full;
+                int valid = int(!rbvh_is_hole(cell.c00)) + int(!rbvh_is_hole(cell.c10)) +
+                            int(!rbvh_is_hole(cell.c01)) + int(!rbvh_is_hole(cell.c11));
+                edge_rim = entered >= 0 && prev_open && valid >= 3;
+                diagonal = valid == 3;
+                prev_open = valid < 4;
+                rim = edge_rim || diagonal;
                 if (rim) {
-                    // Only a ray between the cell's lowest corner less the skirt's depth and its
-                    // highest corner can be caught by its skirt (rbvh_skirt): the others need not
-                    // leave the inner loop. Each bound has a quantum beyond the skirt's own slack,
-                    // against the rounding of the edge's height there.
+                    // Only a ray between the cell's lowest sample less the skirt's depth and its
+                    // highest sample can be caught by its skirts: the others need not leave the
+                    // inner loop. A hole's code is the largest, so it takes no part in the
+                    // highest. Each bound has a quantum beyond the skirt's own slack, against the
+                    // rounding of the edge's height there.
                     uint code_lo = min(min(cell.c00 & 0xFFFFu, cell.c10 & 0xFFFFu), min(cell.c01 & 0xFFFFu, cell.c11 & 0xFFFFu));
-                    uint code_hi = max(max(cell.c00 & 0xFFFFu, cell.c10 & 0xFFFFu), max(cell.c01 & 0xFFFFu, cell.c11 & 0xFFFFu));
+                    uint code_hi = max(max(rbvh_is_hole(cell.c00) ? 0u : cell.c00 & 0xFFFFu,
+                                           rbvh_is_hole(cell.c10) ? 0u : cell.c10 & 0xFFFFu),
+                                       max(rbvh_is_hole(cell.c01) ? 0u : cell.c01 & 0xFFFFu,
+                                           rbvh_is_hole(cell.c11) ? 0u : cell.c11 & 0xFFFFu));
                     float h_in = rbvh_height_at(o.z, d.z, cell.t_in);
-                    rim = h_in >= float(code_lo) * leaf.h_scale - slack - skirt_h - abs(leaf.h_scale) &&
-                          h_in <= float(code_hi) * leaf.h_scale + slack + abs(leaf.h_scale);
+                    float h_out = rbvh_height_at(o.z, d.z, cell.t_out);
+                    rim = max(h_in, h_out) >= float(code_lo) * leaf.h_scale - slack - skirt_h - abs(leaf.h_scale) &&
+                          min(h_in, h_out) <= float(code_hi) * leaf.h_scale + slack + abs(leaf.h_scale);
                 }
             }
             if (tests || rim) {
@@ -593,11 +666,17 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
         if (!candidate) {
             break;
         }
-        if (rim && rbvh_skirt(leaf, fr, slack, uu, cell, entered, entered == 0 ? step_i : step_j)) {
-            skirt = true;
-            t_hit = cell.t_in;
-            stopped = true;
-            break;
+        if (rim) {
+            float t_skirt = edge_rim ? rbvh_skirt(leaf, fr, slack, uu, cell, entered, entered == 0 ? step_i : step_j) : -1.0;
+            if (t_skirt < 0.0 && diagonal) {
+                t_skirt = rbvh_diagonal_skirt(leaf, fr, slack, uu, cell);
+            }
+            if (t_skirt >= 0.0) {
+                skirt = true;
+                t_hit = t_skirt;
+                stopped = true;
+                break;
+            }
         }
         if (tests) {
             RBVH_COUNT_ADD(cells_tested, 1u);

@@ -218,6 +218,7 @@ void main() {
     words[10] = floatBitsToUint(float(RBVH_FLT_MAX));
     words[11] = floatBitsToUint(float(RBVH_FLT_MIN));
     words[12] = floatBitsToUint(float(RBVH_MARCH_SKIRT_TEXELS));
+    words[13] = floatBitsToUint(float(RBVH_MARCH_DIAGONAL_SKIRT_TEXELS));
 }
 "#;
 
@@ -227,10 +228,12 @@ fn shared_constants_are_the_rust_ones_in_the_compiled_shader() {
     use rbvh::geom::ROBUST_FAR_SCALE;
     use rbvh::gpu::ComputePipeline;
     use rbvh::lod::LOD_BIT;
-    use rbvh::rbvh::layout::{MARCH_EDGE_PAD, MARCH_SKIRT_TEXELS, MARCH_SLACK};
+    use rbvh::rbvh::layout::{
+        MARCH_DIAGONAL_SKIRT_TEXELS, MARCH_EDGE_PAD, MARCH_SKIRT_TEXELS, MARCH_SLACK,
+    };
     use rbvh::rbvh::{Texel, HEIGHTFIELD_COUNT};
 
-    let expected: [(&str, u32); 13] = [
+    let expected: [(&str, u32); 14] = [
         ("RBVH_LEAF_BIT", LEAF_BIT),
         ("RBVH_LOD_BIT", LOD_BIT),
         ("RBVH_HEIGHTFIELD_COUNT", HEIGHTFIELD_COUNT),
@@ -244,6 +247,10 @@ fn shared_constants_are_the_rust_ones_in_the_compiled_shader() {
         ("RBVH_FLT_MAX", f32::MAX.to_bits()),
         ("RBVH_FLT_MIN", f32::MIN_POSITIVE.to_bits()),
         ("RBVH_MARCH_SKIRT_TEXELS", MARCH_SKIRT_TEXELS.to_bits()),
+        (
+            "RBVH_MARCH_DIAGONAL_SKIRT_TEXELS",
+            MARCH_DIAGONAL_SKIRT_TEXELS.to_bits(),
+        ),
     ];
     let words = compile(CONSTANTS_PROBE).unwrap();
     let ctx = common::context();
