@@ -37,7 +37,7 @@ use rayon::prelude::*;
 use super::atlas;
 use super::frame::{fit, passes, projection_axis, rounding_pad, triangle_elements};
 use super::layout::{Texel, HEIGHTFIELD_COUNT};
-use super::raster::{rasterize, Frame, Tile, NO_SOURCE};
+use super::raster::{rasterize, ring_reach, Frame, Ring, Tile, NO_SOURCE};
 use super::splat::{splat, Splat};
 use super::split::{split, SplitPrim};
 use super::{Rbvh, RbvhParams, RbvhStats, TexelFormat};
@@ -558,9 +558,13 @@ impl Builder<'_> {
                 let elements = triangle_elements(&tris);
                 let (frame, judge) =
                     self.judged_frame(&elements, tris.as_flattened(), 0.0, diagonal)?;
+                let ring = self.surface.map(|surface| Ring {
+                    surface,
+                    reach: ring_reach(self.params.refinement),
+                });
                 // Layers closer than a texel are one surface at this sampling rate.
                 self.tiles(&frame, |window| {
-                    rasterize(&tris, window, self.texel, judge, self.surface, &open)
+                    rasterize(&tris, window, self.texel, judge, ring, &open)
                 })
             }
             Input::Points(all) => {

@@ -42,7 +42,8 @@
 //!    scene's triangles (two short rays along `±w` through the sample, in a BVH of the scene the
 //!    builder gives), taking the one over the sample whose height lies nearest the mean of those
 //!    neighbours (or, without any, the plane of the triangle whose cell needs it), within two
-//!    texels ([`RING_REACH`]); that replaces the extrapolation there.
+//!    texels, or as far as the leaf's criterion lets its surface rise in a texel, up to four
+//!    ([`ring_reach`]); that replaces the extrapolation there.
 //!    Neighbouring leaves then overlap on the real surface, at corners too, where one
 //!    extrapolated 4-neighbour ring left gaps (about 4 in 10,000 rays aimed at the seams of the
 //!    blob at Q0 slipped through; none now at any preset), and the ring follows the surface
@@ -100,9 +101,45 @@ use crate::geom::{Aabb, Ray};
 pub const EDGE_ON_COS: f32 = 1.0e-5;
 
 /// How far from its written neighbours' mean height a ring sample may find the surface, in
-/// texels: 2 where 3 made leaf boxes taller for nothing (dragon: the same or fewer seam leaks,
-/// t p99 the same or better, 3% fewer cells per ray at Q0; 1.5 lost accuracy, t p99 +7%).
+/// texels, at least: 2 where 3 made leaf boxes taller for nothing (dragon at the presets: the
+/// same or fewer seam leaks, t p99 the same or better, 3% fewer cells per ray at Q0; 1.5 lost
+/// accuracy, t p99 +7%; 3 and 4 for every leaf cost its Q0 t p99 0.150 → 0.155 and 0.170%).
 pub(super) const RING_REACH: f32 = 2.0;
+
+/// How far a ring sample may find the surface at most, in texels ([`ring_reach`]): at 8 the ring
+/// of leaves seen nearly edge-on reached other sheets across creases (dragon at φ_max 89.5°:
+/// t p99 0.207 → 0.301%, where 4 gave 0.193%).
+const MAX_RING_REACH: f32 = 4.0;
+
+/// How far from its written neighbours' mean height a leaf's ring sample may find the surface,
+/// in texels, for a leaf built to `refinement`: the slope the criterion lets its surface have
+/// (the tangent of the largest angle between its normals and its axis, or of the angle whose
+/// cosine is the least projected area ratio), within [`RING_REACH`] and [`MAX_RING_REACH`]. The
+/// presets' 60° allows 1.7 texels a texel, so they keep 2; leaves seen nearly edge-on rise
+/// further within the texel to their ring, and with 2 their rings found no surface over many
+/// corners, left bare (1M seam rays at Q0, 2 → 4: φ_max 89.5° dragon 21 → 3 leaks, bunny
+/// 75 → 50; A⊥/A 0.01 dragon 4,475 → 2,887, bunny 3,916 → 3,173; t p99 better on all four).
+pub(super) fn ring_reach(refinement: Refinement) -> f32 {
+    let cos = match refinement {
+        Refinement::NormalCone { max_angle_deg } => max_angle_deg.to_radians().cos(),
+        Refinement::ProjectedArea { min_ratio } => min_ratio,
+    };
+    let slope = (1.0 - cos * cos).max(0.0).sqrt() / cos;
+    if slope.is_nan() {
+        return RING_REACH;
+    }
+    slope.clamp(RING_REACH, MAX_RING_REACH)
+}
+
+/// Where a leaf's ring of samples comes from (`raster.rs`, step 4): the scene's triangles in a
+/// BVH, searched `reach` texels either side of each sample's estimate ([`ring_reach`]).
+#[derive(Clone, Copy)]
+pub struct Ring<'a> {
+    /// The scene's triangles, the leaf's own among them.
+    pub surface: &'a LinearBvh<'a>,
+    /// How far from its estimate a ring sample may find the surface, in texels.
+    pub reach: f32,
+}
 
 /// A leaf's orthographic projection. `u`, `v`, `w` orthonormal (`w` = projection axis, pointing to
 /// where the surface faces); sample `(i, j)` lies at `origin + (i + ½)·texel·u + (j + ½)·texel·v`,
@@ -244,14 +281,15 @@ impl Tile {
 /// fraction of a texel, or samples on shared edges count as folds). See the module docs for the
 /// steps. The grid of `res_u × res_v` samples is allocated in full; the builder keeps both sides
 /// at most `max_tile` (≤ 4096). With `judge`, the sampled surface must also pass that criterion
-/// (step 3). `open` says, per triangle, whether it touches the scene's open boundary
+/// (step 3). With `ring`, the ring of samples around the written ones comes from the surface
+/// (step 4). `open` says, per triangle, whether it touches the scene's open boundary
 /// ([`crate::scene::open_boundary`]; empty: none does), for step 4's last part.
 pub fn rasterize(
     triangles: &[[Vec3; 3]],
     frame: &Frame,
     fold_tolerance: f32,
     judge: Option<Refinement>,
-    surface: Option<&LinearBvh>,
+    ring: Option<Ring>,
     open: &[bool],
 ) -> Option<Tile> {
     let res_u = frame.res_u as usize;
@@ -292,10 +330,10 @@ pub fn rasterize(
             return None;
         }
     }
-    let ring = match surface {
-        Some(surface) => {
+    let ring = match ring {
+        Some(ring) => {
             let corners = ring_corners(triangles, frame, &source);
-            ring_from_surface(surface, frame, &height, &source, &input_index, &corners)
+            ring_from_surface(ring, frame, &height, &source, &input_index, &corners)
         }
         None => Vec::new(),
     };
@@ -502,9 +540,9 @@ fn triangle_meets_square(p: &[DVec3; 3], i: f64, j: f64) -> bool {
 }
 
 /// The ring around the written samples (holes with a written sample among their eight
-/// neighbours) and the `corners` ([`cell_corners`]), sampled from `surface` — the scene's
+/// neighbours) and the `corners` ([`cell_corners`]), sampled from `ring.surface` — the scene's
 /// triangles, the leaf's own among them — where one of them lies over the sample within
-/// [`RING_REACH`] texels of an estimate (the nearest such): the written neighbours' mean height,
+/// `ring.reach` texels of an estimate (the nearest such): the written neighbours' mean height,
 /// or for a corner without any the plane of the triangle that needs it. The leaf's surface then
 /// continues onto its neighbours' real surface, corners included, instead of a linear
 /// extrapolation that sticks out at silhouettes. Each ring sample is found by two short rays
@@ -512,7 +550,7 @@ fn triangle_meets_square(p: &[DVec3; 3], i: f64, j: f64) -> bool {
 /// near the tile: gathering and rasterizing those grew without bound where triangles are much
 /// smaller than a texel (the paper-scale scene's Q2 took 98 s; 22 s by rays, below its exact BVH).
 fn ring_from_surface(
-    surface: &LinearBvh,
+    ring: Ring,
     frame: &Frame,
     height: &[f32],
     source: &[u32],
@@ -520,12 +558,14 @@ fn ring_from_surface(
     corners: &[(usize, f32, u32)],
 ) -> Vec<(usize, RingSample)> {
     let (res_u, res_v) = (frame.res_u as usize, frame.res_v as usize);
-    let reach = RING_REACH * frame.texel;
+    let reach = ring.reach * frame.texel;
     // The nearest hit before `tmax` along `dir` from `from` on a face not seen edge-on (which
     // covers no sample centre in a way that defines one height, as in step 1).
     let probe = |from: Vec3, dir: Vec3, tmax: f32| {
         let facing = |n: Vec3| n.dot(frame.w).abs() > EDGE_ON_COS;
-        let hit = surface.closest_hit_where(&Ray::new(from, dir, 0.0, tmax), facing);
+        let hit = ring
+            .surface
+            .closest_hit_where(&Ray::new(from, dir, 0.0, tmax), facing);
         hit.is_hit().then_some(hit)
     };
     let mut ring = Vec::new();
@@ -1165,6 +1205,22 @@ pub(super) mod tests {
     }
 
     #[test]
+    fn the_ring_reaches_as_far_as_the_criterion_lets_the_surface_rise() {
+        let cone = |max_angle_deg| ring_reach(Refinement::NormalCone { max_angle_deg });
+        let area = |min_ratio| ring_reach(Refinement::ProjectedArea { min_ratio });
+        // The presets' 60° (1.73 texels a texel) and anything flatter keep the least reach.
+        assert_eq!(cone(60.0), RING_REACH);
+        assert_eq!(cone(0.5), RING_REACH);
+        assert_eq!(area(1.0), RING_REACH);
+        // Steeper, the slope: tan 70° = 2.75.
+        assert!((cone(70.0) - 70f32.to_radians().tan()).abs() < 1e-5);
+        assert!((area(0.3) - (1.0f32 - 0.09).sqrt() / 0.3).abs() < 1e-5);
+        // Nearly edge-on, at most MAX_RING_REACH.
+        assert_eq!(cone(89.5), MAX_RING_REACH);
+        assert_eq!(area(0.01), MAX_RING_REACH);
+    }
+
+    #[test]
     fn the_ring_follows_the_neighbouring_surface_nearest_the_rim() {
         let frame = xy_frame(16);
         // The leaf: flat at height 3 over samples 4..=11. Beyond its +u side the scene bends up
@@ -1184,7 +1240,11 @@ pub(super) mod tests {
             .collect();
         scene.push_object("bend", &positions, &indices);
         let surface = LinearBvh::build(&scene, 4).expect("builds");
-        let tile = rasterize(&own, &frame, 0.01, None, Some(&surface), &[]).unwrap();
+        let ring = Ring {
+            surface: &surface,
+            reach: RING_REACH,
+        };
+        let tile = rasterize(&own, &frame, 0.01, None, Some(ring), &[]).unwrap();
         let plain = plain(&own, &frame, 0.01).unwrap();
         for j in 4..=11u32 {
             // +u: the bent surface at the ring sample's centre, not the flat extrapolation
