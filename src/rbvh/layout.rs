@@ -44,7 +44,7 @@ pub const MARCH_EDGE_PAD: f32 = 1.0 / 64.0;
 /// an extrapolated one, this much at the sampled end, tapering to nothing half-way (a ray aimed
 /// at a rim sample whose edge ends in an extrapolated sample found no skirt there before: the
 /// sphere's 4 and 168 leaks per million at φ_max 89.5° and A⊥/A 0.01; tapering all the way to
-/// the extrapolated end cost t p99 a little, 0.150 → 0.151% on the dragon's Q0). Neighbouring leaves
+/// the extrapolated end cost t p99 a little, 0.150 → 0.151–0.152% on the dragon's Q0). Neighbouring leaves
 /// overlap by their rings of samples; where a ray still passes between them (a corner where
 /// several leaves meet, a rim over a fold), it enters a field from its side, under its surface,
 /// and the skirt catches it there. Under an extrapolated rim the skirt would hang in the air

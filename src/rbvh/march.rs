@@ -874,21 +874,24 @@ impl Cells<'_> {
         // In the cell's own coordinates (fs, ft) ∈ [0, 1]²: the diagonal through c10 and c01
         // (fs + ft = 1) faces a hole at c00 or c11, the one through c00 and c11 (fs = ft) a
         // hole at c10 or c01; `side` is the hole's sign of `q`, zero on the diagonal, and the
-        // fraction along the edge from its first corner is `ft` or `fs`.
+        // fraction along the edge from its first corner is `ft` or `fs` (`along`, as the ray's
+        // origin and direction give it).
         let (o, d) = (self.fr.ray.origin(), self.fr.ray.dir());
         let (fs0, ft0) = (o.x - (ci as f32 + 0.5), o.y - (cj as f32 + 0.5));
-        let (edge, q0, dq, side) = match hole {
+        let (edge, q0, dq, side, along) = match hole {
             0 | 3 => (
                 [1, 2],
                 fs0 + ft0 - 1.0,
                 d.x + d.y,
                 if hole == 0 { -1.0 } else { 1.0 },
+                (ft0, d.y),
             ),
             _ => (
                 [0, 3],
                 fs0 - ft0,
                 d.x - d.y,
                 if hole == 1 { 1.0 } else { -1.0 },
+                (fs0, d.x),
             ),
         };
         // Only a ray that crosses from the hole's side, and within the cell.
@@ -899,14 +902,9 @@ impl Cells<'_> {
         if !(t >= t_in && t <= t_out) {
             return None;
         }
-        let f = if hole == 0 || hole == 3 {
-            ft0 + d.y * t
-        } else {
-            fs0 + d.x * t
-        };
         let edge = SkirtEdge {
             ends: edge,
-            at: f,
+            at: along.0 + along.1 * t,
             full: DIAGONAL_SKIRT_TEXELS,
         };
         self.skirt_hit(corner, (ci, cj), edge, t, probe)

@@ -124,10 +124,8 @@ pub(super) fn ring_reach(refinement: Refinement) -> f32 {
         Refinement::NormalCone { max_angle_deg } => max_angle_deg.to_radians().cos(),
         Refinement::ProjectedArea { min_ratio } => min_ratio,
     };
+    // `refinement` is validated: the cosine lies in (0, 1].
     let slope = (1.0 - cos * cos).max(0.0).sqrt() / cos;
-    if slope.is_nan() {
-        return RING_REACH;
-    }
     slope.clamp(RING_REACH, MAX_RING_REACH)
 }
 
