@@ -44,6 +44,7 @@ use crate::output::{self, Image};
 use crate::probe::{MeanCounters, Read, TraceStats};
 use crate::progress::{Progress, Quiet};
 use crate::rays::{self, RayType, Secondary, DEFAULT_LIGHT};
+use crate::rbvh::seams::closed_triangles;
 use crate::rbvh::{Rbvh, RbvhParams, RbvhSource, TexelFormat};
 use crate::scene::Scene;
 use crate::structure::{Kind, Structure};
@@ -320,6 +321,9 @@ impl<'a> SceneBench<'a> {
         // What every level shares (the scene's parts, the BVH its rings are sampled by) is made
         // once, at the first level, and dropped after the last level is built.
         let mut shared: Option<RbvhSource> = None;
+        // Which triangles lie on closed objects, for the seam rays' referee: found at the first
+        // level that counts leaks.
+        let mut closed: Option<Vec<bool>> = None;
         for (k, (level, texels)) in builds.into_iter().enumerate() {
             level.validate()?;
             let params = RbvhParams { texels, ..*level };
@@ -354,7 +358,8 @@ impl<'a> SceneBench<'a> {
                     config.seam_rays,
                     params.level_label()
                 )));
-                seam_leaks(exact, &rbvh, config.seam_rays, config.seed)
+                let closed = closed.get_or_insert_with(|| closed_triangles(&scene));
+                seam_leaks(exact, closed, &rbvh, config.seam_rays, config.seed)
             });
             let structure = Structure::Rbvh(Arc::clone(&rbvh));
             candidates.push(Candidate {
@@ -781,15 +786,22 @@ impl<'a> SceneBench<'a> {
 }
 
 /// `count` rays aimed at `rbvh`'s seams ([`Rbvh::seam_rays`]), traced by the CPU twins of the
-/// exact BVH and of `rbvh`, and how many leaked ([`crate::rbvh::seams::count_leaks`]).
-/// None when there is nothing to aim at: no height-field leaf (all triangle leaves), or no
+/// exact BVH and of `rbvh`, and how many leaked ([`crate::rbvh::seams::count_leaks`]);
+/// `closed` per scene triangle as [`closed_triangles`] gives it. None when there is nothing to
+/// aim at: no height-field leaf (all triangle leaves), or no
 /// triangle for the exact BVH to referee.
-fn seam_leaks(exact: &Bvh, rbvh: &Rbvh, count: usize, seed: u64) -> Option<SeamRecord> {
+fn seam_leaks(
+    exact: &Bvh,
+    closed: &[bool],
+    rbvh: &Rbvh,
+    count: usize,
+    seed: u64,
+) -> Option<SeamRecord> {
     let rays = rbvh.seam_rays(count, seed);
     if rays.is_empty() || exact.triangles.is_empty() {
         return None;
     }
-    let exact = crate::rbvh::seams::exact_entries(exact, &rays, rbvh.texel_size);
+    let exact = crate::rbvh::seams::exact_entries(exact, &rays, rbvh.texel_size, closed);
     let approx = rbvh.trace_cpu(&rays, false);
     Some(SeamRecord {
         rays: rays.len() as u64,

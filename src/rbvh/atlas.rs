@@ -239,6 +239,7 @@ mod tests {
                 h_scale: 1.0,
                 covered: u * v,
                 sources: Vec::new(),
+                exposed: Vec::new(),
             })
             .collect();
         let p = pack(&s).unwrap();

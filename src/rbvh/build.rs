@@ -16,7 +16,9 @@
 //! A representable set larger than `max_tile` samples per side is cut into several tiles (the
 //! paper's "subdivide large height fields") that overlap by one cell, so they meet without gaps.
 //! A set that is not representable and spans fewer than `min_leaf_texels` texels stays as
-//! triangles, traced exactly (the hybrid leaves).
+//! triangles, traced exactly (the hybrid leaves). So do, beside a height field, those of its own
+//! triangles that its tiles leave uncovered (`Tile::exposed`: over a cell the ring found no
+//! surface for), so that a ray entering the solid through them cannot pass between the leaves.
 //!
 //! A scene with points ([`Scene::points`]) is built from them instead, by the same recursion: a
 //! point is an element of surface with a normal and the area its spacing gives it, so the
@@ -63,7 +65,12 @@ const MAX_ESTIMATED_TEXELS: f64 = 2.0e9;
 enum Node {
     Inner(Box<[Node; 2]>),
     Heightfield(Box<Tile>),
-    Triangles { start: u32, count: u32 },
+    Triangles {
+        start: u32,
+        count: u32,
+    },
+    /// Parts of triangles, traced exactly (at most [`MAX_TRIANGLE_LEAF`]).
+    Pieces(Vec<GpuTriangle>),
 }
 
 /// What the leaves sample: the scene's triangles, or its points.
@@ -440,7 +447,7 @@ impl Builder<'_> {
         if one_part {
             if let Some(tiles) = self.heightfield(order, bounds.diagonal()) {
                 self.progress.advance(n as u64);
-                return tiles_subtree(self.scene_sources(tiles, order));
+                return self.surface_subtree(tiles, order);
             }
         }
         let small = bounds.diagonal() < self.params.min_leaf_texels * self.texel;
@@ -485,6 +492,33 @@ impl Builder<'_> {
             || self.build(right, offset + mid as u32, depth + 1),
         );
         Node::Inner(Box::new([a, b]))
+    }
+
+    /// The subtree of the set `order` made one height field of `tiles`: the tiles, and beside
+    /// them, when they leave some of the set's triangles uncovered ([`Tile::exposed`]: over a
+    /// cell the ring found no surface for), those triangles' parts there as triangle leaves,
+    /// traced exactly, so that a ray entering the solid through them meets them where the
+    /// height field, and its neighbours', may leave a gap.
+    fn surface_subtree(&self, tiles: Vec<Tile>, order: &[u32]) -> Node {
+        let pieces: Vec<GpuTriangle> = match self.input {
+            Input::Triangles(all) => tiles
+                .iter()
+                .flat_map(|tile| {
+                    tile.exposed.iter().flat_map(|e| {
+                        let prim = order[e.input as usize];
+                        e.part(&tile.frame, &all[prim as usize])
+                            .into_iter()
+                            .map(move |t| GpuTriangle::new(t, prim))
+                    })
+                })
+                .collect(),
+            Input::Points(_) => Vec::new(),
+        };
+        let surface = tiles_subtree(self.scene_sources(tiles, order));
+        if pieces.is_empty() {
+            return surface;
+        }
+        Node::Inner(Box::new([surface, pieces_subtree(pieces)]))
     }
 
     /// The forced leaf of the points `order` (see [`Builder::forced_heightfield`]).
@@ -732,6 +766,23 @@ fn tiles_subtree(tiles: Vec<Tile>) -> Node {
     )
 }
 
+/// A subtree of [`Node::Pieces`] leaves over `pieces`: halved at the median of their centroids
+/// along the longest side of the centroids' box until a leaf holds at most
+/// [`MAX_TRIANGLE_LEAF`]. Ties keep their order (a stable sort), so it is deterministic.
+fn pieces_subtree(mut pieces: Vec<GpuTriangle>) -> Node {
+    if pieces.len() <= MAX_TRIANGLE_LEAF {
+        return Node::Pieces(pieces);
+    }
+    let centroid = |t: &GpuTriangle| Vec3::from(t.v0) + Vec3::from(t.v1) + Vec3::from(t.v2);
+    let axis = pieces
+        .iter()
+        .fold(Aabb::EMPTY, |b, t| b.grow(centroid(t)))
+        .largest_axis();
+    pieces.sort_by(|a, b| centroid(a)[axis].total_cmp(&centroid(b)[axis]));
+    let right = pieces.split_off(pieces.len() / 2);
+    Node::Inner(Box::new([pieces_subtree(pieces), pieces_subtree(right)]))
+}
+
 fn depth_of(node: &Node) -> u32 {
     match node {
         Node::Inner(c) => 1 + depth_of(&c[0]).max(depth_of(&c[1])),
@@ -773,6 +824,19 @@ impl Flattened {
                     bounds: tile.surface_bounds(),
                     child: LEAF_BIT | index,
                     count: HEIGHTFIELD_COUNT,
+                }
+            }
+            Node::Pieces(pieces) => {
+                let first = self.triangles.len() as u32;
+                let bounds = pieces.iter().fold(Aabb::EMPTY, |b, t| {
+                    b.union(Aabb::from_points([t.v0, t.v1, t.v2].map(Vec3::from)))
+                });
+                self.triangles.extend_from_slice(pieces);
+                self.triangle_leaves += 1;
+                ChildRef {
+                    bounds,
+                    child: LEAF_BIT | first,
+                    count: pieces.len() as u32,
                 }
             }
             Node::Triangles { start, count } => {

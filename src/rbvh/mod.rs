@@ -73,7 +73,8 @@ pub struct RbvhStats {
     pub build_ms: f64,
     /// Leaves that became height fields (= `leaves.len()`).
     pub heightfield_leaves: u32,
-    /// Leaves kept as triangles (hybrid leaves), traced exactly.
+    /// Leaves of triangles, traced exactly: sets kept as triangles (hybrid leaves), and beside
+    /// height fields the triangles their tiles leave uncovered (`raster.rs`, `exposed`).
     pub triangle_leaves: u32,
     /// Texels of all tiles (the atlas has `atlas.pitch × atlas.rows`, the difference is waste).
     pub tile_texels: u64,

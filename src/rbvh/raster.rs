@@ -79,7 +79,13 @@
 //!    code 0 is the lowest height. Sixteen bits over the leaf's own height range, one of them the
 //!    mark, give a worst quantization error of `(h_hi − h_lo) / 65534` (plus f32 rounding of the
 //!    moved origin).
-//! 6. A tile without any covered sample is still returned (`covered = 0`, all holes); the builder
+//! 6. **Exposed triangles** ([`Tile::exposed`], issue "No leaks between height fields"): the
+//!    leaf's triangles that meet the bare part of a cell (no cell triangle over it: the ring
+//!    found no surface for a corner), or rise more than [`EXPOSED_RISE_TEXELS`] above a cell
+//!    with an extrapolated corner ([`exposed`]). A ray entering the solid through one may pass
+//!    beside the height field or slide over its extrapolated rim, so the builder adds them to
+//!    the tree as triangle leaves, traced exactly, beside the tile.
+//! 7. A tile without any covered sample is still returned (`covered = 0`, all holes); the builder
 //!    decides what to do with it.
 //!
 //! All arithmetic on projected coordinates is done in f64 so that large tiles and far-from-origin
@@ -105,6 +111,13 @@ pub const EDGE_ON_COS: f32 = 1.0e-5;
 /// same or fewer seam leaks, t p99 the same or better, 3% fewer cells per ray at Q0; 1.5 lost
 /// accuracy, t p99 +7%; 3 and 4 for every leaf cost its Q0 t p99 0.150 → 0.155 and 0.170%).
 pub(super) const RING_REACH: f32 = 2.0;
+
+/// How far above the surface of a cell with an extrapolated corner one of the leaf's triangles
+/// may rise before it is traced exactly too, in texels ([`exposed`]). At 0.3 the dragon's
+/// presets add 2,300 such triangles to the 5,100 over bare cells at Q0 (600 at Q4) and close
+/// its last seam leaks but one per million; 0.1 doubles them for nothing more, and asking no
+/// rise at all would take 27,000 (docs/guarantees.md).
+const EXPOSED_RISE_TEXELS: f32 = 0.3;
 
 /// How far a ring sample may find the surface at most, in texels ([`ring_reach`]): at 8 the ring
 /// of leaves seen nearly edge-on reached other sheets across creases (dragon at φ_max 89.5°:
@@ -188,6 +201,9 @@ pub struct Tile {
     /// and [`NO_SOURCE`] for a hole. Baking surface
     /// data (`crate::surface`) evaluates that triangle at the texel centre.
     pub sources: Vec<u32>,
+    /// The triangles given to [`rasterize`] that the tile leaves uncovered, and where
+    /// ([`exposed`]); by ascending index. The builder traces those parts exactly.
+    pub exposed: Vec<Exposed>,
 }
 
 /// [`Tile::sources`] of a hole.
@@ -361,6 +377,7 @@ pub fn rasterize(
         }
     }
     let mut tile = quantize(frame, &height, &source, &sampled, &normals, covered);
+    tile.exposed = exposed(triangles, frame, &height, &source, &sampled);
     tile.sources = source
         .iter()
         .map(|&s| input_index.get(s as usize).copied().unwrap_or(NO_SOURCE))
@@ -478,14 +495,7 @@ fn cell_corners(
         let b = (e2.z * e1.x - e1.z * e2.x) / det;
         let lo = p[0].min(p[1]).min(p[2]);
         let hi = p[0].max(p[1]).max(p[2]);
-        let (i0, i1) = (
-            (lo.x.floor() as i64).max(0),
-            (hi.x.floor() as i64).min(res_u - 2),
-        );
-        let (j0, j1) = (
-            (lo.y.floor() as i64).max(0),
-            (hi.y.floor() as i64).min(res_v - 2),
-        );
+        let [i0, j0, i1, j1] = cell_range(lo, hi, res_u, res_v);
         for j in j0..=j1 {
             for i in i0..=i1 {
                 if !triangle_meets_square(&p, i as f64, j as f64) {
@@ -506,6 +516,236 @@ fn cell_corners(
     out.sort_by_key(|&(k, _, _)| k);
     out.dedup_by_key(|&mut (k, _, _)| k);
     out
+}
+
+/// The cells `[i0, j0, i1, j1]` of a `res_u` × `res_v` tile (by their lowest corner) that the box
+/// from `lo` to `hi` (x, y in sample space) meets.
+fn cell_range(lo: DVec3, hi: DVec3, res_u: i64, res_v: i64) -> [i64; 4] {
+    [
+        (lo.x.floor() as i64).max(0),
+        (lo.y.floor() as i64).max(0),
+        (hi.x.floor() as i64).min(res_u - 2),
+        (hi.y.floor() as i64).min(res_v - 2),
+    ]
+}
+
+/// The cells `(i, j)` (by their lowest corner) of a `res_u` × `res_v` tile that the projected
+/// triangle `p` (x, y in sample space) meets, edges included.
+fn cells_met(p: &[DVec3; 3], res_u: i64, res_v: i64) -> impl Iterator<Item = (i64, i64)> + '_ {
+    let (lo, hi) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+    let [i0, j0, i1, j1] = cell_range(lo, hi, res_u, res_v);
+    (j0..=j1)
+        .flat_map(move |j| (i0..=i1).map(move |i| (i, j)))
+        .filter(|&(i, j)| triangle_meets_square(p, i as f64, j as f64))
+}
+
+/// The `triangles` (by index, ascending) that the finished height field does not cover well
+/// enough for a ray entering the solid through them to be sure to meet it, so that the builder
+/// adds them to the tree as triangles, traced exactly (`build.rs`): those that meet
+/// * the *bare* part of a cell, which no cell triangle covers ([`cell_triangles`]): all of a
+///   cell with two holes or more among its corners, or the half on a lone hole's side of the
+///   diagonal between its neighbours. Edge-on triangles (a wall between two samples) count;
+///   touching the bare part along an edge or at a point does not. After the ring and the open
+///   boundary, these are cells over which the ring found no surface within its reach (a rim
+///   seen nearly edge-on, a crease whose other sheet lies further), where rays aimed at the
+///   seams passed between the leaves;
+/// * a cell with an extrapolated corner (`sampled` false: the ring found no surface over it),
+///   rising more than [`EXPOSED_RISE_TEXELS`] above the cell's surface somewhere over it: a ray
+///   entering the solid through the triangle there still lies above the leaf's surface, and
+///   may leave the leaf over the extrapolated rim before it crosses that surface.
+///
+/// `height` and `source` as after step 4 (`NONE` a hole).
+fn exposed(
+    triangles: &[[Vec3; 3]],
+    frame: &Frame,
+    height: &[f32],
+    source: &[u32],
+    sampled: &[bool],
+) -> Vec<Exposed> {
+    let (res_u, res_v) = (frame.res_u as i64, frame.res_v as i64);
+    let rise = EXPOSED_RISE_TEXELS as f64 * frame.texel as f64;
+    let mut out = Vec::new();
+    for (input, tri) in triangles.iter().enumerate() {
+        let p = tri.map(|q| frame.project(q));
+        if !p.iter().all(|q| q.is_finite()) {
+            continue;
+        }
+        // Most triangles lie over full cells of sampled corners only: nothing to test.
+        let (lo, hi) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+        let (i0, i1) = (
+            (lo.x.floor() as i64).max(0),
+            (hi.x.floor() as i64 + 1).min(res_u - 1),
+        );
+        let (j0, j1) = (
+            (lo.y.floor() as i64).max(0),
+            (hi.y.floor() as i64 + 1).min(res_v - 1),
+        );
+        let suspect = (j0..=j1).any(|j| {
+            (i0..=i1).any(|i| {
+                let k = (j * res_u + i) as usize;
+                source[k] == NONE || !sampled[k]
+            })
+        });
+        if !suspect || unit_normal(tri).is_none() {
+            continue;
+        }
+        // Counter-clockwise in (x, y), as the cells' triangles are, for clipping.
+        let mut ccw = p;
+        if (ccw[1] - ccw[0])
+            .truncate()
+            .perp_dot((ccw[2] - ccw[0]).truncate())
+            < 0.0
+        {
+            ccw.swap(1, 2);
+        }
+        let uncovered = |&(i, j): &(i64, i64)| {
+            // The corners in cycle order c00, c10, c11, c01 (counter-clockwise).
+            let cycle = [(i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)];
+            let k = |c: usize| (cycle[c % 4].1 * res_u + cycle[c % 4].0) as usize;
+            let at = |c: usize| {
+                let (ci, cj) = cycle[c % 4];
+                DVec3::new(ci as f64, cj as f64, height[k(c)] as f64)
+            };
+            let hole = |c: usize| source[k(c)] == NONE;
+            if (0..4).all(|c| !hole(c) && sampled[k(c)]) {
+                return false;
+            }
+            let holes: Vec<usize> = (0..4).filter(|&c| hole(c)).collect();
+            let flat = |q: &[DVec3]| q.iter().map(|v| v.truncate()).collect::<Vec<_>>();
+            let bare: Vec<DVec3> = match holes[..] {
+                [] => Vec::new(),
+                [h] => vec![at(h + 3), at(h), at(h + 1)],
+                _ => (0..4).map(at).collect(),
+            };
+            if !bare.is_empty() && convex_overlap(&flat(&bare), &flat(&ccw)) {
+                return true;
+            }
+            if holes.len() > 1 || (0..4).all(|c| hole(c) || sampled[k(c)]) {
+                return false;
+            }
+            let surface: Vec<[DVec3; 3]> = match holes[..] {
+                [] => vec![[at(0), at(1), at(2)], [at(0), at(2), at(3)]],
+                [h] => vec![[at(h + 1), at(h + 2), at(h + 3)]],
+                _ => Vec::new(),
+            };
+            surface.iter().any(|cell| {
+                clip(&ccw, cell)
+                    .iter()
+                    .any(|q| q.z - plane_height(cell, q.truncate()) > rise)
+            })
+        };
+        let cells = cells_met(&p, res_u, res_v).filter(uncovered).fold(
+            None,
+            |range: Option<[i64; 4]>, (i, j)| {
+                Some(range.map_or([i, j, i, j], |[i0, j0, i1, j1]| {
+                    [i0.min(i), j0.min(j), i1.max(i), j1.max(j)]
+                }))
+            },
+        );
+        if let Some(cells) = cells {
+            out.push(Exposed {
+                input: input as u32,
+                cells,
+            });
+        }
+    }
+    out
+}
+
+/// One of a leaf's triangles that its tile leaves uncovered ([`exposed`]), and where.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Exposed {
+    /// Its index in the triangles given to [`rasterize`].
+    pub input: u32,
+    /// The cells it is uncovered over lie within `[i0, i1] × [j0, j1]`: `[i0, j0, i1, j1]`.
+    pub cells: [i64; 4],
+}
+
+impl Exposed {
+    /// The part of the triangle `tri` (its world corners, as wound) over the cells it is
+    /// uncovered over and the ring of cells around them, in `frame`: the triangle itself where
+    /// it lies within them, else its clipped polygon as a fan of triangles, winding kept. Only
+    /// that part is traced exactly: a long triangle meeting a bare cell at one end (a cone's
+    /// side at its apex) would otherwise add its whole length to every ray along it. The ring
+    /// keeps the cut a cell away from where the height field leaves it, over the covered
+    /// cells. Corners kept from `tri` keep their bits; new ones lie on its plane to f32
+    /// rounding. Cut in world space against the planes of the cells' sides, in f64.
+    pub fn part(&self, frame: &Frame, tri: &[Vec3; 3]) -> Vec<[Vec3; 3]> {
+        let [i0, j0, i1, j1] = self.cells.map(|c| c as f64);
+        // Sample space x, y of the ring's outer sides: cell i spans [i, i + 1].
+        let (lo, hi) = (
+            DVec2::new(i0 - 1.0, j0 - 1.0),
+            DVec2::new(i1 + 2.0, j1 + 2.0),
+        );
+        let flat = |q: Vec3| frame.project(q).truncate();
+        let inside = |xy: DVec2| xy.cmpge(lo).all() && xy.cmple(hi).all();
+        if tri.iter().all(|&q| inside(flat(q))) {
+            return vec![*tri];
+        }
+        // (world, sample-space x y) of each corner, cut against x ≥ lo.x, x ≤ hi.x, y ≥ lo.y,
+        // y ≤ hi.y in turn (Sutherland–Hodgman).
+        let mut poly: Vec<(DVec3, DVec2)> = tri.iter().map(|&q| (q.as_dvec3(), flat(q))).collect();
+        let sides: [(usize, f64, f64); 4] = [
+            (0, lo.x, 1.0),
+            (0, hi.x, -1.0),
+            (1, lo.y, 1.0),
+            (1, hi.y, -1.0),
+        ];
+        for (axis, at, sign) in sides {
+            let inside = |q: &(DVec3, DVec2)| (q.1[axis] - at) * sign;
+            let input = std::mem::take(&mut poly);
+            for (n, q0) in input.iter().enumerate() {
+                let q1 = &input[(n + 1) % input.len()];
+                let (s0, s1) = (inside(q0), inside(q1));
+                if s0 >= 0.0 {
+                    poly.push(*q0);
+                }
+                if (s0 >= 0.0) != (s1 >= 0.0) {
+                    let f = s0 / (s0 - s1);
+                    poly.push((q0.0 + (q1.0 - q0.0) * f, q0.1 + (q1.1 - q0.1) * f));
+                }
+            }
+        }
+        let corners: Vec<Vec3> = poly.iter().map(|q| q.0.as_vec3()).collect();
+        (1..corners.len().saturating_sub(1))
+            .map(|k| [corners[0], corners[k], corners[k + 1]])
+            .collect()
+    }
+}
+
+/// The part of the triangle `poly` (counter-clockwise in x, y; z carried along linearly) over
+/// the triangle `window` (counter-clockwise): Sutherland–Hodgman clipping against its edges.
+fn clip(poly: &[DVec3], window: &[DVec3; 3]) -> Vec<DVec3> {
+    let mut out = poly.to_vec();
+    for e in 0..3 {
+        let (a, b) = (window[e].truncate(), window[(e + 1) % 3].truncate());
+        let side = |q: DVec3| (b - a).perp_dot(q.truncate() - a);
+        let input = std::mem::take(&mut out);
+        for (n, &q0) in input.iter().enumerate() {
+            let q1 = input[(n + 1) % input.len()];
+            let (s0, s1) = (side(q0), side(q1));
+            if s0 >= 0.0 {
+                out.push(q0);
+            }
+            if (s0 >= 0.0) != (s1 >= 0.0) {
+                out.push(q0 + (q1 - q0) * (s0 / (s0 - s1)));
+            }
+        }
+    }
+    out
+}
+
+/// The height over `(x, y)` of the plane through the three points of `tri` (0 when they lie on
+/// a line in x, y).
+fn plane_height(tri: &[DVec3; 3], q: DVec2) -> f64 {
+    let (e1, e2, d) = (tri[1] - tri[0], tri[2] - tri[0], q - tri[0].truncate());
+    let det = e1.truncate().perp_dot(e2.truncate());
+    if det == 0.0 {
+        return tri[0].z;
+    }
+    let u = d.perp_dot(e2.truncate()) / det;
+    let v = e1.truncate().perp_dot(d) / det;
+    tri[0].z + u * e1.z + v * e2.z
 }
 
 /// Whether the projected triangle `p` (x, y in sample space) meets the cell square
@@ -535,6 +775,33 @@ fn triangle_meets_square(p: &[DVec3; 3], i: f64, j: f64) -> bool {
         .into_iter()
         .chain((0..3).map(|e| (tri[(e + 1) % 3] - tri[e]).perp()))
         .any(separated)
+}
+
+/// Whether the convex polygons `a` and `b` (vertices in order around each; a segment will do)
+/// overlap over some area, or a segment passes through the other's inside: no separating axis
+/// among their edges' normals. Sharing an edge or a corner is not overlapping.
+fn convex_overlap(a: &[DVec2], b: &[DVec2]) -> bool {
+    let span = |points: &[DVec2], axis: DVec2| {
+        points
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), q| {
+                let d = q.dot(axis);
+                (lo.min(d), hi.max(d))
+            })
+    };
+    let separated = |axis: DVec2| {
+        let ((a_lo, a_hi), (b_lo, b_hi)) = (span(a, axis), span(b, axis));
+        a_hi <= b_lo || b_hi <= a_lo
+    };
+    !edge_normals(a)
+        .chain(edge_normals(b))
+        .filter(|axis| *axis != DVec2::ZERO)
+        .any(separated)
+}
+
+/// The normals of a polygon's edges (not unit).
+fn edge_normals(poly: &[DVec2]) -> impl Iterator<Item = DVec2> + '_ {
+    (0..poly.len()).map(move |e| (poly[(e + 1) % poly.len()] - poly[e]).perp())
 }
 
 /// The ring around the written samples (holes with a written sample among their eight
@@ -959,6 +1226,7 @@ pub(super) fn quantize(
         h_scale,
         covered,
         sources: Vec::new(),
+        exposed: Vec::new(),
     }
 }
 
@@ -1045,6 +1313,122 @@ pub(super) mod tests {
             "{h} vs {highest}"
         );
         assert!(filled.normal().dot(Vec3::new(-0.5, -0.25, 1.0).normalize()) > 0.999);
+    }
+
+    /// A triangle over a cell that the finished tile leaves bare is exposed (traced exactly by
+    /// the builder's triangle leaves), one the tile covers is not: the small triangle of
+    /// [`cells_beside_the_open_boundary_are_full`], made level, leaves cell (3, 3) a hole short
+    /// of full without the open boundary, and is covered with it.
+    #[test]
+    fn triangles_over_bare_cells_are_exposed() {
+        let frame = xy_frame(8);
+        let corner = |x: f32, y: f32| Vec3::new(x + 0.5, y + 0.5, 1.0);
+        let tri = [[corner(2.9, 2.9), corner(3.9, 3.2), corner(3.2, 3.9)]];
+        let tile = plain(&tri, &frame, 0.01).unwrap();
+        assert_eq!(
+            tile.exposed,
+            [Exposed {
+                input: 0,
+                cells: [3, 3, 3, 3]
+            }]
+        );
+        let open = rasterize(&tri, &frame, 0.01, None, None, &[true]).unwrap();
+        assert!(open.exposed.is_empty());
+        // A plane over the whole frame: every cell full.
+        let whole = square(&frame, 0.0, 8.0, |s, t| 0.3 * s - 0.2 * t);
+        assert!(plain(&whole, &frame, 0.01).unwrap().exposed.is_empty());
+    }
+
+    /// The bare part of a cell with one hole is the half on the hole's side of the diagonal
+    /// between its neighbours; a triangle in the other half, or touching the bare half only
+    /// along that diagonal, is covered.
+    #[test]
+    fn only_the_holes_half_of_a_three_sample_cell_is_bare() {
+        let frame = xy_frame(3);
+        let mut source = vec![0; 9];
+        // Cell (0, 0) has its hole at c11, sample (1, 1): its surface is the triangle c00, c10,
+        // c01, and its bare half lies beyond the diagonal x + y = 1.
+        source[4] = NONE;
+        let (height, sampled) = (vec![0.0; 9], vec![true; 9]);
+        let world = |x: f32, y: f32| Vec3::new(x + 0.5, y + 0.5, 0.0);
+        let covered = [world(0.1, 0.1), world(0.6, 0.1), world(0.1, 0.6)];
+        let on_diagonal = [world(0.0, 0.0), world(1.0, 0.0), world(0.0, 1.0)];
+        let across = [world(0.1, 0.1), world(0.9, 0.3), world(0.3, 0.9)];
+        let tris = [covered, on_diagonal, across];
+        let inputs = |e: Vec<Exposed>| e.iter().map(|e| e.input).collect::<Vec<_>>();
+        assert_eq!(
+            inputs(exposed(&tris, &frame, &height, &source, &sampled)),
+            [2]
+        );
+    }
+
+    /// Only the part of an exposed triangle over its uncovered cells and the ring around them is
+    /// kept: a triangle within them whole, bit for bit; a long one cut at the ring's sides, its
+    /// pieces on its plane, wound as it is, and covering just that part of it.
+    #[test]
+    fn an_exposed_triangle_is_cut_to_its_uncovered_cells_and_their_ring() {
+        let frame = xy_frame(16);
+        // Sample space (x, y) at world (x + 0.5, y + 0.5), on the plane h = 1 + 0.5 x.
+        let p = |x: f32, y: f32| Vec3::new(x + 0.5, y + 0.5, 1.0 + 0.5 * x);
+        let long = [p(1.0, 1.0), p(14.0, 2.0), p(1.2, 3.0)];
+        let at_start = Exposed {
+            input: 0,
+            cells: [1, 1, 2, 2],
+        };
+        let pieces = at_start.part(&frame, &long);
+        assert!(!pieces.is_empty() && pieces.len() <= 5, "{pieces:?}");
+        let normal = (long[1] - long[0]).cross(long[2] - long[0]).normalize();
+        let mut area = 0.0;
+        for piece in &pieces {
+            let n = (piece[1] - piece[0]).cross(piece[2] - piece[0]);
+            assert!(n.normalize().dot(normal) > 0.9999, "{piece:?}");
+            area += n.length() / 2.0;
+            for q in piece {
+                let s = frame.project(*q);
+                // Cells 1..=2 and their ring: x, y within [0, 4].
+                assert!(s.x >= -1e-5 && s.x <= 4.0 + 1e-5, "{q}");
+                assert!((q.z - (1.0 + 0.5 * s.x as f32)).abs() < 1e-5, "{q}");
+            }
+        }
+        // The long triangle's part with x ≤ 4: what clipping at x = 4 leaves of it.
+        let whole = (long[1] - long[0]).cross(long[2] - long[0]).length() / 2.0;
+        assert!(
+            area > 0.3 * whole && area < 0.5 * whole,
+            "{area} of {whole}"
+        );
+        let inside = Exposed {
+            input: 0,
+            cells: [0, 0, 13, 3],
+        };
+        assert_eq!(inside.part(&frame, &long), [long]);
+    }
+
+    /// Over a cell with an extrapolated corner, a triangle rising more than
+    /// [`EXPOSED_RISE_TEXELS`] above the cell's surface is exposed; one rising less is not, nor
+    /// one rising as much over a cell of sampled corners.
+    #[test]
+    fn a_triangle_rising_above_an_extrapolated_corner_is_exposed() {
+        let frame = xy_frame(3);
+        let (height, source) = (vec![0.0; 9], vec![0; 9]);
+        let mut sampled = vec![true; 9];
+        // Cell (1, 1), its corner (2, 2) extrapolated, all corners at height 0.
+        let over = |rise: f32| {
+            let p = |x: f32, y: f32, h: f32| Vec3::new(x + 0.5, y + 0.5, h);
+            [[p(1.0, 1.0, 0.0), p(2.0, 1.0, 0.0), p(2.0, 2.0, rise)]]
+        };
+        let rise = EXPOSED_RISE_TEXELS;
+        assert!(exposed(&over(rise + 0.05), &frame, &height, &source, &sampled).is_empty());
+        sampled[8] = false;
+        assert_eq!(
+            exposed(&over(rise + 0.05), &frame, &height, &source, &sampled),
+            [Exposed {
+                input: 0,
+                cells: [1, 1, 1, 1]
+            }]
+        );
+        assert!(exposed(&over(rise - 0.05), &frame, &height, &source, &sampled).is_empty());
+        // Below the surface it is hit from above through the cell.
+        assert!(exposed(&over(-1.0), &frame, &height, &source, &sampled).is_empty());
     }
 
     #[test]

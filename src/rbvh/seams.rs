@@ -33,6 +33,7 @@ use super::{Rbvh, TexelFormat};
 use crate::bvh::Bvh;
 use crate::geom::{Hit, Ray};
 use crate::random::{mix64, SplitMix64};
+use crate::scene::{open_boundary, Scene};
 
 /// How far behind the exact hit an RBVH hit counts as a leak, in texels.
 pub const LEAK_TEXELS: f32 = 2.0;
@@ -59,15 +60,20 @@ pub struct Entry {
     /// The deepest the ray gets inside the solid between its entry and its exit, measured from
     /// the planes of the faces it enters and leaves by: `chord · a · b / (a + b)` with `a`, `b`
     /// the cosines between the ray and their normals (exact between two planes; a ray tangent
-    /// to a bulge has both small). Infinite when nothing lies behind the entry (an open mesh).
+    /// to a bulge has both small). Infinite when nothing lies behind the entry (an open mesh);
+    /// zero when nothing does but the entry's object is closed: the ray only touched it, at an
+    /// edge or a corner, and passes outside.
     pub depth: f32,
 }
 
 /// The exact BVH's [`Entry`] of each ray (None for a miss, or a ray whose first hit is a back
 /// face, as wound: it starts inside the solid), for rays of unit direction such as
 /// [`Rbvh::seam_rays`] makes, `texel` the RBVH's texel size; the exit is the next hit a
-/// thousandth of a texel past the entry. In parallel.
-pub fn exact_entries(exact: &Bvh, rays: &[Ray], texel: f32) -> Vec<Option<Entry>> {
+/// thousandth of a texel past the entry. `closed`, per scene triangle ([`closed_triangles`];
+/// empty when unknown), says which lie on closed objects: a ray that enters one has an exit,
+/// so without one it only touched it (a cube's corner, or its edge, seen along a face: on
+/// the cube, every ray counted as leaking at Q0 and Q4 did). In parallel.
+pub fn exact_entries(exact: &Bvh, rays: &[Ray], texel: f32, closed: &[bool]) -> Vec<Option<Entry>> {
     rays.par_iter()
         .map(|ray| {
             let (entry, _) = exact.closest_hit(ray);
@@ -86,12 +92,27 @@ pub fn exact_entries(exact: &Bvh, rays: &[Ray], texel: f32) -> Vec<Option<Entry>
                 } else {
                     0.0
                 }
+            } else if closed.get(entry.id as usize) == Some(&true) {
+                0.0
             } else {
                 f32::INFINITY
             };
             Some(Entry { t: entry.t, depth })
         })
         .collect()
+}
+
+/// Per triangle of `scene`, whether the object it belongs to is closed: none of the object's
+/// triangles touches the scene's open boundary ([`open_boundary`]).
+pub fn closed_triangles(scene: &Scene) -> Vec<bool> {
+    let open = open_boundary(scene);
+    let object = |t: usize| scene.object_of_triangle.get(t).copied().unwrap_or(0) as usize;
+    let objects = (0..open.len()).map(object).max().map_or(0, |m| m + 1);
+    let mut open_object = vec![false; objects];
+    for (t, &o) in open.iter().enumerate() {
+        open_object[object(t)] |= o;
+    }
+    (0..open.len()).map(|t| !open_object[object(t)]).collect()
 }
 
 /// Where a seam ray is aimed: a point on or just beyond a leaf's rim, and the outward normal it
@@ -211,4 +232,21 @@ pub fn count_leaks(exact: &[Option<Entry>], approx: &[Hit], texel: f32) -> usize
             })
         })
         .count()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The default scene's ground is an open sheet; every other object in it is closed.
+    #[test]
+    fn triangles_of_closed_objects_are_told_from_open_ones() {
+        let scene = Scene::builtin("default").unwrap();
+        let closed = closed_triangles(&scene);
+        assert_eq!(closed.len(), scene.triangle_count());
+        for (t, &c) in closed.iter().enumerate() {
+            let name = &scene.object_names[scene.object_of_triangle[t] as usize];
+            assert_eq!(c, name != "ground", "triangle {t} of {name}");
+        }
+    }
 }
