@@ -16,9 +16,10 @@
 //! A representable set larger than `max_tile` samples per side is cut into several tiles (the
 //! paper's "subdivide large height fields") that overlap by one cell, so they meet without gaps.
 //! A set that is not representable and spans fewer than `min_leaf_texels` texels stays as
-//! triangles, traced exactly (the hybrid leaves). So do, beside a height field, those of its own
-//! triangles that its tiles leave uncovered (`Tile::exposed`: over a cell the ring found no
-//! surface for), so that a ray entering the solid through them cannot pass between the leaves.
+//! triangles, traced exactly (the hybrid leaves). So do, beside a height field, the parts of its
+//! own triangles that its tiles leave uncovered (`Tile::exposed`: over a cell the ring found no
+//! surface for, or rising above or sinking under a cell with an extrapolated corner), so that a
+//! ray entering the solid through them cannot pass between the leaves.
 //!
 //! A scene with points ([`Scene::points`]) is built from them instead, by the same recursion: a
 //! point is an element of surface with a normal and the area its spacing gives it, so the
@@ -496,7 +497,8 @@ impl Builder<'_> {
 
     /// The subtree of the set `order` made one height field of `tiles`: the tiles, and beside
     /// them, when they leave some of the set's triangles uncovered ([`Tile::exposed`]: over a
-    /// cell the ring found no surface for), those triangles' parts there as triangle leaves,
+    /// cell the ring found no surface for, or rising above or sinking under a cell with an
+    /// extrapolated corner), those triangles' parts there as triangle leaves,
     /// traced exactly, so that a ray entering the solid through them meets them where the
     /// height field, and its neighbours', may leave a gap.
     fn surface_subtree(&self, tiles: Vec<Tile>, order: &[u32]) -> Node {

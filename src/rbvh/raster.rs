@@ -584,16 +584,9 @@ fn exposed(
         }
         // Most triangles lie over full cells of sampled corners only: nothing to test.
         let (lo, hi) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
-        let (i0, i1) = (
-            (lo.x.floor() as i64).max(0),
-            (hi.x.floor() as i64 + 1).min(res_u - 1),
-        );
-        let (j0, j1) = (
-            (lo.y.floor() as i64).max(0),
-            (hi.y.floor() as i64 + 1).min(res_v - 1),
-        );
-        let suspect = (j0..=j1).any(|j| {
-            (i0..=i1).any(|i| {
+        let [i0, j0, i1, j1] = cell_range(lo, hi, res_u, res_v);
+        let suspect = (j0..=j1 + 1).any(|j| {
+            (i0..=i1 + 1).any(|i| {
                 let k = (j * res_u + i) as usize;
                 source[k] == NONE || !sampled[k]
             })
@@ -601,15 +594,7 @@ fn exposed(
         if !suspect || unit_normal(tri).is_none() {
             continue;
         }
-        // Counter-clockwise in (x, y), as the cells' triangles are, for clipping.
-        let mut ccw = p;
-        if (ccw[1] - ccw[0])
-            .truncate()
-            .perp_dot((ccw[2] - ccw[0]).truncate())
-            < 0.0
-        {
-            ccw.swap(1, 2);
-        }
+        let flat_p = p.map(|q| q.truncate());
         let uncovered = |&(i, j): &(i64, i64)| {
             // The corners in cycle order c00, c10, c11, c01 (counter-clockwise).
             let cycle = [(i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)];
@@ -622,14 +607,21 @@ fn exposed(
             if (0..4).all(|c| !hole(c) && sampled[k(c)]) {
                 return false;
             }
+            // Touching the cell along an edge or at a corner is not meeting it.
+            let square = (0..4).map(|c| at(c).truncate()).collect::<Vec<_>>();
+            if !convex_overlap(&square, &flat_p) {
+                return false;
+            }
             let holes: Vec<usize> = (0..4).filter(|&c| hole(c)).collect();
-            let flat = |q: &[DVec3]| q.iter().map(|v| v.truncate()).collect::<Vec<_>>();
-            let bare: Vec<DVec3> = match holes[..] {
+            let bare: Vec<DVec2> = match holes[..] {
                 [] => Vec::new(),
-                [h] => vec![at(h + 3), at(h), at(h + 1)],
-                _ => (0..4).map(at).collect(),
+                [h] => [at(h + 3), at(h), at(h + 1)]
+                    .iter()
+                    .map(|q| q.truncate())
+                    .collect(),
+                _ => square,
             };
-            if !bare.is_empty() && convex_overlap(&flat(&bare), &flat(&ccw)) {
+            if !bare.is_empty() && convex_overlap(&bare, &flat_p) {
                 return true;
             }
             if holes.len() > 1 || (0..4).all(|c| hole(c) || sampled[k(c)]) {
@@ -641,7 +633,7 @@ fn exposed(
                 _ => Vec::new(),
             };
             surface.iter().any(|cell| {
-                clip(&ccw, cell).iter().any(|q| {
+                clip(&p, cell).iter().any(|q| {
                     let above = q.z - plane_height(cell, q.truncate());
                     above > rise || -above > sink
                 })
@@ -690,66 +682,77 @@ impl Exposed {
             DVec2::new(i0 - 1.0, j0 - 1.0),
             DVec2::new(i1 + 2.0, j1 + 2.0),
         );
-        let flat = |q: Vec3| frame.project(q).truncate();
-        let inside = |xy: DVec2| xy.cmpge(lo).all() && xy.cmple(hi).all();
-        if tri.iter().all(|&q| inside(flat(q))) {
+        // `Frame::project`'s x, y of a world point, in f64 throughout.
+        let (origin, u, v) = (
+            frame.origin.as_dvec3(),
+            frame.u.as_dvec3(),
+            frame.v.as_dvec3(),
+        );
+        let texel = frame.texel as f64;
+        let xy = |q: DVec3| {
+            let d = q - origin;
+            DVec2::new(d.dot(u) / texel - 0.5, d.dot(v) / texel - 0.5)
+        };
+        let world = tri.map(|q| q.as_dvec3());
+        if world
+            .iter()
+            .all(|&q| xy(q).cmpge(lo).all() && xy(q).cmple(hi).all())
+        {
             return vec![*tri];
         }
-        // (world, sample-space x y) of each corner, cut against x ≥ lo.x, x ≤ hi.x, y ≥ lo.y,
-        // y ≤ hi.y in turn (Sutherland–Hodgman).
-        let mut poly: Vec<(DVec3, DVec2)> = tri.iter().map(|&q| (q.as_dvec3(), flat(q))).collect();
-        let sides: [(usize, f64, f64); 4] = [
-            (0, lo.x, 1.0),
-            (0, hi.x, -1.0),
-            (1, lo.y, 1.0),
-            (1, hi.y, -1.0),
-        ];
-        for (axis, at, sign) in sides {
-            let inside = |q: &(DVec3, DVec2)| (q.1[axis] - at) * sign;
-            let input = std::mem::take(&mut poly);
-            for (n, q0) in input.iter().enumerate() {
-                let q1 = &input[(n + 1) % input.len()];
-                let (s0, s1) = (inside(q0), inside(q1));
-                if s0 >= 0.0 {
-                    poly.push(*q0);
-                }
-                if (s0 >= 0.0) != (s1 >= 0.0) {
-                    let f = s0 / (s0 - s1);
-                    poly.push((q0.0 + (q1.0 - q0.0) * f, q0.1 + (q1.1 - q0.1) * f));
-                }
-            }
+        let mut poly = world.to_vec();
+        for signed in [
+            &|q| xy(q).x - lo.x,
+            &|q| hi.x - xy(q).x,
+            &|q| xy(q).y - lo.y,
+            &|q| hi.y - xy(q).y,
+        ] as [&dyn Fn(DVec3) -> f64; 4]
+        {
+            poly = clip_half(&poly, signed);
         }
-        let corners: Vec<Vec3> = poly.iter().map(|q| q.0.as_vec3()).collect();
-        (1..corners.len().saturating_sub(1))
-            .map(|k| [corners[0], corners[k], corners[k + 1]])
+        // Slivers left where a corner lies on a side are dropped: the ring around the cells
+        // keeps them over covered cells, and their normals would be rounding.
+        let area = |[a, b, c]: [DVec3; 3]| (b - a).cross(c - a).length();
+        let least = 1e-6 * area(world);
+        (1..poly.len().saturating_sub(1))
+            .map(|k| [poly[0], poly[k], poly[k + 1]])
+            .filter(|&piece| area(piece) > least)
+            .map(|piece| piece.map(|q| q.as_vec3()))
             .collect()
     }
 }
 
-/// The part of the triangle `poly` (counter-clockwise in x, y; z carried along linearly) over
-/// the triangle `window` (counter-clockwise): Sutherland–Hodgman clipping against its edges.
+/// The part of the polygon `poly` (x, y in sample space, z carried along linearly) over the
+/// triangle `window` (counter-clockwise in x, y): Sutherland–Hodgman clipping against its edges.
 fn clip(poly: &[DVec3], window: &[DVec3; 3]) -> Vec<DVec3> {
     let mut out = poly.to_vec();
     for e in 0..3 {
         let (a, b) = (window[e].truncate(), window[(e + 1) % 3].truncate());
-        let side = |q: DVec3| (b - a).perp_dot(q.truncate() - a);
-        let input = std::mem::take(&mut out);
-        for (n, &q0) in input.iter().enumerate() {
-            let q1 = input[(n + 1) % input.len()];
-            let (s0, s1) = (side(q0), side(q1));
-            if s0 >= 0.0 {
-                out.push(q0);
-            }
-            if (s0 >= 0.0) != (s1 >= 0.0) {
-                out.push(q0 + (q1 - q0) * (s0 / (s0 - s1)));
-            }
+        out = clip_half(&out, |q| (b - a).perp_dot(q.truncate() - a));
+    }
+    out
+}
+
+/// The part of the convex polygon `poly` (its points carried along linearly) where `signed` is
+/// at least 0: one step of Sutherland–Hodgman clipping. A corner on the line is kept once, and
+/// an edge that only touches the line adds no point.
+fn clip_half(poly: &[DVec3], signed: impl Fn(DVec3) -> f64) -> Vec<DVec3> {
+    let mut out = Vec::with_capacity(poly.len() + 1);
+    for (n, &q0) in poly.iter().enumerate() {
+        let q1 = poly[(n + 1) % poly.len()];
+        let (s0, s1) = (signed(q0), signed(q1));
+        if s0 >= 0.0 {
+            out.push(q0);
+        }
+        if (s0 > 0.0 && s1 < 0.0) || (s0 < 0.0 && s1 > 0.0) {
+            out.push(q0 + (q1 - q0) * (s0 / (s0 - s1)));
         }
     }
     out
 }
 
-/// The height over `(x, y)` of the plane through the three points of `tri` (0 when they lie on
-/// a line in x, y).
+/// The height over `(x, y)` of the plane through the three points of `tri` (that of its first
+/// point when they lie on a line in x, y).
 fn plane_height(tri: &[DVec3; 3], q: DVec2) -> f64 {
     let (e1, e2, d) = (tri[1] - tri[0], tri[2] - tri[0], q - tri[0].truncate());
     let det = e1.truncate().perp_dot(e2.truncate());
