@@ -775,7 +775,7 @@ fn pieces_subtree(mut pieces: Vec<GpuTriangle>) -> Node {
     if pieces.len() <= MAX_TRIANGLE_LEAF {
         return Node::Pieces(pieces);
     }
-    let centroid = |t: &GpuTriangle| Vec3::from(t.v0) + Vec3::from(t.v1) + Vec3::from(t.v2);
+    let centroid = |t: &GpuTriangle| t.vertices().into_iter().sum::<Vec3>();
     let axis = pieces
         .iter()
         .fold(Aabb::EMPTY, |b, t| b.grow(centroid(t)))
@@ -830,9 +830,9 @@ impl Flattened {
             }
             Node::Pieces(pieces) => {
                 let first = self.triangles.len() as u32;
-                let bounds = pieces.iter().fold(Aabb::EMPTY, |b, t| {
-                    b.union(Aabb::from_points([t.v0, t.v1, t.v2].map(Vec3::from)))
-                });
+                let bounds = pieces
+                    .iter()
+                    .fold(Aabb::EMPTY, |b, t| b.union(Aabb::from_points(t.vertices())));
                 self.triangles.extend_from_slice(pieces);
                 self.triangle_leaves += 1;
                 ChildRef {
