@@ -267,7 +267,7 @@ fn no_seam_leaks_by_the_rims_of_holes() {
 ///   sample whose edge ends extrapolated, or running along a rim of three-sample cells). On
 ///   the sphere at A⊥/A 0.01 the GPU agrees with the CPU on them, skirts included.
 ///
-/// The dragon and the bunny still leak at A⊥/A 0.01 (docs/guarantees.md).
+/// The dragon still leaks at φ_max 89.5° and A⊥/A 0.01 (docs/guarantees.md).
 #[test]
 fn no_seam_leaks_at_the_extreme_criteria() {
     use rbvh::rbvh::Refinement;

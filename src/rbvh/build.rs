@@ -497,8 +497,8 @@ impl Builder<'_> {
 
     /// The subtree of the set `order` made one height field of `tiles`: the tiles, and beside
     /// them, when they leave some of the set's triangles uncovered ([`Tile::exposed`]: over a
-    /// cell the ring found no surface for, or rising above or sinking under a cell with an
-    /// extrapolated corner), those triangles' parts there as triangle leaves,
+    /// cell the ring found no surface for, or rising above or sinking under a cell's surface
+    /// beyond what it stands in for), those triangles' parts there as triangle leaves,
     /// traced exactly, so that a ray entering the solid through them meets them where the
     /// height field, and its neighbours', may leave a gap.
     fn surface_subtree(&self, tiles: Vec<Tile>, order: &[u32]) -> Node {
@@ -770,9 +770,20 @@ fn tiles_subtree(tiles: Vec<Tile>) -> Node {
 
 /// A subtree of [`Node::Pieces`] leaves over `pieces`: halved at the median of their centroids
 /// along the longest side of the centroids' box until a leaf holds at most
-/// [`MAX_TRIANGLE_LEAF`]. Ties keep their order (a stable sort), so it is deterministic.
+/// [`MAX_TRIANGLE_LEAF`] pieces lying together, its box at most twice as long as its longest
+/// piece's. Pieces from places apart in one leaf (two rims of one surface) would give it a box
+/// that rays between them enter for nothing: on the default scene at Q2–Q4, 0.11–0.14
+/// triangles tested per primary ray instead of 0.00–0.01. Ties keep their order (a stable
+/// sort), so it is deterministic.
 fn pieces_subtree(mut pieces: Vec<GpuTriangle>) -> Node {
-    if pieces.len() <= MAX_TRIANGLE_LEAF {
+    let bounds = |t: &GpuTriangle| t.vertices().into_iter().fold(Aabb::EMPTY, Aabb::grow);
+    let union = pieces.iter().fold(Aabb::EMPTY, |b, t| b.union(bounds(t)));
+    let longest = pieces
+        .iter()
+        .map(|t| bounds(t).extent().max_element())
+        .fold(0.0, f32::max);
+    let together = union.extent().max_element() <= 2.0 * longest;
+    if pieces.len() == 1 || (pieces.len() <= MAX_TRIANGLE_LEAF && together) {
         return Node::Pieces(pieces);
     }
     let centroid = |t: &GpuTriangle| t.vertices().into_iter().sum::<Vec3>();

@@ -82,10 +82,13 @@
 //! 6. **Exposed triangles** ([`Tile::exposed`], issue "No leaks between height fields"): the
 //!    leaf's triangles that meet the bare part of a cell (no cell triangle over it: the ring
 //!    found no surface for a corner), or rise more than [`EXPOSED_RISE_TEXELS`] above a cell
-//!    with an extrapolated corner, or lie more than [`EXPOSED_SINK_TEXELS`] below it
-//!    ([`exposed`]). A ray entering the solid through one may pass beside the height field,
-//!    slide over its extrapolated rim or pass under an extrapolated lid, so the builder adds
-//!    their parts there to the tree as triangle leaves, traced exactly, beside the tile.
+//!    with an extrapolated corner, or lie more than [`EXPOSED_SINK_TEXELS`] below it, or rise
+//!    more than [`EXPOSED_SAMPLED_RISE_TEXELS`] above a cell of sampled corners, or lie more
+//!    than [`EXPOSED_SAMPLED_SINK_TEXELS`] below it ([`exposed`]).
+//!    A ray entering the solid through one may pass beside the height field, slide over its
+//!    rim, pass under an extrapolated lid, or reach the triangle from below or beside rather
+//!    than through the cells over it, so the builder adds their parts there to the tree as
+//!    triangle leaves, traced exactly, beside the tile.
 //! 7. A tile without any covered sample is still returned (`covered = 0`, all holes); the builder
 //!    decides what to do with it.
 //!
@@ -120,13 +123,35 @@ pub(super) const RING_REACH: f32 = 2.0;
 /// rise at all would take 27,000 (docs/guarantees.md).
 const EXPOSED_RISE_TEXELS: f32 = 0.3;
 
+/// How far above the surface of a cell of sampled corners one of the leaf's triangles may rise
+/// before it is traced exactly too, in texels ([`exposed`]): where the leaf's samples jump
+/// between two sheets (a crease, a fold the tolerance let in), a cell's triangles cut under the
+/// upper one, and a ray entering the solid through it passes over the cell. At a texel, 5% more
+/// exact parts on the dragon at Q0 (1–4% at Q1–Q4) take the bunny's seam leaks at A⊥/A 0.01
+/// from 195 to 2 per million; at two texels, 8 (docs/guarantees.md). Half a texel, which would
+/// also close the bunny's last leak at Q4, costs a third more parts.
+const EXPOSED_SAMPLED_RISE_TEXELS: f32 = 1.0;
+
 /// How far below the surface of a cell with an extrapolated corner one of the leaf's triangles
 /// may lie before it is traced exactly too, in texels ([`exposed`]): there the extrapolation
 /// has made a lid over the leaf's own surface, and a ray coming in from the side under the lid
-/// meets the triangle but none of the leaf's cells. At a texel it adds 2% to the dragon's
-/// exact parts at the presets and takes its seam leaks at A⊥/A 0.01 from 1,225 to 456 per
-/// million, the bunny's from 956 to 195; at 0.3 texel, 27% more parts for 298 and 195.
-const EXPOSED_SINK_TEXELS: f32 = 1.0;
+/// (where the skirt tapers to nothing, `layout::MARCH_SKIRT_TEXELS`) meets the triangle but none
+/// of the leaf's cells. With the sampled rise and sink (the sink then for triangles facing away
+/// from the axis only), half a texel took the dragon's seam leaks at A⊥/A 0.01 from 210 to 74
+/// per million for 9% more exact parts at Q0; 0.3 texel to 58 for 13% more again
+/// (docs/guarantees.md).
+const EXPOSED_SINK_TEXELS: f32 = 0.5;
+
+/// How far below the surface of a cell of sampled corners one of the leaf's triangles may lie
+/// before it is traced exactly too, in texels ([`exposed`]): it is a sheet the leaf's surface
+/// passes over (the underside of a thin part or a floor under a ledge, which the fold
+/// tolerance let into the leaf), and a ray meeting it from below, or from the side between the
+/// sheets, does not pass through the cell over it. These were most of the dragon's seam leaks
+/// at A⊥/A 0.01: with the sampled-rise rule, 373 → 210 per million for the triangles facing
+/// away from the axis or seen nearly edge-on (`n·w` < 0.2, 2% more exact parts at Q0); with
+/// the half-texel sink rule as well, 74 → 55 for all of them (another 2%; at two texels, 56
+/// for none).
+const EXPOSED_SAMPLED_SINK_TEXELS: f32 = 1.0;
 
 /// How far a ring sample may find the surface at most, in texels ([`ring_reach`]): at 8 the ring
 /// of leaves seen nearly edge-on reached other sheets across creases (dragon at φ_max 89.5°:
@@ -563,7 +588,12 @@ fn cells_met(p: &[DVec3; 3], res_u: i64, res_v: i64) -> impl Iterator<Item = (i6
 ///   entering the solid through the triangle there still lies above the leaf's surface, and
 ///   may leave the leaf over the extrapolated rim before it crosses that surface; or lying
 ///   more than [`EXPOSED_SINK_TEXELS`] below it: the extrapolation is a lid over the surface,
-///   which a ray from the side passes under.
+///   which a ray from the side passes under;
+/// * a cell of sampled corners (three or four), rising more than
+///   [`EXPOSED_SAMPLED_RISE_TEXELS`] above its surface: the cell cuts under a sheet its
+///   corners jump to or from, and a ray entering the solid there passes over it; or lying more
+///   than [`EXPOSED_SAMPLED_SINK_TEXELS`] below it: a sheet under the leaf's surface, which a
+///   ray meets from below or from the side, not through the cell over it.
 ///
 /// `height` and `source` as after step 4 (`NONE` a hole).
 fn exposed(
@@ -574,24 +604,36 @@ fn exposed(
     sampled: &[bool],
 ) -> Vec<Exposed> {
     let (res_u, res_v) = (frame.res_u as i64, frame.res_v as i64);
-    let rise = EXPOSED_RISE_TEXELS as f64 * frame.texel as f64;
-    let sink = EXPOSED_SINK_TEXELS as f64 * frame.texel as f64;
+    let texel = frame.texel as f64;
+    let rise_extrapolated = EXPOSED_RISE_TEXELS as f64 * texel;
+    let rise_sampled = EXPOSED_SAMPLED_RISE_TEXELS as f64 * texel;
+    let sink_extrapolated = EXPOSED_SINK_TEXELS as f64 * texel;
+    let sink_sampled = EXPOSED_SAMPLED_SINK_TEXELS as f64 * texel;
     let mut out = Vec::new();
     for (input, tri) in triangles.iter().enumerate() {
         let p = tri.map(|q| frame.project(q));
-        if !p.iter().all(|q| q.is_finite()) {
+        if !p.iter().all(|q| q.is_finite()) || unit_normal(tri).is_none() {
             continue;
         }
-        // Most triangles lie over full cells of sampled corners only: nothing to test.
+        // Most triangles lie over cells of sampled corners only, within the rise and sink
+        // allowed there: nothing to test. Over a cell's triangle, the height of the triangle's
+        // plane above the cell's surface is linear, so its extremes lie at the cell's corners.
         let (lo, hi) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
         let [i0, j0, i1, j1] = cell_range(lo, hi, res_u, res_v);
-        let suspect = (j0..=j1 + 1).any(|j| {
-            (i0..=i1 + 1).any(|i| {
-                let k = (j * res_u + i) as usize;
-                source[k] == NONE || !sampled[k]
-            })
-        });
-        if !suspect || unit_normal(tri).is_none() {
+        let n = (p[1] - p[0]).cross(p[2] - p[0]);
+        let plane =
+            |i: i64, j: i64| p[0].z - (n.x * (i as f64 - p[0].x) + n.y * (j as f64 - p[0].y)) / n.z;
+        let (mut rise_max, mut sink_max, mut suspect) =
+            (f64::NEG_INFINITY, f64::NEG_INFINITY, false);
+        for (i, j) in (j0..=j1 + 1).flat_map(|j| (i0..=i1 + 1).map(move |i| (i, j))) {
+            let k = (j * res_u + i) as usize;
+            suspect |= source[k] == NONE || !sampled[k];
+            let above = plane(i, j) - height[k] as f64;
+            rise_max = rise_max.max(above);
+            sink_max = sink_max.max(-above);
+        }
+        // A triangle seen edge-on (no plane over the cells) is tested.
+        if !suspect && n.z != 0.0 && rise_max <= rise_sampled && sink_max <= sink_sampled {
             continue;
         }
         let flat_p = p.map(|q| q.truncate());
@@ -604,9 +646,6 @@ fn exposed(
                 DVec3::new(ci as f64, cj as f64, height[k(c)] as f64)
             };
             let hole = |c: usize| source[k(c)] == NONE;
-            if (0..4).all(|c| !hole(c) && sampled[k(c)]) {
-                return false;
-            }
             // Touching the cell along an edge or at a corner is not meeting it.
             let square = (0..4).map(|c| at(c).truncate()).collect::<Vec<_>>();
             if !convex_overlap(&square, &flat_p) {
@@ -624,9 +663,11 @@ fn exposed(
             if !bare.is_empty() && convex_overlap(&bare, &flat_p) {
                 return true;
             }
-            if holes.len() > 1 || (0..4).all(|c| hole(c) || sampled[k(c)]) {
-                return false;
-            }
+            let (rise, sink) = if (0..4).all(|c| hole(c) || sampled[k(c)]) {
+                (rise_sampled, sink_sampled)
+            } else {
+                (rise_extrapolated, sink_extrapolated)
+            };
             let surface: Vec<[DVec3; 3]> = match holes[..] {
                 [] => vec![[at(0), at(1), at(2)], [at(0), at(2), at(3)]],
                 [h] => vec![[at(h + 1), at(h + 2), at(h + 3)]],
@@ -1452,6 +1493,41 @@ pub(super) mod tests {
             exposed(&over(-sink - 0.05), &frame, &height, &source, &sampled).len(),
             1
         );
+    }
+
+    /// Over a cell of sampled corners, a triangle rising more than
+    /// [`EXPOSED_SAMPLED_RISE_TEXELS`] above its surface or lying more than
+    /// [`EXPOSED_SAMPLED_SINK_TEXELS`] below it is exposed, whichever way it faces; one rising
+    /// or sinking less is not.
+    #[test]
+    fn triangles_far_above_or_below_sampled_corners_are_exposed() {
+        let frame = xy_frame(3);
+        let (height, source, sampled) = (vec![0.0; 9], vec![0; 9], vec![true; 9]);
+        let p = |x: f32, y: f32, h: f32| Vec3::new(x + 0.5, y + 0.5, h);
+        let over = |rise: f32| [[p(1.0, 1.0, 0.0), p(2.0, 1.0, 0.0), p(2.0, 2.0, rise)]];
+        let exposed = |tris: &[[Vec3; 3]]| exposed(tris, &frame, &height, &source, &sampled);
+        let rise = EXPOSED_SAMPLED_RISE_TEXELS;
+        assert_eq!(
+            exposed(&over(rise + 0.05)),
+            [Exposed {
+                input: 0,
+                cells: [1, 1, 1, 1]
+            }]
+        );
+        assert!(exposed(&over(rise - 0.05)).is_empty());
+        let sink = EXPOSED_SAMPLED_SINK_TEXELS;
+        let flat = |h: f32, up: bool| {
+            let (a, b) = (p(2.0, 1.0, h), p(2.0, 2.0, h));
+            if up {
+                [[p(1.0, 1.0, h), a, b]]
+            } else {
+                [[p(1.0, 1.0, h), b, a]]
+            }
+        };
+        for up in [true, false] {
+            assert_eq!(exposed(&flat(-sink - 0.05, up)).len(), 1);
+            assert!(exposed(&flat(-sink + 0.05, up)).is_empty());
+        }
     }
 
     #[test]
