@@ -319,8 +319,8 @@ fn seam_leaks(bvh: &Bvh, r: &Rbvh) -> (usize, usize) {
 }
 
 /// **Exact where the height fields cannot cover**: a leaf's own triangles that meet a cell the
-/// ring left bare, or rise above or sink under one with an extrapolated corner (`raster.rs`,
-/// `exposed`), are in the tree as triangle leaves too, so a ray entering the solid through one
+/// ring left bare, or rise above or sink under a cell's surface beyond what it stands in for
+/// (`raster.rs`, `exposed`), are in the tree as triangle leaves too, so a ray entering the solid through one
 /// meets it however the leaves' rims fall. Each part lies on its scene triangle, wound as it
 /// is, and a ray along its normal at its centroid that meets that triangle first hits the RBVH
 /// no later than the exact BVH, on the CPU and on the GPU. On the sphere at A⊥/A 0.01, where

@@ -18,8 +18,8 @@
 //! A set that is not representable and spans fewer than `min_leaf_texels` texels stays as
 //! triangles, traced exactly (the hybrid leaves). So do, beside a height field, the parts of its
 //! own triangles that its tiles leave uncovered (`Tile::exposed`: over a cell the ring found no
-//! surface for, or rising above or sinking under a cell with an extrapolated corner), so that a
-//! ray entering the solid through them cannot pass between the leaves.
+//! surface for, or rising above or sinking under a cell's surface beyond what it stands in for),
+//! so that a ray entering the solid through them cannot pass between the leaves.
 //!
 //! A scene with points ([`Scene::points`]) is built from them instead, by the same recursion: a
 //! point is an element of surface with a normal and the area its spacing gives it, so the
@@ -52,7 +52,9 @@ use crate::{Error, Result};
 
 /// Most triangles in a triangle leaf.
 const MAX_TRIANGLE_LEAF: usize = 8;
-/// From this depth on, splits are object medians, bounding the depth by 32 + log2(n) < STACK_SIZE.
+/// From this depth on, splits are object medians, bounding the depth by 32 + log2(n) < STACK_SIZE
+/// (beside a height field, its exact parts add a median-split subtree of their own, as deep as
+/// log2 of their count; the finished tree's depth is checked against the stack all the same).
 const MEDIAN_BELOW_DEPTH: u32 = 32;
 /// A set of points whose box is thinner than this fraction of its length is a slab: split by
 /// facing when it is not one height field (`Builder::split_by_facing`).
