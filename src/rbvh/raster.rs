@@ -667,31 +667,35 @@ fn exposed_in(
             };
             let hole = |c: usize| source[k(c)] == NONE;
             // Touching the cell along an edge or at a corner is not meeting it.
-            let square = (0..4).map(|c| at(c).truncate()).collect::<Vec<_>>();
+            let square = [0, 1, 2, 3].map(|c| at(c).truncate());
             if !convex_overlap(&square, &flat_p) {
                 return false;
             }
-            let holes: Vec<usize> = (0..4).filter(|&c| hole(c)).collect();
-            let bare: Vec<DVec2> = match holes[..] {
-                [] => Vec::new(),
-                [h] => [at(h + 3), at(h), at(h + 1)]
-                    .iter()
-                    .map(|q| q.truncate())
-                    .collect(),
-                _ => square,
+            // Two holes or more leave the whole cell bare; one, the half on its side.
+            let lone = match (0..4).filter(|&c| hole(c)).count() {
+                0 => None,
+                1 => (0..4).find(|&c| hole(c)),
+                _ => return true,
             };
-            if !bare.is_empty() && convex_overlap(&bare, &flat_p) {
-                return true;
+            if let Some(h) = lone {
+                let bare = [at(h + 3), at(h), at(h + 1)].map(|q| q.truncate());
+                if convex_overlap(&bare, &flat_p) {
+                    return true;
+                }
             }
             let (rise, sink) = if (0..4).all(|c| hole(c) || sampled[k(c)]) {
                 (rise_sampled, sink_sampled)
             } else {
                 (rise_extrapolated, sink_extrapolated)
             };
-            let surface: Vec<[DVec3; 3]> = match holes[..] {
-                [] => vec![[at(0), at(1), at(2)], [at(0), at(2), at(3)]],
-                [h] => vec![[at(h + 1), at(h + 2), at(h + 3)]],
-                _ => Vec::new(),
+            let quad = [[at(0), at(1), at(2)], [at(0), at(2), at(3)]];
+            let three;
+            let surface: &[[DVec3; 3]] = match lone {
+                None => &quad,
+                Some(h) => {
+                    three = [[at(h + 1), at(h + 2), at(h + 3)]];
+                    &three
+                }
             };
             surface.iter().any(|cell| {
                 clip(&p, cell).iter().any(|q| {
