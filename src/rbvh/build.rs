@@ -778,7 +778,7 @@ fn tiles_subtree(tiles: Vec<Tile>) -> Node {
 /// triangles tested per primary ray instead of 0.00–0.01. Ties keep their order (a stable
 /// sort), so it is deterministic.
 fn pieces_subtree(mut pieces: Vec<GpuTriangle>) -> Node {
-    let bounds = |t: &GpuTriangle| t.vertices().into_iter().fold(Aabb::EMPTY, Aabb::grow);
+    let bounds = |t: &GpuTriangle| Aabb::from_points(t.vertices());
     let union = pieces.iter().fold(Aabb::EMPTY, |b, t| b.union(bounds(t)));
     let longest = pieces
         .iter()

@@ -633,15 +633,13 @@ fn exposed_in(
         // plane above the cell's surface is linear, so its extremes lie at the cell's corners.
         let (lo, hi) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
         let [i0, j0, i1, j1] = cell_range(lo, hi, res_u, res_v);
-        let n = (p[1] - p[0]).cross(p[2] - p[0]);
-        let plane =
-            |i: i64, j: i64| p[0].z - (n.x * (i as f64 - p[0].x) + n.y * (j as f64 - p[0].y)) / n.z;
+        let edge_on = (p[1] - p[0]).truncate().perp_dot((p[2] - p[0]).truncate()) == 0.0;
         let (mut rise_max, mut sink_max, mut suspect) =
             (f64::NEG_INFINITY, f64::NEG_INFINITY, false);
         for (i, j) in (j0..=j1 + 1).flat_map(|j| (i0..=i1 + 1).map(move |i| (i, j))) {
             let k = (j * res_u + i) as usize;
             suspect |= source[k] == NONE || !sampled[k];
-            let above = plane(i, j) - height[k] as f64;
+            let above = plane_height(&p, DVec2::new(i as f64, j as f64)) - height[k] as f64;
             rise_max = rise_max.max(above);
             sink_max = sink_max.max(-above);
         }
@@ -650,7 +648,7 @@ fn exposed_in(
         let slack = 1e-9 * texel;
         if prefilter
             && !suspect
-            && n.z != 0.0
+            && !edge_on
             && rise_max + slack <= rise_sampled
             && sink_max + slack <= sink_sampled
         {
