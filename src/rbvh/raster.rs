@@ -83,8 +83,10 @@
 //!    leaf's triangles that meet the bare part of a cell (no cell triangle over it: the ring
 //!    found no surface for a corner), or rise more than [`EXPOSED_RISE_TEXELS`] above a cell
 //!    with an extrapolated corner, or lie more than [`EXPOSED_SINK_TEXELS`] below it, or rise
-//!    more than [`EXPOSED_SAMPLED_RISE_TEXELS`] above a cell of sampled corners, or lie more
-//!    than [`EXPOSED_SAMPLED_SINK_TEXELS`] below it ([`exposed`]).
+//!    more than [`EXPOSED_SAMPLED_RISE_TEXELS`] above a cell of sampled corners (as much as
+//!    over an extrapolated corner where the cell is steep, [`STEEP_CELL_TEXELS`]), or lie more
+//!    than [`EXPOSED_SAMPLED_SINK_TEXELS`] below it, or face away from the axis over a steep
+//!    cell ([`exposed`]).
 //!    A ray entering the solid through one may pass beside the height field, slide over its
 //!    rim, pass under an extrapolated lid, or reach the triangle from below or beside rather
 //!    than through the cells over it, so the builder adds their parts there to the tree as
@@ -138,9 +140,11 @@ const EXPOSED_SAMPLED_RISE_TEXELS: f32 = 1.0;
 /// (where the skirt tapers to nothing, `layout::MARCH_SKIRT_TEXELS`) meets the triangle but none
 /// of the leaf's cells. With the sampled rise and sink (the sink then only for triangles facing
 /// away from the axis or seen nearly edge-on, `n·w` < 0.2), half a texel took the dragon's seam
-/// leaks at A⊥/A 0.01 from 210 to 74 per million for 9% more exact parts at Q0 than a texel;
-/// 0.3 texel to 58 for 13% more than half a texel (docs/guarantees.md).
-const EXPOSED_SINK_TEXELS: f32 = 0.5;
+/// leaks at A⊥/A 0.01 from 210 to 74 per million for 9% more exact parts at Q0 than a texel.
+/// With the steep-cell rules ([`STEEP_CELL_TEXELS`]), 0.3 texel takes them from 32 to 16 (rays
+/// from the side under lids up to 0.35 texel over the triangle) for 4% more parts there and 13%
+/// more on the dragon at Q0 (4–8% at Q1–Q4); 0.1 texel, 14 (docs/guarantees.md).
+const EXPOSED_SINK_TEXELS: f32 = 0.3;
 
 /// How far below the surface of a cell of sampled corners one of the leaf's triangles may lie
 /// before it is traced exactly too, in texels ([`exposed`]): it is a sheet the leaf's surface
@@ -152,6 +156,19 @@ const EXPOSED_SINK_TEXELS: f32 = 0.5;
 /// the half-texel sink rule as well, 74 → 55 for all of them (another 2%; at two texels, 56
 /// for none).
 const EXPOSED_SAMPLED_SINK_TEXELS: f32 = 1.0;
+
+/// How far apart in height the corners of a cell (holes aside) may lie before the cell counts as
+/// *steep*, in texels ([`exposed`]): more than 71° on average along a side. There a height field
+/// is a poor stand-in for the surface, which it meets nearly edge-on: over steep cells of
+/// sampled corners a triangle may rise only as far as over extrapolated ones
+/// ([`EXPOSED_RISE_TEXELS`]) before it is traced exactly, and one facing away from the axis is
+/// always traced exactly (an overhang's underside, where the leaf's samples flip between the
+/// fold's sheets and a ray from below slides under a pit of its surface). These were most of the
+/// dragon's seam leaks at A⊥/A 0.01 left by the other rules: the rise 55 → 32 per million (38%
+/// more exact parts there, 0.1–0.2% at the presets), the faces away, after the sink
+/// ([`EXPOSED_SINK_TEXELS`]), 16 → 9 (8%). Two texels closes no more for more parts; four, 34
+/// instead of 32 (docs/guarantees.md).
+const STEEP_CELL_TEXELS: f32 = 3.0;
 
 /// How far a ring sample may find the surface at most, in texels ([`ring_reach`]): at 8 the ring
 /// of leaves seen nearly edge-on reached other sheets across creases (dragon at φ_max 89.5°:
@@ -593,7 +610,12 @@ fn cells_met(p: &[DVec3; 3], res_u: i64, res_v: i64) -> impl Iterator<Item = (i6
 ///   [`EXPOSED_SAMPLED_RISE_TEXELS`] above its surface: the cell cuts under a sheet its
 ///   corners jump to or from, and a ray entering the solid there passes over it; or lying more
 ///   than [`EXPOSED_SAMPLED_SINK_TEXELS`] below it: a sheet under the leaf's surface, which a
-///   ray meets from below or from the side, not through the cell over it.
+///   ray meets from below or from the side, not through the cell over it. Over a *steep* cell
+///   (corners more than [`STEEP_CELL_TEXELS`] apart in height) the rise allowed is
+///   [`EXPOSED_RISE_TEXELS`], as over an extrapolated corner;
+/// * a steep cell, facing away from the axis: the underside of an overhang, whose sheet the
+///   leaf's samples leave and rejoin, so that a ray from below slides under a pit of the
+///   surface.
 ///
 /// `height` and `source` as after step 4 (`NONE` a hole).
 fn exposed(
@@ -622,12 +644,14 @@ fn exposed_in(
     let rise_sampled = EXPOSED_SAMPLED_RISE_TEXELS as f64 * texel;
     let sink_extrapolated = EXPOSED_SINK_TEXELS as f64 * texel;
     let sink_sampled = EXPOSED_SAMPLED_SINK_TEXELS as f64 * texel;
+    let steep = STEEP_CELL_TEXELS as f64 * texel;
     let mut out = Vec::new();
     for (input, tri) in triangles.iter().enumerate() {
         let p = tri.map(|q| frame.project(q));
-        if !p.iter().all(|q| q.is_finite()) || unit_normal(tri).is_none() {
+        let Some(n) = unit_normal(tri).filter(|_| p.iter().all(|q| q.is_finite())) else {
             continue;
-        }
+        };
+        let faces_away = n.dot(frame.w) < 0.0;
         // Most triangles lie over cells of sampled corners only, within the rise and sink
         // allowed there: nothing to test. Over a cell's triangle, the height of the triangle's
         // plane above the cell's surface is linear, so its extremes lie at the cell's corners.
@@ -636,13 +660,17 @@ fn exposed_in(
         let edge_on = (p[1] - p[0]).truncate().perp_dot((p[2] - p[0]).truncate()) == 0.0;
         let (mut rise_max, mut sink_max, mut suspect) =
             (f64::NEG_INFINITY, f64::NEG_INFINITY, false);
+        let (mut h_lo, mut h_hi) = (f64::INFINITY, f64::NEG_INFINITY);
         for (i, j) in (j0..=j1 + 1).flat_map(|j| (i0..=i1 + 1).map(move |i| (i, j))) {
             let k = (j * res_u + i) as usize;
             suspect |= source[k] == NONE || !sampled[k];
             let above = plane_height(&p, DVec2::new(i as f64, j as f64)) - height[k] as f64;
             rise_max = rise_max.max(above);
             sink_max = sink_max.max(-above);
+            (h_lo, h_hi) = (h_lo.min(height[k] as f64), h_hi.max(height[k] as f64));
         }
+        // No cell of the range is steeper than the range's corners span.
+        suspect |= h_hi - h_lo > steep;
         // A triangle seen edge-on (no plane over the cells) is tested; so is one within
         // rounding of a threshold, which the test proper computes otherwise.
         let slack = 1e-9 * texel;
@@ -664,6 +692,13 @@ fn exposed_in(
                 DVec3::new(ci as f64, cj as f64, height[k(c)] as f64)
             };
             let hole = |c: usize| source[k(c)] == NONE;
+            let (h_lo, h_hi) = (0..4)
+                .filter(|&c| !hole(c))
+                .map(|c| at(c).z)
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), h| {
+                    (lo.min(h), hi.max(h))
+                });
+            let steep_cell = h_hi - h_lo > steep;
             // Touching the cell along an edge or at a corner is not meeting it.
             let square = [0, 1, 2, 3].map(|c| at(c).truncate());
             if !convex_overlap(&square, &flat_p) {
@@ -675,6 +710,9 @@ fn exposed_in(
                 1 => (0..4).find(|&c| hole(c)),
                 _ => return true,
             };
+            if steep_cell && faces_away {
+                return true;
+            }
             if let Some(h) = lone {
                 let bare = [at(h + 3), at(h), at(h + 1)].map(|q| q.truncate());
                 if convex_overlap(&bare, &flat_p) {
@@ -682,7 +720,14 @@ fn exposed_in(
                 }
             }
             let (rise, sink) = if (0..4).all(|c| hole(c) || sampled[k(c)]) {
-                (rise_sampled, sink_sampled)
+                (
+                    if steep_cell {
+                        rise_extrapolated
+                    } else {
+                        rise_sampled
+                    },
+                    sink_sampled,
+                )
             } else {
                 (rise_extrapolated, sink_extrapolated)
             };
@@ -1559,6 +1604,56 @@ pub(super) mod tests {
         assert!(three(&over(rise - 0.05)).is_empty());
         assert_eq!(three(&flat(-sink - 0.05, false)).len(), 1);
         assert!(three(&flat(-sink + 0.05, false)).is_empty());
+    }
+
+    /// Over a steep cell of sampled corners (heights more than [`STEEP_CELL_TEXELS`] apart), a
+    /// triangle rising more than [`EXPOSED_RISE_TEXELS`] above its surface is exposed, and one
+    /// facing away from the axis is exposed wherever it lies; over a gentle cell neither is.
+    #[test]
+    fn triangles_over_steep_cells_are_exposed_sooner() {
+        let frame = xy_frame(3);
+        let (source, sampled) = (vec![0; 9], vec![true; 9]);
+        // Samples (i, j) at height 0 for i ≤ 1 and `wall` for i = 2: cell (1, 1) climbs `wall`
+        // along u, its surface h = wall · (x − 1) over x ∈ [1, 2].
+        let heights = |wall: f32| {
+            (0..9)
+                .map(|k| if k % 3 == 2 { wall } else { 0.0 })
+                .collect()
+        };
+        let (steep, gentle): (Vec<f32>, Vec<f32>) = (
+            heights(STEEP_CELL_TEXELS + 0.5),
+            heights(STEEP_CELL_TEXELS - 0.5),
+        );
+        let p = |x: f32, y: f32, h: f32| Vec3::new(x + 0.5, y + 0.5, h);
+        // Within the cell, wound up (+w) or down, `rise` above the surface at its far corner.
+        let over = |wall: f32, rise: f32, up: bool| {
+            let (a, b, c) = (
+                p(1.2, 1.2, 0.2 * wall),
+                p(1.8, 1.2, 0.8 * wall + rise),
+                p(1.8, 1.8, 0.8 * wall + rise),
+            );
+            if up {
+                [[a, b, c]]
+            } else {
+                [[a, c, b]]
+            }
+        };
+        let exposed =
+            |tris: &[[Vec3; 3]], height: &[f32]| exposed(tris, &frame, height, &source, &sampled);
+        let rise = EXPOSED_RISE_TEXELS;
+        let wall = STEEP_CELL_TEXELS + 0.5;
+        assert_eq!(
+            exposed(&over(wall, rise + 0.05, true), &steep),
+            [Exposed {
+                input: 0,
+                cells: [1, 1, 1, 1]
+            }]
+        );
+        assert!(exposed(&over(wall, rise - 0.05, true), &steep).is_empty());
+        assert_eq!(exposed(&over(wall, 0.0, false), &steep).len(), 1);
+        let wall = STEEP_CELL_TEXELS - 0.5;
+        assert!(exposed(&over(wall, rise + 0.05, true), &gentle).is_empty());
+        assert!(exposed(&over(wall, 0.0, false), &gentle).is_empty());
     }
 
     /// The bound that lets [`exposed`] skip most triangles never skips one that the test of its
