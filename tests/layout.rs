@@ -62,7 +62,7 @@ fn bvh_triangle_layout_matches() {
             ("v0", offset_of!(GpuTriangle, v0)),
             ("prim", offset_of!(GpuTriangle, prim)),
             ("v1", offset_of!(GpuTriangle, v1)),
-            ("pad1", offset_of!(GpuTriangle, pad1)),
+            ("flags", offset_of!(GpuTriangle, flags)),
             ("v2", offset_of!(GpuTriangle, v2)),
             ("pad2", offset_of!(GpuTriangle, pad2)),
         ],

@@ -43,7 +43,11 @@ fn sample() -> Rbvh {
     }
     let triangles = vec![
         GpuTriangle::new([Vec3::ZERO, Vec3::X, Vec3::Z], 4),
-        GpuTriangle::new([Vec3::ONE, Vec3::Y, -Vec3::Z], 9),
+        // An exact part beside height-field leaf 1: its flags round-trip.
+        GpuTriangle {
+            flags: GpuTriangle::PART | 1 << 1,
+            ..GpuTriangle::new([Vec3::ONE, Vec3::Y, -Vec3::Z], 9)
+        },
     ];
     let unit = Aabb {
         min: Vec3::splat(-1.0),
@@ -417,6 +421,18 @@ fn inconsistent_contents_are_rejected_with_the_reason() {
     let mut r = sample();
     (r.atlas.pitch, r.atlas.rows) = (12, 6);
     check(r, "the atlas pitch is 12 texels, not a power of two");
+    let mut r = sample();
+    r.triangles[1].flags = GpuTriangle::PART | 2 << 1;
+    check(
+        r,
+        "triangle 1 has flags 0x5 and padding 0x0: neither 0 nor an exact part of one of the 2",
+    );
+    let mut r = sample();
+    r.triangles[0].flags = 2;
+    check(r, "triangle 0 has flags 0x2");
+    let mut r = sample();
+    r.triangles[0].pad2 = 1;
+    check(r, "triangle 0 has flags 0x0 and padding 0x1");
     let mut r = sample();
     r.params.texels_per_diagonal = f32::NAN;
     check(r, "texels_per_diagonal is NaN");

@@ -19,6 +19,7 @@ use rayon::prelude::*;
 
 use super::layout::{Column, GpuLod, LOD_BIT};
 use super::{Lod, LodParams, LodStats};
+use crate::bvh::GpuTriangle;
 use crate::geom::Aabb;
 use crate::rbvh::layout::{decode_octahedral, encode_octahedral, HEIGHTFIELD_COUNT, LEAF_BIT};
 use crate::rbvh::{Rbvh, Texel};
@@ -202,7 +203,6 @@ impl Source {
                 .get(leaf as usize)
                 .map_or(0, |hf| u64::from(hf.res_u) * u64::from(hf.res_v)),
             Source::Triangles { first, count } => leaf_triangles(rbvh, first, count)
-                .iter()
                 .map(|t| {
                     let d = u64::from(divisions(t.vertices(), rbvh.texel_size));
                     (d + 1) * (d + 2) / 2
@@ -212,25 +212,27 @@ impl Source {
     }
 
     /// The leaf's surface samples: every sample of a height field (holes excepted) at its world
-    /// position, or points spread over each triangle no further apart than a fine texel.
+    /// position, or points spread over each triangle no further apart than a fine texel (but
+    /// for exact parts, [`GpuTriangle::PART`], whose height field stands for them).
     fn samples(&self, rbvh: &Rbvh) -> Vec<Sample> {
         match *self {
             Source::Heightfield(leaf) => heightfield_samples(rbvh, leaf),
             Source::Triangles { first, count } => leaf_triangles(rbvh, first, count)
-                .iter()
                 .flat_map(|t| triangle_samples(t.vertices(), rbvh.texel_size))
                 .collect(),
         }
     }
 }
 
-/// The triangles of a triangle leaf, cut to the array (corrupt ranges give fewer or none).
-fn leaf_triangles(rbvh: &Rbvh, first: u32, count: u32) -> &[crate::bvh::GpuTriangle] {
+/// The triangles of a triangle leaf that its grids sample, cut to the array (corrupt ranges give
+/// fewer or none): all but the exact parts ([`GpuTriangle::PART`]).
+fn leaf_triangles(rbvh: &Rbvh, first: u32, count: u32) -> impl Iterator<Item = &GpuTriangle> {
     let first = first as usize;
     let end = first
         .saturating_add(count as usize)
         .min(rbvh.triangles.len());
-    rbvh.triangles.get(first..end).unwrap_or_default()
+    let all = rbvh.triangles.get(first..end).unwrap_or_default();
+    all.iter().filter(|t| t.flags & GpuTriangle::PART == 0)
 }
 
 fn heightfield_samples(rbvh: &Rbvh, leaf: u32) -> Vec<Sample> {
@@ -408,19 +410,44 @@ mod tests {
     use crate::rbvh::RbvhParams;
     use crate::scene::Scene;
 
-    /// Leaves below every node, counted by walking the tree.
-    fn leaves_below(rbvh: &Rbvh, node: u32) -> usize {
+    /// Leaves below a node, counted by walking the tree: all of them, and those that give its
+    /// grid samples (height fields, and triangle leaves holding more than exact parts).
+    fn leaves_below(rbvh: &Rbvh, node: u32) -> (usize, usize) {
         rbvh.nodes[node as usize]
             .children()
             .iter()
             .map(|c| {
-                if c.child & LEAF_BIT != 0 {
-                    usize::from(c.count > 0)
-                } else {
-                    leaves_below(rbvh, c.child)
+                if c.child & LEAF_BIT == 0 {
+                    return leaves_below(rbvh, c.child);
                 }
+                let surface = c.count == HEIGHTFIELD_COUNT
+                    || leaf_triangles(rbvh, c.child & !LEAF_BIT, c.count)
+                        .next()
+                        .is_some();
+                (usize::from(c.count > 0), usize::from(surface))
             })
-            .sum()
+            .fold((0, 0), |(a, b), (c, d)| (a + c, b + d))
+    }
+
+    /// The default scene's exact parts give its grids no samples: with them flagged as
+    /// ordinary triangles, the same grids hold more column words.
+    #[test]
+    fn exact_parts_give_no_samples() {
+        let mut rbvh = Rbvh::build(
+            &Scene::builtin("default").unwrap(),
+            &RbvhParams::quality(2).unwrap(),
+        )
+        .unwrap();
+        let parts = rbvh.triangles.iter().filter(|t| t.part_leaf().is_some());
+        assert!(parts.count() > 50);
+        let params = LodParams::default();
+        let with_parts_left_out = Lod::build(&rbvh, &params).unwrap();
+        for t in &mut rbvh.triangles {
+            t.flags = 0;
+        }
+        let with_parts = Lod::build(&rbvh, &params).unwrap();
+        let words = |lod: &Lod| lod.texels.len();
+        assert!(words(&with_parts_left_out) < words(&with_parts));
     }
 
     #[test]
@@ -444,9 +471,12 @@ mod tests {
             let mut longest_side_full = 0;
             assert!(!lod.nodes[0].is_some(), "no ray can choose the root");
             for (n, record) in lod.nodes.iter().enumerate().skip(1) {
-                let below = leaves_below(&rbvh, n as u32);
-                if below < params.min_leaves as usize {
-                    assert!(!record.is_some(), "node {n}: {below} leaves");
+                let (below, surface) = leaves_below(&rbvh, n as u32);
+                if below < params.min_leaves as usize || surface == 0 {
+                    assert!(
+                        !record.is_some(),
+                        "node {n}: {below} leaves, {surface} sampled"
+                    );
                     continue;
                 }
                 assert!(record.is_some(), "node {n}: {below} leaves but no grid");

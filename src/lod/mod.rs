@@ -18,7 +18,8 @@
 //! FLIP 0.017 on the `grove-aerial` view, against 1.82× at 0.023 with the defaults now.)
 //!
 //! The data is built from a finished RBVH ([`Lod::build`]), not from the scene: it approximates the
-//! RBVH's own surface (height-field samples and triangle-leaf triangles), works for RBVHs loaded
+//! RBVH's own surface (height-field samples and triangle-leaf triangles, but for the exact parts
+//! beside height fields, `GpuTriangle::PART`, which the fields stand for), works for RBVHs loaded
 //! from files, and exists only when asked for — a trace without `--lod` allocates nothing.
 //!
 //! * [`cone`]: ray cones and the selection rule;

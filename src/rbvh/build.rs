@@ -74,6 +74,10 @@ enum Node {
     },
     /// Parts of triangles, traced exactly (at most [`MAX_TRIANGLE_LEAF`]).
     Pieces(Vec<GpuTriangle>),
+    /// A height field's tiles (first) and the exact parts beside them (second), flattened as an
+    /// inner node: each part's flags name its tile by its place among them
+    /// (`GpuTriangle::PART | k << 1`) until flattening numbers the tiles' leaves.
+    Surface(Box<[Node; 2]>),
 }
 
 /// What the leaves sample: the scene's triangles, or its points.
@@ -345,12 +349,9 @@ impl Rbvh {
         let mut out = Flattened::default();
         let root_children = match &root {
             None => [ChildRef::ABSENT, ChildRef::ABSENT],
-            Some(Node::Inner(children)) => {
+            Some(node @ (Node::Inner(children) | Node::Surface(children))) => {
                 out.nodes.push(GpuNode::default());
-                let refs = [
-                    out.flatten(&children[0], &builder, &order),
-                    out.flatten(&children[1], &builder, &order),
-                ];
+                let refs = out.flatten_children(node, children, &builder, &order);
                 out.nodes[0] = GpuNode::new(refs[0], refs[1]);
                 refs
             }
@@ -507,12 +508,16 @@ impl Builder<'_> {
         let pieces: Vec<GpuTriangle> = match self.input {
             Input::Triangles(all) => tiles
                 .iter()
-                .flat_map(|tile| {
-                    tile.exposed.iter().flat_map(|e| {
+                .enumerate()
+                .flat_map(|(k, tile)| {
+                    tile.exposed.iter().flat_map(move |e| {
                         let prim = order[e.input as usize];
                         e.part(&tile.frame, &all[prim as usize])
                             .into_iter()
-                            .map(move |t| GpuTriangle::new(t, prim))
+                            .map(move |t| GpuTriangle {
+                                flags: GpuTriangle::PART | (k as u32) << 1,
+                                ..GpuTriangle::new(t, prim)
+                            })
                     })
                 })
                 .collect(),
@@ -522,7 +527,7 @@ impl Builder<'_> {
         if pieces.is_empty() {
             return surface;
         }
-        Node::Inner(Box::new([surface, pieces_subtree(pieces)]))
+        Node::Surface(Box::new([surface, pieces_subtree(pieces)]))
     }
 
     /// The forced leaf of the points `order` (see [`Builder::forced_heightfield`]).
@@ -800,7 +805,7 @@ fn pieces_subtree(mut pieces: Vec<GpuTriangle>) -> Node {
 
 fn depth_of(node: &Node) -> u32 {
     match node {
-        Node::Inner(c) => 1 + depth_of(&c[0]).max(depth_of(&c[1])),
+        Node::Inner(c) | Node::Surface(c) => 1 + depth_of(&c[0]).max(depth_of(&c[1])),
         _ => 0,
     }
 }
@@ -812,18 +817,37 @@ struct Flattened {
     leaves: Vec<super::GpuHeightfield>,
     tiles: Vec<Tile>,
     triangle_leaves: u32,
+    /// The leaf of the first tile of the [`Node::Surface`] being flattened, which its parts'
+    /// flags count from.
+    surface_leaves: u32,
 }
 
 impl Flattened {
     /// Depth-first packing; inner boxes are the union of their children's boxes: a height-field
     /// leaf's is the box of its samples, dilated rim included (`Tile::surface_bounds`).
+    /// The two children of `node` (inner or [`Node::Surface`]), flattened in order; a
+    /// surface's parts name their tiles' leaves, which its first child has just numbered.
+    fn flatten_children(
+        &mut self,
+        node: &Node,
+        children: &[Node; 2],
+        b: &Builder,
+        order: &[u32],
+    ) -> [ChildRef; 2] {
+        let first_leaf = self.leaves.len() as u32;
+        let l = self.flatten(&children[0], b, order);
+        if matches!(node, Node::Surface(_)) {
+            self.surface_leaves = first_leaf;
+        }
+        [l, self.flatten(&children[1], b, order)]
+    }
+
     fn flatten(&mut self, node: &Node, b: &Builder, order: &[u32]) -> ChildRef {
         match node {
-            Node::Inner(children) => {
+            Node::Inner(children) | Node::Surface(children) => {
                 let index = self.nodes.len() as u32;
                 self.nodes.push(GpuNode::default());
-                let l = self.flatten(&children[0], b, order);
-                let r = self.flatten(&children[1], b, order);
+                let [l, r] = self.flatten_children(node, children, b, order);
                 self.nodes[index as usize] = GpuNode::new(l, r);
                 ChildRef {
                     bounds: l.bounds.union(r.bounds),
@@ -846,7 +870,14 @@ impl Flattened {
                 let bounds = pieces
                     .iter()
                     .fold(Aabb::EMPTY, |b, t| b.union(Aabb::from_points(t.vertices())));
-                self.triangles.extend_from_slice(pieces);
+                let base = self.surface_leaves;
+                self.triangles.extend(pieces.iter().map(|&t| match t.flags {
+                    0 => t,
+                    k => GpuTriangle {
+                        flags: GpuTriangle::PART | (base + (k >> 1)) << 1,
+                        ..t
+                    },
+                }));
                 self.triangle_leaves += 1;
                 ChildRef {
                     bounds,
@@ -982,6 +1013,29 @@ fn union(parent: &mut [u32], a: u32, b: u32) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every exact part names the height-field leaf it stands beside: it lies over that leaf's
+    /// tile (the cells it was cut to and their ring), and no other leaf's index is named.
+    #[test]
+    fn exact_parts_name_the_leaf_they_stand_beside() {
+        let scene = Scene::builtin("default").unwrap();
+        let r = Rbvh::build(&scene, &super::super::RbvhParams::quality(2).unwrap()).unwrap();
+        let mut parts = 0;
+        for t in &r.triangles {
+            let Some(leaf) = t.part_leaf() else { continue };
+            parts += 1;
+            let leaf = r.leaves[leaf as usize];
+            for q in t.vertices() {
+                let f = leaf.to_frame(q);
+                let (lo, hi) = (-1.5, [leaf.res_u as f32 + 1.5, leaf.res_v as f32 + 1.5]);
+                assert!(
+                    f.x >= lo && f.y >= lo && f.x <= hi[0] && f.y <= hi[1],
+                    "{f} in {leaf:?}"
+                );
+            }
+        }
+        assert!(parts > 50, "{parts} parts");
+    }
 
     /// Two triangles welded along a duplicated edge, and one apart, in one object.
     fn object(scene: &mut Scene, x: f32) {

@@ -464,6 +464,21 @@ impl Rbvh {
         if version < 6 {
             unmark(&nodes, &leaves, &mut atlas, bounds);
         }
+        if let Some((index, t)) = triangles.iter().enumerate().find(|(_, t)| {
+            let flags_ok = match t.part_leaf() {
+                Some(leaf) => (leaf as usize) < leaves.len(),
+                None => t.flags == 0,
+            };
+            !flags_ok || t.pad2 != 0
+        }) {
+            return Err(err(format!(
+                "triangle {index} has flags {:#x} and padding {:#x}: neither 0 nor an exact \
+                 part of one of the {} height-field leaves",
+                t.flags,
+                t.pad2,
+                leaves.len()
+            )));
+        }
         // A triangle's `prim` is its hit id: bit 31 marks height-field hits, and u32::MAX a miss.
         if let Some((index, t)) = triangles
             .iter()

@@ -4,6 +4,8 @@
 //! channel; triangle hits, of the exact BVH or an RBVH's triangle leaves, from the scene's
 //! material at the hit's barycentrics).
 
+use std::collections::HashMap;
+
 use glam::{Vec3, Vec4};
 use rayon::prelude::*;
 
@@ -33,13 +35,21 @@ impl Rbvh {
     /// The texel a height-field hit landed on: the hit point moved into the leaf's frame, and the
     /// sample nearest it (sample `i` sits at `s = i + ½`, so the nearest is `⌊s⌋`), falling back,
     /// when that sample is a hole, to the first present corner of the cell holding the point in the
-    /// order c00, c10, c01, c11 (the march picks the hit's normal the same way). `None` for misses,
-    /// triangle hits, and leaves or atlas indices out of range.
+    /// order c00, c10, c01, c11 (the march picks the hit's normal the same way). A hit on an
+    /// exact part beside a height field (`GpuTriangle::PART`) lands on that field's texel the
+    /// same way (found by a scan of the triangles; [`Rbvh::part_leaves`] maps them all at once).
+    /// `None` for misses, other triangle hits, and leaves or atlas indices out of range.
     pub fn locate(&self, ray: &Ray, hit: &Hit) -> Option<SurfaceLocation> {
-        if !hit.is_hit() || hit.id & LEAF_BIT == 0 {
+        if !hit.is_hit() {
             return None;
         }
-        let leaf_index = hit.id & !LEAF_BIT;
+        let leaf_index = if hit.id & LEAF_BIT != 0 {
+            hit.id & !LEAF_BIT
+        } else {
+            self.triangles
+                .iter()
+                .find_map(|t| (t.prim == hit.id).then(|| t.part_leaf()).flatten())?
+        };
         let leaf = self.leaves.get(leaf_index as usize)?;
         if leaf.res_u == 0 || leaf.res_v == 0 {
             return None;
@@ -69,6 +79,15 @@ impl Rbvh {
             j: j as u32,
             atlas_index,
         })
+    }
+
+    /// The height-field leaf each exact part stands beside (`GpuTriangle::PART`), by the part's
+    /// scene triangle index (a hit's `id`).
+    pub fn part_leaves(&self) -> HashMap<u32, u32> {
+        self.triangles
+            .iter()
+            .filter_map(|t| Some((t.prim, t.part_leaf()?)))
+            .collect()
     }
 
     /// Linear RGBA at a height-field hit, filtered bilinearly (in linear light) between the four
@@ -158,9 +177,10 @@ pub fn blank_colours(texels: &[Texel]) -> Vec<u32> {
 /// `rbvh` (the structure traced, if it was an RBVH) a colour channel — renders then stay
 /// exactly as they were without surface data. Hit ids: a coarse level-of-detail hit (`LEAF_BIT |
 /// LOD_BIT`) reads the colour of the column it hit in `lod` ([`Lod::colour_at`]); a height-field
-/// hit (`LEAF_BIT`) the RBVH's colours filtered at the hit ([`Rbvh::filtered_colour`]); any other
-/// hit is a scene triangle,
-/// coloured by its material at the hit point's barycentrics.
+/// hit (`LEAF_BIT`) the RBVH's colours filtered at the hit ([`Rbvh::filtered_colour`]), and so
+/// does a hit on an exact part beside a height field (its colours are the RBVH's surface data,
+/// painted strokes included); any other hit is a scene triangle, coloured by its material at the
+/// hit point's barycentrics.
 pub fn hit_albedo(
     scene: &Scene,
     rbvh: Option<&Rbvh>,
@@ -172,6 +192,7 @@ pub fn hit_albedo(
     if scene.surface.is_none() && channel.is_none() {
         return None;
     }
+    let parts = channel.map(Rbvh::part_leaves).unwrap_or_default();
     let albedo = rays
         .par_iter()
         .zip(hits)
@@ -186,6 +207,13 @@ pub fn hit_albedo(
                     .map(rgba::unpack)
             } else if hit.id & LEAF_BIT != 0 {
                 channel.and_then(|r| r.filtered_colour(ray, hit))
+            } else if let Some((r, &leaf)) = channel.zip(parts.get(&hit.id)) {
+                let beside = Hit {
+                    id: LEAF_BIT | leaf,
+                    ..*hit
+                };
+                r.filtered_colour(ray, &beside)
+                    .or_else(|| scene.colour_at(hit.id as usize, point))
             } else {
                 scene.colour_at(hit.id as usize, point)
             };

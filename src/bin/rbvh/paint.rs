@@ -96,10 +96,16 @@ pub fn run(a: Args) -> Result<()> {
             dabs.len()
         );
     }
-    // Triangle leaves (where height fields did not fit) have no texels to hold paint.
+    // Triangle leaves (where height fields did not fit) have no texels to hold paint; the exact
+    // parts beside a height field show its texels.
+    let parts = p
+        .structure
+        .rbvh()
+        .map(rbvh::rbvh::Rbvh::part_leaves)
+        .unwrap_or_default();
     let on_triangles = stroke_hits
         .iter()
-        .filter(|h| h.is_hit() && h.id & LEAF_BIT == 0)
+        .filter(|h| h.is_hit() && h.id & LEAF_BIT == 0 && !parts.contains_key(&h.id))
         .count();
     if on_triangles > 0 {
         eprintln!(
