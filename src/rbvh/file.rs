@@ -57,8 +57,9 @@
 //! node's grid (a finite origin, exponents in range, reserved bits zero; a version 1–4 node's
 //! boxes free of NaN), every node's children (inner: a node index, with count 0; triangle leaf: a range within `triangles`;
 //! height-field leaf: an index into `leaves`), every leaf's tile inside the atlas with finite
-//! frame and a non-negative height scale, and every triangle's scene index below 2³¹ (hit ids with
-//! bit 31 set are height-field hits, `u32::MAX` a miss). Every failure is an [`Error::Parse`]
+//! frame and a non-negative height scale, every triangle's scene index below 2³¹ (hit ids with
+//! bit 31 set are height-field hits, `u32::MAX` a miss), and its flags 0 or an exact part of one of
+//! the leaves (`GpuTriangle::PART`), its padding 0. Every failure is an [`Error::Parse`]
 //! naming the file.
 
 use std::io::Write;
