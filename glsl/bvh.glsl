@@ -64,7 +64,7 @@ struct BvhTriangle {
     vec3 v0;
     uint prim;
     vec3 v1;
-    uint flags; // GpuTriangle::PART or 0; not read by the tracers
+    uint flags; // GpuTriangle::PART | BARE? | leaf << 2, or 0; not read by the tracers
     vec3 v2;
     uint pad2;
 };

@@ -271,8 +271,9 @@ pub struct GpuTriangle {
     pub prim: u32,
     /// GLSL `v1`: second vertex, world space.
     pub v1: [f32; 3],
-    /// GLSL `flags`: `PART | leaf << 1` for an exact part beside height-field leaf `leaf`
-    /// ([`GpuTriangle::PART`]), else 0; the tracers ignore it (it pads `v1` to 16 bytes).
+    /// GLSL `flags`: `PART | leaf << 2` for an exact part beside height-field leaf `leaf`
+    /// ([`GpuTriangle::PART`]), with [`GpuTriangle::BARE`] too where it stands in for a bare
+    /// stretch of that field; else 0. The tracers ignore it (it pads `v1` to 16 bytes).
     pub flags: u32,
     /// GLSL `v2`: third vertex, world space; winding `v0, v1, v2` gives [`GpuTriangle::normal`].
     pub v2: [f32; 3],
@@ -284,17 +285,22 @@ const _: () = assert!(std::mem::size_of::<GpuTriangle>() == 48);
 impl GpuTriangle {
     /// The bit of [`GpuTriangle::flags`] that marks an RBVH's *exact part*: a leaf's own
     /// triangle (or its part) traced exactly beside the height field that leaves it uncovered
-    /// (`rbvh::raster::Exposed`), whose leaf index the bits above name. It is traced like any
-    /// triangle; its hits read that leaf's colours (`Rbvh::locate`), and level-of-detail grids
-    /// leave it out, since the height field beside it stands for that surface already and its
-    /// samples only widened their solid columns (an image-based-lighting render with level of
-    /// detail at bias −2 lost FLIP 0.0164 → 0.0186 when more parts came, and not without them).
+    /// (`rbvh::raster::Exposed`), whose leaf index the bits from bit 2 up name. It is traced like
+    /// any triangle, and its hits read that leaf's colours (`Rbvh::locate`).
     pub const PART: u32 = 1;
+
+    /// The bit of [`GpuTriangle::flags`] that marks an exact part over bare cells of its height
+    /// field (no cell triangle there): the only surface the leaf has there, which
+    /// level-of-detail grids sample. They leave the other parts out: the height field beside
+    /// them stands for that surface already, and their samples only widened the solid columns
+    /// (an image-based-lighting render with level of detail at bias −2 lost FLIP 0.0164 →
+    /// 0.0186 when more such parts came, and not without them).
+    pub const BARE: u32 = 2;
 
     /// The height-field leaf an exact part stands beside ([`GpuTriangle::PART`]); None for any
     /// other triangle.
     pub fn part_leaf(&self) -> Option<u32> {
-        (self.flags & Self::PART != 0).then_some(self.flags >> 1)
+        (self.flags & Self::PART != 0).then_some(self.flags >> 2)
     }
 
     /// Packs the vertices `[v0, v1, v2]` (winding kept) of scene triangle `prim`, padding zeroed.

@@ -213,7 +213,8 @@ impl Source {
 
     /// The leaf's surface samples: every sample of a height field (holes excepted) at its world
     /// position, or points spread over each triangle no further apart than a fine texel (but
-    /// for exact parts, [`GpuTriangle::PART`], whose height field stands for them).
+    /// for exact parts, [`GpuTriangle::PART`], whose height field stands for them; not those
+    /// over its bare cells).
     fn samples(&self, rbvh: &Rbvh) -> Vec<Sample> {
         match *self {
             Source::Heightfield(leaf) => heightfield_samples(rbvh, leaf),
@@ -225,14 +226,16 @@ impl Source {
 }
 
 /// The triangles of a triangle leaf that its grids sample, cut to the array (corrupt ranges give
-/// fewer or none): all but the exact parts ([`GpuTriangle::PART`]).
+/// fewer or none): all but the exact parts ([`GpuTriangle::PART`]) that do not stand in for bare
+/// cells ([`GpuTriangle::BARE`]).
 fn leaf_triangles(rbvh: &Rbvh, first: u32, count: u32) -> impl Iterator<Item = &GpuTriangle> {
     let first = first as usize;
     let end = first
         .saturating_add(count as usize)
         .min(rbvh.triangles.len());
     let all = rbvh.triangles.get(first..end).unwrap_or_default();
-    all.iter().filter(|t| t.flags & GpuTriangle::PART == 0)
+    all.iter()
+        .filter(|t| t.flags & GpuTriangle::PART == 0 || t.flags & GpuTriangle::BARE != 0)
 }
 
 fn heightfield_samples(rbvh: &Rbvh, leaf: u32) -> Vec<Sample> {
@@ -429,8 +432,8 @@ mod tests {
             .fold((0, 0), |(a, b), (c, d)| (a + c, b + d))
     }
 
-    /// The default scene's exact parts give its grids no samples: with them flagged as
-    /// ordinary triangles, the same grids hold more column words.
+    /// The default scene's exact parts, but for those over bare cells, give its grids no
+    /// samples: with them flagged as ordinary triangles, the same grids hold more column words.
     #[test]
     fn exact_parts_give_no_samples() {
         let mut rbvh = Rbvh::build(

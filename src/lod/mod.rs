@@ -19,7 +19,7 @@
 //!
 //! The data is built from a finished RBVH ([`Lod::build`]), not from the scene: it approximates the
 //! RBVH's own surface (height-field samples and triangle-leaf triangles, but for the exact parts
-//! beside height fields, `GpuTriangle::PART`, which the fields stand for), works for RBVHs loaded
+//! beside height fields that the fields stand for: `GpuTriangle::PART` without `BARE`), works for RBVHs loaded
 //! from files, and exists only when asked for — a trace without `--lod` allocates nothing.
 //!
 //! * [`cone`]: ray cones and the selection rule;

@@ -76,7 +76,7 @@ enum Node {
     Pieces(Vec<GpuTriangle>),
     /// A height field's tiles (first) and the exact parts beside them (second), flattened as an
     /// inner node: each part's flags name its tile by its place among them
-    /// (`GpuTriangle::PART | k << 1`) until flattening numbers the tiles' leaves.
+    /// (`GpuTriangle::PART | k << 2`) until flattening numbers the tiles' leaves.
     Surface(Box<[Node; 2]>),
 }
 
@@ -515,7 +515,9 @@ impl Builder<'_> {
                         e.part(&tile.frame, &all[prim as usize])
                             .into_iter()
                             .map(move |t| GpuTriangle {
-                                flags: GpuTriangle::PART | (k as u32) << 1,
+                                flags: GpuTriangle::PART
+                                    | if e.bare { GpuTriangle::BARE } else { 0 }
+                                    | (k as u32) << 2,
                                 ..GpuTriangle::new(t, prim)
                             })
                     })
@@ -823,8 +825,6 @@ struct Flattened {
 }
 
 impl Flattened {
-    /// Depth-first packing; inner boxes are the union of their children's boxes: a height-field
-    /// leaf's is the box of its samples, dilated rim included (`Tile::surface_bounds`).
     /// The two children of `node` (inner or [`Node::Surface`]), flattened in order; a
     /// surface's parts name their tiles' leaves, which its first child has just numbered.
     fn flatten_children(
@@ -842,6 +842,8 @@ impl Flattened {
         [l, self.flatten(&children[1], b, order)]
     }
 
+    /// Depth-first packing; inner boxes are the union of their children's boxes: a height-field
+    /// leaf's is the box of its samples, dilated rim included (`Tile::surface_bounds`).
     fn flatten(&mut self, node: &Node, b: &Builder, order: &[u32]) -> ChildRef {
         match node {
             Node::Inner(children) | Node::Surface(children) => {
@@ -873,8 +875,8 @@ impl Flattened {
                 let base = self.surface_leaves;
                 self.triangles.extend(pieces.iter().map(|&t| match t.flags {
                     0 => t,
-                    k => GpuTriangle {
-                        flags: GpuTriangle::PART | (base + (k >> 1)) << 1,
+                    f => GpuTriangle {
+                        flags: f & 3 | (base + (f >> 2)) << 2,
                         ..t
                     },
                 }));
@@ -1035,6 +1037,39 @@ mod tests {
             }
         }
         assert!(parts > 50, "{parts} parts");
+    }
+
+    /// A hit on an exact part lands on the leaf it stands beside, also where its scene triangle
+    /// left parts beside several leaves (a triangle crossing tiles of one surface: the default
+    /// scene at Q4 has such), not on the first leaf found for that triangle.
+    #[test]
+    fn a_hit_on_an_exact_part_lands_on_its_own_leaf() {
+        use crate::geom::{Hit, Ray};
+        let scene = Scene::builtin("default").unwrap();
+        let r = Rbvh::build(&scene, &super::super::RbvhParams::quality(4).unwrap()).unwrap();
+        let shared = r.part_leaves().values().filter(|l| l.len() > 1).count();
+        assert!(shared > 0, "no triangle with parts beside several leaves");
+        for t in r.triangles.iter().filter(|t| t.part_leaf().is_some()) {
+            let [a, b, c] = t.vertices();
+            let centre = (a + b + c) / 3.0;
+            let ray = Ray::new(centre + t.normal(), -t.normal(), 0.0, f32::INFINITY);
+            let hit = Hit {
+                t: 1.0,
+                normal: t.normal().to_array(),
+                id: t.prim,
+                reserved: [0; 3],
+            };
+            let loc = r.locate(&ray, &hit).expect("a part's hit has a texel");
+            let leaf = r.leaves[loc.leaf as usize];
+            let f = leaf.to_frame(ray.origin() + ray.dir() * hit.t);
+            let (lo, hi) = (-1.5, [leaf.res_u as f32 + 1.5, leaf.res_v as f32 + 1.5]);
+            assert!(
+                f.x >= lo && f.y >= lo && f.x <= hi[0] && f.y <= hi[1],
+                "part of {} at {centre}: {f} in leaf {}",
+                t.prim,
+                loc.leaf
+            );
+        }
     }
 
     /// Two triangles welded along a duplicated edge, and one apart, in one object.

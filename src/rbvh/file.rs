@@ -59,7 +59,9 @@
 //! height-field leaf: an index into `leaves`), every leaf's tile inside the atlas with finite
 //! frame and a non-negative height scale, every triangle's scene index below 2³¹ (hit ids with
 //! bit 31 set are height-field hits, `u32::MAX` a miss), and its flags 0 or an exact part of one of
-//! the leaves (`GpuTriangle::PART`), its padding 0. Every failure is an [`Error::Parse`]
+//! the leaves (`GpuTriangle::PART`), its padding 0 (files written before parts carried flags load
+//! with theirs 0: level-of-detail grids then sample them, and their hits take the scene's
+//! material colours, as they did then). Every failure is an [`Error::Parse`]
 //! naming the file.
 
 use std::io::Write;

@@ -687,7 +687,9 @@ fn exposed_in(
             continue;
         }
         let flat_p = p.map(|q| q.truncate());
-        let uncovered = |&(i, j): &(i64, i64)| {
+        // Whether the triangle is uncovered over cell (i, j): None where the cell covers it,
+        // else whether the cell is bare there (no cell triangle over that part of it).
+        let uncovered = |(i, j): (i64, i64)| -> Option<bool> {
             // The corners in cycle order c00, c10, c11, c01 (counter-clockwise).
             let cycle = [(i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)];
             let k = |c: usize| (cycle[c % 4].1 * res_u + cycle[c % 4].0) as usize;
@@ -706,22 +708,22 @@ fn exposed_in(
             // Touching the cell along an edge or at a corner is not meeting it.
             let square = [0, 1, 2, 3].map(|c| at(c).truncate());
             if !convex_overlap(&square, &flat_p) {
-                return false;
+                return None;
             }
             // Two holes or more leave the whole cell bare; one, the half on its side.
             let lone = match (0..4).filter(|&c| hole(c)).count() {
                 0 => None,
                 1 => (0..4).find(|&c| hole(c)),
-                _ => return true,
+                _ => return Some(true),
             };
-            if steep_cell && faces_away {
-                return true;
-            }
             if let Some(h) = lone {
                 let bare = [at(h + 3), at(h), at(h + 1)].map(|q| q.truncate());
                 if convex_overlap(&bare, &flat_p) {
-                    return true;
+                    return Some(true);
                 }
+            }
+            if steep_cell && faces_away {
+                return Some(false);
             }
             let (rise, sink) = if (0..4).all(|c| hole(c) || sampled[k(c)]) {
                 (
@@ -744,18 +746,23 @@ fn exposed_in(
                     &three
                 }
             };
-            surface.iter().any(|cell| {
+            let off = surface.iter().any(|cell| {
                 clip(&p, cell).iter().any(|q| {
                     let above = q.z - plane_height(cell, q.truncate());
                     above > rise || -above > sink
                 })
-            })
+            });
+            off.then_some(false)
         };
-        let cells = cell_boxes(cells_met(&p, res_u, res_v).filter(uncovered));
+        let found: Vec<((i64, i64), bool)> = cells_met(&p, res_u, res_v)
+            .filter_map(|c| Some((c, uncovered(c)?)))
+            .collect();
+        let cells = cell_boxes(found.iter().map(|&(c, _)| c));
         if !cells.is_empty() {
             out.push(Exposed {
                 input: input as u32,
                 cells,
+                bare: found.iter().any(|&(_, bare)| bare),
             });
         }
     }
@@ -817,6 +824,9 @@ pub struct Exposed {
     /// `[i0, j0, i1, j1]`: one or more, sorted, more than [`BOX_GAP_CELLS`] apart along u or v
     /// ([`cell_boxes`]).
     pub cells: Vec<[i64; 4]>,
+    /// Whether some of those cells are bare where it meets them (no cell triangle over it):
+    /// there its part is the only surface the leaf has.
+    pub bare: bool,
 }
 
 impl Exposed {
@@ -1508,7 +1518,8 @@ pub(super) mod tests {
             tile.exposed,
             [Exposed {
                 input: 0,
-                cells: vec![[3, 3, 3, 3]]
+                cells: vec![[3, 3, 3, 3]],
+                bare: true,
             }]
         );
         let open = rasterize(&tri, &frame, 0.01, None, None, &[true]).unwrap();
@@ -1553,6 +1564,7 @@ pub(super) mod tests {
         let at_start = Exposed {
             input: 0,
             cells: vec![[1, 1, 2, 2]],
+            bare: true,
         };
         let pieces = at_start.part(&frame, &long);
         assert!(!pieces.is_empty() && pieces.len() <= 5, "{pieces:?}");
@@ -1578,6 +1590,7 @@ pub(super) mod tests {
         let inside = Exposed {
             input: 0,
             cells: vec![[0, 0, 13, 3]],
+            bare: true,
         };
         assert_eq!(inside.part(&frame, &long), [long]);
     }
@@ -1629,6 +1642,7 @@ pub(super) mod tests {
         let long = [p(1.0, 1.0), p(14.0, 2.0), p(1.2, 3.0)];
         let found = exposed(&[long], &frame, &height, &source, &sampled);
         assert_eq!(found.len(), 1, "{found:?}");
+        assert!(found[0].bare, "the holes leave cells bare");
         let boxes = &found[0].cells;
         assert_eq!(boxes.len(), 2, "{boxes:?}");
         assert!(boxes[0][2] <= 3 && boxes[1][0] >= 11, "{boxes:?}");
@@ -1669,7 +1683,8 @@ pub(super) mod tests {
             exposed(&over(rise + 0.05), &frame, &height, &source, &sampled),
             [Exposed {
                 input: 0,
-                cells: vec![[1, 1, 1, 1]]
+                cells: vec![[1, 1, 1, 1]],
+                bare: false,
             }]
         );
         assert!(exposed(&over(rise - 0.05), &frame, &height, &source, &sampled).is_empty());
@@ -1699,7 +1714,8 @@ pub(super) mod tests {
             exposed(&over(rise + 0.05)),
             [Exposed {
                 input: 0,
-                cells: vec![[1, 1, 1, 1]]
+                cells: vec![[1, 1, 1, 1]],
+                bare: false,
             }]
         );
         assert!(exposed(&over(rise - 0.05)).is_empty());
@@ -1767,7 +1783,8 @@ pub(super) mod tests {
             exposed(&over(wall, rise + 0.05, true), &steep),
             [Exposed {
                 input: 0,
-                cells: vec![[1, 1, 1, 1]]
+                cells: vec![[1, 1, 1, 1]],
+                bare: false,
             }]
         );
         assert!(exposed(&over(wall, rise - 0.05, true), &steep).is_empty());

@@ -37,8 +37,9 @@ impl Rbvh {
     /// when that sample is a hole, to the first present corner of the cell holding the point in the
     /// order c00, c10, c01, c11 (the march picks the hit's normal the same way). A hit on an
     /// exact part beside a height field (`GpuTriangle::PART`) lands on that field's texel the
-    /// same way (found by a scan of the triangles; [`Rbvh::part_leaves`] maps them all at once).
-    /// `None` for misses, other triangle hits, and leaves or atlas indices out of range.
+    /// same way ([`Rbvh::leaf_beside`]; its leaves found by a scan of the triangles, which
+    /// [`Rbvh::part_leaves`] does for all parts at once). `None` for misses, other triangle
+    /// hits, and leaves or atlas indices out of range.
     pub fn locate(&self, ray: &Ray, hit: &Hit) -> Option<SurfaceLocation> {
         if !hit.is_hit() {
             return None;
@@ -46,9 +47,12 @@ impl Rbvh {
         let leaf_index = if hit.id & LEAF_BIT != 0 {
             hit.id & !LEAF_BIT
         } else {
-            self.triangles
+            let leaves = self
+                .triangles
                 .iter()
-                .find_map(|t| (t.prim == hit.id).then(|| t.part_leaf()).flatten())?
+                .filter(|t| t.prim == hit.id)
+                .filter_map(|t| t.part_leaf());
+            self.leaf_beside(leaves, ray.origin() + ray.dir() * hit.t)?
         };
         let leaf = self.leaves.get(leaf_index as usize)?;
         if leaf.res_u == 0 || leaf.res_v == 0 {
@@ -81,13 +85,39 @@ impl Rbvh {
         })
     }
 
-    /// The height-field leaf each exact part stands beside (`GpuTriangle::PART`), by the part's
-    /// scene triangle index (a hit's `id`).
-    pub fn part_leaves(&self) -> HashMap<u32, u32> {
-        self.triangles
-            .iter()
-            .filter_map(|t| Some((t.prim, t.part_leaf()?)))
-            .collect()
+    /// The height-field leaves that exact parts stand beside (`GpuTriangle::PART`), by the
+    /// parts' scene triangle index (a hit's `id`): more than one where a triangle crossing
+    /// several tiles of a surface left parts in each.
+    pub fn part_leaves(&self) -> HashMap<u32, Vec<u32>> {
+        let mut map: HashMap<u32, Vec<u32>> = HashMap::new();
+        for t in &self.triangles {
+            if let Some(leaf) = t.part_leaf() {
+                let leaves = map.entry(t.prim).or_default();
+                if !leaves.contains(&leaf) {
+                    leaves.push(leaf);
+                }
+            }
+        }
+        map
+    }
+
+    /// Of `leaves`, the one whose tile `point` lies over, or nearest to (in texels beyond its
+    /// samples), first among equals: the leaf an exact part's hit at `point` stands beside.
+    pub fn leaf_beside(&self, leaves: impl IntoIterator<Item = u32>, point: Vec3) -> Option<u32> {
+        let beyond = |index: u32| {
+            let leaf = self.leaves.get(index as usize)?;
+            let f = leaf.to_frame(point);
+            let (u, v) = (leaf.res_u as f32, leaf.res_v as f32);
+            Some((-f.x).max(f.x - u).max(-f.y).max(f.y - v).max(0.0))
+        };
+        leaves
+            .into_iter()
+            .filter_map(|l| Some((l, beyond(l)?)))
+            .fold(None, |best: Option<(u32, f32)>, (l, d)| match best {
+                Some((_, b)) if b <= d => best,
+                _ => Some((l, d)),
+            })
+            .map(|(l, _)| l)
     }
 
     /// Linear RGBA at a height-field hit, filtered bilinearly (in linear light) between the four
@@ -207,12 +237,15 @@ pub fn hit_albedo(
                     .map(rgba::unpack)
             } else if hit.id & LEAF_BIT != 0 {
                 channel.and_then(|r| r.filtered_colour(ray, hit))
-            } else if let Some((r, &leaf)) = channel.zip(parts.get(&hit.id)) {
-                let beside = Hit {
-                    id: LEAF_BIT | leaf,
-                    ..*hit
-                };
-                r.filtered_colour(ray, &beside)
+            } else if let Some((r, leaves)) = channel.zip(parts.get(&hit.id)) {
+                r.leaf_beside(leaves.iter().copied(), point)
+                    .and_then(|leaf| {
+                        let beside = Hit {
+                            id: LEAF_BIT | leaf,
+                            ..*hit
+                        };
+                        r.filtered_colour(ray, &beside)
+                    })
                     .or_else(|| scene.colour_at(hit.id as usize, point))
             } else {
                 scene.colour_at(hit.id as usize, point)
