@@ -876,7 +876,7 @@ impl Flattened {
                 self.triangles.extend(pieces.iter().map(|&t| match t.flags {
                     0 => t,
                     f => GpuTriangle {
-                        flags: f & 3 | (base + (f >> 2)) << 2,
+                        flags: f & (GpuTriangle::PART | GpuTriangle::BARE) | (base + (f >> 2)) << 2,
                         ..t
                     },
                 }));
@@ -1018,6 +1018,14 @@ mod tests {
 
     /// Every exact part names the height-field leaf it stands beside: it lies over that leaf's
     /// tile (the cells it was cut to and their ring), and no other leaf's index is named.
+    /// Whether `point` lies over `leaf`'s tile or the ring of cells around it, where its exact
+    /// parts are cut (a cell and a half past its outer samples).
+    fn over_tile(leaf: &super::super::GpuHeightfield, point: Vec3) -> bool {
+        let f = leaf.to_frame(point);
+        let (lo, hi) = (-1.5, [leaf.res_u as f32 + 1.5, leaf.res_v as f32 + 1.5]);
+        f.x >= lo && f.y >= lo && f.x <= hi[0] && f.y <= hi[1]
+    }
+
     #[test]
     fn exact_parts_name_the_leaf_they_stand_beside() {
         let scene = Scene::builtin("default").unwrap();
@@ -1028,12 +1036,7 @@ mod tests {
             parts += 1;
             let leaf = r.leaves[leaf as usize];
             for q in t.vertices() {
-                let f = leaf.to_frame(q);
-                let (lo, hi) = (-1.5, [leaf.res_u as f32 + 1.5, leaf.res_v as f32 + 1.5]);
-                assert!(
-                    f.x >= lo && f.y >= lo && f.x <= hi[0] && f.y <= hi[1],
-                    "{f} in {leaf:?}"
-                );
+                assert!(over_tile(&leaf, q), "{q} beside {leaf:?}");
             }
         }
         assert!(parts > 50, "{parts} parts");
@@ -1060,12 +1063,9 @@ mod tests {
                 reserved: [0; 3],
             };
             let loc = r.locate(&ray, &hit).expect("a part's hit has a texel");
-            let leaf = r.leaves[loc.leaf as usize];
-            let f = leaf.to_frame(ray.origin() + ray.dir() * hit.t);
-            let (lo, hi) = (-1.5, [leaf.res_u as f32 + 1.5, leaf.res_v as f32 + 1.5]);
             assert!(
-                f.x >= lo && f.y >= lo && f.x <= hi[0] && f.y <= hi[1],
-                "part of {} at {centre}: {f} in leaf {}",
+                over_tile(&r.leaves[loc.leaf as usize], centre),
+                "part of {} at {centre}: leaf {}",
                 t.prim,
                 loc.leaf
             );
