@@ -786,7 +786,8 @@ impl<'a> SceneBench<'a> {
 }
 
 /// `count` rays aimed at `rbvh`'s seams ([`Rbvh::seam_rays`]), traced by the CPU twins of the
-/// exact BVH and of `rbvh`, and how many leaked ([`crate::rbvh::seams::count_leaks`]);
+/// exact BVH and of `rbvh`, and how many leaked and passed through
+/// ([`crate::rbvh::seams::count_leaks`]);
 /// `closed` per scene triangle as [`closed_triangles`] gives it. None when there is nothing to
 /// aim at: no height-field leaf (all triangle leaves), or no
 /// triangle for the exact BVH to referee.
@@ -801,11 +802,13 @@ fn seam_leaks(
     if rays.is_empty() || exact.triangles.is_empty() {
         return None;
     }
-    let exact = crate::rbvh::seams::exact_entries(exact, &rays, rbvh.texel_size, closed);
+    let entries = crate::rbvh::seams::exact_entries(exact, &rays, rbvh.texel_size, closed);
     let approx = rbvh.trace_cpu(&rays, false);
+    let leaks = crate::rbvh::seams::count_leaks(exact, &rays, &entries, &approx, rbvh.texel_size);
     Some(SeamRecord {
         rays: rays.len() as u64,
-        leaks: crate::rbvh::seams::count_leaks(&exact, &approx, rbvh.texel_size) as u64,
+        leaks: leaks.leaks as u64,
+        through: leaks.through as u64,
     })
 }
 

@@ -186,13 +186,17 @@ pub struct Record {
 /// Rays aimed at an RBVH level's seams between leaves and how many leaked through the surface
 /// ([`crate::rbvh::seams`]: the exact BVH finds the ray entering the solid a texel or more from
 /// its origin and passing half a texel or more inside, and the RBVH finds nothing within two
-/// texels behind the entry).
+/// texels behind the entry), and how many of those passed through the solid (nothing within two
+/// texels behind the exit either).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 pub struct SeamRecord {
     /// Rays aimed at the leaves' rims.
     pub rays: u64,
     /// Of those, the ones that leaked.
     pub leaks: u64,
+    /// Of the leaks, the ones the RBVH did not meet before they left the solid: light through
+    /// a closed object for shadow and ambient-occlusion rays.
+    pub through: u64,
 }
 
 /// A trace pipeline and the driver's statistics of it ([`crate::gpu::ShaderStatistic`]): on a GPU
@@ -487,7 +491,11 @@ impl Record {
                     ..Traffic::default()
                 },
             }),
-            seams: Some(SeamRecord { rays: 0, leaks: 0 }),
+            seams: Some(SeamRecord {
+                rays: 0,
+                leaks: 0,
+                through: 0,
+            }),
         }
     }
 }

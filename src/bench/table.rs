@@ -9,7 +9,7 @@ use super::record::{BenchReport, Record};
 
 /// Columns after the scene's: header, width, and whether values are left-aligned (names) rather
 /// than right-aligned (numbers).
-const COLUMNS: [(&str, usize, bool); 14] = [
+const COLUMNS: [(&str, usize, bool); 15] = [
     ("method", 8, true),
     ("level", 7, true),
     ("ray type", 8, true),
@@ -23,6 +23,7 @@ const COLUMNS: [(&str, usize, bool); 14] = [
     ("PSNR", 6, false),
     ("FLIP", 6, false),
     ("leaks", 6, false),
+    ("through", 7, false),
     ("valid", 5, true),
 ];
 
@@ -82,7 +83,8 @@ pub fn table(report: &BenchReport) -> String {
         .map_or(String::new(), |s| {
             format!(
                 "; leaks: of {} rays aimed at each level's seams between leaves, those that \
-                 passed through the surface (rbvh::seams)",
+                 passed through the surface, through: those that passed through the solid \
+                 (rbvh::seams)",
                 s.rays
             )
         });
@@ -182,6 +184,7 @@ fn cells(r: &Record) -> [String; COLUMNS.len()] {
         num(e.and_then(|e| e.psnr_db), 1),
         num(e.and_then(|e| e.flip_mean), 3),
         r.seams.map_or_else(dash, |s| s.leaks.to_string()),
+        r.seams.map_or_else(dash, |s| s.through.to_string()),
         if r.valid { "yes" } else { "NO" }.into(),
     ]
 }

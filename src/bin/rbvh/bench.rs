@@ -70,7 +70,8 @@ pub struct Args {
     traffic: bool,
     /// Rays aimed at each RBVH level's seams between leaves (their rims and corners), traced by
     /// the CPU twins of the level and of the exact BVH: the `leaks` column counts those that
-    /// passed through the surface. 0: skip.
+    /// passed through the surface, `through` those of them that passed through the solid as
+    /// well (light through a closed object for shadow and AO rays). 0: skip.
     #[arg(long, default_value_t = 100_000)]
     seam_rays: usize,
     /// Block jumps in the RBVH march: on or off (default: off on CPU implementations such as
