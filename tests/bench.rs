@@ -85,7 +85,6 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
             let seams = r.seams.expect("a plain RBVH level's seam leaks");
             assert_eq!(seams.rays, 2000);
             assert!(seams.leaks < 20, "{seams:?}");
-            assert!(seams.through <= seams.leaks, "{seams:?}");
         }
         assert_eq!(exact.speedup_vs_exact, 1.0);
         assert_eq!(exact.memory_ratio_vs_exact, 1.0);

@@ -8,8 +8,8 @@ use rbvh::bvh::Bvh;
 use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{Context, Query, Tracer};
 use rbvh::rbvh::seams::{
-    closed_triangles, count_leaks, exact_entries, passes_deeper, Leaks, CLEARANCE_TEXELS,
-    DEPTH_TEXELS, LEAK_TEXELS,
+    closed_triangles, count_leaks, exact_entries, passes_deeper, Entry, Leaks, CHORD_POINTS,
+    CLEARANCE_TEXELS, DEPTH_TEXELS, LEAK_TEXELS,
 };
 use rbvh::rbvh::{Rbvh, RbvhParams};
 use rbvh::scene::Scene;
@@ -131,7 +131,7 @@ fn a_leak_passes_the_surface_by_two_texels_and_goes_through_when_it_passes_the_e
 /// normal, in at 8 and out through the bottom 4 further; leaving by a side instead, out where
 /// it crosses `x = 10`. A ray from inside, out through the top (a back face), is no entry; one
 /// into the open sheet has no exit. How deep they pass is probed ([`passes_deeper`]): 1 straight
-/// down, half the slab (the probes bound it within 5%), and 0.94 by the side, where the side
+/// down, half the slab (the probes bound it within 10%), and 0.94 by the side, where the side
 /// and the top close in (`chord · a · b / (a + b)` of the cosines with their normals, exact
 /// between two planes).
 #[test]
@@ -156,7 +156,16 @@ fn entries_exits_and_how_deep_rays_pass_between_them() {
     let e = entries[0].expect("hits the slab");
     assert!(near(e.t, 4.0) && near(e.exit, 6.0), "{e:?}");
     assert!(passes_deeper(&bvh, &straight, &e, 0.95, texel));
-    assert!(!passes_deeper(&bvh, &straight, &e, 1.05, texel));
+    assert!(!passes_deeper(&bvh, &straight, &e, 1.1, texel));
+    // A touch has no chord; a chord so long that half the points' spacing exceeds the depth
+    // asked counts unprobed.
+    let touch = Entry { t: 4.0, exit: 4.0 };
+    assert!(!passes_deeper(&bvh, &straight, &touch, 1e-6, texel));
+    let long = Entry {
+        t: 4.0,
+        exit: 4.0 + 2.0 * CHORD_POINTS as f32 + 1.0,
+    };
+    assert!(passes_deeper(&bvh, &straight, &long, 1.0, texel));
     let e = entries[1].expect("hits the slab");
     assert!(near(e.t, 8.0) && near(e.exit, 12.0), "{e:?}");
     let e = entries[2].expect("hits the slab");
@@ -168,7 +177,7 @@ fn entries_exits_and_how_deep_rays_pass_between_them() {
     let (a, b) = (0.5, tilt.sin());
     let depth = (exit - 8.0) * a * b / (a + b);
     assert!(passes_deeper(&bvh, &by_side, &e, 0.95 * depth, texel));
-    assert!(!passes_deeper(&bvh, &by_side, &e, 1.05 * depth, texel));
+    assert!(!passes_deeper(&bvh, &by_side, &e, 1.1 * depth, texel));
     let e = entries[4].expect("hits the sheet");
     assert!(near(e.t, 55.0) && e.exit == f32::INFINITY, "{e:?}");
     assert!(passes_deeper(&bvh, &open, &e, 1e6, texel));
@@ -251,17 +260,37 @@ fn no_seam_leaks_at_any_preset_on_closed_meshes() {
 #[test]
 fn no_light_through_the_default_scene_at_any_preset() {
     let scene = Scene::builtin("default").unwrap();
-    let bvh = Bvh::build(&scene).unwrap();
-    let closed = closed_triangles(&scene);
     for level in 0..5 {
-        let r = Rbvh::build(&scene, &q(level)).unwrap();
-        let rays = r.seam_rays(200_000, 7);
-        let exact = exact_entries(&bvh, &rays, r.texel_size, &closed);
-        let approx = r.trace_cpu(&rays, false);
-        let leaks = count_leaks(&bvh, &rays, &exact, &approx, r.texel_size);
-        println!("default Q{level}: {leaks:?} of {} seam rays", rays.len());
+        let leaks = seam_leaks_and_through(&scene, &q(level));
+        println!("default Q{level}: {leaks:?} of 200,000 seam rays");
         assert_eq!(leaks.through, 0, "default Q{level}: {leaks:?}");
     }
+}
+
+/// **No light through the cone seen nearly edge-on** (A⊥/A 0.01): of 200,000 seam rays, 5 pass
+/// its surface by more than two texels (10 per million with `rbvh bench`'s seed), but every one
+/// meets the RBVH before it leaves the cone.
+#[test]
+fn no_light_through_the_cone_at_the_edge_on_criterion() {
+    let scene = Scene::builtin("cone").unwrap();
+    let params = RbvhParams {
+        refinement: rbvh::rbvh::Refinement::ProjectedArea { min_ratio: 0.01 },
+        ..q(0)
+    };
+    let leaks = seam_leaks_and_through(&scene, &params);
+    println!("cone A/A 0.01: {leaks:?} of 200,000 seam rays");
+    assert_eq!(leaks.through, 0, "{leaks:?}");
+}
+
+/// [`Leaks`] of 200,000 rays aimed at the seams of `scene` built with `params` (seed 7),
+/// refereed by its exact BVH, told which of its objects are closed.
+fn seam_leaks_and_through(scene: &Scene, params: &RbvhParams) -> Leaks {
+    let bvh = Bvh::build(scene).unwrap();
+    let r = Rbvh::build(scene, params).unwrap();
+    let rays = r.seam_rays(200_000, 7);
+    let exact = exact_entries(&bvh, &rays, r.texel_size, &closed_triangles(scene));
+    let approx = r.trace_cpu(&rays, false);
+    count_leaks(&bvh, &rays, &exact, &approx, r.texel_size)
 }
 
 /// The presets at which any of 200,000 seam rays leak on `scene` (called `name`), each as a

@@ -57,13 +57,17 @@ pub const CLEARANCE_TEXELS: f32 = 1.0;
 /// cells that lay below a grazed bulge (docs/guarantees.md).
 pub const DEPTH_TEXELS: f32 = 0.5;
 
-/// How many directions [`passes_deeper`] probes from each point of a chord: 64 spread evenly
-/// over the sphere leave no direction more than about 18° from one, so the nearest surface
-/// found along them lies within 5% of the nearest surface (a plane) in any direction.
+/// How many directions [`passes_deeper`] probes from each point of a chord. Whatever their
+/// spread, the nearest surface they meet bounds the point's distance from the surface from
+/// above; how tightly depends on it: 64 spread evenly over the sphere leave no direction more
+/// than about 20° from one, so beside a plane the bound is within 6.5% of the distance (at a thin
+/// crest between two probes it may be looser, which counts more rays, never fewer).
 pub const PROBES: usize = 64;
 
-/// At most how many points of a chord [`passes_deeper`] probes from, a tenth of a texel
-/// apart where the chord is shorter than 25.6 texels.
+/// At most how many points of a chord [`passes_deeper`] probes from: they lie a tenth of a
+/// texel apart where the chord is shorter than 25.6 texels, further apart on longer ones (whose
+/// margin for the spacing grows with them: a chord longer than `2 · CHORD_POINTS` times the
+/// depth asked counts without a probe).
 pub const CHORD_POINTS: usize = 256;
 
 /// Where a seam ray enters the solid, by the exact BVH, and where it leaves it.
@@ -115,12 +119,15 @@ pub fn exact_entries(exact: &Bvh, rays: &[Ray], texel: f32, closed: &[bool]) -> 
 /// spread over the sphere: the nearest surface they meet bounds that point's distance from
 /// above, and the distance changes along the chord no faster than the chord, so where every
 /// point meets the surface within `depth` less half the points' spacing, the ray passes less
-/// deep. Exact up to the probes' spread, unlike an estimate from the faces it enters and leaves
-/// by (their planes bound a convex part, not a crease): a ray threading a thin fin's crest, 1.7
-/// texels of chord, estimated 0.59 texel deep by those planes, passes 0.34 deep (brute force
-/// over every triangle), and the probes bound it by 0.340. An open mesh's entry (no exit) passes
-/// deeper; a touch (no chord) does not.
+/// deep. A bound, tight up to the probes' spread ([`PROBES`]), where an estimate from the faces
+/// the ray enters and leaves by is exact between two planes and may fall either side elsewhere:
+/// a ray threading a thin fin's crest, 1.7 texels of chord, estimated 0.59 texel deep by those
+/// planes, passes 0.34 deep (brute force over every triangle); the probes find 0.340 at its
+/// deepest point, so with the margin of their spacing it passes at most 0.39 deep. An open
+/// mesh's entry (no exit) passes deeper; a touch (no chord) does not. `ray`'s direction must be
+/// of unit length (the margin is in `t`).
 pub fn passes_deeper(exact: &Bvh, ray: &Ray, entry: &Entry, depth: f32, texel: f32) -> bool {
+    debug_assert!((ray.dir().length() - 1.0).abs() < 1e-4, "{ray:?}");
     let chord = entry.exit - entry.t;
     if !chord.is_finite() {
         return true;
@@ -278,6 +285,8 @@ pub struct Leaks {
     /// Of those, the rays it lets through the solid: nothing before [`LEAK_TEXELS`] behind the
     /// exact exit either, so that a shadow or ambient-occlusion ray sees light through a closed
     /// object. The others meet the approximation of the far side (a primary ray's depth error).
+    /// The exit is the next surface of any object, and an open mesh's entry has none: there,
+    /// through means that the RBVH missed altogether.
     pub through: usize,
 }
 
