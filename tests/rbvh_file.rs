@@ -45,7 +45,7 @@ fn sample() -> Rbvh {
         GpuTriangle::new([Vec3::ZERO, Vec3::X, Vec3::Z], 4),
         // An exact part beside height-field leaf 1: its flags round-trip.
         GpuTriangle {
-            flags: GpuTriangle::PART | 1 << 2,
+            flags: GpuTriangle::part_flags(1, false),
             ..GpuTriangle::new([Vec3::ONE, Vec3::Y, -Vec3::Z], 9)
         },
     ];
@@ -422,7 +422,7 @@ fn inconsistent_contents_are_rejected_with_the_reason() {
     (r.atlas.pitch, r.atlas.rows) = (12, 6);
     check(r, "the atlas pitch is 12 texels, not a power of two");
     let mut r = sample();
-    r.triangles[1].flags = GpuTriangle::PART | 2 << 2;
+    r.triangles[1].flags = GpuTriangle::part_flags(2, false);
     check(
         r,
         "triangle 1 has flags 0x9 and padding 0x0: neither 0 nor an exact part of one of the 2",

@@ -297,6 +297,12 @@ impl GpuTriangle {
     /// 0.0186 when more such parts came, and not without them).
     pub const BARE: u32 = 2;
 
+    /// The flags of an exact part beside height-field leaf `leaf`, over bare cells of it or not:
+    /// `PART | BARE? | leaf << 2` (read back by [`GpuTriangle::part_leaf`]).
+    pub fn part_flags(leaf: u32, bare: bool) -> u32 {
+        Self::PART | if bare { Self::BARE } else { 0 } | leaf << 2
+    }
+
     /// The height-field leaf an exact part stands beside ([`GpuTriangle::PART`]); None for any
     /// other triangle.
     pub fn part_leaf(&self) -> Option<u32> {

@@ -76,7 +76,7 @@ enum Node {
     Pieces(Vec<GpuTriangle>),
     /// A height field's tiles (first) and the exact parts beside them (second), flattened as an
     /// inner node: each part's flags name its tile by its place among them
-    /// (`GpuTriangle::PART | k << 2`) until flattening numbers the tiles' leaves.
+    /// (`GpuTriangle::part_flags(k, …)`) until flattening numbers the tiles' leaves.
     Surface(Box<[Node; 2]>),
 }
 
@@ -515,9 +515,7 @@ impl Builder<'_> {
                         e.part(&tile.frame, &all[prim as usize])
                             .into_iter()
                             .map(move |t| GpuTriangle {
-                                flags: GpuTriangle::PART
-                                    | if e.bare { GpuTriangle::BARE } else { 0 }
-                                    | (k as u32) << 2,
+                                flags: GpuTriangle::part_flags(k as u32, e.bare),
                                 ..GpuTriangle::new(t, prim)
                             })
                     })
@@ -873,13 +871,17 @@ impl Flattened {
                     .iter()
                     .fold(Aabb::EMPTY, |b, t| b.union(Aabb::from_points(t.vertices())));
                 let base = self.surface_leaves;
-                self.triangles.extend(pieces.iter().map(|&t| match t.flags {
-                    0 => t,
-                    f => GpuTriangle {
-                        flags: f & (GpuTriangle::PART | GpuTriangle::BARE) | (base + (f >> 2)) << 2,
-                        ..t
-                    },
-                }));
+                self.triangles
+                    .extend(pieces.iter().map(|&t| match t.part_leaf() {
+                        None => t,
+                        Some(k) => GpuTriangle {
+                            flags: GpuTriangle::part_flags(
+                                base + k,
+                                t.flags & GpuTriangle::BARE != 0,
+                            ),
+                            ..t
+                        },
+                    }));
                 self.triangle_leaves += 1;
                 ChildRef {
                     bounds,
@@ -1016,8 +1018,6 @@ fn union(parent: &mut [u32], a: u32, b: u32) {
 mod tests {
     use super::*;
 
-    /// Every exact part names the height-field leaf it stands beside: it lies over that leaf's
-    /// tile (the cells it was cut to and their ring), and no other leaf's index is named.
     /// Whether `point` lies over `leaf`'s tile or the ring of cells around it, where its exact
     /// parts are cut (a cell and a half past its outer samples).
     fn over_tile(leaf: &super::super::GpuHeightfield, point: Vec3) -> bool {
@@ -1026,6 +1026,8 @@ mod tests {
         f.x >= lo && f.y >= lo && f.x <= hi[0] && f.y <= hi[1]
     }
 
+    /// Every exact part names the height-field leaf it stands beside: it lies over that leaf's
+    /// tile (the cells it was cut to and their ring), and no other leaf's index is named.
     #[test]
     fn exact_parts_name_the_leaf_they_stand_beside() {
         let scene = Scene::builtin("default").unwrap();
