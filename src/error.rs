@@ -101,6 +101,17 @@ pub enum Error {
         /// The layers' error messages, in the order they were reported.
         messages: Vec<String>,
     },
+    /// The device compiles pipelines but cannot allocate memory or run anything: RADV's "null
+    /// hardware" device, which Mesa offers (alone of its AMD devices) while `RADV_FORCE_FAMILY`
+    /// names a GPU family, for reading what AMD's compiler makes of the shaders
+    /// ([`crate::gpu::compile_every_pipeline`]).
+    #[error("{device} compiles pipelines but cannot run them, so it cannot {what}: it is RADV's null device, offered while RADV_FORCE_FAMILY is set; `rbvh shaders` reports what it compiles, and a device that runs is used when RADV_FORCE_FAMILY is unset or another device is named (--device, RBVH_DEVICE)")]
+    CompileOnly {
+        /// The device's name.
+        device: String,
+        /// What was asked of it.
+        what: String,
+    },
     /// A traversal was cut short on the GPU for some rays — its stack overflowed, or the device
     /// ended a shader loop early (lavapipe stops an invocation's loops after 65535 iterations) —
     /// so their hits are not trustworthy.

@@ -120,28 +120,57 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
         "threads",
         "date",
         "git",
+        "git_dirty",
+        "host",
         "version",
         "runs",
         "min_run_ms",
         "results",
         "shaders"
     ])));
+    // The host: what decides lavapipe's speed, read from this (Linux) machine.
+    assert!(keys(&json["host"]).is_superset(&set(&[
+        "cpu",
+        "cores",
+        "logical_cpus",
+        "threads_used",
+        "l2_bytes",
+        "l3_bytes",
+        "memory_bytes",
+        "os",
+        "virtualized",
+        "mesa",
+        "llvm"
+    ])));
+    if cfg!(target_os = "linux") {
+        assert!(json["host"]["memory_bytes"].as_u64().unwrap() > 0);
+        assert!(json["host"]["logical_cpus"].as_u64().unwrap() > 0);
+    }
+    if report.device.contains("llvmpipe") {
+        assert_eq!(report.host.threads_used, report.threads);
+        assert!(
+            report.host.mesa.is_some() && report.host.llvm.is_some(),
+            "{:?}",
+            report.host
+        );
+    }
     // One entry per trace pipeline, in the order first used; statistics where the driver gives them.
     let pipelines: Vec<(&str, Kind)> = report
         .shaders
         .iter()
-        .map(|s| (s.pipeline.as_str(), s.method))
+        .map(|s| (s.compiled.shader, s.method))
         .collect();
     assert_eq!(
         pipelines,
         [("trace_exact", Kind::Exact), ("trace_rbvh", Kind::Rbvh)]
     );
+    assert!(report.shaders.iter().all(|s| s.compiled.default_variant));
     assert_eq!(json["shaders"].as_array().unwrap().len(), 2);
     let listed = bench::shader_table(&report);
     for s in &report.shaders {
         assert_eq!(
-            s.statistics.is_empty(),
-            !listed.contains(&s.pipeline),
+            s.compiled.statistics.is_empty(),
+            !listed.contains(&s.compiled.pipeline),
             "{listed}"
         );
     }
@@ -224,7 +253,22 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
         assert_eq!(&row[0], report.device, "{row:?}");
         assert_eq!(&row[1], report.driver, "{row:?}");
         assert_eq!(&row[2], report.date, "{row:?}");
-        assert_eq!(&row[4], env!("CARGO_PKG_VERSION"), "{row:?}");
+        assert_eq!(
+            &row[column("version")],
+            env!("CARGO_PKG_VERSION"),
+            "{row:?}"
+        );
+        // Every row names its host, as the JSON does.
+        assert_eq!(
+            &row[column("host.cpu")],
+            report.host.cpu.clone().unwrap_or_default(),
+            "{row:?}"
+        );
+        assert_eq!(
+            &row[column("host.mesa")],
+            report.host.mesa.clone().unwrap_or_default(),
+            "{row:?}"
+        );
         assert_eq!(&row[column("scene")], record.scene, "{row:?}");
         // The CSV is the JSON record flattened: the same values under dotted keys.
         for (key, value) in [
@@ -283,11 +327,18 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
     let table = bench::table(&report);
     assert_eq!(
         table.lines().count(),
-        1 + report.results.len() + 1,
+        1 + 1 + report.results.len() + 1,
         "{table}"
     );
+    // First where it was measured: the host, the device and the commit.
+    let host = table.lines().next().unwrap();
+    assert_eq!(host, bench::host_line(&report).trim_end());
+    assert!(host.contains(&report.device), "{host}");
+    if let Some(cpu) = &report.host.cpu {
+        assert!(host.starts_with(&format!("host: {cpu}")), "{host}");
+    }
     // The leaks column, a count on the RBVH lines, and the footnote saying of how many rays.
-    assert!(table.lines().next().unwrap().contains("leaks"), "{table}");
+    assert!(table.lines().nth(1).unwrap().contains("leaks"), "{table}");
     assert!(table.contains("leaks: of 2000 rays"), "{table}");
 }
 
@@ -617,7 +668,10 @@ fn the_cli_writes_json_and_csv_and_rejects_unknown_ray_types() {
         String::from_utf8_lossy(&out.stderr)
     );
     let table = String::from_utf8_lossy(&out.stdout);
-    assert!(table.starts_with("scene"), "{table}");
+    // A one-line host header, then the table.
+    let (host, rest) = table.split_once('\n').unwrap();
+    assert!(host.starts_with("host: "), "{table}");
+    assert!(rest.starts_with("scene"), "{table}");
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(report["results"].as_array().unwrap().len(), 2 * 2 * 2);

@@ -982,3 +982,91 @@ fn point_clouds_render_build_and_bench() {
         &["sphere.ply", "must cover the mesh"],
     );
 }
+
+/// `rbvh shaders` compiles every pipeline on the default device and writes them, with the host,
+/// as JSON; `--wave32` needs `--amd`, and `--amd` refuses a family name that is no name.
+#[test]
+fn shaders_lists_every_pipeline_with_its_host() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("shaders.json");
+    let out = rbvh(&["shaders", "--json", arg(&json)]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(table.starts_with("host: "), "{table}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let pipelines = report["pipelines"].as_array().unwrap();
+    for p in pipelines {
+        assert!(table.contains(p["pipeline"].as_str().unwrap()), "{table}");
+    }
+    for shader in ["trace_exact", "trace_rbvh", "trace_rbvh_lod", "paint"] {
+        assert!(pipelines.iter().any(|p| p["shader"] == shader), "{shader}");
+    }
+    assert!(report["host"].is_object() && report["date"].is_string());
+    assert_eq!(report["compile_only"], false);
+    let wave32 = rbvh(&["shaders", "--wave32"]);
+    assert!(!wave32.status.success());
+    let bad = rbvh(&["shaders", "--amd", "navi 21"]);
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("navi21"));
+}
+
+/// `rbvh tables` writes a block's table from its results file; `--check` fails on a table edited
+/// by hand, and on a table of figures outside any block.
+#[test]
+fn tables_are_written_from_results_files_and_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    std::fs::create_dir_all(root.join("docs/results")).unwrap();
+    std::fs::write(
+        root.join("docs/results/t.json"),
+        r#"{"transcribed": {"source": "a test", "commit": "abc1234", "host": "a host",
+            "device": "a device"}, "columns": ["level", "MB"], "align": ["l", "r"],
+            "rows": [["Q0", "1.5"]]}"#,
+    )
+    .unwrap();
+    let doc = root.join("docs/x.md");
+    std::fs::write(
+        &doc,
+        "# x\n\n<!-- table docs/results/t.json -->\n<!-- /table -->\n",
+    )
+    .unwrap();
+    let check = |root: &Path| rbvh(&["tables", "--check", "--root", arg(root)]);
+    assert!(
+        !check(root).status.success(),
+        "an empty block is not its table"
+    );
+    let out = rbvh(&["tables", "--root", arg(root)]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let written = std::fs::read_to_string(&doc).unwrap();
+    assert!(
+        written.contains("| level | MB |\n|---|---:|\n| Q0 | 1.5 |\n"),
+        "{written}"
+    );
+    assert!(
+        written.contains("measured at abc1234; host: a host; device: a device"),
+        "{written}"
+    );
+    assert!(written.contains("[results](results/t.json)"), "{written}");
+    assert!(check(root).status.success());
+    std::fs::write(&doc, written.replace("| Q0 | 1.5 |", "| Q0 | 1.4 |")).unwrap();
+    let edited = check(root);
+    assert!(!edited.status.success());
+    assert!(String::from_utf8_lossy(&edited.stderr).contains("docs/x.md:3"));
+    std::fs::write(
+        &doc,
+        format!("{written}\n| a | b |\n|---|---|\n| 1 | 2 |\n"),
+    )
+    .unwrap();
+    let typed = check(root);
+    assert!(!typed.status.success());
+    assert!(String::from_utf8_lossy(&typed.stderr).contains("typed by hand"));
+}

@@ -86,12 +86,15 @@ pub fn run_observed(
             Context::new(options)?
         }
     };
+    let threads = provenance::lavapipe_threads(&ctx);
     let mut report = BenchReport {
         device: ctx.device_name().to_string(),
         driver: ctx.driver().to_string(),
-        threads: provenance::lavapipe_threads(&ctx),
+        threads,
         date,
         git: provenance::git_commit(),
+        git_dirty: provenance::git_dirty(),
+        host: provenance::Host::current(ctx.driver(), threads),
         version: env!("CARGO_PKG_VERSION").to_string(),
         runs: config.runs,
         min_run_ms: config.min_run_ms,
@@ -131,12 +134,15 @@ pub fn run_observed(
         }
         let mut bench = SceneBench::new(&ctx, config, scene, observe, progress)?;
         for c in &bench.candidates {
-            let (pipeline, statistics) = c.tracer.shader_statistics();
-            if !report.shaders.iter().any(|s| s.pipeline == pipeline) {
+            let compiled = c.tracer.compiled();
+            if !report
+                .shaders
+                .iter()
+                .any(|s| s.compiled.pipeline == compiled.pipeline)
+            {
                 report.shaders.push(ShaderRecord {
-                    pipeline: pipeline.to_string(),
                     method: c.method(),
-                    statistics: statistics.to_vec(),
+                    compiled,
                 });
             }
         }

@@ -28,10 +28,12 @@
 
 pub mod error_image;
 pub mod harness;
+pub mod markdown;
 pub mod metrics;
 pub mod plot;
 pub mod provenance;
 pub mod record;
+pub mod shaders;
 pub mod table;
 pub mod traffic;
 pub mod validate;
@@ -41,7 +43,8 @@ use std::path::PathBuf;
 pub use crate::rays::RayType;
 pub use harness::{run, run_observed, Event};
 pub use record::{write_csv, write_json, BenchReport, Record, ShaderRecord};
-pub use table::{shader_table, table, work_table};
+pub use shaders::{shader_report, shader_report_table, write_shader_json, ShaderReport};
+pub use table::{host_line, shader_table, table, work_table};
 
 use crate::gpu::Context;
 #[cfg(feature = "loaded")]

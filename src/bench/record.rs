@@ -10,6 +10,8 @@
 //! | `threads` | int \| null | lavapipe's worker threads (`LP_NUM_THREADS`, else one per CPU); null on other devices |
 //! | `date` | string | start of the run, UTC, ISO 8601 (`2025-01-31T12:00:00Z`) |
 //! | `git` | string \| null | `git rev-parse HEAD` in the working directory, null outside a repository |
+//! | `git_dirty` | bool \| null | whether tracked files differed from that commit (uncommitted code was measured) |
+//! | `host` | object | the machine ([`Host`]): `cpu`, `cores`, `logical_cpus`, `threads_used` (the driver's worker threads: lavapipe's), `l2_bytes`, `l3_bytes`, `memory_bytes`, `os`, `virtualized`, `mesa`, `llvm`; null where the system does not tell |
 //! | `version` | string | this crate's version |
 //! | `runs` | int | timed runs per record, after one warm-up |
 //! | `min_run_ms` | number | shortest timed run asked for, in milliseconds (records' `passes`) |
@@ -17,7 +19,7 @@
 //! | `ao_radius` | number | AO ray length, fraction of the scene diagonal |
 //! | `seed` | int | seed of the secondary rays' directions |
 //! | `results` | array | the records below |
-//! | `shaders` | array | each trace pipeline used, once: `pipeline` (name), `method`, `statistics` (`name`, `value` pairs in the driver's words: registers, spills, instructions; empty where the device does not report them) |
+//! | `shaders` | array | each trace pipeline used, once: `method`, then as `rbvh shaders` reports every pipeline ([`CompiledPipeline`]): `pipeline` (the shader and its variant), `shader`, `reach`, `specialization`, `default_variant`, `statistics` (`name`, `value` pairs in the driver's words: registers, spills, code size; empty where the device does not report them) |
 //!
 //! Each record:
 //!
@@ -65,7 +67,8 @@
 //! # CSV (`--csv`)
 //!
 //! RFC 4180: a header line ([`csv_columns`]), then one line per record: first the run's provenance
-//! (`device`, `driver`, `date`, `git`, `version`), so that rows from several runs can be pasted
+//! (`device`, `driver`, `date`, `git`, `git_dirty`, `version`, then the host's fields as `host.cpu`,
+//! `host.l3_bytes`, …), so that rows from several runs can be pasted
 //! into one table, then the record's fields flattened (`params.*`, `mrays_per_s.*`,
 //! `memory_bytes.*`, `error.*`, `counters.*` and the traffic figures without their prefix, except
 //! `mrays_median`/`mrays_min`/`mrays_max`, `*_bytes`, `lod_*`, `twin_*` and one
@@ -80,8 +83,9 @@ use serde::Serialize;
 
 use crate::structure::Kind;
 
+use super::provenance::Host;
 use super::traffic::{CacheTraffic, Traffic, CACHE_SIZES};
-use crate::gpu::ShaderStatistic;
+use crate::gpu::CompiledPipeline;
 use crate::io::write_atomically;
 use crate::lod::LodParams;
 use crate::probe::MeanCounters;
@@ -102,6 +106,11 @@ pub struct BenchReport {
     pub date: String,
     /// `git rev-parse HEAD` in the working directory; None outside a repository.
     pub git: Option<String>,
+    /// Whether tracked files differed from `git` (uncommitted code was measured); None outside a
+    /// repository.
+    pub git_dirty: Option<bool>,
+    /// The machine the run measured on.
+    pub host: Host,
     /// This crate's version.
     pub version: String,
     /// Timed runs per record, after one warm-up
@@ -199,17 +208,18 @@ pub struct SeamRecord {
     pub through: u64,
 }
 
-/// A trace pipeline and the driver's statistics of it ([`crate::gpu::ShaderStatistic`]): on a GPU
-/// its registers bound how many rays run at once, which no per-ray counter shows.
+/// A trace pipeline the run used and what the driver compiled it into
+/// ([`crate::gpu::CompiledPipeline`], as [`crate::gpu::compile_every_pipeline`] and `rbvh
+/// shaders` report every pipeline): on a GPU its registers bound how many rays run at once,
+/// which no per-ray counter shows.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ShaderRecord {
-    /// The pipeline's name (the shader and its variant).
-    pub pipeline: String,
     /// The first method traced with it.
     pub method: Kind,
-    /// In the driver's order and words; empty where the device does not report them
-    /// (`VK_KHR_pipeline_executable_properties`).
-    pub statistics: Vec<ShaderStatistic>,
+    /// The pipeline, its variant and the driver's statistics (empty where the device does not
+    /// report them, `VK_KHR_pipeline_executable_properties`).
+    #[serde(flatten)]
+    pub compiled: CompiledPipeline,
 }
 
 /// What the CPU twin measured on a record's rays ([`super::BenchConfig::traffic`]).
@@ -396,17 +406,64 @@ pub fn write_json(path: &Path, report: &BenchReport) -> Result<()> {
     })
 }
 
-/// The provenance columns that lead every CSV row.
-const PROVENANCE: [&str; 5] = ["device", "driver", "date", "git", "version"];
+/// The run's provenance that leads every CSV row, as (column, cell): the device, driver, date,
+/// commit and version, then the host's fields (`host.cpu`, …).
+fn provenance(report: &BenchReport) -> Result<Vec<(String, String)>> {
+    let mut cells = vec![
+        ("device".to_string(), report.device.clone()),
+        ("driver".to_string(), report.driver.clone()),
+        ("date".to_string(), report.date.clone()),
+        ("git".to_string(), report.git.clone().unwrap_or_default()),
+        (
+            "git_dirty".to_string(),
+            report.git_dirty.map(|d| d.to_string()).unwrap_or_default(),
+        ),
+        ("version".to_string(), report.version.clone()),
+    ];
+    let host = serde_json::to_value(&report.host)
+        .map_err(|e| Error::param("bench host", format!("cannot serialize it: {e}")))?;
+    let mut flat = Vec::new();
+    flatten("host", &host, &mut flat);
+    cells.extend(flat.into_iter().map(|(k, v)| (k, cell(&v))));
+    Ok(cells)
+}
 
 /// The CSV header: the provenance, then the dotted key of every value of a record's JSON with
 /// every section present (see the module docs), in the record's field order.
 pub fn csv_columns() -> Result<Vec<String>> {
-    let mut columns: Vec<String> = PROVENANCE.iter().map(|c| c.to_string()).collect();
+    let mut columns: Vec<String> = provenance(&BenchReport::empty())?
+        .into_iter()
+        .map(|(c, _)| c)
+        .collect();
     let mut cells = Vec::new();
     flatten("", &json_of(&Record::with_every_section())?, &mut cells);
     columns.extend(cells.into_iter().map(|(key, _)| key));
     Ok(columns)
+}
+
+impl BenchReport {
+    /// A report of no run, whose provenance has every column (the CSV header's).
+    fn empty() -> BenchReport {
+        BenchReport {
+            device: String::new(),
+            driver: String::new(),
+            threads: None,
+            date: String::new(),
+            git: None,
+            git_dirty: None,
+            host: Host::default(),
+            version: String::new(),
+            runs: 0,
+            min_run_ms: 0.0,
+            width: 0,
+            height: 0,
+            ao_radius: 0.0,
+            seed: 0,
+            results: Vec::new(),
+            shaders: Vec::new(),
+            written: Vec::new(),
+        }
+    }
 }
 
 /// A record's JSON value: the one serialization both files are written from.
@@ -503,13 +560,8 @@ impl Record {
 /// Writes `report`'s records as CSV (see the module docs), atomically.
 pub fn write_csv(path: &Path, report: &BenchReport) -> Result<()> {
     let columns = csv_columns()?;
-    let provenance = [
-        report.device.clone(),
-        report.driver.clone(),
-        report.date.clone(),
-        report.git.clone().unwrap_or_default(),
-        report.version.clone(),
-    ];
+    let provenance: Vec<String> = provenance(report)?.into_iter().map(|(_, c)| c).collect();
+    let lead = provenance.len();
     let rows = report
         .results
         .iter()
@@ -522,7 +574,7 @@ pub fn write_csv(path: &Path, report: &BenchReport) -> Result<()> {
                 .iter()
                 .cloned()
                 .chain(
-                    columns[PROVENANCE.len()..]
+                    columns[lead..]
                         .iter()
                         .map(|c| by_key.get(c).map(cell).unwrap_or_default()),
                 )
@@ -576,6 +628,10 @@ mod tests {
         let columns = csv_columns().unwrap();
         for c in [
             "device",
+            "git_dirty",
+            "host.cpu",
+            "host.l3_bytes",
+            "host.llvm",
             "scene",
             "mrays_per_s.median",
             "params.texels",

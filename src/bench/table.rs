@@ -57,7 +57,25 @@ fn pad(text: &str, width: usize, left: bool) -> String {
     }
 }
 
-/// The table, with a header line and a footnote on units.
+/// Where the run measured, on one line: the host ([`super::provenance::Host::summary`]), the device
+/// and driver, the commit (marked `+ uncommitted changes` where tracked files differed) and the
+/// date. Every table of a run is printed under it, so that a copied table says where it was taken.
+pub fn host_line(report: &BenchReport) -> String {
+    let commit = match (&report.git, report.git_dirty) {
+        (Some(c), Some(true)) => format!("{} + uncommitted changes", &c[..c.len().min(10)]),
+        (Some(c), _) => c[..c.len().min(10)].to_string(),
+        (None, _) => "no commit".into(),
+    };
+    format!(
+        "host: {}; device: {} ({}); {commit}; {}\n",
+        report.host.summary(),
+        report.device,
+        report.driver,
+        report.date
+    )
+}
+
+/// The table, under the [`host_line`], with a footnote on units.
 pub fn table(report: &BenchReport) -> String {
     let sources: BTreeSet<&str> = report
         .results
@@ -95,7 +113,7 @@ pub fn table(report: &BenchReport) -> String {
         report.runs,
         sources.into_iter().collect::<Vec<_>>().join(" and ")
     );
-    render(report, &COLUMNS, cells, &footnote)
+    host_line(report) + &render(report, &COLUMNS, cells, &footnote)
 }
 
 /// Where each record's work went: the device's per-ray counters and, where the run modelled it
@@ -115,11 +133,20 @@ pub fn work_table(report: &BenchReport) -> String {
 /// occupancy is decided), one line per pipeline; empty where the device reports nothing.
 pub fn shader_table(report: &BenchReport) -> String {
     let mut out = String::new();
-    for shader in report.shaders.iter().filter(|s| !s.statistics.is_empty()) {
-        let statistics: Vec<String> = shader.statistics.iter().map(|s| s.to_string()).collect();
+    for shader in report
+        .shaders
+        .iter()
+        .filter(|s| !s.compiled.statistics.is_empty())
+    {
+        let statistics: Vec<String> = shader
+            .compiled
+            .statistics
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
         out += &format!(
             "{} ({}): {}\n",
-            shader.pipeline,
+            shader.compiled.pipeline,
             shader.method.name(),
             statistics.join(", ")
         );

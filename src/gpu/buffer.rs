@@ -103,6 +103,7 @@ impl Context {
         usage: vk::BufferUsageFlags,
         location: MemoryLocation,
     ) -> Result<Buffer> {
+        self.check_runnable(&format!("allocate {name}"))?;
         let size = size.max(4);
         let device = &self.shared.device;
         let usage = if self.shared.get_address.is_some()

@@ -93,6 +93,10 @@ pub struct DeviceLimits {
     /// every branch of a divergent `if` and every loop at least once, whether or not a lane needs
     /// it, so the tracers leave the march's block jumps out there ([`crate::gpu::Tracer`]).
     pub cpu: bool,
+    /// Whether the device only compiles: RADV's null device ([`Error::CompileOnly`]), which is
+    /// never chosen unless named. Pipelines are made as anywhere else, with their statistics;
+    /// buffers and submissions fail with that error.
+    pub compile_only: bool,
     /// Whether this context asked the driver for its pipelines' statistics
     /// (`VK_KHR_pipeline_executable_properties`, enabled where the device offers it; never for an
     /// embedded context): see [`crate::gpu::ComputePipeline::statistics`].
@@ -366,6 +370,18 @@ impl Context {
         }
     }
 
+    /// Fails with [`Error::CompileOnly`], saying it cannot do `what`, on a device that only
+    /// compiles ([`DeviceLimits::compile_only`]).
+    pub fn check_runnable(&self, what: &str) -> Result<()> {
+        if self.shared.limits.compile_only {
+            return Err(Error::CompileOnly {
+                device: self.shared.device_name.clone(),
+                what: what.to_string(),
+            });
+        }
+        Ok(())
+    }
+
     /// Fails with [`Error::DeviceLimit`] when a storage buffer of `bytes` exceeds the device's
     /// `maxStorageBufferRange` (lavapipe does not enforce it; real GPUs and validation do).
     pub fn check_storage_range(&self, resource: &str, bytes: u64, hint: &str) -> Result<()> {
@@ -572,6 +588,7 @@ fn describe(
         timestamp_period_ns: (timestamp_bits > 0 && props.limits.timestamp_period > 0.0)
             .then_some(props.limits.timestamp_period as f64),
         cpu: props.device_type == vk::PhysicalDeviceType::CPU,
+        compile_only: is_null_device(instance, pd),
         pipeline_statistics: false,
     };
     (limits, device_name, driver)
@@ -587,6 +604,26 @@ pub(crate) fn offers_extension(
         .unwrap_or_default()
         .iter()
         .any(|e| e.extension_name_as_c_str() == Ok(name))
+}
+
+/// The driver's `VkDriverId`, where the device reports it (Vulkan 1.2 or
+/// `VK_KHR_driver_properties`).
+fn driver_id(instance: &ash::Instance, pd: vk::PhysicalDevice) -> Option<vk::DriverId> {
+    if !offers_extension(instance, pd, ash::khr::driver_properties::NAME) {
+        return None;
+    }
+    let mut driver = vk::PhysicalDeviceDriverProperties::default();
+    let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut driver);
+    unsafe { instance.get_physical_device_properties2(pd, &mut props2) };
+    Some(driver.driver_id)
+}
+
+/// Whether `pd` is RADV's null device: while `RADV_FORCE_FAMILY` is set, Mesa's RADV enumerates
+/// that device alone ("null hardware" of the family named, with AMD's real compiler behind it)
+/// in place of any AMD GPU, so a RADV device then is the null one.
+fn is_null_device(instance: &ash::Instance, pd: vk::PhysicalDevice) -> bool {
+    std::env::var_os("RADV_FORCE_FAMILY").is_some_and(|f| !f.is_empty())
+        && driver_id(instance, pd) == Some(vk::DriverId::MESA_RADV)
 }
 
 fn driver_string(
@@ -684,7 +721,7 @@ fn pick_device(
             continue;
         }
         if let Some(family) = family {
-            candidates.push((rank, name, pd, family));
+            candidates.push((rank, name, pd, family, is_null_device(instance, pd)));
         }
     }
     let names = || {
@@ -712,8 +749,16 @@ fn pick_device(
                 ))
             });
     }
-    candidates.sort_by_key(|c| c.0);
-    Ok((candidates[0].2, candidates[0].3))
+    // A device that only compiles is taken when named, never by preference.
+    match candidates.iter().min_by_key(|c| (c.4, c.0)) {
+        Some(c) if !c.4 => Ok((c.2, c.3)),
+        _ => Err(Error::NoDevice(format!(
+            "the only device, {}, is RADV's null device (RADV_FORCE_FAMILY is set): it compiles \
+             pipelines but cannot run them; name it to compile only (`rbvh shaders --device \
+             RADV`), or unset RADV_FORCE_FAMILY",
+            names()
+        ))),
+    }
 }
 
 impl Drop for Shared {
@@ -722,7 +767,9 @@ impl Drop for Shared {
         // The allocator (our reference to it) goes before the device it allocates from; an owned
         // context then destroys its pool, device, messenger and instance, in that order.
         unsafe {
-            if self.own.is_some() {
+            // Nothing ever ran on a device that only compiles, and RADV's null device crashes
+            // in vkDeviceWaitIdle.
+            if self.own.is_some() && !self.limits.compile_only {
                 let _ = self.device.device_wait_idle();
             }
             ManuallyDrop::drop(&mut self.allocator);

@@ -4,6 +4,7 @@
 
 mod addressing;
 mod buffer;
+mod compiled;
 mod context;
 mod painter;
 mod pipeline;
@@ -15,6 +16,7 @@ mod tracer;
 
 pub use addressing::{Addressing, Reach};
 pub use buffer::Buffer;
+pub use compiled::{compile_every_pipeline, CompiledPipeline};
 pub use context::{Context, ContextOptions, DeviceLimits, External, Validation};
 pub use painter::{PaintParams, PaintRecording, PaintStats, Painter, MAX_BRUSHES_PER_PASS};
 pub use pipeline::{ComputePipeline, DescriptorSet};

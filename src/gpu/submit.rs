@@ -62,6 +62,7 @@ impl Context {
         pass: &str,
         record: impl FnOnce(&ash::Device, vk::CommandBuffer),
     ) -> Result<Timing> {
+        self.check_runnable(pass)?;
         let s = &self.shared;
         let device = &s.device;
         let own = s.own.as_ref().ok_or_else(|| {

@@ -16,8 +16,9 @@ use bytemuck::{Pod, Zeroable};
 
 use ash::vk;
 
+use super::compiled::{variant_name, CompiledPipeline};
 use super::pipeline::DescriptorSet;
-use super::{shaders, Buffer, ComputePipeline, Context, Reach, ShaderStatistic, Timing};
+use super::{shaders, Buffer, ComputePipeline, Context, Reach, Timing};
 use crate::bvh::{Bvh, STACK_SIZE};
 use crate::geom::{Hit, Ray};
 use crate::lod::cone::check_cones;
@@ -99,7 +100,7 @@ const JUMPS_CONSTANT_ID: u32 = 1;
 const HEIGHT_ONLY_CONSTANT_ID: u32 = 2;
 
 /// The name of `kind`'s trace shader (its pipeline's name).
-fn shader_name(kind: Kind) -> &'static str {
+pub(crate) fn shader_name(kind: Kind) -> &'static str {
     match kind {
         Kind::Exact => "trace_exact",
         Kind::Rbvh => "trace_rbvh",
@@ -108,7 +109,7 @@ fn shader_name(kind: Kind) -> &'static str {
 }
 
 /// The SPIR-V of `kind`'s trace shader for arrays reached by `reach`.
-fn shader_spirv(kind: Kind, reach: Reach) -> &'static [u8] {
+pub(crate) fn shader_spirv(kind: Kind, reach: Reach) -> &'static [u8] {
     match (kind, reach) {
         (Kind::Exact, Reach::Bindings) => shaders::TRACE_EXACT,
         (Kind::Exact, Reach::DeviceAddresses) => shaders::TRACE_EXACT_BDA,
@@ -145,40 +146,53 @@ fn bindings(kind: Kind, reach: Reach) -> Vec<u32> {
     b
 }
 
-/// The trace pipeline of `kind`'s shader `spirv`, specialised: `rbvh_count` to `counting` (the
-/// pipeline that counts each ray's work; the timed one compiles the counting away), for the
-/// RBVH kinds `rbvh_block_jumps` to `block_jumps`, and for a plain RBVH `rbvh_height_only` to
-/// its texel format `texels`.
-fn make_pipeline(
-    ctx: &Context,
+/// The specialization constants of `kind`'s trace shader as (GLSL name, `constant_id`, value):
+/// `rbvh_count` to `counting` (the pipeline that counts each ray's work; the timed one compiles
+/// the counting away), for the RBVH kinds `rbvh_block_jumps` to `block_jumps`, and for a plain
+/// RBVH `rbvh_height_only` to its texel format `texels`.
+pub(crate) fn specialization(
     (kind, texels): (Kind, TexelFormat),
+    block_jumps: bool,
+    counting: bool,
+) -> Vec<(&'static str, u32, u32)> {
+    let mut constants = vec![("rbvh_count", COUNT_CONSTANT_ID, u32::from(counting))];
+    if kind != Kind::Exact {
+        constants.push((
+            "rbvh_block_jumps",
+            JUMPS_CONSTANT_ID,
+            u32::from(block_jumps),
+        ));
+    }
+    if kind == Kind::Rbvh {
+        constants.push((
+            "rbvh_height_only",
+            HEIGHT_ONLY_CONSTANT_ID,
+            u32::from(texels == TexelFormat::Height),
+        ));
+    }
+    constants
+}
+
+/// The trace pipeline of `shader`'s `spirv` with its [`specialization`], named for its variant
+/// ([`super::compiled::variant_name`]: `trace_rbvh jumps height`, `trace_exact counting`).
+pub(crate) fn make_pipeline(
+    ctx: &Context,
+    shader: (Kind, TexelFormat),
     reach: Reach,
     spirv: &[u8],
     block_jumps: bool,
     counting: bool,
 ) -> Result<ComputePipeline> {
-    let mut constants = vec![(COUNT_CONSTANT_ID, u32::from(counting))];
-    if kind != Kind::Exact {
-        constants.push((JUMPS_CONSTANT_ID, u32::from(block_jumps)));
-    }
-    if kind == Kind::Rbvh {
-        constants.push((
-            HEIGHT_ONLY_CONSTANT_ID,
-            u32::from(texels == TexelFormat::Height),
-        ));
-    }
-    let name = if counting {
-        format!("{} (counting)", shader_name(kind))
-    } else {
-        shader_name(kind).to_string()
-    };
+    let constants = specialization(shader, block_jumps, counting);
+    let name = variant_name(shader_name(shader.0), &constants, reach);
+    let ids: Vec<(u32, u32)> = constants.iter().map(|&(_, id, v)| (id, v)).collect();
     ComputePipeline::specialized(
         ctx,
         &name,
         spirv,
-        &bindings(kind, reach),
+        &bindings(shader.0, reach),
         std::mem::size_of::<TraceParams>() as u32,
-        &constants,
+        &ids,
     )
 }
 
@@ -421,10 +435,19 @@ impl Tracer {
         self.block_jumps
     }
 
-    /// The trace pipeline's name and the driver's statistics of it (registers, spills, …; empty
-    /// where the context does not capture them, [`super::DeviceLimits::pipeline_statistics`]).
-    pub fn shader_statistics(&self) -> (&str, &[ShaderStatistic]) {
-        (self.pipeline.name(), self.pipeline.statistics())
+    /// The trace pipeline, its variant and what the driver compiled it into (registers,
+    /// spills, …; no statistics where the context does not capture them,
+    /// [`super::DeviceLimits::pipeline_statistics`]): what [`super::compile_every_pipeline`] says
+    /// of the same variant.
+    pub fn compiled(&self) -> CompiledPipeline {
+        let constants = specialization(self.shader, self.block_jumps, false);
+        CompiledPipeline::of(
+            &self.pipeline,
+            shader_name(self.shader.0),
+            self.reach,
+            &constants,
+            self.block_jumps != self.ctx.limits().cpu || self.shader.0 == Kind::Exact,
+        )
     }
 
     /// Turns the block jumps on or off (see [`Tracer::block_jumps`]), remaking the pipeline: do it

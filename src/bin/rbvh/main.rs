@@ -7,6 +7,8 @@ mod prepare;
 mod progress;
 mod regress;
 mod render;
+mod shaders;
+mod tables;
 mod trace;
 
 use clap::{Parser, Subcommand};
@@ -45,6 +47,12 @@ enum Command {
     /// Render the regression cases and compare them with golden images (FLIP and depth).
     #[command(allow_negative_numbers = true)]
     Regress(regress::Args),
+    /// Compile every pipeline (on any device, or AMD's compiler with no GPU: --amd navi21) and
+    /// print the registers, spills, code size and waves per SIMD each takes; runs nothing.
+    Shaders(shaders::Args),
+    /// Write every measured table of README.md and docs/*.md from the results files in
+    /// docs/results (or check, with --check, that each is what its file makes).
+    Tables(tables::Args),
     /// List the built-in scenes, which every command takes for --scene without any file.
     Scenes,
 }
@@ -58,6 +66,8 @@ fn main() {
         Command::Bench(a) => bench::run(a),
         Command::Regress(a) => regress::run(a),
         Command::Paint(a) => paint::run(a),
+        Command::Shaders(a) => shaders::run(a),
+        Command::Tables(a) => tables::run(a),
         Command::Scenes => {
             for name in rbvh::scene::builtin::NAMES {
                 println!("{name}");

@@ -9,6 +9,7 @@ use anyhow::{Context as _, Result};
 
 use crate::progress::step;
 use clap::{Args, ValueEnum};
+use rbvh::bench::provenance;
 use rbvh::bvh::{BuildParams, Bvh};
 use rbvh::geom::{Hit, Ray};
 use rbvh::glam::Vec3;
@@ -434,6 +435,11 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
             );
         }
         eprintln!("device: {} ({})", ctx.device_name(), ctx.driver());
+        let threads = provenance::lavapipe_threads(&ctx);
+        eprintln!(
+            "host: {}",
+            provenance::Host::current(ctx.driver(), threads).summary()
+        );
     }
     Ok(Prepared {
         scene,

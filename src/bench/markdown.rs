@@ -1,0 +1,692 @@
+//! Markdown tables made from results files, written into the documents that name them — so that
+//! no measured figure in a document is typed by hand (`rbvh tables`; the repository's
+//! `docs/results/README.md` describes the files and the blocks).
+//!
+//! A block in a document:
+//!
+//! ```markdown
+//! <!-- table docs/results/bench-dragon.json view=ratios rays=primary,shadow -->
+//! (generated: the table, then a line saying where and when it was measured)
+//! <!-- /table -->
+//! ```
+//!
+//! The file is either raw results — the JSON `rbvh bench --json` or `rbvh shaders --json` wrote,
+//! which a *view* turns into a table — or a *transcribed* measurement whose raw file was not kept
+//! (`{"transcribed": {source, commit, host, device, note}, "columns", "align", "rows"}`), shown as
+//! it was recorded. Either way the line under the table names the commit and the host.
+
+use std::io::Write as _;
+use std::path::{Component, Path, PathBuf};
+
+use serde_json::Value;
+
+use super::provenance::Host;
+use super::shaders::{column_value, COLUMNS};
+use crate::gpu::{ShaderStatistic, StatisticValue};
+use crate::{Error, Result};
+
+/// The comment that opens a generated block, before the results file's path.
+pub const OPEN: &str = "<!-- table ";
+/// The comment that closes a generated block.
+pub const CLOSE: &str = "<!-- /table -->";
+/// The comment that marks the next table as holding no measurement (a layout, a list, pictures).
+pub const NOT_A_MEASUREMENT: &str = "<!-- not a measurement -->";
+
+/// A document whose blocks differ from what their files make.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Stale {
+    /// The document, relative to the root.
+    pub document: PathBuf,
+    /// 1-based line of each differing block's opening comment.
+    pub lines: Vec<usize>,
+    /// The document as the files make it.
+    pub regenerated: String,
+}
+
+/// The documents of a repository that hold measurements: `README.md`, `scenes/README.md` and
+/// `docs/*.md`, those that exist, relative to `root`.
+pub fn documents(root: &Path) -> Result<Vec<PathBuf>> {
+    let mut found: Vec<PathBuf> = ["README.md", "scenes/README.md"]
+        .iter()
+        .map(PathBuf::from)
+        .filter(|p| root.join(p).is_file())
+        .collect();
+    let docs = root.join("docs");
+    if docs.is_dir() {
+        let mut md: Vec<PathBuf> = std::fs::read_dir(&docs)
+            .map_err(|e| Error::io(&docs, e))?
+            .flatten()
+            .map(|e| e.path())
+            .filter(|p| p.extension().is_some_and(|e| e == "md"))
+            .filter_map(|p| p.strip_prefix(root).ok().map(Path::to_path_buf))
+            .collect();
+        md.sort();
+        found.extend(md);
+    }
+    Ok(found)
+}
+
+/// Regenerates every block of every document of [`documents`] under `root`: writes the documents
+/// that change unless `check`, and returns them either way (empty: every table is what its file
+/// makes).
+pub fn update(root: &Path, check: bool) -> Result<Vec<Stale>> {
+    let mut stale = Vec::new();
+    for document in documents(root)? {
+        let path = root.join(&document);
+        let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+        let (regenerated, lines) = regenerate(root, &document, &text)?;
+        if !lines.is_empty() {
+            if !check {
+                crate::io::write_atomically(&path, |w| w.write_all(regenerated.as_bytes()))?;
+            }
+            stale.push(Stale {
+                document,
+                lines,
+                regenerated,
+            });
+        }
+    }
+    Ok(stale)
+}
+
+/// `text` (of `document`, relative to `root`) with each block's content made from its file, and
+/// the 1-based lines of the blocks that changed.
+pub fn regenerate(root: &Path, document: &Path, text: &str) -> Result<(String, Vec<usize>)> {
+    let lines: Vec<&str> = text.lines().collect();
+    let mut out = String::with_capacity(text.len());
+    let mut changed = Vec::new();
+    let mut k = 0;
+    while k < lines.len() {
+        let line = lines[k];
+        out.push_str(line);
+        out.push('\n');
+        let Some(spec) = line.trim().strip_prefix(OPEN) else {
+            k += 1;
+            continue;
+        };
+        let place = || format!("{}:{}", document.display(), k + 1);
+        let spec = spec
+            .strip_suffix("-->")
+            .ok_or_else(|| Error::parse(document, Some(k + 1), "a table comment ends with -->"))?;
+        let end = lines[k + 1..]
+            .iter()
+            .position(|l| l.trim() == CLOSE)
+            .map(|e| k + 1 + e)
+            .ok_or_else(|| {
+                Error::parse(
+                    document,
+                    Some(k + 1),
+                    format!("no {CLOSE} after this block"),
+                )
+            })?;
+        let block = Block::parse(spec).map_err(|m| Error::parse(document, Some(k + 1), m))?;
+        let made = block
+            .render(root, document)
+            .map_err(|e| Error::param("table", format!("{}: {e}", place())))?;
+        let old: Vec<&str> = lines[k + 1..end].to_vec();
+        if old.join("\n") != made.trim_end_matches('\n') {
+            changed.push(k + 1);
+        }
+        out.push_str(&made);
+        out.push_str(CLOSE);
+        out.push('\n');
+        k = end + 1;
+    }
+    if !text.ends_with('\n') && out.ends_with('\n') {
+        out.pop();
+    }
+    Ok((out, changed))
+}
+
+/// Lines of `text` that begin a markdown table (a `|` line followed by an alignment row) outside
+/// every generated block and not marked [`NOT_A_MEASUREMENT`] on the line before: tables typed by
+/// hand.
+pub fn unmarked_tables(text: &str) -> Vec<usize> {
+    let lines: Vec<&str> = text.lines().collect();
+    let mut inside = false;
+    let mut fenced = false;
+    let mut found = Vec::new();
+    for (k, line) in lines.iter().enumerate() {
+        let t = line.trim();
+        if t.starts_with("```") {
+            fenced = !fenced;
+        }
+        if fenced {
+            continue;
+        }
+        if t.starts_with(OPEN) {
+            inside = true;
+        } else if t == CLOSE {
+            inside = false;
+        }
+        let header = t.starts_with('|')
+            && lines.get(k + 1).is_some_and(|next| is_alignment_row(next))
+            && (k == 0 || !lines[k - 1].trim().starts_with('|'));
+        if header && !inside && (k == 0 || lines[k - 1].trim() != NOT_A_MEASUREMENT) {
+            found.push(k + 1);
+        }
+    }
+    found
+}
+
+fn is_alignment_row(line: &str) -> bool {
+    let t = line.trim();
+    t.starts_with('|') && t.contains('-') && t.chars().all(|c| matches!(c, '|' | '-' | ':' | ' '))
+}
+
+/// A block's comment: the results file and, for raw results, the view and its filters.
+#[derive(Clone, Debug, PartialEq, Eq)]
+struct Block {
+    file: PathBuf,
+    view: Option<String>,
+    filters: Vec<(String, Vec<String>)>,
+}
+
+impl Block {
+    fn parse(spec: &str) -> std::result::Result<Block, String> {
+        let mut words = spec.split_whitespace();
+        let file = words
+            .next()
+            .ok_or("a table comment names its results file")?;
+        let mut block = Block {
+            file: PathBuf::from(file),
+            view: None,
+            filters: Vec::new(),
+        };
+        for word in words {
+            let (key, value) = word
+                .split_once('=')
+                .ok_or_else(|| format!("{word:?}: options are key=value"))?;
+            let values: Vec<String> = value.split(',').map(str::to_string).collect();
+            match key {
+                "view" => block.view = Some(value.to_string()),
+                "scene" | "rays" | "levels" | "pipelines" => {
+                    block.filters.push((key.to_string(), values))
+                }
+                _ => {
+                    return Err(format!(
+                        "unknown option {key:?} (view, scene, rays, levels, pipelines)"
+                    ))
+                }
+            }
+        }
+        Ok(block)
+    }
+
+    fn filter(&self, key: &str) -> Option<&[String]> {
+        self.filters
+            .iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v.as_slice())
+    }
+
+    /// The block's content: the table, a blank line and the line saying where it was measured.
+    fn render(&self, root: &Path, document: &Path) -> Result<String> {
+        let path = root.join(&self.file);
+        let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+        let json: Value = serde_json::from_str(&text)
+            .map_err(|e| Error::parse(&self.file, Some(e.line()), e.to_string()))?;
+        let link = relative(document.parent().unwrap_or(Path::new("")), &self.file);
+        let link = link.to_string_lossy().replace('\\', "/");
+        let (table, caption) = if let Some(t) = json.get("transcribed") {
+            if self.view.is_some() || !self.filters.is_empty() {
+                return Err(Error::param(
+                    "table",
+                    "a transcribed file is shown as recorded: no view or filters",
+                ));
+            }
+            (transcribed_table(&json)?, transcribed_caption(t)?)
+        } else {
+            (
+                self.view_table(&json)?,
+                measured_caption(&json, &self.file)?,
+            )
+        };
+        Ok(format!(
+            "{table}\n<sub>{caption} ([results]({link}))</sub>\n"
+        ))
+    }
+
+    fn view_table(&self, json: &Value) -> Result<String> {
+        let view = self.view.as_deref().unwrap_or("summary");
+        if view == "shaders" {
+            return shaders_table(json, self.filter("pipelines"));
+        }
+        let records: Vec<&Value> = json["results"]
+            .as_array()
+            .ok_or_else(|| {
+                Error::param(
+                    "table",
+                    format!(
+                        "{}: neither bench results (results) nor transcribed",
+                        self.file.display()
+                    ),
+                )
+            })?
+            .iter()
+            .filter(|r| self.keeps(r))
+            .collect();
+        if records.is_empty() {
+            return Err(Error::param(
+                "table",
+                format!("{}: no record passes the filters", self.file.display()),
+            ));
+        }
+        match view {
+            "summary" => Ok(summary_table(&records)),
+            "work" => Ok(work_table(&records)),
+            "ratios" => Ok(ratios_table(&records)),
+            other => Err(Error::param(
+                "table",
+                format!("unknown view {other:?} (summary, work, ratios, shaders)"),
+            )),
+        }
+    }
+
+    /// Whether a bench record passes the block's filters.
+    fn keeps(&self, record: &Value) -> bool {
+        let ok = |key: &str, value: String| self.filter(key).is_none_or(|v| v.contains(&value));
+        ok("scene", text(&record["scene"]))
+            && ok("rays", text(&record["ray_type"]))
+            && ok("levels", level(record))
+    }
+}
+
+/// `path` (relative to the root) as seen from the folder `from` (relative to the root).
+fn relative(from: &Path, path: &Path) -> PathBuf {
+    let from: Vec<Component> = from.components().collect();
+    let to: Vec<Component> = path.components().collect();
+    let common = from.iter().zip(&to).take_while(|(a, b)| a == b).count();
+    let mut out = PathBuf::new();
+    for _ in common..from.len() {
+        out.push("..");
+    }
+    for c in &to[common..] {
+        out.push(c.as_os_str());
+    }
+    out
+}
+
+/// A JSON value as a cell: strings as they are, null as `-`.
+fn text(v: &Value) -> String {
+    match v {
+        Value::Null => "-".into(),
+        Value::String(s) => s.clone(),
+        other => other.to_string(),
+    }
+}
+
+/// A record's level as the bench tables write it: `exact`, `Q2`, `Q2h` (height-only), `Q2 LOD`.
+fn level(record: &Value) -> String {
+    let Some(q) = record["quality"].as_str() else {
+        return "exact".into();
+    };
+    let height = record["params"]["texels"].as_str() == Some("height");
+    let lod = record["method"].as_str() == Some("rbvh-lod");
+    format!(
+        "{q}{}{}",
+        if height { "h" } else { "" },
+        if lod { " LOD" } else { "" }
+    )
+}
+
+fn num(v: &Value, scale: f64, digits: usize) -> String {
+    v.as_f64()
+        .map_or("-".into(), |x| format!("{:.digits$}", x * scale))
+}
+
+/// Markdown table lines: the header, the alignment row (`r` right-aligned, else left), rows.
+fn markdown(header: &[String], align: &[char], rows: &[Vec<String>]) -> String {
+    let row = |cells: &[String]| format!("| {} |", cells.join(" | "));
+    let mut out = vec![row(header)];
+    out.push(format!(
+        "|{}|",
+        header
+            .iter()
+            .enumerate()
+            .map(|(i, _)| match align.get(i) {
+                Some('r') => "---:",
+                Some('c') => ":-:",
+                _ => "---",
+            })
+            .collect::<Vec<_>>()
+            .join("|")
+    ));
+    out.extend(rows.iter().map(|r| row(r)));
+    out.join("\n") + "\n"
+}
+
+fn summary_table(records: &[&Value]) -> String {
+    let header: Vec<String> = [
+        "scene",
+        "method",
+        "level",
+        "rays",
+        "MRays/s",
+        "× exact",
+        "MB",
+        "× less",
+        "miss %",
+        "t p99 %",
+        "normal °",
+        "PSNR",
+        "FLIP",
+        "leaks",
+        "through",
+        "valid",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    let rows: Vec<Vec<String>> = records
+        .iter()
+        .map(|r| {
+            let e = &r["error"];
+            vec![
+                text(&r["scene"]),
+                text(&r["method"]),
+                level(r),
+                text(&r["ray_type"]),
+                num(&r["mrays_per_s"]["median"], 1.0, 2),
+                format!("{}×", num(&r["speedup_vs_exact"], 1.0, 2)),
+                num(&r["memory_bytes"]["total"], 1e-6, 2),
+                num(&r["memory_ratio_vs_exact"], 1.0, 1),
+                num(&e["miss_mismatch_rate"], 100.0, 2),
+                num(&e["t_err_p99"], 100.0, 3),
+                num(&e["normal_err_deg_mean"], 1.0, 1),
+                num(&e["psnr_db"], 1.0, 1),
+                num(&e["flip_mean"], 1.0, 3),
+                r["seams"]["leaks"]
+                    .as_u64()
+                    .map_or("-".into(), |v| v.to_string()),
+                r["seams"]["through"]
+                    .as_u64()
+                    .map_or("-".into(), |v| v.to_string()),
+                if r["valid"].as_bool() == Some(true) {
+                    "yes"
+                } else {
+                    "**no**"
+                }
+                .into(),
+            ]
+        })
+        .collect();
+    let align: Vec<char> = "llllrrrrrrrrrrrl".chars().collect();
+    markdown(&header, &align, &rows)
+}
+
+fn work_table(records: &[&Value]) -> String {
+    let header: Vec<String> = [
+        "scene",
+        "level",
+        "rays",
+        "nodes",
+        "leaves",
+        "cells",
+        "tested",
+        "jumps",
+        "triangles",
+        "SIMD8",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    let rows: Vec<Vec<String>> = records
+        .iter()
+        .map(|r| {
+            let c = &r["counters"];
+            vec![
+                text(&r["scene"]),
+                level(r),
+                text(&r["ray_type"]),
+                num(&c["nodes"], 1.0, 2),
+                num(&c["leaves"], 1.0, 2),
+                num(&c["cells"], 1.0, 2),
+                num(&c["cells_tested"], 1.0, 2),
+                num(&c["jumps"], 1.0, 2),
+                num(&c["triangles"], 1.0, 2),
+                format!("{}%", num(&c["simd8_utilisation"], 100.0, 0)),
+            ]
+        })
+        .collect();
+    let align: Vec<char> = "lllrrrrrrr".chars().collect();
+    markdown(&header, &align, &rows)
+}
+
+/// A row per (scene, ray type): the exact BVH's MRays/s, then each level's speed over it.
+fn ratios_table(records: &[&Value]) -> String {
+    let mut levels: Vec<String> = Vec::new();
+    let mut keys: Vec<(String, String)> = Vec::new();
+    for r in records {
+        let l = level(r);
+        if l != "exact" && !levels.contains(&l) {
+            levels.push(l);
+        }
+        let key = (text(&r["scene"]), text(&r["ray_type"]));
+        if !keys.contains(&key) {
+            keys.push(key);
+        }
+    }
+    let mut header = vec!["scene, rays".to_string(), "exact MRays/s".to_string()];
+    header.extend(levels.iter().map(|l| format!("{l} × exact")));
+    let rows: Vec<Vec<String>> = keys
+        .iter()
+        .map(|(scene, rays)| {
+            let find = |l: &str| {
+                records.iter().find(|r| {
+                    text(&r["scene"]) == *scene && text(&r["ray_type"]) == *rays && level(r) == l
+                })
+            };
+            let mut row = vec![
+                format!("{scene}, {rays}"),
+                find("exact").map_or("-".into(), |r| num(&r["mrays_per_s"]["median"], 1.0, 2)),
+            ];
+            row.extend(levels.iter().map(|l| {
+                find(l).map_or("-".into(), |r| {
+                    let ratio = num(&r["speedup_vs_exact"], 1.0, 2);
+                    if r["valid"].as_bool() == Some(true) {
+                        ratio
+                    } else {
+                        format!("{ratio} (invalid)")
+                    }
+                })
+            }));
+            row
+        })
+        .collect();
+    let align: Vec<char> = std::iter::once('l')
+        .chain(std::iter::repeat('r'))
+        .take(header.len())
+        .collect();
+    markdown(&header, &align, &rows)
+}
+
+/// `rbvh shaders` results: a row per pipeline (`pipelines=default`: the variants the tracers use
+/// by default), with the statistics of [`COLUMNS`] that any row has.
+fn shaders_table(json: &Value, which: Option<&[String]>) -> Result<String> {
+    let pipelines = json["pipelines"]
+        .as_array()
+        .ok_or_else(|| Error::param("table", "view=shaders needs rbvh shaders results"))?;
+    let only_default = which.is_some_and(|w| w.iter().any(|p| p == "default"));
+    let rows: Vec<(String, Vec<ShaderStatistic>)> = pipelines
+        .iter()
+        .filter(|p| !only_default || p["default_variant"].as_bool() == Some(true))
+        .map(|p| {
+            let statistics = p["statistics"]
+                .as_array()
+                .map(|s| {
+                    s.iter()
+                        .map(|s| ShaderStatistic {
+                            name: text(&s["name"]),
+                            value: match &s["value"] {
+                                Value::Bool(b) => StatisticValue::Bool(*b),
+                                v if v.is_u64() => StatisticValue::UInt(v.as_u64().unwrap_or(0)),
+                                v if v.is_i64() => StatisticValue::Int(v.as_i64().unwrap_or(0)),
+                                v => StatisticValue::Float(v.as_f64().unwrap_or(f64::NAN)),
+                            },
+                        })
+                        .collect()
+                })
+                .unwrap_or_default();
+            (format!("`{}`", text(&p["pipeline"])), statistics)
+        })
+        .collect();
+    let shown: Vec<&(&str, &[&str])> = COLUMNS
+        .iter()
+        .filter(|(_, names)| rows.iter().any(|(_, s)| column_value(s, names).is_some()))
+        .collect();
+    let mut header = vec!["pipeline".to_string()];
+    header.extend(shown.iter().map(|(h, _)| h.to_string()));
+    let cells: Vec<Vec<String>> = rows
+        .iter()
+        .map(|(name, s)| {
+            let mut row = vec![name.clone()];
+            row.extend(
+                shown
+                    .iter()
+                    .map(|(_, n)| column_value(s, n).map_or("-".into(), |v| v.to_string())),
+            );
+            row
+        })
+        .collect();
+    let align: Vec<char> = std::iter::once('l')
+        .chain(std::iter::repeat('r'))
+        .take(header.len())
+        .collect();
+    Ok(markdown(&header, &align, &cells))
+}
+
+/// A transcribed file's table, as recorded.
+fn transcribed_table(json: &Value) -> Result<String> {
+    let strings = |v: &Value, what: &str| -> Result<Vec<String>> {
+        v.as_array()
+            .ok_or_else(|| Error::param("table", format!("transcribed {what}: not a list")))?
+            .iter()
+            .map(|c| {
+                c.as_str().map(str::to_string).ok_or_else(|| {
+                    Error::param("table", format!("transcribed {what}: cells are strings"))
+                })
+            })
+            .collect()
+    };
+    let header = strings(&json["columns"], "columns")?;
+    let align: Vec<char> = match &json["align"] {
+        Value::Null => Vec::new(),
+        v => strings(v, "align")?
+            .iter()
+            .map(|a| a.chars().next().unwrap_or('l'))
+            .collect(),
+    };
+    let rows = json["rows"]
+        .as_array()
+        .ok_or_else(|| Error::param("table", "transcribed rows: not a list"))?
+        .iter()
+        .map(|r| strings(r, "rows"))
+        .collect::<Result<Vec<_>>>()?;
+    if let Some(bad) = rows.iter().find(|r| r.len() != header.len()) {
+        return Err(Error::param(
+            "table",
+            format!(
+                "a transcribed row has {} cells for {} columns: {bad:?}",
+                bad.len(),
+                header.len()
+            ),
+        ));
+    }
+    Ok(markdown(&header, &align, &rows))
+}
+
+fn transcribed_caption(t: &Value) -> Result<String> {
+    let field = |k: &str| -> Result<String> {
+        t[k].as_str()
+            .map(str::to_string)
+            .ok_or_else(|| Error::param("table", format!("transcribed.{k}: required, a string")))
+    };
+    let commit = match &t["commit"] {
+        Value::String(c) => format!("measured at {c}"),
+        Value::Null => "measured at a commit not recorded".into(),
+        _ => {
+            return Err(Error::param(
+                "table",
+                "transcribed.commit: a string or null",
+            ))
+        }
+    };
+    let note = t["note"].as_str().map_or(String::new(), |n| {
+        format!(" {}", n.trim_end_matches('.').to_string() + ".")
+    });
+    Ok(format!(
+        "Transcribed from {} (no raw file kept): {commit}; host: {}; device: {}.{note}",
+        field("source")?,
+        field("host")?,
+        field("device")?
+    ))
+}
+
+/// The line under a view of raw results: the tool, commit, date, host and device.
+fn measured_caption(json: &Value, file: &Path) -> Result<String> {
+    let host: Host = serde_json::from_value(json["host"].clone()).map_err(|_| {
+        Error::param(
+            "table",
+            format!("{}: raw results name their host (`host`)", file.display()),
+        )
+    })?;
+    let commit = match (json["git"].as_str(), json["git_dirty"].as_bool()) {
+        (Some(c), Some(true)) => format!("{} + uncommitted changes", &c[..c.len().min(7)]),
+        (Some(c), _) => c[..c.len().min(7)].to_string(),
+        (None, _) => "a commit not recorded".into(),
+    };
+    let tool = if json.get("pipelines").is_some() {
+        "rbvh shaders"
+    } else {
+        "rbvh bench"
+    };
+    let date = json["date"].as_str().unwrap_or("").get(..10).unwrap_or("");
+    let settings = if tool == "rbvh bench" {
+        format!(
+            ", {}×{} primary rays, median of {} runs",
+            text(&json["width"]),
+            text(&json["height"]),
+            text(&json["runs"])
+        )
+    } else {
+        String::new()
+    };
+    Ok(format!(
+        "Measured by `{tool}` at {commit} on {date}{settings}; host: {}; device: {} ({}).",
+        host.summary(),
+        text(&json["device"]),
+        text(&json["driver"])
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn relative_links_from_each_folder() {
+        let f = Path::new("docs/results/x.json");
+        assert_eq!(relative(Path::new(""), f), Path::new("docs/results/x.json"));
+        assert_eq!(relative(Path::new("docs"), f), Path::new("results/x.json"));
+        assert_eq!(
+            relative(Path::new("scenes"), f),
+            Path::new("../docs/results/x.json")
+        );
+    }
+
+    #[test]
+    fn tables_typed_by_hand_are_found() {
+        let text = "intro\n| a | b |\n|---|--:|\n| 1 | 2 |\n\n<!-- not a measurement -->\n| x |\n|---|\n\n```\n| c |\n|---|\n```\n<!-- table f.json -->\n| d |\n|---|\n<!-- /table -->\n";
+        assert_eq!(unmarked_tables(text), vec![2]);
+    }
+
+    #[test]
+    fn block_options_are_checked() {
+        let b = Block::parse("docs/results/a.json view=ratios rays=primary,shadow").unwrap();
+        assert_eq!(b.view.as_deref(), Some("ratios"));
+        assert_eq!(b.filter("rays").unwrap(), ["primary", "shadow"]);
+        assert!(Block::parse("a.json colour=red").is_err());
+        assert!(Block::parse("").is_err());
+    }
+}

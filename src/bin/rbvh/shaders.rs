@@ -1,0 +1,77 @@
+//! `rbvh shaders`: compiles every pipeline the library has on a device, runs nothing, and prints
+//! what the driver compiled each into (registers, spills, code size, scratch, waves per SIMD) —
+//! with `--amd FAMILY`, on RADV's null device: AMD's compiler with no AMD GPU.
+
+use std::path::PathBuf;
+
+use anyhow::{Context as _, Result};
+use rbvh::bench::{shader_report, shader_report_table, write_shader_json};
+use rbvh::gpu::Context;
+
+use crate::prepare::context_options;
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Compile for this AMD GPU family on RADV's null device (Mesa's, installed with
+    /// mesa-vulkan-drivers): sets RADV_FORCE_FAMILY (and MESA_SHADER_CACHE_DISABLE, so that
+    /// every pipeline is compiled) and picks that device. Families Mesa 22.3 knows include
+    /// navi21, navi10, vega10 and rembrandt; navi21 is the project's reference.
+    #[arg(long, value_name = "FAMILY")]
+    amd: Option<String>,
+    /// With --amd: compile compute shaders for wave32 (RADV_PERFTEST=cswave32) instead of wave64.
+    #[arg(long, requires = "amd")]
+    wave32: bool,
+    /// Compile on the first device whose name contains this (default: RBVH_DEVICE, else the
+    /// device a render would use; with --amd, the null device).
+    #[arg(long, conflicts_with = "amd")]
+    device: Option<String>,
+    /// Also write every pipeline's statistics, with the run's provenance, as JSON.
+    #[arg(long, value_name = "FILE")]
+    json: Option<PathBuf>,
+    /// Require the Vulkan validation layers (else RBVH_VALIDATION decides).
+    #[arg(long)]
+    validate: bool,
+}
+
+pub fn run(a: Args) -> Result<()> {
+    let device = match &a.amd {
+        Some(family) => {
+            anyhow::ensure!(
+                !family.is_empty() && family.chars().all(|c| c.is_ascii_alphanumeric()),
+                "--amd {family:?}: a family name such as navi21"
+            );
+            // Read by Mesa when the instance enumerates devices, which is after this; nothing
+            // else runs yet.
+            std::env::set_var("RADV_FORCE_FAMILY", family);
+            std::env::set_var("MESA_SHADER_CACHE_DISABLE", "true");
+            if a.wave32 {
+                std::env::set_var("RADV_PERFTEST", "cswave32");
+            } else {
+                std::env::remove_var("RADV_PERFTEST");
+            }
+            Some("RADV".to_string())
+        }
+        None => a.device.clone(),
+    };
+    let ctx = Context::new(&context_options(device.as_deref(), a.validate)?).with_context(|| {
+        match &a.amd {
+            Some(f) => format!(
+                "creating RADV's null device for {f} (is mesa-vulkan-drivers installed, and is {f} a family this Mesa knows?)"
+            ),
+            None => "creating the Vulkan device".into(),
+        }
+    })?;
+    if a.amd.is_some() && !ctx.limits().compile_only {
+        anyhow::bail!(
+            "--amd: the device chosen, {}, is not RADV's null device",
+            ctx.device_name()
+        );
+    }
+    let report = shader_report(&ctx)?;
+    print!("{}", shader_report_table(&report));
+    if let Some(path) = &a.json {
+        write_shader_json(path, &report).with_context(|| format!("writing {}", path.display()))?;
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
+}

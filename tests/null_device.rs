@@ -1,0 +1,150 @@
+//! Shader statistics without a GPU: RADV's null device (Mesa's "null hardware", offered while
+//! `RADV_FORCE_FAMILY` names an AMD family) compiles every pipeline the library has with AMD's
+//! real compiler and reports what each became. This file is its own process, so the variable set
+//! here reaches no other test; its one test runs the steps in order, since Mesa reads the variables
+//! when an instance is made.
+//!
+//! Where RADV is not installed the test is skipped, saying why — unless `RBVH_REQUIRE_NULL_DEVICE`
+//! is set, as `.ci/run` sets it: CI installs RADV through `.ci/setup`, so a skip there fails.
+
+use rbvh::bench::shaders::{column_value, COLUMNS};
+use rbvh::gpu::{compile_every_pipeline, Context, ContextOptions, Validation};
+use rbvh::structure::Structure;
+use rbvh::Error;
+
+const RADV_MANIFESTS: [&str; 2] = [
+    "/usr/share/vulkan/icd.d/radeon_icd.x86_64.json",
+    "/usr/share/vulkan/icd.d/radeon_icd.aarch64.json",
+];
+
+/// The results file of the project's reference (Mesa's RADV on navi21, wave64), kept at the
+/// commit's shaders.
+const REFERENCE: &str = "docs/results/shaders-navi21-wave64.json";
+
+fn options(device: Option<&str>) -> ContextOptions {
+    ContextOptions {
+        device_name: device.map(str::to_string),
+        validation: Validation::IfInstalled,
+        ..ContextOptions::default()
+    }
+}
+
+#[test]
+fn every_pipeline_compiles_on_the_null_device_and_reports_its_registers() {
+    if !RADV_MANIFESTS
+        .iter()
+        .any(|m| std::path::Path::new(m).exists())
+    {
+        let reason = "RADV is not installed (Debian: mesa-vulkan-drivers), so there is no null \
+                      device to compile on";
+        assert!(
+            std::env::var_os("RBVH_REQUIRE_NULL_DEVICE").is_none(),
+            "RBVH_REQUIRE_NULL_DEVICE is set but {reason}"
+        );
+        eprintln!("skipped: {reason}");
+        return;
+    }
+    // SAFETY (of the environment): set before any Vulkan call of this process, which has no
+    // other test; Mesa reads them when the instance enumerates its devices.
+    std::env::set_var("RADV_FORCE_FAMILY", "navi21");
+    std::env::set_var("MESA_SHADER_CACHE_DISABLE", "true");
+    std::env::remove_var("RADV_PERFTEST");
+
+    // Unnamed, the null device is never chosen: lavapipe is, and traces.
+    let runnable = Context::new(&options(None)).expect("lavapipe beside the null device");
+    assert!(
+        !runnable.limits().compile_only,
+        "{}",
+        runnable.device_name()
+    );
+    drop(runnable);
+
+    let ctx = Context::new(&options(Some("RADV"))).expect("RADV's null device, named");
+    assert!(ctx.limits().compile_only, "{}", ctx.device_name());
+    assert!(ctx.limits().pipeline_statistics, "RADV reports statistics");
+
+    // What must run fails with an error that names the device and the step, not a crash.
+    let scene = rbvh::scene::Scene::load("sphere").unwrap();
+    let exact = Structure::from(rbvh::bvh::Bvh::build(&scene).unwrap());
+    match rbvh::gpu::Tracer::new(&ctx, &exact) {
+        Err(Error::CompileOnly { device, what }) => {
+            assert_eq!(device, ctx.device_name());
+            assert!(what.contains("BVH nodes"), "{what}");
+        }
+        Err(e) => panic!("expected a compile-only error, got {e}"),
+        Ok(_) => panic!("the null device uploaded a structure"),
+    }
+
+    let pipelines = compile_every_pipeline(&ctx).unwrap();
+    let shaders: std::collections::BTreeSet<&str> = pipelines.iter().map(|p| p.shader).collect();
+    assert_eq!(
+        shaders,
+        ["paint", "trace_exact", "trace_rbvh", "trace_rbvh_lod"].into()
+    );
+    assert!(
+        pipelines.iter().any(|p| p.reach == "device_addresses"),
+        "RADV has device addresses: their variants are compiled too"
+    );
+    for p in &pipelines {
+        let registers = column_value(&p.statistics, COLUMNS[0].1);
+        assert!(
+            matches!(registers, Some(v) if v.to_string().parse::<u64>().unwrap_or(0) > 0),
+            "{}: no registers in {:?}",
+            p.pipeline,
+            p.statistics
+        );
+    }
+    // The default exact tracer is the one the bench times on a GPU.
+    assert!(pipelines
+        .iter()
+        .any(|p| p.pipeline == "trace_exact" && p.default_variant));
+
+    // The reference results file holds this commit's statistics wherever this Mesa made it.
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(root.join(REFERENCE)).unwrap_or_else(|e| {
+        panic!("{REFERENCE}: {e} (write it with rbvh shaders --amd navi21 --json {REFERENCE})")
+    });
+    let file: serde_json::Value = serde_json::from_str(&text).unwrap();
+    if file["driver"].as_str() != Some(ctx.driver()) {
+        eprintln!(
+            "{REFERENCE} was compiled by {}, this is {}: not compared",
+            file["driver"],
+            ctx.driver()
+        );
+        return;
+    }
+    let recorded: Vec<(String, Vec<String>)> = file["pipelines"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| {
+            let stats: Vec<rbvh::gpu::ShaderStatistic> = p["statistics"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|s| rbvh::gpu::ShaderStatistic {
+                    name: s["name"].as_str().unwrap().to_string(),
+                    value: rbvh::gpu::StatisticValue::UInt(s["value"].as_u64().unwrap_or(0)),
+                })
+                .collect();
+            (p["pipeline"].as_str().unwrap().to_string(), shown(&stats))
+        })
+        .collect();
+    let now: Vec<(String, Vec<String>)> = pipelines
+        .iter()
+        .map(|p| (p.pipeline.clone(), shown(&p.statistics)))
+        .collect();
+    assert_eq!(
+        recorded, now,
+        "{REFERENCE} is not what this commit's shaders compile to: rerun \
+         `rbvh shaders --amd navi21 --json {REFERENCE}` (and the wave32 file) and `rbvh tables`"
+    );
+}
+
+/// The statistics a table shows, as text, in [`COLUMNS`] order.
+fn shown(statistics: &[rbvh::gpu::ShaderStatistic]) -> Vec<String> {
+    COLUMNS
+        .iter()
+        .map(|(_, names)| column_value(statistics, names).map_or("-".into(), |v| v.to_string()))
+        .collect()
+}
