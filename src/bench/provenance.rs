@@ -42,14 +42,17 @@ pub fn git_commit() -> Option<String> {
     (out.status.success() && !commit.is_empty()).then_some(commit)
 }
 
-/// Whether tracked files differ from `HEAD` in the current directory's repository (the
-/// measurement is then of uncommitted code), or None when git or a repository is missing.
+/// Whether tracked files other than documentation (`docs/`, `*.md`) differ from `HEAD` in the
+/// current directory's repository — the measurement is then of uncommitted code; results files
+/// and the tables made from them are committed after it — or None when git or a repository is
+/// missing.
 pub fn git_dirty() -> Option<bool> {
     if std::env::var("RBVH_COMMIT").is_ok_and(|c| !c.trim().is_empty()) {
         return None;
     }
     let out = Command::new("git")
-        .args(["status", "--porcelain", "--untracked-files=no"])
+        .args(["status", "--porcelain", "--untracked-files=no", "--", "."])
+        .args([":(exclude)docs", ":(exclude)*.md"])
         .output()
         .ok()?;
     out.status.success().then_some(!out.stdout.is_empty())
