@@ -178,3 +178,87 @@ fn ci_runs_the_readme_test_command_and_the_lints() {
         assert!(ci_lines.contains(&lint), ".ci/run does not run {lint:?}");
     }
 }
+
+/// Every measured table of the README and docs/ is what `rbvh tables` makes of its results file
+/// (docs/results/README.md): a table edited by hand, or a results file changed without rerunning
+/// the command, fails here.
+#[test]
+fn every_table_is_what_its_results_file_makes() {
+    let stale = rbvh::bench::markdown::update(root(), true).unwrap();
+    let places: Vec<String> = stale
+        .iter()
+        .flat_map(|s| {
+            s.lines
+                .iter()
+                .map(move |l| format!("{}:{l}", s.document.display()))
+        })
+        .collect();
+    assert!(
+        places.is_empty(),
+        "tables that differ from their results files (run `cargo run --release -- tables`):\n{}",
+        places.join("\n")
+    );
+}
+
+/// No table of measurements is typed by hand: each is a generated block, or marked as holding no
+/// measurement.
+#[test]
+fn no_table_is_typed_by_hand() {
+    let mut unmarked = Vec::new();
+    let mut blocks = 0;
+    for document in rbvh::bench::markdown::documents(root()).unwrap() {
+        let text = std::fs::read_to_string(root().join(&document)).unwrap();
+        blocks += text.matches(rbvh::bench::markdown::OPEN).count();
+        for line in rbvh::bench::markdown::unmarked_tables(&text) {
+            unmarked.push(format!("{}:{line}", document.display()));
+        }
+    }
+    assert!(
+        blocks > 40,
+        "only {blocks} generated tables: is the scan right?"
+    );
+    assert!(
+        unmarked.is_empty(),
+        "tables outside a generated block and not marked `<!-- not a measurement -->`:\n{}",
+        unmarked.join("\n")
+    );
+}
+
+/// Every results file says where it was measured: raw results carry the host (its CPU at least)
+/// and the commit; transcribed ones their source, commit (or null), host and device.
+#[test]
+fn every_results_file_names_its_host() {
+    let dir = root().join("docs/results");
+    let mut checked = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|e| e != "json") {
+            continue;
+        }
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap())
+                .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let name = path.display();
+        if let Some(t) = json.get("transcribed") {
+            for key in ["source", "host", "device"] {
+                assert!(
+                    t[key].as_str().is_some_and(|s| !s.is_empty()),
+                    "{name}: transcribed.{key}"
+                );
+            }
+            assert!(
+                t["commit"].is_null() || t["commit"].is_string(),
+                "{name}: transcribed.commit"
+            );
+        } else {
+            assert!(json["host"]["cpu"].is_string(), "{name}: host.cpu");
+            assert!(json["git"].is_string(), "{name}: git");
+            assert!(
+                json["device"].is_string() && json["driver"].is_string(),
+                "{name}"
+            );
+        }
+        checked += 1;
+    }
+    assert!(checked > 40, "only {checked} results files");
+}

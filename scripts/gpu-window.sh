@@ -1,0 +1,86 @@
+#!/usr/bin/env bash
+# The README's GPU measurements in a short window of device time: runs them in order of value,
+# each within what is left of the budget, writes a results file as each finishes, and stops
+# cleanly (nothing half-written) when the budget ends.
+#
+#   scripts/gpu-window.sh BUDGET_SECONDS OUT_DIR [DATASETS_DIR]
+#
+# BUDGET_SECONDS  wall time for everything, start-up of each step included
+# OUT_DIR         where the results files (JSON, as `rbvh bench --json` and `rbvh shaders --json`
+#                 write them) and log.txt go; copy them to docs/results/ and run `rbvh tables`
+# DATASETS_DIR    the shared datasets (dragon/dragon_vrip.obj, sponza-dabrovic/sponza.obj), by
+#                 default ../shared/datasets beside the repository; steps whose files are missing
+#                 are skipped, saying so
+#
+# Environment: RBVH (the binary; default target/release/rbvh), DEVICE (a part of the device's name;
+# default NVIDIA), RBVH_COMMIT (the commit measured, for a tree without .git; default git's HEAD),
+# WIDTH/HEIGHT (default 1920x1080), RUNS (default 5).
+#
+# Order of value: the shaders' registers (seconds), then the dragon close-up and the default scene
+# (exact and Q0-Q4) for primary, shadow and AO rays, then the paper-scale scene (primary, shadow),
+# whose builds take minutes.
+set -uo pipefail
+
+budget=${1:?usage: scripts/gpu-window.sh BUDGET_SECONDS OUT_DIR [DATASETS_DIR]}
+out=${2:?usage: scripts/gpu-window.sh BUDGET_SECONDS OUT_DIR [DATASETS_DIR]}
+root=$(cd "$(dirname "$0")/.." && pwd)
+datasets=$(cd "${3:-$root/../shared/datasets}" 2>/dev/null && pwd || echo "${3:-$root/../shared/datasets}")
+rbvh=${RBVH:-$root/target/release/rbvh}
+device=${DEVICE:-NVIDIA}
+width=${WIDTH:-1920}
+height=${HEIGHT:-1080}
+runs=${RUNS:-5}
+case $budget in ''|*[!0-9]*) echo "BUDGET_SECONDS must be a whole number of seconds, not $budget" >&2; exit 2;; esac
+[ -x "$rbvh" ] || { echo "no rbvh binary at $rbvh: build it (cargo build --release) or set RBVH" >&2; exit 2; }
+mkdir -p "$out" || exit 2
+out=$(cd "$out" && pwd)
+export RBVH_COMMIT=${RBVH_COMMIT:-$(git -C "$root" rev-parse HEAD 2>/dev/null || true)}
+log=$out/log.txt
+start=$(date +%s)
+left() { echo $(( budget - ($(date +%s) - start) )); }
+say() { echo "[$(( $(date +%s) - start ))s] $*" | tee -a "$log" >&2; }
+
+# The scene files name the datasets relative to scenes/; copies under OUT_DIR name DATASETS_DIR.
+scene_copy() {
+  local from=$root/scenes/$1 to=$out/scenes/$1
+  mkdir -p "$out/scenes"
+  sed "s|\.\./\.\./shared/datasets|$datasets|g" "$from" > "$to" && echo "$to"
+}
+
+# step NAME MIN_SECONDS NEEDED_FILE -- COMMAND...: runs COMMAND when at least MIN_SECONDS are left
+# and NEEDED_FILE exists, killed when the budget ends (its results file is written atomically, so
+# none is left half-written).
+step() {
+  local name=$1 min=$2 needed=$3; shift 4
+  local remaining; remaining=$(left)
+  if [ "$remaining" -lt "$min" ]; then
+    say "$name: skipped, $remaining s left of the budget (needs about $min)"; return
+  fi
+  if [ -n "$needed" ] && [ ! -e "$needed" ]; then
+    say "$name: skipped, $needed is missing"; return
+  fi
+  say "$name: started, $remaining s left"
+  timeout --signal=TERM --kill-after=5 "$remaining" "$@" >>"$log" 2>&1
+  local rc=$?
+  case $rc in
+    0) say "$name: done" ;;
+    124|137) say "$name: stopped, the budget ended"; exit 0 ;;
+    *) say "$name: failed (exit $rc, see $log)" ;;
+  esac
+}
+
+say "rbvh gpu-window: budget ${budget}s, device $device, ${width}x${height}, $runs runs, commit ${RBVH_COMMIT:-unknown}"
+common=(--device "$device" --quality all --width "$width" --height "$height" --runs "$runs" --allow-invalid)
+dragon=$datasets/dragon/dragon_vrip.obj
+closeup=$(scene_copy dragon-closeup.toml)
+paper=$(scene_copy paper-scale.toml)
+
+step shaders 20 "" -- "$rbvh" shaders --device "$device" --json "$out/shaders-gpu.json"
+for rays in primary shadow ao; do
+  step "dragon-closeup $rays" 60 "$dragon" -- "$rbvh" bench --scene "$closeup" --rays "$rays" "${common[@]}" --json "$out/bench-gpu-dragon-closeup-$rays.json"
+  step "default $rays" 40 "" -- "$rbvh" bench --scene default --rays "$rays" "${common[@]}" --json "$out/bench-gpu-default-$rays.json"
+done
+for rays in primary shadow; do
+  step "paper-scale $rays" 240 "$datasets/sponza-dabrovic/sponza.obj" -- "$rbvh" bench --scene "$paper" --rays "$rays" "${common[@]}" --json "$out/bench-gpu-paper-scale-$rays.json"
+done
+say "all steps ended; $(left) s of the budget left"
