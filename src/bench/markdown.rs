@@ -385,7 +385,10 @@ fn summary_table(records: &[&Value]) -> String {
             vec![
                 text(&r["scene"]),
                 text(&r["method"]),
-                level(r),
+                match level(r).as_str() {
+                    "exact" => "-".into(),
+                    l => l.to_string(),
+                },
                 text(&r["ray_type"]),
                 num(&r["mrays_per_s"]["median"], 1.0, 2),
                 format!("{}×", num(&r["speedup_vs_exact"], 1.0, 2)),
