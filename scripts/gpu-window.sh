@@ -13,12 +13,13 @@
 #                 are skipped, saying so
 #
 # Environment: RBVH (the binary; default target/release/rbvh), DEVICE (a part of the device's name;
-# default NVIDIA), RBVH_COMMIT (the commit measured, for a tree without .git; default git's HEAD),
+# default NVIDIA), RBVH_COMMIT (the commit measured, for a tree without .git; inside a repository
+# the bench reads it, and whether the code was committed, from git),
 # WIDTH/HEIGHT (default 1920x1080), RUNS (default 5).
 #
 # Order of value: the shaders' registers (seconds), then the dragon close-up and the default scene
-# (exact and Q0-Q4) for primary, shadow and AO rays, then the paper-scale scene (primary, shadow),
-# whose builds take minutes.
+# (exact and Q0-Q4) for primary, AO and shadow rays, then the paper-scale scene (the three ray
+# types in one run), whose builds take minutes.
 set -uo pipefail
 
 budget=${1:?usage: scripts/gpu-window.sh BUDGET_SECONDS OUT_DIR [DATASETS_DIR]}
@@ -34,7 +35,12 @@ case $budget in ''|*[!0-9]*) echo "BUDGET_SECONDS must be a whole number of seco
 [ -x "$rbvh" ] || { echo "no rbvh binary at $rbvh: build it (cargo build --release) or set RBVH" >&2; exit 2; }
 mkdir -p "$out" || exit 2
 out=$(cd "$out" && pwd)
-export RBVH_COMMIT=${RBVH_COMMIT:-$(git -C "$root" rev-parse HEAD 2>/dev/null || true)}
+# Inside the repository the bench reads the commit (and whether the code was committed) from git;
+# a tree without .git (as a GPU machine is handed) should be given RBVH_COMMIT.
+if [ -z "${RBVH_COMMIT:-}" ] && ! git -C "$root" rev-parse HEAD >/dev/null 2>&1; then
+  echo "warning: no git repository at $root and no RBVH_COMMIT: the results will name no commit" >&2
+fi
+commit=${RBVH_COMMIT:-$(git -C "$root" rev-parse HEAD 2>/dev/null || echo unknown)}
 log=$out/log.txt
 start=$(date +%s)
 left() { echo $(( budget - ($(date +%s) - start) )); }
@@ -44,7 +50,8 @@ say() { echo "[$(( $(date +%s) - start ))s] $*" | tee -a "$log" >&2; }
 scene_copy() {
   local from=$root/scenes/$1 to=$out/scenes/$1
   mkdir -p "$out/scenes"
-  sed "s|\.\./\.\./shared/datasets|$datasets|g" "$from" > "$to" && echo "$to"
+  local escaped; escaped=$(printf '%s' "$datasets" | sed 's/[\\|&]/\\&/g')
+  sed "s|\.\./\.\./shared/datasets|$escaped|g" "$from" > "$to" && echo "$to"
 }
 
 # step NAME MIN_SECONDS NEEDED_FILE -- COMMAND...: runs COMMAND when at least MIN_SECONDS are left
@@ -69,18 +76,19 @@ step() {
   esac
 }
 
-say "rbvh gpu-window: budget ${budget}s, device $device, ${width}x${height}, $runs runs, commit ${RBVH_COMMIT:-unknown}"
+say "rbvh gpu-window: budget ${budget}s, device $device, ${width}x${height}, $runs runs, commit $commit"
 common=(--device "$device" --quality all --width "$width" --height "$height" --runs "$runs" --allow-invalid)
 dragon=$datasets/dragon/dragon_vrip.obj
 closeup=$(scene_copy dragon-closeup.toml)
 paper=$(scene_copy paper-scale.toml)
 
 step shaders 20 "" -- "$rbvh" shaders --device "$device" --json "$out/shaders-gpu.json"
-for rays in primary shadow ao; do
+# A file per ray type for the small scenes, so that the budget's end loses one ray type, not all
+# (their builds take seconds); one run of all three for the paper-scale scene, whose builds take
+# minutes.
+for rays in primary ao shadow; do
   step "dragon-closeup $rays" 60 "$dragon" -- "$rbvh" bench --scene "$closeup" --rays "$rays" "${common[@]}" --json "$out/bench-gpu-dragon-closeup-$rays.json"
   step "default $rays" 40 "" -- "$rbvh" bench --scene default --rays "$rays" "${common[@]}" --json "$out/bench-gpu-default-$rays.json"
 done
-for rays in primary shadow; do
-  step "paper-scale $rays" 240 "$datasets/sponza-dabrovic/sponza.obj" -- "$rbvh" bench --scene "$paper" --rays "$rays" "${common[@]}" --json "$out/bench-gpu-paper-scale-$rays.json"
-done
+step "paper-scale" 300 "$datasets/sponza-dabrovic/sponza.obj" -- "$rbvh" bench --scene "$paper" --rays primary,ao,shadow "${common[@]}" --json "$out/bench-gpu-paper-scale.json"
 say "all steps ended; $(left) s of the budget left"

@@ -1070,3 +1070,59 @@ fn tables_are_written_from_results_files_and_checked() {
     assert!(!typed.status.success());
     assert!(String::from_utf8_lossy(&typed.stderr).contains("typed by hand"));
 }
+
+/// Under `RADV_FORCE_FAMILY` Mesa offers RADV's null device, which compiles but cannot run: a
+/// render picks a device that runs instead (it used to pick the null device and crash), and one
+/// that names the null device fails with an error saying why.
+#[test]
+fn a_render_never_runs_on_a_null_device() {
+    let radv = [
+        "/usr/share/vulkan/icd.d/radeon_icd.x86_64.json",
+        "/usr/share/vulkan/icd.d/radeon_icd.aarch64.json",
+    ];
+    if !radv.iter().any(|m| Path::new(m).exists()) {
+        assert!(
+            std::env::var_os("RBVH_REQUIRE_NULL_DEVICE").is_none(),
+            "RBVH_REQUIRE_NULL_DEVICE is set but RADV is not installed"
+        );
+        eprintln!("skipped: RADV is not installed (Debian: mesa-vulkan-drivers)");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("r.png");
+    let render = |extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_rbvh"))
+            .args([
+                "render",
+                "--width",
+                "16",
+                "--height",
+                "12",
+                "--out",
+                arg(&png),
+            ])
+            .args(extra)
+            .env("RADV_FORCE_FAMILY", "navi21")
+            .env("MESA_SHADER_CACHE_DISABLE", "true")
+            .env("RBVH_VALIDATION", "auto")
+            .env_remove("RBVH_DEVICE")
+            .output()
+            .unwrap()
+    };
+    let out = render(&[]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(png.exists());
+    std::fs::remove_file(&png).unwrap();
+    let named = render(&["--device", "RADV"]);
+    assert_eq!(named.status.code(), Some(1), "an error, not a crash");
+    let stderr = String::from_utf8_lossy(&named.stderr);
+    assert!(
+        stderr.contains("compiles pipelines but cannot run them"),
+        "{stderr}"
+    );
+    assert!(!png.exists(), "nothing written");
+}

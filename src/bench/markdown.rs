@@ -20,10 +20,14 @@ use std::path::{Component, Path, PathBuf};
 
 use serde_json::Value;
 
-use super::provenance::Host;
+use super::provenance::{short_commit, Host};
 use super::shaders::{column_value, COLUMNS};
 use crate::gpu::{ShaderStatistic, StatisticValue};
 use crate::{Error, Result};
+
+/// What a view or caption makes, or what is wrong with the results file (the caller names the
+/// file and the document's line).
+type Made<T> = std::result::Result<T, String>;
 
 /// The comment that opens a generated block, before the results file's path.
 pub const OPEN: &str = "<!-- table ";
@@ -39,8 +43,6 @@ pub struct Stale {
     pub document: PathBuf,
     /// 1-based line of each differing block's opening comment.
     pub lines: Vec<usize>,
-    /// The document as the files make it.
-    pub regenerated: String,
 }
 
 /// The documents of a repository that hold measurements: `README.md`, `scenes/README.md` and
@@ -79,11 +81,7 @@ pub fn update(root: &Path, check: bool) -> Result<Vec<Stale>> {
             if !check {
                 crate::io::write_atomically(&path, |w| w.write_all(regenerated.as_bytes()))?;
             }
-            stale.push(Stale {
-                document,
-                lines,
-                regenerated,
-            });
+            stale.push(Stale { document, lines });
         }
     }
     Ok(stale)
@@ -95,36 +93,37 @@ pub fn regenerate(root: &Path, document: &Path, text: &str) -> Result<(String, V
     let lines: Vec<&str> = text.lines().collect();
     let mut out = String::with_capacity(text.len());
     let mut changed = Vec::new();
+    let mut fenced = false;
     let mut k = 0;
     while k < lines.len() {
         let line = lines[k];
         out.push_str(line);
         out.push('\n');
-        let Some(spec) = line.trim().strip_prefix(OPEN) else {
-            k += 1;
-            continue;
+        if line.trim_start().starts_with("```") {
+            fenced = !fenced;
+        }
+        let spec = match line.trim().strip_prefix(OPEN) {
+            Some(spec) if !fenced => spec,
+            _ => {
+                k += 1;
+                continue;
+            }
         };
-        let place = || format!("{}:{}", document.display(), k + 1);
+        let at = |m: String| Error::parse(document, Some(k + 1), m);
         let spec = spec
             .strip_suffix("-->")
-            .ok_or_else(|| Error::parse(document, Some(k + 1), "a table comment ends with -->"))?;
+            .ok_or_else(|| at("a table comment ends with -->".into()))?;
+        // The block ends at the first close; an opening before it means this one lost its close,
+        // and writing would swallow what lies between.
         let end = lines[k + 1..]
             .iter()
-            .position(|l| l.trim() == CLOSE)
+            .position(|l| l.trim() == CLOSE || l.trim().starts_with(OPEN))
             .map(|e| k + 1 + e)
-            .ok_or_else(|| {
-                Error::parse(
-                    document,
-                    Some(k + 1),
-                    format!("no {CLOSE} after this block"),
-                )
-            })?;
-        let block = Block::parse(spec).map_err(|m| Error::parse(document, Some(k + 1), m))?;
-        let made = block
-            .render(root, document)
-            .map_err(|e| Error::param("table", format!("{}: {e}", place())))?;
-        let old: Vec<&str> = lines[k + 1..end].to_vec();
-        if old.join("\n") != made.trim_end_matches('\n') {
+            .filter(|&e| lines[e].trim() == CLOSE)
+            .ok_or_else(|| at(format!("no {CLOSE} before the next block or the end")))?;
+        let block = Block::parse(spec).map_err(at)?;
+        let made = block.render(root, document).map_err(at)?;
+        if lines[k + 1..end].join("\n") != made.trim_end_matches('\n') {
             changed.push(k + 1);
         }
         out.push_str(&made);
@@ -220,34 +219,33 @@ impl Block {
             .map(|(_, v)| v.as_slice())
     }
 
-    /// The block's content: the table, a blank line and the line saying where it was measured.
-    fn render(&self, root: &Path, document: &Path) -> Result<String> {
-        let path = root.join(&self.file);
-        let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+    /// The block's content: the table, a blank line and the line saying where it was measured;
+    /// or what is wrong with the results file, naming it.
+    fn render(&self, root: &Path, document: &Path) -> Made<String> {
+        let file = self.file.display();
+        let text = std::fs::read_to_string(root.join(&self.file))
+            .map_err(|e| format!("results file {file}: {e}"))?;
         let json: Value = serde_json::from_str(&text)
-            .map_err(|e| Error::parse(&self.file, Some(e.line()), e.to_string()))?;
+            .map_err(|e| format!("results file {file}:{}: {e}", e.line()))?;
         let link = relative(document.parent().unwrap_or(Path::new("")), &self.file);
         let link = link.to_string_lossy().replace('\\', "/");
-        let (table, caption) = if let Some(t) = json.get("transcribed") {
+        let made = if let Some(t) = json.get("transcribed") {
             if self.view.is_some() || !self.filters.is_empty() {
-                return Err(Error::param(
-                    "table",
-                    "a transcribed file is shown as recorded: no view or filters",
-                ));
+                Err("a transcribed file is shown as recorded: no view or filters".to_string())
+            } else {
+                transcribed_table(&json).and_then(|table| Ok((table, transcribed_caption(t)?)))
             }
-            (transcribed_table(&json)?, transcribed_caption(t)?)
         } else {
-            (
-                self.view_table(&json)?,
-                measured_caption(&json, &self.file)?,
-            )
+            self.view_table(&json)
+                .and_then(|table| Ok((table, measured_caption(&json)?)))
         };
+        let (table, caption) = made.map_err(|m| format!("results file {file}: {m}"))?;
         Ok(format!(
             "{table}\n<sub>{caption} ([results]({link}))</sub>\n"
         ))
     }
 
-    fn view_table(&self, json: &Value) -> Result<String> {
+    fn view_table(&self, json: &Value) -> Made<String> {
         let view = self.view.as_deref().unwrap_or("summary");
         if view == "shaders" {
             return shaders_table(json, self.filter("pipelines"));
@@ -255,30 +253,21 @@ impl Block {
         let records: Vec<&Value> = json["results"]
             .as_array()
             .ok_or_else(|| {
-                Error::param(
-                    "table",
-                    format!(
-                        "{}: neither bench results (results) nor transcribed",
-                        self.file.display()
-                    ),
-                )
+                "neither bench results (`results`), shader results (`pipelines`) nor transcribed"
+                    .to_string()
             })?
             .iter()
             .filter(|r| self.keeps(r))
             .collect();
         if records.is_empty() {
-            return Err(Error::param(
-                "table",
-                format!("{}: no record passes the filters", self.file.display()),
-            ));
+            return Err("no record passes the block's filters".to_string());
         }
         match view {
             "summary" => Ok(summary_table(&records)),
             "work" => Ok(work_table(&records)),
             "ratios" => Ok(ratios_table(&records)),
-            other => Err(Error::param(
-                "table",
-                format!("unknown view {other:?} (summary, work, ratios, shaders)"),
+            other => Err(format!(
+                "unknown view {other:?} (summary, work, ratios, shaders)"
             )),
         }
     }
@@ -506,10 +495,10 @@ fn ratios_table(records: &[&Value]) -> String {
 
 /// `rbvh shaders` results: a row per pipeline (`pipelines=default`: the variants the tracers use
 /// by default), with the statistics of [`COLUMNS`] that any row has.
-fn shaders_table(json: &Value, which: Option<&[String]>) -> Result<String> {
+fn shaders_table(json: &Value, which: Option<&[String]>) -> Made<String> {
     let pipelines = json["pipelines"]
         .as_array()
-        .ok_or_else(|| Error::param("table", "view=shaders needs rbvh shaders results"))?;
+        .ok_or_else(|| "view=shaders needs rbvh shaders results".to_string())?;
     let only_default = which.is_some_and(|w| w.iter().any(|p| p == "default"));
     let rows: Vec<(String, Vec<ShaderStatistic>)> = pipelines
         .iter()
@@ -560,15 +549,15 @@ fn shaders_table(json: &Value, which: Option<&[String]>) -> Result<String> {
 }
 
 /// A transcribed file's table, as recorded.
-fn transcribed_table(json: &Value) -> Result<String> {
-    let strings = |v: &Value, what: &str| -> Result<Vec<String>> {
+fn transcribed_table(json: &Value) -> Made<String> {
+    let strings = |v: &Value, what: &str| -> Made<Vec<String>> {
         v.as_array()
-            .ok_or_else(|| Error::param("table", format!("transcribed {what}: not a list")))?
+            .ok_or_else(|| format!("transcribed {what}: not a list"))?
             .iter()
             .map(|c| {
-                c.as_str().map(str::to_string).ok_or_else(|| {
-                    Error::param("table", format!("transcribed {what}: cells are strings"))
-                })
+                c.as_str()
+                    .map(str::to_string)
+                    .ok_or_else(|| format!("transcribed {what}: cells are strings"))
             })
             .collect()
     };
@@ -582,38 +571,30 @@ fn transcribed_table(json: &Value) -> Result<String> {
     };
     let rows = json["rows"]
         .as_array()
-        .ok_or_else(|| Error::param("table", "transcribed rows: not a list"))?
+        .ok_or_else(|| "transcribed rows: not a list".to_string())?
         .iter()
         .map(|r| strings(r, "rows"))
-        .collect::<Result<Vec<_>>>()?;
+        .collect::<Made<Vec<_>>>()?;
     if let Some(bad) = rows.iter().find(|r| r.len() != header.len()) {
-        return Err(Error::param(
-            "table",
-            format!(
-                "a transcribed row has {} cells for {} columns: {bad:?}",
-                bad.len(),
-                header.len()
-            ),
+        return Err(format!(
+            "a transcribed row has {} cells for {} columns: {bad:?}",
+            bad.len(),
+            header.len()
         ));
     }
     Ok(markdown(&header, &align, &rows))
 }
 
-fn transcribed_caption(t: &Value) -> Result<String> {
-    let field = |k: &str| -> Result<String> {
+fn transcribed_caption(t: &Value) -> Made<String> {
+    let field = |k: &str| -> Made<String> {
         t[k].as_str()
             .map(str::to_string)
-            .ok_or_else(|| Error::param("table", format!("transcribed.{k}: required, a string")))
+            .ok_or_else(|| format!("transcribed.{k}: required, a string"))
     };
     let commit = match &t["commit"] {
         Value::String(c) => format!("measured at {c}"),
         Value::Null => "measured at a commit not recorded".into(),
-        _ => {
-            return Err(Error::param(
-                "table",
-                "transcribed.commit: a string or null",
-            ))
-        }
+        _ => return Err("transcribed.commit: a string or null".to_string()),
     };
     let note = t["note"].as_str().map_or(String::new(), |n| {
         format!(" {}", n.trim_end_matches('.').to_string() + ".")
@@ -627,16 +608,12 @@ fn transcribed_caption(t: &Value) -> Result<String> {
 }
 
 /// The line under a view of raw results: the tool, commit, date, host and device.
-fn measured_caption(json: &Value, file: &Path) -> Result<String> {
-    let host: Host = serde_json::from_value(json["host"].clone()).map_err(|_| {
-        Error::param(
-            "table",
-            format!("{}: raw results name their host (`host`)", file.display()),
-        )
-    })?;
+fn measured_caption(json: &Value) -> Made<String> {
+    let host: Host = serde_json::from_value(json["host"].clone())
+        .map_err(|_| "raw results name their host (`host`)".to_string())?;
     let commit = match (json["git"].as_str(), json["git_dirty"].as_bool()) {
-        (Some(c), Some(true)) => format!("{} + uncommitted changes", &c[..c.len().min(7)]),
-        (Some(c), _) => c[..c.len().min(7)].to_string(),
+        (Some(c), Some(true)) => format!("{} + uncommitted changes", short_commit(c)),
+        (Some(c), _) => short_commit(c),
         (None, _) => "a commit not recorded".into(),
     };
     let tool = if json.get("pipelines").is_some() {
@@ -682,6 +659,30 @@ mod tests {
     fn tables_typed_by_hand_are_found() {
         let text = "intro\n| a | b |\n|---|--:|\n| 1 | 2 |\n\n<!-- not a measurement -->\n| x |\n|---|\n\n```\n| c |\n|---|\n```\n<!-- table f.json -->\n| d |\n|---|\n<!-- /table -->\n";
         assert_eq!(unmarked_tables(text), vec![2]);
+    }
+
+    #[test]
+    fn a_block_without_its_close_is_refused_not_written_over() {
+        let root = Path::new("/nonexistent");
+        let doc = Path::new("x.md");
+        let lost = "<!-- table a.json -->\nprose\n<!-- table b.json -->\n<!-- /table -->\n";
+        let e = regenerate(root, doc, lost).unwrap_err().to_string();
+        assert!(
+            e.contains("x.md:1") && e.contains("no <!-- /table -->"),
+            "{e}"
+        );
+        // Inside a fence a block is an example, not a block.
+        let fenced = "```markdown\n<!-- table a.json -->\n```\n";
+        assert_eq!(
+            regenerate(root, doc, fenced).unwrap(),
+            (fenced.to_string(), vec![])
+        );
+        let missing = "<!-- table a.json -->\n<!-- /table -->\n";
+        let e = regenerate(root, doc, missing).unwrap_err().to_string();
+        assert!(
+            e.contains("x.md:1") && e.contains("results file a.json"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -6,9 +6,9 @@
 
 use std::path::Path;
 use std::process::Command;
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use serde::{Deserialize, Serialize};
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use crate::gpu::Context;
 
@@ -40,6 +40,12 @@ pub fn git_commit() -> Option<String> {
         .ok()?;
     let commit = String::from_utf8(out.stdout).ok()?.trim().to_string();
     (out.status.success() && !commit.is_empty()).then_some(commit)
+}
+
+/// The first ten characters of a commit, as tables print it (fewer where it is shorter; any
+/// text, since `RBVH_COMMIT` may name it).
+pub fn short_commit(commit: &str) -> String {
+    commit.chars().take(10).collect()
 }
 
 /// Whether tracked files other than documentation (`docs/`, `*.md`) differ from `HEAD` in the
@@ -83,7 +89,8 @@ pub fn lavapipe_threads(ctx: &Context) -> Option<u32> {
 pub struct Host {
     /// The CPU's model name (`/proc/cpuinfo`).
     pub cpu: Option<String>,
-    /// Physical cores (distinct core ids per package in `/proc/cpuinfo`).
+    /// Physical cores of the machine (distinct core ids per package in `/proc/cpuinfo`), which a
+    /// container or an affinity mask may leave fewer of to this process ([`Host::logical_cpus`]).
     pub cores: Option<u32>,
     /// Logical CPUs this process may run on.
     pub logical_cpus: Option<u32>,
@@ -143,8 +150,8 @@ impl Host {
     }
 
     /// One line for people: `Intel Xeon …, 2 cores (2 threads used), L2 2 MiB, L3 480 MiB,
-    /// 23.4 GiB, Debian GNU/Linux 12 (kernel …), virtual machine, Mesa 22.3.6, LLVM 15.0.6`;
-    /// what is unknown is left out.
+    /// 23.4 GiB memory, Debian GNU/Linux 12 (bookworm), kernel …, virtual machine, Mesa 22.3.6,
+    /// LLVM 15.0.6`; what is unknown is left out.
     pub fn summary(&self) -> String {
         let mut parts = vec![self.cpu.clone().unwrap_or_else(|| "CPU not known".into())];
         let mut cores = match (self.cores, self.logical_cpus) {

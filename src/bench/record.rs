@@ -9,8 +9,8 @@
 //! | `device`, `driver` | string | the Vulkan device and driver, as they report themselves |
 //! | `threads` | int \| null | lavapipe's worker threads (`LP_NUM_THREADS`, else one per CPU); null on other devices |
 //! | `date` | string | start of the run, UTC, ISO 8601 (`2025-01-31T12:00:00Z`) |
-//! | `git` | string \| null | `git rev-parse HEAD` in the working directory, null outside a repository |
-//! | `git_dirty` | bool \| null | whether tracked files other than documentation differed from that commit (uncommitted code was measured) |
+//! | `git` | string \| null | `RBVH_COMMIT` where set, else `git rev-parse HEAD` in the working directory; null outside a repository |
+//! | `git_dirty` | bool \| null | whether tracked files other than documentation (`docs/`, `*.md`) differed from that commit (uncommitted code was measured); null outside a repository or with `RBVH_COMMIT` |
 //! | `host` | object | the machine ([`Host`]): `cpu`, `cores`, `logical_cpus`, `threads_used` (the driver's worker threads: lavapipe's), `l2_bytes`, `l3_bytes`, `memory_bytes`, `os`, `virtualized`, `mesa`, `llvm`; null where the system does not tell |
 //! | `version` | string | this crate's version |
 //! | `runs` | int | timed runs per record, after one warm-up |
@@ -104,10 +104,12 @@ pub struct BenchReport {
     pub threads: Option<u32>,
     /// Start of the run, UTC, ISO 8601 (`2025-01-31T12:00:00Z`).
     pub date: String,
-    /// `git rev-parse HEAD` in the working directory; None outside a repository.
+    /// The commit measured ([`super::provenance::git_commit`]: `RBVH_COMMIT`, else `git
+    /// rev-parse HEAD` in the working directory); None outside a repository.
     pub git: Option<String>,
-    /// Whether tracked files other than documentation differed from `git` (uncommitted code was measured); None outside a
-    /// repository.
+    /// Whether tracked files other than documentation differed from `git` (uncommitted code was
+    /// measured, [`super::provenance::git_dirty`]); None outside a repository or with
+    /// `RBVH_COMMIT`.
     pub git_dirty: Option<bool>,
     /// The machine the run measured on.
     pub host: Host,

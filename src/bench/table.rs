@@ -5,6 +5,7 @@
 use std::collections::BTreeSet;
 use std::fmt::Write;
 
+use super::provenance::short_commit;
 use super::record::{BenchReport, Record};
 
 /// Columns after the scene's: header, width, and whether values are left-aligned (names) rather
@@ -62,8 +63,8 @@ fn pad(text: &str, width: usize, left: bool) -> String {
 /// date. Every table of a run is printed under it, so that a copied table says where it was taken.
 pub fn host_line(report: &BenchReport) -> String {
     let commit = match (&report.git, report.git_dirty) {
-        (Some(c), Some(true)) => format!("{} + uncommitted changes", &c[..c.len().min(10)]),
-        (Some(c), _) => c[..c.len().min(10)].to_string(),
+        (Some(c), Some(true)) => format!("{} + uncommitted changes", short_commit(c)),
+        (Some(c), _) => short_commit(c),
         (None, _) => "no commit".into(),
     };
     format!(

@@ -24,8 +24,9 @@ pub struct CompiledPipeline {
     /// The specialization constants set, by their GLSL names, as 0 or 1 (JSON: an object).
     #[serde(serialize_with = "as_map")]
     pub specialization: Vec<(&'static str, u32)>,
-    /// Whether this is the variant the tracer uses on this device by default (block jumps off on
-    /// CPU devices, on elsewhere; not counting): the one whose speed the bench times.
+    /// Whether a tracer uses this variant by default on this device for the structure it suits
+    /// (block jumps off on CPU devices, on elsewhere; not counting; each texel format for RBVHs
+    /// built with it): the ones whose speed the bench times.
     pub default_variant: bool,
     /// In the driver's order and words; empty where the device does not report them.
     pub statistics: Vec<ShaderStatistic>,
@@ -87,6 +88,7 @@ pub fn compile_every_pipeline(ctx: &Context) -> Result<Vec<CompiledPipeline>> {
     Ok(compiled)
 }
 
+/// `(name, value)` pairs as a JSON object, which reads better than a list of pairs.
 fn as_map<S: serde::Serializer>(
     pairs: &[(&'static str, u32)],
     serializer: S,

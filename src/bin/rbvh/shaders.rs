@@ -18,7 +18,8 @@ pub struct Args {
     /// navi21, navi10, vega10 and rembrandt; navi21 is the project's reference.
     #[arg(long, value_name = "FAMILY")]
     amd: Option<String>,
-    /// With --amd: compile compute shaders for wave32 (RADV_PERFTEST=cswave32) instead of wave64.
+    /// With --amd: compile compute shaders for wave32 (adds cswave32 to RADV_PERFTEST) instead of
+    /// wave64.
     #[arg(long, requires = "amd")]
     wave32: bool,
     /// Compile on the first device whose name contains this (default: RBVH_DEVICE, else the
@@ -44,10 +45,15 @@ pub fn run(a: Args) -> Result<()> {
             // else runs yet.
             std::env::set_var("RADV_FORCE_FAMILY", family);
             std::env::set_var("MESA_SHADER_CACHE_DISABLE", "true");
+            // Kept as the user set it (the report records it), with cswave32 added for --wave32.
             if a.wave32 {
-                std::env::set_var("RADV_PERFTEST", "cswave32");
-            } else {
-                std::env::remove_var("RADV_PERFTEST");
+                let perftest = std::env::var("RADV_PERFTEST").unwrap_or_default();
+                let flags: Vec<&str> = perftest
+                    .split(',')
+                    .filter(|f| !f.is_empty())
+                    .chain(["cswave32"])
+                    .collect();
+                std::env::set_var("RADV_PERFTEST", flags.join(","));
             }
             Some("RADV".to_string())
         }

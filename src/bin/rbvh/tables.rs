@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::Result;
+use anyhow::{Context as _, Result};
 use rbvh::bench::markdown;
 
 #[derive(clap::Args, Debug)]
@@ -20,10 +20,18 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> Result<()> {
+    let documents = markdown::documents(&a.root)?;
+    anyhow::ensure!(
+        !documents.is_empty(),
+        "no README.md, scenes/README.md or docs/*.md under {}: give the repository with --root",
+        a.root.display()
+    );
     let stale = markdown::update(&a.root, a.check)?;
     let mut unmarked = Vec::new();
-    for document in markdown::documents(&a.root)? {
-        let text = std::fs::read_to_string(a.root.join(&document))?;
+    for document in documents {
+        let path = a.root.join(&document);
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("reading {}", path.display()))?;
         for line in markdown::unmarked_tables(&text) {
             unmarked.push(format!("{}:{line}", document.display()));
         }
