@@ -117,7 +117,6 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
     assert!(keys(&json).is_superset(&set(&[
         "device",
         "driver",
-        "threads",
         "date",
         "git",
         "git_dirty",
@@ -146,12 +145,12 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
         assert!(json["host"]["memory_bytes"].as_u64().unwrap() > 0);
         assert!(json["host"]["logical_cpus"].as_u64().unwrap() > 0);
     }
-    if report.device.contains("llvmpipe") {
-        assert_eq!(report.host.threads_used, report.threads);
+    if report.provenance.device.contains("llvmpipe") {
+        assert!(report.provenance.host.threads_used.is_some());
         assert!(
-            report.host.mesa.is_some() && report.host.llvm.is_some(),
+            report.provenance.host.mesa.is_some() && report.provenance.host.llvm.is_some(),
             "{:?}",
-            report.host
+            report.provenance.host
         );
     }
     // One entry per trace pipeline, in the order first used; statistics where the driver gives them.
@@ -250,9 +249,9 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
     let column = |name: &str| columns.iter().position(|c| c == name).unwrap();
     for ((row, record), json) in rows.iter().zip(&report.results).zip(results) {
         assert_eq!(row.len(), columns.len(), "{row:?}");
-        assert_eq!(&row[0], report.device, "{row:?}");
-        assert_eq!(&row[1], report.driver, "{row:?}");
-        assert_eq!(&row[2], report.date, "{row:?}");
+        assert_eq!(&row[0], report.provenance.device, "{row:?}");
+        assert_eq!(&row[1], report.provenance.driver, "{row:?}");
+        assert_eq!(&row[2], report.provenance.date, "{row:?}");
         assert_eq!(
             &row[column("version")],
             env!("CARGO_PKG_VERSION"),
@@ -261,12 +260,12 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
         // Every row names its host, as the JSON does.
         assert_eq!(
             &row[column("host.cpu")],
-            report.host.cpu.clone().unwrap_or_default(),
+            report.provenance.host.cpu.clone().unwrap_or_default(),
             "{row:?}"
         );
         assert_eq!(
             &row[column("host.mesa")],
-            report.host.mesa.clone().unwrap_or_default(),
+            report.provenance.host.mesa.clone().unwrap_or_default(),
             "{row:?}"
         );
         assert_eq!(&row[column("scene")], record.scene, "{row:?}");
@@ -333,8 +332,8 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
     // First where it was measured: the host, the device and the commit.
     let host = table.lines().next().unwrap();
     assert_eq!(host, bench::host_line(&report).trim_end());
-    assert!(host.contains(&report.device), "{host}");
-    if let Some(cpu) = &report.host.cpu {
+    assert!(host.contains(&report.provenance.device), "{host}");
+    if let Some(cpu) = &report.provenance.host.cpu {
         assert!(host.starts_with(&format!("host: {cpu}")), "{host}");
     }
     // The leaks column, a count on the RBVH lines, and the footnote saying of how many rays.
@@ -676,7 +675,7 @@ fn the_cli_writes_json_and_csv_and_rejects_unknown_ray_types() {
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(report["results"].as_array().unwrap().len(), 2 * 2 * 2);
     if report["device"].as_str().unwrap().contains("llvmpipe") {
-        assert_eq!(report["threads"], 1);
+        assert_eq!(report["host"]["threads_used"], 1);
     }
     assert_eq!(
         std::fs::read_to_string(&csv).unwrap().lines().count(),

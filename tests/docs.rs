@@ -9,17 +9,13 @@ fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// The markdown files a reader of the repository opens.
+/// The markdown files a reader of the repository opens (those `rbvh tables` writes into).
 fn documents() -> Vec<PathBuf> {
-    let mut files = vec![root().join("README.md"), root().join("scenes/README.md")];
-    let mut docs: Vec<PathBuf> = std::fs::read_dir(root().join("docs"))
+    rbvh::bench::markdown::documents(root())
         .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "md"))
-        .collect();
-    docs.sort();
-    files.extend(docs);
-    files
+        .into_iter()
+        .map(|d| root().join(d))
+        .collect()
 }
 
 /// The text's lines with fenced code blocks emptied and inline code spans removed.

@@ -7,15 +7,12 @@
 //! Where RADV is not installed the test is skipped, saying why — unless `RBVH_REQUIRE_NULL_DEVICE`
 //! is set, as `.ci/run` sets it: CI installs RADV through `.ci/setup`, so a skip there fails.
 
+mod common;
+
 use rbvh::bench::shaders::{column_value, COLUMNS};
-use rbvh::gpu::{compile_every_pipeline, Context, ContextOptions, Validation};
+use rbvh::gpu::{compile_every_pipeline, Context, ContextOptions, ShaderStatistic, Validation};
 use rbvh::structure::Structure;
 use rbvh::Error;
-
-const RADV_MANIFESTS: [&str; 2] = [
-    "/usr/share/vulkan/icd.d/radeon_icd.x86_64.json",
-    "/usr/share/vulkan/icd.d/radeon_icd.aarch64.json",
-];
 
 /// The results file of the project's reference (Mesa's RADV on navi21, wave64), kept at the
 /// commit's shaders.
@@ -31,17 +28,7 @@ fn options(device: Option<&str>) -> ContextOptions {
 
 #[test]
 fn every_pipeline_compiles_on_the_null_device_and_reports_its_registers() {
-    if !RADV_MANIFESTS
-        .iter()
-        .any(|m| std::path::Path::new(m).exists())
-    {
-        let reason = "RADV is not installed (Debian: mesa-vulkan-drivers), so there is no null \
-                      device to compile on";
-        assert!(
-            std::env::var_os("RBVH_REQUIRE_NULL_DEVICE").is_none(),
-            "RBVH_REQUIRE_NULL_DEVICE is set but {reason}"
-        );
-        eprintln!("skipped: {reason}");
+    if !common::radv_or_skip() {
         return;
     }
     // SAFETY (of the environment): set before any Vulkan call of this process, which has no
@@ -118,15 +105,8 @@ fn every_pipeline_compiles_on_the_null_device_and_reports_its_registers() {
         .unwrap()
         .iter()
         .map(|p| {
-            let stats: Vec<rbvh::gpu::ShaderStatistic> = p["statistics"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|s| rbvh::gpu::ShaderStatistic {
-                    name: s["name"].as_str().unwrap().to_string(),
-                    value: rbvh::gpu::StatisticValue::UInt(s["value"].as_u64().unwrap_or(0)),
-                })
-                .collect();
+            let stats: Vec<ShaderStatistic> =
+                serde_json::from_value(p["statistics"].clone()).unwrap();
             (p["pipeline"].as_str().unwrap().to_string(), shown(&stats))
         })
         .collect();
@@ -142,7 +122,7 @@ fn every_pipeline_compiles_on_the_null_device_and_reports_its_registers() {
 }
 
 /// The statistics a table shows, as text, in [`COLUMNS`] order.
-fn shown(statistics: &[rbvh::gpu::ShaderStatistic]) -> Vec<String> {
+fn shown(statistics: &[ShaderStatistic]) -> Vec<String> {
     COLUMNS
         .iter()
         .map(|(_, names)| column_value(statistics, names).map_or("-".into(), |v| v.to_string()))

@@ -28,7 +28,7 @@ use rayon::prelude::*;
 use super::error_image::error_image;
 use super::metrics::{self, HitErrors, Summary};
 use super::plot;
-use super::provenance;
+use super::provenance::{self, Provenance};
 use super::record::{
     BenchReport, Errors, Memory, Params, Record, SeamRecord, ShaderRecord, Spread, TimingSource,
     TrafficRecord,
@@ -86,16 +86,11 @@ pub fn run_observed(
             Context::new(options)?
         }
     };
-    let threads = provenance::lavapipe_threads(&ctx);
     let mut report = BenchReport {
-        device: ctx.device_name().to_string(),
-        driver: ctx.driver().to_string(),
-        threads,
-        date,
-        git: provenance::git_commit(),
-        git_dirty: provenance::git_dirty(),
-        host: provenance::Host::current(ctx.driver(), threads),
-        version: env!("CARGO_PKG_VERSION").to_string(),
+        provenance: Provenance {
+            date,
+            ..Provenance::of(&ctx)
+        },
         runs: config.runs,
         min_run_ms: config.min_run_ms,
         width: config.width,

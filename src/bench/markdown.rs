@@ -20,9 +20,9 @@ use std::path::{Component, Path, PathBuf};
 
 use serde_json::Value;
 
-use super::provenance::{short_commit, Host};
+use super::provenance::Provenance;
 use super::shaders::{column_value, COLUMNS};
-use crate::gpu::{ShaderStatistic, StatisticValue};
+use crate::gpu::ShaderStatistic;
 use crate::{Error, Result};
 
 /// What a view or caption makes, or what is wrong with the results file (the caller names the
@@ -325,9 +325,10 @@ fn num(v: &Value, scale: f64, digits: usize) -> String {
 }
 
 /// Markdown table lines: the header, the alignment row (`r` right-aligned, else left), rows.
-fn markdown(header: &[String], align: &[char], rows: &[Vec<String>]) -> String {
+fn markdown<H: AsRef<str>>(header: &[H], align: &[char], rows: &[Vec<String>]) -> String {
     let row = |cells: &[String]| format!("| {} |", cells.join(" | "));
-    let mut out = vec![row(header)];
+    let header: Vec<String> = header.iter().map(|h| h.as_ref().to_string()).collect();
+    let mut out = vec![row(&header)];
     out.push(format!(
         "|{}|",
         header
@@ -346,7 +347,7 @@ fn markdown(header: &[String], align: &[char], rows: &[Vec<String>]) -> String {
 }
 
 fn summary_table(records: &[&Value]) -> String {
-    let header: Vec<String> = [
+    let header = [
         "scene",
         "method",
         "level",
@@ -363,10 +364,7 @@ fn summary_table(records: &[&Value]) -> String {
         "leaks",
         "through",
         "valid",
-    ]
-    .iter()
-    .map(|s| s.to_string())
-    .collect();
+    ];
     let rows: Vec<Vec<String>> = records
         .iter()
         .map(|r| {
@@ -408,7 +406,7 @@ fn summary_table(records: &[&Value]) -> String {
 }
 
 fn work_table(records: &[&Value]) -> String {
-    let header: Vec<String> = [
+    let header = [
         "scene",
         "level",
         "rays",
@@ -419,10 +417,7 @@ fn work_table(records: &[&Value]) -> String {
         "jumps",
         "triangles",
         "SIMD8",
-    ]
-    .iter()
-    .map(|s| s.to_string())
-    .collect();
+    ];
     let rows: Vec<Vec<String>> = records
         .iter()
         .map(|r| {
@@ -504,22 +499,8 @@ fn shaders_table(json: &Value, which: Option<&[String]>) -> Made<String> {
         .iter()
         .filter(|p| !only_default || p["default_variant"].as_bool() == Some(true))
         .map(|p| {
-            let statistics = p["statistics"]
-                .as_array()
-                .map(|s| {
-                    s.iter()
-                        .map(|s| ShaderStatistic {
-                            name: text(&s["name"]),
-                            value: match &s["value"] {
-                                Value::Bool(b) => StatisticValue::Bool(*b),
-                                v if v.is_u64() => StatisticValue::UInt(v.as_u64().unwrap_or(0)),
-                                v if v.is_i64() => StatisticValue::Int(v.as_i64().unwrap_or(0)),
-                                v => StatisticValue::Float(v.as_f64().unwrap_or(f64::NAN)),
-                            },
-                        })
-                        .collect()
-                })
-                .unwrap_or_default();
+            let statistics: Vec<ShaderStatistic> =
+                serde_json::from_value(p["statistics"].clone()).unwrap_or_default();
             (format!("`{}`", text(&p["pipeline"])), statistics)
         })
         .collect();
@@ -609,34 +590,31 @@ fn transcribed_caption(t: &Value) -> Made<String> {
 
 /// The line under a view of raw results: the tool, commit, date, host and device.
 fn measured_caption(json: &Value) -> Made<String> {
-    let host: Host = serde_json::from_value(json["host"].clone())
-        .map_err(|_| "raw results name their host (`host`)".to_string())?;
-    let commit = match (json["git"].as_str(), json["git_dirty"].as_bool()) {
-        (Some(c), Some(true)) => format!("{} + uncommitted changes", short_commit(c)),
-        (Some(c), _) => short_commit(c),
-        (None, _) => "a commit not recorded".into(),
-    };
-    let tool = if json.get("pipelines").is_some() {
-        "rbvh shaders"
+    if !json["host"].is_object() {
+        return Err("raw results name their host (`host`)".to_string());
+    }
+    let p: Provenance = serde_json::from_value(json.clone())
+        .map_err(|e| format!("its provenance (device, date, git, host): {e}"))?;
+    let date = p.date.get(..10).unwrap_or(&p.date);
+    let (tool, settings) = if json.get("pipelines").is_some() {
+        ("rbvh shaders", String::new())
     } else {
-        "rbvh bench"
-    };
-    let date = json["date"].as_str().unwrap_or("").get(..10).unwrap_or("");
-    let settings = if tool == "rbvh bench" {
-        format!(
-            ", {}×{} primary rays, median of {} runs",
-            text(&json["width"]),
-            text(&json["height"]),
-            text(&json["runs"])
+        (
+            "rbvh bench",
+            format!(
+                ", {}×{} primary rays, median of {} runs",
+                text(&json["width"]),
+                text(&json["height"]),
+                text(&json["runs"])
+            ),
         )
-    } else {
-        String::new()
     };
     Ok(format!(
-        "Measured by `{tool}` at {commit} on {date}{settings}; host: {}; device: {} ({}).",
-        host.summary(),
-        text(&json["device"]),
-        text(&json["driver"])
+        "Measured by `{tool}` at {} on {date}{settings}; host: {}; device: {} ({}).",
+        p.commit_label(),
+        p.host.summary(),
+        p.device,
+        p.driver
     ))
 }
 

@@ -12,6 +12,66 @@ use serde::{Deserialize, Serialize};
 
 use crate::gpu::Context;
 
+/// Where and when a measurement was taken: what leads every results file (`rbvh bench`'s and
+/// `rbvh shaders`'), flattened into it, and the line printed above their tables.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct Provenance {
+    /// The Vulkan device's name, as it reports itself.
+    pub device: String,
+    /// The driver's name and version, as the device reports them.
+    pub driver: String,
+    /// When the measurement started, UTC, ISO 8601 (`2025-01-31T12:00:00Z`).
+    pub date: String,
+    /// The commit measured ([`git_commit`]); None outside a repository.
+    pub git: Option<String>,
+    /// Whether code differed from `git` ([`git_dirty`]); None outside a repository or with
+    /// `RBVH_COMMIT`.
+    pub git_dirty: Option<bool>,
+    /// The machine, with the threads the device's driver ran on.
+    pub host: Host,
+    /// This crate's version.
+    pub version: String,
+}
+
+impl Provenance {
+    /// A measurement starting now on `ctx`'s device, on this machine, of the current commit.
+    pub fn of(ctx: &Context) -> Provenance {
+        Provenance {
+            device: ctx.device_name().to_string(),
+            driver: ctx.driver().to_string(),
+            date: utc_now(),
+            git: git_commit(),
+            git_dirty: git_dirty(),
+            host: Host::current(ctx.driver(), lavapipe_threads(ctx)),
+            version: env!("CARGO_PKG_VERSION").to_string(),
+        }
+    }
+
+    /// The commit as tables print it: ten characters, `+ uncommitted changes` where code
+    /// differed, `no commit` outside a repository.
+    pub fn commit_label(&self) -> String {
+        match (&self.git, self.git_dirty) {
+            (Some(c), Some(true)) => format!("{} + uncommitted changes", short_commit(c)),
+            (Some(c), _) => short_commit(c),
+            (None, _) => "no commit".into(),
+        }
+    }
+
+    /// One line above a run's tables: `host: …; device: … (driver); commit; date`, so that a
+    /// copied table says where it was taken.
+    pub fn line(&self) -> String {
+        format!(
+            "host: {}; device: {} ({}); {}; {}",
+            self.host.summary(),
+            self.device,
+            self.driver,
+            self.commit_label(),
+            self.date
+        )
+    }
+}
+
 /// The current time in UTC as ISO 8601 / RFC 3339 (`YYYY-MM-DDThh:mm:ssZ`).
 pub fn utc_now() -> String {
     iso8601(SystemTime::now())
@@ -42,9 +102,9 @@ pub fn git_commit() -> Option<String> {
     (out.status.success() && !commit.is_empty()).then_some(commit)
 }
 
-/// The first ten characters of a commit, as tables print it (fewer where it is shorter; any
-/// text, since `RBVH_COMMIT` may name it).
-pub fn short_commit(commit: &str) -> String {
+/// The first ten characters of a commit (fewer where it is shorter; any text, since
+/// `RBVH_COMMIT` may name it).
+fn short_commit(commit: &str) -> String {
     commit.chars().take(10).collect()
 }
 
@@ -349,6 +409,21 @@ mod tests {
             Some("Debian GNU/Linux 12 (bookworm), kernel 6.1.0".into())
         );
         assert_eq!(os_name("", None), None);
+    }
+
+    #[test]
+    fn a_commit_is_labelled_by_characters_and_its_state() {
+        let mut p = Provenance {
+            git: Some("d45624a2b54996ca2d0136b2352f1b820a7dc957".into()),
+            git_dirty: Some(true),
+            ..Provenance::default()
+        };
+        assert_eq!(p.commit_label(), "d45624a2b5 + uncommitted changes");
+        p.git = Some("été".into());
+        p.git_dirty = None;
+        assert_eq!(p.commit_label(), "été");
+        p.git = None;
+        assert_eq!(p.commit_label(), "no commit");
     }
 
     #[test]

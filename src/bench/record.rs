@@ -7,11 +7,10 @@
 //! | key | type | meaning |
 //! |---|---|---|
 //! | `device`, `driver` | string | the Vulkan device and driver, as they report themselves |
-//! | `threads` | int \| null | lavapipe's worker threads (`LP_NUM_THREADS`, else one per CPU); null on other devices |
 //! | `date` | string | start of the run, UTC, ISO 8601 (`2025-01-31T12:00:00Z`) |
 //! | `git` | string \| null | `RBVH_COMMIT` where set, else `git rev-parse HEAD` in the working directory; null outside a repository |
 //! | `git_dirty` | bool \| null | whether tracked files other than documentation (`docs/`, `*.md`) differed from that commit (uncommitted code was measured); null outside a repository or with `RBVH_COMMIT` |
-//! | `host` | object | the machine ([`Host`]): `cpu`, `cores`, `logical_cpus`, `threads_used` (the driver's worker threads: lavapipe's), `l2_bytes`, `l3_bytes`, `memory_bytes`, `os`, `virtualized`, `mesa`, `llvm`; null where the system does not tell |
+//! | `host` | object | the machine ([`super::provenance::Host`]): `cpu`, `cores`, `logical_cpus`, `threads_used` (lavapipe's worker threads, `LP_NUM_THREADS` else one per CPU; null on other devices), `l2_bytes`, `l3_bytes`, `memory_bytes`, `os`, `virtualized`, `mesa`, `llvm`; null where the system does not tell |
 //! | `version` | string | this crate's version |
 //! | `runs` | int | timed runs per record, after one warm-up |
 //! | `min_run_ms` | number | shortest timed run asked for, in milliseconds (records' `passes`) |
@@ -67,13 +66,12 @@
 //! # CSV (`--csv`)
 //!
 //! RFC 4180: a header line ([`csv_columns`]), then one line per record: first the run's provenance
-//! (`device`, `driver`, `date`, `git`, `git_dirty`, `version`, then the host's fields as `host.cpu`,
-//! `host.l3_bytes`, …), so that rows from several runs can be pasted
+//! (`device`, `driver`, `date`, `git`, `git_dirty`, the host's fields as `host.cpu`,
+//! `host.l3_bytes`, …, then `version`), so that rows from several runs can be pasted
 //! into one table, then the record's fields flattened (`params.*`, `mrays_per_s.*`,
 //! `memory_bytes.*`, `error.*`, `counters.*` and the traffic figures without their prefix, except
 //! `mrays_median`/`mrays_min`/`mrays_max`, `*_bytes`, `lod_*`, `twin_*` and one
-//! `dram_bytes_per_ray_*`/`miss_rate_*` pair per modelled cache). The run's settings (`threads`,
-//! `runs`, `min_run_ms`, image size, `ao_radius`, `seed`) and the per-run `samples` are in the JSON only. Null
+//! `dram_bytes_per_ray_*`/`miss_rate_*` pair per modelled cache). The run's settings (`runs`, `min_run_ms`, image size, `ao_radius`, `seed`) and the per-run `samples` are in the JSON only. Null
 //! is an empty cell; an infinite PSNR is `inf`.
 
 use std::io::Write;
@@ -83,7 +81,7 @@ use serde::Serialize;
 
 use crate::structure::Kind;
 
-use super::provenance::Host;
+use super::provenance::Provenance;
 use super::traffic::{CacheTraffic, Traffic, CACHE_SIZES};
 use crate::gpu::CompiledPipeline;
 use crate::io::write_atomically;
@@ -96,25 +94,9 @@ use crate::{Error, Result};
 /// A whole run: provenance and records.
 #[derive(Clone, Debug, Serialize)]
 pub struct BenchReport {
-    /// The Vulkan device's name, as it reports itself.
-    pub device: String,
-    /// The driver's name and version, as the device reports them.
-    pub driver: String,
-    /// lavapipe's worker threads (`LP_NUM_THREADS`, else one per CPU); None on other devices.
-    pub threads: Option<u32>,
-    /// Start of the run, UTC, ISO 8601 (`2025-01-31T12:00:00Z`).
-    pub date: String,
-    /// The commit measured ([`super::provenance::git_commit`]: `RBVH_COMMIT`, else `git
-    /// rev-parse HEAD` in the working directory); None outside a repository.
-    pub git: Option<String>,
-    /// Whether tracked files other than documentation differed from `git` (uncommitted code was
-    /// measured, [`super::provenance::git_dirty`]); None outside a repository or with
-    /// `RBVH_COMMIT`.
-    pub git_dirty: Option<bool>,
-    /// The machine the run measured on.
-    pub host: Host,
-    /// This crate's version.
-    pub version: String,
+    /// Where and when: device, driver, date, commit, host (with lavapipe's threads), version.
+    #[serde(flatten)]
+    pub provenance: Provenance,
     /// Timed runs per record, after one warm-up
     /// ([`BenchConfig::runs`](super::BenchConfig::runs)).
     pub runs: u32,
@@ -408,26 +390,14 @@ pub fn write_json(path: &Path, report: &BenchReport) -> Result<()> {
     })
 }
 
-/// The run's provenance that leads every CSV row, as (column, cell): the device, driver, date,
-/// commit and version, then the host's fields (`host.cpu`, …).
+/// The run's provenance that leads every CSV row, as (column, cell): [`Provenance`]'s fields by
+/// their JSON keys, the host's as `host.cpu`, ….
 fn provenance(report: &BenchReport) -> Result<Vec<(String, String)>> {
-    let mut cells = vec![
-        ("device".to_string(), report.device.clone()),
-        ("driver".to_string(), report.driver.clone()),
-        ("date".to_string(), report.date.clone()),
-        ("git".to_string(), report.git.clone().unwrap_or_default()),
-        (
-            "git_dirty".to_string(),
-            report.git_dirty.map(|d| d.to_string()).unwrap_or_default(),
-        ),
-        ("version".to_string(), report.version.clone()),
-    ];
-    let host = serde_json::to_value(&report.host)
-        .map_err(|e| Error::param("bench host", format!("cannot serialize it: {e}")))?;
+    let value = serde_json::to_value(&report.provenance)
+        .map_err(|e| Error::param("bench provenance", format!("cannot serialize it: {e}")))?;
     let mut flat = Vec::new();
-    flatten("host", &host, &mut flat);
-    cells.extend(flat.into_iter().map(|(k, v)| (k, cell(&v))));
-    Ok(cells)
+    flatten("", &value, &mut flat);
+    Ok(flat.into_iter().map(|(k, v)| (k, cell(&v))).collect())
 }
 
 /// The CSV header: the provenance, then the dotted key of every value of a record's JSON with
@@ -447,14 +417,7 @@ impl BenchReport {
     /// A report of no run, whose provenance has every column (the CSV header's).
     fn empty() -> BenchReport {
         BenchReport {
-            device: String::new(),
-            driver: String::new(),
-            threads: None,
-            date: String::new(),
-            git: None,
-            git_dirty: None,
-            host: Host::default(),
-            version: String::new(),
+            provenance: Provenance::default(),
             runs: 0,
             min_run_ms: 0.0,
             width: 0,

@@ -12,7 +12,7 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use super::provenance::{self, Host};
+use super::provenance::Provenance;
 use crate::gpu::{
     compile_every_pipeline, CompiledPipeline, Context, ShaderStatistic, StatisticValue,
 };
@@ -22,47 +22,30 @@ use crate::Result;
 /// What `rbvh shaders` measured: where, and every pipeline.
 #[derive(Clone, Debug, Serialize)]
 pub struct ShaderReport {
-    /// The Vulkan device's name, as it reports itself.
-    pub device: String,
-    /// The driver's name and version.
-    pub driver: String,
+    /// Where and when: device, driver, date, commit, host, version.
+    #[serde(flatten)]
+    pub provenance: Provenance,
     /// Whether the device only compiles (RADV's null device).
     pub compile_only: bool,
     /// `RADV_FORCE_FAMILY`, where set: the AMD family compiled for.
     pub amd_family: Option<String>,
     /// `RADV_PERFTEST`, where set (`cswave32` compiles compute shaders for wave32).
     pub radv_perftest: Option<String>,
-    /// When, UTC, ISO 8601.
-    pub date: String,
-    /// The commit ([`provenance::git_commit`]).
-    pub git: Option<String>,
-    /// Whether tracked files differed from it.
-    pub git_dirty: Option<bool>,
-    /// The machine.
-    pub host: Host,
-    /// This crate's version.
-    pub version: String,
     /// Every pipeline, in [`compile_every_pipeline`]'s order.
     pub pipelines: Vec<CompiledPipeline>,
 }
 
 /// Compiles every pipeline on `ctx` and describes the run.
 pub fn shader_report(ctx: &Context) -> Result<ShaderReport> {
-    let date = provenance::utc_now();
+    let provenance = Provenance::of(ctx);
     let pipelines = compile_every_pipeline(ctx)?;
     let env = |name: &str| std::env::var(name).ok().filter(|v| !v.is_empty());
     let compile_only = ctx.limits().compile_only;
     Ok(ShaderReport {
-        device: ctx.device_name().to_string(),
-        driver: ctx.driver().to_string(),
+        provenance,
         compile_only,
         amd_family: env("RADV_FORCE_FAMILY").filter(|_| compile_only),
         radv_perftest: env("RADV_PERFTEST").filter(|_| ctx.driver().starts_with("radv")),
-        date,
-        git: provenance::git_commit(),
-        git_dirty: provenance::git_dirty(),
-        host: Host::current(ctx.driver(), provenance::lavapipe_threads(ctx)),
-        version: env!("CARGO_PKG_VERSION").to_string(),
         pipelines,
     })
 }
@@ -121,20 +104,14 @@ pub fn shader_report_table(report: &ShaderReport) -> String {
         .chain(["pipeline".len()])
         .max()
         .unwrap_or(0);
-    let mut out = format!(
-        "host: {}; device: {} ({}){}{}\n",
-        report.host.summary(),
-        report.device,
-        report.driver,
-        report
-            .amd_family
-            .as_ref()
-            .map_or(String::new(), |f| format!(", null device for {f}")),
-        report
-            .radv_perftest
-            .as_ref()
-            .map_or(String::new(), |p| format!(", RADV_PERFTEST={p}")),
-    );
+    let mut out = report.provenance.line();
+    if let Some(family) = &report.amd_family {
+        out += &format!("; null device for {family}");
+    }
+    if let Some(perftest) = &report.radv_perftest {
+        out += &format!("; RADV_PERFTEST={perftest}");
+    }
+    out.push('\n');
     let mut header = format!("{:<name_width$}", "pipeline");
     for (h, _) in &shown {
         header += &format!(" {h:>w$}", w = h.len().max(6));

@@ -5,7 +5,6 @@
 use std::collections::BTreeSet;
 use std::fmt::Write;
 
-use super::provenance::short_commit;
 use super::record::{BenchReport, Record};
 
 /// Columns after the scene's: header, width, and whether values are left-aligned (names) rather
@@ -58,22 +57,10 @@ fn pad(text: &str, width: usize, left: bool) -> String {
     }
 }
 
-/// Where the run measured, on one line: the host ([`super::provenance::Host::summary`]), the device
-/// and driver, the commit (marked `+ uncommitted changes` where tracked files differed) and the
-/// date. Every table of a run is printed under it, so that a copied table says where it was taken.
+/// Where the run measured, on one line ([`super::provenance::Provenance::line`]): every table of a
+/// run is printed under it, so that a copied table says where it was taken.
 pub fn host_line(report: &BenchReport) -> String {
-    let commit = match (&report.git, report.git_dirty) {
-        (Some(c), Some(true)) => format!("{} + uncommitted changes", short_commit(c)),
-        (Some(c), _) => short_commit(c),
-        (None, _) => "no commit".into(),
-    };
-    format!(
-        "host: {}; device: {} ({}); {commit}; {}\n",
-        report.host.summary(),
-        report.device,
-        report.driver,
-        report.date
-    )
+    report.provenance.line() + "\n"
 }
 
 /// The table, under the [`host_line`], with a footnote on units.

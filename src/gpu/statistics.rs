@@ -6,10 +6,10 @@
 use std::fmt;
 
 use ash::vk;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// One statistic of one executable (a compute pipeline has one: its compute shader).
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ShaderStatistic {
     /// The driver's name for it (`Register Count`, `Spill Count`, …).
     pub name: String,
@@ -17,8 +17,9 @@ pub struct ShaderStatistic {
     pub value: StatisticValue,
 }
 
-/// A statistic's value, in the format the driver gave.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+/// A statistic's value, in the format the driver gave. Read back from JSON (results files), a
+/// count that fits `i64` comes back as `Int`: the same number, printed the same.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(untagged)]
 pub enum StatisticValue {
     /// A yes/no property.

@@ -156,3 +156,24 @@ pub fn ensure(condition: bool, why: impl FnOnce() -> String) -> Result<(), Strin
         Err(why())
     }
 }
+
+/// Whether Mesa's RADV is installed, whose null device compiles for AMD GPUs without one
+/// (`RADV_FORCE_FAMILY`); where it is not, says that the test is skipped and why, unless
+/// `RBVH_REQUIRE_NULL_DEVICE` is set (as `.ci/run` sets it: CI installs RADV through
+/// `.ci/setup`), which fails the test instead.
+pub fn radv_or_skip() -> bool {
+    const MANIFESTS: [&str; 2] = [
+        "/usr/share/vulkan/icd.d/radeon_icd.x86_64.json",
+        "/usr/share/vulkan/icd.d/radeon_icd.aarch64.json",
+    ];
+    if MANIFESTS.iter().any(|m| std::path::Path::new(m).exists()) {
+        return true;
+    }
+    let reason = "RADV is not installed (Debian: mesa-vulkan-drivers), so there is no null device";
+    assert!(
+        std::env::var_os("RBVH_REQUIRE_NULL_DEVICE").is_none(),
+        "RBVH_REQUIRE_NULL_DEVICE is set but {reason}"
+    );
+    eprintln!("skipped: {reason}");
+    false
+}

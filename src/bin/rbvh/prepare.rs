@@ -9,7 +9,7 @@ use anyhow::{Context as _, Result};
 
 use crate::progress::step;
 use clap::{Args, ValueEnum};
-use rbvh::bench::provenance;
+use rbvh::bench::provenance::Provenance;
 use rbvh::bvh::{BuildParams, Bvh};
 use rbvh::geom::{Hit, Ray};
 use rbvh::glam::Vec3;
@@ -434,12 +434,8 @@ pub fn prepare(c: &Common) -> Result<Prepared> {
                 lod.bytes()
             );
         }
-        eprintln!("device: {} ({})", ctx.device_name(), ctx.driver());
-        let threads = provenance::lavapipe_threads(&ctx);
-        eprintln!(
-            "host: {}",
-            provenance::Host::current(ctx.driver(), threads).summary()
-        );
+        // The line the bench prints above its tables: host, device, driver, commit and date.
+        eprintln!("{}", Provenance::of(&ctx).line());
     }
     Ok(Prepared {
         scene,
