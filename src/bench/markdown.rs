@@ -173,10 +173,12 @@ fn is_alignment_row(line: &str) -> bool {
     t.starts_with('|') && t.contains('-') && t.chars().all(|c| matches!(c, '|' | '-' | ':' | ' '))
 }
 
-/// A block's comment: the results file and, for raw results, the view and its filters.
+/// A block's comment: the results file (for `view=ratios`, several, comma-separated: repeated
+/// invocations whose ratios are shown as medians and ranges) and, for raw results, the view and
+/// its filters.
 #[derive(Clone, Debug, PartialEq, Eq)]
 struct Block {
-    file: PathBuf,
+    files: Vec<PathBuf>,
     view: Option<String>,
     filters: Vec<(String, Vec<String>)>,
 }
@@ -184,11 +186,11 @@ struct Block {
 impl Block {
     fn parse(spec: &str) -> std::result::Result<Block, String> {
         let mut words = spec.split_whitespace();
-        let file = words
+        let files = words
             .next()
             .ok_or("a table comment names its results file")?;
         let mut block = Block {
-            file: PathBuf::from(file),
+            files: files.split(',').map(PathBuf::from).collect(),
             view: None,
             filters: Vec::new(),
         };
@@ -220,52 +222,83 @@ impl Block {
     }
 
     /// The block's content: the table, a blank line and the line saying where it was measured;
-    /// or what is wrong with the results file, naming it.
+    /// or what is wrong with a results file, naming it.
     fn render(&self, root: &Path, document: &Path) -> Made<String> {
-        let file = self.file.display();
-        let text = std::fs::read_to_string(root.join(&self.file))
-            .map_err(|e| format!("results file {file}: {e}"))?;
-        let json: Value = serde_json::from_str(&text)
-            .map_err(|e| format!("results file {file}:{}: {e}", e.line()))?;
-        let link = relative(document.parent().unwrap_or(Path::new("")), &self.file);
-        let link = link.to_string_lossy().replace('\\', "/");
-        let made = if let Some(t) = json.get("transcribed") {
-            if self.view.is_some() || !self.filters.is_empty() {
-                Err("a transcribed file is shown as recorded: no view or filters".to_string())
-            } else {
-                transcribed_table(&json).and_then(|table| Ok((table, transcribed_caption(t)?)))
+        let mut jsons = Vec::new();
+        let mut links = Vec::new();
+        for file in &self.files {
+            let name = file.display();
+            let text = std::fs::read_to_string(root.join(file))
+                .map_err(|e| format!("results file {name}: {e}"))?;
+            let json: Value = serde_json::from_str(&text)
+                .map_err(|e| format!("results file {name}:{}: {e}", e.line()))?;
+            jsons.push(json);
+            let link = relative(document.parent().unwrap_or(Path::new("")), file);
+            links.push(link.to_string_lossy().replace('\\', "/"));
+        }
+        let names: Vec<String> = self.files.iter().map(|f| f.display().to_string()).collect();
+        let made = match jsons.as_slice() {
+            [json] if json.get("transcribed").is_some() => {
+                if self.view.is_some() || !self.filters.is_empty() {
+                    Err("a transcribed file is shown as recorded: no view or filters".to_string())
+                } else {
+                    transcribed_table(json)
+                        .and_then(|table| Ok((table, transcribed_caption(&json["transcribed"])?)))
+                }
             }
-        } else {
-            self.view_table(&json)
-                .and_then(|table| Ok((table, measured_caption(&json)?)))
+            _ if jsons.iter().any(|j| j.get("transcribed").is_some()) => {
+                Err("a transcribed file is shown alone".to_string())
+            }
+            _ => self
+                .view_table(&jsons)
+                .and_then(|table| Ok((table, measured_caption(&jsons)?))),
         };
-        let (table, caption) = made.map_err(|m| format!("results file {file}: {m}"))?;
+        let (table, caption) =
+            made.map_err(|m| format!("results file {}: {m}", names.join(", ")))?;
+        let links: Vec<String> = links
+            .iter()
+            .enumerate()
+            .map(|(k, l)| match k {
+                0 => format!("[results]({l})"),
+                _ => format!("[{}]({l})", k + 1),
+            })
+            .collect();
         Ok(format!(
-            "{table}\n<sub>{caption} ([results]({link}))</sub>\n"
+            "{table}\n<sub>{caption} ({})</sub>\n",
+            links.join(", ")
         ))
     }
 
-    fn view_table(&self, json: &Value) -> Made<String> {
+    fn view_table(&self, jsons: &[Value]) -> Made<String> {
         let view = self.view.as_deref().unwrap_or("summary");
-        if view == "shaders" {
-            return shaders_table(json, self.filter("pipelines"));
+        if jsons.len() > 1 && view != "ratios" {
+            return Err(format!(
+                "view={view} shows one file; several make medians in view=ratios"
+            ));
         }
-        let records: Vec<&Value> = json["results"]
-            .as_array()
-            .ok_or_else(|| {
-                "neither bench results (`results`), shader results (`pipelines`) nor transcribed"
-                    .to_string()
-            })?
+        if view == "shaders" {
+            return shaders_table(&jsons[0], self.filter("pipelines"));
+        }
+        let runs = jsons
             .iter()
-            .filter(|r| self.keeps(r))
-            .collect();
-        if records.is_empty() {
+            .map(|json| {
+                json["results"]
+                    .as_array()
+                    .map(|records| records.iter().filter(|r| self.keeps(r)).collect())
+                    .ok_or_else(|| {
+                        "neither bench results (`results`), shader results (`pipelines`) nor \
+                         transcribed"
+                            .to_string()
+                    })
+            })
+            .collect::<Made<Vec<Vec<&Value>>>>()?;
+        if runs.iter().any(Vec::is_empty) {
             return Err("no record passes the block's filters".to_string());
         }
         match view {
-            "summary" => Ok(summary_table(&records)),
-            "work" => Ok(work_table(&records)),
-            "ratios" => Ok(ratios_table(&records)),
+            "summary" => Ok(summary_table(&runs[0])),
+            "work" => Ok(work_table(&runs[0])),
+            "ratios" => Ok(ratios_table(&runs)),
             other => Err(format!(
                 "unknown view {other:?} (summary, work, ratios, shaders)"
             )),
@@ -440,11 +473,13 @@ fn work_table(records: &[&Value]) -> String {
     markdown(&header, &align, &rows)
 }
 
-/// A row per (scene, ray type): the exact BVH's MRays/s, then each level's speed over it.
-fn ratios_table(records: &[&Value]) -> String {
+/// A row per (scene, ray type): the exact BVH's MRays/s, then each level's speed over it. Of
+/// several invocations (`runs`, each one file's records), the median and, in brackets, the range:
+/// each ratio is taken within one invocation, interleaved, and they scatter between invocations.
+fn ratios_table(runs: &[Vec<&Value>]) -> String {
     let mut levels: Vec<String> = Vec::new();
     let mut keys: Vec<(String, String)> = Vec::new();
-    for r in records {
+    for r in runs.iter().flatten() {
         let l = level(r);
         if l != "exact" && !levels.contains(&l) {
             levels.push(l);
@@ -459,24 +494,46 @@ fn ratios_table(records: &[&Value]) -> String {
     let rows: Vec<Vec<String>> = keys
         .iter()
         .map(|(scene, rays)| {
-            let find = |l: &str| {
-                records.iter().find(|r| {
-                    text(&r["scene"]) == *scene && text(&r["ray_type"]) == *rays && level(r) == l
-                })
+            // The records of (scene, rays, level) in every invocation that has one.
+            let found = |l: &str| -> Vec<&Value> {
+                runs.iter()
+                    .filter_map(|run| {
+                        run.iter().copied().find(|r| {
+                            text(&r["scene"]) == *scene
+                                && text(&r["ray_type"]) == *rays
+                                && level(r) == l
+                        })
+                    })
+                    .collect()
+            };
+            let spread = |records: &[&Value], value: fn(&Value) -> Option<f64>| {
+                let mut v: Vec<f64> = records.iter().filter_map(|r| value(r)).collect();
+                v.sort_by(f64::total_cmp);
+                match v.len() {
+                    0 => "-".to_string(),
+                    1 => format!("{:.2}", v[0]),
+                    n => {
+                        let median = if n % 2 == 1 {
+                            v[n / 2]
+                        } else {
+                            0.5 * (v[n / 2 - 1] + v[n / 2])
+                        };
+                        format!("{median:.2} ({:.2}–{:.2})", v[0], v[n - 1])
+                    }
+                }
             };
             let mut row = vec![
                 format!("{scene}, {rays}"),
-                find("exact").map_or("-".into(), |r| num(&r["mrays_per_s"]["median"], 1.0, 2)),
+                spread(&found("exact"), |r| r["mrays_per_s"]["median"].as_f64()),
             ];
             row.extend(levels.iter().map(|l| {
-                find(l).map_or("-".into(), |r| {
-                    let ratio = num(&r["speedup_vs_exact"], 1.0, 2);
-                    if r["valid"].as_bool() == Some(true) {
-                        ratio
-                    } else {
-                        format!("{ratio} (invalid)")
-                    }
-                })
+                let records = found(l);
+                let ratio = spread(&records, |r| r["speedup_vs_exact"].as_f64());
+                if records.iter().all(|r| r["valid"].as_bool() == Some(true)) {
+                    ratio
+                } else {
+                    format!("{ratio} (invalid)")
+                }
             }));
             row
         })
@@ -588,15 +645,48 @@ fn transcribed_caption(t: &Value) -> Made<String> {
     ))
 }
 
-/// The line under a view of raw results: the tool, commit, date, host and device.
-fn measured_caption(json: &Value) -> Made<String> {
-    if !json["host"].is_object() {
-        return Err("raw results name their host (`host`)".to_string());
+/// The line under a view of raw results: the tool, commit, date, host and device; of several
+/// invocations, how many, and only where they share host, device and settings (ratios from
+/// different machines are not pooled).
+fn measured_caption(jsons: &[Value]) -> Made<String> {
+    let mut provenances = Vec::new();
+    for json in jsons {
+        if !json["host"].is_object() {
+            return Err("raw results name their host (`host`)".to_string());
+        }
+        let p: Provenance = serde_json::from_value(json.clone())
+            .map_err(|e| format!("its provenance (device, date, git, host): {e}"))?;
+        provenances.push(p);
     }
-    let p: Provenance = serde_json::from_value(json.clone())
-        .map_err(|e| format!("its provenance (device, date, git, host): {e}"))?;
-    let date = p.date.get(..10).unwrap_or(&p.date);
-    let (tool, settings) = if json.get("pipelines").is_some() {
+    let first = &provenances[0];
+    let settings = |j: &Value| [&j["width"], &j["height"], &j["runs"]].map(text);
+    if provenances
+        .iter()
+        .any(|p| p.host != first.host || p.device != first.device || p.driver != first.driver)
+        || jsons.iter().any(|j| settings(j) != settings(&jsons[0]))
+    {
+        return Err(
+            "the files differ in host, device or settings: their ratios are not pooled".to_string(),
+        );
+    }
+    let distinct = |values: Vec<String>| {
+        let mut unique: Vec<String> = Vec::new();
+        for v in values {
+            if !unique.contains(&v) {
+                unique.push(v);
+            }
+        }
+        unique.join(", ")
+    };
+    let commits = distinct(provenances.iter().map(Provenance::commit_label).collect());
+    let dates = distinct(
+        provenances
+            .iter()
+            .map(|p| p.date.get(..10).unwrap_or(&p.date).to_string())
+            .collect(),
+    );
+    let json = &jsons[0];
+    let (tool, details) = if json.get("pipelines").is_some() {
         ("rbvh shaders", String::new())
     } else {
         (
@@ -609,12 +699,15 @@ fn measured_caption(json: &Value) -> Made<String> {
             ),
         )
     };
+    let invocations = match jsons.len() {
+        1 => String::new(),
+        n => format!(" (medians of {n} invocations, their range in brackets)"),
+    };
     Ok(format!(
-        "Measured by `{tool}` at {} on {date}{settings}; host: {}; device: {} ({}).",
-        p.commit_label(),
-        p.host.summary(),
-        p.device,
-        p.driver
+        "Measured by `{tool}`{invocations} at {commits} on {dates}{details}; host: {}; device: {} ({}).",
+        first.host.summary(),
+        first.device,
+        first.driver
     ))
 }
 
@@ -664,8 +757,41 @@ mod tests {
     }
 
     #[test]
+    fn several_invocations_give_medians_and_ranges_from_one_host() {
+        let record = |quality: Option<&str>, mrays: f64, speedup: f64| {
+            serde_json::json!({
+                "scene": "s", "ray_type": "primary", "quality": quality, "method":
+                if quality.is_some() { "rbvh" } else { "exact" }, "params": null,
+                "mrays_per_s": {"median": mrays}, "speedup_vs_exact": speedup, "valid": true
+            })
+        };
+        let runs: Vec<Vec<Value>> = [(2.0, 1.5), (3.0, 1.1), (4.0, 1.2)]
+            .iter()
+            .map(|&(m, x)| vec![record(None, m, 1.0), record(Some("Q2"), m * x, x)])
+            .collect();
+        let refs: Vec<Vec<&Value>> = runs.iter().map(|r| r.iter().collect()).collect();
+        let table = ratios_table(&refs);
+        assert!(
+            table.contains("| s, primary | 3.00 (2.00–4.00) | 1.20 (1.10–1.50) |"),
+            "{table}"
+        );
+        let file = |cpu: &str| {
+            serde_json::json!({"device": "d", "driver": "v", "date": "2026-12-01T00:00:00Z",
+                "git": "abc", "host": {"cpu": cpu}, "width": 8, "height": 8, "runs": 3,
+                "results": []})
+        };
+        let caption = measured_caption(&[file("x"), file("x")]).unwrap();
+        assert!(caption.contains("medians of 2 invocations"), "{caption}");
+        assert!(measured_caption(&[file("x"), file("y")]).is_err());
+    }
+
+    #[test]
     fn block_options_are_checked() {
-        let b = Block::parse("docs/results/a.json view=ratios rays=primary,shadow").unwrap();
+        let b = Block::parse("docs/results/a.json,b.json view=ratios rays=primary,shadow").unwrap();
+        assert_eq!(
+            b.files,
+            [Path::new("docs/results/a.json"), Path::new("b.json")]
+        );
         assert_eq!(b.view.as_deref(), Some("ratios"));
         assert_eq!(b.filter("rays").unwrap(), ["primary", "shadow"]);
         assert!(Block::parse("a.json colour=red").is_err());
