@@ -97,6 +97,21 @@ vec3 rbvh_decode_normal(uint texel) {
     return normalize(vec3(x, y, z));
 }
 
+// Whether texel's normal faces a ray along world `dir` (Texel::faces in layout.rs): the dot
+// product with the normal's octahedral direction before normalizing, summed in the same order,
+// so that both sides take the same sign.
+bool rbvh_faces(uint texel, vec3 dir) {
+    uint code = texel >> 16;
+    precise float x = float(code & 0xFFu) / 255.0 * 2.0 - 1.0;
+    precise float y = float((code >> 8) & 0xFFu) / 255.0 * 2.0 - 1.0;
+    precise float z = 1.0 - abs(x) - abs(y);
+    precise float t = max(-z, 0.0);
+    x += x >= 0.0 ? -t : t;
+    y += y >= 0.0 ? -t : t;
+    precise float dot_n = x * dir.x + y * dir.y + z * dir.z;
+    return dot_n < 0.0;
+}
+
 bool rbvh_is_hole(uint texel) {
     return (texel & 0xFFFFu) == RBVH_HOLE_CODE;
 }
@@ -334,8 +349,10 @@ vec3 rbvh_skirt_facet(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, float t) {
 }
 
 // Step 5 of march.rs: the texel whose normal a hit at `t_hit` in `cell` reports, its nearest
-// present corner sample. Called once, after the walk, so that the SIMD walk loop does not carry it.
-uint rbvh_cell_normal_texel(RbvhFrameRay fr, RbvhCell cell, float t_hit) {
+// present corner sample, or, when that faces away from the world direction `dir` and another
+// present corner faces it, the first such (nearest_normal in march.rs). Called once, after the
+// walk, so that the SIMD walk loop does not carry it.
+uint rbvh_cell_normal_texel(RbvhFrameRay fr, RbvhCell cell, float t_hit, vec3 dir) {
     bool v00 = !rbvh_is_hole(cell.c00);
     bool v10 = !rbvh_is_hole(cell.c10);
     bool v01 = !rbvh_is_hole(cell.c01);
@@ -348,6 +365,17 @@ uint rbvh_cell_normal_texel(RbvhFrameRay fr, RbvhCell cell, float t_hit) {
     bool nearest_valid = up ? (right ? v11 : v01) : (right ? v10 : v00);
     if (!nearest_valid) {
         nearest = v00 ? cell.c00 : (v10 ? cell.c10 : (v01 ? cell.c01 : cell.c11));
+    }
+    if (!rbvh_faces(nearest, dir)) {
+        if (v00 && rbvh_faces(cell.c00, dir)) {
+            nearest = cell.c00;
+        } else if (v10 && rbvh_faces(cell.c10, dir)) {
+            nearest = cell.c10;
+        } else if (v01 && rbvh_faces(cell.c01, dir)) {
+            nearest = cell.c01;
+        } else if (v11 && rbvh_faces(cell.c11, dir)) {
+            nearest = cell.c11;
+        }
     }
     return nearest;
 }
@@ -703,7 +731,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
             precise vec3 n = (frame_leaf.axis_u * facet.x + frame_leaf.axis_v * facet.y) + frame_leaf.axis_w * facet.z;
             facet_normal = normalize(n);
         } else {
-            normal_texel = rbvh_cell_normal_texel(fr, cell, t_hit);
+            normal_texel = rbvh_cell_normal_texel(fr, cell, t_hit, ray.dir);
         }
     }
     return t_hit;

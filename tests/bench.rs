@@ -221,12 +221,17 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
                     "t_err_mean",
                     "t_err_p99",
                     "t_err_max",
+                    "t_err_object_mean",
+                    "t_err_object_p99",
                     "normal_err_deg_mean",
                     "normal_err_deg_p99",
+                    "back_facing_rate",
                     "psnr_db",
                     "flip_mean",
                 ])));
-                assert!(keys(&r["params"]).contains("texels_per_diagonal"));
+                assert!(
+                    keys(&r["params"]).is_superset(&set(&["texels_per_diagonal", "object_rate"]))
+                );
                 assert!(matches!(r["quality"].as_str(), Some("Q0" | "Q2")));
                 // The device's default (`Tracer::block_jumps`).
                 let cpu = common::context().limits().cpu;
@@ -553,7 +558,9 @@ fn the_validator_flags_a_method_that_is_wrong_rather_than_fast() {
     let bvh = Bvh::build(&scene).unwrap();
     let rays = scene.camera_or_framed(1.0).primary_rays(24, 24);
     let exact = bvh.trace_cpu(&rays, false);
-    let same = hit_errors(&rays, &exact, &exact, diagonal, Query::Closest).unwrap();
+    // The sphere is one object: its diagonal is the scene's.
+    let object = |_: &Hit| Some(diagonal);
+    let same = hit_errors(&rays, &exact, &exact, diagonal, &object, Query::Closest).unwrap();
     assert_eq!(invalid_reason(&same), None);
 
     let doubled: Vec<Hit> = exact
@@ -563,12 +570,13 @@ fn the_validator_flags_a_method_that_is_wrong_rather_than_fast() {
             ..*h
         })
         .collect();
-    let wrong = hit_errors(&rays, &exact, &doubled, diagonal, Query::Closest).unwrap();
+    let wrong = hit_errors(&rays, &exact, &doubled, diagonal, &object, Query::Closest).unwrap();
+    assert_eq!(wrong.t_err, wrong.t_err_object);
     let reason = invalid_reason(&wrong).expect("doubled distances are invalid");
     assert!(reason.contains("distance"), "{reason}");
 
     let all_miss = vec![Hit::MISS; rays.len()];
-    let blind = hit_errors(&rays, &exact, &all_miss, diagonal, Query::Any).unwrap();
+    let blind = hit_errors(&rays, &exact, &all_miss, diagonal, &object, Query::Any).unwrap();
     assert!(invalid_reason(&blind).unwrap().contains("hit/miss"));
 }
 

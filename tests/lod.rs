@@ -62,7 +62,17 @@ fn grove_lod_is_near_fine_never_worse_than_coarse_and_ends_traversal_sooner() {
     .unwrap();
     let exact = Tracer::new(&ctx, &Structure::from(Bvh::build(&scene).unwrap())).unwrap();
     let fine = Arc::new(Rbvh::build(&scene, &fine_params()).unwrap());
-    let coarse = Rbvh::build(&scene, &RbvhParams::quality(0).unwrap()).unwrap();
+    // Q0 at the scene's rate alone: the presets' object rate samples each blob for its own size
+    // (as finely as its triangles allow), which is what level of detail measures itself against
+    // only where a blob is near.
+    let coarse = Rbvh::build(
+        &scene,
+        &RbvhParams {
+            object_rate: 0.0,
+            ..RbvhParams::quality(0).unwrap()
+        },
+    )
+    .unwrap();
     let fine_lod = Structure::with_lod(
         fine.clone(),
         Lod::build(&fine, &LodParams::default()).unwrap(),

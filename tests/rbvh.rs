@@ -400,12 +400,19 @@ fn a_small_noisy_scan_is_judged_at_the_sampling_rate() {
         })
         .collect();
     for level in [0, 2] {
-        let paper = RbvhParams {
-            sampled_criterion_texels: 0.0,
+        // At the scene's rate alone, where the scan (a fourteenth of the ground's diagonal) has
+        // noise below the texel at every size: what the judgement is for. The presets' object
+        // rate samples the scan finer.
+        let at_scene_rate = RbvhParams {
+            object_rate: 0.0,
             ..q(level)
         };
+        let paper = RbvhParams {
+            sampled_criterion_texels: 0.0,
+            ..at_scene_rate
+        };
         let by_rule = Rbvh::build(&scene, &paper).unwrap();
-        let sampled = Rbvh::build(&scene, &q(level)).unwrap();
+        let sampled = Rbvh::build(&scene, &at_scene_rate).unwrap();
         let (rule_error, sampled_error) = (
             error_vs_exact(&scene, &by_rule, &rays),
             error_vs_exact(&scene, &sampled, &rays),
@@ -437,4 +444,77 @@ fn a_small_noisy_scan_is_judged_at_the_sampling_rate() {
             "Q{level}: {sampled_error:?} against {rule_error:?}"
         );
     }
+}
+
+/// **Each object at its own rate** (`object_rate`): a unit sphere beside a ground 40 wide
+/// is sampled for its own size, at least that many texels along its own diagonal, while the
+/// ground keeps the scene's texel; the RBVH's `texel_size` stays the scene's (the coarsest), seam
+/// rays carry their leaf's texel, the error against the exact BVH shrinks on the sphere, and the
+/// build is the one without where no object is small enough (the sphere alone).
+#[test]
+fn each_object_is_sampled_at_its_own_rate() {
+    let mut scene = Scene::new("ground and ball");
+    let ground = Scene::builtin("plane").unwrap();
+    scene.append(&ground, glam::Mat4::from_scale(Vec3::new(20.0, 1.0, 20.0)));
+    let ball = Scene::builtin("sphere").unwrap();
+    scene.append(&ball, glam::Mat4::from_translation(Vec3::Y));
+    // 128 texels along each object's diagonal, where the scene's is 256 along its own.
+    let per_object = RbvhParams {
+        object_rate: 0.5,
+        ..q(0)
+    };
+    let plain = Rbvh::build(
+        &scene,
+        &RbvhParams {
+            object_rate: 0.0,
+            ..q(0)
+        },
+    )
+    .unwrap();
+    let fine = Rbvh::build(&scene, &per_object).unwrap();
+    let scene_texel = scene.bounds().diagonal() / q(0).texels_per_diagonal;
+    let ball_texel = 2.0 * 3f32.sqrt() / 128.0;
+    assert!(ball_texel < 0.5 * scene_texel);
+    for r in [&plain, &fine] {
+        assert!((r.texel_size - scene_texel).abs() <= 1e-6 * scene_texel);
+    }
+    // A leaf's texel is its grid's step; the ball's leaves start near the ball (the ground's
+    // tiles, 64 texels a side, have none of their corners there).
+    let texels = |r: &Rbvh, on_ball: bool| -> Vec<f32> {
+        r.leaves
+            .iter()
+            .filter(|l| ((Vec3::from(l.origin) - Vec3::Y).length() < 1.5) == on_ball)
+            .map(|l| l.grid().step_u.length())
+            .collect()
+    };
+    let near = |t: f32, want: f32| (t - want).abs() <= 1e-3 * want;
+    assert!(texels(&fine, true).iter().all(|&t| near(t, ball_texel)));
+    assert!(texels(&fine, false).iter().all(|&t| near(t, scene_texel)));
+    assert!(texels(&plain, true).iter().all(|&t| near(t, scene_texel)));
+    assert!(texels(&fine, true).len() > texels(&plain, true).len());
+    let seam = fine.seam_rays(5000, 3);
+    assert!(seam.texels.iter().any(|&t| near(t, ball_texel)));
+    assert!(seam.texels.iter().any(|&t| near(t, scene_texel)));
+    // Rays down onto the ball: the finer ball is nearer the exact one.
+    let rays: Vec<Ray> = (0..400)
+        .map(|k| {
+            let (x, z) = ((k % 20) as f32 / 10.0 - 0.95, (k / 20) as f32 / 10.0 - 0.95);
+            Ray::new(Vec3::new(x, 5.0, z), -Vec3::Y, 0.0, f32::INFINITY)
+        })
+        .collect();
+    let (plain_mean, _, _) = error_vs_exact(&scene, &plain, &rays);
+    let (fine_mean, _, _) = error_vs_exact(&scene, &fine, &rays);
+    assert!(fine_mean < 0.5 * plain_mean, "{fine_mean} vs {plain_mean}");
+    // The sphere alone is its own scene: no object is finer than the scene's rate.
+    let alone = Rbvh::build(&ball, &per_object).unwrap();
+    let as_before = Rbvh::build(
+        &ball,
+        &RbvhParams {
+            object_rate: 0.0,
+            ..q(0)
+        },
+    )
+    .unwrap();
+    assert_eq!(alone.leaves, as_before.leaves);
+    assert_eq!(alone.atlas, as_before.atlas);
 }

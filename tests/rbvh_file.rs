@@ -13,7 +13,9 @@ use rbvh::rbvh::{
 use rbvh::Error;
 
 /// Bytes before the arrays, per the format table in `src/rbvh/file.rs`.
-const HEADER_BYTES: usize = 148;
+const HEADER_BYTES: usize = 152;
+/// The header of versions 4–6, which ends before `object_rate`.
+const V6_HEADER_BYTES: usize = 148;
 
 /// A small hybrid RBVH built by hand: a root over an inner node (two height-field leaves) and a
 /// triangle leaf, in a 8 × 9 atlas holding a 4 × 4 and a 3 × 5 tile.
@@ -79,6 +81,7 @@ fn sample() -> Rbvh {
             subdivision: Subdivision::AreaSah,
             object_split: false,
             sampled_criterion_texels: 2.5,
+            object_rate: 0.375,
             ..RbvhParams::quality(3).unwrap()
         },
         nodes,
@@ -128,10 +131,11 @@ fn save_load_round_trips_exactly() {
     loaded.save(&again).unwrap();
     assert_eq!(std::fs::read(&again).unwrap(), bytes);
 
-    // The documented framing: magic, version 6, the sampling judgement's size, normal texels, no
-    // colour channel, then the arrays after a 148-byte header.
+    // The documented framing: magic, version 7, the sampling judgement's size, normal texels, no
+    // colour channel, each object's rate last, then the arrays after a 152-byte header.
     assert_eq!(&bytes[..8], b"RBVHv\0\0\0");
-    assert_eq!(word(&bytes, 8), 6);
+    assert_eq!(word(&bytes, 8), 7);
+    assert_eq!(f32::from_bits(word(&bytes, 148)), 0.375);
     assert_eq!(f32::from_bits(word(&bytes, 40)), 2.5);
     assert_eq!((word(&bytes, 44), word(&bytes, 48)), (0, 0));
     let arrays = 2 * 48 + 2 * 48 + 2 * 64 + 72 * 4;
@@ -146,11 +150,19 @@ fn word(bytes: &[u8], at: usize) -> u32 {
     u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap())
 }
 
+/// `rbvh` as version 5 or 6 wrote it: without `object_rate` at the header's end.
+fn as_v6(rbvh: &Rbvh, version: u32) -> Vec<u8> {
+    let mut bytes = rbvh.to_bytes();
+    bytes.drain(V6_HEADER_BYTES..HEADER_BYTES);
+    bytes[8..12].copy_from_slice(&version.to_le_bytes());
+    bytes
+}
+
 /// `rbvh` as the older `version` (1–4) wrote it: each node in 64 bytes with its children's boxes
 /// at full precision (here the decoded ones), and before version 4 without header bytes 40..52.
 fn as_old_version(rbvh: &Rbvh, version: u32) -> Vec<u8> {
     let bytes = rbvh.to_bytes();
-    let mut old = bytes[..HEADER_BYTES].to_vec();
+    let mut old = bytes[..V6_HEADER_BYTES].to_vec();
     old[8..12].copy_from_slice(&version.to_le_bytes());
     for node in &rbvh.nodes {
         for c in node.children() {
@@ -217,7 +229,7 @@ fn bad_magic_and_unknown_versions_are_rejected() {
     let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
     assert!(message.contains("not an RBVH file"), "{message}");
 
-    for version in [0, 7, u32::MAX] {
+    for version in [0, 8, u32::MAX] {
         let mut bytes = sample().to_bytes();
         bytes[8..12].copy_from_slice(&version.to_le_bytes());
         let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
@@ -225,14 +237,15 @@ fn bad_magic_and_unknown_versions_are_rejected() {
             message.contains(&format!("unsupported version {version}")),
             "{message}"
         );
-        assert!(message.contains("reads versions 1 to 6"), "{message}");
+        assert!(message.contains("reads versions 1 to 7"), "{message}");
     }
 }
 
 /// Files written before version 6 (1: normal texels; 2: with colours; 3: height-only; 4: with
 /// the sampled judgement's size and the texel format in the header, all with 64-byte nodes; 5:
 /// 48-byte nodes) load as the RBVHs they described, their nodes quantized, and are saved again as
-/// version 6. Before version 4 they were built by the paper's rule alone. Their height codes
+/// version 7. Before version 4 they were built by the paper's rule alone, and before version 7
+/// every texel was the scene's (`object_rate` 0). Their height codes
 /// carry no mark of which were sampled, so each even one becomes odd (extrapolated: no skirt)
 /// within one code where that keeps it inside its leaf's box, the normals as they were.
 #[test]
@@ -253,9 +266,7 @@ fn older_versions_load_as_what_they_described() {
         let old = if version < 5 {
             as_old_version(&rbvh, version)
         } else {
-            let mut bytes = rbvh.to_bytes();
-            bytes[8..12].copy_from_slice(&version.to_le_bytes());
-            bytes
+            as_v6(&rbvh, version)
         };
         let mut loaded = Rbvh::from_bytes(&old, path).unwrap();
         let mut unmarked = 0;
@@ -282,19 +293,37 @@ fn older_versions_load_as_what_they_described() {
         let expected = Rbvh {
             params: RbvhParams {
                 sampled_criterion_texels,
+                object_rate: 0.0,
                 ..rbvh.params
             },
             ..rbvh
         };
         assert_eq!(loaded, expected, "version {version}");
-        assert_eq!(word(&loaded.to_bytes(), 8), 6);
-        let header = if version < 4 { 136 } else { HEADER_BYTES };
+        assert_eq!(word(&loaded.to_bytes(), 8), 7);
+        let header = if version < 4 { 136 } else { V6_HEADER_BYTES };
         let message = parse_error(Rbvh::from_bytes(&old[..old.len() - 1], path), path);
         assert!(
             message.contains("truncated") && message.contains(&format!("{header}-byte header")),
             "version {version}: {message}"
         );
     }
+}
+
+/// A version 6 file (marked heights, no `object_rate`) loads as it was, every texel the
+/// scene's, and is saved again as version 7.
+#[test]
+fn version_6_loads_with_every_texel_the_scenes() {
+    let rbvh = sample();
+    let loaded = Rbvh::from_bytes(&as_v6(&rbvh, 6), Path::new("v6.rbvh")).unwrap();
+    let expected = Rbvh {
+        params: RbvhParams {
+            object_rate: 0.0,
+            ..rbvh.params
+        },
+        ..rbvh
+    };
+    assert_eq!(loaded, expected);
+    assert_eq!(word(&loaded.to_bytes(), 8), 7);
 }
 
 /// A version 1–4 node whose box holds NaN has no grid to be quantized to: a parse error naming
@@ -304,7 +333,7 @@ fn an_old_node_with_a_nan_box_is_rejected() {
     let path = Path::new("nan.rbvh");
     let mut old = as_old_version(&sample(), 4);
     // Node 1's `a_min.y`.
-    let at = HEADER_BYTES + 64 + 4;
+    let at = V6_HEADER_BYTES + 64 + 4;
     old[at..at + 4].copy_from_slice(&f32::NAN.to_bits().to_le_bytes());
     let message = parse_error(Rbvh::from_bytes(&old, path), path);
     assert!(
@@ -437,12 +466,15 @@ fn inconsistent_contents_are_rejected_with_the_reason() {
     r.params.texels_per_diagonal = f32::NAN;
     check(r, "texels_per_diagonal is NaN");
     let mut r = sample();
+    r.params.object_rate = f32::NAN;
+    check(r, "object_rate is NaN");
+    let mut r = sample();
     r.texel_size = f32::NAN;
     check(r, "texel_size is NaN");
 
     // Counts that overflow, or promise more than the file holds.
     let mut bytes = sample().to_bytes();
-    bytes[HEADER_BYTES - 8..HEADER_BYTES].copy_from_slice(&u64::MAX.to_le_bytes());
+    bytes[HEADER_BYTES - 12..HEADER_BYTES - 4].copy_from_slice(&u64::MAX.to_le_bytes());
     let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
     assert!(message.contains("counts"), "{message}");
     // Unknown enum tags and flags, and a height-only RBVH claiming colours.

@@ -115,9 +115,10 @@ fn a_leak_passes_the_surface_by_two_texels_and_goes_through_when_it_passes_the_e
     ];
     let rays: Vec<Ray> = cases.iter().map(|c| c.0).collect();
     let approx: Vec<Hit> = cases.iter().map(|c| c.1).collect();
-    let exact = exact_entries(&bvh, &rays, texel, &closed_triangles(&scene));
+    let texels = vec![texel; rays.len()];
+    let exact = exact_entries(&bvh, &rays, &texels, &closed_triangles(&scene));
     assert_eq!(exact[6], None, "aimed past the slab");
-    let leaks = count_leaks(&bvh, &rays, &exact, &approx, texel);
+    let leaks = count_leaks(&bvh, &rays, &exact, &approx, &texels);
     assert_eq!(
         leaks,
         Leaks {
@@ -147,7 +148,7 @@ fn entries_exits_and_how_deep_rays_pass_between_them() {
     let open = down(50.0, 50.0, 5.0);
     let rays = [straight, slanted, by_side, leaving, open];
     let texel = 0.01;
-    let entries = exact_entries(&bvh, &rays, texel, &closed_triangles(&scene));
+    let entries = exact_entries(&bvh, &rays, &[texel; 5], &closed_triangles(&scene));
     assert_eq!(
         entries[3], None,
         "a ray leaving the solid does not enter it"
@@ -195,10 +196,16 @@ fn seam_rays_start_outside_and_meet_the_surface_at_their_targets() {
     let r = Rbvh::build(&sphere, &q(1)).unwrap();
     let targets = r.seam_targets();
     assert!(targets.len() > 1000, "{} targets", targets.len());
-    let rays = r.seam_rays(20_000, 5);
+    let seam = r.seam_rays(20_000, 5);
+    // One object at the scene's rate: every leaf's texel is the scene's.
+    assert!(seam
+        .texels
+        .iter()
+        .all(|&t| (t - r.texel_size).abs() <= 1e-5 * r.texel_size));
+    let rays = seam.rays;
     assert_eq!(rays.len(), 20_000);
-    assert_eq!(rays, r.seam_rays(20_000, 5));
-    assert_ne!(rays, r.seam_rays(20_000, 6));
+    assert_eq!(rays, r.seam_rays(20_000, 5).rays);
+    assert_ne!(rays, r.seam_rays(20_000, 6).rays);
     let exact = Bvh::build(&sphere).unwrap().trace_cpu(&rays, false);
     for (ray, h) in rays.iter().zip(&exact) {
         assert!(
@@ -287,10 +294,10 @@ fn no_light_through_the_cone_at_the_edge_on_criterion() {
 fn seam_leaks_and_through(scene: &Scene, params: &RbvhParams) -> Leaks {
     let bvh = Bvh::build(scene).unwrap();
     let r = Rbvh::build(scene, params).unwrap();
-    let rays = r.seam_rays(200_000, 7);
-    let exact = exact_entries(&bvh, &rays, r.texel_size, &closed_triangles(scene));
-    let approx = r.trace_cpu(&rays, false);
-    count_leaks(&bvh, &rays, &exact, &approx, r.texel_size)
+    let seam = r.seam_rays(200_000, 7);
+    let exact = exact_entries(&bvh, &seam.rays, &seam.texels, &closed_triangles(scene));
+    let approx = r.trace_cpu(&seam.rays, false);
+    count_leaks(&bvh, &seam.rays, &exact, &approx, &seam.texels)
 }
 
 /// The presets at which any of 200,000 seam rays leak on `scene` (called `name`), each as a
@@ -394,7 +401,7 @@ fn no_seam_leaks_at_the_extreme_criteria() {
                 failures.push(format!("{name} {refinement:?}: {leaks} of {rays} leak"));
             }
             if name == "sphere" && refinement == (Refinement::ProjectedArea { min_ratio: 0.01 }) {
-                let rays = r.seam_rays(20_000, 7);
+                let rays = r.seam_rays(20_000, 7).rays;
                 gpu_agrees(&ctx, r, &rays, "sphere A/A 0.01 seams");
             }
         }
@@ -407,10 +414,11 @@ fn no_seam_leaks_at_the_extreme_criteria() {
 /// the origin or shallow the ray), the larger returned: on these closed, smooth meshes neither
 /// filter should be needed.
 fn seam_leaks(bvh: &Bvh, r: &Rbvh) -> (usize, usize) {
-    let rays = r.seam_rays(200_000, 7);
-    let exact = exact_entries(bvh, &rays, r.texel_size, &[]);
-    let approx = r.trace_cpu(&rays, false);
-    let counted = count_leaks(bvh, &rays, &exact, &approx, r.texel_size).leaks;
+    let seam = r.seam_rays(200_000, 7);
+    let (rays, texels) = (&seam.rays, &seam.texels);
+    let exact = exact_entries(bvh, rays, texels, &[]);
+    let approx = r.trace_cpu(rays, false);
+    let counted = count_leaks(bvh, rays, &exact, &approx, texels).leaks;
     let all = exact
         .iter()
         .zip(&approx)
@@ -507,11 +515,11 @@ fn rays_that_only_touch_a_closed_object_do_not_count() {
     let (mut told, mut not_told) = (0, 0);
     for level in [0, 4] {
         let r = Rbvh::build(&scene, &q(level)).unwrap();
-        let rays = r.seam_rays(200_000, 7);
-        let approx = r.trace_cpu(&rays, false);
+        let seam = r.seam_rays(200_000, 7);
+        let approx = r.trace_cpu(&seam.rays, false);
         let count = |closed: &[bool]| {
-            let exact = exact_entries(&bvh, &rays, r.texel_size, closed);
-            count_leaks(&bvh, &rays, &exact, &approx, r.texel_size).leaks
+            let exact = exact_entries(&bvh, &seam.rays, &seam.texels, closed);
+            count_leaks(&bvh, &seam.rays, &exact, &approx, &seam.texels).leaks
         };
         told += count(&closed);
         not_told += count(&[]);

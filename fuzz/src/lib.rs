@@ -243,16 +243,24 @@ pub fn rbvh_file(data: &[u8]) {
     };
     let saved = r.to_bytes();
     let version = u32::from_le_bytes(data[8..12].try_into().expect("a loaded file has a version"));
-    if version == 6 {
+    if version == 7 {
         assert_eq!(saved, data, "save(load(file)) differs from the file");
     } else {
-        const HEADER: usize = 148;
-        let old_header = if version < 4 { 136 } else { HEADER };
+        // Version 7 appended `object_rate` (0 for older files) to the 148-byte header of
+        // versions 4–6; versions 1–3 lack bytes 40..52 of those.
+        const V6_HEADER: usize = 148;
+        const HEADER: usize = 152;
+        let old_header = if version < 4 { 136 } else { V6_HEADER };
         assert_eq!(saved[12..40], data[12..40], "the upgraded header differs");
         assert_eq!(
-            saved[HEADER - (old_header - 40)..HEADER],
+            saved[V6_HEADER - (old_header - 40)..V6_HEADER],
             data[40..old_header],
             "the upgraded header differs"
+        );
+        assert_eq!(
+            saved[V6_HEADER..HEADER],
+            [0; 4],
+            "an old file's object rate is not 0"
         );
         let nodes = r.nodes.len();
         let old_node = if version < 5 { 64 } else { 48 };

@@ -236,6 +236,8 @@ struct SceneBench<'a> {
     config: &'a BenchConfig,
     scene: Scene,
     diagonal: f32,
+    /// Per scene object, its box diagonal: what `t_err_object` measures against.
+    object_diagonals: Vec<f32>,
     /// The exact BVH first: its host copy is also the CPU reference tracer that referees its
     /// GPU hits.
     candidates: Vec<Candidate>,
@@ -416,6 +418,7 @@ impl<'a> SceneBench<'a> {
         };
         Ok(SceneBench {
             config,
+            object_diagonals: object_diagonals(&scene),
             scene,
             diagonal,
             candidates,
@@ -548,8 +551,12 @@ impl<'a> SceneBench<'a> {
                     t_err_mean: summary(errors.t_err, |s| s.mean),
                     t_err_p99: summary(errors.t_err, |s| s.p99),
                     t_err_max: summary(errors.t_err, |s| s.max),
+                    t_err_object_mean: summary(errors.t_err_object, |s| s.mean),
+                    t_err_object_p99: summary(errors.t_err_object, |s| s.p99),
                     normal_err_deg_mean: summary(errors.normal_err_deg, |s| s.mean),
                     normal_err_deg_p99: summary(errors.normal_err_deg, |s| s.p99),
+                    back_facing_rate: (m.query == Query::Closest)
+                        .then_some(errors.back_facing_rate),
                     psnr_db: image.map(|e| e.psnr_db),
                     flip_mean: image.map(|e| e.flip_mean),
                 };
@@ -752,7 +759,12 @@ impl<'a> SceneBench<'a> {
     }
 
     fn hit_errors(&self, m: &Measured, reference: &[Hit], test: &[Hit]) -> Result<HitErrors> {
-        metrics::hit_errors(&m.rays, reference, test, self.diagonal, m.query)
+        let object = |h: &Hit| {
+            let triangle = usize::try_from(h.id).ok()?;
+            let o = *self.scene.object_of_triangle.get(triangle)?;
+            self.object_diagonals.get(o as usize).copied()
+        };
+        metrics::hit_errors(&m.rays, reference, test, self.diagonal, &object, m.query)
     }
 
     /// Writes into `dir` the exact render (`exact.png`), each level's render and error image
@@ -799,13 +811,14 @@ fn seam_leaks(
     count: usize,
     seed: u64,
 ) -> Option<SeamRecord> {
-    let rays = rbvh.seam_rays(count, seed);
+    let seam = rbvh.seam_rays(count, seed);
+    let (rays, texels) = (&seam.rays, &seam.texels);
     if rays.is_empty() || exact.triangles.is_empty() {
         return None;
     }
-    let entries = crate::rbvh::seams::exact_entries(exact, &rays, rbvh.texel_size, closed);
-    let approx = rbvh.trace_cpu(&rays, false);
-    let leaks = crate::rbvh::seams::count_leaks(exact, &rays, &entries, &approx, rbvh.texel_size);
+    let entries = crate::rbvh::seams::exact_entries(exact, rays, texels, closed);
+    let approx = rbvh.trace_cpu(rays, false);
+    let leaks = crate::rbvh::seams::count_leaks(exact, rays, &entries, &approx, texels);
     Some(SeamRecord {
         rays: rays.len() as u64,
         leaks: leaks.leaks as u64,
@@ -832,6 +845,19 @@ fn with_jumps(mut tracer: Tracer, block_jumps: Option<bool>) -> Result<Tracer> {
         tracer.set_block_jumps(on)?;
     }
     Ok(tracer)
+}
+
+/// Per object of `scene`, the diagonal of its triangles' box (NaN for one without triangles).
+fn object_diagonals(scene: &Scene) -> Vec<f32> {
+    let mut boxes = vec![crate::geom::Aabb::EMPTY; scene.object_names.len()];
+    for (i, &o) in scene.object_of_triangle.iter().enumerate() {
+        boxes[o as usize] =
+            boxes[o as usize].union(crate::geom::Aabb::from_points(scene.triangle(i)));
+    }
+    boxes
+        .iter()
+        .map(|b| if b.is_empty() { f32::NAN } else { b.diagonal() })
+        .collect()
 }
 
 #[cfg(test)]

@@ -3,7 +3,13 @@
 //!
 //! * **hit/miss disagreement**: the fraction of rays that one side hits and the other misses;
 //! * **hit distance error** `|t − t_exact| · |dir| / diagonal`, over the rays both hit, as a
-//!   fraction of the scene's bounding-box diagonal so that it means the same at any scale;
+//!   fraction of the scene's bounding-box diagonal so that it means the same at any scale, and
+//!   as a fraction of the diagonal of the object the exact ray hit (`t_err_object`): what a
+//!   preset that samples each object for its own size promises, so that a dragon in a courtyard
+//!   is judged as the dragon alone would be;
+//! * **back-facing hits**: the fraction of rays both hit whose normal faces away from the ray
+//!   while the exact normal faces it: shaded, the dark specks along silhouettes that a coarse
+//!   preset may bring (issue "Small and valid at every scale", item 5);
 //! * **normal angle error** in degrees between the two geometric normals, over the rays both hit.
 //!   Normals are compared as wound, not flipped towards the ray: a height field that reports the
 //!   back side is an error. RBVH normals are reconstructed from quantized heights, so a few
@@ -66,8 +72,14 @@ pub struct HitErrors {
     /// `|t − t_exact| · |dir| / diagonal` over rays both hit; None for any-hit queries or when no
     /// ray was hit by both.
     pub t_err: Option<Summary>,
+    /// The same distance error over the diagonal of the object the reference hit, over the rays
+    /// both hit whose reference object is known; None as for `t_err`, or when no object is.
+    pub t_err_object: Option<Summary>,
     /// Angle between the normals in degrees, over rays both hit; None as for `t_err`.
     pub normal_err_deg: Option<Summary>,
+    /// Rays both hit whose normal faces away from the ray (as wound) while the exact one faces
+    /// it, over all rays; 0 for any-hit queries.
+    pub back_facing_rate: f64,
     /// Hits of the method under test with a non-finite `t` or normal: always a bug.
     pub non_finite: usize,
 }
@@ -89,12 +101,14 @@ pub(crate) fn check_lengths(rays: &[Ray], exact: &[Hit], test: &[Hit]) -> Result
 }
 
 /// Compares `test` with `exact`, both answers to `rays` for `query`; `diagonal` is the scene's
-/// bounding-box diagonal.
+/// bounding-box diagonal, and `object_diagonal` that of the object an exact hit lies on (None
+/// where it is not known: a hit that is not a scene triangle, a degenerate object).
 pub fn hit_errors(
     rays: &[Ray],
     exact: &[Hit],
     test: &[Hit],
     diagonal: f32,
+    object_diagonal: &dyn Fn(&Hit) -> Option<f32>,
     query: Query,
 ) -> Result<HitErrors> {
     check_lengths(rays, exact, test)?;
@@ -107,7 +121,9 @@ pub fn hit_errors(
     let mut mismatches = 0usize;
     let mut non_finite = 0usize;
     let mut t_err = Vec::new();
+    let mut t_err_object = Vec::new();
     let mut normal_err = Vec::new();
+    let mut back_facing = 0usize;
     for ((ray, e), h) in rays.iter().zip(exact).zip(test) {
         if h.is_hit() && !(h.t.is_finite() && h.normal().is_finite()) {
             non_finite += 1;
@@ -115,9 +131,14 @@ pub fn hit_errors(
         }
         match (e.is_hit(), h.is_hit()) {
             (true, true) if query == Query::Closest => {
-                let scale = f64::from(ray.dir().length()) / f64::from(diagonal);
-                t_err.push((f64::from(h.t) - f64::from(e.t)).abs() * scale);
+                let off = (f64::from(h.t) - f64::from(e.t)).abs() * f64::from(ray.dir().length());
+                t_err.push(off / f64::from(diagonal));
+                if let Some(d) = object_diagonal(e).filter(|d| d.is_finite() && *d > 0.0) {
+                    t_err_object.push(off / f64::from(d));
+                }
                 normal_err.push(angle_deg(e, h));
+                let d = ray.dir();
+                back_facing += usize::from(h.normal().dot(d) > 0.0 && e.normal().dot(d) < 0.0);
             }
             (a, b) if a != b => mismatches += 1,
             _ => {}
@@ -131,7 +152,13 @@ pub fn hit_errors(
             mismatches as f64 / rays.len() as f64
         },
         t_err: Summary::of(t_err),
+        t_err_object: Summary::of(t_err_object),
         normal_err_deg: Summary::of(normal_err),
+        back_facing_rate: if rays.is_empty() {
+            0.0
+        } else {
+            back_facing as f64 / rays.len() as f64
+        },
         non_finite,
     })
 }
@@ -234,12 +261,21 @@ mod tests {
             Hit::MISS,          // disagreement
             hit(1.0, Vec3::Z),  // disagreement
         ];
-        let e = hit_errors(&rays, &exact, &test, 10.0, Query::Closest).unwrap();
+        // The object of the second exact hit has diagonal 2, the others none known.
+        let object = |h: &Hit| (h.t == 2.0).then_some(2.0);
+        let e = hit_errors(&rays, &exact, &test, 10.0, &object, Query::Closest).unwrap();
         assert_eq!(e.rays, 5);
+        let o = e.t_err_object.unwrap();
+        assert!(
+            (o.mean - 0.25).abs() < 1e-9 && (o.max - 0.25).abs() < 1e-9,
+            "{o:?}"
+        );
         assert_eq!(e.miss_mismatch_rate, 0.4);
         let t = e.t_err.unwrap();
         assert!((t.mean - 0.1 / 3.0).abs() < 1e-9, "{t:?}");
         assert!((t.p99 - 0.05).abs() < 1e-9 && (t.max - 0.05).abs() < 1e-9);
+        // Every exact normal here faces away from its ray (+z along +z): none counts.
+        assert_eq!(e.back_facing_rate, 0.0);
         let n = e.normal_err_deg.unwrap();
         assert!(
             (n.mean - 15.0).abs() < 1e-4 && (n.p99 - 45.0).abs() < 1e-4,
@@ -247,9 +283,38 @@ mod tests {
         );
         assert_eq!(e.non_finite, 0);
 
-        let any = hit_errors(&rays, &exact, &test, 10.0, Query::Any).unwrap();
+        let any = hit_errors(&rays, &exact, &test, 10.0, &object, Query::Any).unwrap();
         assert_eq!(any.miss_mismatch_rate, 0.4);
-        assert_eq!((any.t_err, any.normal_err_deg), (None, None));
+        assert_eq!(
+            (any.t_err, any.t_err_object, any.normal_err_deg),
+            (None, None, None)
+        );
+    }
+
+    /// A hit counts as back-facing when its normal faces away from the ray and the exact one
+    /// faces it; misses and any-hit queries do not count.
+    #[test]
+    fn back_facing_hits_are_counted_against_front_facing_exact_ones() {
+        let down = Ray::new(Vec3::Z, -Vec3::Z, 0.0, f32::INFINITY);
+        let rays = [down; 4];
+        let tilted = Vec3::new(0.9, 0.0, 0.1).normalize();
+        let exact = [
+            hit(1.0, Vec3::Z),
+            hit(1.0, Vec3::Z),
+            hit(1.0, -Vec3::Z),
+            Hit::MISS,
+        ];
+        let test = [
+            hit(1.0, -Vec3::Z),
+            hit(1.0, tilted),
+            hit(1.0, -Vec3::Z),
+            hit(1.0, -Vec3::Z),
+        ];
+        let none = |_: &Hit| None;
+        let e = hit_errors(&rays, &exact, &test, 1.0, &none, Query::Closest).unwrap();
+        assert_eq!(e.back_facing_rate, 0.25);
+        let any = hit_errors(&rays, &exact, &test, 1.0, &none, Query::Any).unwrap();
+        assert_eq!(any.back_facing_rate, 0.0);
     }
 
     #[test]
@@ -263,8 +328,17 @@ mod tests {
     #[test]
     fn mismatched_lengths_and_bad_diagonals_are_errors() {
         let ray = Ray::new(Vec3::ZERO, Vec3::Z, 0.0, 1.0);
-        assert!(hit_errors(&[ray], &[], &[Hit::MISS], 1.0, Query::Closest).is_err());
-        assert!(hit_errors(&[ray], &[Hit::MISS], &[Hit::MISS], 0.0, Query::Closest).is_err());
+        let none = |_: &Hit| None;
+        assert!(hit_errors(&[ray], &[], &[Hit::MISS], 1.0, &none, Query::Closest).is_err());
+        assert!(hit_errors(
+            &[ray],
+            &[Hit::MISS],
+            &[Hit::MISS],
+            0.0,
+            &none,
+            Query::Closest
+        )
+        .is_err());
     }
 
     #[test]

@@ -57,9 +57,12 @@
 //!
 //! `error` (definitions in `bench::metrics`): `miss_mismatch_rate` (fraction of rays hit by one
 //! side only); `t_err_mean`, `t_err_p99`, `t_err_max` (`|t − t_exact|` over rays both hit, as a
-//! fraction of the scene's bounding-box diagonal); `normal_err_deg_mean`, `normal_err_deg_p99`
-//! (degrees); `psnr_db`, `flip_mean` (shaded primary images, 8-bit sRGB). The distance and normal
-//! errors are null for any-hit ray types (ao, shadow) and when no ray was hit by both; the image
+//! fraction of the scene's bounding-box diagonal); `t_err_object_mean`, `t_err_object_p99` (the
+//! same over the diagonal of the object the exact ray hit); `normal_err_deg_mean`,
+//! `normal_err_deg_p99` (degrees); `back_facing_rate` (rays both hit whose normal faces away from
+//! the ray while the exact one faces it, over all rays); `psnr_db`, `flip_mean` (shaded primary
+//! images, 8-bit sRGB). The distance and normal errors and `back_facing_rate` are null for any-hit
+//! ray types (ao, shadow), the distance and normal errors also when no ray was hit by both; the image
 //! metrics are null except for primary rays, and `psnr_db` is also null for identical images
 //! (+∞ dB; `flip_mean` is then 0).
 //!
@@ -292,6 +295,9 @@ pub struct Memory {
 pub struct Params {
     /// Sampling rate: texels along the scene's bounding-box diagonal.
     pub texels_per_diagonal: f32,
+    /// Each object's least sampling rate along its own box diagonal, as a fraction of
+    /// `texels_per_diagonal`, 0 for none ([`RbvhParams::object_rate`]).
+    pub object_rate: f32,
     /// Leaf refinement criterion: `"normal_cone"` or `"projected_area"`.
     pub refinement: &'static str,
     /// Largest angle between a triangle normal and the projection axis, in degrees; None unless
@@ -325,6 +331,7 @@ impl From<&RbvhParams> for Params {
         };
         Params {
             texels_per_diagonal: p.texels_per_diagonal,
+            object_rate: p.object_rate,
             refinement,
             max_angle_deg,
             min_ratio,
@@ -372,10 +379,18 @@ pub struct Errors {
     pub t_err_p99: Option<f64>,
     /// Largest distance error, as a fraction of the scene diagonal.
     pub t_err_max: Option<f64>,
+    /// Mean `|t − t_exact| · |dir|` as a fraction of the diagonal of the object the exact ray
+    /// hit: the error a preset that samples each object for its size promises.
+    pub t_err_object_mean: Option<f64>,
+    /// Nearest-rank 99th percentile of the same object-relative error.
+    pub t_err_object_p99: Option<f64>,
     /// Mean angle between the geometric normals (as wound) over rays both hit, in degrees.
     pub normal_err_deg_mean: Option<f64>,
     /// Nearest-rank 99th percentile of the normal angle error, in degrees.
     pub normal_err_deg_p99: Option<f64>,
+    /// Rays both hit whose normal faces away from the ray while the exact one faces it, over
+    /// all rays: the dark specks of a shaded image. Null for any-hit ray types.
+    pub back_facing_rate: Option<f64>,
     /// +∞ for identical images, which JSON writes as null.
     pub psnr_db: Option<f64>,
     /// Mean of FLIP's per-pixel error map between the shaded primary images, in [0, 1].

@@ -9,7 +9,7 @@ use super::record::{BenchReport, Record};
 
 /// Columns after the scene's: header, width, and whether values are left-aligned (names) rather
 /// than right-aligned (numbers).
-const COLUMNS: [(&str, usize, bool); 15] = [
+const COLUMNS: [(&str, usize, bool); 17] = [
     ("method", 8, true),
     ("level", 7, true),
     ("ray type", 8, true),
@@ -19,7 +19,9 @@ const COLUMNS: [(&str, usize, bool); 15] = [
     ("mem x", 6, false),
     ("miss %", 7, false),
     ("t p99 %", 8, false),
+    ("obj t p99 %", 11, false),
     ("n err°", 7, false),
+    ("backf %", 7, false),
     ("PSNR", 6, false),
     ("FLIP", 6, false),
     ("leaks", 6, false),
@@ -96,8 +98,10 @@ pub fn table(report: &BenchReport) -> String {
         });
     let footnote = format!(
         "MRays/s: median of {} runs of {passes} trace pass(es){shortest} (timing: {}); mem x: \
-         exact's bytes / these; t p99: hit distance error, % of the scene diagonal; n err: mean \
-         normal error; PSNR/FLIP: shaded primary image{leaks}",
+         exact's bytes / these; t p99: hit distance error, % of the scene diagonal (obj: of the \
+         diagonal of the object the exact ray hit); n err: mean normal error; backf: hits whose \
+         normal faces away from the ray where the exact one faces it, % of the rays; PSNR/FLIP: \
+         shaded primary image{leaks}",
         report.runs,
         sources.into_iter().collect::<Vec<_>>().join(" and ")
     );
@@ -195,7 +199,9 @@ fn cells(r: &Record) -> [String; COLUMNS.len()] {
         format!("{:.1}", r.memory_ratio_vs_exact),
         num(e.map(|e| 100.0 * e.miss_mismatch_rate), 2),
         num(e.and_then(|e| e.t_err_p99).map(|t| 100.0 * t), 3),
+        num(e.and_then(|e| e.t_err_object_p99).map(|t| 100.0 * t), 3),
         num(e.and_then(|e| e.normal_err_deg_mean), 1),
+        num(e.and_then(|e| e.back_facing_rate).map(|b| 100.0 * b), 3),
         num(e.and_then(|e| e.psnr_db), 1),
         num(e.and_then(|e| e.flip_mean), 3),
         r.seams.map_or_else(dash, |s| s.leaks.to_string()),

@@ -55,7 +55,9 @@ mod tests {
                 p99,
                 max: p99,
             }),
+            t_err_object: None,
             normal_err_deg: None,
+            back_facing_rate: 0.0,
             non_finite: 0,
         }
     }

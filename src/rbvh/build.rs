@@ -99,7 +99,13 @@ struct Builder<'a> {
     params: &'a RbvhParams,
     /// Told of every leaf's triangles as the leaf is made.
     progress: &'a dyn Progress,
+    /// The scene's texel: its diagonal over `texels_per_diagonal`.
     texel: f32,
+    /// Per scene object, its texel ([`object_texels`]); empty when every object takes the
+    /// scene's.
+    object_texel: Vec<f32>,
+    /// Per scene triangle, its object (`Scene::object_of_triangle`); empty for points.
+    objects: &'a [u32],
     /// The scene's triangles in a BVH, for the surface around each leaf (its ring of samples).
     surface: Option<&'a LinearBvh<'a>>,
     /// Per scene triangle, whether it touches the open boundary ([`open_boundary`]); empty
@@ -120,8 +126,10 @@ pub struct RbvhSource<'s> {
     tris: Vec<[Vec3; 3]>,
     /// The scene's points as splats (none when it has triangles).
     splats: Vec<Splat>,
-    /// Total surface area, for the texel-count estimate that refuses an oversized build early.
-    area: f64,
+    /// Per scene object, its surface area, box and element count (one object for points), for
+    /// the texel-count estimate that refuses an oversized build early and for each object's
+    /// texel.
+    objects: Vec<ObjectSize>,
     /// Made by the first build that passes that estimate.
     shared: std::sync::OnceLock<Shared<'s>>,
     /// Milliseconds [`RbvhSource::new`] took. It and [`Shared::ms`] count into each level's
@@ -157,34 +165,49 @@ impl<'s> RbvhSource<'s> {
             ));
         }
         let start = Instant::now();
-        let (tris, splats, area): (Vec<[Vec3; 3]>, Vec<Splat>, f64) = match &scene.points {
-            Some(cloud) => {
-                let splats: Vec<Splat> = (0..cloud.len())
-                    .map(|i| Splat {
-                        position: cloud.positions[i],
-                        normal: cloud.normals[i],
-                        spacing: cloud.spacing[i],
-                    })
-                    .collect();
-                let area = splats.iter().map(|p| f64::from(p.spacing).powi(2)).sum();
-                (Vec::new(), splats, area)
-            }
-            None => {
-                let tris: Vec<[Vec3; 3]> = (0..scene.triangle_count())
-                    .map(|i| scene.triangle(i))
-                    .collect();
-                let area = tris
-                    .iter()
-                    .map(|[a, b, c]| 0.5 * (*b - *a).cross(*c - *a).length() as f64)
-                    .sum();
-                (tris, Vec::new(), area)
-            }
-        };
+        let (tris, splats, objects): (Vec<[Vec3; 3]>, Vec<Splat>, Vec<ObjectSize>) =
+            match &scene.points {
+                Some(cloud) => {
+                    let splats: Vec<Splat> = (0..cloud.len())
+                        .map(|i| Splat {
+                            position: cloud.positions[i],
+                            normal: cloud.normals[i],
+                            spacing: cloud.spacing[i],
+                        })
+                        .collect();
+                    let area = splats.iter().map(|p| f64::from(p.spacing).powi(2)).sum();
+                    let cloud = ObjectSize {
+                        area,
+                        bounds: scene.bounds(),
+                        elements: splats.len(),
+                    };
+                    (Vec::new(), splats, vec![cloud])
+                }
+                None => {
+                    let tris: Vec<[Vec3; 3]> = (0..scene.triangle_count())
+                        .map(|i| scene.triangle(i))
+                        .collect();
+                    let empty = ObjectSize {
+                        area: 0.0,
+                        bounds: Aabb::EMPTY,
+                        elements: 0,
+                    };
+                    let mut objects = vec![empty; scene.object_names.len()];
+                    for (t, &o) in tris.iter().zip(&scene.object_of_triangle) {
+                        let [a, b, c] = *t;
+                        let object = &mut objects[o as usize];
+                        object.area += 0.5 * (b - a).cross(c - a).length() as f64;
+                        object.bounds = object.bounds.union(Aabb::from_points(*t));
+                        object.elements += 1;
+                    }
+                    (tris, Vec::new(), objects)
+                }
+            };
         Ok(RbvhSource {
             scene,
             tris,
             splats,
-            area,
+            objects,
             shared: std::sync::OnceLock::new(),
             new_ms: start.elapsed().as_secs_f64() * 1e3,
         })
@@ -305,14 +328,35 @@ impl Rbvh {
             input @ Input::Points(_) => (input, "points"),
             input @ Input::Triangles(_) => (input, "triangles"),
         };
-        let area = source.area;
-        let estimate = area / (texel as f64 * texel as f64);
+        let object_texel = object_texels(
+            &source.objects,
+            texel,
+            params.object_rate * params.texels_per_diagonal,
+        );
+        let (area, estimate) =
+            source
+                .objects
+                .iter()
+                .enumerate()
+                .fold((0.0, 0.0), |(area, estimate), (o, object)| {
+                    let t = f64::from(object_texel.get(o).copied().unwrap_or(texel));
+                    (area + object.area, estimate + object.area / (t * t))
+                });
         if estimate > MAX_ESTIMATED_TEXELS {
+            // Named after the rate that asks for more: the objects', where any is finer.
+            let (name, what) = if object_texel.iter().any(|&t| t < texel) {
+                (
+                    "object_rate",
+                    format!(" and {} of it along each object's", params.object_rate),
+                )
+            } else {
+                ("texels_per_diagonal", String::new())
+            };
             return Err(Error::param(
-                "texels_per_diagonal",
+                name,
                 format!(
-                    "{} would need about {estimate:.3e} texels for {} of surface (limit {MAX_ESTIMATED_TEXELS:.0e}); lower the sampling rate or the quality level",
-                    params.texels_per_diagonal, area
+                    "{} texels along the scene's diagonal{what} would need about {estimate:.3e} texels for {area} of surface (limit {MAX_ESTIMATED_TEXELS:.0e}); lower the sampling rate or the quality level",
+                    params.texels_per_diagonal
                 ),
             ));
         }
@@ -334,6 +378,11 @@ impl Rbvh {
             prims,
             params,
             texel,
+            object_texel,
+            objects: match source.input() {
+                Input::Triangles(_) => &scene.object_of_triangle,
+                Input::Points(_) => &[],
+            },
             progress,
             surface,
             open,
@@ -431,6 +480,21 @@ impl Rbvh {
 }
 
 impl Builder<'_> {
+    /// The texel of the set `order`: its objects' finest ([`RbvhParams::object_rate`]),
+    /// or the scene's. With object split on, a set that becomes a leaf lies in one object.
+    fn texel_of(&self, order: &[u32]) -> f32 {
+        if self.objects.is_empty() {
+            // Points: the cloud is one object.
+            return self.object_texel.first().copied().unwrap_or(self.texel);
+        }
+        if self.object_texel.is_empty() {
+            return self.texel;
+        }
+        order.iter().fold(self.texel, |t, &i| {
+            t.min(self.object_texel[self.objects[i as usize] as usize])
+        })
+    }
+
     fn build(&self, order: &mut [u32], offset: u32, depth: u32) -> Node {
         let n = order.len();
         // The box of the surface the set samples: its triangles, or its points (whose splits
@@ -443,24 +507,25 @@ impl Builder<'_> {
                 .iter()
                 .fold(Aabb::EMPTY, |b, &i| b.grow(self.prims[i as usize].centroid)),
         };
+        let texel = self.texel_of(order);
         let first = &self.prims[order[0] as usize];
         let one_part = !self.params.object_split
             || order
                 .iter()
                 .all(|&i| self.prims[i as usize].component == first.component);
         if one_part {
-            if let Some(tiles) = self.heightfield(order, bounds.diagonal()) {
+            if let Some(tiles) = self.heightfield(order, bounds.diagonal(), texel) {
                 self.progress.advance(n as u64);
                 return self.surface_subtree(tiles, order);
             }
         }
-        let small = bounds.diagonal() < self.params.min_leaf_texels * self.texel;
+        let small = bounds.diagonal() < self.params.min_leaf_texels * texel;
         // A slab (thinner than that, or than a quarter of its length: two sides of a thin sheet,
         // scanned from both): space splits along its length and never between its sides, only
         // their facing does.
         let extent = bounds.extent();
         let thin = extent.min_element()
-            < (self.params.min_leaf_texels * self.texel).max(SLAB * extent.max_element());
+            < (self.params.min_leaf_texels * texel).max(SLAB * extent.max_element());
         match self.input {
             Input::Triangles(_) if n == 1 || (n <= MAX_TRIANGLE_LEAF && small) => {
                 self.progress.advance(n as u64);
@@ -476,10 +541,10 @@ impl Builder<'_> {
                     return self.split_by_facing(points, order, offset, depth);
                 }
                 if n == 1 || small {
-                    return self.forced(points, order, offset);
+                    return self.forced(points, order, offset, texel);
                 }
             }
-            Input::Points(points) if n == 1 => return self.forced(points, order, offset),
+            Input::Points(points) if n == 1 => return self.forced(points, order, offset, texel),
             _ => {}
         }
         let mid = split(
@@ -531,9 +596,9 @@ impl Builder<'_> {
     }
 
     /// The forced leaf of the points `order` (see [`Builder::forced_heightfield`]).
-    fn forced(&self, points: &[Splat], order: &[u32], offset: u32) -> Node {
+    fn forced(&self, points: &[Splat], order: &[u32], offset: u32, texel: f32) -> Node {
         self.progress.advance(order.len() as u64);
-        let tiles = self.forced_heightfield(points, order);
+        let tiles = self.forced_heightfield(points, order, texel);
         if tiles.is_empty() {
             // Unreachable for finite points (each marks the sample nearest to it); an empty
             // leaf keeps the tree whole if it were not.
@@ -587,9 +652,9 @@ impl Builder<'_> {
         tiles
     }
 
-    /// The tiles of the set `order` (whose box diagonal is `diagonal`) as one height field, or
-    /// None when it is not representable.
-    fn heightfield(&self, order: &[u32], diagonal: f32) -> Option<Vec<Tile>> {
+    /// The tiles of the set `order` (whose box diagonal is `diagonal`) as one height field of
+    /// texels `texel` wide, or None when it is not representable.
+    fn heightfield(&self, order: &[u32], diagonal: f32, texel: f32) -> Option<Vec<Tile>> {
         match self.input {
             Input::Triangles(all) => {
                 let tris: Vec<[Vec3; 3]> = order.iter().map(|&i| all[i as usize]).collect();
@@ -600,23 +665,22 @@ impl Builder<'_> {
                 };
                 let elements = triangle_elements(&tris);
                 let (frame, judge) =
-                    self.judged_frame(&elements, tris.as_flattened(), 0.0, diagonal)?;
+                    self.judged_frame(&elements, tris.as_flattened(), 0.0, diagonal, texel)?;
                 let ring = self.surface.map(|surface| Ring {
                     surface,
                     reach: ring_reach(self.params.refinement),
                 });
                 // Layers closer than a texel are one surface at this sampling rate.
                 self.tiles(&frame, |window| {
-                    rasterize(&tris, window, self.texel, judge, ring, &open)
+                    rasterize(&tris, window, texel, judge, ring, &open)
                 })
             }
             Input::Points(all) => {
                 let (points, positions, reach) = gather(all, order);
                 let elements = point_elements(&points);
-                let (frame, judge) = self.judged_frame(&elements, &positions, reach, diagonal)?;
-                self.tiles(&frame, |window| {
-                    splat(&points, window, self.texel, judge, false)
-                })
+                let (frame, judge) =
+                    self.judged_frame(&elements, &positions, reach, diagonal, texel)?;
+                self.tiles(&frame, |window| splat(&points, window, texel, judge, false))
             }
         }
     }
@@ -632,15 +696,16 @@ impl Builder<'_> {
         positions: &[Vec3],
         margin: f32,
         diagonal: f32,
+        texel: f32,
     ) -> Option<(Frame, Option<super::Refinement>)> {
         let w = projection_axis(elements)?;
         let elements_pass = passes(self.params.refinement, elements, w);
-        if !elements_pass && diagonal > self.params.sampled_criterion_texels * self.texel {
+        if !elements_pass && diagonal > self.params.sampled_criterion_texels * texel {
             return None;
         }
         // Elements that fail the criterion get a second hearing on their surface as sampled.
         let judge = (!elements_pass).then_some(self.params.refinement);
-        Some((fit(positions, w, self.texel, margin), judge))
+        Some((fit(positions, w, texel, margin), judge))
     }
 
     /// The covered tiles of `frame`'s windows (at most `max_tile` samples a side), each sampled
@@ -659,16 +724,14 @@ impl Builder<'_> {
     /// A forced leaf of the points `order` (see `splat.rs`): splatted along their area-weighted
     /// normal (or the first point's, when their normals cancel), the nearest point winning where
     /// they overlap.
-    fn forced_heightfield(&self, all: &[Splat], order: &[u32]) -> Vec<Tile> {
+    fn forced_heightfield(&self, all: &[Splat], order: &[u32], texel: f32) -> Vec<Tile> {
         let (points, positions, reach) = gather(all, order);
         let w = projection_axis(&point_elements(&points))
             .or_else(|| points.first().map(|p| p.normal))
             .unwrap_or(Vec3::Z);
-        let frame = fit(&positions, w, self.texel, reach);
-        self.tiles(&frame, |window| {
-            splat(&points, window, self.texel, None, true)
-        })
-        .unwrap_or_default()
+        let frame = fit(&positions, w, texel, reach);
+        self.tiles(&frame, |window| splat(&points, window, texel, None, true))
+            .unwrap_or_default()
     }
 }
 
@@ -715,6 +778,54 @@ fn point_elements(points: &[Splat]) -> Vec<Vec3> {
     points
         .iter()
         .map(|p| p.normal * (p.spacing * p.spacing))
+        .collect()
+}
+
+/// How many times its box diagonal squared an object's area may be before the object counts as a
+/// crowd rather than a surface ([`object_texels`]): a closed surface has about one time (a
+/// sphere 1.05, the Stanford dragon about 1), a crowd of overlapping triangles thousands (200,000
+/// triangles in a speck, `tests/stability`: 25,000). No height field represents a crowd, and
+/// sampled for its own size it is no longer below a texel: every split tried to rasterize it and
+/// traced its ring through the crowd, minutes where the scene's texel took a second. A crowd
+/// takes the scene's texel.
+const CROWD_LAYERS: f64 = 64.0;
+
+/// What sizes one scene object's texel ([`object_texels`]).
+#[derive(Clone, Copy, Debug)]
+struct ObjectSize {
+    /// Surface area of its triangles (or its points' splats).
+    area: f64,
+    /// Box of its triangles (or the scene's, for points).
+    bounds: Aabb,
+    /// How many triangles (or points) it has.
+    elements: usize,
+}
+
+/// Per object, its texel: the scene's `texel`, or finer where the object's own rate asks for it
+/// (its box diagonal over `rate` texels), but never finer than the object's mean triangle
+/// (the side of a square of its area over its triangle count): an object is not given more
+/// texels than it has triangles, since it has no detail between them to sample (the grove's
+/// blobs of 1,280 triangles, a fifty-fifth of their scene's diagonal, took 21.8M texels at Q4
+/// without that bound, 4 times the scene's exact BVH). Empty when `rate` is 0 (every object
+/// takes the scene's). An object without extent, or a crowd ([`CROWD_LAYERS`]), takes the
+/// scene's.
+fn object_texels(objects: &[ObjectSize], texel: f32, rate: f32) -> Vec<f32> {
+    if rate <= 0.0 {
+        return Vec::new();
+    }
+    objects
+        .iter()
+        .map(|o| {
+            let mean = (o.area / o.elements.max(1) as f64).sqrt() as f32;
+            let diagonal = o.bounds.diagonal();
+            let own = (diagonal / rate).max(mean);
+            let crowd = o.area > CROWD_LAYERS * f64::from(diagonal) * f64::from(diagonal);
+            if own.is_finite() && own > 0.0 && !crowd {
+                texel.min(own)
+            } else {
+                texel
+            }
+        })
         .collect()
 }
 

@@ -10,7 +10,7 @@
 //! | bytes | type | field |
 //! |---|---|---|
 //! | 0..8 | `[u8; 8]` | magic `RBVHv` followed by three zero bytes |
-//! | 8..12 | u32 | format version: 6 (this build writes it; it reads 1–5 as well, see below) |
+//! | 8..12 | u32 | format version: 7 (this build writes it; it reads 1–6 as well, see below) |
 //! | 12..16 | f32 | `params.texels_per_diagonal` |
 //! | 16..20, 20..24 | u32, f32 | `params.refinement`: tag (0 = `NormalCone`, 1 = `ProjectedArea`), its value (`max_angle_deg` or `min_ratio`) |
 //! | 24..28 | u32 | `params.subdivision`: 0 = `SpatialMedian`, 1 = `AreaSah` |
@@ -28,7 +28,8 @@
 //! | 100..108 | u64 | `stats.tile_texels` |
 //! | 108..112, 112..116 | u32, u32 | `atlas.pitch`, `atlas.rows` |
 //! | 116..148 | 4 × u64 | counts: nodes `N`, triangles `T`, leaves `L`, texels `X` |
-//! | 148.. | `N` × 48 bytes | `nodes` ([`crate::bvh::GpuNode`], 12 words each) |
+//! | 148..152 | f32 | `params.object_rate` (0: none) |
+//! | 152.. | `N` × 48 bytes | `nodes` ([`crate::bvh::GpuNode`], 12 words each) |
 //! | then | `T` × 48 bytes | `triangles` ([`crate::bvh::GpuTriangle`], 12 words each) |
 //! | then | `L` × 64 bytes | `leaves` ([`super::GpuHeightfield`], 16 words each) |
 //! | then | `X` × 4 bytes | `atlas.texels` ([`super::Texel`], one word each), row by row; height-only texels: `X` × 2 bytes, each texel's height code (u16) |
@@ -47,7 +48,7 @@
 //! from the surface and which extrapolated (the parity of a height code, [`Texel::is_sampled`]):
 //! every sampled-looking code is made odd on loading, within one code and inside its leaf's box
 //! (where the box allows: `unmark`), so that the march hangs no skirt under them and the RBVH
-//! traces as it was built. Saving such an RBVH writes version 6. A colour section
+//! traces as it was built. Versions 1–6 took every texel from the scene (`object_rate` 0). Saving such an RBVH writes version 7. A colour section
 //! that is cut short, or whose count is not `X`, is an [`Error::Parse`] like any other
 //! malformation.
 //!
@@ -82,9 +83,11 @@ use crate::{Error, Result};
 /// The first eight bytes of every RBVH file.
 const MAGIC: [u8; 8] = *b"RBVHv\0\0\0";
 /// The format version this build writes.
-const VERSION: u32 = 6;
+const VERSION: u32 = 7;
 /// Bytes before the arrays (see the table in the module docs).
-const HEADER_BYTES: usize = 148;
+const HEADER_BYTES: usize = 152;
+/// Bytes before the arrays in versions 4–6, whose header ends before `object_rate`.
+const V6_HEADER_BYTES: usize = 148;
 /// Bytes before the arrays in versions 1–3, whose header lacks bytes 40..52 of later ones.
 const OLD_HEADER_BYTES: usize = 136;
 
@@ -176,6 +179,7 @@ impl Rbvh {
         ] {
             out.extend_from_slice(&(count as u64).to_le_bytes());
         }
+        put_f32(&mut out, p.object_rate);
         debug_assert_eq!(out.len(), HEADER_BYTES);
 
         put_records(&mut out, &self.nodes);
@@ -283,13 +287,14 @@ impl Rbvh {
                 (sampled, texels, colour_channel)
             }
         };
-        let header_bytes = if version < 4 {
-            OLD_HEADER_BYTES
-        } else {
-            HEADER_BYTES
+        let header_bytes = match version {
+            1..=3 => OLD_HEADER_BYTES,
+            4..=6 => V6_HEADER_BYTES,
+            _ => HEADER_BYTES,
         };
         let params = RbvhParams {
             texels_per_diagonal,
+            object_rate: 0.0,
             refinement,
             subdivision,
             object_split,
@@ -318,9 +323,20 @@ impl Rbvh {
             r.u64("the leaf count")?,
             r.u64("the texel count")?,
         ];
+        // Versions 1–6 took every texel from the scene's diagonal.
+        let object_rate = if version >= 7 {
+            r.f32("params.object_rate")?
+        } else {
+            0.0
+        };
+        let params = RbvhParams {
+            object_rate,
+            ..params
+        };
 
         let floats = [
             ("params.texels_per_diagonal", texels_per_diagonal),
+            ("params.object_rate", object_rate),
             ("params.refinement value", refinement_value(refinement)),
             ("params.min_leaf_texels", params.min_leaf_texels),
             ("params.sampled_criterion_texels", sampled_criterion_texels),

@@ -218,6 +218,13 @@ impl Texel {
     pub fn normal(self) -> Vec3 {
         decode_octahedral((self.0 >> 16) as u16)
     }
+
+    /// Whether the texel's normal faces a ray along `dir` (world space): their dot product,
+    /// summed in the order `glsl/rbvh.glsl`'s `rbvh_faces` sums it, is negative.
+    pub fn faces(self, dir: Vec3) -> bool {
+        let n = octahedral_direction((self.0 >> 16) as u16);
+        n.x * dir.x + n.y * dir.y + n.z * dir.z < 0.0
+    }
 }
 
 /// A leaf's samples in world space: `step_u = axis_u / |axis_u|²` (= `u · texel`, the axes being
@@ -283,13 +290,19 @@ pub fn encode_octahedral(n: Vec3) -> u16 {
 
 /// Inverse of [`encode_octahedral`]; `glsl/rbvh.glsl` decodes identically.
 pub fn decode_octahedral(code: u16) -> Vec3 {
+    octahedral_direction(code).normalize()
+}
+
+/// The direction of octahedral `code` before normalizing: exact arithmetic on the code's bytes
+/// (`glsl/rbvh.glsl` computes the same bits), so a sign taken from it agrees on every device.
+fn octahedral_direction(code: u16) -> Vec3 {
     let f = |b: u16| (b & 0xFF) as f32 / 255.0 * 2.0 - 1.0;
     let (x, y) = (f(code), f(code >> 8));
     let z = 1.0 - x.abs() - y.abs();
     let t = (-z).max(0.0);
     let x = x + if x >= 0.0 { -t } else { t };
     let y = y + if y >= 0.0 { -t } else { t };
-    Vec3::new(x, y, z).normalize()
+    Vec3::new(x, y, z)
 }
 
 fn sign(x: f32) -> f32 {

@@ -31,6 +31,7 @@ pub use build::RbvhSource;
 pub use layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT};
 pub use march::DeviceTwin;
 pub use params::{RbvhParams, Refinement, Subdivision, TexelFormat, QUALITY_NAMES};
+pub use raster::CREST_TEXELS;
 
 use crate::bvh::{GpuNode, GpuTriangle};
 use crate::geom::Aabb;
@@ -104,9 +105,16 @@ impl Rbvh {
         self.atlas.device_words(self.params.texels)
     }
 
-    /// Bytes of the triangle-leaf triangles.
+    /// Bytes of the triangle-leaf triangles: hybrid leaves' and exact parts' together.
     pub fn triangle_bytes(&self) -> u64 {
         std::mem::size_of_val(self.triangles.as_slice()) as u64
+    }
+
+    /// Bytes of the exact parts beside height fields ([`GpuTriangle::PART`]), of
+    /// [`Rbvh::triangle_bytes`]: the rest are hybrid leaves, sets too small to be height fields.
+    pub fn part_bytes(&self) -> u64 {
+        let parts = self.triangles.iter().filter(|t| t.part_leaf().is_some());
+        (parts.count() * std::mem::size_of::<GpuTriangle>()) as u64
     }
 
     /// Bytes of the optional colour channel (0 without one). Not part of [`Rbvh::total_bytes`],

@@ -81,12 +81,10 @@
 //!    moved origin).
 //! 6. **Exposed triangles** ([`Tile::exposed`], issue "No leaks between height fields"): the
 //!    leaf's triangles that meet the bare part of a cell (no cell triangle over it: the ring
-//!    found no surface for a corner), or rise more than [`EXPOSED_RISE_TEXELS`] above a cell
-//!    with an extrapolated corner, or lie more than [`EXPOSED_SINK_TEXELS`] below it, or rise
-//!    more than [`EXPOSED_SAMPLED_RISE_TEXELS`] above a cell of sampled corners (as much as
-//!    over an extrapolated corner where the cell is steep, [`STEEP_CELL_TEXELS`]), or lie more
-//!    than [`EXPOSED_SAMPLED_SINK_TEXELS`] below it, or face away from the axis over a steep
-//!    cell ([`exposed`]).
+//!    found no surface for a corner), or rise more than [`CREST_TEXELS`] above a cell, or lie
+//!    more than that below a cell of sampled corners or more than [`EXPOSED_SINK_TEXELS`] below
+//!    one with an extrapolated corner, or face away from the axis over a steep cell
+//!    ([`STEEP_CELL_TEXELS`]; [`exposed`]).
 //!    A ray entering the solid through one may pass beside the height field, slide over its
 //!    rim, pass under an extrapolated lid, or reach the triangle from below or beside rather
 //!    than through the cells over it, so the builder adds their parts there to the tree as
@@ -118,60 +116,43 @@ pub const EDGE_ON_COS: f32 = 1.0e-5;
 /// accuracy, t p99 +7%; 3 and 4 for every leaf cost its Q0 t p99 0.150 → 0.155 and 0.170%).
 pub(super) const RING_REACH: f32 = 2.0;
 
-/// How far above the surface of a cell with an extrapolated corner one of the leaf's triangles
-/// may rise before it is traced exactly too, in texels ([`exposed`]). At 0.3 the dragon's
-/// presets add 2,300 such triangles to the 5,100 over bare cells at Q0 (600 at Q4) and close
-/// its last seam leaks but one per million; 0.1 doubles them for nothing more, and asking no
-/// rise at all would take 27,000 (docs/guarantees.md).
-const EXPOSED_RISE_TEXELS: f32 = 0.3;
-
-/// How far above the surface of a cell of sampled corners one of the leaf's triangles may rise
-/// before it is traced exactly too, in texels ([`exposed`]): where the leaf's samples jump
-/// between two sheets (a crease, a fold the tolerance let in), a cell's triangles cut under the
-/// upper one, and where a crest runs between samples the cells' chords cut under it; a ray
-/// entering the solid there passes over the cell. At a texel, 5% more exact parts on the dragon
-/// at Q0 (1–4% at Q1–Q4) took the bunny's seam leaks at A⊥/A 0.01 from 195 to 2 per million;
-/// at two texels, 8. Half a texel also closes the bunny's last preset leak (Q4) and most of the
-/// default scene's (49 → 13 per million over Q0–Q4: crests met head-on), and cuts the default
-/// scene's t p99 by 9–39%, for 20% more parts on the dragon at Q0 (6% more memory) and 2–4% of
-/// the default scene's speed; 0.3 texel, 13 → 10 for 17–39% more of its parts
-/// (docs/guarantees.md).
-const EXPOSED_SAMPLED_RISE_TEXELS: f32 = 0.5;
+/// How far one of the leaf's triangles may rise above its cell's surface, or lie below a cell
+/// of sampled corners, before it is traced exactly too, in texels (`exposed`): **the
+/// approximation may clip a crest, or pass over a sheet under its surface, by up to two
+/// texels** (issue "Small and valid at every scale"). A crest running between samples, or a
+/// sheet the leaf's samples jump to, is cut under by the cells' chords; a ray entering the
+/// solid there passes over the cell, and meets the leaf's surface at most this far in. Below
+/// the sampling rate (a horn, a claw, a dragon's scales at a coarse preset) nearly every
+/// triangle rises or sinks that much somewhere, so tighter rules (half a texel over sampled
+/// corners, 0.3 over extrapolated ones, a texel under sampled ones, kept since the seam work)
+/// made most of a small, detailed object's triangles exact: 167.5 of the 210.8 MB of the
+/// paper-scale scene's Q0 (21.85M triangles), 2.79 of the dragon's 3.74 MB at 64 texels along
+/// its diagonal. At two texels the dragon at 64 keeps 0.97 MB of them, at Q0 0.34 instead of
+/// 0.58 MB, with its errors and FLIP unchanged, no seam ray through a closed solid anywhere, and seam
+/// leaks 3 → 7 per million over the default scene's Q0–Q4 (the leak threshold is two texels
+/// behind the surface, `seams::LEAK_TEXELS`: a clipped crest is what it allows) and as before on
+/// the dragon, the closed meshes and at the extreme criteria (docs/guarantees.md).
+pub const CREST_TEXELS: f32 = 2.0;
 
 /// How far below the surface of a cell with an extrapolated corner one of the leaf's triangles
 /// may lie before it is traced exactly too, in texels ([`exposed`]): there the extrapolation
 /// has made a lid over the leaf's own surface, and a ray coming in from the side under the lid
 /// (where the skirt tapers to nothing, `layout::MARCH_SKIRT_TEXELS`) meets the triangle but none
-/// of the leaf's cells. With the sampled rise and sink (the sink then only for triangles facing
-/// away from the axis or seen nearly edge-on, `n·w` < 0.2), half a texel took the dragon's seam
-/// leaks at A⊥/A 0.01 from 210 to 74 per million for 9% more exact parts at Q0 than a texel.
-/// With the steep-cell rules ([`STEEP_CELL_TEXELS`]), 0.3 texel takes them from 32 to 16 (rays
-/// from the side under lids up to 0.35 texel over the triangle) for 4% more parts there and 13%
-/// more on the dragon at Q0 (4–8% at Q1–Q4); 0.1 texel, 14 (docs/guarantees.md).
+/// of the leaf's cells. Half a texel took the dragon's seam leaks at A⊥/A 0.01 from 210 to 74 per
+/// million for 9% more exact parts at Q0 than a texel; with the steep-cell rule
+/// ([`STEEP_CELL_TEXELS`]), 0.3 texel from 32 to 16, 0.1 texel to 14. At [`CREST_TEXELS`] the
+/// cone's seam leaks at A⊥/A 0.01 rose from 25 to 215 per million: the lids keep theirs
+/// (docs/guarantees.md).
 const EXPOSED_SINK_TEXELS: f32 = 0.3;
-
-/// How far below the surface of a cell of sampled corners one of the leaf's triangles may lie
-/// before it is traced exactly too, in texels ([`exposed`]): it is a sheet the leaf's surface
-/// passes over (the underside of a thin part or a floor under a ledge, which the fold
-/// tolerance let into the leaf), and a ray meeting it from below, or from the side between the
-/// sheets, does not pass through the cell over it. These were most of the dragon's seam leaks
-/// at A⊥/A 0.01: with the sampled-rise rule, 373 → 210 per million for the triangles facing
-/// away from the axis or seen nearly edge-on (`n·w` < 0.2, 2% more exact parts at Q0); with
-/// the half-texel sink rule as well, 74 → 55 for all of them (another 2%; at two texels, 56
-/// for none).
-const EXPOSED_SAMPLED_SINK_TEXELS: f32 = 1.0;
 
 /// How far apart in height the corners of a cell (holes aside) may lie before the cell counts as
 /// *steep*, in texels ([`exposed`]): more than 71° on average along a side. There a height field
-/// is a poor stand-in for the surface, which it meets nearly edge-on: over steep cells of
-/// sampled corners a triangle may rise only as far as over extrapolated ones
-/// ([`EXPOSED_RISE_TEXELS`]) before it is traced exactly, and one facing away from the axis is
-/// always traced exactly (an overhang's underside, where the leaf's samples flip between the
-/// fold's sheets and a ray from below slides under a pit of its surface). These were most of the
-/// dragon's seam leaks at A⊥/A 0.01 left by the other rules: the rise 55 → 32 per million (38%
-/// more exact parts there, 0.1–0.2% at the presets), the faces away, after the sink
-/// ([`EXPOSED_SINK_TEXELS`]), 16 → 9 (8%). Two texels closes no more for more parts; four, 34
-/// instead of 32 (docs/guarantees.md).
+/// is a poor stand-in for the surface, which it meets nearly edge-on: one of the leaf's triangles
+/// facing away from the axis over a steep cell is always traced exactly (an overhang's
+/// underside, where the leaf's samples flip between the fold's sheets and a ray from below
+/// slides under a pit of its surface). After the sink ([`EXPOSED_SINK_TEXELS`]) this took the
+/// dragon's seam leaks at A⊥/A 0.01 from 16 to 9 per million (8% more exact parts there)
+/// (docs/guarantees.md).
 const STEEP_CELL_TEXELS: f32 = 3.0;
 
 /// How far a ring sample may find the surface at most, in texels ([`ring_reach`]): at 8 the ring
@@ -604,19 +585,16 @@ fn cells_met(p: &[DVec3; 3], res_u: i64, res_v: i64) -> impl Iterator<Item = (i6
 ///   boundary, these are cells over which the ring found no surface within its reach (a rim
 ///   seen nearly edge-on, a crease whose other sheet lies further), where rays aimed at the
 ///   seams passed between the leaves;
+/// * a cell, rising more than [`CREST_TEXELS`] above its surface somewhere over it: the cell
+///   cuts under a crest or a sheet its corners jump to or from, and a ray entering the solid
+///   there passes over it (or, over an extrapolated corner, may leave the leaf over the rim
+///   before it crosses the surface);
 /// * a cell with an extrapolated corner (`sampled` false: the ring found no surface over it),
-///   rising more than [`EXPOSED_RISE_TEXELS`] above the cell's surface somewhere over it: a ray
-///   entering the solid through the triangle there still lies above the leaf's surface, and
-///   may leave the leaf over the extrapolated rim before it crosses that surface; or lying
-///   more than [`EXPOSED_SINK_TEXELS`] below it: the extrapolation is a lid over the surface,
-///   which a ray from the side passes under;
-/// * a cell of sampled corners (three or four), rising more than
-///   [`EXPOSED_SAMPLED_RISE_TEXELS`] above its surface: the cell cuts under a sheet its
-///   corners jump to or from, and a ray entering the solid there passes over it; or lying more
-///   than [`EXPOSED_SAMPLED_SINK_TEXELS`] below it: a sheet under the leaf's surface, which a
-///   ray meets from below or from the side, not through the cell over it. Over a *steep* cell
-///   (corners more than [`STEEP_CELL_TEXELS`] apart in height) the rise allowed is
-///   [`EXPOSED_RISE_TEXELS`], as over an extrapolated corner;
+///   lying more than [`EXPOSED_SINK_TEXELS`] below it: the extrapolation is a lid over the
+///   surface, which a ray from the side passes under;
+/// * a cell of sampled corners (three or four), lying more than [`CREST_TEXELS`] below it: a
+///   sheet under the leaf's surface, which a ray meets from below or from the side, not through
+///   the cell over it;
 /// * a steep cell, facing away from the axis: the underside of an overhang, whose sheet the
 ///   leaf's samples leave and rejoin, so that a ray from below slides under a pit of the
 ///   surface.
@@ -644,10 +622,8 @@ fn exposed_in(
 ) -> Vec<Exposed> {
     let (res_u, res_v) = (frame.res_u as i64, frame.res_v as i64);
     let texel = frame.texel as f64;
-    let rise_extrapolated = EXPOSED_RISE_TEXELS as f64 * texel;
-    let rise_sampled = EXPOSED_SAMPLED_RISE_TEXELS as f64 * texel;
+    let crest = CREST_TEXELS as f64 * texel;
     let sink_extrapolated = EXPOSED_SINK_TEXELS as f64 * texel;
-    let sink_sampled = EXPOSED_SAMPLED_SINK_TEXELS as f64 * texel;
     let steep = STEEP_CELL_TEXELS as f64 * texel;
     let mut out = Vec::new();
     for (input, tri) in triangles.iter().enumerate() {
@@ -681,8 +657,8 @@ fn exposed_in(
         if prefilter
             && !suspect
             && !edge_on
-            && rise_max + slack <= rise_sampled
-            && sink_max + slack <= sink_sampled
+            && rise_max + slack <= crest
+            && sink_max + slack <= crest
         {
             continue;
         }
@@ -725,17 +701,10 @@ fn exposed_in(
             if steep_cell && faces_away {
                 return Some(false);
             }
-            let (rise, sink) = if (0..4).all(|c| hole(c) || sampled[k(c)]) {
-                (
-                    if steep_cell {
-                        rise_extrapolated
-                    } else {
-                        rise_sampled
-                    },
-                    sink_sampled,
-                )
+            let sink = if (0..4).all(|c| hole(c) || sampled[k(c)]) {
+                crest
             } else {
-                (rise_extrapolated, sink_extrapolated)
+                sink_extrapolated
             };
             let quad = [[at(0), at(1), at(2)], [at(0), at(2), at(3)]];
             let three;
@@ -749,7 +718,7 @@ fn exposed_in(
             let off = surface.iter().any(|cell| {
                 clip(&p, cell).iter().any(|q| {
                     let above = q.z - plane_height(cell, q.truncate());
-                    above > rise || -above > sink
+                    above > crest || -above > sink
                 })
             });
             off.then_some(false)
@@ -1662,23 +1631,24 @@ pub(super) mod tests {
         );
     }
 
-    /// Over a cell with an extrapolated corner, a triangle rising more than
-    /// [`EXPOSED_RISE_TEXELS`] above the cell's surface, or lying more than
-    /// [`EXPOSED_SINK_TEXELS`] below it, is exposed; one rising or sinking less is not, nor one
-    /// rising as much over a cell of sampled corners.
+    /// Over a cell with an extrapolated corner, a triangle rising more than [`CREST_TEXELS`]
+    /// above the cell's surface, or lying more than [`EXPOSED_SINK_TEXELS`] below it, is
+    /// exposed; one rising or sinking less is not, nor one lying as far below a cell of sampled
+    /// corners.
     #[test]
-    fn a_triangle_rising_above_an_extrapolated_corner_is_exposed() {
+    fn a_triangle_past_a_crest_or_under_an_extrapolated_lid_is_exposed() {
         let frame = xy_frame(3);
         let (height, source) = (vec![0.0; 9], vec![0; 9]);
         let mut sampled = vec![true; 9];
-        // Cell (1, 1), its corner (2, 2) extrapolated, all corners at height 0.
+        // Cell (1, 1), all corners at height 0; its corner (2, 2) extrapolated below.
         let over = |rise: f32| {
             let p = |x: f32, y: f32, h: f32| Vec3::new(x + 0.5, y + 0.5, h);
             [[p(1.0, 1.0, 0.0), p(2.0, 1.0, 0.0), p(2.0, 2.0, rise)]]
         };
-        let rise = EXPOSED_RISE_TEXELS;
-        assert!(exposed(&over(rise + 0.05), &frame, &height, &source, &sampled).is_empty());
+        let sink = EXPOSED_SINK_TEXELS;
+        assert!(exposed(&over(-sink - 0.05), &frame, &height, &source, &sampled).is_empty());
         sampled[8] = false;
+        let rise = CREST_TEXELS;
         assert_eq!(
             exposed(&over(rise + 0.05), &frame, &height, &source, &sampled),
             [Exposed {
@@ -1688,9 +1658,8 @@ pub(super) mod tests {
             }]
         );
         assert!(exposed(&over(rise - 0.05), &frame, &height, &source, &sampled).is_empty());
-        // A little below the surface it is hit from above through the cell; far below, under
-        // an extrapolated lid, a ray from the side would miss the cell.
-        let sink = EXPOSED_SINK_TEXELS;
+        // A little below the surface it is hit from above through the cell; further below,
+        // under an extrapolated lid, a ray from the side would miss the cell.
         assert!(exposed(&over(-sink + 0.05), &frame, &height, &source, &sampled).is_empty());
         assert_eq!(
             exposed(&over(-sink - 0.05), &frame, &height, &source, &sampled).len(),
@@ -1698,9 +1667,8 @@ pub(super) mod tests {
         );
     }
 
-    /// Over a cell of sampled corners, a triangle rising more than
-    /// [`EXPOSED_SAMPLED_RISE_TEXELS`] above its surface or lying more than
-    /// [`EXPOSED_SAMPLED_SINK_TEXELS`] below it is exposed, whichever way it faces; one rising
+    /// Over a cell of sampled corners, a triangle rising more than [`CREST_TEXELS`] above its
+    /// surface or lying more than that below it is exposed, whichever way it faces; one rising
     /// or sinking less is not.
     #[test]
     fn triangles_far_above_or_below_sampled_corners_are_exposed() {
@@ -1709,7 +1677,7 @@ pub(super) mod tests {
         let p = |x: f32, y: f32, h: f32| Vec3::new(x + 0.5, y + 0.5, h);
         let over = |rise: f32| [[p(1.0, 1.0, 0.0), p(2.0, 1.0, 0.0), p(2.0, 2.0, rise)]];
         let exposed = |tris: &[[Vec3; 3]]| exposed(tris, &frame, &height, &source, &sampled);
-        let rise = EXPOSED_SAMPLED_RISE_TEXELS;
+        let rise = CREST_TEXELS;
         assert_eq!(
             exposed(&over(rise + 0.05)),
             [Exposed {
@@ -1719,7 +1687,7 @@ pub(super) mod tests {
             }]
         );
         assert!(exposed(&over(rise - 0.05)).is_empty());
-        let sink = EXPOSED_SAMPLED_SINK_TEXELS;
+        let sink = CREST_TEXELS;
         let flat = |h: f32, up: bool| {
             let (a, b) = (p(2.0, 1.0, h), p(2.0, 2.0, h));
             if up {
@@ -1744,10 +1712,10 @@ pub(super) mod tests {
     }
 
     /// Over a steep cell of sampled corners (heights more than [`STEEP_CELL_TEXELS`] apart), a
-    /// triangle rising more than [`EXPOSED_RISE_TEXELS`] above its surface is exposed, and one
-    /// facing away from the axis is exposed wherever it lies; over a gentle cell neither is.
+    /// triangle facing away from the axis is exposed wherever it lies; over a gentle cell it is
+    /// not. Rising above either, it is exposed past [`CREST_TEXELS`] only.
     #[test]
-    fn triangles_over_steep_cells_are_exposed_sooner() {
+    fn triangles_facing_away_over_steep_cells_are_exposed() {
         let frame = xy_frame(3);
         let (source, sampled) = (vec![0; 9], vec![true; 9]);
         // Samples (i, j) at height 0 for i ≤ 1 and `wall` for i = 2: cell (1, 1) climbs `wall`
@@ -1777,7 +1745,7 @@ pub(super) mod tests {
         };
         let exposed =
             |tris: &[[Vec3; 3]], height: &[f32]| exposed(tris, &frame, height, &source, &sampled);
-        let rise = EXPOSED_RISE_TEXELS;
+        let rise = CREST_TEXELS;
         let wall = STEEP_CELL_TEXELS + 0.5;
         assert_eq!(
             exposed(&over(wall, rise + 0.05, true), &steep),
@@ -1790,7 +1758,8 @@ pub(super) mod tests {
         assert!(exposed(&over(wall, rise - 0.05, true), &steep).is_empty());
         assert_eq!(exposed(&over(wall, 0.0, false), &steep).len(), 1);
         let wall = STEEP_CELL_TEXELS - 0.5;
-        assert!(exposed(&over(wall, rise + 0.05, true), &gentle).is_empty());
+        assert_eq!(exposed(&over(wall, rise + 0.05, true), &gentle).len(), 1);
+        assert!(exposed(&over(wall, rise - 0.05, true), &gentle).is_empty());
         assert!(exposed(&over(wall, 0.0, false), &gentle).is_empty());
     }
 

@@ -83,14 +83,20 @@ pub struct Entry {
 
 /// The exact BVH's [`Entry`] of each ray (None for a miss, or a ray whose first hit is a back
 /// face, as wound: it starts inside the solid), for rays of unit direction such as
-/// [`Rbvh::seam_rays`] makes, `texel` the RBVH's texel size; the exit is the next hit a
-/// thousandth of a texel past the entry. `closed`, per scene triangle ([`closed_triangles`];
+/// [`Rbvh::seam_rays`] makes, `texels` the texel size of the leaf each is aimed at; the exit is
+/// the next hit a thousandth of a texel past the entry. `closed`, per scene triangle ([`closed_triangles`];
 /// empty when unknown), says which lie on closed objects: a ray that enters one has an exit,
 /// so without one it only touched it (a cube's corner, or its edge, seen along a face: on
 /// the cube, every ray counted as leaking at Q0 and Q4 did). In parallel.
-pub fn exact_entries(exact: &Bvh, rays: &[Ray], texel: f32, closed: &[bool]) -> Vec<Option<Entry>> {
+pub fn exact_entries(
+    exact: &Bvh,
+    rays: &[Ray],
+    texels: &[f32],
+    closed: &[bool],
+) -> Vec<Option<Entry>> {
     rays.par_iter()
-        .map(|ray| {
+        .zip(texels)
+        .map(|(ray, &texel)| {
             let (entry, _) = exact.closest_hit(ray);
             let dir = ray.dir();
             // A back face first: the ray started inside the solid and leaves it.
@@ -186,6 +192,19 @@ pub struct SeamTarget {
     /// Unit outward normal there: the sample's (the leaf's projection axis for height-only
     /// texels, which carry none).
     pub normal: Vec3,
+    /// The leaf's texel size: leaves of objects sampled at their own rate
+    /// ([`super::RbvhParams::object_rate`]) have finer texels than the scene's, and the
+    /// seam rays' distances and the leak thresholds scale with the leaf they are aimed at.
+    pub texel: f32,
+}
+
+/// Rays aimed at seams ([`Rbvh::seam_rays`]) and the texel size of the leaf each is aimed at.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SeamRays {
+    /// Unit-direction rays, each from outside towards its target.
+    pub rays: Vec<Ray>,
+    /// Per ray, its target's [`SeamTarget::texel`].
+    pub texels: Vec<f32>,
 }
 
 impl Rbvh {
@@ -199,6 +218,7 @@ impl Rbvh {
             let (res_u, res_v) = (leaf.res_u as i64, leaf.res_v as i64);
             let grid = leaf.grid();
             let (du, dv, w) = (grid.step_u, grid.step_v, grid.axis_w);
+            let size = du.length();
             let texel = |i: i64, j: i64| {
                 if i < 0 || j < 0 || i >= res_u || j >= res_v {
                     return None;
@@ -225,11 +245,16 @@ impl Rbvh {
                             out.push(SeamTarget {
                                 point: point + 0.5 * (di as f32 * du + dj as f32 * dv),
                                 normal,
+                                texel: size,
                             });
                         }
                     }
                     if rim {
-                        out.push(SeamTarget { point, normal });
+                        out.push(SeamTarget {
+                            point,
+                            normal,
+                            texel: size,
+                        });
                     }
                 }
             }
@@ -241,15 +266,14 @@ impl Rbvh {
     /// each target a run of equal shares when there are fewer targets than rays, every
     /// `targets / count`-th when there are more), each starting 8 texels out along its target's
     /// normal tilted by up to about 22° (atan 0.4) in a random direction, and aimed at the
-    /// target; unit directions, so `t` is a world distance.
+    /// target; unit directions, so `t` is a world distance. Texels are the target leaf's.
     /// Reproducible: each ray's tilt comes from a stream hashed from `seed` and its index.
-    pub fn seam_rays(&self, count: usize, seed: u64) -> Vec<Ray> {
+    pub fn seam_rays(&self, count: usize, seed: u64) -> SeamRays {
         let targets = self.seam_targets();
         if targets.is_empty() {
-            return Vec::new();
+            return SeamRays::default();
         }
-        let reach = 8.0 * self.texel_size;
-        (0..count)
+        let (rays, texels) = (0..count)
             .map(|k| {
                 let target = targets[(k as u128 * targets.len() as u128 / count as u128) as usize];
                 let mut rng = SplitMix64::new(mix64(seed ^ mix64(k as u64)));
@@ -258,9 +282,12 @@ impl Rbvh {
                 let angle = std::f32::consts::TAU * rng.next_f32();
                 let tilt = 0.4 * rng.next_f32().sqrt();
                 let out = (n + tilt * (angle.cos() * a + angle.sin() * b)).normalize();
-                Ray::new(target.point + reach * out, -out, 0.0, f32::INFINITY)
+                let reach = 8.0 * target.texel;
+                let ray = Ray::new(target.point + reach * out, -out, 0.0, f32::INFINITY);
+                (ray, target.texel)
             })
-            .collect()
+            .unzip();
+        SeamRays { rays, texels }
     }
 }
 
@@ -294,22 +321,24 @@ pub struct Leaks {
 /// BVH `bvh` finds them entering the solid (`exact`, from [`exact_entries`]) at least
 /// [`CLEARANCE_TEXELS`] from their origin and passing [`DEPTH_TEXELS`] or more inside it
 /// ([`passes_deeper`]), and the RBVH (`approx`, the same rays in the same order) found nothing
-/// before [`LEAK_TEXELS`] texels of `texel` behind the entry; and how many of those it let
-/// through the solid. Rays beyond the shortest slice are not counted. In parallel.
+/// before [`LEAK_TEXELS`] texels behind the entry, each ray's texel its target leaf's
+/// (`texels`); and how many of those it let through the solid. Rays beyond the shortest slice
+/// are not counted. In parallel.
 pub fn count_leaks(
     bvh: &Bvh,
     rays: &[Ray],
     exact: &[Option<Entry>],
     approx: &[Hit],
-    texel: f32,
+    texels: &[f32],
 ) -> Leaks {
-    let behind = |a: &Hit, t: f32| !a.is_hit() || a.t > t + LEAK_TEXELS * texel;
     let leaked: Vec<bool> = exact
         .par_iter()
         .zip(approx)
         .zip(rays)
-        .filter_map(|((e, a), ray)| {
+        .zip(texels)
+        .filter_map(|(((e, a), ray), &texel)| {
             let e = e.as_ref()?;
+            let behind = |a: &Hit, t: f32| !a.is_hit() || a.t > t + LEAK_TEXELS * texel;
             let counts = e.t >= CLEARANCE_TEXELS * texel
                 && behind(a, e.t)
                 && passes_deeper(bvh, ray, e, DEPTH_TEXELS * texel, texel);

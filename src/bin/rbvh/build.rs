@@ -84,7 +84,7 @@ pub fn run(a: Args) -> Result<()> {
     };
     if table {
         println!(
-            "{:>7} {:>9} {:>9} {:>9} {:>8} {:>9} {:>11} {:>10} {:>7} {:>9} {:>9} {:>9} {:>9} {:>10} {:>9}",
+            "{:>7} {:>9} {:>9} {:>9} {:>8} {:>9} {:>11} {:>10} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9} {:>10} {:>9}",
             "level",
             "texel",
             "build ms",
@@ -97,6 +97,7 @@ pub fn run(a: Args) -> Result<()> {
             "tree MB",
             "atlas MB",
             "tris MB",
+            "parts MB",
             "total MB",
             "vs exact",
             "peak MB"
@@ -112,7 +113,7 @@ pub fn run(a: Args) -> Result<()> {
         })?;
         if table {
             println!(
-            "{:>7} {:>9.3e} {:>9.0} {:>9} {:>8} {:>9} {:>11} {:>10} {:>6.1}% {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>10} {:>9}",
+            "{:>7} {:>9.3e} {:>9.0} {:>9} {:>8} {:>9} {:>11} {:>10} {:>6.1}% {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>10} {:>9}",
             name,
             r.texel_size,
             r.stats.build_ms,
@@ -125,6 +126,7 @@ pub fn run(a: Args) -> Result<()> {
             mb(r.tree_bytes()),
             mb(r.atlas_bytes()),
             mb(r.triangle_bytes()),
+            mb(r.part_bytes()),
             mb(r.total_bytes()),
             exact_bytes.map_or("-".into(), |e| format!(
                 "{:.1}x",

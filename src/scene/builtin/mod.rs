@@ -5,6 +5,8 @@
 mod analytic;
 mod shapes;
 
+use std::f32::consts::FRAC_PI_2;
+
 use glam::{DVec3, Mat4, Quat, Vec3};
 
 pub use analytic::Analytic;
@@ -24,6 +26,7 @@ pub const NAMES: &[&str] = &[
     "bumpy-sphere",
     "blob",
     "grove",
+    "hall",
 ];
 
 /// Subdivision level of the "sphere" scene: 20·4⁵ = 20480 triangles.
@@ -67,6 +70,7 @@ pub(super) fn build(name: &str) -> Option<Scene> {
         "bumpy-sphere" => vec![("bumpy-sphere", bumpy_sphere())],
         "blob" => vec![("blob", blob())],
         "grove" => return Some(grove()),
+        "hall" => return Some(hall()),
         _ => return None,
     };
     let mut scene = Scene::new(name);
@@ -160,6 +164,108 @@ fn grove() -> Scene {
         target: Vec3::new(0.0, 0.0, -60.0),
         up: Vec3::Y,
         vfov_deg: 50.0,
+    });
+    scene
+}
+
+/// Side of the "hall"'s square floor and height of its walls.
+const HALL_SIDE: f32 = 48.0;
+const HALL_HEIGHT: f32 = 12.0;
+/// Pieces across and along the "hall", and their spacing.
+const HALL_PIECES: usize = 5;
+const HALL_SPACING: f32 = 8.0;
+
+/// The guard of issue "Small and valid at every scale": the shape of the paper's scene (a large
+/// room, many small, detailed, closed objects) with no files. A 48 × 48 floor walled 12 high on
+/// every side, open above, and 25 pieces in a 5 × 5 grid, each a thirtieth to a twentieth of
+/// the room's diagonal across (as the paper-scale scene's dragons are of its courtyard): spiky
+/// critters (horns a fifth of their size), bumpy spheres and tori, turned and scaled by a fixed
+/// hash, about 370k triangles. Its camera stands inside at one end, looking over the pieces.
+/// A texel tied to the room's size is larger than the pieces' features; each piece's own size
+/// is what its texel must follow.
+fn hall() -> Scene {
+    let mut scene = Scene::new("hall");
+    let (half, height) = (0.5 * HALL_SIDE, HALL_HEIGHT);
+    let floor =
+        shapes::grid_plane(1.0, 24).transformed(Mat4::from_scale(Vec3::new(half, 1.0, half)));
+    scene.push_object("floor", &floor.positions, &floor.triangles);
+    // Each wall is a grid stood up to face into the room: the x turns make the grid's z its
+    // height, the z turns its x.
+    let (along_x, along_z) = (
+        Vec3::new(half, 1.0, 0.5 * height),
+        Vec3::new(0.5 * height, 1.0, half),
+    );
+    let up = 0.5 * height;
+    let walls = [
+        (
+            "back wall",
+            along_x,
+            Quat::from_rotation_x(FRAC_PI_2),
+            Vec3::new(0.0, up, -half),
+        ),
+        (
+            "front wall",
+            along_x,
+            Quat::from_rotation_x(-FRAC_PI_2),
+            Vec3::new(0.0, up, half),
+        ),
+        (
+            "left wall",
+            along_z,
+            Quat::from_rotation_z(-FRAC_PI_2),
+            Vec3::new(-half, up, 0.0),
+        ),
+        (
+            "right wall",
+            along_z,
+            Quat::from_rotation_z(FRAC_PI_2),
+            Vec3::new(half, up, 0.0),
+        ),
+    ];
+    for (name, scale, turn, at) in walls {
+        let wall = shapes::grid_plane(1.0, 12)
+            .transformed(Mat4::from_scale_rotation_translation(scale, turn, at));
+        scene.push_object(name, &wall.positions, &wall.triangles);
+    }
+    let critter = shapes::displaced_sphere(5, |d| {
+        let s = (6.0 * d.x).sin() * (6.0 * d.y + 0.5).sin() * (6.0 * d.z + 1.0).sin();
+        1.0 + 0.45 * s.max(0.0).powi(4)
+    });
+    let bumpy = shapes::displaced_sphere(5, |d| {
+        1.0 + BUMP * (10.0 * d.x).sin() * (10.0 * d.y).sin() * (10.0 * d.z).sin()
+    });
+    let ring = shapes::torus(1.0, 0.3, 96, 32);
+    let kinds = [("critter", &critter), ("bumpy", &bumpy), ("ring", &ring)];
+    for row in 0..HALL_PIECES {
+        for col in 0..HALL_PIECES {
+            let k = row * HALL_PIECES + col;
+            let h = (k as u32 + 1).wrapping_mul(2_654_435_761);
+            let unit = |shift: u32| ((h >> shift) & 0xFF) as f32 / 255.0;
+            let (kind, shape) = kinds[k % kinds.len()];
+            let size = 0.8 + 0.6 * unit(0);
+            let centre = |i: usize| (i as f32 - 0.5 * (HALL_PIECES - 1) as f32) * HALL_SPACING;
+            let at = Vec3::new(centre(col), 1.5 * size, centre(row));
+            let turn = Quat::from_rotation_y(unit(8) * std::f32::consts::TAU)
+                * Quat::from_rotation_x(0.5 * unit(16));
+            let piece = (*shape)
+                .clone()
+                .transformed(Mat4::from_scale_rotation_translation(
+                    Vec3::splat(size),
+                    turn,
+                    at,
+                ));
+            scene.push_object(
+                format!("{kind} {row},{col}"),
+                &piece.positions,
+                &piece.triangles,
+            );
+        }
+    }
+    scene.camera = Some(super::Camera {
+        eye: Vec3::new(0.0, 5.0, half - 3.0),
+        target: Vec3::new(0.0, 1.0, -4.0),
+        up: Vec3::Y,
+        vfov_deg: 60.0,
     });
     scene
 }
