@@ -86,21 +86,9 @@ struct RbvhSizes {
     uint atlas_len;
 };
 
-vec3 rbvh_decode_normal(uint texel) {
-    uint code = texel >> 16;
-    float x = float(code & 0xFFu) / 255.0 * 2.0 - 1.0;
-    float y = float((code >> 8) & 0xFFu) / 255.0 * 2.0 - 1.0;
-    float z = 1.0 - abs(x) - abs(y);
-    float t = max(-z, 0.0);
-    x += x >= 0.0 ? -t : t;
-    y += y >= 0.0 ? -t : t;
-    return normalize(vec3(x, y, z));
-}
-
-// Whether texel's normal faces a ray along world `dir` (Texel::faces in layout.rs): the dot
-// product with the normal's octahedral direction before normalizing, summed in the same order,
-// so that both sides take the same sign.
-bool rbvh_faces(uint texel, vec3 dir) {
+// The direction of texel's octahedral normal before normalizing (octahedral_direction in
+// layout.rs): `precise`, so that every device computes the bits the host does.
+vec3 rbvh_octahedral_direction(uint texel) {
     uint code = texel >> 16;
     precise float x = float(code & 0xFFu) / 255.0 * 2.0 - 1.0;
     precise float y = float((code >> 8) & 0xFFu) / 255.0 * 2.0 - 1.0;
@@ -108,7 +96,19 @@ bool rbvh_faces(uint texel, vec3 dir) {
     precise float t = max(-z, 0.0);
     x += x >= 0.0 ? -t : t;
     y += y >= 0.0 ? -t : t;
-    precise float dot_n = x * dir.x + y * dir.y + z * dir.z;
+    return vec3(x, y, z);
+}
+
+vec3 rbvh_decode_normal(uint texel) {
+    return normalize(rbvh_octahedral_direction(texel));
+}
+
+// Whether texel's normal faces a ray along world `dir` (Texel::faces in layout.rs): the dot
+// product with the normal's octahedral direction, summed in the same order, so that both sides
+// take the same sign.
+bool rbvh_faces(uint texel, vec3 dir) {
+    precise vec3 n = rbvh_octahedral_direction(texel);
+    precise float dot_n = n.x * dir.x + n.y * dir.y + n.z * dir.z;
     return dot_n < 0.0;
 }
 

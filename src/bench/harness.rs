@@ -418,7 +418,11 @@ impl<'a> SceneBench<'a> {
         };
         Ok(SceneBench {
             config,
-            object_diagonals: object_diagonals(&scene),
+            object_diagonals: scene
+                .object_bounds()
+                .iter()
+                .map(|b| if b.is_empty() { f32::NAN } else { b.diagonal() })
+                .collect(),
             scene,
             diagonal,
             candidates,
@@ -845,19 +849,6 @@ fn with_jumps(mut tracer: Tracer, block_jumps: Option<bool>) -> Result<Tracer> {
         tracer.set_block_jumps(on)?;
     }
     Ok(tracer)
-}
-
-/// Per object of `scene`, the diagonal of its triangles' box (NaN for one without triangles).
-fn object_diagonals(scene: &Scene) -> Vec<f32> {
-    let mut boxes = vec![crate::geom::Aabb::EMPTY; scene.object_names.len()];
-    for (i, &o) in scene.object_of_triangle.iter().enumerate() {
-        boxes[o as usize] =
-            boxes[o as usize].union(crate::geom::Aabb::from_points(scene.triangle(i)));
-    }
-    boxes
-        .iter()
-        .map(|b| if b.is_empty() { f32::NAN } else { b.diagonal() })
-        .collect()
 }
 
 #[cfg(test)]

@@ -187,17 +187,19 @@ impl<'s> RbvhSource<'s> {
                     let tris: Vec<[Vec3; 3]> = (0..scene.triangle_count())
                         .map(|i| scene.triangle(i))
                         .collect();
-                    let empty = ObjectSize {
-                        area: 0.0,
-                        bounds: Aabb::EMPTY,
-                        elements: 0,
-                    };
-                    let mut objects = vec![empty; scene.object_names.len()];
+                    let mut objects: Vec<ObjectSize> = scene
+                        .object_bounds()
+                        .into_iter()
+                        .map(|bounds| ObjectSize {
+                            area: 0.0,
+                            bounds,
+                            elements: 0,
+                        })
+                        .collect();
                     for (t, &o) in tris.iter().zip(&scene.object_of_triangle) {
                         let [a, b, c] = *t;
                         let object = &mut objects[o as usize];
                         object.area += 0.5 * (b - a).cross(c - a).length() as f64;
-                        object.bounds = object.bounds.union(Aabb::from_points(*t));
                         object.elements += 1;
                     }
                     (tris, Vec::new(), objects)

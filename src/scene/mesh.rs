@@ -178,6 +178,19 @@ impl Scene {
         }
     }
 
+    /// Per object ([`Scene::object_names`]), the box of its triangles (empty for an object
+    /// without any): what an object's own sampling rate and its distance errors are measured
+    /// against.
+    pub fn object_bounds(&self) -> Vec<Aabb> {
+        let mut boxes = vec![Aabb::EMPTY; self.object_names.len()];
+        for (i, &o) in self.object_of_triangle.iter().enumerate() {
+            if let Some(b) = boxes.get_mut(o as usize) {
+                *b = b.union(Aabb::from_points(self.triangle(i)));
+            }
+        }
+        boxes
+    }
+
     /// Points of the scene (0 without a point cloud).
     pub fn point_count(&self) -> usize {
         self.points.as_ref().map_or(0, PointCloud::len)
