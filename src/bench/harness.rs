@@ -14,6 +14,9 @@
 //! 4. **memory traffic** (with [`BenchConfig::traffic`]) — the CPU twins trace the rays again in
 //!    screen-tile order, reporting every read of the structure's device arrays to the cache model
 //!    of [`traffic`], and counting as the device does (the two must agree).
+//! 5. **where the steps go** (with [`BenchConfig::steps`]) — the CPU twins of the exact BVH and
+//!    of each plain RBVH level trace the rays again, and [`steps`] accounts for their nodes by
+//!    depth and for every leaf handed to the march.
 //!
 //! Throughput is `rays / time` per run, from GPU timestamps around the trace dispatches (uploads
 //! and read-back excluded). When a device cannot time, every method of that ray type falls back to
@@ -33,6 +36,7 @@ use super::record::{
     BenchReport, Errors, Memory, Params, Record, SeamRecord, ShaderRecord, Spread, TimingSource,
     TrafficRecord,
 };
+use super::steps;
 use super::traffic::{self, TrafficModel, CACHE_SIZES, DRAM_LINE};
 use super::validate;
 use super::{BenchConfig, Device};
@@ -521,20 +525,30 @@ impl<'a> SceneBench<'a> {
                 "{name}: {} rays, counting the work of {}{}",
                 ray_type.name(),
                 c.label(),
-                if self.config.traffic {
-                    " and modelling its memory traffic"
-                } else {
-                    ""
+                match (self.config.traffic, self.config.steps) {
+                    (true, true) => " and modelling its memory traffic and steps",
+                    (true, false) => " and modelling its memory traffic",
+                    (false, true) => " and where its steps go",
+                    (false, false) => "",
                 }
             )));
             let traced = c.trace(&m.rays, &cones, m.query, true)?;
+            let any = m.query == Query::Any;
             let device = traced.counters.unwrap_or_default();
             let traffic = if self.config.traffic {
                 Some(self.traffic(c, &m, &cones, &pixels, &device)?)
             } else {
                 None
             };
-            counted.push((MeanCounters::of(&device), traffic));
+            let steps = match &c.structure {
+                _ if !self.config.steps => None,
+                Structure::Exact(b) => Some(steps::exact_steps(b, &m.rays, any)),
+                Structure::Rbvh(r) => {
+                    Some(steps::rbvh_steps(r, &m.rays, any, c.tracer.block_jumps()))
+                }
+                Structure::RbvhLod(..) => None,
+            };
+            counted.push((MeanCounters::of(&device), traffic, steps));
         }
         for (i, c) in self.candidates.iter().enumerate() {
             let (errors, invalid) = if i == 0 {
@@ -605,6 +619,7 @@ impl<'a> SceneBench<'a> {
                 block_jumps: (c.method() != Kind::Exact).then(|| c.tracer.block_jumps()),
                 counters: counted[i].0,
                 traffic: counted[i].1.clone(),
+                steps: counted[i].2,
                 seams: c.seams,
             });
         }

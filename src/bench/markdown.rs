@@ -298,9 +298,10 @@ impl Block {
         match view {
             "summary" => Ok(summary_table(&runs[0])),
             "work" => Ok(work_table(&runs[0])),
+            "steps" => steps_table(&runs[0]),
             "ratios" => Ok(ratios_table(&runs)),
             other => Err(format!(
-                "unknown view {other:?} (summary, work, ratios, shaders)"
+                "unknown view {other:?} (summary, work, steps, ratios, shaders)"
             )),
         }
     }
@@ -471,6 +472,63 @@ fn work_table(records: &[&Value]) -> String {
         .collect();
     let align: Vec<char> = "lllrrrrrrr".chars().collect();
     markdown(&header, &align, &rows)
+}
+
+/// Where each record's steps go (`rbvh bench --steps`, [`super::steps::StepsRecord`]): inner nodes
+/// a ray by depth band and their mean depth, the leaves handed to the march by what came of
+/// them, and the leaf boxes at a hit; an error when a record has none.
+fn steps_table(records: &[&Value]) -> Made<String> {
+    let header = [
+        "scene",
+        "level",
+        "rays",
+        "nodes",
+        "levels 0–7",
+        "8–15",
+        "16–23",
+        "24+",
+        "mean level",
+        "leaves",
+        "tile missed",
+        "no surface",
+        "behind",
+        "nearest",
+        "boxes at hit",
+    ];
+    let rows = records
+        .iter()
+        .map(|r| {
+            let s = &r["steps"];
+            if s.is_null() {
+                return Err(format!(
+                    "{} {} {} has no steps (measured without --steps)",
+                    text(&r["scene"]),
+                    level(r),
+                    text(&r["ray_type"])
+                ));
+            }
+            let band = |k: usize| s["nodes_by_depth"][k].as_f64().unwrap_or(f64::NAN);
+            Ok(vec![
+                text(&r["scene"]),
+                level(r),
+                text(&r["ray_type"]),
+                num(&r["counters"]["nodes"], 1.0, 2),
+                format!("{:.2}", band(0)),
+                format!("{:.2}", band(1)),
+                format!("{:.2}", band(2)),
+                format!("{:.2}", band(3) + band(4)),
+                num(&s["node_depth_mean"], 1.0, 1),
+                num(&r["counters"]["leaves"], 1.0, 2),
+                num(&s["leaves_tile_missed"], 1.0, 2),
+                num(&s["leaves_no_surface"], 1.0, 2),
+                num(&s["leaves_behind"], 1.0, 2),
+                num(&s["leaves_nearest"], 1.0, 2),
+                num(&s["boxes_at_hit"], 1.0, 2),
+            ])
+        })
+        .collect::<Made<Vec<Vec<String>>>>()?;
+    let align: Vec<char> = "lllrrrrrrrrrrrr".chars().collect();
+    Ok(markdown(&header, &align, &rows))
 }
 
 /// A row per (scene, ray type): the exact BVH's MRays/s, then each level's speed over it. Of

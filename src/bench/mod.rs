@@ -34,6 +34,7 @@ pub mod plot;
 pub mod provenance;
 pub mod record;
 pub mod shaders;
+pub mod steps;
 pub mod table;
 pub mod traffic;
 pub mod validate;
@@ -44,7 +45,7 @@ pub use crate::rays::RayType;
 pub use harness::{run, run_observed, Event};
 pub use record::{write_csv, write_json, BenchReport, Record, ShaderRecord};
 pub use shaders::{shader_report, shader_report_table, write_shader_json, ShaderReport};
-pub use table::{host_line, shader_table, table, work_table};
+pub use table::{host_line, shader_table, steps_table, table, work_table};
 
 use crate::gpu::Context;
 #[cfg(feature = "loaded")]
@@ -106,6 +107,10 @@ pub struct BenchConfig {
     /// and cache lines per ray, the frame's working set, DRAM bytes per ray behind 4, 32 and
     /// 72 MiB caches. Costs a CPU trace per method and ray type.
     pub traffic: bool,
+    /// Also trace the exact BVH's and every plain RBVH level's CPU twin to say where each ray's
+    /// steps go ([`steps`]): nodes by depth, why leaves handed to the march gave no hit, leaf
+    /// boxes at the hit. Costs a CPU trace per method and ray type.
+    pub steps: bool,
     /// Rays aimed at every plain RBVH level's seams between leaves ([`crate::rbvh::seams`]),
     /// traced by the CPU twins of it and of the exact BVH, for the level's leak count (0: none).
     pub seam_rays: usize,
@@ -146,6 +151,7 @@ impl BenchConfig {
             plot_dir: None,
             lod: None,
             traffic: false,
+            steps: false,
             seam_rays: 100_000,
             texels: vec![TexelFormat::HeightNormal],
             block_jumps: None,

@@ -46,6 +46,7 @@
 //! | `block_jumps` | bool \| null | whether the march jumped over blocks ([`crate::gpu::Tracer::block_jumps`]); null for exact |
 //! | `counters` | object | per-ray means of the device's counters ([`crate::probe::MeanCounters`]: `nodes`, `leaves`, `walks`, `cells`, `cells_tested`, `jumps`, `triangle_leaves`, `triangles`, `simd8_utilisation`) |
 //! | `traffic` | object \| null | with `--traffic`: `twin_counters` (the CPU twin's, same keys), `counter_mismatch_rate`, and `traffic` (the cache model's figures, [`super::traffic::Traffic`]); else null |
+//! | `steps` | object \| null | with `--steps`, for exact and plain RBVH records: where a ray's steps go ([`super::steps::StepsRecord`]: `nodes_by_depth` (inner nodes per ray at tree levels 0–7, 8–15, 16–23, 24–31, 32 on), `node_depth_mean`, the height-field leaves handed to the march by what came of them (`leaves_tile_missed`, `leaves_no_surface`, `leaves_behind`, `leaves_nearest`), `boxes_at_hit`); else null |
 //!
 //! `params`: `texels_per_diagonal`, `refinement` (`"normal_cone"` \| `"projected_area"`),
 //! `max_angle_deg` (normal cone, else null), `min_ratio` (projected area, else null),
@@ -74,7 +75,7 @@
 //! into one table, then the record's fields flattened (`params.*`, `mrays_per_s.*`,
 //! `memory_bytes.*`, `error.*`, `counters.*` and the traffic figures without their prefix, except
 //! `mrays_median`/`mrays_min`/`mrays_max`, `*_bytes`, `lod_*`, `twin_*` and one
-//! `dram_bytes_per_ray_*`/`miss_rate_*` pair per modelled cache). The run's settings (`runs`, `min_run_ms`, image size, `ao_radius`, `seed`) and the per-run `samples` are in the JSON only. Null
+//! `dram_bytes_per_ray_*`/`miss_rate_*` pair per modelled cache). The run's settings (`runs`, `min_run_ms`, image size, `ao_radius`, `seed`), the per-run `samples` and the steps' `nodes_by_depth` bands are in the JSON only. Null
 //! is an empty cell; an infinite PSNR is `inf`.
 
 use std::io::Write;
@@ -85,6 +86,7 @@ use serde::Serialize;
 use crate::structure::Kind;
 
 use super::provenance::Provenance;
+use super::steps::StepsRecord;
 use super::traffic::{CacheTraffic, Traffic, CACHE_SIZES};
 use crate::gpu::CompiledPipeline;
 use crate::io::write_atomically;
@@ -174,6 +176,9 @@ pub struct Record {
     pub counters: MeanCounters,
     /// The CPU twin's counters and memory traffic, with `--traffic`.
     pub traffic: Option<TrafficRecord>,
+    /// Where a ray's steps go (the CPU twin's account), with `--steps`; None for
+    /// level-of-detail records.
+    pub steps: Option<StepsRecord>,
     /// Leaks through the seams between height fields, for plain RBVH records (the same for each
     /// ray type of a level); None for the other methods, or with no seam rays asked for.
     pub seams: Option<SeamRecord>,
@@ -528,6 +533,7 @@ impl Record {
                     ..Traffic::default()
                 },
             }),
+            steps: Some(StepsRecord::default()),
             seams: Some(SeamRecord {
                 rays: 0,
                 leaks: 0,
@@ -620,10 +626,13 @@ mod tests {
             "counters.nodes",
             "traffic.twin_counters.nodes",
             "traffic.caches.2.dram_bytes_per_ray",
+            "steps.node_depth_mean",
+            "steps.leaves_behind",
         ] {
             assert!(columns.iter().any(|k| k == c), "{c} not in {columns:?}");
         }
         assert!(!columns.iter().any(|k| k.contains("samples")));
+        assert!(!columns.iter().any(|k| k.contains("nodes_by_depth")));
         let unique: std::collections::HashSet<&String> = columns.iter().collect();
         assert_eq!(unique.len(), columns.len());
     }

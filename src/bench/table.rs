@@ -1,11 +1,13 @@
 //! The report as tables for people, one line per record: the numbers that decide the trade —
 //! speed and memory relative to the exact BVH, and what they cost in accuracy ([`table`]) — and
-//! where each ray's work and memory traffic go ([`work_table`]).
+//! where each ray's work and memory traffic go ([`work_table`]), and with `--steps` where its
+//! steps go ([`steps_table`]).
 
 use std::collections::BTreeSet;
 use std::fmt::Write;
 
 use super::record::{BenchReport, Record};
+use super::steps::StepsRecord;
 
 /// Columns after the scene's: header, width, and whether values are left-aligned (names) rather
 /// than right-aligned (numbers).
@@ -48,6 +50,25 @@ const WORK_COLUMNS: [(&str, usize, bool); 16] = [
     ("DRAM4M", 7, false),
     ("DRAM32M", 7, false),
     ("DRAM72M", 7, false),
+];
+
+/// Columns of [`steps_table`]: inner nodes per ray by depth band and their mean depth, then the
+/// height-field leaves handed to the march by what came of them, and the leaf boxes at a hit.
+const STEPS_COLUMNS: [(&str, usize, bool); 14] = [
+    ("method", 8, true),
+    ("level", 7, true),
+    ("ray type", 8, true),
+    ("d0-7", 6, false),
+    ("d8-15", 6, false),
+    ("d16-23", 6, false),
+    ("d24-31", 6, false),
+    ("d32+", 6, false),
+    ("depth", 6, false),
+    ("missed", 6, false),
+    ("empty", 6, false),
+    ("behind", 6, false),
+    ("near", 6, false),
+    ("boxes", 6, false),
 ];
 
 /// `text` padded to `width`, on the side `left` says.
@@ -119,6 +140,20 @@ pub fn work_table(report: &BenchReport) -> String {
                     distinct 128-byte lines per ray; set = the frame's working set; DRAMnM = \
                     bytes per ray from DRAM behind an n MiB LRU cache (a model, see README)";
     render(report, &WORK_COLUMNS, work_cells, footnote)
+}
+
+/// Where each record's steps went, for the records the run accounted for (`--steps`); empty
+/// where none was.
+pub fn steps_table(report: &BenchReport) -> String {
+    if report.results.iter().all(|r| r.steps.is_none()) {
+        return String::new();
+    }
+    let footnote = "per ray (CPU twin, --steps): inner nodes at tree levels 0-7, 8-15, 16-23, \
+                    24-31 and 32 on, and the mean level of a visited node; height-field leaves \
+                    handed to the march whose tile box the ray missed, whose surface it did not \
+                    meet, met behind the nearest hit, or that held the nearest hit; boxes: leaf \
+                    boxes holding a hit's point (1: no overlap there)";
+    render(report, &STEPS_COLUMNS, steps_cells, footnote)
 }
 
 /// What the driver compiled each trace pipeline into (registers, spills, …: where a GPU's
@@ -235,5 +270,27 @@ fn work_cells(r: &Record) -> [String; WORK_COLUMNS.len()] {
         dram(0),
         dram(1),
         dram(2),
+    ]
+}
+
+fn steps_cells(r: &Record) -> [String; STEPS_COLUMNS.len()] {
+    let dash = || "-".to_string();
+    let num =
+        |f: &dyn Fn(&StepsRecord) -> f64| r.steps.map_or_else(dash, |s| format!("{:.2}", f(&s)));
+    [
+        r.method.name().into(),
+        r.level_label(),
+        r.ray_type.name().into(),
+        num(&|s| s.nodes_by_depth[0]),
+        num(&|s| s.nodes_by_depth[1]),
+        num(&|s| s.nodes_by_depth[2]),
+        num(&|s| s.nodes_by_depth[3]),
+        num(&|s| s.nodes_by_depth[4]),
+        num(&|s| s.node_depth_mean),
+        num(&|s| s.leaves_tile_missed),
+        num(&|s| s.leaves_no_surface),
+        num(&|s| s.leaves_behind),
+        num(&|s| s.leaves_nearest),
+        num(&|s| s.boxes_at_hit),
     ]
 }

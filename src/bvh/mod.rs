@@ -20,7 +20,7 @@ mod morton;
 mod traverse;
 mod validate;
 
-pub(crate) use build::{join_halves, partition};
+pub(crate) use build::{join_halves, partition, sah_cost, tree_over};
 pub use build::{BuildParams, Bvh};
 pub use layout::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
 pub(crate) use morton::LinearBvh;

@@ -260,6 +260,15 @@ impl Rbvh {
         (leaves.into().finish(probe), stats)
     }
 
+    /// Marches height-field leaf `leaf_index` alone over the ray's whole interval: whether a walk
+    /// started (the ray crosses the tile's box) and the distance of its hit, if any. What came of
+    /// a leaf the traversal handed to the march (`crate::bench::steps`).
+    pub(crate) fn march_alone(&self, leaf_index: u32, ray: &Ray) -> (bool, Option<f32>) {
+        let mut stats = TraceStats::default();
+        let hit = self.march(leaf_index, ray, ray.tmax, Walk::Plain, &mut stats, &mut ());
+        (stats.counters.walks > 0, hit.map(|(t, _)| t))
+    }
+
     /// Marches height-field leaf `leaf_index` for the ray's interval `[tmin, t_closest)`; returns
     /// the hit distance and the world-space normal. Steps as numbered in the module docs; with
     /// [`Walk::Blocks`], the block jumps of `glsl/rbvh.glsl`'s `rbvh_march`, statement for

@@ -68,6 +68,12 @@ pub struct Args {
     /// working set, DRAM bytes per ray behind 4, 32 and 72 MiB caches (slower: a CPU trace each).
     #[arg(long)]
     traffic: bool,
+    /// Also say where each ray's steps go, from the CPU twins of the exact BVH and each RBVH
+    /// level: inner nodes by tree depth, the leaves handed to the march by what came of them
+    /// (tile box missed, no surface met, surface behind the nearest hit, the nearest), and the
+    /// leaf boxes holding a hit's point (slower: a CPU trace each).
+    #[arg(long)]
+    steps: bool,
     /// Rays aimed at each RBVH level's seams between leaves (their rims and corners), traced by
     /// the CPU twins of the level and of the exact BVH: the `leaks` column counts those that
     /// passed through the surface, `through` those of them that passed through the solid as
@@ -115,6 +121,7 @@ pub fn run(a: Args) -> Result<()> {
     config.plot_dir = a.plot.clone();
     config.lod = a.lod.then(|| a.lod_build.params());
     config.traffic = a.traffic;
+    config.steps = a.steps;
     config.seam_rays = a.seam_rays;
     config.block_jumps = a.block_jumps;
     config.points = a.points.points.clone();
@@ -137,6 +144,11 @@ pub fn run(a: Args) -> Result<()> {
     print!("{}", bench::table(&report));
     println!();
     print!("{}", bench::work_table(&report));
+    let steps = bench::steps_table(&report);
+    if !steps.is_empty() {
+        println!();
+        print!("{steps}");
+    }
     print!("{}", bench::shader_table(&report));
     let invalid = report.results.iter().filter(|r| !r.valid).count();
     if invalid > 0 {
