@@ -486,7 +486,8 @@ fn steps_table(records: &[&Value]) -> Made<String> {
         "levels 0–7",
         "8–15",
         "16–23",
-        "24+",
+        "24–31",
+        "32+",
         "mean level",
         "leaves",
         "tile missed",
@@ -516,7 +517,8 @@ fn steps_table(records: &[&Value]) -> Made<String> {
                 format!("{:.2}", band(0)),
                 format!("{:.2}", band(1)),
                 format!("{:.2}", band(2)),
-                format!("{:.2}", band(3) + band(4)),
+                format!("{:.2}", band(3)),
+                format!("{:.2}", band(4)),
                 num(&s["node_depth_mean"], 1.0, 1),
                 num(&r["counters"]["leaves"], 1.0, 2),
                 num(&s["leaves_tile_missed"], 1.0, 2),
@@ -527,7 +529,7 @@ fn steps_table(records: &[&Value]) -> Made<String> {
             ])
         })
         .collect::<Made<Vec<Vec<String>>>>()?;
-    let align: Vec<char> = "lllrrrrrrrrrrrr".chars().collect();
+    let align: Vec<char> = "lllrrrrrrrrrrrrr".chars().collect();
     Ok(markdown(&header, &align, &rows))
 }
 

@@ -19,7 +19,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::bvh::{Bvh, GpuNode, LEAF_BIT};
+use crate::bvh::{Bvh, GpuNode};
 use crate::geom::{Hit, Ray};
 use crate::probe::{Array, Read};
 use crate::rbvh::{GpuHeightfield, Rbvh};
@@ -174,7 +174,7 @@ fn node_depths(nodes: &[GpuNode]) -> Vec<u32> {
     for (i, node) in nodes.iter().enumerate() {
         let below = depth[i] + 1;
         for c in node.children() {
-            if c.child & LEAF_BIT == 0 {
+            if !c.is_leaf() {
                 if let Some(d) = depth.get_mut(c.child as usize) {
                     *d = below;
                 }
@@ -186,7 +186,6 @@ fn node_depths(nodes: &[GpuNode]) -> Vec<u32> {
 
 /// How many leaves' boxes (as the nodes decode them) hold the point `p`.
 fn leaf_boxes_holding(nodes: &[GpuNode], p: Vec3) -> u32 {
-    let inside = |b: &crate::geom::Aabb| p.cmpge(b.min).all() && p.cmple(b.max).all();
     let mut stack = vec![0u32];
     let mut count = 0;
     // Bounded by the node count: each node is pushed at most once in a tree.
@@ -197,7 +196,7 @@ fn leaf_boxes_holding(nodes: &[GpuNode], p: Vec3) -> u32 {
             continue;
         };
         for c in node.children() {
-            if c.is_absent() || !inside(&c.bounds) {
+            if c.is_absent() || !c.bounds.contains(p) {
                 continue;
             }
             if c.is_leaf() {
@@ -213,7 +212,7 @@ fn leaf_boxes_holding(nodes: &[GpuNode], p: Vec3) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bvh::ChildRef;
+    use crate::bvh::{ChildRef, LEAF_BIT};
     use crate::geom::Aabb;
 
     fn leaf(min: [f32; 3], max: [f32; 3], first: u32) -> ChildRef {

@@ -9,12 +9,16 @@ use std::fmt::Write;
 use super::record::{BenchReport, Record};
 use super::steps::StepsRecord;
 
-/// Columns after the scene's: header, width, and whether values are left-aligned (names) rather
-/// than right-aligned (numbers).
-const COLUMNS: [(&str, usize, bool); 17] = [
+/// Columns that lead every table after the scene's, naming the record: header, width, and
+/// whether values are left-aligned (names) rather than right-aligned (numbers).
+const LEAD: [(&str, usize, bool); 3] = [
     ("method", 8, true),
     ("level", 7, true),
     ("ray type", 8, true),
+];
+
+/// Columns of [`table`] after the [`LEAD`].
+const COLUMNS: [(&str, usize, bool); 14] = [
     ("MRays/s", 8, false),
     ("speedup", 8, false),
     ("mem MB", 8, false),
@@ -33,10 +37,7 @@ const COLUMNS: [(&str, usize, bool); 17] = [
 
 /// Columns of [`work_table`]: the device's counters per ray, then, with `--traffic`, the model's
 /// lines per ray, working set and DRAM bytes per ray behind each modelled cache.
-const WORK_COLUMNS: [(&str, usize, bool); 16] = [
-    ("method", 8, true),
-    ("level", 7, true),
-    ("ray type", 8, true),
+const WORK_COLUMNS: [(&str, usize, bool); 13] = [
     ("nodes", 6, false),
     ("leaves", 6, false),
     ("walks", 6, false),
@@ -54,10 +55,7 @@ const WORK_COLUMNS: [(&str, usize, bool); 16] = [
 
 /// Columns of [`steps_table`]: inner nodes per ray by depth band and their mean depth, then the
 /// height-field leaves handed to the march by what came of them, and the leaf boxes at a hit.
-const STEPS_COLUMNS: [(&str, usize, bool); 14] = [
-    ("method", 8, true),
-    ("level", 7, true),
-    ("ray type", 8, true),
+const STEPS_COLUMNS: [(&str, usize, bool); 11] = [
     ("d0-7", 6, false),
     ("d8-15", 6, false),
     ("d16-23", 6, false),
@@ -185,7 +183,8 @@ pub fn shader_table(report: &BenchReport) -> String {
     }
 }
 
-/// `report`'s records under `columns`, one line each from `cells`, then `footnote`.
+/// `report`'s records under the [`LEAD`] and `columns`, one line each from its lead and `cells`,
+/// then `footnote`.
 fn render<const N: usize>(
     report: &BenchReport,
     columns: &[(&str, usize, bool); N],
@@ -200,7 +199,11 @@ fn render<const N: usize>(
         .max()
         .unwrap_or(0);
     let mut out = String::new();
-    let header: Vec<String> = columns.iter().map(|&(h, w, l)| pad(h, w, l)).collect();
+    let header: Vec<String> = LEAD
+        .iter()
+        .chain(columns)
+        .map(|&(h, w, l)| pad(h, w, l))
+        .collect();
     // Writing to a String cannot fail.
     let _ = writeln!(
         out,
@@ -208,9 +211,15 @@ fn render<const N: usize>(
         format!("{:<scene_width$} {}", "scene", header.join(" ")).trim_end()
     );
     for r in &report.results {
-        let cells: Vec<String> = cells(r)
+        let lead = [
+            r.method.name().to_string(),
+            r.level_label(),
+            r.ray_type.name().to_string(),
+        ];
+        let cells: Vec<String> = lead
             .iter()
-            .zip(columns)
+            .chain(&cells(r))
+            .zip(LEAD.iter().chain(columns))
             .map(|(c, &(_, w, l))| pad(c, w, l))
             .collect();
         let line = format!("{:<scene_width$} {}", r.scene, cells.join(" "));
@@ -225,9 +234,6 @@ fn cells(r: &Record) -> [String; COLUMNS.len()] {
     let num = |v: Option<f64>, digits: usize| v.map_or_else(dash, |v| format!("{v:.digits$}"));
     let e = r.error.as_ref();
     [
-        r.method.name().into(),
-        r.level_label(),
-        r.ray_type.name().into(),
         format!("{:.2}", r.mrays_per_s.median),
         format!("{:.2}x", r.speedup_vs_exact),
         format!("{:.2}", r.memory_bytes.total as f64 / 1e6),
@@ -254,9 +260,6 @@ fn work_cells(r: &Record) -> [String; WORK_COLUMNS.len()] {
             .map_or_else(dash, |c| format!("{:.0}", c.dram_bytes_per_ray))
     };
     [
-        r.method.name().into(),
-        r.level_label(),
-        r.ray_type.name().into(),
         format!("{:.2}", c.nodes),
         format!("{:.2}", c.leaves),
         format!("{:.2}", c.walks),
@@ -278,9 +281,6 @@ fn steps_cells(r: &Record) -> [String; STEPS_COLUMNS.len()] {
     let num =
         |f: &dyn Fn(&StepsRecord) -> f64| r.steps.map_or_else(dash, |s| format!("{:.2}", f(&s)));
     [
-        r.method.name().into(),
-        r.level_label(),
-        r.ray_type.name().into(),
         num(&|s| s.nodes_by_depth[0]),
         num(&|s| s.nodes_by_depth[1]),
         num(&|s| s.nodes_by_depth[2]),

@@ -30,6 +30,11 @@ impl Aabb {
         points.into_iter().fold(Self::EMPTY, |b, p| b.grow(p))
     }
 
+    /// Whether `p` lies in this box, its faces included.
+    pub fn contains(&self, p: Vec3) -> bool {
+        p.cmpge(self.min).all() && p.cmple(self.max).all()
+    }
+
     /// This box extended to contain `p`.
     #[must_use]
     pub fn grow(self, p: Vec3) -> Self {

@@ -28,6 +28,9 @@
 //! still not representable when it is a single point or smaller than `min_leaf_texels` is
 //! splatted regardless (a forced leaf), its error bounded by its size.
 //!
+//! The tree a ray traverses over the leaves is the construction's own or one built again over the
+//! leaves' boxes by the exact BVH's SAH, whichever the SAH finds cheaper (`upper_tree`).
+//!
 //! Parallel with `rayon::join` over subtrees; every per-node computation is sequential and ordered,
 //! so the output is byte-identical for any thread count.
 
@@ -52,9 +55,9 @@ use crate::{Error, Result};
 
 /// Most triangles in a triangle leaf.
 const MAX_TRIANGLE_LEAF: usize = 8;
-/// From this depth on, splits are object medians, bounding the construction's recursion by
-/// 32 + log2(n) (the traversed tree is built again over the leaves, `crate::bvh::tree_over`,
-/// which bounds its own depth the same way).
+/// From this depth on, splits are object medians, bounding the construction's tree by 32 +
+/// log2(n) (it is traversed where the SAH prefers it to the tree built again over its leaves,
+/// `crate::bvh::tree_over`, which bounds its own depth the same way; see `upper_tree`).
 const MEDIAN_BELOW_DEPTH: u32 = 32;
 /// A set of points whose box is thinner than this fraction of its length is a slab: split by
 /// facing when it is not one height field (`Builder::split_by_facing`).
@@ -413,7 +416,7 @@ impl Rbvh {
                 .push(GpuNode::new(root_children[0], root_children[1]));
         }
         let (nodes, depth) = step(progress, "building the tree over the leaves", 0, || {
-            upper_tree(&out, root.as_ref())
+            upper_tree(&mut out, root.as_ref())
         })?;
         let sizes: Vec<(u32, u32)> = out
             .tiles
@@ -925,7 +928,7 @@ fn pieces_subtree(mut pieces: Vec<GpuTriangle>) -> Node {
 /// the better one: on the dragon close-up it costs 24.0 against 24.7 at Q2, and rays visit 5%
 /// fewer nodes through it than through the SAH tree. The cost decides, so each scene gets the
 /// cheaper of the two.
-fn upper_tree(out: &Flattened, root: Option<&Node>) -> Result<(Vec<GpuNode>, u32)> {
+fn upper_tree(out: &mut Flattened, root: Option<&Node>) -> Result<(Vec<GpuNode>, u32)> {
     let (rebuilt, rebuilt_depth) = crate::bvh::tree_over(&out.refs)?;
     if crate::bvh::sah_cost(&rebuilt) < crate::bvh::sah_cost(&out.nodes) {
         return Ok((rebuilt, rebuilt_depth));
@@ -937,7 +940,7 @@ fn upper_tree(out: &Flattened, root: Option<&Node>) -> Result<(Vec<GpuNode>, u32
             format!("RBVH depth {depth} exceeds the {STACK_SIZE}-entry stack"),
         ));
     }
-    Ok((out.nodes.clone(), depth))
+    Ok((std::mem::take(&mut out.nodes), depth))
 }
 
 fn depth_of(node: &Node) -> u32 {

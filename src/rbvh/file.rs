@@ -69,7 +69,6 @@ use std::io::Write;
 use std::path::Path;
 
 use bytemuck::{Pod, Zeroable};
-use glam::Vec3;
 
 use super::layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT, LEAF_BIT};
 use super::march::tile_fits;
@@ -592,7 +591,6 @@ fn unmark(nodes: &[GpuNode], leaves: &[GpuHeightfield], atlas: &mut Atlas, bound
     let pitch = atlas.pitch as usize;
     for (leaf, b) in leaves.iter().zip(&boxes) {
         let grid = leaf.grid();
-        let inside = |p: Vec3| p.cmpge(b.min).all() && p.cmple(b.max).all();
         for j in 0..leaf.res_v {
             for i in 0..leaf.res_u {
                 let k = leaf.atlas_base as usize + j as usize * pitch + i as usize;
@@ -604,7 +602,7 @@ fn unmark(nodes: &[GpuNode], leaves: &[GpuHeightfield], atlas: &mut Atlas, bound
                 let odd = [code.checked_add(1), code.checked_sub(1)]
                     .into_iter()
                     .flatten()
-                    .find(|&c| c <= Texel::MAX_CODE && inside(grid.point(i, j, c)));
+                    .find(|&c| c <= Texel::MAX_CODE && b.contains(grid.point(i, j, c)));
                 if let Some(odd) = odd {
                     atlas.texels[k] = Texel((texel.0 & !0xFFFF) | u32::from(odd));
                 }

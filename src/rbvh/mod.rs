@@ -2,7 +2,8 @@
 //! fields in a texel atlas, mixed with ordinary triangle leaves where height fields do not fit.
 //!
 //! * [`params`]: quality presets and free parameters;
-//! * `build`: the top-down recursion — refinement criteria, subdivision, leaf frames;
+//! * `build`: the top-down recursion — refinement criteria, subdivision, leaf frames — and the
+//!   tree traversed over its leaves (its own, or an SAH tree over them, whichever is cheaper);
 //! * `raster`: rasterizing a leaf's triangles into its tile, dilation, quantization;
 //! * `splat`: splatting a leaf's points (a scan's samples) into its tile, for RBVHs of point clouds;
 //! * `atlas`: packing tiles into one atlas;

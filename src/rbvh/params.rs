@@ -22,7 +22,9 @@ pub enum Refinement {
     },
 }
 
-/// Where to split a set that cannot be one height field.
+/// Where to split a set that cannot be one height field. The splits decide the leaves; the tree a
+/// ray traverses over them may be built again by the SAH where that is cheaper (`build.rs`,
+/// `upper_tree`), so a strategy is measured by the leaves it makes as much as by its tree.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Subdivision {
     /// The middle of the longest axis of the node's box: fast to build and, per the paper's

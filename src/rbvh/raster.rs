@@ -2176,10 +2176,7 @@ pub(super) mod tests {
                 if !tile.texels[(j * 12 + i) as usize].is_hole() {
                     let p = world_sample(&tile, i, j);
                     for b in [b, tight] {
-                        assert!(
-                            p.cmpge(b.min).all() && p.cmple(b.max).all(),
-                            "{p} not in {b:?}"
-                        );
+                        assert!(b.contains(p), "{p} not in {b:?}");
                     }
                 }
             }
