@@ -89,6 +89,34 @@ layout(std430, set = RBVH_BVH_SET, binding = RBVH_BVH_TRIS_BINDING) readonly buf
 #define RBVH_BVH_TRIANGLE(i) rbvh_bvh_triangles[i]
 #endif
 
+// The traversal stack's entry for `child`, the child of inner node `node` on side b (or a): an
+// inner child's reference as it is (with the level of detail's mark), and for a leaf
+// LEAF_BIT | node << 1 | side, from which rbvh_stack_pop reads the leaf's reference and count back
+// from the node. So the stack holds one word per entry, not two (a leaf's count does not fit beside
+// its first triangle in one word), and the read this costs is of a node the ray has just read.
+// Inner node indices stay below 2^30 (bvh::MAX_NODES, checked where a tree is built or loaded).
+uint rbvh_stack_entry(uint child, uint node, bool b) {
+    return (child & RBVH_LEAF_BIT) == 0u ? child : RBVH_LEAF_BIT | (node << 1) | (b ? 1u : 0u);
+}
+
+// The reference and count that stack entry `entry` stands for (an inner child's count is 0: the
+// traversal reads a count only from leaves).
+void rbvh_stack_pop(uint entry, out uint reference, out uint count) {
+    if ((entry & RBVH_LEAF_BIT) == 0u) {
+        reference = entry;
+        count = 0u;
+        return;
+    }
+    uint node = (entry & ~RBVH_LEAF_BIT) >> 1;
+    if ((entry & 1u) != 0u) {
+        reference = RBVH_BVH_NODE(node).b_child;
+        count = RBVH_BVH_NODE(node).b_count;
+    } else {
+        reference = RBVH_BVH_NODE(node).a_child;
+        count = RBVH_BVH_NODE(node).a_count;
+    }
+}
+
 // Sizes the exact traversal needs to bound its reads.
 struct BvhSizes {
     uint node_count;

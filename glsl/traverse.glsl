@@ -51,10 +51,12 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
     vec3 inv_dir = rbvh_safe_inverse(ray.dir);
     uint node_count = rbvh_node_count(leaves);
     uint bound = rbvh_round_bound(leaves);
-    // Each stack entry is a child reference with its count (a triangle leaf's triangles).
-    uint stack[RBVH_STACK_SIZE];
-    uint stack_count[RBVH_STACK_SIZE];
+    // One stack of (entry, distance) pairs: rbvh_stack_entry's word and the distance at which the
+    // child's box was entered, so that an entry whose box now lies beyond the nearest hit is
+    // dropped when popped instead of visited or marched.
+    uvec2 stack[RBVH_STACK_SIZE];
     uint sp = 0u;
+    // The reference to visit next; RBVH_INVALID: pop one.
     uint node = 0u;
     uint count_of_node = 0u;
     uint visits = 0u;
@@ -72,15 +74,29 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
                 break;
             }
             pending = RBVH_INVALID;
-            if (sp == 0u) {
-                finished = true;
-                break;
-            }
-            sp -= 1u;
-            node = stack[sp];
-            count_of_node = stack_count[sp];
+            node = RBVH_INVALID;
         }
         for (; iter <= bound; ++iter) {
+            if (node == RBVH_INVALID) {
+                // Each pass pops one entry: at most the stack's entries, and no more than sp.
+                bool popped = false;
+                for (; sp > 0u;) {
+                    sp -= 1u;
+                    if (uintBitsToFloat(stack[sp].y) <= t_closest) {
+                        rbvh_stack_pop(stack[sp].x, node, count_of_node);
+                        popped = true;
+                        break;
+                    }
+                }
+                if (!popped) {
+                    if (sp > 0u) {
+                        cut = true;
+                    } else {
+                        finished = true;
+                    }
+                    break;
+                }
+            }
             if (rbvh_is_leaf(leaves, node)) {
                 pending = node;
                 pending_count = count_of_node;
@@ -126,8 +142,7 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
                         next = child;
                         next_count = count;
                     } else if (sp < RBVH_STACK_SIZE) {
-                        stack[sp] = child;
-                        stack_count[sp] = count;
+                        stack[sp] = uvec2(rbvh_stack_entry(child, node, use_b), floatBitsToUint(t_entry));
                         sp += 1u;
                     } else {
                         overflow = true;
@@ -136,15 +151,6 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
                 if (k < 2) {
                     cut = true;
                 }
-            }
-            if (next == RBVH_INVALID) {
-                if (sp == 0u) {
-                    finished = true;
-                    break;
-                }
-                sp -= 1u;
-                next = stack[sp];
-                next_count = stack_count[sp];
             }
             node = next;
             count_of_node = next_count;

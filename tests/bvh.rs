@@ -183,3 +183,70 @@ fn rejects_non_finite_geometry() {
     let err = Bvh::build(&scene).unwrap_err().to_string();
     assert!(err.contains("test"), "{err}");
 }
+
+/// A scene of triangles parallel to z = 0, each given by its three (x, y) corners and its z.
+fn flat_triangles(tris: &[([[f32; 2]; 3], f32)]) -> Scene {
+    let mut scene = Scene::new("flat");
+    for (corners, z) in tris {
+        let positions: Vec<Vec3> = corners.iter().map(|[x, y]| Vec3::new(*x, *y, *z)).collect();
+        scene.push_object("t", &positions, &[[0, 1, 2]]);
+    }
+    scene
+}
+
+fn one_per_leaf(scene: &Scene) -> Bvh {
+    let params = rbvh::bvh::BuildParams {
+        max_leaf: 1,
+        ..rbvh::bvh::BuildParams::DEFAULT
+    };
+    Bvh::build_with(scene, &params).unwrap()
+}
+
+/// A stack entry remembers where its box was entered: once a nearer hit is found, the far subtree
+/// pushed before it is dropped when popped, not visited. One triangle at z = 1, two behind it at
+/// z = 5 and 6 (a subtree of their own): the ray down the middle visits the root alone.
+#[test]
+fn entries_beyond_the_nearest_hit_are_dropped_unvisited() {
+    let square = [[-1.0, -1.0], [3.0, -1.0], [-1.0, 3.0]];
+    let scene = flat_triangles(&[(square, 1.0), (square, 5.0), (square, 6.0)]);
+    let bvh = one_per_leaf(&scene);
+    assert_eq!(bvh.nodes.len(), 2, "a root and the far pair's node");
+    let ray = Ray::new(Vec3::new(0.0, 0.0, 0.0), Vec3::Z, 0.0, f32::INFINITY);
+    let (hit, stats) = bvh.closest_hit(&ray);
+    assert_eq!(hit.t, 1.0);
+    assert_eq!(stats.counters.nodes, 1);
+    assert_eq!(stats.counters.triangles, 1);
+    // From z = 7 the pair comes first: the triangle at z = 6 is hit, and both the one at z = 5
+    // and the one at z = 1, pushed before, are dropped untested.
+    let back = Ray::new(Vec3::new(0.0, 0.0, 7.0), -Vec3::Z, 0.0, f32::INFINITY);
+    let (hit, stats) = bvh.closest_hit(&back);
+    assert_eq!(hit.t, 1.0);
+    assert_eq!(stats.counters.nodes, 2);
+    assert_eq!(stats.counters.triangles, 1);
+}
+
+/// A leaf that comes off the stack is read back from its parent node, with its count: the near
+/// triangle's box holds the ray but the triangle does not, so the far leaf, pushed, is popped and
+/// hit, and the probe sees its child and count read again (bytes 36..44 of the root, child b).
+#[test]
+fn a_popped_leaf_is_read_back_from_its_node() {
+    let near = [[-1.0, -1.0], [1.0, -1.0], [-1.0, 1.0]];
+    let far = [[-2.0, -2.0], [4.0, -2.0], [-2.0, 4.0]];
+    let scene = flat_triangles(&[(near, 1.0), (far, 5.0)]);
+    let bvh = one_per_leaf(&scene);
+    assert_eq!(bvh.nodes.len(), 1);
+    let ray = Ray::new(Vec3::new(0.5, 0.5, 0.0), Vec3::Z, 0.0, f32::INFINITY);
+    let mut reads: Vec<rbvh::probe::Read> = Vec::new();
+    let (hit, stats) = bvh.trace_probed(&ray, false, &mut reads);
+    assert_eq!(hit.t, 5.0);
+    assert_eq!(stats.counters.triangles, 2);
+    let children = bvh.nodes[0].children();
+    let side = if children[1].bounds.min.z > children[0].bounds.min.z {
+        36
+    } else {
+        28
+    };
+    let rereads: Vec<_> = reads.iter().filter(|r| r.bytes == 8).collect();
+    assert_eq!(rereads.len(), 1, "{reads:?}");
+    assert_eq!(rereads[0].offset, side);
+}

@@ -9,7 +9,7 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::layout::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
+use super::layout::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, MAX_NODES, STACK_SIZE};
 use crate::geom::Aabb;
 use crate::progress::{step, Progress, Quiet};
 use crate::scene::Scene;
@@ -283,6 +283,20 @@ pub(crate) fn sah_cost(nodes: &[GpuNode]) -> f64 {
     nodes.iter().map(area).sum::<f64>() / root
 }
 
+/// An error when a tree has more than [`MAX_NODES`] inner nodes, which its traversal stack
+/// entries cannot name.
+pub(crate) fn check_node_count(nodes: usize) -> Result<()> {
+    if nodes > MAX_NODES {
+        return Err(Error::param(
+            "scene",
+            format!(
+                "the tree has {nodes} inner nodes, more than the {MAX_NODES} a traversal can name"
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// [`pack`] with `leaf(bounds, start, count)` the reference of a leaf holding `order[start..start
 /// + count]`.
 fn pack_with(
@@ -307,6 +321,7 @@ fn pack_with(
     if nodes.is_empty() {
         nodes.push(GpuNode::new(root_children[0], root_children[1]));
     }
+    check_node_count(nodes.len())?;
     let depth = root.map_or(0, tree_depth).max(1);
     if depth > STACK_SIZE {
         return Err(Error::param(

@@ -12,6 +12,11 @@ use crate::geom::Aabb;
 /// counts overflows, so a violation is reported, never silent.
 pub const STACK_SIZE: u32 = 64;
 
+/// Inner nodes a tree may have: a traversal stack entry names a leaf by its parent node and side
+/// in 31 bits (`StackEntry` in `traverse.rs`, `rbvh_stack_entry` in `glsl/bvh.glsl`), and level
+/// of detail marks inner references with bit 30 (`crate::lod::LOD_BIT`).
+pub const MAX_NODES: usize = 1 << 30;
+
 /// Marks a child reference as a leaf: `child = LEAF_BIT | first_triangle`, `count` triangles.
 pub const LEAF_BIT: u32 = 0x8000_0000;
 

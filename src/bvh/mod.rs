@@ -20,8 +20,8 @@ mod morton;
 mod traverse;
 mod validate;
 
-pub(crate) use build::{join_halves, partition, sah_cost, tree_over};
+pub(crate) use build::{check_node_count, join_halves, partition, sah_cost, tree_over};
 pub use build::{BuildParams, Bvh};
-pub use layout::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
+pub use layout::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, MAX_NODES, STACK_SIZE};
 pub(crate) use morton::LinearBvh;
 pub(crate) use traverse::{traverse, Leaves, Triangles};

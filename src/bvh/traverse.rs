@@ -17,7 +17,7 @@ use rayon::prelude::*;
 use super::layout::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
 use super::Bvh;
 use crate::geom::{intersect_triangle, safe_inverse, Hit, Ray, RayShear};
-use crate::probe::{element, Array, Probe, TraceStats};
+use crate::probe::{element, Array, Probe, Read, TraceStats};
 
 /// What a traversal does where it stops descending: the leaf test of one structure.
 pub(crate) trait Leaves<P: Probe> {
@@ -64,12 +64,32 @@ pub(crate) fn traverse<P: Probe, L: Leaves<P>>(
     let origin = ray.origin();
     let inv_dir = safe_inverse(ray.dir());
     let mut t_closest = ray.tmax;
-    let mut stack = [(0u32, 0u32); STACK_SIZE as usize];
+    // One stack of (entry, distance) pairs, as in traverse.glsl: [`StackEntry`]'s word and the
+    // distance at which the child's box was entered, so that an entry whose box now lies beyond
+    // the nearest hit is dropped when popped instead of visited or marched.
+    let mut stack = [(0u32, 0f32); STACK_SIZE as usize];
     let mut sp = 0usize;
-    let mut entry = (0u32, 0u32);
+    let mut entry = Some((0u32, 0u32));
     loop {
-        let (reference, count) = entry;
-        let mut next = None;
+        let (reference, count) = match entry {
+            Some(e) => e,
+            None => {
+                let mut popped = None;
+                while sp > 0 {
+                    sp -= 1;
+                    let (word, t_entry) = stack[sp];
+                    if t_entry <= t_closest {
+                        popped = Some(StackEntry(word).resolve(nodes, probe));
+                        break;
+                    }
+                }
+                match popped {
+                    Some(e) => e,
+                    None => break,
+                }
+            }
+        };
+        entry = None;
         if leaves.is_leaf(reference) {
             if leaves.test(reference, count, &mut t_closest, &mut stats, probe) && any_hit {
                 return stats;
@@ -102,26 +122,64 @@ pub(crate) fn traverse<P: Probe, L: Leaves<P>>(
                 } else {
                     c.child
                 };
-                if next.is_none() {
-                    next = Some((child, c.count));
+                if entry.is_none() {
+                    entry = Some((child, c.count));
                 } else if sp < STACK_SIZE as usize {
-                    stack[sp] = (child, c.count);
+                    stack[sp] = (StackEntry::of(child, reference, k == 1).0, t_entry);
                     sp += 1;
                 } else {
                     stats.overflow = true;
                 }
             }
         }
-        entry = match next {
-            Some(n) => n,
-            None if sp > 0 => {
-                sp -= 1;
-                stack[sp]
-            }
-            None => break,
-        };
     }
     stats
+}
+
+/// A traversal stack entry's word (`rbvh_stack_entry` in `glsl/bvh.glsl`): an inner child's
+/// reference as [`Leaves::enter`] made it, or, for a leaf, [`LEAF_BIT`] | parent node << 1 | side,
+/// from which [`StackEntry::resolve`] reads the leaf's reference and count back from the node when
+/// it is popped. So an entry is one word and a distance: a leaf's count does not fit beside its
+/// first triangle in one word, and the read it costs is of a node this ray has just read. Node
+/// indices stay below 2^30 ([`crate::bvh::MAX_NODES`]).
+struct StackEntry(u32);
+
+impl StackEntry {
+    /// The entry for `child`, child `b` (or `a`) of inner node `node`.
+    fn of(child: u32, node: u32, b: bool) -> StackEntry {
+        if child & LEAF_BIT == 0 {
+            StackEntry(child)
+        } else {
+            StackEntry(LEAF_BIT | node << 1 | u32::from(b))
+        }
+    }
+
+    /// The reference and count the entry stands for (0 for an inner child: only leaves' counts
+    /// are read), reporting the read of a leaf's from its node as the shaders make it.
+    fn resolve<P: Probe>(self, nodes: &[GpuNode], probe: &mut P) -> (u32, u32) {
+        if self.0 & LEAF_BIT == 0 {
+            return (self.0, 0);
+        }
+        let node = ((self.0 & !LEAF_BIT) >> 1) as usize;
+        let b = self.0 & 1 == 1;
+        // The parent was visited, so it is in range.
+        let n = &nodes[node];
+        let field = if b {
+            std::mem::offset_of!(GpuNode, b_child)
+        } else {
+            std::mem::offset_of!(GpuNode, a_child)
+        };
+        probe.read(Read {
+            array: Array::Nodes,
+            offset: (node * std::mem::size_of::<GpuNode>() + field) as u64,
+            bytes: 8,
+        });
+        if b {
+            (n.b_child, n.b_count)
+        } else {
+            (n.a_child, n.a_count)
+        }
+    }
 }
 
 /// Triangle leaves, tested with the watertight test: the exact BVH's leaves, and an RBVH's hybrid

@@ -933,6 +933,7 @@ fn upper_tree(out: &mut Flattened, root: Option<&Node>) -> Result<(Vec<GpuNode>,
     if crate::bvh::sah_cost(&rebuilt) < crate::bvh::sah_cost(&out.nodes) {
         return Ok((rebuilt, rebuilt_depth));
     }
+    crate::bvh::check_node_count(out.nodes.len())?;
     let depth = root.map_or(0, depth_of).max(1);
     if depth > STACK_SIZE {
         return Err(Error::param(

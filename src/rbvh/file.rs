@@ -371,6 +371,12 @@ impl Rbvh {
         }
         let remaining = (bytes.len() - r.pos) as u64;
         let [n_nodes, n_triangles, n_leaves, n_texels] = counts;
+        if n_nodes > crate::bvh::MAX_NODES as u64 {
+            return Err(err(format!(
+                "{n_nodes} nodes, more than the {} a traversal can name",
+                crate::bvh::MAX_NODES
+            )));
+        }
         // The colour section follows the arrays; its length is checked below.
         let colour_section = if colour_channel {
             let colour_count = needed.and_then(|n| {
