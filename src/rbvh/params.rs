@@ -167,7 +167,7 @@ impl RbvhParams {
             },
             subdivision: Subdivision::SpatialMedian,
             object_split: true,
-            max_tile: 32,
+            max_tile: 64,
             min_leaf_texels: 3.0,
             sampled_criterion_texels: 4.0,
             texels: TexelFormat::HeightNormal,
