@@ -37,6 +37,10 @@
 // ended, and one that stopped with its condition still true and no break of its own flags
 // `overflow`. This adds no arithmetic: the hit is computed exactly as on the CPU.
 //
+// One stack of (word, distance) pairs (rbvh_stack_entry in bvh.glsl says what the word holds): an
+// entry whose box was entered beyond the nearest hit found since it was pushed is dropped when it
+// comes off the stack, neither visited nor marched (as crate::bvh::traverse does).
+//
 // Corrupt data never loops forever: a node index out of range has no children, and more node
 // visits than nodes (only a cycle can make them) end the ray as an overflow.
 
@@ -76,7 +80,7 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
             node = RBVH_INVALID;
         }
         // Made anew each round rather than kept through the leaf test, where it would hold three
-        // registers through the march (RADV navi21: trace_rbvh 136 -> 128 VGPRs).
+        // registers through the march (docs/speed.md, "What holds the RBVH tracer's registers").
         vec3 inv_dir = rbvh_safe_inverse(ray.dir);
         for (; iter <= bound; ++iter) {
             if (node == RBVH_INVALID) {

@@ -477,6 +477,15 @@ fn inconsistent_contents_are_rejected_with_the_reason() {
     bytes[HEADER_BYTES - 12..HEADER_BYTES - 4].copy_from_slice(&u64::MAX.to_le_bytes());
     let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
     assert!(message.contains("counts"), "{message}");
+    // More nodes than a traversal stack entry can name (bytes 116..124: the node count).
+    let mut bytes = sample().to_bytes();
+    let too_many = rbvh::bvh::MAX_NODES as u64 + 1;
+    bytes[116..124].copy_from_slice(&too_many.to_le_bytes());
+    let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
+    assert!(
+        message.contains(&format!("{too_many} nodes, more than the")),
+        "{message}"
+    );
     // Unknown enum tags and flags, and a height-only RBVH claiming colours.
     for (at, value, expect) in [
         (24, 7u32, "params.subdivision has tag 7"),

@@ -109,7 +109,9 @@ fn ray_steps(
     let mut last_leaf = None;
     for read in reads {
         match read.array {
-            Array::Nodes => {
+            // A node visit reads the whole node; a leaf popped off the stack reads its child and
+            // count from its parent again, which is no visit.
+            Array::Nodes if u64::from(read.bytes) == node_size => {
                 let d = depth[(read.offset / node_size) as usize];
                 out.nodes_by_depth[(d as usize / DEPTH_BAND).min(DEPTH_BANDS - 1)] += 1;
                 out.depth_sum += u64::from(d);
@@ -269,8 +271,31 @@ mod tests {
             r.leaves_tile_missed + r.leaves_no_surface + r.leaves_behind + r.leaves_nearest;
         assert!((accounted - device).abs() < 1e-9, "{accounted} vs {device}");
         assert!(r.leaves_nearest > 0.0 && r.leaves_nearest <= 1.0, "{r:?}");
+        // Every node visit is in a depth band, and nothing else is (a leaf popped off the stack
+        // reads its parent again, which is no visit).
+        let mean_nodes = |counts: Vec<u32>| {
+            counts.iter().map(|&n| f64::from(n)).sum::<f64>() / camera.len() as f64
+        };
+        let rbvh_nodes = mean_nodes(
+            camera
+                .iter()
+                .map(|ray| rbvh.closest_hit(ray).1.counters.nodes)
+                .collect(),
+        );
+        let exact_nodes = mean_nodes(
+            camera
+                .iter()
+                .map(|ray| bvh.closest_hit(ray).1.counters.nodes)
+                .collect(),
+        );
         let nodes: f64 = r.nodes_by_depth.iter().sum();
         assert!(nodes > 0.0 && r.node_depth_mean >= 0.0, "{r:?}");
+        assert!((nodes - rbvh_nodes).abs() < 1e-9, "{nodes} vs {rbvh_nodes}");
+        let exact: f64 = e.nodes_by_depth.iter().sum();
+        assert!(
+            (exact - exact_nodes).abs() < 1e-9,
+            "{exact} vs {exact_nodes}"
+        );
         // A hit's point lies in its own leaf's box, at least.
         assert!(
             r.boxes_at_hit >= 1.0 && e.boxes_at_hit >= 1.0,
