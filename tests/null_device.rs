@@ -81,6 +81,28 @@ fn every_pipeline_compiles_on_the_null_device_and_reports_its_registers() {
             p.statistics
         );
     }
+    // Bounds a regression would cross (issue "Faster than the exact BVH on a GPU"): the exact
+    // tracer's stack stays out of its registers (at most 64 VGPRs, nothing spilled; 184 when
+    // its two stacks sat in registers), and no RBVH tracer goes back above 160 (128–152 with the
+    // one stack; 256 with SGPRs spilled before it: docs/speed.md, "One stack").
+    let number = |p: &rbvh::gpu::CompiledPipeline, column: usize| {
+        column_value(&p.statistics, COLUMNS[column].1)
+            .map_or(0, |v| v.to_string().parse::<u64>().unwrap_or(u64::MAX))
+    };
+    for p in &pipelines {
+        let (vgprs, spilled) = (number(p, 0), number(p, 2) + number(p, 3));
+        match p.shader {
+            "trace_exact" => assert!(
+                vgprs <= 64 && spilled == 0,
+                "{}: {vgprs} VGPRs, {spilled} spilled",
+                p.pipeline
+            ),
+            "trace_rbvh" | "trace_rbvh_lod" => {
+                assert!(vgprs <= 160, "{}: {vgprs} VGPRs", p.pipeline)
+            }
+            _ => {}
+        }
+    }
     // The default exact tracer is the one the bench times on a GPU.
     assert!(pipelines
         .iter()
