@@ -60,27 +60,25 @@ RbvhShear rbvh_shear(Ray r) {
     return sh;
 }
 
-// Hit distance in [tmin, tmax), or a negative value on a miss. Edge functions that are exactly
-// zero count as inside on both sides (see src/geom/triangle.rs for why no double fallback).
-float rbvh_intersect_triangle(RbvhShear sh, vec3 v0, vec3 v1, vec3 v2, float tmin, float tmax) {
-    precise vec3 a = v0 - sh.origin;
-    precise vec3 b = v1 - sh.origin;
-    precise vec3 c = v2 - sh.origin;
+// A vertex in the ray's sheared frame: x and y (the edge functions' plane) and z (the distance
+// scale), each summed as the rows' one 1, one -S and one 0 make exact.
+vec3 rbvh_sheared(RbvhShear sh, vec3 v) {
+    precise vec3 a = v - sh.origin;
     precise vec3 ax = a * sh.mx;
     precise vec3 ay = a * sh.my;
-    precise vec3 bx = b * sh.mx;
-    precise vec3 by = b * sh.my;
-    precise vec3 cx = c * sh.mx;
-    precise vec3 cy = c * sh.my;
-    precise float Ax = (ax.x + ax.y) + ax.z;
-    precise float Ay = (ay.x + ay.y) + ay.z;
-    precise float Bx = (bx.x + bx.y) + bx.z;
-    precise float By = (by.x + by.y) + by.z;
-    precise float Cx = (cx.x + cx.y) + cx.z;
-    precise float Cy = (cy.x + cy.y) + cy.z;
-    precise float u = Cx * By - Cy * Bx;
-    precise float v = Ax * Cy - Ay * Cx;
-    precise float w = Bx * Ay - By * Ax;
+    precise vec3 az = a * sh.mz;
+    precise float x = (ax.x + ax.y) + ax.z;
+    precise float y = (ay.x + ay.y) + ay.z;
+    precise float z = (az.x + az.y) + az.z;
+    return vec3(x, y, z);
+}
+
+// The watertight test of the triangle whose vertices are A, B, C in the ray's sheared frame
+// (rbvh_sheared): hit distance in [tmin, tmax), or a negative value on a miss.
+float rbvh_intersect_sheared(vec3 A, vec3 B, vec3 C, float tmin, float tmax) {
+    precise float u = C.x * B.y - C.y * B.x;
+    precise float v = A.x * C.y - A.y * C.x;
+    precise float w = B.x * A.y - B.y * A.x;
     if ((u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0)) {
         return -1.0;
     }
@@ -88,17 +86,17 @@ float rbvh_intersect_triangle(RbvhShear sh, vec3 v0, vec3 v1, vec3 v2, float tmi
     if (det == 0.0) {
         return -1.0;
     }
-    precise vec3 az = a * sh.mz;
-    precise vec3 bz = b * sh.mz;
-    precise vec3 cz = c * sh.mz;
-    precise float Az = (az.x + az.y) + az.z;
-    precise float Bz = (bz.x + bz.y) + bz.z;
-    precise float Cz = (cz.x + cz.y) + cz.z;
-    precise float t_scaled = u * Az + v * Bz + w * Cz;
+    precise float t_scaled = u * A.z + v * B.z + w * C.z;
     precise float lo = tmin * det;
     precise float hi = tmax * det;
     bool inside = det > 0.0 ? (t_scaled >= lo && t_scaled < hi) : (t_scaled <= lo && t_scaled > hi);
     return inside ? t_scaled / det : -1.0;
+}
+
+// Hit distance in [tmin, tmax), or a negative value on a miss. Edge functions that are exactly
+// zero count as inside on both sides (see src/geom/triangle.rs for why no double fallback).
+float rbvh_intersect_triangle(RbvhShear sh, vec3 v0, vec3 v1, vec3 v2, float tmin, float tmax) {
+    return rbvh_intersect_sheared(rbvh_sheared(sh, v0), rbvh_sheared(sh, v1), rbvh_sheared(sh, v2), tmin, tmax);
 }
 
 #endif

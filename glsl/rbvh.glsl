@@ -217,25 +217,40 @@ float rbvh_cell_triangles(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, out vec
     vec3 p10 = vec3(s1, r0, h10);
     vec3 p01 = vec3(s0, r1, h01);
     vec3 p11 = vec3(s1, r1, h11);
+    // The four corners in the ray's sheared frame once, for both triangles, rather than each
+    // triangle's three in its own test: the same values (those intersect_triangle in
+    // src/geom/triangle.rs makes of each corner), and far fewer live at once inside the walk
+    // (docs/speed.md, "What holds the RBVH tracer's registers").
+    RbvhShear shear = rbvh_shear(Ray(fr.o, fr.tmin, fr.d, fr.tmax));
+    vec3 q00 = rbvh_sheared(shear, p00);
+    vec3 q10 = rbvh_sheared(shear, p10);
+    vec3 q01 = rbvh_sheared(shear, p01);
+    vec3 q11 = rbvh_sheared(shear, p11);
     vec3 a;
     vec3 b;
     vec3 c;
-    rbvh_first_triangle(v00, v10, v11, p00, p10, p01, p11, a, b, c);
+    rbvh_first_triangle(v00, v10, v11, q00, q10, q01, q11, a, b, c);
     // Then, with all four, (c00, c11, c01) when nearer; one call site for both triangles.
-    RbvhShear shear = rbvh_shear(Ray(fr.o, fr.tmin, fr.d, fr.tmax));
     float t_hit = -1.0;
     facet = vec3(0.0);
     int tris = (v00 && v10 && v01 && v11) ? 2 : 1;
     int k = 0;
     for (; k < tris; ++k) {
-        vec3 b_k = k == 0 ? b : p11;
-        vec3 c_k = k == 0 ? c : p01;
-        float t = rbvh_intersect_triangle(shear, a, b_k, c_k, fr.tmin, t_hit >= 0.0 ? t_hit : fr.tmax);
+        vec3 b_k = k == 0 ? b : q11;
+        vec3 c_k = k == 0 ? c : q01;
+        float t = rbvh_intersect_sheared(a, b_k, c_k, fr.tmin, t_hit >= 0.0 ? t_hit : fr.tmax);
         if (t >= 0.0) {
             t_hit = t;
             if (RBVH_HEIGHT_ONLY) {
-                precise vec3 e1 = b_k - a;
-                precise vec3 e2 = c_k - a;
+                // The facet from the frame-space corners of the triangle hit.
+                vec3 pa;
+                vec3 pb;
+                vec3 pc;
+                rbvh_first_triangle(v00, v10, v11, p00, p10, p01, p11, pa, pb, pc);
+                vec3 pb_k = k == 0 ? pb : p11;
+                vec3 pc_k = k == 0 ? pc : p01;
+                precise vec3 e1 = pb_k - pa;
+                precise vec3 e2 = pc_k - pa;
                 precise vec3 n = vec3(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z,
                                       e1.x * e2.y - e1.y * e2.x);
                 facet = n;
