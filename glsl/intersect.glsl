@@ -26,9 +26,10 @@ bool rbvh_intersect_box(vec3 bmin, vec3 bmax, vec3 origin, vec3 inv_dir, float t
 // Per-ray shear of Woop, Benthin & Wald, "Watertight Ray/Triangle Intersection" (JCGT 2013).
 // The permutation (kx, ky, kz) and shear are folded into three row vectors, so a vertex is
 // transformed with plain multiply-adds instead of dynamically indexed components (which compile to
-// chains of selects per SIMD lane on lavapipe). Each row has one entry 1 (or 1/d[kz]), one -S and
-// one 0, so every sum is exactly the paper's `a[kx] - Sx * a[kz]`: adding a product with 0 changes
-// nothing, and the CPU reference computes bit-identical values.
+// chains of selects per SIMD lane on lavapipe). The rows mx and my each have one entry 1, one -S
+// and one 0, and mz one entry Sz and two 0s, so every sum is exactly the paper's
+// `a[kx] - Sx * a[kz]` (or `Sz * a[kz]`): adding a product with 0 changes nothing, and the CPU
+// reference computes bit-identical values.
 struct RbvhShear {
     vec3 origin;
     vec3 mx;   // e[kx] - Sx e[kz]
@@ -61,7 +62,7 @@ RbvhShear rbvh_shear(Ray r) {
 }
 
 // A vertex in the ray's sheared frame: x and y (the edge functions' plane) and z (the distance
-// scale), each summed as the rows' one 1, one -S and one 0 make exact.
+// scale), each sum exact as RbvhShear's rows make it.
 vec3 rbvh_sheared(RbvhShear sh, vec3 v) {
     precise vec3 a = v - sh.origin;
     precise vec3 ax = a * sh.mx;
@@ -74,7 +75,9 @@ vec3 rbvh_sheared(RbvhShear sh, vec3 v) {
 }
 
 // The watertight test of the triangle whose vertices are A, B, C in the ray's sheared frame
-// (rbvh_sheared): hit distance in [tmin, tmax), or a negative value on a miss.
+// (rbvh_sheared): hit distance in [tmin, tmax), or a negative value on a miss. Edge functions that
+// are exactly zero count as inside on both sides (see src/geom/triangle.rs for why no double
+// fallback).
 float rbvh_intersect_sheared(vec3 A, vec3 B, vec3 C, float tmin, float tmax) {
     precise float u = C.x * B.y - C.y * B.x;
     precise float v = A.x * C.y - A.y * C.x;
@@ -93,8 +96,8 @@ float rbvh_intersect_sheared(vec3 A, vec3 B, vec3 C, float tmin, float tmax) {
     return inside ? t_scaled / det : -1.0;
 }
 
-// Hit distance in [tmin, tmax), or a negative value on a miss. Edge functions that are exactly
-// zero count as inside on both sides (see src/geom/triangle.rs for why no double fallback).
+// The watertight test of triangle (v0, v1, v2) for the ray sheared by `sh` (intersect_triangle in
+// src/geom/triangle.rs): hit distance in [tmin, tmax), or a negative value on a miss.
 float rbvh_intersect_triangle(RbvhShear sh, vec3 v0, vec3 v1, vec3 v2, float tmin, float tmax) {
     return rbvh_intersect_sheared(rbvh_sheared(sh, v0), rbvh_sheared(sh, v1), rbvh_sheared(sh, v2), tmin, tmax);
 }

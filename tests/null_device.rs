@@ -86,7 +86,6 @@ fn every_pipeline_compiles_on_the_null_device_and_reports_its_registers() {
         .iter()
         .any(|p| p.pipeline == "trace_exact" && p.default_variant));
 
-    // The reference results file holds this commit's statistics wherever this Mesa made it.
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let text = std::fs::read_to_string(root.join(REFERENCE)).unwrap_or_else(|e| {
         panic!("{REFERENCE}: {e} (write it with rbvh shaders --amd navi21 --json {REFERENCE})")
@@ -100,7 +99,7 @@ fn every_pipeline_compiles_on_the_null_device_and_reports_its_registers() {
         );
         return;
     }
-    // Bounds a regression would cross, with the reference's compiler (issue "Faster than the
+    // Bounds a regression would cross, with the reference's driver (issue "Faster than the
     // exact BVH on a GPU"): the exact tracer's stack stays out of its registers (at most 64
     // VGPRs, nothing spilled; 184 when its two stacks sat in registers), and no RBVH tracer goes
     // back above 136 (104–136 with the one stack and cells sheared once; 256 with SGPRs spilled
@@ -123,6 +122,7 @@ fn every_pipeline_compiles_on_the_null_device_and_reports_its_registers() {
             _ => {}
         }
     }
+    // The reference results file holds this commit's statistics wherever this Mesa made it.
     let recorded: Vec<(String, Vec<String>)> = file["pipelines"]
         .as_array()
         .unwrap()
