@@ -410,6 +410,13 @@ int rbvh_walk_start(float entry, int step, int last, float o, float inv, float d
     return c;
 }
 
+// The walk's loop bound: twice the (res_u - 1) + (res_v - 1) - 1 cells a walk can step through,
+// made from the last cell indices where it is used rather than kept through the walk, where it
+// held a register (docs/speed.md, "What holds the RBVH tracer's registers").
+uint rbvh_walk_bound(int last_i, int last_j) {
+    return 2u * uint(last_i + last_j + 1);
+}
+
 // Marches leaf `li` over [tmin, t_closest); returns t (< 0 on a miss) and, on a hit, the texel
 // whose normal it reports (decode with rbvh_decode_normal), or with RBVH_HEIGHT_ONLY the world
 // normal of the cell triangle hit (`facet_normal`, as facet_normal in march.rs). `cells` counts
@@ -498,7 +505,6 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     int cj = rbvh_walk_start(entry.y, step_j, last_j, o.y, inv.y, d.y, t0, corner_slack);
     float next_i = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, ci, step_i, o.x, inv.x);
     float next_j = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, cj, step_j, o.y, inv.y);
-    uint max_steps = (leaf.res_u - 1u) + (leaf.res_v - 1u) - 1u;
     // The walk of march.rs: a main cell, then (when the ray passes a grid vertex too closely to
     // resolve) the extra cell across it, then the step. "While-while" as in the traversal: the
     // inner loop steps through cells while their cheap test (rbvh_cell_candidate) rejects them,
@@ -529,9 +535,9 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     float t_hit = -1.0;
     vec3 facet = vec3(0.0);
     uint n = 0u;
-    for (uint round = 0u; round < 2u * max_steps; ++round) {
+    for (uint round = 0u; round < rbvh_walk_bound(last_i, last_j); ++round) {
         bool candidate = false;
-        for (; n < 2u * max_steps; ++n) {
+        for (; n < rbvh_walk_bound(last_i, last_j); ++n) {
             if (advance) {
                 if (is_extra) {
                     is_extra = false;
@@ -732,7 +738,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
         }
         n += 1u;
     }
-    if (!stopped && n < 2u * max_steps) {
+    if (!stopped && n < rbvh_walk_bound(last_i, last_j)) {
         cut = true;
     }
     if (t_hit >= 0.0) {
