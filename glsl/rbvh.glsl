@@ -188,8 +188,9 @@ bool rbvh_cell_candidate(RbvhLeaf leaf, RbvhSizes sz, RbvhFrameRay fr, float sla
 }
 
 // The first triangle of a cell with three or four corners present (`v..`, at points `p..`: in
-// the frame, or sheared for the ray): (c00, c10, c11) with all four, else the three present in the cycle order c00, c10,
-// c11, c01 (the winding stays the quad's), as `hit` and `surface_under` in march.rs take it.
+// the frame, or sheared for the ray): (c00, c10, c11) with all four, else the three present in
+// the cycle order c00, c10, c11, c01 (the winding stays the quad's), as `hit` and `surface_under`
+// in march.rs take it.
 void rbvh_first_triangle(bool v00, bool v10, bool v11, vec3 p00, vec3 p10, vec3 p01, vec3 p11,
                          out vec3 a, out vec3 b, out vec3 c) {
     a = v00 ? p00 : p10;
@@ -199,7 +200,8 @@ void rbvh_first_triangle(bool v00, bool v10, bool v11, vec3 p00, vec3 p10, vec3 
 
 // Step 4 of march.rs, its costly half: the cell's two (or one) triangles; returns t (< 0 on a
 // miss) and, on a hit, the frame-space normal of the triangle hit, (b - a) x (c - a) of its
-// frame-space corners (used by height-only RBVHs). `cut` is set when the device ended the loop early (see traverse.glsl).
+// frame-space corners (used by height-only RBVHs). `cut` is set when the device ended the loop
+// early (see traverse.glsl).
 float rbvh_cell_triangles(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, out vec3 facet, inout bool cut) {
     bool v00 = !rbvh_is_hole(cell.c00);
     bool v10 = !rbvh_is_hole(cell.c10);
