@@ -229,7 +229,7 @@ bool rbvh_test(inout RbvhLodLeafHook leaves, Ray ray, bool any_hit, uint referen
     t_closest = t;
     leaves.rbvh.best_id = RBVH_LEAF_BIT | reference;
     leaves.rbvh.best_slot = RBVH_INVALID;
-    leaves.rbvh.best_texel = normal_texel;
+    leaves.rbvh.best_normal = uvec2(normal_texel, 0u);
     leaves.rbvh.best_facet = vec3(0.0);
     return true;
 }
@@ -246,7 +246,7 @@ Hit rbvh_trace_rbvh_lod(Ray ray, vec2 cone, bool any_hit, RbvhSizes sz, RbvhLodS
                         out uint steps, out bool overflow) {
     RbvhLodLeafHook leaves = RbvhLodLeafHook(rbvh_leaf_hook(sz), lsz, cone);
     float t = rbvh_traverse_rbvh_lod(ray, any_hit, leaves, steps, overflow);
-    return rbvh_rbvh_hit(leaves.rbvh, t);
+    return rbvh_rbvh_hit(leaves.rbvh, t, ray.dir);
 }
 
 #endif

@@ -41,11 +41,13 @@ layout(push_constant) uniform PaintParams {
     uint brush_count;   // at most MAX_BRUSHES_PER_PASS (src/gpu/painter.rs), so the loop is bounded
     uint atlas_pitch;
     uint atlas_len;
+    uint atlas_wide_len;  // texels before the narrow band (atlas.glsl)
+    uint reserved;        // zero: keeps the addresses 8-byte aligned
     uvec2 atlas_address;    // device addresses (low, high word) of the atlas and the colours,
     uvec2 colours_address;  // read with RBVH_DEVICE_ADDRESS; zero where they are bound
 } pc;
 
-// The atlas (bits 0-15 height code, 0xFFFF = hole, as in glsl/rbvh.glsl) and the colour channel:
+// The atlas (as the trace shaders read it: atlas.glsl) and the colour channel:
 // bound, or reached through their device addresses (src/gpu/addressing.rs).
 #ifdef RBVH_DEVICE_ADDRESS
 layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer PaintAtlasRef {
@@ -66,6 +68,8 @@ layout(std430, set = 0, binding = 2) buffer Colours {
 #define PAINT_ATLAS(i) atlas[i]
 #define PAINT_COLOUR(i) colours[i]
 #endif
+#define RBVH_ATLAS_WORD(i) PAINT_ATLAS(i)
+#include "atlas.glsl"
 
 // rgba::over of src/surface/rgba.rs, byte for byte.
 uint paint_over(uint src, uint dst) {
@@ -91,7 +95,7 @@ void main() {
     if (index >= pc.atlas_len) {
         return;
     }
-    uint code = PAINT_ATLAS(index) & 0xFFFFu;
+    uint code = rbvh_atlas_code(index, pc.atlas_len, pc.atlas_wide_len, false);
     if (code == 0xFFFFu) {
         return;
     }

@@ -13,8 +13,8 @@
 // ray passes above or below; the hits are the same either way. On CPU implementations such as
 // lavapipe, which run every branch, the walk is faster without (see Tracer::block_jumps).
 // RBVH_HEIGHT_ONLY (default false) must be true for an RBVH built with TexelFormat::Height: its
-// atlas holds 16-bit height codes two to a word (texel 2k in the low half of word k), the block
-// ranges follow the texels' words, and a hit's normal is that of the cell triangle it hit.
+// atlas holds height codes alone (atlas.glsl), and a hit's normal is that of the cell triangle it
+// hit.
 #ifndef RBVH_RBVH_GLSL
 #define RBVH_RBVH_GLSL
 
@@ -56,7 +56,8 @@ struct RbvhLeaf {
     float h_scale;
 };
 
-// Atlas texels: bits 0-15 height code (0xFFFF = hole), bits 16-31 the 8:8 octahedral normal.
+// Atlas texels, as rbvh_texel returns them: bits 0-15 height code (0xFFFF = hole), bits 16-31
+// the 8:8 octahedral normal; atlas.glsl reads them from the atlas's words.
 #ifdef RBVH_DEVICE_ADDRESS
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer RbvhLeavesRef {
     RbvhLeaf leaves[];
@@ -76,6 +77,8 @@ layout(std430, set = RBVH_BVH_SET, binding = RBVH_ATLAS_BINDING) readonly buffer
 #define RBVH_LEAF(i) rbvh_leaves[i]
 #define RBVH_ATLAS(i) rbvh_atlas[i]
 #endif
+#define RBVH_ATLAS_WORD(i) RBVH_ATLAS(i)
+#include "atlas.glsl"
 
 // Sizes the march needs to bound its reads.
 struct RbvhSizes {
@@ -84,6 +87,7 @@ struct RbvhSizes {
     uint leaf_count;
     uint atlas_pitch;  // texels per atlas row: a power of two (the march skips leaves otherwise)
     uint atlas_len;
+    uint atlas_wide_len;  // texels before the narrow band (atlas.glsl)
 };
 
 // The direction of texel's octahedral normal before normalizing (octahedral_direction in
@@ -116,20 +120,16 @@ bool rbvh_is_hole(uint texel) {
     return (texel & 0xFFFFu) == RBVH_HOLE_CODE;
 }
 
+// The height code of sample (i, j) of `leaf`'s tile: the walk needs no normals (a hit's are read
+// once the ray is done, rbvh_normal_texel), so that a texel of the narrow band is one read.
 uint rbvh_texel(RbvhLeaf leaf, RbvhSizes sz, int i, int j) {
     uint index = leaf.atlas_base + uint(j) * sz.atlas_pitch + uint(i);
-    if (index >= sz.atlas_len) {
-        return RBVH_HOLE_CODE;
-    }
-    if (RBVH_HEIGHT_ONLY) {
-        return (RBVH_ATLAS(index >> 1) >> ((index & 1u) << 4)) & 0xFFFFu;
-    }
-    return RBVH_ATLAS(index);
+    return rbvh_atlas_code(index, sz.atlas_len, sz.atlas_wide_len, RBVH_HEIGHT_ONLY);
 }
 
 // Where the blocks' height ranges start in the atlas words: after the texels' words.
 uint rbvh_texel_words(RbvhSizes sz) {
-    return RBVH_HEIGHT_ONLY ? (sz.atlas_len >> 1) + (sz.atlas_len & 1u) : sz.atlas_len;
+    return rbvh_atlas_texel_words(sz.atlas_len, sz.atlas_wide_len, RBVH_HEIGHT_ONLY);
 }
 
 // Frame-space ray of one leaf. Its shear (for the cells' triangles) is not kept here but made
@@ -144,8 +144,8 @@ struct RbvhFrameRay {
     float tmax;
 };
 
-// One cell of the walk: its indices, the ray's parameter range over it, and its four corner
-// texels as the walk read them.
+// One cell of the walk: its indices, the ray's parameter range over it, and its four corners'
+// height codes as the walk read them (rbvh_texel).
 struct RbvhCell {
     int i;
     int j;
@@ -365,33 +365,45 @@ vec3 rbvh_skirt_facet(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, float t) {
     return vec3(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
 }
 
-// Step 5 of march.rs: the texel whose normal a hit at `t_hit` in `cell` reports, its nearest
-// present corner sample, or, when that faces away from the world direction `dir` and another
-// present corner faces it, the first such (nearest_normal in march.rs). Called once, after the
-// walk, so that the SIMD walk loop does not carry it.
-uint rbvh_cell_normal_texel(RbvhFrameRay fr, RbvhCell cell, float t_hit, vec3 dir) {
-    bool v00 = !rbvh_is_hole(cell.c00);
-    bool v10 = !rbvh_is_hole(cell.c10);
-    bool v01 = !rbvh_is_hole(cell.c01);
-    bool v11 = !rbvh_is_hole(cell.c11);
+// Step 5 of march.rs, its first half: where in `cell` a hit at `t_hit` lies and which corners it
+// has, for rbvh_normal_texel: bit 0 right of the cell's middle, bit 1 above it, bits 2-5 corners
+// c00, c10, c01, c11 present; never 0 for a hit (a cell with a surface has three corners). The
+// normals are read once a ray is done (rbvh_rbvh_hit), not in the SIMD loops: read after every
+// marched hit they cost lavapipe a tenth of its speed.
+uint rbvh_cell_normal_choice(RbvhFrameRay fr, RbvhCell cell, float t_hit) {
     precise float s = fr.o.x + fr.d.x * t_hit;
     precise float r = fr.o.y + fr.d.y * t_hit;
     bool right = clamp(floor(s), float(cell.i), float(cell.i + 1)) > float(cell.i);
     bool up = clamp(floor(r), float(cell.j), float(cell.j + 1)) > float(cell.j);
-    uint nearest = up ? (right ? cell.c11 : cell.c01) : (right ? cell.c10 : cell.c00);
-    bool nearest_valid = up ? (right ? v11 : v01) : (right ? v10 : v00);
-    if (!nearest_valid) {
-        nearest = v00 ? cell.c00 : (v10 ? cell.c10 : (v01 ? cell.c01 : cell.c11));
+    return uint(right) | uint(up) << 1 | uint(!rbvh_is_hole(cell.c00)) << 2
+        | uint(!rbvh_is_hole(cell.c10)) << 3 | uint(!rbvh_is_hole(cell.c01)) << 4
+        | uint(!rbvh_is_hole(cell.c11)) << 5;
+}
+
+// Step 5 of march.rs, its second half: the texel whose normal a hit reports, given its cell's
+// texel c00 at atlas index `k00` and rbvh_cell_normal_choice: the nearest present corner sample,
+// or, when that faces away from the world direction `dir` and another present corner faces it,
+// the first such in the order c00, c10, c01, c11 (nearest_normal in march.rs).
+uint rbvh_normal_texel(RbvhSizes sz, uint k00, uint choice, vec3 dir) {
+    bool right = (choice & 1u) != 0u;
+    bool up = (choice & 2u) != 0u;
+    uint corner = (up ? 2u : 0u) + (right ? 1u : 0u);
+    if ((choice & (4u << corner)) == 0u) {
+        corner = uint(findLSB(choice >> 2));
     }
+    uint nearest = rbvh_atlas_texel(k00 + (corner & 1u) + (corner >> 1) * sz.atlas_pitch, sz.atlas_len,
+                                    sz.atlas_wide_len);
     if (!rbvh_faces(nearest, dir)) {
-        if (v00 && rbvh_faces(cell.c00, dir)) {
-            nearest = cell.c00;
-        } else if (v10 && rbvh_faces(cell.c10, dir)) {
-            nearest = cell.c10;
-        } else if (v01 && rbvh_faces(cell.c01, dir)) {
-            nearest = cell.c01;
-        } else if (v11 && rbvh_faces(cell.c11, dir)) {
-            nearest = cell.c11;
+        for (uint q = 0u; q < 4u; ++q) {
+            if ((choice & (4u << q)) == 0u) {
+                continue;
+            }
+            uint c = rbvh_atlas_texel(k00 + (q & 1u) + (q >> 1) * sz.atlas_pitch, sz.atlas_len,
+                                      sz.atlas_wide_len);
+            if (rbvh_faces(c, dir)) {
+                nearest = c;
+                break;
+            }
         }
     }
     return nearest;
@@ -423,9 +435,9 @@ uint rbvh_walk_bound(int last_i, int last_j) {
 // whose normal it reports (decode with rbvh_decode_normal), or with RBVH_HEIGHT_ONLY the world
 // normal of the cell triangle hit (`facet_normal`, as facet_normal in march.rs). `cells` counts
 // cells visited. `cut` is set when the device ended a loop early (see traverse.glsl).
-float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cells, out uint normal_texel,
+float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cells, out uvec2 normal_cell,
                  out vec3 facet_normal, inout bool cut) {
-    normal_texel = RBVH_HOLE_CODE;
+    normal_cell = uvec2(0u);
     facet_normal = vec3(0.0);
     if (li >= sz.leaf_count) {
         return -1.0;
@@ -754,7 +766,8 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
             precise vec3 n = (frame_leaf.axis_u * facet.x + frame_leaf.axis_v * facet.y) + frame_leaf.axis_w * facet.z;
             facet_normal = normalize(n);
         } else {
-            normal_texel = rbvh_cell_normal_texel(fr, cell, t_hit, ray.dir);
+            uint k00 = leaf.atlas_base + uint(cell.j) * sz.atlas_pitch + uint(cell.i);
+            normal_cell = uvec2(k00, rbvh_cell_normal_choice(fr, cell, t_hit));
         }
     }
     return t_hit;
@@ -762,19 +775,21 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
 
 // The RBVH's leaf hook for traverse.glsl: height fields marched, hybrid triangle leaves tested as
 // the exact BVH's (RbvhLeaves in src/rbvh/march.rs). It keeps the nearest hit: a triangle's slot,
-// or the id of a height field (or, with level of detail, a chosen node) and the texel its normal
+// or the id of a height field (or, with level of detail, a chosen node) and where its normal
 // comes from. Its id and normal are read and decoded once, after the loops (rbvh_rbvh_hit), so
 // that the SIMD loops do not carry them.
 struct RbvhLeafHook {
     RbvhSizes sz;
     uint best_id;
     uint best_slot;
-    uint best_texel;
+    // A height field's hit: its cell's c00 at atlas index x and rbvh_cell_normal_choice in y
+    // (rbvh_normal_texel); a level-of-detail hit: its normal texel in x and 0 in y.
+    uvec2 best_normal;
     vec3 best_facet;  // RBVH_HEIGHT_ONLY: the hit's normal, made by the march
 };
 
 RbvhLeafHook rbvh_leaf_hook(RbvhSizes sz) {
-    return RbvhLeafHook(sz, RBVH_INVALID, RBVH_INVALID, RBVH_HOLE_CODE, vec3(0.0));
+    return RbvhLeafHook(sz, RBVH_INVALID, RBVH_INVALID, uvec2(RBVH_HOLE_CODE, 0u), vec3(0.0));
 }
 
 uint rbvh_node_count(RbvhLeafHook leaves) {
@@ -806,9 +821,9 @@ bool rbvh_test(inout RbvhLeafHook leaves, Ray ray, bool any_hit, uint reference,
     }
     RBVH_COUNT_ADD(leaves, 1u);
     uint cells = 0u;
-    uint normal_texel;
+    uvec2 normal_cell;
     vec3 facet_normal;
-    float t = rbvh_march(reference & ~RBVH_LEAF_BIT, leaves.sz, ray, t_closest, cells, normal_texel, facet_normal, cut);
+    float t = rbvh_march(reference & ~RBVH_LEAF_BIT, leaves.sz, ray, t_closest, cells, normal_cell, facet_normal, cut);
     steps += cells;
     RBVH_COUNT_ADD(cells, cells);
     if (t < 0.0) {
@@ -817,7 +832,7 @@ bool rbvh_test(inout RbvhLeafHook leaves, Ray ray, bool any_hit, uint reference,
     t_closest = t;
     leaves.best_id = reference;
     leaves.best_slot = RBVH_INVALID;
-    leaves.best_texel = normal_texel;
+    leaves.best_normal = normal_cell;
     leaves.best_facet = facet_normal;
     return true;
 }
@@ -828,10 +843,11 @@ bool rbvh_test(inout RbvhLeafHook leaves, Ray ray, bool any_hit, uint reference,
 #undef RBVH_TRAVERSE
 #undef RBVH_LEAVES
 
-// The hit that `leaves` kept at distance t: a triangle's id and normal, read now, or a height
-// field's id (LEAF_BIT | leaf index; with level of detail LEAF_BIT | LOD_BIT | node) and its
-// texel's normal (RBVH_HEIGHT_ONLY: the facet's, made by the march).
-Hit rbvh_rbvh_hit(RbvhLeafHook leaves, float t) {
+// The hit that `leaves` kept at distance t along a ray in direction `dir`: a triangle's id and
+// normal, read now, or a height field's id (LEAF_BIT | leaf index; with level of detail
+// LEAF_BIT | LOD_BIT | node) and its texel's normal, read now (RBVH_HEIGHT_ONLY: the facet's,
+// made by the march).
+Hit rbvh_rbvh_hit(RbvhLeafHook leaves, float t, vec3 dir) {
     vec3 nrm;
     uint id = leaves.best_id;
     if (leaves.best_slot != RBVH_INVALID) {
@@ -843,7 +859,9 @@ Hit rbvh_rbvh_hit(RbvhLeafHook leaves, float t) {
     } else if (RBVH_HEIGHT_ONLY) {
         nrm = leaves.best_facet;
     } else {
-        nrm = rbvh_decode_normal(leaves.best_texel);
+        uvec2 b = leaves.best_normal;
+        uint texel = b.y == 0u ? b.x : rbvh_normal_texel(leaves.sz, b.x, b.y, dir);
+        nrm = rbvh_decode_normal(texel);
     }
     return Hit(t, nrm.x, nrm.y, nrm.z, id, 0u, 0u, 0u);
 }
@@ -853,7 +871,7 @@ Hit rbvh_rbvh_hit(RbvhLeafHook leaves, float t) {
 Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out bool overflow) {
     RbvhLeafHook leaves = rbvh_leaf_hook(sz);
     float t = rbvh_traverse_rbvh(ray, any_hit, leaves, steps, overflow);
-    return rbvh_rbvh_hit(leaves, t);
+    return rbvh_rbvh_hit(leaves, t, ray.dir);
 }
 
 // With RBVH_LOD, also rbvh_trace_rbvh_lod: the same traversal with lod.glsl's hook.

@@ -14,8 +14,10 @@ layout(push_constant) uniform Params {
     uint leaf_count;
     uint atlas_pitch;
     uint atlas_len;
+    uint atlas_wide_len;  // atlas texels before the narrow band (atlas.glsl)
     uint lod_node_count;  // LOD records (0 without LOD)
     uint lod_texel_len;   // LOD column words
+    uint reserved;        // zero: keeps `addresses` 8-byte aligned
     uvec2 addresses[6];   // device addresses (low, high word); zero where arrays are bound
 } pc;
 

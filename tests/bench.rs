@@ -204,7 +204,14 @@ fn a_small_run_has_every_record_and_writes_json_csv_and_plots() {
         );
         assert_eq!(
             keys(&r["memory_bytes"]),
-            set(&["tree", "atlas", "triangles", "total"])
+            set(&[
+                "tree",
+                "atlas",
+                "triangles",
+                "total",
+                "texels",
+                "narrow_texels"
+            ])
         );
         assert!(matches!(
             r["timing_source"].as_str(),

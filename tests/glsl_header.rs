@@ -136,7 +136,8 @@ layout(local_size_x = 32) in;
 
 layout(push_constant) uniform EnginePush {
     uvec2 rbvh_arrays[6];
-    uint node_count, tri_count, leaf_count, atlas_pitch, atlas_len, lod_nodes, lod_texels;
+    uint node_count, tri_count, leaf_count, atlas_pitch, atlas_len, atlas_wide_len, lod_nodes,
+        lod_texels;
     float spread;
 } push;
 
@@ -155,7 +156,7 @@ layout(std430, set = 0, binding = 0) writeonly buffer EngineDepth { float depth[
 void main() {
     Ray ray = Ray(vec3(gl_GlobalInvocationID.x, 0.0, -10.0), 0.0, vec3(0.0, 0.0, 1.0), 1e30);
     RbvhSizes sz = RbvhSizes(push.node_count, push.tri_count, push.leaf_count, push.atlas_pitch,
-                             push.atlas_len);
+                             push.atlas_len, push.atlas_wide_len);
     uint steps;
     bool overflow;
     Hit hit = rbvh_trace_rbvh_lod(ray, vec2(0.0, push.spread), false, sz,
@@ -179,10 +180,11 @@ fn header_reads_through_device_addresses_the_includer_passes() {
 #[test]
 fn each_header_compiles_on_its_own() {
     // lod.glsl is the RBVH_LOD part of rbvh.glsl, compiled above through it; traverse.glsl is a
-    // template that bvh.glsl, rbvh.glsl and lod.glsl instantiate, compiled through them.
+    // template that bvh.glsl, rbvh.glsl and lod.glsl instantiate, and atlas.glsl one that
+    // rbvh.glsl and the paint shader instantiate, compiled through them.
     for (header, _) in rbvh::gpu::shaders::GLSL_HEADERS
         .iter()
-        .filter(|(name, _)| !["lod.glsl", "traverse.glsl"].contains(name))
+        .filter(|(name, _)| !["lod.glsl", "traverse.glsl", "atlas.glsl"].contains(name))
     {
         let source = format!(
             "#version 460\n#extension GL_GOOGLE_include_directive : require\nlayout(local_size_x = 1) in;\n#include \"{header}\"\nvoid main() {{}}\n"

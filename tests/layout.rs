@@ -174,8 +174,10 @@ fn push_constants_match_in_every_trace_shader() {
         ("leaf_count", offset_of!(P, leaf_count)),
         ("atlas_pitch", offset_of!(P, atlas_pitch)),
         ("atlas_len", offset_of!(P, atlas_len)),
+        ("atlas_wide_len", offset_of!(P, atlas_wide_len)),
         ("lod_node_count", offset_of!(P, lod_node_count)),
         ("lod_texel_len", offset_of!(P, lod_texel_len)),
+        ("reserved", offset_of!(P, reserved)),
         ("addresses", offset_of!(P, addresses)),
     ];
     assert_eq!(size_of::<P>(), offset_of!(P, addresses) + 6 * 8);
@@ -272,6 +274,8 @@ fn paint_brush_and_push_constants_match() {
                 ("brush_count", offset_of!(P, brush_count)),
                 ("atlas_pitch", offset_of!(P, atlas_pitch)),
                 ("atlas_len", offset_of!(P, atlas_len)),
+                ("atlas_wide_len", offset_of!(P, atlas_wide_len)),
+                ("reserved", offset_of!(P, reserved)),
                 ("atlas_address", offset_of!(P, atlas_address)),
                 ("colours_address", offset_of!(P, colours_address)),
             ]

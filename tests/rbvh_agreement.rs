@@ -28,10 +28,14 @@ fn rays_for(scene: &Scene, side: u32, random: usize, seed: u64) -> Vec<Ray> {
 fn gpu_and_cpu_rbvh_casters_agree_at_every_level() {
     let ctx = common::context();
     let mut agreement = common::Agreement::default();
+    // Texels of tiles with 8- and with 16-bit heights: both decodes of the atlas are exercised.
+    let (mut narrow, mut wide) = (0u64, 0u64);
     for (k, name) in ["default", "blob", "sphere"].into_iter().enumerate() {
         let scene = Scene::builtin(name).unwrap();
         for level in 0..5 {
             let r = Arc::new(Rbvh::build(&scene, &RbvhParams::quality(level).unwrap()).unwrap());
+            narrow += r.narrow_texels();
+            wide += r.stats.tile_texels - r.narrow_texels();
             let tracer = Tracer::new(&ctx, &Structure::from(r.clone())).unwrap();
             let rays = rays_for(&scene, 96, 4000, (k * 5 + level as usize) as u64);
             for (query, any) in [(Query::Closest, false), (Query::Any, true)] {
@@ -52,6 +56,10 @@ fn gpu_and_cpu_rbvh_casters_agree_at_every_level() {
     );
     assert!(total >= 100_000);
     assert!(agreement.rate() < 1e-4, "{hit_miss} of {total}");
+    assert!(
+        narrow > 0 && wide > 0,
+        "{narrow} texels 8-bit, {wide} 16-bit"
+    );
 }
 
 /// The device march jumps over 8 × 8-cell blocks that a ray passes above or below
@@ -201,6 +209,7 @@ fn a_tree_of_triangle_leaves_alone_is_traversed_to_its_end() {
     let atlas = rbvh::rbvh::Atlas {
         pitch: 8,
         rows: 8,
+        narrow_rows: 0,
         texels: vec![rbvh::rbvh::Texel::HOLE; 64],
     };
     let r = hand_made(vec![GpuNode::new(a, b)], vec![far, near], vec![], atlas);
@@ -232,6 +241,7 @@ fn a_tile_that_wraps_across_atlas_rows_is_refused_or_empty() {
     let atlas = Atlas {
         pitch,
         rows,
+        narrow_rows: 0,
         texels,
     };
     let r = Arc::new(one_leaf(
@@ -276,6 +286,7 @@ fn an_atlas_pitch_that_is_not_a_power_of_two_is_refused() {
     let atlas = Atlas {
         pitch,
         rows,
+        narrow_rows: 0,
         texels: vec![Texel::new(0, Vec3::Y); (pitch * rows) as usize],
     };
     let r = Arc::new(one_leaf(0, (4, 4), 0.001, atlas, Vec3::new(5.0, 70.0, 1.0)));
@@ -333,6 +344,7 @@ fn block_jumps_agree_with_the_plain_walk_on_steep_unaligned_tiles() {
         let atlas = Atlas {
             pitch,
             rows,
+            narrow_rows: 0,
             texels,
         };
         let r = Arc::new(one_leaf(

@@ -13,7 +13,9 @@ use rbvh::rbvh::{
 use rbvh::Error;
 
 /// Bytes before the arrays, per the format table in `src/rbvh/file.rs`.
-const HEADER_BYTES: usize = 152;
+const HEADER_BYTES: usize = 156;
+/// The header of version 7, which ends before `atlas.narrow_rows`.
+const V7_HEADER_BYTES: usize = 152;
 /// The header of versions 4–6, which ends before `object_rate`.
 const V6_HEADER_BYTES: usize = 148;
 
@@ -90,6 +92,7 @@ fn sample() -> Rbvh {
         atlas: Atlas {
             pitch: 8,
             rows: 9,
+            narrow_rows: 0,
             texels,
         },
         bounds: unit,
@@ -131,11 +134,13 @@ fn save_load_round_trips_exactly() {
     loaded.save(&again).unwrap();
     assert_eq!(std::fs::read(&again).unwrap(), bytes);
 
-    // The documented framing: magic, version 7, the sampling judgement's size, normal texels, no
-    // colour channel, each object's rate last, then the arrays after a 152-byte header.
+    // The documented framing: magic, version 8, the sampling judgement's size, normal texels, no
+    // colour channel, each object's rate and the narrow rows last, then the arrays after a
+    // 156-byte header.
     assert_eq!(&bytes[..8], b"RBVHv\0\0\0");
-    assert_eq!(word(&bytes, 8), 7);
+    assert_eq!(word(&bytes, 8), 8);
     assert_eq!(f32::from_bits(word(&bytes, 148)), 0.375);
+    assert_eq!(word(&bytes, 152), 0);
     assert_eq!(f32::from_bits(word(&bytes, 40)), 2.5);
     assert_eq!((word(&bytes, 44), word(&bytes, 48)), (0, 0));
     let arrays = 2 * 48 + 2 * 48 + 2 * 64 + 72 * 4;
@@ -229,7 +234,7 @@ fn bad_magic_and_unknown_versions_are_rejected() {
     let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
     assert!(message.contains("not an RBVH file"), "{message}");
 
-    for version in [0, 8, u32::MAX] {
+    for version in [0, 9, u32::MAX] {
         let mut bytes = sample().to_bytes();
         bytes[8..12].copy_from_slice(&version.to_le_bytes());
         let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
@@ -237,7 +242,7 @@ fn bad_magic_and_unknown_versions_are_rejected() {
             message.contains(&format!("unsupported version {version}")),
             "{message}"
         );
-        assert!(message.contains("reads versions 1 to 7"), "{message}");
+        assert!(message.contains("reads versions 1 to 8"), "{message}");
     }
 }
 
@@ -299,7 +304,7 @@ fn older_versions_load_as_what_they_described() {
             ..rbvh
         };
         assert_eq!(loaded, expected, "version {version}");
-        assert_eq!(word(&loaded.to_bytes(), 8), 7);
+        assert_eq!(word(&loaded.to_bytes(), 8), 8);
         let header = if version < 4 { 136 } else { V6_HEADER_BYTES };
         let message = parse_error(Rbvh::from_bytes(&old[..old.len() - 1], path), path);
         assert!(
@@ -310,7 +315,7 @@ fn older_versions_load_as_what_they_described() {
 }
 
 /// A version 6 file (marked heights, no `object_rate`) loads as it was, every texel the
-/// scene's, and is saved again as version 7.
+/// scene's, and is saved again as version 8.
 #[test]
 fn version_6_loads_with_every_texel_the_scenes() {
     let rbvh = sample();
@@ -323,7 +328,59 @@ fn version_6_loads_with_every_texel_the_scenes() {
         ..rbvh
     };
     assert_eq!(loaded, expected);
-    assert_eq!(word(&loaded.to_bytes(), 8), 7);
+    assert_eq!(word(&loaded.to_bytes(), 8), 8);
+}
+
+/// `sample()` with its last four atlas rows narrow: their codes made 8-bit ones.
+fn narrow_sample() -> Rbvh {
+    let mut r = sample();
+    r.atlas.narrow_rows = 4;
+    let wide = r.atlas.wide_len();
+    for t in &mut r.atlas.texels[wide..] {
+        let code = u32::from(t.height_code()) / Texel::NARROW_STEP * Texel::NARROW_STEP;
+        *t = Texel(t.0 & !0xFFFF | code);
+    }
+    r
+}
+
+/// A version 7 file (16-bit codes everywhere, no `narrow_rows`) loads with no narrow rows; an
+/// RBVH with narrow rows round-trips; narrow rows beyond the atlas, or a code in them that is
+/// not an 8-bit one (which the device could not store), are parse errors.
+#[test]
+fn narrow_rows_round_trip_and_are_checked() {
+    let rbvh = sample();
+    let mut v7 = rbvh.to_bytes();
+    v7.drain(V7_HEADER_BYTES..HEADER_BYTES);
+    v7[8..12].copy_from_slice(&7u32.to_le_bytes());
+    assert_eq!(Rbvh::from_bytes(&v7, Path::new("v7.rbvh")).unwrap(), rbvh);
+
+    let narrow = narrow_sample();
+    assert_eq!(narrow.atlas.wide_len(), 40);
+    let bytes = narrow.to_bytes();
+    assert_eq!(word(&bytes, 152), 4);
+    assert_eq!(
+        Rbvh::from_bytes(&bytes, Path::new("n.rbvh")).unwrap(),
+        narrow
+    );
+
+    let path = Path::new("rows.rbvh");
+    let mut bad = bytes.clone();
+    bad[152..156].copy_from_slice(&10u32.to_le_bytes());
+    let message = parse_error(Rbvh::from_bytes(&bad, path), path);
+    assert!(
+        message.contains("narrow_rows 10 exceeds its 9 rows"),
+        "{message}"
+    );
+
+    let mut odd = narrow.clone();
+    let k = (40..72).find(|&k| !odd.atlas.texels[k].is_hole()).unwrap();
+    odd.atlas.texels[k].0 += 1;
+    let path = Path::new("odd.rbvh");
+    let message = parse_error(Rbvh::from_bytes(&odd.to_bytes(), path), path);
+    assert!(
+        message.contains(&format!("atlas texel {k} lies in the narrow rows")),
+        "{message}"
+    );
 }
 
 /// A version 1–4 node whose box holds NaN has no grid to be quantized to: a parse error naming
@@ -474,7 +531,8 @@ fn inconsistent_contents_are_rejected_with_the_reason() {
 
     // Counts that overflow, or promise more than the file holds.
     let mut bytes = sample().to_bytes();
-    bytes[HEADER_BYTES - 12..HEADER_BYTES - 4].copy_from_slice(&u64::MAX.to_le_bytes());
+    // Bytes 140..148: the texel count.
+    bytes[140..148].copy_from_slice(&u64::MAX.to_le_bytes());
     let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
     assert!(message.contains("counts"), "{message}");
     // More nodes than a traversal stack entry can name (bytes 116..124: the node count).

@@ -232,7 +232,7 @@ pub fn scene_file(data: &[u8]) {
 }
 
 /// Fuzz target: the bytes of an RBVH file. A file that loads must round-trip byte for byte (a
-/// file of an older version comes back as version 6: the same header, with bytes 40..52 inserted
+/// file of an older version comes back as version 8: the same header, with bytes 40..52 inserted
 /// before version 4, its 64-byte nodes quantized to 48 bytes before version 5, its height codes
 /// each within one of what they were and its normals kept, and the other arrays unchanged) and
 /// trace on the CPU without overflow and with well-formed hits (the loader promises "safe to
@@ -243,24 +243,40 @@ pub fn rbvh_file(data: &[u8]) {
     };
     let saved = r.to_bytes();
     let version = u32::from_le_bytes(data[8..12].try_into().expect("a loaded file has a version"));
-    if version == 7 {
+    if version == 8 {
         assert_eq!(saved, data, "save(load(file)) differs from the file");
     } else {
-        // Version 7 appended `object_rate` (0 for older files) to the 148-byte header of
-        // versions 4–6; versions 1–3 lack bytes 40..52 of those.
+        // Version 8 appended `narrow_rows` (0 for older files) to version 7's 152-byte header,
+        // which appended `object_rate` (0 for older files) to the 148-byte header of versions
+        // 4–6; versions 1–3 lack bytes 40..52 of those.
         const V6_HEADER: usize = 148;
-        const HEADER: usize = 152;
-        let old_header = if version < 4 { 136 } else { V6_HEADER };
+        const V7_HEADER: usize = 152;
+        const HEADER: usize = 156;
+        let old_header = match version {
+            1..=3 => 136,
+            4..=6 => V6_HEADER,
+            _ => V7_HEADER,
+        };
+        let before_rate = old_header.min(V6_HEADER);
         assert_eq!(saved[12..40], data[12..40], "the upgraded header differs");
         assert_eq!(
-            saved[V6_HEADER - (old_header - 40)..V6_HEADER],
-            data[40..old_header],
+            saved[V6_HEADER - (before_rate - 40)..V6_HEADER],
+            data[40..before_rate],
             "the upgraded header differs"
         );
+        if version < 7 {
+            assert_eq!(
+                saved[V6_HEADER..V7_HEADER],
+                [0; 4],
+                "an old file's object rate is not 0"
+            );
+        } else {
+            assert_eq!(saved[V6_HEADER..V7_HEADER], data[V6_HEADER..V7_HEADER]);
+        }
         assert_eq!(
-            saved[V6_HEADER..HEADER],
+            saved[V7_HEADER..HEADER],
             [0; 4],
-            "an old file's object rate is not 0"
+            "an old file's narrow rows are not 0"
         );
         let nodes = r.nodes.len();
         let old_node = if version < 5 { 64 } else { 48 };

@@ -301,9 +301,9 @@ impl<'a> SceneBench<'a> {
             bvh.build_ms,
             Memory {
                 tree: bvh.tree_bytes(),
-                atlas: 0,
                 triangles: bvh.triangle_bytes(),
                 total: bvh.tree_bytes() + bvh.triangle_bytes(),
+                ..Memory::default()
             },
         );
         let structure = Structure::Exact(bvh);
@@ -353,6 +353,8 @@ impl<'a> SceneBench<'a> {
                 atlas: rbvh.atlas_bytes(),
                 triangles: rbvh.triangle_bytes(),
                 total: rbvh.total_bytes(),
+                texels: rbvh.stats.tile_texels,
+                narrow_texels: rbvh.narrow_texels(),
             };
             let exact = candidates[0]
                 .structure

@@ -293,6 +293,13 @@ pub struct Memory {
     pub triangles: u64,
     /// `tree + atlas + triangles`.
     pub total: u64,
+    /// Texels of the height-field tiles (the atlas's unused ones not counted); 0 for exact.
+    /// `atlas / texels` is what a texel costs on the device ([`Rbvh::bytes_per_texel`]).
+    ///
+    /// [`Rbvh::bytes_per_texel`]: crate::rbvh::Rbvh::bytes_per_texel
+    pub texels: u64,
+    /// Of `texels`, those of tiles with 8-bit heights ([`crate::rbvh::Rbvh::narrow_texels`]).
+    pub narrow_texels: u64,
 }
 
 /// [`RbvhParams`] with named enums, for the records.

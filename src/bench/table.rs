@@ -18,11 +18,12 @@ const LEAD: [(&str, usize, bool); 3] = [
 ];
 
 /// Columns of [`table`] after the [`LEAD`].
-const COLUMNS: [(&str, usize, bool); 14] = [
+const COLUMNS: [(&str, usize, bool); 15] = [
     ("MRays/s", 8, false),
     ("speedup", 8, false),
     ("mem MB", 8, false),
     ("mem x", 6, false),
+    ("B/texel", 7, false),
     ("miss %", 7, false),
     ("t p99 %", 8, false),
     ("obj t p99 %", 11, false),
@@ -117,7 +118,8 @@ pub fn table(report: &BenchReport) -> String {
         });
     let footnote = format!(
         "MRays/s: median of {} runs of {passes} trace pass(es){shortest} (timing: {}); mem x: \
-         exact's bytes / these; t p99: hit distance error, % of the scene diagonal (obj: of the \
+         exact's bytes / these; B/texel: the atlas's device bytes (unused texels and block \
+         ranges included) per tile texel; t p99: hit distance error, % of the scene diagonal (obj: of the \
          diagonal of the object the exact ray hit); n err: mean normal error; backf: hits whose \
          normal faces away from the ray where the exact one faces it, % of the rays; PSNR/FLIP: \
          shaded primary image{leaks}",
@@ -238,6 +240,10 @@ fn cells(r: &Record) -> [String; COLUMNS.len()] {
         format!("{:.2}x", r.speedup_vs_exact),
         format!("{:.2}", r.memory_bytes.total as f64 / 1e6),
         format!("{:.1}", r.memory_ratio_vs_exact),
+        match r.memory_bytes.texels {
+            0 => dash(),
+            n => format!("{:.2}", r.memory_bytes.atlas as f64 / n as f64),
+        },
         num(e.map(|e| 100.0 * e.miss_mismatch_rate), 2),
         num(e.and_then(|e| e.t_err_p99).map(|t| 100.0 * t), 3),
         num(e.and_then(|e| e.t_err_object_p99).map(|t| 100.0 * t), 3),

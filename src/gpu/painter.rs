@@ -21,7 +21,7 @@ use crate::{Error, Result};
 /// 65535 iterations; more brushes are painted in further passes, in order.
 pub const MAX_BRUSHES_PER_PASS: usize = 4096;
 
-/// Push constants of `glsl/paint_main.glsl` (96 bytes): the leaf's sample grid
+/// Push constants of `glsl/paint_main.glsl` (104 bytes): the leaf's sample grid
 /// ([`crate::rbvh::layout::SampleGrid`]), where its tile lies, and the device addresses of the
 /// atlas and the colours (zero where they are bound).
 #[repr(C)]
@@ -53,13 +53,18 @@ pub struct PaintParams {
     pub atlas_pitch: u32,
     /// GLSL `atlas_len`: texels in the atlas; reads at or beyond it are skipped.
     pub atlas_len: u32,
+    /// GLSL `atlas_wide_len`: texels before the atlas's narrow band
+    /// ([`Atlas::wide_len`](crate::rbvh::Atlas::wide_len)).
+    pub atlas_wide_len: u32,
+    /// GLSL `reserved`: zero, so that the addresses are 8-byte aligned.
+    pub reserved: u32,
     /// GLSL `atlas_address` (`uvec2`, low word first): the atlas's device address; 0 when bound.
     pub atlas_address: u64,
     /// GLSL `colours_address` (`uvec2`, low word first): the colour channel's device address; 0
     /// when bound.
     pub colours_address: u64,
 }
-const _: () = assert!(std::mem::size_of::<PaintParams>() == 96);
+const _: () = assert!(std::mem::size_of::<PaintParams>() == 104);
 
 /// What one [`Painter::paint`] call did.
 #[derive(Clone, Copy, Debug, Default)]
@@ -80,11 +85,11 @@ pub struct PaintRecording {
     _staging: Option<Buffer>,
 }
 
-/// The atlas and colour channel of `rbvh` as the painter uploads them: the channel checked
-/// against the atlas (or white on every surface texel when there is none, as
-/// [`Rbvh::colour_channel`] creates it), and neither empty (a buffer cannot be; an empty atlas has
-/// no leaf to paint anyway).
-fn channel_data(rbvh: &Rbvh) -> Result<(Vec<Texel>, Vec<u32>)> {
+/// The atlas and colour channel of `rbvh` as the painter uploads them: the atlas as the trace
+/// shaders read it ([`Rbvh::atlas_words`]), the channel checked against the atlas (or white on
+/// every surface texel when there is none, as [`Rbvh::colour_channel`] creates it), and neither
+/// empty (a buffer cannot be; an empty atlas has no leaf to paint anyway).
+fn channel_data(rbvh: &Rbvh) -> Result<(Vec<u32>, Vec<u32>)> {
     no_height_only(rbvh)?;
     if let Some(c) = rbvh
         .colours
@@ -104,16 +109,18 @@ fn channel_data(rbvh: &Rbvh) -> Result<(Vec<Texel>, Vec<u32>)> {
         Some(c) => c.clone(),
         None => blank_colours(&rbvh.atlas.texels),
     };
-    let mut atlas = rbvh.atlas.texels.clone();
+    let mut atlas = rbvh.atlas_words();
     if atlas.is_empty() {
-        atlas.push(Texel::HOLE);
+        atlas.push(Texel::HOLE.0);
+    }
+    if colours.is_empty() {
         colours.push(0);
     }
     Ok((atlas, colours))
 }
 
-/// A height-only RBVH ([`crate::rbvh::TexelFormat::Height`]) keeps no colour channel, and its
-/// atlas is packed two texels to a word, which the paint shader does not read.
+/// A height-only RBVH ([`crate::rbvh::TexelFormat::Height`]) keeps no colour channel (and its
+/// atlas holds no normals, which the paint shader reads as those of the other format).
 fn no_height_only(rbvh: &Rbvh) -> Result<()> {
     if rbvh.params.texels == TexelFormat::Height {
         return Err(Error::param(
@@ -139,7 +146,7 @@ fn reach_of(ctx: &Context, atlas_bytes: u64, colours: &[u32]) -> Result<Reach> {
 
 /// The atlas, colour words and reach of a painter that uploads its own atlas ([`Painter::new`],
 /// [`Painter::record_new`]).
-fn own_parts(ctx: &Context, rbvh: &Rbvh) -> Result<(Vec<Texel>, Vec<u32>, Reach)> {
+fn own_parts(ctx: &Context, rbvh: &Rbvh) -> Result<(Vec<u32>, Vec<u32>, Reach)> {
     let (atlas, colours) = channel_data(rbvh)?;
     let reach = reach_of(
         ctx,
@@ -150,22 +157,27 @@ fn own_parts(ctx: &Context, rbvh: &Rbvh) -> Result<(Vec<Texel>, Vec<u32>, Reach)
 }
 
 /// The context, shared atlas, colour words and reach of [`Painter::sharing`]: the tracer must hold
-/// `rbvh`'s atlas (same pitch and texel count).
+/// `rbvh`'s atlas (same pitch, texel count and narrow band).
 fn shared_parts(tracer: &Tracer, rbvh: &Rbvh) -> Result<(Context, Arc<Buffer>, Vec<u32>, Reach)> {
     no_height_only(rbvh)?;
-    let Some((atlas, pitch, len)) = tracer.atlas() else {
+    let Some((atlas, pitch, len, wide_len)) = tracer.atlas() else {
         return Err(Error::param(
             "tracer",
             "an exact-BVH tracer has no atlas to paint: share an RBVH tracer",
         ));
     };
-    if pitch != rbvh.atlas.pitch || len as usize != rbvh.atlas.texels.len() {
+    let ours = (
+        rbvh.atlas.pitch,
+        rbvh.atlas.texels.len(),
+        rbvh.atlas.wide_len(),
+    );
+    if (pitch, len as usize, wide_len as usize) != ours {
         return Err(Error::param(
             "tracer",
             format!(
-                "its atlas ({len} texels, pitch {pitch}) is not this RBVH's ({} texels, pitch {})",
-                rbvh.atlas.texels.len(),
-                rbvh.atlas.pitch
+                "its atlas ({len} texels, {wide_len} of them wide, pitch {pitch}) is not this \
+                 RBVH's ({} texels, {} wide, pitch {})",
+                ours.1, ours.2, ours.0
             ),
         ));
     }
@@ -188,6 +200,7 @@ pub struct Painter {
     colours: Buffer,
     pitch: u32,
     atlas_len: u32,
+    atlas_wide_len: u32,
 }
 
 impl Painter {
@@ -298,6 +311,7 @@ impl Painter {
             colours,
             pitch: rbvh.atlas.pitch,
             atlas_len: rbvh.atlas.texels.len() as u32,
+            atlas_wide_len: rbvh.atlas.wide_len() as u32,
         })
     }
 
@@ -387,6 +401,8 @@ impl Painter {
                 brush_count,
                 atlas_pitch: self.pitch,
                 atlas_len: self.atlas_len,
+                atlas_wide_len: self.atlas_wide_len,
+                reserved: 0,
                 atlas_address,
                 colours_address,
             };

@@ -13,12 +13,13 @@ pub fn words(bytes: &[u8]) -> std::io::Result<Vec<u32>> {
 /// for both marches), `lod.glsl` (level of detail, with `RBVH_LOD`) and what they include. An
 /// engine that compiles its shaders resolves its includes from this table and needs no files of
 /// this crate.
-pub const GLSL_HEADERS: [(&str, &str); 7] = [
+pub const GLSL_HEADERS: [(&str, &str); 8] = [
     ("common.glsl", include_str!("../../glsl/common.glsl")),
     ("intersect.glsl", include_str!("../../glsl/intersect.glsl")),
     ("traverse.glsl", include_str!("../../glsl/traverse.glsl")),
     ("grid.glsl", include_str!("../../glsl/grid.glsl")),
     ("bvh.glsl", include_str!("../../glsl/bvh.glsl")),
+    ("atlas.glsl", include_str!("../../glsl/atlas.glsl")),
     ("rbvh.glsl", include_str!("../../glsl/rbvh.glsl")),
     ("lod.glsl", include_str!("../../glsl/lod.glsl")),
 ];

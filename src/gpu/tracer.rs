@@ -49,7 +49,7 @@ pub struct Traced {
     pub timing: Timing,
 }
 
-/// Push constants of the trace shaders (`glsl/trace_params.glsl`, 88 bytes); the exact one ignores
+/// Push constants of the trace shaders (`glsl/trace_params.glsl`, 96 bytes); the exact one ignores
 /// the sizes after `tri_count`, the plain RBVH one the LOD sizes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
@@ -73,15 +73,20 @@ pub struct TraceParams {
     /// GLSL `atlas_len`: texels in the atlas; the blocks' height ranges follow them in the same
     /// buffer, and texel reads at or beyond it see holes.
     pub atlas_len: u32,
+    /// GLSL `atlas_wide_len`: texels before the atlas's narrow band
+    /// ([`Atlas::wide_len`](crate::rbvh::Atlas::wide_len)), whose heights are 16-bit codes.
+    pub atlas_wide_len: u32,
     /// LOD records (one per node; 0 without LOD).
     pub lod_node_count: u32,
     /// LOD column words.
     pub lod_texel_len: u32,
+    /// GLSL `reserved`: zero, so that `addresses` are 8-byte aligned.
+    pub reserved: u32,
     /// Device addresses of the structure's arrays in binding order (nodes, triangles, leaves,
     /// atlas, LOD records, LOD columns), read by the `_bda` shaders; zero where arrays are bound.
     pub addresses: [u64; 6],
 }
-const _: () = assert!(std::mem::size_of::<TraceParams>() == 88);
+const _: () = assert!(std::mem::size_of::<TraceParams>() == 96);
 
 const FLAG_ANY_HIT: u32 = 1;
 
@@ -327,6 +332,7 @@ fn rbvh_parts<'a>(rbvh: &'a Rbvh, atlas_words: &'a [u32]) -> Result<(TraceParams
         leaf_count: count("leaves", rbvh.leaves.len())?,
         atlas_pitch: rbvh.atlas.pitch,
         atlas_len: count("atlas texels", rbvh.atlas.texels.len())?,
+        atlas_wide_len: count("atlas texels", rbvh.atlas.wide_len())?,
         ..TraceParams::default()
     };
     // The shaders index the block ranges after the texels with 32 bits too.
@@ -747,12 +753,13 @@ impl Tracer {
             .sum()
     }
 
-    /// The RBVH atlas on the device with its pitch and texel count, for a painter that shares it
-    /// ([`super::Painter::sharing`]); None for the exact BVH.
-    pub(crate) fn atlas(&self) -> Option<(&Arc<Buffer>, u32, u32)> {
+    /// The RBVH atlas on the device with its pitch, texel count and wide texels, for a painter
+    /// that shares it ([`super::Painter::sharing`]); None for the exact BVH.
+    pub(crate) fn atlas(&self) -> Option<(&Arc<Buffer>, u32, u32, u32)> {
+        let sz = &self.sizes;
         self.structure
             .get(3)
-            .map(|b| (b, self.sizes.atlas_pitch, self.sizes.atlas_len))
+            .map(|b| (b, sz.atlas_pitch, sz.atlas_len, sz.atlas_wide_len))
     }
 
     /// Traces `rays` without per-ray counters: [`Tracer::trace_with`] with `counters` off.

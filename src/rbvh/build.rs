@@ -418,12 +418,11 @@ impl Rbvh {
         let (nodes, depth) = step(progress, "building the tree over the leaves", 0, || {
             upper_tree(&mut out, root.as_ref())
         })?;
-        let sizes: Vec<(u32, u32)> = out
-            .tiles
-            .iter()
-            .map(|t| (t.frame.res_u, t.frame.res_v))
-            .collect();
-        let packing = step(progress, "packing the atlas", 0, || atlas::pack(&sizes))?;
+        let footprints: Vec<atlas::Footprint> =
+            out.tiles.iter().map(atlas::Footprint::of).collect();
+        let packing = step(progress, "packing the atlas", 0, || {
+            atlas::pack(&footprints)
+        })?;
         for (leaf, &base) in out.leaves.iter_mut().zip(&packing.bases) {
             leaf.atlas_base = base;
         }
@@ -459,7 +458,10 @@ impl Rbvh {
             build_ms: prepared_ms + start.elapsed().as_secs_f64() * 1e3,
             heightfield_leaves: out.leaves.len() as u32,
             triangle_leaves: out.triangle_leaves,
-            tile_texels: sizes.iter().map(|&(u, v)| u as u64 * v as u64).sum(),
+            tile_texels: footprints
+                .iter()
+                .map(|f| u64::from(f.res_u) * u64::from(f.res_v))
+                .sum(),
         };
         let bounds = root_children
             .iter()

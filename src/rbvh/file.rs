@@ -10,7 +10,7 @@
 //! | bytes | type | field |
 //! |---|---|---|
 //! | 0..8 | `[u8; 8]` | magic `RBVHv` followed by three zero bytes |
-//! | 8..12 | u32 | format version: 7 (this build writes it; it reads 1–6 as well, see below) |
+//! | 8..12 | u32 | format version: 8 (this build writes it; it reads 1–7 as well, see below) |
 //! | 12..16 | f32 | `params.texels_per_diagonal` |
 //! | 16..20, 20..24 | u32, f32 | `params.refinement`: tag (0 = `NormalCone`, 1 = `ProjectedArea`), its value (`max_angle_deg` or `min_ratio`) |
 //! | 24..28 | u32 | `params.subdivision`: 0 = `SpatialMedian`, 1 = `AreaSah` |
@@ -29,7 +29,8 @@
 //! | 108..112, 112..116 | u32, u32 | `atlas.pitch`, `atlas.rows` |
 //! | 116..148 | 4 × u64 | counts: nodes `N`, triangles `T`, leaves `L`, texels `X` |
 //! | 148..152 | f32 | `params.object_rate` (0: none) |
-//! | 152.. | `N` × 48 bytes | `nodes` ([`crate::bvh::GpuNode`], 12 words each) |
+//! | 152..156 | u32 | `atlas.narrow_rows`: rows at the end whose heights are 8-bit codes |
+//! | 156.. | `N` × 48 bytes | `nodes` ([`crate::bvh::GpuNode`], 12 words each) |
 //! | then | `T` × 48 bytes | `triangles` ([`crate::bvh::GpuTriangle`], 12 words each) |
 //! | then | `L` × 64 bytes | `leaves` ([`super::GpuHeightfield`], 16 words each) |
 //! | then | `X` × 4 bytes | `atlas.texels` ([`super::Texel`], one word each), row by row; height-only texels: `X` × 2 bytes, each texel's height code (u16) |
@@ -48,13 +49,16 @@
 //! from the surface and which extrapolated (the parity of a height code, [`Texel::is_sampled`]):
 //! every sampled-looking code is made odd on loading, within one code and inside its leaf's box
 //! (where the box allows: `unmark`), so that the march hangs no skirt under them and the RBVH
-//! traces as it was built. Versions 1–6 took every texel from the scene (`object_rate` 0). Saving such an RBVH writes version 7. A colour section
+//! traces as it was built. Versions 1–6 took every texel from the scene (`object_rate` 0). Versions 1–7 have 16-bit
+//! codes everywhere (`narrow_rows` 0). Saving such an RBVH writes version 8. A colour section
 //! that is cut short, or whose count is not `X`, is an [`Error::Parse`] like any other
 //! malformation.
 //!
 //! Loading checks everything a tracer relies on, so a loaded RBVH is safe to trace and to upload:
 //! the magic and version, the length (counts × record sizes must be exactly what follows the
-//! header), `X = pitch × rows` with a power-of-two pitch, no NaN in the header's floats, enum tags and flags in range, every
+//! header), `X = pitch × rows` with a power-of-two pitch, `narrow_rows ≤ rows` with every
+//! texel of those rows a hole or an 8-bit code (a multiple of [`Texel::NARROW_STEP`]: what the
+//! device can store there), no NaN in the header's floats, enum tags and flags in range, every
 //! node's grid (a finite origin, exponents in range, reserved bits zero; a version 1–4 node's
 //! boxes free of NaN), every node's children (inner: a node index, with count 0; triangle leaf: a range within `triangles`;
 //! height-field leaf: an index into `leaves`), every leaf's tile inside the atlas with finite
@@ -82,9 +86,11 @@ use crate::{Error, Result};
 /// The first eight bytes of every RBVH file.
 const MAGIC: [u8; 8] = *b"RBVHv\0\0\0";
 /// The format version this build writes.
-const VERSION: u32 = 7;
+const VERSION: u32 = 8;
 /// Bytes before the arrays (see the table in the module docs).
-const HEADER_BYTES: usize = 152;
+const HEADER_BYTES: usize = 156;
+/// Bytes before the arrays in version 7, whose header ends before `narrow_rows`.
+const V7_HEADER_BYTES: usize = 152;
 /// Bytes before the arrays in versions 4–6, whose header ends before `object_rate`.
 const V6_HEADER_BYTES: usize = 148;
 /// Bytes before the arrays in versions 1–3, whose header lacks bytes 40..52 of later ones.
@@ -179,6 +185,7 @@ impl Rbvh {
             out.extend_from_slice(&(count as u64).to_le_bytes());
         }
         put_f32(&mut out, p.object_rate);
+        put_u32(&mut out, self.atlas.narrow_rows);
         debug_assert_eq!(out.len(), HEADER_BYTES);
 
         put_records(&mut out, &self.nodes);
@@ -289,6 +296,7 @@ impl Rbvh {
         let header_bytes = match version {
             1..=3 => OLD_HEADER_BYTES,
             4..=6 => V6_HEADER_BYTES,
+            7 => V7_HEADER_BYTES,
             _ => HEADER_BYTES,
         };
         let params = RbvhParams {
@@ -331,6 +339,12 @@ impl Rbvh {
         let params = RbvhParams {
             object_rate,
             ..params
+        };
+        // Versions 1–7 stored 16-bit codes everywhere.
+        let narrow_rows = if version >= 8 {
+            r.u32("atlas.narrow_rows")?
+        } else {
+            0
         };
 
         let floats = [
@@ -465,8 +479,28 @@ impl Rbvh {
         let mut atlas = Atlas {
             pitch,
             rows,
+            narrow_rows,
             texels: texel_words,
         };
+        if narrow_rows > rows {
+            return Err(err(format!(
+                "atlas.narrow_rows {narrow_rows} exceeds its {rows} rows"
+            )));
+        }
+        let wide = atlas.wide_len();
+        if let Some((k, t)) = atlas.texels[wide..]
+            .iter()
+            .enumerate()
+            .find(|(_, t)| u32::from(t.height_code()) % Texel::NARROW_STEP != 0)
+        {
+            return Err(err(format!(
+                "atlas texel {} lies in the narrow rows but has height code {}, not a multiple \
+                 of {} (an 8-bit code)",
+                wide + k,
+                t.height_code(),
+                Texel::NARROW_STEP
+            )));
+        }
 
         for (index, node) in nodes.iter().enumerate() {
             if let Some(why) = node.malformation() {

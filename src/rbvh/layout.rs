@@ -181,6 +181,11 @@ impl Texel {
     pub const MAX_CODE: u16 = 0xFFFE;
     /// An empty texel: [`Texel::HOLE_CODE`] with a zero normal word.
     pub const HOLE: Texel = Texel(Self::HOLE_CODE as u32);
+    /// The 16-bit code of one step of an 8-bit code ([`Texel::narrow_code_of`]): byte `c` is
+    /// code `c · 257` (`c` repeated in both bytes).
+    pub const NARROW_STEP: u32 = 0x101;
+    /// Largest height code of a surface texel of an 8-bit tile: `254 · NARROW_STEP`.
+    pub const NARROW_MAX: u32 = 254 * Self::NARROW_STEP;
 
     /// A surface texel of height code `height_code` (at most [`Texel::MAX_CODE`]) and world-space
     /// unit `normal`, octahedrally encoded.
@@ -208,10 +213,21 @@ impl Texel {
     /// The code nearest `q` (a height in quanta, clamped to `[0, MAX_CODE]`) whose parity says
     /// whether the height was `sampled` ([`Texel::is_sampled`]): within one code of `q`.
     pub fn code_of(q: f64, sampled: bool) -> u16 {
-        debug_assert!(!q.is_nan(), "a height code of NaN");
-        let (odd, max) = (f64::from(u8::from(!sampled)), f64::from(Self::MAX_CODE));
-        let half = (q.clamp(0.0, max) - odd) / 2.0;
-        ((2.0 * half.round()).clamp(0.0, max - 2.0 * odd) + odd) as u16
+        nearest_code(q, sampled, Self::MAX_CODE)
+    }
+
+    /// The code nearest `q` (in quanta of a 16-bit code, clamped to `[0, NARROW_MAX]`) among the
+    /// codes an 8-bit tile can hold: `NARROW_STEP · c` with `c` of `sampled`'s parity in
+    /// `0..=254`, within one step of `q`. `NARROW_STEP` is odd, so the product keeps `c`'s
+    /// parity (the sampled mark), and `255 · NARROW_STEP` is [`Texel::HOLE_CODE`]: the device
+    /// expands a stored byte `c` to its code by that one product, holes included.
+    pub fn narrow_code_of(q: f64, sampled: bool) -> u16 {
+        let step = f64::from(Self::NARROW_STEP);
+        nearest_code(
+            q / step,
+            sampled,
+            (Self::NARROW_MAX / Self::NARROW_STEP) as u16,
+        ) * Self::NARROW_STEP as u16
     }
 
     /// Bits 16–31 decoded: the world-space unit normal (meaningless for a hole).
@@ -225,6 +241,14 @@ impl Texel {
         let n = octahedral_direction((self.0 >> 16) as u16);
         n.x * dir.x + n.y * dir.y + n.z * dir.z < 0.0
     }
+}
+
+/// The code nearest `q` in `[0, max]` (`max` even) of `sampled`'s parity (even when sampled).
+fn nearest_code(q: f64, sampled: bool, max: u16) -> u16 {
+    debug_assert!(!q.is_nan(), "a height code of NaN");
+    let (odd, max) = (f64::from(u8::from(!sampled)), f64::from(max));
+    let half = (q.clamp(0.0, max) - odd) / 2.0;
+    ((2.0 * half.round()).clamp(0.0, max - 2.0 * odd) + odd) as u16
 }
 
 /// A leaf's samples in world space: `step_u = axis_u / |axis_u|²` (= `u · texel`, the axes being
@@ -316,14 +340,29 @@ fn sign(x: f32) -> f32 {
 /// The texel atlas: `rows` rows of `pitch` texels. Tiles are packed on shelves (see `atlas.rs`).
 /// The shaders require `pitch` to be a power of two (they locate tiles with shifts): the builder
 /// makes it one, and the file reader and the upload refuse any other.
+///
+/// The last `narrow_rows` rows are the *narrow band*: every tile there has 8-bit height codes
+/// ([`Texel::narrow_code_of`]: multiples of [`Texel::NARROW_STEP`]), which the device stores a
+/// byte each ([`Atlas::device_words`]); the rows above hold 16-bit codes. The host keeps every
+/// texel as a full [`Texel`] either way, so that the CPU march reads the codes the device decodes.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Atlas {
     /// Texels per row; a power of two (the row stride of every tile).
     pub pitch: u32,
     /// Rows of texels.
     pub rows: u32,
+    /// Rows at the end of the atlas whose tiles have 8-bit height codes (0: none).
+    pub narrow_rows: u32,
     /// `pitch × rows` texels, row-major; unused texels are holes.
     pub texels: Vec<Texel>,
+}
+
+impl Atlas {
+    /// Texels before the narrow band: those the device stores with 16-bit height codes.
+    pub fn wide_len(&self) -> usize {
+        let wide_rows = self.rows.saturating_sub(self.narrow_rows) as usize;
+        (wide_rows * self.pitch as usize).min(self.texels.len())
+    }
 }
 
 #[cfg(test)]
@@ -349,6 +388,36 @@ mod tests {
         assert_eq!(Texel::code_of(1e9, true), Texel::MAX_CODE);
         assert_eq!(Texel::code_of(1e9, false), Texel::MAX_CODE - 1);
         assert!(!Texel::HOLE.is_sampled());
+    }
+
+    #[test]
+    fn narrow_codes_are_bytes_repeated_with_their_mark() {
+        let step = f64::from(Texel::NARROW_STEP);
+        for sampled in [true, false] {
+            for q in [
+                0.0, 100.0, 128.5, 257.0, 3000.3, 65277.0, 65278.0, 65534.0, 1e9, -5.0,
+            ] {
+                let code = Texel::narrow_code_of(q, sampled);
+                let byte = code & 0xFF;
+                assert_eq!(u32::from(code), u32::from(byte) * Texel::NARROW_STEP, "{q}");
+                assert!(
+                    u32::from(code) <= Texel::NARROW_MAX && byte != 0xFF,
+                    "{q}: {code}"
+                );
+                assert_eq!(
+                    Texel::new(code, Vec3::Z).is_sampled(),
+                    sampled,
+                    "{q}: {code}"
+                );
+                let clamped = q.clamp(0.0, f64::from(Texel::NARROW_MAX));
+                assert!((f64::from(code) - clamped).abs() <= step, "{q}: {code}");
+            }
+        }
+        assert_eq!(0xFF * Texel::NARROW_STEP, u32::from(Texel::HOLE_CODE));
+        assert_eq!(
+            u32::from(Texel::narrow_code_of(1e9, true)),
+            Texel::NARROW_MAX
+        );
     }
 
     #[test]

@@ -123,6 +123,8 @@ pub(crate) struct RbvhLeaves<'a> {
     best: Hit,
     /// Whether the triangles' hit is the nearest.
     triangle_nearest: bool,
+    /// The texels the device reads for `best`'s normal once the ray is done.
+    normal_reads: NormalReads,
 }
 
 impl<'a> RbvhLeaves<'a> {
@@ -140,16 +142,22 @@ impl<'a> RbvhLeaves<'a> {
             reserved: [0; 3],
         };
         self.triangle_nearest = false;
+        self.normal_reads = NormalReads::default();
     }
 
     /// The hit kept. The device reads the nearest triangle once more, after its loops, for the
-    /// hit's id and normal, when the best hit is a triangle: that read goes to `probe`.
+    /// hit's id and normal, when the best hit is a triangle, and a height field's texels for its
+    /// normal: those reads go to `probe`.
     pub(crate) fn finish<P: Probe>(self, probe: &mut P) -> Hit {
         if self.triangle_nearest {
-            self.triangles.hit(probe).unwrap_or(Hit::MISS)
-        } else {
-            self.best
+            return self.triangles.hit(probe).unwrap_or(Hit::MISS);
         }
+        for texel in self.normal_reads.iter() {
+            for read in self.rbvh.atlas.normal_reads(texel as usize) {
+                probe.read(read);
+            }
+        }
+        self.best
     }
 }
 
@@ -177,7 +185,8 @@ impl<P: Probe> Leaves<P> for RbvhLeaves<'_> {
             return false;
         };
         *t_closest = t;
-        self.record(t, normal, node);
+        self.record(t, normal.normal, node);
+        self.normal_reads = normal.reads;
         true
     }
 }
@@ -241,6 +250,7 @@ impl Rbvh {
             walk,
             best: Hit::MISS,
             triangle_nearest: false,
+            normal_reads: NormalReads::default(),
         }
     }
 
@@ -281,7 +291,7 @@ impl Rbvh {
         walk: Walk,
         stats: &mut TraceStats,
         probe: &mut P,
-    ) -> Option<(f32, Vec3)> {
+    ) -> Option<(f32, HitNormal)> {
         let leaf = self.leaves.get(leaf_index as usize)?;
         probe.read(element::<GpuHeightfield>(
             Array::Leaves,
@@ -650,6 +660,43 @@ pub(super) fn tile_fits(leaf: &GpuHeightfield, atlas: &Atlas) -> bool {
     last < atlas.texels.len() as u64
 }
 
+/// A height-field hit's normal, and the atlas texels the device reads for it once its ray is done
+/// (none for a facet's normal, which the march makes): what [`RbvhLeaves::finish`] reports.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct HitNormal {
+    pub(crate) normal: Vec3,
+    reads: NormalReads,
+}
+
+impl HitNormal {
+    /// A facet's normal (height-only texels), for which the device reads no texel.
+    fn facet(normal: Vec3) -> HitNormal {
+        HitNormal {
+            normal,
+            reads: NormalReads::default(),
+        }
+    }
+}
+
+/// Atlas indices of the texels read for a hit's normal, in order: at most the nearest corner and
+/// then the four corners.
+#[derive(Clone, Copy, Debug, Default)]
+struct NormalReads {
+    texels: [u32; 5],
+    len: usize,
+}
+
+impl NormalReads {
+    fn push(&mut self, texel: u32) {
+        self.texels[self.len] = texel;
+        self.len += 1;
+    }
+
+    fn iter(&self) -> impl Iterator<Item = u32> + '_ {
+        self.texels[..self.len].iter().copied()
+    }
+}
+
 /// The world-space unit normal of the cell triangle `(a, b, c)` (frame coordinates, counter-
 /// clockwise in `(s, t)`, so the normal points along `+h`, the side the leaf's surface faces):
 /// the frame maps world offsets by the rows `axis_u`, `axis_v`, `axis_w`, so normals map back by
@@ -721,7 +768,7 @@ impl Cells<'_> {
         t_out: f32,
         stats: &mut TraceStats,
         probe: &mut P,
-    ) -> Option<(f32, Vec3)> {
+    ) -> Option<(f32, HitNormal)> {
         let (atlas, leaf, fr) = (self.atlas, self.leaf, self.fr);
         let mut corner = [Texel::HOLE; 4];
         let mut pos = [Vec3::ZERO; 4];
@@ -733,12 +780,7 @@ impl Cells<'_> {
             let j = cj + (k >> 1) as i64;
             let (c, index) = texel(atlas, leaf, i, j);
             if let Some(index) = index {
-                let bytes = self.format.bytes();
-                probe.read(Read {
-                    array: Array::Atlas,
-                    offset: bytes * index as u64,
-                    bytes: bytes as u32,
-                });
+                probe.read(atlas.code_read(index, self.format));
             }
             corner[k] = c;
             if !c.is_hole() {
@@ -787,7 +829,7 @@ impl Cells<'_> {
                 self.leaf_index as usize,
             ));
             let [a, b, c] = hit_triangle.map(|k| pos[k]);
-            return Some((t, facet_normal(leaf, a, b, c)));
+            return Some((t, HitNormal::facet(facet_normal(leaf, a, b, c))));
         }
 
         Some((t, self.nearest_normal(&corner, ci, cj, t)))
@@ -801,27 +843,38 @@ impl Cells<'_> {
     /// a spike or a horn (its normal turned away from the viewer), and a hit shaded with it is a
     /// dark speck the exact surface does not have (issue "Small and valid at every scale",
     /// item 5: on the dragon close-up at Q0, 207 of 386 dark pixels).
-    fn nearest_normal(&self, corner: &[Texel; 4], ci: i64, cj: i64, t: f32) -> Vec3 {
+    ///
+    /// The device reads these texels once its ray is done (`rbvh_normal_texel`): the nearest, then
+    /// while none faces the ray, each present corner in that order; `HitNormal::reads` lists them.
+    fn nearest_normal(&self, corner: &[Texel; 4], ci: i64, cj: i64, t: f32) -> HitNormal {
         let (o, d) = (self.fr.ray.origin(), self.fr.ray.dir());
         let s = o.x + d.x * t;
         let r = o.y + d.y * t;
         let di = ((s.floor() as i64).clamp(ci, ci + 1) - ci) as usize;
         let dj = ((r.floor() as i64).clamp(cj, cj + 1) - cj) as usize;
-        let mut nearest = corner[di + 2 * dj];
-        if nearest.is_hole() {
-            for &c in corner {
-                if !c.is_hole() {
-                    nearest = c;
+        let mut k = di + 2 * dj;
+        if corner[k].is_hole() {
+            k = (0..4).find(|&q| !corner[q].is_hole()).unwrap_or(k);
+        }
+        let pitch = i64::from(self.atlas.pitch);
+        let k00 = i64::from(self.leaf.atlas_base) + cj * pitch + ci;
+        let index = |q: usize| (k00 + (q & 1) as i64 + (q >> 1) as i64 * pitch) as u32;
+        let mut reads = NormalReads::default();
+        reads.push(index(k));
+        let mut nearest = corner[k];
+        if !nearest.faces(self.dir) {
+            for q in (0..4).filter(|&q| !corner[q].is_hole()) {
+                reads.push(index(q));
+                if corner[q].faces(self.dir) {
+                    nearest = corner[q];
                     break;
                 }
             }
         }
-        if !nearest.faces(self.dir) {
-            if let Some(&c) = corner.iter().find(|c| !c.is_hole() && c.faces(self.dir)) {
-                nearest = c;
-            }
+        HitNormal {
+            normal: nearest.normal(),
+            reads,
         }
-        nearest.normal()
     }
 
     /// The four corner texels of cell `(ci, cj)` (c00, c10, c01, c11), read without reporting:
@@ -852,7 +905,7 @@ impl Cells<'_> {
         step: i64,
         t_in: f32,
         probe: &mut P,
-    ) -> Option<(f32, Vec3)> {
+    ) -> Option<(f32, HitNormal)> {
         // The entered edge's two corners: c00-c01 or c10-c11 across s, c00-c10 or c01-c11
         // across t.
         let edge = match (axis, step > 0) {
@@ -891,7 +944,7 @@ impl Cells<'_> {
         t_in: f32,
         t_out: f32,
         probe: &mut P,
-    ) -> Option<(f32, Vec3)> {
+    ) -> Option<(f32, HitNormal)> {
         let hole = corner.iter().position(|c| c.is_hole())?;
         // In the cell's own coordinates (fs, ft) ∈ [0, 1]²: the diagonal through c10 and c01
         // (fs + ft = 1) faces a hole at c00 or c11, the one through c00 and c11 (fs = ft) a
@@ -963,7 +1016,7 @@ impl Cells<'_> {
         edge: SkirtEdge,
         t: f32,
         probe: &mut P,
-    ) -> Option<(f32, Vec3)> {
+    ) -> Option<(f32, HitNormal)> {
         let (atlas, leaf, fr) = (self.atlas, self.leaf, self.fr);
         let (o, d) = (fr.ray.origin(), fr.ray.dir());
         let (depth, edge_h) = self.skirt_depth(corner, &edge)?;
@@ -977,12 +1030,7 @@ impl Cells<'_> {
         for k in 0..4 {
             if let (_, Some(index)) = texel(atlas, leaf, ci + (k & 1) as i64, cj + (k >> 1) as i64)
             {
-                let bytes = self.format.bytes();
-                probe.read(Read {
-                    array: Array::Atlas,
-                    offset: bytes * index as u64,
-                    bytes: bytes as u32,
-                });
+                probe.read(atlas.code_read(index, self.format));
             }
         }
         if self.format == TexelFormat::Height {
@@ -1000,7 +1048,7 @@ impl Cells<'_> {
             let fs = o.x + d.x * t - (ci as f32 + 0.5);
             let ft = o.y + d.y * t - (cj as f32 + 0.5);
             let [a, b, c] = surface_under(corner, fs, ft).map(|k| pos[k]);
-            return Some((t, facet_normal(leaf, a, b, c)));
+            return Some((t, HitNormal::facet(facet_normal(leaf, a, b, c))));
         }
         Some((t, self.nearest_normal(corner, ci, cj, t)))
     }
@@ -1136,6 +1184,7 @@ mod tests {
         let atlas = Atlas {
             pitch,
             rows: texels.len() as u32 / pitch,
+            narrow_rows: 0,
             texels,
         };
         let root = GpuNode::new(hf_child(&l, 0), ChildRef::ABSENT);
@@ -1190,7 +1239,8 @@ mod tests {
         );
         assert_eq!((c.triangle_leaves, c.triangles), (0, 0));
         // World (0.3, 0.2) is frame (4.6, 4.4): cell (4, 3), texels 28, 29, 36, 37 of the 8 × 8
-        // tile; the block range word follows the 64 texels.
+        // tile; the block range word follows the 64 texels. Once the ray is done, the hit's
+        // normal: that of texel 36, the sample nearest the hit.
         let read = |array, offset, bytes| Read {
             array,
             offset,
@@ -1206,6 +1256,7 @@ mod tests {
                 read(Array::Atlas, 4 * 29, 4),
                 read(Array::Atlas, 4 * 36, 4),
                 read(Array::Atlas, 4 * 37, 4),
+                read(Array::Atlas, 4 * 36, 4),
             ]
         );
     }
@@ -1569,6 +1620,7 @@ mod tests {
         let atlas = Atlas {
             pitch: 8,
             rows: 16,
+            narrow_rows: 0,
             texels,
         };
         rbvh(vec![root, node1], vec![tri], vec![l0, l1], atlas)
@@ -1749,6 +1801,7 @@ mod tests {
         let atlas = Atlas {
             pitch: res_u + 3,
             rows: res_v,
+            narrow_rows: 0,
             texels,
         };
         // A loose box, so that the march, not the box, decides at the tile's border.
@@ -1848,6 +1901,7 @@ mod tests {
         let atlas = Atlas {
             pitch: 8,
             rows: 4,
+            narrow_rows: 0,
             texels: vec![Texel::HOLE; 32],
         };
         let fits = |base, res_u, res_v| {

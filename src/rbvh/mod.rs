@@ -176,6 +176,26 @@ impl Rbvh {
         ))
     }
 
+    /// Texels of the tiles with 8-bit heights (in the atlas's narrow band, [`Atlas::narrow_rows`]).
+    pub fn narrow_texels(&self) -> u64 {
+        let wide = self.atlas.wide_len() as u64;
+        self.leaves
+            .iter()
+            .filter(|l| u64::from(l.atlas_base) >= wide)
+            .map(|l| u64::from(l.res_u) * u64::from(l.res_v))
+            .sum()
+    }
+
+    /// What a texel costs on the device: [`Rbvh::atlas_bytes`] (the texels in this RBVH's format,
+    /// the atlas's unused texels and the blocks' height ranges) over the tiles' texels; 0 without
+    /// any.
+    pub fn bytes_per_texel(&self) -> f64 {
+        match self.stats.tile_texels {
+            0 => 0.0,
+            n => self.atlas_bytes() as f64 / n as f64,
+        }
+    }
+
     /// Used tile texels over atlas texels.
     pub fn fill_ratio(&self) -> f64 {
         let total = self.atlas.texels.len() as f64;

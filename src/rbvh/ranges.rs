@@ -30,6 +30,7 @@ use rayon::prelude::*;
 
 use super::layout::{Atlas, Texel};
 use super::params::TexelFormat;
+use crate::probe::{Array, Read};
 
 /// Cells along a block's side.
 pub const BLOCK: u32 = 8;
@@ -75,33 +76,105 @@ pub fn block_ranges(atlas: &Atlas) -> Vec<u32> {
 }
 
 impl Atlas {
-    /// The atlas as the trace shaders read it in `format`: the texels — one word each, or with
-    /// [`TexelFormat::Height`] their height codes two to a word (texel `2k` in the low half of word
-    /// `k`, `2k + 1` in the high half) — then [`block_ranges`], from word
-    /// [`Atlas::texel_words`] on.
+    /// The atlas as the trace shaders read it in `format`, in words:
+    /// 1. the wide texels (before [`Atlas::wide_len`]): one word each (height code in bits 0–15,
+    ///    normal in 16–31), or with [`TexelFormat::Height`] their height codes two to a word
+    ///    (texel `2k` in the low half of word `k`, `2k + 1` in the high half);
+    /// 2. the narrow band's height codes a byte each, four to a word (low byte first): an 8-bit
+    ///    code `c` stands for the code `c · 257` ([`Texel::narrow_code_of`]), a hole for 255;
+    /// 3. with [`TexelFormat::HeightNormal`], the narrow band's normals two to a word;
+    /// 4. [`block_ranges`], from word [`Atlas::texel_words`] on.
+    ///
+    /// `glsl/atlas.glsl` reads it back.
     pub fn device_words(&self, format: TexelFormat) -> Vec<u32> {
+        let (wide, narrow) = self.texels.split_at(self.wide_len());
         let mut words: Vec<u32> = match format {
-            TexelFormat::HeightNormal => bytemuck::cast_slice::<Texel, u32>(&self.texels).to_vec(),
-            TexelFormat::Height => self
-                .texels
-                .chunks(2)
-                .map(|pair| {
-                    let high = pair.get(1).map_or(Texel::HOLE_CODE, |t| t.height_code());
-                    u32::from(pair[0].height_code()) | (u32::from(high) << 16)
-                })
-                .collect(),
+            TexelFormat::HeightNormal => bytemuck::cast_slice::<Texel, u32>(wide).to_vec(),
+            TexelFormat::Height => pack_words(wide, 2, |t| u32::from(t.height_code())),
         };
+        words.extend(pack_words(narrow, 4, |t| u32::from(t.height_code() & 0xFF)));
+        if format == TexelFormat::HeightNormal {
+            words.extend(pack_words(narrow, 2, |t| t.0 >> 16));
+        }
         words.extend(block_ranges(self));
         words
     }
 
     /// Words the texels take in `format`, where the block ranges start.
     pub fn texel_words(&self, format: TexelFormat) -> u64 {
-        match format {
-            TexelFormat::HeightNormal => self.texels.len() as u64,
-            TexelFormat::Height => (self.texels.len() as u64).div_ceil(2),
-        }
+        let wide = self.wide_len() as u64;
+        let narrow = self.texels.len() as u64 - wide;
+        let normals = match format {
+            TexelFormat::HeightNormal => narrow.div_ceil(2),
+            TexelFormat::Height => 0,
+        };
+        let wide_words = match format {
+            TexelFormat::HeightNormal => wide,
+            TexelFormat::Height => wide.div_ceil(2),
+        };
+        wide_words + narrow.div_ceil(4) + normals
     }
+}
+
+impl Atlas {
+    /// The device's read of texel `index`'s height code in `format` ([`Atlas::device_words`]):
+    /// the texel's word (its half-word without normals) above the narrow band, the word holding
+    /// its byte in it.
+    pub(crate) fn code_read(&self, index: usize, format: TexelFormat) -> Read {
+        let wide = self.wide_len();
+        if index < wide {
+            let bytes = format.bytes();
+            return Read {
+                array: Array::Atlas,
+                offset: bytes * index as u64,
+                bytes: bytes as u32,
+            };
+        }
+        let wide_words = match format {
+            TexelFormat::HeightNormal => wide,
+            TexelFormat::Height => wide.div_ceil(2),
+        };
+        word_read(wide_words + (index - wide) / 4)
+    }
+
+    /// The device's reads of texel `index` with its normal (the format with normals): its word
+    /// above the narrow band; in it, the word holding its code and the one holding its normal.
+    pub(crate) fn normal_reads(&self, index: usize) -> impl Iterator<Item = Read> {
+        let wide = self.wide_len();
+        let (first, normal) = if index < wide {
+            (word_read(index), None)
+        } else {
+            let k = index - wide;
+            let narrow = self.texels.len() - wide;
+            let normals = wide + narrow.div_ceil(4);
+            (word_read(wide + k / 4), Some(word_read(normals + k / 2)))
+        };
+        std::iter::once(first).chain(normal)
+    }
+}
+
+/// A read of atlas word `word`.
+fn word_read(word: usize) -> Read {
+    Read {
+        array: Array::Atlas,
+        offset: 4 * word as u64,
+        bytes: 4,
+    }
+}
+
+/// `texels` as words of `per_word` fields of `32 / per_word` bits, the first texel in the lowest
+/// bits, each field `field(texel)`; a last word's missing fields are all ones (holes).
+fn pack_words(texels: &[Texel], per_word: usize, field: impl Fn(Texel) -> u32) -> Vec<u32> {
+    let bits = 32 / per_word;
+    texels
+        .chunks(per_word)
+        .map(|chunk| {
+            (0..per_word).fold(0u32, |word, k| {
+                let value = chunk.get(k).map_or(u32::MAX, |&t| field(t));
+                word | (value & (u32::MAX >> (32 - bits))) << (k * bits)
+            })
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -116,8 +189,66 @@ mod tests {
         Atlas {
             pitch,
             rows,
+            narrow_rows: 0,
             texels,
         }
+    }
+
+    /// Texel `index` as `glsl/atlas.glsl` reads it from `words` (its code, and with normals its
+    /// normal in the high half).
+    fn device_texel(a: &Atlas, words: &[u32], format: TexelFormat, index: usize) -> u32 {
+        let wide = a.wide_len();
+        let height_only = format == TexelFormat::Height;
+        if index < wide {
+            return if height_only {
+                (words[index / 2] >> (16 * (index % 2))) & 0xFFFF
+            } else {
+                words[index]
+            };
+        }
+        let k = index - wide;
+        let codes = if height_only { wide.div_ceil(2) } else { wide };
+        let code = ((words[codes + k / 4] >> (8 * (k % 4))) & 0xFF) * Texel::NARROW_STEP;
+        if height_only {
+            return code;
+        }
+        let normals = codes + (a.texels.len() - wide).div_ceil(4);
+        code | ((words[normals + k / 2] >> (16 * (k % 2))) & 0xFFFF) << 16
+    }
+
+    #[test]
+    fn narrow_rows_are_stored_a_byte_a_height_and_read_back() {
+        // 8 × 7 texels, the last 3 rows narrow (codes c · 257), some holes; 56 texels: neither
+        // band a whole number of words in every format.
+        let mut a = atlas(8, 7, |x, y| {
+            let n = glam::Vec3::new(x as f32 - 3.5, y as f32 - 3.0, 2.0).normalize();
+            match (x + y) % 5 {
+                0 => Texel::HOLE,
+                _ if y >= 4 => Texel::new(((x * 31 + y) % 255) as u16 * 257, n),
+                _ => Texel::new((x * 4001 + y * 13) as u16, n),
+            }
+        });
+        a.narrow_rows = 3;
+        assert_eq!(a.wide_len(), 32);
+        for format in [TexelFormat::HeightNormal, TexelFormat::Height] {
+            let words = a.device_words(format);
+            let k = a.texel_words(format) as usize;
+            assert_eq!(&words[k..], &block_ranges(&a)[..], "{format:?}");
+            for (i, t) in a.texels.iter().enumerate() {
+                let want = match format {
+                    TexelFormat::HeightNormal => t.0,
+                    TexelFormat::Height => u32::from(t.height_code()),
+                };
+                assert_eq!(
+                    device_texel(&a, &words, format, i),
+                    want,
+                    "{format:?} texel {i}"
+                );
+            }
+        }
+        // Bytes: 32 wide texels at 4 (2) bytes, 24 narrow ones at 3 (1).
+        assert_eq!(a.texel_words(TexelFormat::HeightNormal), 32 + 6 + 12);
+        assert_eq!(a.texel_words(TexelFormat::Height), 16 + 6);
     }
 
     #[test]
@@ -175,6 +306,7 @@ mod tests {
         let a = Atlas {
             pitch: 1,
             rows: 3,
+            narrow_rows: 0,
             texels: vec![Texel::new(5, glam::Vec3::Z); 3],
         };
         let words = a.device_words(TexelFormat::Height);

@@ -73,12 +73,17 @@
 //!    2/2/0/0/1, t p99 the same). Filling every such corner, not only beside open edges, cost
 //!    the dragon's Q0 t p99 0.150 → 0.326% (docs/guarantees.md).
 //! 5. **Quantization.** With `h_lo`, `h_hi` the extreme heights of all valid samples (after
-//!    dilation, the ring, the walls and the open boundary), `h_scale = (h_hi − h_lo) / MAX_CODE` (0 when flat or empty), the code of height `h`
-//!    is the code nearest `(h − h_lo) / h_scale` whose parity tells a sampled height (even) from
-//!    an extrapolated one (odd; [`Texel::code_of`]), and `frame.origin` moves by `h_lo · w`, so
-//!    code 0 is the lowest height. Sixteen bits over the leaf's own height range, one of them the
-//!    mark, give a worst quantization error of `(h_hi − h_lo) / 65534` (plus f32 rounding of the
-//!    moved origin).
+//!    dilation, the ring, the walls and the open boundary), `frame.origin` moves by `h_lo · w`,
+//!    so code 0 is the lowest height, and the code of height `h` is the code nearest
+//!    `(h − h_lo) / h_scale` whose parity tells a sampled height (even) from an extrapolated one
+//!    (odd). A tile whose range is at most 254 · [`NARROW_QUANTUM_TEXELS`] texels is *narrow*:
+//!    `h_scale = (h_hi − h_lo) / NARROW_MAX` and its codes are 8-bit ones
+//!    ([`Texel::narrow_code_of`]), a worst quantization error of `(h_hi − h_lo) / 254`, at most
+//!    [`NARROW_QUANTUM_TEXELS`] of a texel; the device stores them a byte each (issue "Small and
+//!    valid at every scale": bytes per texel that fit the surface). Any other tile takes
+//!    `h_scale = (h_hi − h_lo) / MAX_CODE` and 16-bit codes ([`Texel::code_of`]), a worst error
+//!    of `(h_hi − h_lo) / 65534`. (Flat or empty tiles: `h_scale` 0, narrow.) Both add the f32
+//!    rounding of the moved origin.
 //! 6. **Exposed triangles** ([`Tile::exposed`], issue "No leaks between height fields"): the
 //!    leaf's triangles that meet the bare part of a cell (no cell triangle over it: the ring
 //!    found no surface for a corner), or rise more than [`CREST_TEXELS`] above a cell, or lie
@@ -136,6 +141,17 @@ pub(super) const RING_REACH: f32 = 2.0;
 /// allows) and as before on the dragon, the closed meshes and at the extreme criteria
 /// (docs/guarantees.md).
 pub const CREST_TEXELS: f32 = 2.0;
+
+/// Largest quantization step, in texels, of a tile's 8-bit heights (step 5 of the module docs):
+/// a tile whose heights span at most 254 such steps (two texels) stores a byte per height instead
+/// of two (issue "Small and valid at every scale", bytes per texel that fit the surface). The
+/// step is what accuracy allows, measured (`rbvh bench`, default scene and dragon close-up, Q0–Q4,
+/// 256 × 192): at 1/16 of a texel the default scene's t p99 rose by a fifth to four fifths
+/// (Q2 0.0217 → 0.0266% of the diagonal), at 1/32 and 1/64 by up to 13% and 4%; at 1/128 every
+/// figure of the default scene is unchanged and the dragon's within 0.4% (its scanned detail
+/// errs far more than any quantum). The paper-scale scene's Q2 then keeps 72% of its texels in
+/// 8-bit tiles (89% at 1/64).
+pub const NARROW_QUANTUM_TEXELS: f32 = 1.0 / 128.0;
 
 /// How far below the surface of a cell with an extrapolated corner one of the leaf's triangles
 /// may lie before it is traced exactly too, in texels ([`exposed`]): there the extrapolation
@@ -231,6 +247,9 @@ pub struct Tile {
     pub texels: Vec<Texel>,
     /// World height per quantum along `w`.
     pub h_scale: f32,
+    /// Whether the codes are 8-bit ones (step 5 of the module docs): the tile goes to the atlas's
+    /// narrow band ([`crate::rbvh::Atlas::narrow_rows`]).
+    pub narrow: bool,
     /// Samples covered by triangles (before dilation).
     pub covered: u32,
     /// Per texel, the index (into the triangles given to [`rasterize`]) of the triangle whose
@@ -1335,7 +1354,8 @@ fn walls(
     steep_walls
 }
 
-/// Step 5 of the module docs: 16-bit heights over the tile's own range, origin moved to `h_lo`.
+/// Step 5 of the module docs: 8- or 16-bit heights over the tile's own range, origin moved to
+/// `h_lo`.
 pub(super) fn quantize(
     frame: &Frame,
     height: &[f32],
@@ -1353,11 +1373,19 @@ pub(super) fn quantize(
     };
     let h_lo = valid().fold(f32::INFINITY, f32::min);
     let h_hi = valid().fold(f32::NEG_INFINITY, f32::max);
+    let range = if h_lo <= h_hi {
+        h_hi as f64 - h_lo as f64
+    } else {
+        0.0
+    };
+    let narrow = range <= 254.0 * f64::from(NARROW_QUANTUM_TEXELS) * f64::from(frame.texel);
+    let top = if narrow {
+        Texel::NARROW_MAX
+    } else {
+        u32::from(Texel::MAX_CODE)
+    };
     let (h_lo, h_scale) = if h_lo <= h_hi {
-        (
-            h_lo,
-            ((h_hi as f64 - h_lo as f64) / Texel::MAX_CODE as f64) as f32,
-        )
+        (h_lo, (range / f64::from(top)) as f32)
     } else {
         (0.0, 0.0)
     };
@@ -1374,7 +1402,11 @@ pub(super) fn quantize(
             } else {
                 0.0
             };
-            let code = Texel::code_of(q, sampled);
+            let code = if narrow {
+                Texel::narrow_code_of(q, sampled)
+            } else {
+                Texel::code_of(q, sampled)
+            };
             Texel::new(code, normals[s as usize])
         })
         .collect();
@@ -1385,6 +1417,7 @@ pub(super) fn quantize(
         },
         texels,
         h_scale,
+        narrow,
         covered,
         sources: Vec::new(),
         exposed: Vec::new(),
@@ -1427,6 +1460,12 @@ pub(super) mod tests {
     }
 
     /// Height of sample `k` measured along `w` from `reference`, decoded from the tile.
+    /// World height of one step of `tile`'s codes: its quantization error bound.
+    fn quantum(tile: &Tile) -> f32 {
+        let step = if tile.narrow { Texel::NARROW_STEP } else { 1 };
+        tile.h_scale * step as f32
+    }
+
     fn decoded(tile: &Tile, k: usize, reference: Vec3) -> f32 {
         let f = &tile.frame;
         (f.origin - reference).dot(f.w) + tile.texels[k].height_code() as f32 * tile.h_scale
@@ -1470,7 +1509,7 @@ pub(super) mod tests {
         let highest = plane(3.9, 3.2);
         let h = decoded(&open, 4 * 8 + 4, Vec3::ZERO);
         assert!(
-            (h - highest).abs() <= 2.0 * open.h_scale + 1e-5,
+            (h - highest).abs() <= 2.0 * quantum(&open) + 1e-5,
             "{h} vs {highest}"
         );
         assert!(filled.normal().dot(Vec3::new(-0.5, -0.25, 1.0).normalize()) > 0.999);
@@ -1844,6 +1883,32 @@ pub(super) mod tests {
         }
     }
 
+    /// Heights spanning up to 254 steps of [`NARROW_QUANTUM_TEXELS`] take 8-bit codes, and err by
+    /// at most that step; a span a little larger keeps 16-bit codes.
+    #[test]
+    fn narrow_tiles_err_by_at_most_their_quantum() {
+        let frame = Frame {
+            texel: 0.5,
+            ..xy_frame(16)
+        };
+        // Heights over the sample centres 0.5..15.5 of s: a span of 15 · slope world units.
+        let span_texels = 254.0 * NARROW_QUANTUM_TEXELS;
+        for (span, narrow) in [(0.0, true), (0.5, true), (0.99, true), (1.02, false)] {
+            let slope = span * span_texels * frame.texel / 15.0;
+            let plane = |s: f32, _: f32| slope * s;
+            let tile = plain(&square(&frame, 0.0, 16.0, plane), &frame, 0.01).unwrap();
+            assert_eq!(tile.narrow, narrow, "a span of {span} × 254 steps");
+            assert!(quantum(&tile) <= NARROW_QUANTUM_TEXELS * frame.texel * 1.0001 || !narrow);
+            for k in 0..256usize {
+                let want = plane((k % 16) as f32 + 0.5, 0.0);
+                let got = decoded(&tile, k, frame.origin);
+                assert!((got - want).abs() <= quantum(&tile) + 1e-5, "{span}: {k}");
+                let code = u32::from(tile.texels[k].height_code());
+                assert!(!narrow || code % Texel::NARROW_STEP == 0, "{span}: {k}");
+            }
+        }
+    }
+
     #[test]
     fn tilted_plane_is_within_the_quantization_bound() {
         let frame = Frame {
@@ -1854,8 +1919,7 @@ pub(super) mod tests {
         let plane = |s: f32, t: f32| 0.3 * s + 0.2 * t + 1.0;
         let tile = plain(&square(&frame, 0.0, 16.0, plane), &frame, 0.01).unwrap();
         assert_eq!(tile.covered, 256);
-        let range = plane(15.5, 15.5) - plane(0.5, 0.5);
-        let bound = range / Texel::MAX_CODE as f32 + 1e-5;
+        let bound = quantum(&tile) + 1e-5;
         for j in 0..16 {
             for i in 0..16 {
                 let k = j * 16 + i;
@@ -1893,8 +1957,7 @@ pub(super) mod tests {
         assert_eq!(tile.covered, 64);
         let core = |x: u32| (4..=11).contains(&x);
         let ring = |x: u32| x == 3 || x == 12;
-        let range = plane(12.5, 3.5) - plane(3.5, 12.5);
-        let bound = range / Texel::MAX_CODE as f32 + 1e-5;
+        let bound = quantum(&tile) + 1e-5;
         for j in 0..16 {
             for i in 0..16 {
                 let k = (j * 16 + i) as usize;
@@ -1932,15 +1995,15 @@ pub(super) mod tests {
         let at = |i: usize, j: usize| (j * 16 + i, tile.texels[j * 16 + i]);
         for j in 3..=10 {
             let (k, steep) = at(7, j);
-            assert!((decoded(&tile, k, frame.origin) - 3.5).abs() < 1e-3);
+            assert!((decoded(&tile, k, frame.origin) - 3.5).abs() < quantum(&tile) + 1e-3);
             assert!(steep.is_sampled());
             let (k, wall) = at(8, j);
             let h = decoded(&tile, k, frame.origin);
-            assert!(h.abs() < 1e-3, "({j}): {h}");
+            assert!(h.abs() < quantum(&tile) + 1e-3, "({j}): {h}");
             // 3.5 texels below its written neighbour: a steep wall, marked for the skirt.
             assert!(wall.is_sampled());
             let (k, flat) = at(1, j);
-            assert!((decoded(&tile, k, frame.origin) - 5.0).abs() < 1e-3);
+            assert!((decoded(&tile, k, frame.origin) - 5.0).abs() < quantum(&tile) + 1e-3);
             assert!(!flat.is_sampled());
         }
         // A rim that falls only half a texel: the wall moves the sample down to 4.5 all the
@@ -1955,7 +2018,7 @@ pub(super) mod tests {
         for j in 3..=10 {
             let k = j * 16 + 8;
             let h = decoded(&tile, k, frame.origin);
-            assert!((h - 4.5).abs() < 1e-3, "({j}): {h}");
+            assert!((h - 4.5).abs() < quantum(&tile) + 1e-3, "({j}): {h}");
             assert!(!tile.texels[k].is_sampled());
         }
     }
@@ -1975,8 +2038,7 @@ pub(super) mod tests {
             [p(2.0, 6.0), p(6.0, 10.0), p(2.0, 10.0)],
         ]);
         let tile = plain(&tris, &frame, 0.01).unwrap();
-        let range = plane(10.5, 1.5) - plane(1.5, 10.5);
-        let bound = range / Texel::MAX_CODE as f32 + 1e-4;
+        let bound = quantum(&tile) + 1e-4;
         for (i, j) in [(6, 6), (10, 4), (4, 10), (1, 4), (4, 1)] {
             let k = j * 16 + i;
             let got = decoded(&tile, k, frame.origin);
@@ -2034,12 +2096,15 @@ pub(super) mod tests {
             // extrapolation, marked as such (no skirt hangs under it).
             let k = (j * 16 + 12) as usize;
             let got = decoded(&tile, k, frame.origin);
-            assert!((got - bend(12.5, 0.0)).abs() < 1e-3, "({j}): {got}");
+            assert!(
+                (got - bend(12.5, 0.0)).abs() < quantum(&tile) + 1e-3,
+                "({j}): {got}"
+            );
             assert!(tile.texels[k].is_sampled());
-            assert!((decoded(&plain, k, frame.origin) - 3.0).abs() < 1e-3);
+            assert!((decoded(&plain, k, frame.origin) - 3.0).abs() < quantum(&plain) + 1e-3);
             assert!(!plain.texels[k].is_sampled());
             let k = (j * 16 + 3) as usize;
-            assert!((decoded(&tile, k, frame.origin) - 3.0).abs() < 1e-3);
+            assert!((decoded(&tile, k, frame.origin) - 3.0).abs() < quantum(&tile) + 1e-3);
             assert!(!tile.texels[k].is_sampled());
         }
     }

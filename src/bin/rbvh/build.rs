@@ -84,7 +84,7 @@ pub fn run(a: Args) -> Result<()> {
     };
     if table {
         println!(
-            "{:>7} {:>9} {:>9} {:>9} {:>8} {:>9} {:>11} {:>10} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9} {:>10} {:>9}",
+            "{:>7} {:>9} {:>9} {:>9} {:>8} {:>9} {:>11} {:>10} {:>7} {:>7} {:>8} {:>9} {:>9} {:>9} {:>9} {:>9} {:>10} {:>9}",
             "level",
             "texel",
             "build ms",
@@ -94,6 +94,8 @@ pub fn run(a: Args) -> Result<()> {
             "tile texels",
             "atlas",
             "fill",
+            "8-bit",
+            "B/texel",
             "tree MB",
             "atlas MB",
             "tris MB",
@@ -113,7 +115,7 @@ pub fn run(a: Args) -> Result<()> {
         })?;
         if table {
             println!(
-            "{:>7} {:>9.3e} {:>9.0} {:>9} {:>8} {:>9} {:>11} {:>10} {:>6.1}% {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>10} {:>9}",
+            "{:>7} {:>9.3e} {:>9.0} {:>9} {:>8} {:>9} {:>11} {:>10} {:>6.1}% {:>6.1}% {:>8.2} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>10} {:>9}",
             name,
             r.texel_size,
             r.stats.build_ms,
@@ -123,6 +125,8 @@ pub fn run(a: Args) -> Result<()> {
             r.stats.tile_texels,
             format!("{}x{}", r.atlas.pitch, r.atlas.rows),
             100.0 * r.fill_ratio(),
+            100.0 * r.narrow_texels() as f64 / r.stats.tile_texels.max(1) as f64,
+            r.bytes_per_texel(),
             mb(r.tree_bytes()),
             mb(r.atlas_bytes()),
             mb(r.triangle_bytes()),
