@@ -145,11 +145,11 @@ pub const CREST_TEXELS: f32 = 2.0;
 /// Largest quantization step, in texels, of a tile's 8-bit heights (step 5 of the module docs):
 /// a tile whose heights span at most 254 such steps (two texels) stores a byte per height instead
 /// of two (issue "Small and valid at every scale", bytes per texel that fit the surface). The
-/// step is what accuracy allows, measured (`rbvh bench`, default scene and dragon close-up, Q0–Q4,
-/// 256 × 192): at 1/16 of a texel the default scene's t p99 rose by a fifth to four fifths
-/// (Q2 0.0217 → 0.0266% of the diagonal), at 1/32 and 1/64 by up to 13% and 4%; at 1/128 every
-/// figure of the default scene is unchanged and the dragon's within 0.4% (its scanned detail
-/// errs far more than any quantum). The paper-scale scene's Q2 then keeps 72% of its texels in
+/// step is what accuracy allows, measured (`rbvh bench`, default scene and dragon close-up, Q0,
+/// Q2 and Q4, 256 × 192): at 1/16 of a texel the default scene's t p99 rose by 14–83% (Q2
+/// 0.0217 → 0.0266% of the diagonal), at 1/32 and 1/64 by up to 13% and 4%; at 1/128 every
+/// figure of the default scene is unchanged and the dragon's t p99 within 0.4%, its mean within
+/// 1.2% (its scanned detail errs far more than any quantum). The paper-scale scene's Q2 then keeps 72% of its texels in
 /// 8-bit tiles (89% at 1/64).
 pub const NARROW_QUANTUM_TEXELS: f32 = 1.0 / 128.0;
 
