@@ -25,12 +25,13 @@ uint rbvh_atlas_code(uint index, uint len, uint wide_len, bool height_only) {
         return 0xFFFFu;
     }
     bool narrow = index >= wide_len;
+    uint k = index - wide_len;
     uint wide_words = height_only ? (wide_len + 1u) >> 1 : wide_len;
-    // Bits per texel as a power of two: 8 in the narrow band, 16 or 32 (code and normal) above.
-    uint log_bits = narrow ? 3u : (height_only ? 4u : 5u);
-    uint bit = (narrow ? index - wide_len : index) << log_bits;
-    uint word = RBVH_ATLAS_WORD((narrow ? wide_words : 0u) + (bit >> 5));
-    uint code = (word >> (bit & 31u)) & (narrow ? 0xFFu : 0xFFFFu);
+    // A byte of the narrow band, a half-word without normals above it, else the texel's word;
+    // word indices and shifts made apart (a bit offset would overflow 32 bits past 2^27 texels).
+    uint word = narrow ? wide_words + (k >> 2) : (height_only ? index >> 1 : index);
+    uint shift = narrow ? (k & 3u) << 3 : (height_only ? (index & 1u) << 4 : 0u);
+    uint code = (RBVH_ATLAS_WORD(word) >> shift) & (narrow ? 0xFFu : 0xFFFFu);
     return narrow ? code * 0x101u : code;
 }
 

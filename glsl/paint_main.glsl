@@ -25,7 +25,7 @@ layout(std430, set = 0, binding = 1) readonly buffer Brushes {
     PaintBrush brushes[];
 };
 
-// 96 bytes: see src/gpu/painter.rs (PaintParams). The leaf's frame comes with each dispatch:
+// 104 bytes: see src/gpu/painter.rs (PaintParams). The leaf's frame comes with each dispatch:
 // step_u = axis_u / |axis_u|^2 and step_v likewise (world vectors of one texel), computed once on
 // the host for the GPU and the CPU reference alike.
 layout(push_constant) uniform PaintParams {

@@ -431,9 +431,10 @@ uint rbvh_walk_bound(int last_i, int last_j) {
     return 2u * uint(last_i + last_j + 1);
 }
 
-// Marches leaf `li` over [tmin, t_closest); returns t (< 0 on a miss) and, on a hit, the texel
-// whose normal it reports (decode with rbvh_decode_normal), or with RBVH_HEIGHT_ONLY the world
-// normal of the cell triangle hit (`facet_normal`, as facet_normal in march.rs). `cells` counts
+// Marches leaf `li` over [tmin, t_closest); returns t (< 0 on a miss) and, on a hit, where its
+// normal's texel is (`normal_cell`: the cell's c00 atlas index and rbvh_cell_normal_choice, for
+// rbvh_normal_texel once the ray is done), or with RBVH_HEIGHT_ONLY the world normal of the cell
+// triangle hit (`facet_normal`, as facet_normal in march.rs). `cells` counts
 // cells visited. `cut` is set when the device ended a loop early (see traverse.glsl).
 float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cells, out uvec2 normal_cell,
                  out vec3 facet_normal, inout bool cut) {

@@ -107,7 +107,7 @@ pub enum Array {
     Triangles = 1,
     /// Height-field leaf records (`GpuHeightfield`, 64 bytes each).
     Leaves = 2,
-    /// The atlas words: texels (4 bytes each), then the 8×8 blocks' height ranges.
+    /// The atlas words (`Atlas::device_words`): texels, then the 8×8 blocks' height ranges.
     Atlas = 3,
     /// Level-of-detail records (`GpuLod`, 48 bytes each).
     LodRecords = 4,

@@ -64,7 +64,7 @@ fn device_and_cpu_twin_count_the_same_work() {
         assert!(!exact.block_jumps());
         let e = exact.set_block_jumps(true).unwrap_err().to_string();
         assert!(e.contains("no march"), "{e}");
-        // Height-only texels are read two to a word, and the block ranges after them.
+        // Height-only texels are read two (8-bit: four) to a word, and the block ranges after them.
         let builds = [
             (0, TexelFormat::HeightNormal),
             (2, TexelFormat::HeightNormal),

@@ -275,6 +275,41 @@ fn a_tile_that_wraps_across_atlas_rows_is_refused_or_empty() {
     assert!(gpu.iter().chain(&cpu).all(|h| !h.is_hit()));
 }
 
+/// The device stores a byte a height in the atlas's narrow rows: an RBVH built by hand with a code
+/// there that is not an 8-bit one (a multiple of 257) is refused by the upload, as by the loader,
+/// rather than traced with other heights than the CPU's.
+#[test]
+fn a_wide_code_in_the_narrow_rows_is_refused() {
+    use glam::Vec3;
+    use rbvh::rbvh::{Atlas, Texel};
+    let ctx = common::context();
+    let (pitch, rows) = (16u32, 4u32);
+    let mut atlas = Atlas {
+        pitch,
+        rows,
+        narrow_rows: 4,
+        texels: vec![Texel::new(257, Vec3::Y); (pitch * rows) as usize],
+    };
+    let fine = Arc::new(one_leaf(
+        0,
+        (4, 4),
+        0.001,
+        atlas.clone(),
+        Vec3::new(5.0, 70.0, 1.0),
+    ));
+    Tracer::new(&ctx, &Structure::from(fine)).expect("8-bit codes upload");
+    atlas.texels[17] = Texel::new(300, Vec3::Y);
+    let r = Arc::new(one_leaf(0, (4, 4), 0.001, atlas, Vec3::new(5.0, 70.0, 1.0)));
+    let e = Tracer::new(&ctx, &Structure::from(r))
+        .err()
+        .expect("the upload refuses the code")
+        .to_string();
+    assert!(
+        e.contains("atlas texel 17 lies in the narrow rows but has height code 300"),
+        "{e}"
+    );
+}
+
 /// The shaders locate a tile in the atlas with shifts, not divisions: an atlas whose pitch is not a
 /// power of two (which the builder never makes) is refused by the upload, and by the loader.
 #[test]

@@ -249,7 +249,7 @@ fn bad_magic_and_unknown_versions_are_rejected() {
 /// Files written before version 6 (1: normal texels; 2: with colours; 3: height-only; 4: with
 /// the sampled judgement's size and the texel format in the header, all with 64-byte nodes; 5:
 /// 48-byte nodes) load as the RBVHs they described, their nodes quantized, and are saved again as
-/// version 7. Before version 4 they were built by the paper's rule alone, and before version 7
+/// version 8. Before version 4 they were built by the paper's rule alone, and before version 7
 /// every texel was the scene's (`object_rate` 0). Their height codes
 /// carry no mark of which were sampled, so each even one becomes odd (extrapolated: no skirt)
 /// within one code where that keeps it inside its leaf's box, the normals as they were.

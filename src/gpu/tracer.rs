@@ -101,7 +101,8 @@ const COUNT_CONSTANT_ID: u32 = 0;
 const JUMPS_CONSTANT_ID: u32 = 1;
 
 /// `constant_id` of the plain RBVH trace shaders' `rbvh_height_only`
-/// (`glsl/trace_rbvh_main.glsl`): the atlas holds height codes alone, two to a word.
+/// (`glsl/trace_rbvh_main.glsl`): the atlas holds height codes alone (two to a word, four in its
+/// narrow band: [`Atlas::device_words`](crate::rbvh::Atlas::device_words)).
 const HEIGHT_ONLY_CONSTANT_ID: u32 = 2;
 
 /// The name of `kind`'s trace shader (its pipeline's name).
@@ -323,6 +324,16 @@ fn rbvh_parts<'a>(rbvh: &'a Rbvh, atlas_words: &'a [u32]) -> Result<(TraceParams
                 "atlas pitch {}: not a power of two, which the shaders count on (the builder \
                  and the file reader make every pitch one)",
                 rbvh.atlas.pitch
+            ),
+        ));
+    }
+    if let Some((k, code)) = rbvh.atlas.first_wide_code_in_narrow_band() {
+        return Err(Error::param(
+            "rbvh",
+            format!(
+                "atlas texel {k} lies in the narrow rows but has height code {code}, not a \
+                 multiple of {} (an 8-bit code, all the device stores there)",
+                crate::rbvh::Texel::NARROW_STEP
             ),
         ));
     }

@@ -15,7 +15,7 @@ use crate::{Error, Result};
 
 /// Smallest atlas pitch.
 const MIN_PITCH: u64 = 16;
-/// Largest pitch chosen for the sake of a square-ish atlas. The builder's tiles are at most
+/// Largest pitch [`pack`] tries. The builder's tiles are at most
 /// `max_tile` ≤ 4096 texels wide, so they always fit; a wider tile (never produced) gets the
 /// power of two above its width instead, so that packing still succeeds.
 const MAX_PITCH: u64 = 16384;

@@ -487,17 +487,10 @@ impl Rbvh {
                 "atlas.narrow_rows {narrow_rows} exceeds its {rows} rows"
             )));
         }
-        let wide = atlas.wide_len();
-        if let Some((k, t)) = atlas.texels[wide..]
-            .iter()
-            .enumerate()
-            .find(|(_, t)| u32::from(t.height_code()) % Texel::NARROW_STEP != 0)
-        {
+        if let Some((k, code)) = atlas.first_wide_code_in_narrow_band() {
             return Err(err(format!(
-                "atlas texel {} lies in the narrow rows but has height code {}, not a multiple \
-                 of {} (an 8-bit code)",
-                wide + k,
-                t.height_code(),
+                "atlas texel {k} lies in the narrow rows but has height code {code}, not a \
+                 multiple of {} (an 8-bit code)",
                 Texel::NARROW_STEP
             )));
         }

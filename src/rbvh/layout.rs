@@ -363,6 +363,16 @@ impl Atlas {
         let wide_rows = self.rows.saturating_sub(self.narrow_rows) as usize;
         (wide_rows * self.pitch as usize).min(self.texels.len())
     }
+
+    /// The first texel of the narrow band (index, code) whose height code is not an 8-bit one (a
+    /// multiple of [`Texel::NARROW_STEP`]), which the device could not store: None when all are.
+    pub fn first_wide_code_in_narrow_band(&self) -> Option<(usize, u16)> {
+        let wide = self.wide_len();
+        self.texels[wide..]
+            .iter()
+            .position(|t| u32::from(t.height_code()) % Texel::NARROW_STEP != 0)
+            .map(|k| (wide + k, self.texels[wide + k].height_code()))
+    }
 }
 
 #[cfg(test)]

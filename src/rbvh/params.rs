@@ -39,11 +39,11 @@ pub enum Subdivision {
 /// requires).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum TexelFormat {
-    /// 32 bits: the 16-bit height code and the sample's 8:8 octahedral normal; a hit reports the
-    /// normal of the sample nearest it (the paper's texels).
+    /// The height code and the sample's 8:8 octahedral normal: 32 bits, or 24 in a tile of 8-bit
+    /// heights; a hit reports the normal of the sample nearest it (the paper's texels).
     #[default]
     HeightNormal,
-    /// 16 bits: the height code alone, half the atlas. A hit reports the normal of the cell
+    /// The height code alone, 16 or 8 bits: half the atlas or less. A hit reports the normal of the cell
     /// triangle it hit (a facet normal, exact for the height field as sampled), so shading shows
     /// the facets; for visibility (AO, shadows) the hits are the same as with normals. Carries no
     /// colour channel, and levels of detail (whose columns take their normals from the texels)
@@ -52,7 +52,8 @@ pub enum TexelFormat {
 }
 
 impl TexelFormat {
-    /// Bytes of one texel on the device and in the file.
+    /// Bytes of one texel of 16-bit height in the file and on the device (a texel of 8-bit height
+    /// takes one less there: [`crate::rbvh::Atlas::device_words`]).
     pub fn bytes(self) -> u64 {
         match self {
             TexelFormat::HeightNormal => 4,

@@ -1459,13 +1459,13 @@ pub(super) mod tests {
         rasterize(triangles, frame, fold_tolerance, None, None, &[])
     }
 
-    /// Height of sample `k` measured along `w` from `reference`, decoded from the tile.
     /// World height of one step of `tile`'s codes: its quantization error bound.
     fn quantum(tile: &Tile) -> f32 {
         let step = if tile.narrow { Texel::NARROW_STEP } else { 1 };
         tile.h_scale * step as f32
     }
 
+    /// Height of sample `k` measured along `w` from `reference`, decoded from the tile.
     fn decoded(tile: &Tile, k: usize, reference: Vec3) -> f32 {
         let f = &tile.frame;
         (f.origin - reference).dot(f.w) + tile.texels[k].height_code() as f32 * tile.h_scale
