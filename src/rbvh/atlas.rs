@@ -292,6 +292,26 @@ mod tests {
         assert_eq!(pack(&wide(&s)).unwrap().narrow_rows, 0);
     }
 
+    /// Five 64 × 64 tiles: a square atlas (pitch 256) would leave its second shelf half empty
+    /// (32,768 texels); the pitch of one tile wastes nothing.
+    #[test]
+    fn the_pitch_with_the_fewest_texels_is_chosen() {
+        let s = vec![(64, 64); 5];
+        let p = pack(&wide(&s)).unwrap();
+        check_placement(&s, &p);
+        assert_eq!((p.pitch, p.rows), (64, 320));
+        // Against every pitch it could have taken, none holds them in fewer texels.
+        let tiles = wide(&s);
+        let order: Vec<usize> = (0..tiles.len()).collect();
+        for pitch in [64u64, 128, 256, 512, 1024] {
+            let rows = shelve(&tiles, &order, pitch).rows;
+            assert!(
+                pitch * rows >= u64::from(p.pitch) * u64::from(p.rows),
+                "{pitch}"
+            );
+        }
+    }
+
     #[test]
     fn equal_and_zero_sized_tiles_are_placed_deterministically() {
         let s = vec![(8, 8), (0, 5), (8, 8), (16, 4), (3, 0), (8, 8)];
