@@ -13,7 +13,9 @@ use rbvh::rbvh::{
 use rbvh::Error;
 
 /// Bytes before the arrays, per the format table in `src/rbvh/file.rs`.
-const HEADER_BYTES: usize = 156;
+const HEADER_BYTES: usize = 160;
+/// The header of version 8, which ends before `params.exact_when_cheaper`.
+const V8_HEADER_BYTES: usize = 156;
 /// The header of version 7, which ends before `atlas.narrow_rows`.
 const V7_HEADER_BYTES: usize = 152;
 /// The header of versions 4–6, which ends before `object_rate`.
@@ -84,6 +86,7 @@ fn sample() -> Rbvh {
             object_split: false,
             sampled_criterion_texels: 2.5,
             object_rate: 0.375,
+            exact_when_cheaper: true,
             ..RbvhParams::quality(3).unwrap()
         },
         nodes,
@@ -134,13 +137,14 @@ fn save_load_round_trips_exactly() {
     loaded.save(&again).unwrap();
     assert_eq!(std::fs::read(&again).unwrap(), bytes);
 
-    // The documented framing: magic, version 8, the sampling judgement's size, normal texels, no
-    // colour channel, each object's rate and the narrow rows last, then the arrays after a
-    // 156-byte header.
+    // The documented framing: magic, version 9, the sampling judgement's size, normal texels, no
+    // colour channel, each object's rate, the narrow rows and whether triangles were traced
+    // exactly where cheaper last, then the arrays after a 160-byte header.
     assert_eq!(&bytes[..8], b"RBVHv\0\0\0");
-    assert_eq!(word(&bytes, 8), 8);
+    assert_eq!(word(&bytes, 8), 9);
     assert_eq!(f32::from_bits(word(&bytes, 148)), 0.375);
     assert_eq!(word(&bytes, 152), 0);
+    assert_eq!(word(&bytes, 156), 1);
     assert_eq!(f32::from_bits(word(&bytes, 40)), 2.5);
     assert_eq!((word(&bytes, 44), word(&bytes, 48)), (0, 0));
     let arrays = 2 * 48 + 2 * 48 + 2 * 64 + 72 * 4;
@@ -153,14 +157,6 @@ fn save_load_round_trips_exactly() {
 /// The little-endian u32 at byte `at`.
 fn word(bytes: &[u8], at: usize) -> u32 {
     u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap())
-}
-
-/// `rbvh` as version 5 or 6 wrote it: without `object_rate` at the header's end.
-fn as_v6(rbvh: &Rbvh, version: u32) -> Vec<u8> {
-    let mut bytes = rbvh.to_bytes();
-    bytes.drain(V6_HEADER_BYTES..HEADER_BYTES);
-    bytes[8..12].copy_from_slice(&version.to_le_bytes());
-    bytes
 }
 
 /// `rbvh` as the older `version` (1–4) wrote it: each node in 64 bytes with its children's boxes
@@ -234,7 +230,7 @@ fn bad_magic_and_unknown_versions_are_rejected() {
     let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
     assert!(message.contains("not an RBVH file"), "{message}");
 
-    for version in [0, 9, u32::MAX] {
+    for version in [0, 10, u32::MAX] {
         let mut bytes = sample().to_bytes();
         bytes[8..12].copy_from_slice(&version.to_le_bytes());
         let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
@@ -242,15 +238,16 @@ fn bad_magic_and_unknown_versions_are_rejected() {
             message.contains(&format!("unsupported version {version}")),
             "{message}"
         );
-        assert!(message.contains("reads versions 1 to 8"), "{message}");
+        assert!(message.contains("reads versions 1 to 9"), "{message}");
     }
 }
 
 /// Files written before version 6 (1: normal texels; 2: with colours; 3: height-only; 4: with
 /// the sampled judgement's size and the texel format in the header, all with 64-byte nodes; 5:
 /// 48-byte nodes) load as the RBVHs they described, their nodes quantized, and are saved again as
-/// version 8. Before version 4 they were built by the paper's rule alone, and before version 7
-/// every texel was the scene's (`object_rate` 0). Their height codes
+/// version 9. Before version 4 they were built by the paper's rule alone, before version 7
+/// every texel was the scene's (`object_rate` 0), and before version 9 every triangle a height
+/// field could hold was sampled (`exact_when_cheaper` false). Their height codes
 /// carry no mark of which were sampled, so each even one becomes odd (extrapolated: no skirt)
 /// within one code where that keeps it inside its leaf's box, the normals as they were.
 #[test]
@@ -271,7 +268,7 @@ fn older_versions_load_as_what_they_described() {
         let old = if version < 5 {
             as_old_version(&rbvh, version)
         } else {
-            as_v6(&rbvh, version)
+            as_version(&rbvh, version)
         };
         let mut loaded = Rbvh::from_bytes(&old, path).unwrap();
         let mut unmarked = 0;
@@ -299,12 +296,13 @@ fn older_versions_load_as_what_they_described() {
             params: RbvhParams {
                 sampled_criterion_texels,
                 object_rate: 0.0,
+                exact_when_cheaper: false,
                 ..rbvh.params
             },
             ..rbvh
         };
         assert_eq!(loaded, expected, "version {version}");
-        assert_eq!(word(&loaded.to_bytes(), 8), 8);
+        assert_eq!(word(&loaded.to_bytes(), 8), 9);
         let header = if version < 4 { 136 } else { V6_HEADER_BYTES };
         let message = parse_error(Rbvh::from_bytes(&old[..old.len() - 1], path), path);
         assert!(
@@ -315,20 +313,67 @@ fn older_versions_load_as_what_they_described() {
 }
 
 /// A version 6 file (marked heights, no `object_rate`) loads as it was, every texel the
-/// scene's, and is saved again as version 8.
+/// scene's, and is saved again as version 9.
 #[test]
 fn version_6_loads_with_every_texel_the_scenes() {
     let rbvh = sample();
-    let loaded = Rbvh::from_bytes(&as_v6(&rbvh, 6), Path::new("v6.rbvh")).unwrap();
+    let loaded = Rbvh::from_bytes(&as_version(&rbvh, 6), Path::new("v6.rbvh")).unwrap();
     let expected = Rbvh {
         params: RbvhParams {
             object_rate: 0.0,
+            exact_when_cheaper: false,
             ..rbvh.params
         },
         ..rbvh
     };
     assert_eq!(loaded, expected);
-    assert_eq!(word(&loaded.to_bytes(), 8), 8);
+    assert_eq!(word(&loaded.to_bytes(), 8), 9);
+}
+
+/// `rbvh` as version 5–8 wrote it: its header without what later versions appended
+/// (`exact_when_cheaper` from 9, `narrow_rows` from 8, `object_rate` from 7).
+fn as_version(rbvh: &Rbvh, version: u32) -> Vec<u8> {
+    let mut bytes = rbvh.to_bytes();
+    let end = match version {
+        ..=6 => V6_HEADER_BYTES,
+        7 => V7_HEADER_BYTES,
+        _ => V8_HEADER_BYTES,
+    };
+    bytes.drain(end..HEADER_BYTES);
+    bytes[8..12].copy_from_slice(&version.to_le_bytes());
+    bytes
+}
+
+/// `rbvh` built without tracing any triangle exactly for its size, as versions 1–8 were.
+fn all_sampled(rbvh: &Rbvh) -> Rbvh {
+    Rbvh {
+        params: RbvhParams {
+            exact_when_cheaper: false,
+            ..rbvh.params
+        },
+        ..rbvh.clone()
+    }
+}
+
+/// A version 8 file loads as built by sampling every triangle it could (`exact_when_cheaper`
+/// false); both values round-trip; any other value of the flag is a parse error.
+#[test]
+fn exact_when_cheaper_round_trips_and_is_checked() {
+    let rbvh = sample();
+    let path = Path::new("v8.rbvh");
+    let loaded = Rbvh::from_bytes(&as_version(&rbvh, 8), path).unwrap();
+    assert_eq!(loaded, all_sampled(&rbvh));
+    assert_eq!(word(&loaded.to_bytes(), 156), 0);
+    for r in [rbvh.clone(), all_sampled(&rbvh)] {
+        assert_eq!(Rbvh::from_bytes(&r.to_bytes(), path).unwrap(), r);
+    }
+    let mut bad = rbvh.to_bytes();
+    bad[156..160].copy_from_slice(&2u32.to_le_bytes());
+    let message = parse_error(Rbvh::from_bytes(&bad, path), path);
+    assert!(
+        message.contains("params.exact_when_cheaper is 2, not 0 or 1"),
+        "{message}"
+    );
 }
 
 /// `sample()` with its last four atlas rows narrow: their codes made 8-bit ones.
@@ -349,10 +394,11 @@ fn narrow_sample() -> Rbvh {
 #[test]
 fn narrow_rows_round_trip_and_are_checked() {
     let rbvh = sample();
-    let mut v7 = rbvh.to_bytes();
-    v7.drain(V7_HEADER_BYTES..HEADER_BYTES);
-    v7[8..12].copy_from_slice(&7u32.to_le_bytes());
-    assert_eq!(Rbvh::from_bytes(&v7, Path::new("v7.rbvh")).unwrap(), rbvh);
+    let v7 = as_version(&rbvh, 7);
+    assert_eq!(
+        Rbvh::from_bytes(&v7, Path::new("v7.rbvh")).unwrap(),
+        all_sampled(&rbvh)
+    );
 
     let narrow = narrow_sample();
     assert_eq!(narrow.atlas.wide_len(), 40);

@@ -51,7 +51,8 @@
 //! `params`: `texels_per_diagonal`, `refinement` (`"normal_cone"` \| `"projected_area"`),
 //! `max_angle_deg` (normal cone, else null), `min_ratio` (projected area, else null),
 //! `subdivision` (`"spatial_median"` \| `"area_sah"`), `object_split`, `max_tile`,
-//! `min_leaf_texels`, `sampled_criterion_texels`, `texels` (`"height_normal"` \| `"height"`) — the fields of [`RbvhParams`].
+//! `min_leaf_texels`, `sampled_criterion_texels`, `texels` (`"height_normal"` \| `"height"`),
+//! `exact_when_cheaper` — the fields of [`RbvhParams`].
 //!
 //! `lod` (`rbvh-lod` records, else null): `columns`, `min_leaves`, `bias` — the fields of
 //! [`LodParams`].
@@ -333,6 +334,9 @@ pub struct Params {
     pub sampled_criterion_texels: f32,
     /// What each texel holds: `"height_normal"` or `"height"` ([`RbvhParams::texels`]).
     pub texels: &'static str,
+    /// Whether triangles are traced exactly where that costs fewer bytes than sampling them
+    /// ([`RbvhParams::exact_when_cheaper`]).
+    pub exact_when_cheaper: bool,
 }
 
 impl From<&RbvhParams> for Params {
@@ -356,6 +360,7 @@ impl From<&RbvhParams> for Params {
             min_leaf_texels: p.min_leaf_texels,
             sampled_criterion_texels: p.sampled_criterion_texels,
             texels: p.texels.name(),
+            exact_when_cheaper: p.exact_when_cheaper,
         }
     }
 }

@@ -19,7 +19,10 @@
 //! triangles, traced exactly (the hybrid leaves). So do, beside a height field, the parts of its
 //! own triangles that its tiles leave uncovered (`Tile::exposed`: over a cell the ring found no
 //! surface for, or rising above or sinking under a cell's surface beyond what it stands in for),
-//! so that a ray entering the solid through them cannot pass between the leaves.
+//! so that a ray entering the solid through them cannot pass between the leaves. And so does,
+//! before the recursion, every triangle large enough to cost fewer bytes traced exactly than
+//! sampled (`Builder::exact_by_size`): the paper's "triangle leaves where needed", decided by
+//! the bytes each way.
 //!
 //! A scene with points ([`Scene::points`]) is built from them instead, by the same recursion: a
 //! point is an element of surface with a normal and the area its spacing gives it, so the
@@ -62,6 +65,11 @@ const MEDIAN_BELOW_DEPTH: u32 = 32;
 /// A set of points whose box is thinner than this fraction of its length is a slab: split by
 /// facing when it is not one height field (`Builder::split_by_facing`).
 const SLAB: f32 = 0.25;
+/// What a triangle traced exactly costs: its 48 bytes ([`GpuTriangle`]) and, alone in its leaf,
+/// the 48-byte node above it. A triangle whose area covers more texels than these bytes buy
+/// (24 with normals, 48 height-only) is traced exactly instead of sampled
+/// ([`Builder::exact_by_size`]).
+const EXACT_TRIANGLE_BYTES: f32 = 96.0;
 /// Subtrees smaller than this are built on the calling thread.
 const PARALLEL_THRESHOLD: usize = 2048;
 /// Upper bound on tile texels before building: beyond it the atlas would not fit 32-bit indices
@@ -392,12 +400,20 @@ impl Rbvh {
             surface,
             open,
         };
-        let mut order: Vec<u32> = (0..count as u32).collect();
+        let (mut order, exact) = builder.exact_by_size();
         let root = step(
             progress,
             &format!("building the RBVH ({elements} into leaves)"),
             count as u64,
-            || (!order.is_empty()).then(|| builder.build(&mut order, 0, 0)),
+            || {
+                progress.advance(exact.len() as u64);
+                let sampled = (!order.is_empty()).then(|| builder.build(&mut order, 0, 0));
+                let exact = (!exact.is_empty()).then(|| pieces_subtree(exact, 1));
+                match (sampled, exact) {
+                    (Some(a), Some(b)) => Some(Node::Inner(Box::new([a, b]))),
+                    (a, b) => a.or(b),
+                }
+            },
         );
 
         let mut out = Flattened::default();
@@ -483,6 +499,32 @@ impl Rbvh {
 }
 
 impl Builder<'_> {
+    /// The scene's triangles split into those to sample (their indices, the construction's
+    /// `order`) and those traced exactly because they cost fewer bytes so than as texels: a
+    /// triangle whose area is at least [`EXACT_TRIANGLE_BYTES`] over a texel's bytes texels of
+    /// its object ([`Builder::texel_of`]). Such a triangle has no detail between its corners for
+    /// texels to sample: a wall, a floor, a column's face, a cube's side. Sampled, it would also
+    /// be widened at its silhouette by the dilated rim, the largest error on architecture (the
+    /// columns and arches of the paper-scale scene's Sponza). Points have no such triangles.
+    fn exact_by_size(&self) -> (Vec<u32>, Vec<GpuTriangle>) {
+        let all = match self.input {
+            Input::Triangles(all) if self.params.exact_when_cheaper => all,
+            _ => return ((0..self.prims.len() as u32).collect(), Vec::new()),
+        };
+        let texels = EXACT_TRIANGLE_BYTES / self.params.texels.bytes() as f32;
+        let (mut sampled, mut exact) = (Vec::new(), Vec::new());
+        for (i, &[a, b, c]) in (0u32..).zip(all.iter()) {
+            let texel = self.texel_of(&[i]);
+            let area = 0.5 * (b - a).cross(c - a).length();
+            if area >= texels * texel * texel {
+                exact.push(GpuTriangle::new([a, b, c], i));
+            } else {
+                sampled.push(i);
+            }
+        }
+        (sampled, exact)
+    }
+
     /// The texel of the set `order`: its objects' finest ([`RbvhParams::object_rate`]),
     /// or the scene's. With object split on, a set that becomes a leaf lies in one object.
     fn texel_of(&self, order: &[u32]) -> f32 {
@@ -519,7 +561,17 @@ impl Builder<'_> {
         if one_part {
             if let Some(tiles) = self.heightfield(order, bounds.diagonal(), texel) {
                 self.progress.advance(n as u64);
-                return self.surface_subtree(tiles, order);
+                let parts = self.parts(&tiles, order);
+                if let (Input::Triangles(all), true) = (&self.input, self.params.exact_when_cheaper)
+                {
+                    if sampled_bytes(&tiles, parts.len(), self.params.texels)
+                        > n as f32 * EXACT_TRIANGLE_BYTES
+                    {
+                        let exact = order.iter().map(|&i| GpuTriangle::new(all[i as usize], i));
+                        return pieces_subtree(exact.collect(), 1);
+                    }
+                }
+                return self.surface_subtree(tiles, parts, order);
             }
         }
         let small = bounds.diagonal() < self.params.min_leaf_texels * texel;
@@ -572,8 +624,21 @@ impl Builder<'_> {
     /// beyond what it stands in for), those triangles' parts there as triangle leaves,
     /// traced exactly, so that a ray entering the solid through them meets them where the
     /// height field, and its neighbours', may leave a gap.
-    fn surface_subtree(&self, tiles: Vec<Tile>, order: &[u32]) -> Node {
-        let pieces: Vec<GpuTriangle> = match self.input {
+    fn surface_subtree(&self, tiles: Vec<Tile>, pieces: Vec<GpuTriangle>, order: &[u32]) -> Node {
+        let surface = tiles_subtree(self.scene_sources(tiles, order));
+        if pieces.is_empty() {
+            return surface;
+        }
+        Node::Surface(Box::new([
+            surface,
+            pieces_subtree(pieces, MAX_TRIANGLE_LEAF),
+        ]))
+    }
+
+    /// The exact parts of the set `order`'s triangles beside its `tiles` (see
+    /// [`Builder::surface_subtree`]), each naming its tile.
+    fn parts(&self, tiles: &[Tile], order: &[u32]) -> Vec<GpuTriangle> {
+        match self.input {
             Input::Triangles(all) => tiles
                 .iter()
                 .enumerate()
@@ -590,12 +655,7 @@ impl Builder<'_> {
                 })
                 .collect(),
             Input::Points(_) => Vec::new(),
-        };
-        let surface = tiles_subtree(self.scene_sources(tiles, order));
-        if pieces.is_empty() {
-            return surface;
         }
-        Node::Surface(Box::new([surface, pieces_subtree(pieces)]))
     }
 
     /// The forced leaf of the points `order` (see [`Builder::forced_heightfield`]).
@@ -878,6 +938,20 @@ fn windows(frame: &Frame, max: u32) -> Vec<Frame> {
     out
 }
 
+/// The device bytes of a height field of `tiles` beside `parts` exact parts: each tile's texels
+/// (one byte less for 8-bit heights), its 64-byte leaf record and a 48-byte node over it, and
+/// each part's 48-byte triangle.
+fn sampled_bytes(tiles: &[Tile], parts: usize, format: TexelFormat) -> f32 {
+    let tiles: u64 = tiles
+        .iter()
+        .map(|tile| {
+            let texel = format.bytes() - u64::from(tile.narrow);
+            tile.texels.len() as u64 * texel + 64 + 48
+        })
+        .sum();
+    (tiles + parts as u64 * 48) as f32
+}
+
 /// A balanced subtree over the tiles of one subdivided height field (in window order, so halves
 /// are spatially coherent).
 fn tiles_subtree(tiles: Vec<Tile>) -> Node {
@@ -890,13 +964,15 @@ fn tiles_subtree(tiles: Vec<Tile>) -> Node {
 }
 
 /// A subtree of [`Node::Pieces`] leaves over `pieces`: halved at the median of their centroids
-/// along the longest side of the centroids' box until a leaf holds at most
-/// [`MAX_TRIANGLE_LEAF`] pieces lying together, its box at most twice as long as its longest
-/// piece's. Pieces from places apart in one leaf (two rims of one surface) would give it a box
+/// along the longest side of the centroids' box until a leaf holds at most `max_leaf` pieces
+/// lying together, its box at most twice as long as its longest piece's. Exact parts take
+/// [`MAX_TRIANGLE_LEAF`]; triangles traced exactly for their size one each, since their long
+/// boxes overlap, and rays entering a leaf of eight of them tested most for nothing (28
+/// triangles per primary ray on the paper-scale scene at Q2, against the exact BVH's 5.3). Pieces from places apart in one leaf (two rims of one surface) would give it a box
 /// that rays between them enter for nothing: on the default scene at Q2–Q4, 0.11–0.14
 /// triangles tested per primary ray instead of 0.00–0.01. Ties keep their order (a stable
 /// sort), so it is deterministic.
-fn pieces_subtree(mut pieces: Vec<GpuTriangle>) -> Node {
+fn pieces_subtree(mut pieces: Vec<GpuTriangle>, max_leaf: usize) -> Node {
     let bounds = |t: &GpuTriangle| Aabb::from_points(t.vertices());
     let union = pieces.iter().fold(Aabb::EMPTY, |b, t| b.union(bounds(t)));
     let longest = pieces
@@ -904,7 +980,7 @@ fn pieces_subtree(mut pieces: Vec<GpuTriangle>) -> Node {
         .map(|t| bounds(t).extent().max_element())
         .fold(0.0, f32::max);
     let together = union.extent().max_element() <= 2.0 * longest;
-    if pieces.len() == 1 || (pieces.len() <= MAX_TRIANGLE_LEAF && together) {
+    if pieces.len() == 1 || (pieces.len() <= max_leaf && together) {
         return Node::Pieces(pieces);
     }
     let centroid = |t: &GpuTriangle| t.vertices().into_iter().sum::<Vec3>();
@@ -914,7 +990,10 @@ fn pieces_subtree(mut pieces: Vec<GpuTriangle>) -> Node {
         .largest_axis();
     pieces.sort_by(|a, b| centroid(a)[axis].total_cmp(&centroid(b)[axis]));
     let right = pieces.split_off(pieces.len() / 2);
-    Node::Inner(Box::new([pieces_subtree(pieces), pieces_subtree(right)]))
+    Node::Inner(Box::new([
+        pieces_subtree(pieces, max_leaf),
+        pieces_subtree(right, max_leaf),
+    ]))
 }
 
 /// The tree traversal runs over the leaves of `out`: the construction's own (`out.nodes`, of
@@ -1221,6 +1300,84 @@ mod tests {
                 t.prim,
                 loc.leaf
             );
+        }
+    }
+
+    /// The default scene's ground triangles cover 27 texels each at Q2: at 4 bytes a texel (108)
+    /// more than a triangle traced exactly costs (96), at 2 (54) less. So with normals every
+    /// ground triangle is traced exactly, whole (not an exact part), and height-only none is;
+    /// the sphere's triangles (under 2 texels each) are sampled in both.
+    #[test]
+    fn triangles_that_cost_more_as_texels_are_traced_exactly() {
+        let scene = Scene::builtin("default").unwrap();
+        let objects = &scene.object_of_triangle;
+        let object = |name: &str| {
+            let o = scene.object_names.iter().position(|n| n == name).unwrap() as u32;
+            let of = move |prim: u32| objects[prim as usize] == o;
+            (of, objects.iter().filter(|&&x| x == o).count())
+        };
+        let (ground, ground_count) = object("ground");
+        let (sphere, _) = object("sphere");
+        let whole = |r: &Rbvh, of: &dyn Fn(u32) -> bool| {
+            r.triangles
+                .iter()
+                .filter(|t| t.part_leaf().is_none() && of(t.prim))
+                .count()
+        };
+        let mut params = super::super::RbvhParams {
+            exact_when_cheaper: true,
+            ..super::super::RbvhParams::quality(2).unwrap()
+        };
+        let r = Rbvh::build(&scene, &params).unwrap();
+        assert_eq!(whole(&r, &ground), ground_count);
+        assert_eq!(whole(&r, &sphere), 0);
+        params.texels = TexelFormat::Height;
+        let r = Rbvh::build(&scene, &params).unwrap();
+        assert_eq!(whole(&r, &ground), 0);
+        assert_eq!(whole(&r, &sphere), 0);
+    }
+
+    /// A square of two triangles, or of a grid of them, `side` texels of the scene's rate
+    /// across (its diagonal sampled at 9 texels).
+    fn square(cells: u32) -> Scene {
+        let n = cells + 1;
+        let positions: Vec<Vec3> = (0..n * n)
+            .map(|k| Vec3::new((k % n) as f32, (k / n) as f32, 0.0) / cells as f32)
+            .collect();
+        let mut triangles = Vec::new();
+        for j in 0..cells {
+            for i in 0..cells {
+                let k = j * n + i;
+                triangles.push([k, k + 1, k + n + 1]);
+                triangles.push([k, k + n + 1, k + n]);
+            }
+        }
+        let mut scene = Scene::new("square");
+        scene.push_object("square", &positions, &triangles);
+        scene
+    }
+
+    /// At 9 texels along its diagonal a unit square's two triangles cover 20.25 texels each,
+    /// under what a triangle alone must cover to be traced exactly (24 with normals), but its
+    /// tile, with the ring of samples around it, costs more than the two triangles do (192
+    /// bytes): the set is traced exactly, in either texel format. Cut into 16 × 16 cells, its
+    /// 512 triangles cost more than that tile: it is sampled.
+    #[test]
+    fn a_set_whose_tiles_cost_more_than_its_triangles_is_traced_exactly() {
+        for format in [TexelFormat::HeightNormal, TexelFormat::Height] {
+            let params = super::super::RbvhParams {
+                texels_per_diagonal: 9.0,
+                texels: format,
+                exact_when_cheaper: true,
+                ..super::super::RbvhParams::quality(2).unwrap()
+            };
+            let r = Rbvh::build(&square(1), &params).unwrap();
+            assert!(r.leaves.is_empty(), "{format:?}: {} leaves", r.leaves.len());
+            assert_eq!(r.triangles.len(), 2);
+            assert!(r.triangles.iter().all(|t| t.part_leaf().is_none()));
+            let r = Rbvh::build(&square(16), &params).unwrap();
+            assert!(!r.leaves.is_empty(), "{format:?}");
+            assert!(r.triangles.is_empty(), "{format:?}: {}", r.triangles.len());
         }
     }
 

@@ -10,7 +10,7 @@
 //! | bytes | type | field |
 //! |---|---|---|
 //! | 0..8 | `[u8; 8]` | magic `RBVHv` followed by three zero bytes |
-//! | 8..12 | u32 | format version: 8 (this build writes it; it reads 1–7 as well, see below) |
+//! | 8..12 | u32 | format version: 9 (this build writes it; it reads 1–8 as well, see below) |
 //! | 12..16 | f32 | `params.texels_per_diagonal` |
 //! | 16..20, 20..24 | u32, f32 | `params.refinement`: tag (0 = `NormalCone`, 1 = `ProjectedArea`), its value (`max_angle_deg` or `min_ratio`) |
 //! | 24..28 | u32 | `params.subdivision`: 0 = `SpatialMedian`, 1 = `AreaSah` |
@@ -30,7 +30,8 @@
 //! | 116..148 | 4 × u64 | counts: nodes `N`, triangles `T`, leaves `L`, texels `X` |
 //! | 148..152 | f32 | `params.object_rate` (0: none) |
 //! | 152..156 | u32 | `atlas.narrow_rows`: rows at the end whose heights are 8-bit codes |
-//! | 156.. | `N` × 48 bytes | `nodes` ([`crate::bvh::GpuNode`], 12 words each) |
+//! | 156..160 | u32 | `params.exact_when_cheaper`: 0 or 1 |
+//! | 160.. | `N` × 48 bytes | `nodes` ([`crate::bvh::GpuNode`], 12 words each) |
 //! | then | `T` × 48 bytes | `triangles` ([`crate::bvh::GpuTriangle`], 12 words each) |
 //! | then | `L` × 64 bytes | `leaves` ([`super::GpuHeightfield`], 16 words each) |
 //! | then | `X` × 4 bytes | `atlas.texels` ([`super::Texel`], one word each), row by row; height-only texels: `X` × 2 bytes, each texel's height code (u16) |
@@ -50,7 +51,8 @@
 //! every sampled-looking code is made odd on loading, within one code and inside its leaf's box
 //! (where the box allows: `unmark`), so that the march hangs no skirt under them and the RBVH
 //! traces as it was built. Versions 1–6 took every texel from the scene (`object_rate` 0). Versions 1–7 have 16-bit
-//! codes everywhere (`narrow_rows` 0). Saving such an RBVH writes version 8. A colour section
+//! codes everywhere (`narrow_rows` 0). Versions 1–8 sampled every triangle a height field could
+//! hold (`exact_when_cheaper` false). Saving such an RBVH writes version 9. A colour section
 //! that is cut short, or whose count is not `X`, is an [`Error::Parse`] like any other
 //! malformation.
 //!
@@ -86,9 +88,11 @@ use crate::{Error, Result};
 /// The first eight bytes of every RBVH file.
 const MAGIC: [u8; 8] = *b"RBVHv\0\0\0";
 /// The format version this build writes.
-const VERSION: u32 = 8;
+const VERSION: u32 = 9;
 /// Bytes before the arrays (see the table in the module docs).
-const HEADER_BYTES: usize = 156;
+const HEADER_BYTES: usize = 160;
+/// Bytes before the arrays in version 8, whose header ends before `exact_when_cheaper`.
+const V8_HEADER_BYTES: usize = 156;
 /// Bytes before the arrays in version 7, whose header ends before `narrow_rows`.
 const V7_HEADER_BYTES: usize = 152;
 /// Bytes before the arrays in versions 4–6, whose header ends before `object_rate`.
@@ -186,6 +190,7 @@ impl Rbvh {
         }
         put_f32(&mut out, p.object_rate);
         put_u32(&mut out, self.atlas.narrow_rows);
+        put_u32(&mut out, u32::from(p.exact_when_cheaper));
         debug_assert_eq!(out.len(), HEADER_BYTES);
 
         put_records(&mut out, &self.nodes);
@@ -297,6 +302,7 @@ impl Rbvh {
             1..=3 => OLD_HEADER_BYTES,
             4..=6 => V6_HEADER_BYTES,
             7 => V7_HEADER_BYTES,
+            8 => V8_HEADER_BYTES,
             _ => HEADER_BYTES,
         };
         let params = RbvhParams {
@@ -309,6 +315,7 @@ impl Rbvh {
             min_leaf_texels,
             sampled_criterion_texels,
             texels,
+            exact_when_cheaper: false,
         };
         let bounds = Aabb {
             min: [r.f32("bounds")?, r.f32("bounds")?, r.f32("bounds")?].into(),
@@ -345,6 +352,19 @@ impl Rbvh {
             r.u32("atlas.narrow_rows")?
         } else {
             0
+        };
+        // Versions 1–8 sampled every triangle a height field could hold.
+        let exact_when_cheaper = match version {
+            1..=8 => false,
+            _ => match r.u32("params.exact_when_cheaper")? {
+                0 => false,
+                1 => true,
+                x => return Err(err(format!("params.exact_when_cheaper is {x}, not 0 or 1"))),
+            },
+        };
+        let params = RbvhParams {
+            exact_when_cheaper,
+            ..params
         };
 
         let floats = [

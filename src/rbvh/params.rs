@@ -116,6 +116,14 @@ pub struct RbvhParams {
     pub sampled_criterion_texels: f32,
     /// What each texel holds: height and normal (the default), or height alone.
     pub texels: TexelFormat,
+    /// Triangles are traced exactly where that costs fewer bytes than sampling them: a triangle
+    /// covering more texels than its 96 bytes buy, and a set whose tiles (texels, leaf records,
+    /// nodes, exact parts) cost more than its triangles would (`build.rs`). Such triangles have
+    /// no detail between their corners for texels to sample (walls, floors, a cube's faces, a
+    /// mesh coarser than the sampling rate), and a height field of them widens their silhouettes
+    /// by its rim. Off (the presets, and RBVH files before version 9): every triangle is sampled
+    /// wherever a height field can hold it, as the paper does.
+    pub exact_when_cheaper: bool,
 }
 
 /// Quality preset names, coarsest to finest.
@@ -172,6 +180,7 @@ impl RbvhParams {
             min_leaf_texels: 3.0,
             sampled_criterion_texels: 4.0,
             texels: TexelFormat::HeightNormal,
+            exact_when_cheaper: false,
         }
     }
 

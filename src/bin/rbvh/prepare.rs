@@ -567,6 +567,11 @@ pub struct Quality {
     /// judged on their surface as sampled (0: triangles only, the paper's rule; presets: 4).
     #[arg(long)]
     pub sampled_criterion_texels: Option<f32>,
+    /// Free parameter: trace triangles exactly where that costs fewer bytes than sampling them (a
+    /// triangle covering at least 24 texels, 48 height-only, and a set whose tiles would cost more
+    /// than its triangles); presets sample every triangle a height field can hold.
+    #[arg(long)]
+    pub exact_when_cheaper: bool,
     /// What each atlas texel holds: `normals` (height and normal, 4 bytes) or `height` (height
     /// alone, 2 bytes: facet normals, no colours, no levels of detail); comma-separate both to
     /// build each level in each (a height-only level is named with an `h`, e.g. Q2h).
@@ -601,6 +606,7 @@ impl Quality {
             || self.max_tile.is_some()
             || self.min_leaf_texels.is_some()
             || self.sampled_criterion_texels.is_some()
+            || self.exact_when_cheaper
     }
 
     /// The texel formats asked for, each once, in the order given.
@@ -689,6 +695,9 @@ impl Quality {
                 }
                 if let Some(k) = self.sampled_criterion_texels {
                     p.sampled_criterion_texels = k;
+                }
+                if self.exact_when_cheaper {
+                    p.exact_when_cheaper = true;
                 }
                 p.validate().map_err(flag_error)?;
                 Ok(p)
