@@ -339,16 +339,23 @@ fn text(v: &Value) -> String {
     }
 }
 
-/// A record's level as the bench tables write it: `exact`, `Q2`, `Q2h` (height-only), `Q2 LOD`.
+/// A record's level as the bench tables write it: `exact`, `Q2`, `Q2h` (height-only), `Q2e`
+/// (triangles exact where cheaper), `Q2 LOD`.
 fn level(record: &Value) -> String {
     let Some(q) = record["quality"].as_str() else {
         return "exact".into();
     };
     let height = record["params"]["texels"].as_str() == Some("height");
+    let exact = record["params"]["exact_when_cheaper"].as_bool() == Some(true);
     let lod = record["method"].as_str() == Some("rbvh-lod");
     format!(
-        "{q}{}{}",
+        "{q}{}{}{}",
         if height { "h" } else { "" },
+        if exact {
+            crate::rbvh::EXACT_WHEN_CHEAPER_SUFFIX
+        } else {
+            ""
+        },
         if lod { " LOD" } else { "" }
     )
 }

@@ -367,7 +367,8 @@ impl From<&RbvhParams> for Params {
 
 impl Record {
     /// The level as tables and charts show it: the quality (`-` for exact), with `h` appended for
-    /// a height-only RBVH (`"Q2h"`), so that both texel formats of one level tell apart.
+    /// a height-only RBVH (`"Q2h"`) and `e` where triangles were traced exactly where cheaper
+    /// (`"Q2e"`), as [`RbvhParams::level_label`] names them.
     pub fn level_label(&self) -> String {
         let height_only = self
             .params
@@ -378,8 +379,13 @@ impl Record {
         } else {
             ""
         };
+        let exact = if self.params.as_ref().is_some_and(|p| p.exact_when_cheaper) {
+            crate::rbvh::EXACT_WHEN_CHEAPER_SUFFIX
+        } else {
+            ""
+        };
         match &self.quality {
-            Some(q) => format!("{q}{suffix}"),
+            Some(q) => format!("{q}{suffix}{exact}"),
             None => "-".into(),
         }
     }
@@ -619,6 +625,12 @@ mod tests {
         };
         r.params = Some(Params::from(&height));
         assert_eq!(r.level_label(), "Q2h");
+        let exact = RbvhParams {
+            exact_when_cheaper: true,
+            ..RbvhParams::quality(2).unwrap()
+        };
+        r.params = Some(Params::from(&exact));
+        assert_eq!(r.level_label(), "Q2e");
     }
 
     #[test]

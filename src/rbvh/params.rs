@@ -126,6 +126,11 @@ pub struct RbvhParams {
     pub exact_when_cheaper: bool,
 }
 
+/// What a level's name gets appended when its triangles are traced exactly where cheaper
+/// ([`RbvhParams::exact_when_cheaper`]): `Q2e`, so that it tells apart from the preset in
+/// tables, charts and file names.
+pub const EXACT_WHEN_CHEAPER_SUFFIX: &str = "e";
+
 /// Quality preset names, coarsest to finest.
 pub const QUALITY_NAMES: [&str; 5] = ["Q0", "Q1", "Q2", "Q3", "Q4"];
 
@@ -185,11 +190,12 @@ impl RbvhParams {
     }
 
     /// The preset these parameters are, if any: the level whose [`RbvhParams::quality`] they equal
-    /// in everything but the texel format (which every preset can take).
+    /// in everything but the texel format and `exact_when_cheaper` (which every preset can take).
     pub fn preset(&self) -> Option<u32> {
         let level = Self::presets().iter().position(|p| {
             RbvhParams {
                 texels: self.texels,
+                exact_when_cheaper: self.exact_when_cheaper,
                 ..*p
             } == *self
         })?;
@@ -204,9 +210,19 @@ impl RbvhParams {
     }
 
     /// [`RbvhParams::quality_name`] with the texel format's suffix
-    /// ([`TexelFormat::level_suffix`]): `Q2`, `Q2h`, `customh`.
+    /// ([`TexelFormat::level_suffix`]) and [`EXACT_WHEN_CHEAPER_SUFFIX`] where it applies: `Q2`,
+    /// `Q2h`, `Q2e`, `Q2he`, `customh`.
     pub fn level_label(&self) -> String {
-        format!("{}{}", self.quality_name(), self.texels.level_suffix())
+        let exact = if self.exact_when_cheaper {
+            EXACT_WHEN_CHEAPER_SUFFIX
+        } else {
+            ""
+        };
+        format!(
+            "{}{}{exact}",
+            self.quality_name(),
+            self.texels.level_suffix()
+        )
     }
 
     /// Checks every parameter's range; the error names the parameter and the allowed range.
@@ -343,6 +359,12 @@ mod tests {
                 ..p
             };
             assert_eq!(height.level_label(), format!("Q{level}h"));
+            let exact = RbvhParams {
+                exact_when_cheaper: true,
+                ..height
+            };
+            assert_eq!(exact.preset(), Some(level));
+            assert_eq!(exact.level_label(), format!("Q{level}he"));
         }
         let q2 = RbvhParams::quality(2).unwrap();
         let custom = RbvhParams {

@@ -567,9 +567,10 @@ pub struct Quality {
     /// judged on their surface as sampled (0: triangles only, the paper's rule; presets: 4).
     #[arg(long)]
     pub sampled_criterion_texels: Option<f32>,
-    /// Free parameter: trace triangles exactly where that costs fewer bytes than sampling them (a
-    /// triangle covering at least 24 texels, 48 height-only, and a set whose tiles would cost more
-    /// than its triangles); presets sample every triangle a height field can hold.
+    /// Trace triangles exactly where that costs fewer bytes than sampling them (a triangle
+    /// covering at least 24 texels, 48 height-only, and a set whose tiles would cost more than
+    /// its triangles), at every level asked for; such a level is named with an `e`, e.g. Q2e.
+    /// Presets sample every triangle a height field can hold.
     #[arg(long)]
     pub exact_when_cheaper: bool,
     /// What each atlas texel holds: `normals` (height and normal, 4 bytes) or `height` (height
@@ -606,7 +607,6 @@ impl Quality {
             || self.max_tile.is_some()
             || self.min_leaf_texels.is_some()
             || self.sampled_criterion_texels.is_some()
-            || self.exact_when_cheaper
     }
 
     /// The texel formats asked for, each once, in the order given.
@@ -626,7 +626,7 @@ impl Quality {
     }
 
     /// Every requested level in every requested texel format (each named by
-    /// `RbvhParams::level_label`: `Q2`, `Q2h`, `custom`).
+    /// `RbvhParams::level_label`: `Q2`, `Q2h`, `Q2e`, `custom`).
     pub fn levels(&self) -> Result<Vec<rbvh::rbvh::RbvhParams>> {
         let formats = self.texel_formats();
         Ok(self
@@ -641,7 +641,8 @@ impl Quality {
     }
 
     /// The requested levels (presets, or one preset changed by free parameters), each
-    /// validated, with the default texels (see [`Quality::levels`] for the formats).
+    /// validated, with the default texels (see [`Quality::levels`] for the formats), their
+    /// triangles traced exactly where cheaper if asked.
     pub fn quality_levels(&self) -> Result<Vec<rbvh::rbvh::RbvhParams>> {
         use rbvh::rbvh::{RbvhParams, Refinement, Subdivision};
         let mut levels = Vec::new();
@@ -666,6 +667,7 @@ impl Quality {
             .into_iter()
             .map(|level| {
                 let mut p = RbvhParams::quality(level)?;
+                p.exact_when_cheaper = self.exact_when_cheaper;
                 if let Some(r) = self.texels_per_diagonal {
                     p.texels_per_diagonal = r;
                 }
@@ -695,9 +697,6 @@ impl Quality {
                 }
                 if let Some(k) = self.sampled_criterion_texels {
                     p.sampled_criterion_texels = k;
-                }
-                if self.exact_when_cheaper {
-                    p.exact_when_cheaper = true;
                 }
                 p.validate().map_err(flag_error)?;
                 Ok(p)
