@@ -13,7 +13,8 @@
 //! The file is either raw results — the JSON `rbvh bench --json` or `rbvh shaders --json` wrote,
 //! which a *view* turns into a table — or a *transcribed* measurement whose raw file was not kept
 //! (`{"transcribed": {source, commit, host, device, note}, "columns", "align", "rows"}`), shown as
-//! it was recorded. Either way the line under the table names the commit and the host.
+//! it was recorded, or that no view makes from its raw files, named by an optional
+//! `transcribed.raw` (a list of paths). Either way the line under the table names the commit and the host.
 
 use std::io::Write as _;
 use std::path::{Component, Path, PathBuf};
@@ -704,8 +705,21 @@ fn transcribed_caption(t: &Value) -> Made<String> {
     let note = t["note"].as_str().map_or(String::new(), |n| {
         format!(" {}", n.trim_end_matches('.').to_string() + ".")
     });
+    let raw = match &t["raw"] {
+        Value::Null => "no raw file kept".to_string(),
+        Value::Array(files) => {
+            let files = files
+                .iter()
+                .map(|f| f.as_str().map(str::to_string))
+                .collect::<Option<Vec<_>>>()
+                .filter(|f| !f.is_empty())
+                .ok_or("transcribed.raw: a list of file paths")?;
+            format!("raw records: {}", files.join(", "))
+        }
+        _ => return Err("transcribed.raw: a list of file paths".to_string()),
+    };
     Ok(format!(
-        "Transcribed from {} (no raw file kept): {commit}; host: {}; device: {}.{note}",
+        "Transcribed from {} ({raw}): {commit}; host: {}; device: {}.{note}",
         field("source")?,
         field("host")?,
         field("device")?
@@ -791,6 +805,31 @@ mod tests {
             relative(Path::new("scenes"), f),
             Path::new("../docs/results/x.json")
         );
+    }
+
+    /// A transcription names its raw records where they were kept, else says none was; a `raw`
+    /// that is not a list of paths is refused.
+    #[test]
+    fn a_transcription_names_its_raw_records() {
+        let mut t = serde_json::json!({
+            "source": "s", "commit": "abc", "host": "h", "device": "d"
+        });
+        let caption = transcribed_caption(&t).unwrap();
+        assert!(caption.contains("(no raw file kept)"), "{caption}");
+        t["raw"] = serde_json::json!(["docs/results/a.json", "docs/results/b.json"]);
+        let caption = transcribed_caption(&t).unwrap();
+        assert!(
+            caption.contains("(raw records: docs/results/a.json, docs/results/b.json)"),
+            "{caption}"
+        );
+        for bad in [
+            serde_json::json!("a.json"),
+            serde_json::json!([]),
+            serde_json::json!([1]),
+        ] {
+            t["raw"] = bad;
+            assert!(transcribed_caption(&t).is_err());
+        }
     }
 
     #[test]

@@ -19,10 +19,12 @@
 //! triangles, traced exactly (the hybrid leaves). So do, beside a height field, the parts of its
 //! own triangles that its tiles leave uncovered (`Tile::exposed`: over a cell the ring found no
 //! surface for, or rising above or sinking under a cell's surface beyond what it stands in for),
-//! so that a ray entering the solid through them cannot pass between the leaves. And so does,
-//! before the recursion, every triangle large enough to cost fewer bytes traced exactly than
-//! sampled (`Builder::exact_by_size`): the paper's "triangle leaves where needed", decided by
-//! the bytes each way.
+//! so that a ray entering the solid through them cannot pass between the leaves. With
+//! `exact_when_cheaper` (off in the presets) triangles that cost fewer bytes traced exactly than
+//! sampled stay triangles too: before the recursion every triangle large enough
+//! (`Builder::exact_by_size`), and in it every set whose tiles would cost more than its
+//! triangles (`sampled_bytes`) — the paper's "triangle leaves where needed", decided by the
+//! bytes each way.
 //!
 //! A scene with points ([`Scene::points`]) is built from them instead, by the same recursion: a
 //! point is an element of surface with a normal and the area its spacing gives it, so the
@@ -500,9 +502,9 @@ impl Rbvh {
 
 impl Builder<'_> {
     /// The scene's triangles split into those to sample (their indices, the construction's
-    /// `order`) and those traced exactly because they cost fewer bytes so than as texels: a
-    /// triangle whose area is at least [`EXACT_TRIANGLE_BYTES`] over a texel's bytes texels of
-    /// its object ([`Builder::texel_of`]). Such a triangle has no detail between its corners for
+    /// `order`) and, with `exact_when_cheaper`, those traced exactly because that costs fewer
+    /// bytes: a triangle whose area covers at least [`EXACT_TRIANGLE_BYTES`] worth of texels of
+    /// its object ([`Builder::texel_of`]), at the texel format's full bytes a texel. Such a triangle has no detail between its corners for
     /// texels to sample: a wall, a floor, a column's face, a cube's side. Sampled, it would also
     /// be widened at its silhouette by the dilated rim, the largest error on architecture (the
     /// columns and arches of the paper-scale scene's Sponza). Points have no such triangles.
@@ -968,7 +970,8 @@ fn tiles_subtree(tiles: Vec<Tile>) -> Node {
 /// lying together, its box at most twice as long as its longest piece's. Exact parts take
 /// [`MAX_TRIANGLE_LEAF`]; triangles traced exactly for their size one each, since their long
 /// boxes overlap, and rays entering a leaf of eight of them tested most for nothing (28
-/// triangles per primary ray on the paper-scale scene at Q2, against the exact BVH's 5.3). Pieces from places apart in one leaf (two rims of one surface) would give it a box
+/// triangles per primary ray on the paper-scale scene at Q2, against the exact BVH's 5.3).
+/// Pieces from places apart in one leaf (two rims of one surface) would give it a box
 /// that rays between them enter for nothing: on the default scene at Q2–Q4, 0.11–0.14
 /// triangles tested per primary ray instead of 0.00–0.01. Ties keep their order (a stable
 /// sort), so it is deterministic.
