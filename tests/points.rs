@@ -314,3 +314,20 @@ fn the_exact_bvh_of_a_point_cloud_is_refused_by_name() {
     let e = Bvh::build(&scene).unwrap_err().to_string();
     assert!(e.contains("scan.ply") && e.contains("point cloud"), "{e}");
 }
+
+/// A point cloud has no triangles to trace exactly: `exact_when_cheaper` is refused by name
+/// rather than ignored (a level named `Q2e` would otherwise be the plain Q2).
+#[test]
+fn exact_when_cheaper_is_refused_for_points() {
+    let scene = sampled("sphere", 2000);
+    let params = RbvhParams {
+        exact_when_cheaper: true,
+        ..q(2)
+    };
+    let e = Rbvh::build(&scene, &params).unwrap_err().to_string();
+    assert!(
+        e.contains("exact_when_cheaper") && e.contains("point cloud"),
+        "{e}"
+    );
+    assert!(Rbvh::build(&scene, &q(2)).is_ok());
+}

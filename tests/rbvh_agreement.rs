@@ -32,22 +32,24 @@ fn gpu_and_cpu_rbvh_casters_agree_at_every_level() {
     let (mut narrow, mut wide) = (0u64, 0u64);
     for (k, name) in ["default", "blob", "sphere"].into_iter().enumerate() {
         let scene = Scene::builtin(name).unwrap();
-        for level in 0..5 {
-            // The default scene at Q4 also with its large triangles exact (`exact_when_cheaper`):
-            // triangle leaves of one triangle each beside the height fields.
-            let params = RbvhParams {
-                exact_when_cheaper: name == "default" && level == 4,
-                ..RbvhParams::quality(level).unwrap()
-            };
+        // Every preset, and the default scene's Q4 also with its large triangles exact
+        // (`exact_when_cheaper`: leaves of one triangle each beside the height fields).
+        let variants = (0..5)
+            .map(|level| RbvhParams::quality(level).unwrap())
+            .chain((name == "default").then(|| RbvhParams {
+                exact_when_cheaper: true,
+                ..RbvhParams::quality(4).unwrap()
+            }));
+        for (variant, params) in variants.enumerate() {
             let r = Arc::new(Rbvh::build(&scene, &params).unwrap());
             narrow += r.narrow_texels();
             wide += r.stats.tile_texels - r.narrow_texels();
             let tracer = Tracer::new(&ctx, &Structure::from(r.clone())).unwrap();
-            let rays = rays_for(&scene, 96, 4000, (k * 5 + level as usize) as u64);
+            let rays = rays_for(&scene, 96, 4000, (k * 5 + variant) as u64);
             for (query, any) in [(Query::Closest, false), (Query::Any, true)] {
                 let gpu = tracer.trace(&rays, query).unwrap().hits;
                 let cpu = r.trace_cpu(&rays, any);
-                agreement.add(&format!("{name} Q{level}"), &gpu, &cpu, any);
+                agreement.add(&format!("{name} {}", params.level_label()), &gpu, &cpu, any);
             }
         }
     }

@@ -286,6 +286,22 @@ fn no_light_through_the_default_scene_with_its_large_triangles_exact() {
             exact_when_cheaper: true,
             ..q(level)
         };
+        let ground = scene
+            .object_names
+            .iter()
+            .position(|n| n == "ground")
+            .unwrap() as u32;
+        let r = Rbvh::build(&scene, &params).unwrap();
+        let whole_ground = r
+            .triangles
+            .iter()
+            .filter(|t| t.part_leaf().is_none())
+            .filter(|t| scene.object_of_triangle[t.prim as usize] == ground)
+            .count();
+        assert!(
+            whole_ground > 1000,
+            "Q{level}: {whole_ground} ground triangles exact"
+        );
         let leaks = seam_leaks_and_through(&scene, &params);
         println!("default Q{level}, exact when cheaper: {leaks:?} of 200,000 seam rays");
         assert_eq!(leaks.through, 0, "default Q{level}: {leaks:?}");

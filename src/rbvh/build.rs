@@ -68,7 +68,7 @@ const MEDIAN_BELOW_DEPTH: u32 = 32;
 /// facing when it is not one height field (`Builder::split_by_facing`).
 const SLAB: f32 = 0.25;
 /// What a triangle traced exactly costs: its 48 bytes ([`GpuTriangle`]) and, alone in its leaf,
-/// the 48-byte node above it. A triangle whose area covers more texels than these bytes buy
+/// the 48-byte node above it. A triangle whose area covers at least the texels these bytes buy
 /// (24 with normals, 48 height-only) is traced exactly instead of sampled
 /// ([`Builder::exact_by_size`]).
 const EXACT_TRIANGLE_BYTES: f32 = 96.0;
@@ -343,6 +343,12 @@ impl Rbvh {
             input @ Input::Points(_) => (input, "points"),
             input @ Input::Triangles(_) => (input, "triangles"),
         };
+        if params.exact_when_cheaper && matches!(input, Input::Points(_)) {
+            return Err(Error::param(
+                "exact_when_cheaper",
+                "a point cloud has no triangles to trace exactly; build it without".to_string(),
+            ));
+        }
         let object_texel = object_texels(
             &source.objects,
             texel,
@@ -1340,8 +1346,7 @@ mod tests {
         assert_eq!(whole(&r, &sphere), 0);
     }
 
-    /// A square of two triangles, or of a grid of them, `side` texels of the scene's rate
-    /// across (its diagonal sampled at 9 texels).
+    /// A unit square in one object, cut into `cells` × `cells` cells of two triangles each.
     fn square(cells: u32) -> Scene {
         let n = cells + 1;
         let positions: Vec<Vec3> = (0..n * n)
