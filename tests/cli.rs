@@ -271,6 +271,48 @@ fn rbvh_build_save_render_and_trace() {
     );
 }
 
+/// The presets trace the cube's large faces exactly; `--sample-all` samples them as the paper
+/// does, names the level `Q2s`, and saves that choice in the file.
+#[test]
+fn sample_all_samples_what_the_presets_trace_exactly() {
+    let dir = tempfile::tempdir().unwrap();
+    for (extra, label, sampled) in [(None, "Q2", false), (Some("--sample-all"), "Q2s", true)] {
+        let file = dir.path().join(format!("{label}.rbvh"));
+        let mut args = vec![
+            "build",
+            "--scene",
+            "cube",
+            "--quality",
+            "2",
+            "--out",
+            arg(&file),
+            "--stats",
+        ];
+        args.extend(extra);
+        let out = rbvh(&args);
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(
+            stdout
+                .lines()
+                .any(|l| l.split_whitespace().next() == Some(label)),
+            "{stdout}"
+        );
+        let r = rbvh::rbvh::Rbvh::load(&file).unwrap();
+        assert_eq!(r.params.exact_when_cheaper, !sampled, "{label}");
+        assert_eq!(
+            !r.leaves.is_empty(),
+            sampled,
+            "{label}: {} leaves",
+            r.leaves.len()
+        );
+    }
+}
+
 /// What the CLI would otherwise get wrong quietly or refuse obscurely: an output name whose
 /// extension says another format, and a negative number (which clap took for a flag).
 #[test]

@@ -101,11 +101,8 @@ fn every_tracer_gives_identical_hits_through_device_addresses() {
 #[test]
 fn painting_through_device_addresses_matches_the_cpu_reference() {
     let ctx = common::context_with(Addressing::DeviceAddress);
-    let mut r = Rbvh::build(
-        &Scene::load("cube").unwrap(),
-        &RbvhParams::quality(2).unwrap(),
-    )
-    .unwrap();
+    // Every triangle sampled: the presets trace the cube's faces exactly, with no texels to paint.
+    let mut r = Rbvh::build(&Scene::load("cube").unwrap(), &common::sampled_preset(2)).unwrap();
     let brushes = [
         Brush::new(Vec3::new(1.0, 1.0, 0.1), 0.3, 0xFF00_00FF),
         Brush::new(Vec3::new(-1.0, 0.2, 0.5), 0.4, 0x80FF_0000),
@@ -120,7 +117,8 @@ fn painting_through_device_addresses_matches_the_cpu_reference() {
 }
 
 /// A 2×2 square at `texels_per_diagonal` 10000: about 53M texels, flat, so 8-bit heights with
-/// their normals: a 160 MB atlas on the device.
+/// their normals: a 160 MB atlas on the device. Every triangle sampled: the presets would trace
+/// its two triangles exactly, with no atlas at all.
 fn big_square() -> Rbvh {
     let mut scene = Scene::new("big square");
     scene.push_object(
@@ -135,7 +133,7 @@ fn big_square() -> Rbvh {
     );
     let params = RbvhParams {
         texels_per_diagonal: 10000.0,
-        ..RbvhParams::quality(0).unwrap()
+        ..common::sampled_preset(0)
     };
     Rbvh::build(&scene, &params).unwrap()
 }
@@ -146,6 +144,10 @@ fn an_atlas_over_the_storage_buffer_range_is_traced_and_painted_through_device_a
     let range = ctx.limits().max_storage_buffer_range;
     let r = Arc::new(big_square());
     let atlas_bytes = r.atlas_bytes();
+    assert!(
+        atlas_bytes > 100 << 20,
+        "the square's atlas is {atlas_bytes} B"
+    );
     if atlas_bytes <= range {
         // A device whose bindings reach this far (desktop GPUs: 4 GiB) needs no addresses here.
         eprintln!(

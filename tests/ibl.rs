@@ -13,7 +13,7 @@ use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{Context, Query, Tracer};
 use rbvh::ibl::{self, Environment, Frame, LatLongMap, Settings, Sky};
 use rbvh::output::Image;
-use rbvh::rbvh::{Rbvh, RbvhParams};
+use rbvh::rbvh::Rbvh;
 use rbvh::scene::Scene;
 use rbvh::structure::Structure;
 use rbvh::Error;
@@ -27,7 +27,10 @@ struct Uploaded {
     surface_offset: f32,
 }
 
-/// The exact BVH (`None`) or the RBVH at quality `Some(level)` of `scene`.
+/// The exact BVH (`None`) or the RBVH at quality `Some(level)` of `scene`, every triangle
+/// sampled ([`common::sampled_preset`]): these scenes are planes and boxes of a few large
+/// triangles, which the presets trace exactly, and the tests' subject is lighting through
+/// height fields.
 fn structure(ctx: &Context, scene: &Scene, level: Option<u32>) -> Uploaded {
     match level {
         None => Uploaded {
@@ -35,7 +38,7 @@ fn structure(ctx: &Context, scene: &Scene, level: Option<u32>) -> Uploaded {
             surface_offset: 0.0,
         },
         Some(q) => {
-            let rbvh = Rbvh::build(scene, &RbvhParams::quality(q).unwrap()).unwrap();
+            let rbvh = Rbvh::build(scene, &common::sampled_preset(q)).unwrap();
             let surface_offset = rbvh.texel_size;
             Uploaded {
                 tracer: Tracer::new(ctx, &Structure::from(rbvh)).unwrap(),

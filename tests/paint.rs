@@ -1,6 +1,8 @@
 //! Painting on an RBVH: the device (`glsl/paint.comp`) and the CPU reference agree texel for
 //! texel, a stroke lands where it was aimed and nowhere else — across leaf borders too — and
-//! painted data survives a save and a load.
+//! painted data survives a save and a load. Every RBVH here samples every triangle
+//! ([`common::sampled_preset`], as `rbvh paint` builds them): the presets trace the cube's faces
+//! exactly, and exact triangles have no texels to paint.
 
 mod common;
 
@@ -17,11 +19,7 @@ use std::sync::Arc;
 const RED: u32 = 0xFF00_00FF;
 
 fn cube() -> Rbvh {
-    Rbvh::build(
-        &Scene::load("cube").unwrap(),
-        &RbvhParams::quality(2).unwrap(),
-    )
-    .unwrap()
+    Rbvh::build(&Scene::load("cube").unwrap(), &common::sampled_preset(2)).unwrap()
 }
 
 /// Every surface texel: (atlas index, world sample point, leaf index, stored normal).
@@ -152,7 +150,7 @@ fn painted_colours_survive_save_and_load() {
 fn a_colour_channel_that_does_not_match_the_atlas_is_refused() {
     let ctx = common::context();
     let scene = Scene::builtin("cube").unwrap();
-    let mut r = Rbvh::build(&scene, &RbvhParams::quality(1).unwrap()).unwrap();
+    let mut r = Rbvh::build(&scene, &common::sampled_preset(1)).unwrap();
     r.colours = Some(vec![0; 3]);
     let e = Painter::new(&ctx, &r).err().unwrap().to_string();
     assert!(
@@ -170,7 +168,7 @@ fn a_height_only_rbvh_has_no_colours_to_paint() {
     let scene = Scene::builtin("cube").unwrap();
     let params = RbvhParams {
         texels: rbvh::rbvh::TexelFormat::Height,
-        ..RbvhParams::quality(1).unwrap()
+        ..common::sampled_preset(1)
     };
     let r = Arc::new(Rbvh::build(&scene, &params).unwrap());
     let tracer = Tracer::new(&ctx, &Structure::from(r.clone())).unwrap();
@@ -285,11 +283,7 @@ fn a_painter_sharing_the_tracers_atlas_paints_the_same_and_uploads_only_colours(
     shared.paint(&brushes[..1]).unwrap();
 
     // A tracer of another RBVH, or of the exact BVH, is refused.
-    let other = Rbvh::build(
-        &Scene::load("cube").unwrap(),
-        &RbvhParams::quality(0).unwrap(),
-    )
-    .unwrap();
+    let other = Rbvh::build(&Scene::load("cube").unwrap(), &common::sampled_preset(0)).unwrap();
     let e = Painter::sharing(&Tracer::new(&ctx, &Structure::from(other)).unwrap(), &r)
         .err()
         .unwrap()

@@ -315,19 +315,29 @@ fn the_exact_bvh_of_a_point_cloud_is_refused_by_name() {
     assert!(e.contains("scan.ply") && e.contains("point cloud"), "{e}");
 }
 
-/// A point cloud has no triangles to trace exactly: `exact_when_cheaper` is refused by name
-/// rather than ignored (a level named `Q2e` would otherwise be the plain Q2).
+/// A point cloud has no triangles to trace exactly: the presets' `exact_when_cheaper` does
+/// nothing there, and a cloud built with it is the cloud built without it.
 #[test]
-fn exact_when_cheaper_is_refused_for_points() {
+fn exact_when_cheaper_changes_nothing_for_points() {
     let scene = sampled("sphere", 2000);
-    let params = RbvhParams {
-        exact_when_cheaper: true,
-        ..q(2)
-    };
-    let e = Rbvh::build(&scene, &params).unwrap_err().to_string();
-    assert!(
-        e.contains("exact_when_cheaper") && e.contains("point cloud"),
-        "{e}"
+    let with = Rbvh::build(&scene, &q(2)).unwrap();
+    let without = Rbvh::build(
+        &scene,
+        &RbvhParams {
+            exact_when_cheaper: false,
+            ..q(2)
+        },
+    )
+    .unwrap();
+    assert!(with.params.exact_when_cheaper);
+    assert!(with.triangles.is_empty() && without.triangles.is_empty());
+    assert_eq!(
+        (with.leaves.len(), with.atlas.texels.len(), with.nodes.len()),
+        (
+            without.leaves.len(),
+            without.atlas.texels.len(),
+            without.nodes.len()
+        )
     );
-    assert!(Rbvh::build(&scene, &q(2)).is_ok());
+    assert_eq!(with.atlas.texels, without.atlas.texels);
 }

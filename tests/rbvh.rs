@@ -10,8 +10,11 @@ use rbvh::progress::Quiet;
 use rbvh::rbvh::{Rbvh, RbvhParams, RbvhSource, Refinement, Subdivision, HEIGHTFIELD_COUNT};
 use rbvh::scene::Scene;
 
+/// Preset `level` with every triangle sampled: these tests referee the height fields on the
+/// built-in meshes ([`common::sampled_preset`]); the presets themselves are tested in
+/// `a_mesh_coarser_than_its_texels_is_its_triangles_in_the_presets`.
 fn q(level: u32) -> RbvhParams {
-    RbvhParams::quality(level).unwrap()
+    common::sampled_preset(level)
 }
 
 /// Mean and max |t − t_exact| / diagonal over rays both hit, and the hit/miss disagreement rate.
@@ -142,19 +145,23 @@ fn sphere_leaves_respect_the_cone_and_height_error_bound() {
 #[test]
 fn build_is_identical_for_any_thread_count() {
     let scene = Scene::builtin("default").unwrap();
-    let build = |threads| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| Rbvh::build(&scene, &q(1)).unwrap())
-    };
-    let (a, b) = (build(1), build(3));
-    assert_eq!(
-        (&a.nodes, &a.leaves, &a.triangles),
-        (&b.nodes, &b.leaves, &b.triangles)
-    );
-    assert_eq!(a.atlas, b.atlas);
+    // The preset, whose triangles exact where cheaper are sorted into their own subtree, and the
+    // same level with every triangle sampled.
+    for params in [RbvhParams::quality(2).unwrap(), q(1)] {
+        let build = |threads| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| Rbvh::build(&scene, &params).unwrap())
+        };
+        let (a, b) = (build(1), build(3));
+        assert_eq!(
+            (&a.nodes, &a.leaves, &a.triangles),
+            (&b.nodes, &b.leaves, &b.triangles)
+        );
+        assert_eq!(a.atlas, b.atlas);
+    }
 }
 
 /// Levels built from one shared source are the levels built alone, byte for byte (their build
@@ -171,31 +178,50 @@ fn levels_from_one_source_are_the_levels_built_alone() {
     let err = Rbvh::build_from(&source, &too_fine, &Quiet).unwrap_err();
     assert!(err.to_string().contains("texels_per_diagonal"), "{err}");
     for level in [0, 2, 4] {
-        let mut shared = Rbvh::build_from(&source, &q(level), &Quiet).unwrap();
-        let mut alone = Rbvh::build(&scene, &q(level)).unwrap();
-        assert!(shared.stats.build_ms > 0.0 && alone.stats.build_ms > 0.0);
-        shared.stats.build_ms = 0.0;
-        alone.stats.build_ms = 0.0;
-        assert_eq!(shared.to_bytes(), alone.to_bytes(), "Q{level}");
+        for params in [RbvhParams::quality(level).unwrap(), q(level)] {
+            let mut shared = Rbvh::build_from(&source, &params, &Quiet).unwrap();
+            let mut alone = Rbvh::build(&scene, &params).unwrap();
+            assert!(shared.stats.build_ms > 0.0 && alone.stats.build_ms > 0.0);
+            shared.stats.build_ms = 0.0;
+            alone.stats.build_ms = 0.0;
+            assert_eq!(
+                shared.to_bytes(),
+                alone.to_bytes(),
+                "{}",
+                params.level_label()
+            );
+        }
     }
 }
 
+/// Every preset and strategy builds, and each finer level is larger: with every triangle sampled
+/// in texels, as the presets are in bytes (their texels need not grow: at Q2 the ground's 4,608
+/// triangles become cheaper than their texels, and Q2 has fewer texels than Q1).
 #[test]
-fn every_preset_and_strategy_builds_and_texels_grow_with_quality() {
+fn every_preset_and_strategy_builds_and_grows_with_quality() {
     let scene = Scene::builtin("default").unwrap();
-    let mut previous = 0;
-    for level in 0..5 {
-        let r = Rbvh::build(&scene, &q(level)).unwrap();
-        assert!(
-            r.stats.tile_texels > previous,
-            "Q{level} has no more texels than the level below"
-        );
-        previous = r.stats.tile_texels;
-        assert!(
-            r.fill_ratio() > 0.5,
-            "Q{level}: atlas fill {}",
-            r.fill_ratio()
-        );
+    for sampled in [false, true] {
+        let mut previous = 0;
+        for level in 0..5 {
+            let params = RbvhParams {
+                exact_when_cheaper: !sampled,
+                ..q(level)
+            };
+            let r = Rbvh::build(&scene, &params).unwrap();
+            let label = params.level_label();
+            let size = if sampled {
+                r.stats.tile_texels
+            } else {
+                r.total_bytes()
+            };
+            assert!(size > previous, "{label} is no larger than the level below");
+            previous = size;
+            assert!(
+                r.fill_ratio() > 0.5,
+                "{label}: atlas fill {}",
+                r.fill_ratio()
+            );
+        }
     }
     for (refinement, subdivision, object_split) in [
         (
@@ -229,6 +255,45 @@ fn every_preset_and_strategy_builds_and_texels_grow_with_quality() {
         let (_, _, mismatch) = error_vs_exact(&scene, &r, &rays);
         assert!(mismatch < 0.05, "{params:?}: {mismatch}");
     }
+}
+
+/// The presets trace a mesh coarser than its texels as its triangles (`exact_when_cheaper`): each
+/// of the cube's twelve and the plane's two triangles is cheaper than the texels that would
+/// sample it, so no height field is built and every hit is the exact BVH's; a mesh with detail
+/// between its texels (the blob at Q0) keeps its height fields.
+#[test]
+fn a_mesh_coarser_than_its_texels_is_its_triangles_in_the_presets() {
+    for name in ["cube", "plane"] {
+        let scene = Scene::builtin(name).unwrap();
+        let exact = Bvh::build(&scene).unwrap();
+        let rays = common::random_rays(&scene, 2000, &mut common::Rng::new(5));
+        for level in 0..5 {
+            let r = Rbvh::build(&scene, &RbvhParams::quality(level).unwrap()).unwrap();
+            assert!(
+                r.leaves.is_empty() && r.atlas.texels.is_empty(),
+                "{name} Q{level}: {} height fields",
+                r.leaves.len()
+            );
+            assert_eq!(r.triangles.len(), scene.triangle_count(), "{name} Q{level}");
+            for ray in &rays {
+                let (e, a) = (exact.closest_hit(ray).0, r.closest_hit(ray).0);
+                assert_eq!(e.is_hit(), a.is_hit(), "{name} Q{level}: {ray:?}");
+                if e.is_hit() {
+                    assert!(
+                        (e.t - a.t).abs() <= 1e-5 * e.t.max(1.0) && e.id == a.id,
+                        "{name} Q{level}: {e:?} against {a:?}"
+                    );
+                }
+            }
+        }
+    }
+    let blob = Scene::builtin("blob").unwrap();
+    let r = Rbvh::build(&blob, &RbvhParams::quality(0).unwrap()).unwrap();
+    assert!(
+        r.leaves.len() > 1,
+        "the blob at Q0: {} height fields",
+        r.leaves.len()
+    );
 }
 
 #[test]

@@ -32,14 +32,12 @@ fn gpu_and_cpu_rbvh_casters_agree_at_every_level() {
     let (mut narrow, mut wide) = (0u64, 0u64);
     for (k, name) in ["default", "blob", "sphere"].into_iter().enumerate() {
         let scene = Scene::builtin(name).unwrap();
-        // Every preset, and the default scene's Q4 also with its large triangles exact
-        // (`exact_when_cheaper`: leaves of one triangle each beside the height fields).
+        // Every preset (the large triangles exact where cheaper: leaves of one triangle each
+        // beside the height fields, and from Q3 no height field on the sphere), and Q4 also with
+        // every triangle sampled.
         let variants = (0..5)
             .map(|level| RbvhParams::quality(level).unwrap())
-            .chain((name == "default").then(|| RbvhParams {
-                exact_when_cheaper: true,
-                ..RbvhParams::quality(4).unwrap()
-            }));
+            .chain([common::sampled_preset(4)]);
         for (variant, params) in variants.enumerate() {
             let r = Arc::new(Rbvh::build(&scene, &params).unwrap());
             narrow += r.narrow_texels();
@@ -78,7 +76,8 @@ fn gpu_and_cpu_rbvh_casters_agree_at_every_level() {
 fn block_jumps_skip_many_cells_of_grazing_rays_and_change_no_hit() {
     let ctx = common::context();
     let scene = Scene::builtin("sphere").unwrap();
-    let r = Arc::new(Rbvh::build(&scene, &RbvhParams::quality(4).unwrap()).unwrap());
+    // Every triangle sampled: the presets trace the sphere's triangles exactly at Q4.
+    let r = Arc::new(Rbvh::build(&scene, &common::sampled_preset(4)).unwrap());
     let mut rng = common::Rng::new(5);
     let rays: Vec<Ray> = (0..4096)
         .map(|_| {
@@ -451,8 +450,9 @@ fn block_jumps_agree_with_the_plain_walk_on_steep_unaligned_tiles() {
     assert_eq!(agreement.worst_t, 0.0, "{agreement:?}");
 }
 
-/// Height-only texels (`TexelFormat::Height`): the same tree and heights, so the same hits as with
-/// normals, bit for bit, on the device and the CPU; only the normal differs — the cell triangle's,
+/// Height-only texels (`TexelFormat::Height`), every triangle sampled: the same tree and heights,
+/// so the same hits as with normals, bit for bit, on the device and the CPU; only the normal
+/// differs — the cell triangle's,
 /// which on the unit sphere is at least as close to the true normal as the nearest sample's.
 #[test]
 fn height_only_texels_hit_the_same_and_report_the_facet_normal() {
@@ -461,7 +461,10 @@ fn height_only_texels_hit_the_same_and_report_the_facet_normal() {
     for (k, name) in ["default", "blob", "sphere"].into_iter().enumerate() {
         let scene = Scene::builtin(name).unwrap();
         for level in [0, 2, 4] {
-            let normals = Rbvh::build(&scene, &RbvhParams::quality(level).unwrap()).unwrap();
+            // Every triangle sampled: the presets trace a triangle exactly where that is cheaper
+            // than its texels, and a texel's bytes depend on the format, so their two formats of
+            // one level need not have the same tree.
+            let normals = Rbvh::build(&scene, &common::sampled_preset(level)).unwrap();
             let params = RbvhParams {
                 texels: TexelFormat::Height,
                 ..normals.params

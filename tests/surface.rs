@@ -73,16 +73,28 @@ fn check_quadrants(scene: &Scene, expect: [Vec3; 4]) {
         .trace(&rays, Query::Closest)
         .unwrap()
         .hits;
-    let rbvh = Arc::new(Rbvh::build(scene, &RbvhParams::quality(4).unwrap()).unwrap());
-    assert!(rbvh.colours.is_some());
-    assert!(rbvh.stats.heightfield_leaves > 0);
-    let approx = Tracer::new(&ctx, &Structure::from(rbvh.clone()))
-        .unwrap()
-        .trace(&rays, Query::Closest)
-        .unwrap()
-        .hits;
-    for (name, hits, structure) in [("exact", &exact, None), ("rbvh", &approx, Some(&*rbvh))] {
-        let albedo = hit_albedo(scene, structure, None, &rays, hits).unwrap();
+    // The preset traces the quad's two large triangles exactly (its colour is the surface's at
+    // the hit); with every triangle sampled it is a height field whose texels hold the colour.
+    let preset = RbvhParams::quality(4).unwrap();
+    let sampled = common::sampled_preset(4);
+    let mut structures = vec![("exact", None, exact)];
+    for (name, params) in [("rbvh Q4", preset), ("rbvh Q4s", sampled)] {
+        let rbvh = Arc::new(Rbvh::build(scene, &params).unwrap());
+        assert!(rbvh.colours.is_some());
+        assert_eq!(
+            rbvh.stats.heightfield_leaves > 0,
+            !params.exact_when_cheaper,
+            "{name}"
+        );
+        let hits = Tracer::new(&ctx, &Structure::from(rbvh.clone()))
+            .unwrap()
+            .trace(&rays, Query::Closest)
+            .unwrap()
+            .hits;
+        structures.push((name, Some(rbvh), hits));
+    }
+    for (name, structure, hits) in &structures {
+        let albedo = hit_albedo(scene, structure.as_deref(), None, &rays, hits).unwrap();
         for (k, (&got, want)) in albedo.iter().zip(expect).enumerate() {
             assert!(
                 (got - want).abs().max_element() < 0.05,
@@ -134,7 +146,9 @@ fn kd_only_obj_colours_objects_and_leaves_plain_meshes_without_materials() {
     // No materials: no surface table, no colour channel, no albedo (renders stay grey).
     let plain = Scene::load("cube").unwrap();
     assert!(plain.surface.is_none());
-    let r = Rbvh::build(&plain, &RbvhParams::quality(1).unwrap()).unwrap();
+    // Every triangle sampled: the preset traces the cube's faces exactly, with no texels.
+    let r = Rbvh::build(&plain, &common::sampled_preset(1)).unwrap();
+    assert!(r.stats.heightfield_leaves > 0);
     assert!(r.colours.is_none() && r.colour_bytes() == 0);
     let rays = [down_ray(0.0, 0.0)];
     let hits = r.trace_cpu(&rays, false);
@@ -426,6 +440,10 @@ fn paint_command_saves_colours_that_render_shows() {
         String::from_utf8_lossy(&out.stderr)
     );
     let painted = Rbvh::load(Path::new(&p("painted.rbvh"))).unwrap();
+    assert!(
+        !painted.params.exact_when_cheaper,
+        "paint samples every triangle: the preset's cube would have no texels"
+    );
     assert!(painted.colours.unwrap().contains(&0xFF00_00FF));
     let out = rbvh_cli(&[
         "render",
@@ -503,7 +521,8 @@ fn gltf_uris_are_percent_decoded_and_file_uris_to_special_files_are_refused() {
 fn height_field_colours_are_filtered_between_samples() {
     use rbvh::rgba;
     let scene = Scene::load("plane").unwrap();
-    let mut r = Rbvh::build(&scene, &RbvhParams::quality(0).unwrap()).unwrap();
+    // Every triangle sampled: the preset traces the plane's two triangles exactly.
+    let mut r = Rbvh::build(&scene, &common::sampled_preset(0)).unwrap();
     let (red, blue) = (
         rgba::from_bytes([255, 0, 0, 255]),
         rgba::from_bytes([0, 0, 255, 255]),
@@ -576,7 +595,8 @@ fn baked_colours_average_a_texture_finer_than_the_atlas() {
             .build()
             .unwrap();
         for _ in 0..3 {
-            let rbvh = pool.install(|| Rbvh::build(&scene, &RbvhParams::quality(0).unwrap()));
+            // Every triangle sampled: the preset traces the quad exactly, with no texels to bake.
+            let rbvh = pool.install(|| Rbvh::build(&scene, &common::sampled_preset(0)));
             send.send(rbvh.unwrap()).unwrap();
         }
     });

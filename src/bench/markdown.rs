@@ -340,20 +340,22 @@ fn text(v: &Value) -> String {
     }
 }
 
-/// A record's level as the bench tables write it: `exact`, `Q2`, `Q2h` (height-only), `Q2e`
-/// (triangles exact where cheaper), `Q2 LOD`.
+/// A record's level as the bench tables write it: `exact`, `Q2`, `Q2h` (height-only), `Q2s`
+/// (every triangle a height field can hold sampled, `exact_when_cheaper` false), `Q2 LOD`.
+/// Records made before `exact_when_cheaper` existed have no such field and no `s`: they were
+/// the presets of their commit, which the table's caption names.
 fn level(record: &Value) -> String {
     let Some(q) = record["quality"].as_str() else {
         return "exact".into();
     };
     let height = record["params"]["texels"].as_str() == Some("height");
-    let exact = record["params"]["exact_when_cheaper"].as_bool() == Some(true);
+    let sampled = record["params"]["exact_when_cheaper"].as_bool() == Some(false);
     let lod = record["method"].as_str() == Some("rbvh-lod");
     format!(
         "{q}{}{}{}",
         if height { "h" } else { "" },
-        if exact {
-            crate::rbvh::EXACT_WHEN_CHEAPER_SUFFIX
+        if sampled {
+            crate::rbvh::SAMPLED_SUFFIX
         } else {
             ""
         },
@@ -805,6 +807,35 @@ mod tests {
             relative(Path::new("scenes"), f),
             Path::new("../docs/results/x.json")
         );
+    }
+
+    /// A level is named by what its record says: `s` only where `exact_when_cheaper` is false, not
+    /// where the field is missing (records from before it, their commit's presets).
+    #[test]
+    fn levels_are_named_by_their_records() {
+        let record = |params: Value, method: &str| serde_json::json!({"quality": "Q2", "params": params, "method": method});
+        let cases = [
+            (serde_json::json!({"texels": "height_normal"}), "rbvh", "Q2"),
+            (
+                serde_json::json!({"exact_when_cheaper": true}),
+                "rbvh",
+                "Q2",
+            ),
+            (
+                serde_json::json!({"exact_when_cheaper": false}),
+                "rbvh",
+                "Q2s",
+            ),
+            (
+                serde_json::json!({"texels": "height", "exact_when_cheaper": false}),
+                "rbvh-lod",
+                "Q2hs LOD",
+            ),
+        ];
+        for (params, method, name) in cases {
+            assert_eq!(level(&record(params, method)), name);
+        }
+        assert_eq!(level(&serde_json::json!({"method": "exact"})), "exact");
     }
 
     /// A transcription names its raw records where they were kept, else says none was; a `raw`

@@ -367,8 +367,8 @@ impl From<&RbvhParams> for Params {
 
 impl Record {
     /// The level as tables and charts show it: the quality (`-` for exact), with `h` appended for
-    /// a height-only RBVH (`"Q2h"`) and `e` where triangles were traced exactly where cheaper
-    /// (`"Q2e"`), as [`RbvhParams::level_label`] names them.
+    /// a height-only RBVH (`"Q2h"`) and `s` where every triangle a height field can hold was
+    /// sampled (`"Q2s"`), as [`RbvhParams::level_label`] names them.
     pub fn level_label(&self) -> String {
         let height_only = self
             .params
@@ -379,13 +379,13 @@ impl Record {
         } else {
             ""
         };
-        let exact = if self.params.as_ref().is_some_and(|p| p.exact_when_cheaper) {
-            crate::rbvh::EXACT_WHEN_CHEAPER_SUFFIX
+        let sampled = if self.params.as_ref().is_some_and(|p| !p.exact_when_cheaper) {
+            crate::rbvh::SAMPLED_SUFFIX
         } else {
             ""
         };
         match &self.quality {
-            Some(q) => format!("{q}{suffix}{exact}"),
+            Some(q) => format!("{q}{suffix}{sampled}"),
             None => "-".into(),
         }
     }
@@ -625,12 +625,12 @@ mod tests {
         };
         r.params = Some(Params::from(&height));
         assert_eq!(r.level_label(), "Q2h");
-        let exact = RbvhParams {
-            exact_when_cheaper: true,
+        let sampled = RbvhParams {
+            exact_when_cheaper: false,
             ..RbvhParams::quality(2).unwrap()
         };
-        r.params = Some(Params::from(&exact));
-        assert_eq!(r.level_label(), "Q2e");
+        r.params = Some(Params::from(&sampled));
+        assert_eq!(r.level_label(), "Q2s");
     }
 
     #[test]

@@ -20,7 +20,7 @@
 //! own triangles that its tiles leave uncovered (`Tile::exposed`: over a cell the ring found no
 //! surface for, or rising above or sinking under a cell's surface beyond what it stands in for),
 //! so that a ray entering the solid through them cannot pass between the leaves. With
-//! `exact_when_cheaper` (off in the presets) triangles that cost fewer bytes traced exactly than
+//! `exact_when_cheaper` (on in the presets) triangles that cost fewer bytes traced exactly than
 //! sampled stay triangles too: before the recursion every triangle large enough
 //! (`Builder::exact_by_size`), and in it every set whose tiles would cost more than its
 //! triangles (`sampled_bytes`) — the paper's "triangle leaves where needed", decided by the
@@ -343,12 +343,6 @@ impl Rbvh {
             input @ Input::Points(_) => (input, "points"),
             input @ Input::Triangles(_) => (input, "triangles"),
         };
-        if params.exact_when_cheaper && matches!(input, Input::Points(_)) {
-            return Err(Error::param(
-                "exact_when_cheaper",
-                "a point cloud has no triangles to trace exactly; build it without".to_string(),
-            ));
-        }
         let object_texel = object_texels(
             &source.objects,
             texel,
@@ -1264,12 +1258,21 @@ mod tests {
         f.x >= lo && f.y >= lo && f.x <= hi[0] && f.y <= hi[1]
     }
 
+    /// Preset `level` with every triangle sampled: the parts these tests check stand beside the
+    /// default scene's cube and cone, which the presets trace exactly.
+    fn sampled(level: u32) -> RbvhParams {
+        RbvhParams {
+            exact_when_cheaper: false,
+            ..RbvhParams::quality(level).unwrap()
+        }
+    }
+
     /// Every exact part names the height-field leaf it stands beside: it lies over that leaf's
     /// tile (the cells it was cut to and their ring), and no other leaf's index is named.
     #[test]
     fn exact_parts_name_the_leaf_they_stand_beside() {
         let scene = Scene::builtin("default").unwrap();
-        let r = Rbvh::build(&scene, &super::super::RbvhParams::quality(2).unwrap()).unwrap();
+        let r = Rbvh::build(&scene, &sampled(2)).unwrap();
         let mut parts = 0;
         for t in &r.triangles {
             let Some(leaf) = t.part_leaf() else { continue };
@@ -1289,7 +1292,7 @@ mod tests {
     fn a_hit_on_an_exact_part_lands_on_its_own_leaf() {
         use crate::geom::{Hit, Ray};
         let scene = Scene::builtin("default").unwrap();
-        let r = Rbvh::build(&scene, &super::super::RbvhParams::quality(4).unwrap()).unwrap();
+        let r = Rbvh::build(&scene, &sampled(4)).unwrap();
         let shared = r.part_leaves().values().filter(|l| l.len() > 1).count();
         assert!(shared > 0, "no triangle with parts beside several leaves");
         for t in r.triangles.iter().filter(|t| t.part_leaf().is_some()) {

@@ -31,9 +31,7 @@ mod split;
 pub use build::RbvhSource;
 pub use layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT};
 pub use march::DeviceTwin;
-pub use params::{
-    RbvhParams, Refinement, Subdivision, TexelFormat, EXACT_WHEN_CHEAPER_SUFFIX, QUALITY_NAMES,
-};
+pub use params::{RbvhParams, Refinement, Subdivision, TexelFormat, QUALITY_NAMES, SAMPLED_SUFFIX};
 pub use raster::CREST_TEXELS;
 
 use crate::bvh::{GpuNode, GpuTriangle};

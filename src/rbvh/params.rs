@@ -45,7 +45,9 @@ pub enum TexelFormat {
     HeightNormal,
     /// The height code alone, 16 or 8 bits: half the atlas or less. A hit reports the normal of the cell
     /// triangle it hit (a facet normal, exact for the height field as sampled), so shading shows
-    /// the facets; for visibility (AO, shadows) the hits are the same as with normals. Carries no
+    /// the facets; for visibility (AO, shadows) the hits are the same as with normals where every
+    /// triangle is sampled (`exact_when_cheaper` counts a texel's bytes, so a height-only preset
+    /// may trace a few more triangles exactly, each hit exactly). Carries no
     /// colour channel, and levels of detail (whose columns take their normals from the texels)
     /// are not built for it.
     Height,
@@ -121,15 +123,17 @@ pub struct RbvhParams {
     /// nodes, exact parts) cost more than its triangles would (`build.rs`). Such triangles have
     /// no detail between their corners for texels to sample (walls, floors, a cube's faces, a
     /// mesh coarser than the sampling rate), and a height field of them widens their silhouettes
-    /// by its rim. Off (the presets, and RBVH files before version 9): every triangle is sampled
-    /// wherever a height field can hold it, as the paper does.
+    /// by its rim. On in the presets (a texel exists because the scene needs it); off (RBVH
+    /// files before version 9, `rbvh --sample-all`): every triangle is sampled wherever a height
+    /// field can hold it, as the paper does. A point cloud has no triangles: the rule does
+    /// nothing there.
     pub exact_when_cheaper: bool,
 }
 
-/// What a level's name gets appended when its triangles are traced exactly where cheaper
-/// ([`RbvhParams::exact_when_cheaper`]): `Q2e`, so that it tells apart from the preset in
-/// tables, charts and file names.
-pub const EXACT_WHEN_CHEAPER_SUFFIX: &str = "e";
+/// What a level's name gets appended when every triangle a height field can hold is sampled
+/// (`exact_when_cheaper` off, the paper's rule): `Q2s`, so that it tells apart from the preset
+/// in tables, charts and file names.
+pub const SAMPLED_SUFFIX: &str = "s";
 
 /// Quality preset names, coarsest to finest.
 pub const QUALITY_NAMES: [&str; 5] = ["Q0", "Q1", "Q2", "Q3", "Q4"];
@@ -185,12 +189,13 @@ impl RbvhParams {
             min_leaf_texels: 3.0,
             sampled_criterion_texels: 4.0,
             texels: TexelFormat::HeightNormal,
-            exact_when_cheaper: false,
+            exact_when_cheaper: true,
         }
     }
 
     /// The preset these parameters are, if any: the level whose [`RbvhParams::quality`] they equal
-    /// in everything but the texel format and `exact_when_cheaper` (which every preset can take).
+    /// in everything but the texel format and `exact_when_cheaper` (which every preset can take or
+    /// leave).
     pub fn preset(&self) -> Option<u32> {
         let level = Self::presets().iter().position(|p| {
             RbvhParams {
@@ -210,16 +215,16 @@ impl RbvhParams {
     }
 
     /// [`RbvhParams::quality_name`] with the texel format's suffix
-    /// ([`TexelFormat::level_suffix`]) and [`EXACT_WHEN_CHEAPER_SUFFIX`] where it applies: `Q2`,
-    /// `Q2h`, `Q2e`, `Q2he`, `customh`.
+    /// ([`TexelFormat::level_suffix`]) and [`SAMPLED_SUFFIX`] where it applies: `Q2`, `Q2h`,
+    /// `Q2s`, `Q2hs`, `customh`.
     pub fn level_label(&self) -> String {
-        let exact = if self.exact_when_cheaper {
-            EXACT_WHEN_CHEAPER_SUFFIX
-        } else {
+        let sampled = if self.exact_when_cheaper {
             ""
+        } else {
+            SAMPLED_SUFFIX
         };
         format!(
-            "{}{}{exact}",
+            "{}{}{sampled}",
             self.quality_name(),
             self.texels.level_suffix()
         )
@@ -359,12 +364,13 @@ mod tests {
                 ..p
             };
             assert_eq!(height.level_label(), format!("Q{level}h"));
-            let exact = RbvhParams {
-                exact_when_cheaper: true,
+            assert_eq!(p.level_label(), format!("Q{level}"));
+            let sampled = RbvhParams {
+                exact_when_cheaper: false,
                 ..height
             };
-            assert_eq!(exact.preset(), Some(level));
-            assert_eq!(exact.level_label(), format!("Q{level}he"));
+            assert_eq!(sampled.preset(), Some(level));
+            assert_eq!(sampled.level_label(), format!("Q{level}hs"));
         }
         let q2 = RbvhParams::quality(2).unwrap();
         let custom = RbvhParams {

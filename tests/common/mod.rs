@@ -29,6 +29,18 @@ pub fn context_with(addressing: Addressing) -> Context {
     ctx
 }
 
+/// Preset `level` with every triangle a height field can hold sampled (`exact_when_cheaper` off,
+/// the paper's rule; the CLI's `--sample-all`, `Q2s`), for the tests whose subject is the height
+/// fields on the built-in single meshes: the presets trace their few large triangles exactly
+/// where that costs fewer bytes (the cube, cylinder, cone and plane at every level, the torus
+/// from Q2, the sphere from Q3, the blob at Q4), and such a test would referee no height field.
+pub fn sampled_preset(level: u32) -> rbvh::rbvh::RbvhParams {
+    rbvh::rbvh::RbvhParams {
+        exact_when_cheaper: false,
+        ..rbvh::rbvh::RbvhParams::quality(level).unwrap()
+    }
+}
+
 /// The built-in plane's oracle: a point on it, its normal and its half extent.
 pub fn plane_oracle() -> (glam::Vec3, glam::Vec3, f32) {
     match rbvh::scene::builtin::analytic("plane") {

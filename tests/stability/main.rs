@@ -56,8 +56,11 @@ fn rbvh_hits(ctx: &Context, r: &Arc<Rbvh>, rays: &[Ray], query: Query) -> [Vec<H
     [gpu, r.trace_cpu(rays, query == Query::Any)]
 }
 
+/// Preset `level` with every triangle sampled ([`common::sampled_preset`]): these tests hold
+/// height fields to extremes, on meshes (planes, slabs, a few large triangles) that the presets
+/// would trace exactly.
 fn q(level: u32) -> RbvhParams {
-    RbvhParams::quality(level).unwrap()
+    common::sampled_preset(level)
 }
 
 fn mesh(name: &str, positions: &[Vec3], triangles: &[[u32; 3]]) -> Scene {

@@ -43,10 +43,14 @@ pub struct Args {
 pub fn run(a: Args) -> Result<()> {
     check_image_size(a.width, a.height)?;
     let dabs = strokes::load(&a.strokes)?;
-    // Painting writes the RBVH's texels: no other structure, and no coarse levels of detail,
-    // which have none to paint.
+    // Painting writes the RBVH's texels: no other structure, no coarse levels of detail (which
+    // have none to paint), and every triangle a height field can hold sampled (`--sample-all`),
+    // or the walls and floors the presets trace exactly would take no paint. A file given with
+    // `--rbvh` is painted as it was built.
+    let mut source = a.source.clone();
+    source.quality.sample_all = true;
     let common = Common {
-        source: a.source.clone(),
+        source,
         method: Method::Rbvh,
         lod: LodArgs::off(),
     };
@@ -108,8 +112,15 @@ pub fn run(a: Args) -> Result<()> {
         .filter(|h| h.is_hit() && h.id & LEAF_BIT == 0 && !parts.contains_key(&h.id))
         .count();
     if on_triangles > 0 {
+        // A file built by the presets (`rbvh build --out`) keeps its large triangles exact.
+        let advice = match p.structure.rbvh() {
+            Some(r) if r.params.exact_when_cheaper => {
+                " (this RBVH traces triangles exactly where cheaper: build it with --sample-all to paint them)"
+            }
+            _ => "",
+        };
         eprintln!(
-            "warning: {on_triangles} of {} dabs land on triangle leaves, which have no texels: paint shows only on the height-field surface around them",
+            "warning: {on_triangles} of {} dabs land on triangle leaves, which have no texels: paint shows only on the height-field surface around them{advice}",
             dabs.len()
         );
     }

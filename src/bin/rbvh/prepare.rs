@@ -567,12 +567,14 @@ pub struct Quality {
     /// judged on their surface as sampled (0: triangles only, the paper's rule; presets: 4).
     #[arg(long)]
     pub sampled_criterion_texels: Option<f32>,
-    /// Trace triangles exactly where that costs fewer bytes than sampling them (a triangle
-    /// covering at least 24 texels, 48 height-only, and a set whose tiles would cost more than
-    /// its triangles), at every level asked for; such a level is named with an `e`, e.g. Q2e.
-    /// Presets sample every triangle a height field can hold.
+    /// Sample every triangle a height field can hold, as the paper does, at every level asked
+    /// for; such a level is named with an `s`, e.g. Q2s. Presets trace triangles exactly where
+    /// that costs fewer bytes than sampling them (a triangle covering at least 24 texels, 48
+    /// height-only, and a set whose tiles would cost more than its triangles). `rbvh paint`
+    /// samples everything it builds (paint is stored in texels); a file it is given with
+    /// --rbvh is painted as it was built.
     #[arg(long)]
-    pub exact_when_cheaper: bool,
+    pub sample_all: bool,
     /// What each atlas texel holds: `normals` (height and normal, 4 bytes) or `height` (height
     /// alone, 2 bytes: facet normals, no colours, no levels of detail); comma-separate both to
     /// build each level in each (a height-only level is named with an `h`, e.g. Q2h).
@@ -626,7 +628,7 @@ impl Quality {
     }
 
     /// Every requested level in every requested texel format (each named by
-    /// `RbvhParams::level_label`: `Q2`, `Q2h`, `Q2e`, `custom`).
+    /// `RbvhParams::level_label`: `Q2`, `Q2h`, `Q2s`, `custom`).
     pub fn levels(&self) -> Result<Vec<rbvh::rbvh::RbvhParams>> {
         let formats = self.texel_formats();
         Ok(self
@@ -642,7 +644,7 @@ impl Quality {
 
     /// The requested levels (presets, or one preset changed by free parameters), each
     /// validated, with the default texels (see [`Quality::levels`] for the formats), their
-    /// triangles traced exactly where cheaper if asked.
+    /// triangles all sampled if asked.
     pub fn quality_levels(&self) -> Result<Vec<rbvh::rbvh::RbvhParams>> {
         use rbvh::rbvh::{RbvhParams, Refinement, Subdivision};
         let mut levels = Vec::new();
@@ -667,7 +669,7 @@ impl Quality {
             .into_iter()
             .map(|level| {
                 let mut p = RbvhParams::quality(level)?;
-                p.exact_when_cheaper = self.exact_when_cheaper;
+                p.exact_when_cheaper = !self.sample_all;
                 if let Some(r) = self.texels_per_diagonal {
                     p.texels_per_diagonal = r;
                 }
