@@ -250,6 +250,9 @@ impl Block {
             _ if jsons.iter().any(|j| j.get("transcribed").is_some()) => {
                 Err("a transcribed file is shown alone".to_string())
             }
+            _ if self.view.as_deref() == Some("glance") => self
+                .view_table(&jsons)
+                .and_then(|table| Ok((table, glance_caption(&jsons, |r| self.keeps(r))?))),
             _ => self
                 .view_table(&jsons)
                 .and_then(|table| Ok((table, measured_caption(&jsons)?))),
@@ -272,9 +275,9 @@ impl Block {
 
     fn view_table(&self, jsons: &[Value]) -> Made<String> {
         let view = self.view.as_deref().unwrap_or("summary");
-        if jsons.len() > 1 && view != "ratios" {
+        if jsons.len() > 1 && view != "ratios" && view != "glance" {
             return Err(format!(
-                "view={view} shows one file; several make medians in view=ratios"
+                "view={view} shows one file; several make medians in view=ratios or view=glance"
             ));
         }
         if view == "shaders" {
@@ -301,8 +304,9 @@ impl Block {
             "work" => Ok(work_table(&runs[0])),
             "steps" => steps_table(&runs[0]),
             "ratios" => Ok(ratios_table(&runs)),
+            "glance" => Ok(glance_table(&runs)),
             other => Err(format!(
-                "unknown view {other:?} (summary, work, steps, ratios, shaders)"
+                "unknown view {other:?} (summary, work, steps, ratios, glance, shaders)"
             )),
         }
     }
@@ -348,19 +352,16 @@ fn level(record: &Value) -> String {
     let Some(q) = record["quality"].as_str() else {
         return "exact".into();
     };
-    let height = record["params"]["texels"].as_str() == Some("height");
-    let sampled = record["params"]["exact_when_cheaper"].as_bool() == Some(false);
-    let lod = record["method"].as_str() == Some("rbvh-lod");
-    format!(
-        "{q}{}{}{}",
-        if height { "h" } else { "" },
-        if sampled {
-            crate::rbvh::SAMPLED_SUFFIX
-        } else {
-            ""
-        },
-        if lod { " LOD" } else { "" }
-    )
+    let name = crate::rbvh::level_name(
+        q,
+        record["params"]["texels"].as_str() == Some("height"),
+        record["params"]["exact_when_cheaper"].as_bool() == Some(false),
+    );
+    if record["method"].as_str() == Some("rbvh-lod") {
+        format!("{name} LOD")
+    } else {
+        name
+    }
 }
 
 fn num(v: &Value, scale: f64, digits: usize) -> String {
@@ -579,17 +580,10 @@ fn ratios_table(runs: &[Vec<&Value>]) -> String {
             let spread = |records: &[&Value], value: fn(&Value) -> Option<f64>| {
                 let mut v: Vec<f64> = records.iter().filter_map(|r| value(r)).collect();
                 v.sort_by(f64::total_cmp);
-                match v.len() {
-                    0 => "-".to_string(),
-                    1 => format!("{:.2}", v[0]),
-                    n => {
-                        let median = if n % 2 == 1 {
-                            v[n / 2]
-                        } else {
-                            0.5 * (v[n / 2 - 1] + v[n / 2])
-                        };
-                        format!("{median:.2} ({:.2}–{:.2})", v[0], v[n - 1])
-                    }
+                match (median(v.iter().copied()), v.len()) {
+                    (None, _) => "-".to_string(),
+                    (Some(m), 1) => format!("{m:.2}"),
+                    (Some(m), n) => format!("{m:.2} ({:.2}–{:.2})", v[0], v[n - 1]),
                 }
             };
             let mut row = vec![
@@ -613,6 +607,177 @@ fn ratios_table(runs: &[Vec<&Value>]) -> String {
         .take(header.len())
         .collect();
     markdown(&header, &align, &rows)
+}
+
+/// The trade at a glance: a row per (scene, level), the exact BVH first, with what the level
+/// costs (megabytes, and how many times smaller than the exact BVH), what it buys (its speed
+/// over the exact BVH's, a column per ray type measured) and what it gives up (its primary
+/// rays' hit-distance error p99 and FLIP, and whether the bench judged every ray type valid).
+/// Speeds are medians over the invocations (`runs`) that hold the record; sizes and errors are
+/// deterministic, so any invocation's. The exact BVH's speed cells give its MRays/s.
+fn glance_table(runs: &[Vec<&Value>]) -> String {
+    let mut keys: Vec<(String, String)> = Vec::new();
+    let mut rays: Vec<String> = Vec::new();
+    for r in runs.iter().flatten() {
+        let key = (text(&r["scene"]), level(r));
+        if !keys.contains(&key) {
+            keys.push(key);
+        }
+        let ray = text(&r["ray_type"]);
+        if !rays.contains(&ray) {
+            rays.push(ray);
+        }
+    }
+    // Exact first within each scene, the levels in the order the files hold them.
+    let scenes: Vec<String> = keys.iter().fold(Vec::new(), |mut v, (scene, _)| {
+        if !v.contains(scene) {
+            v.push(scene.clone());
+        }
+        v
+    });
+    keys.sort_by_key(|(scene, l)| {
+        (
+            scenes.iter().position(|s| s == scene),
+            l != "exact",
+            keys_order(runs, scene, l),
+        )
+    });
+    let mut header: Vec<String> = ["scene", "level", "MB", "× smaller"]
+        .map(String::from)
+        .to_vec();
+    header.extend(rays.iter().map(|ray| format!("{ray} × exact")));
+    header.extend(["t p99 %", "FLIP", "valid"].map(String::from));
+    let rows: Vec<Vec<String>> = keys
+        .iter()
+        .map(|(scene, l)| {
+            let records: Vec<&Value> = runs
+                .iter()
+                .flatten()
+                .copied()
+                .filter(|r| text(&r["scene"]) == *scene && level(r) == *l)
+                .collect();
+            let first = records[0];
+            let primary = records
+                .iter()
+                .find(|r| r["ray_type"].as_str() == Some("primary"))
+                .copied();
+            let exact = l == "exact";
+            let mut row = vec![
+                scene.clone(),
+                if exact { "exact BVH".into() } else { l.clone() },
+                num(&first["memory_bytes"]["total"], 1e-6, 2),
+                if exact {
+                    "1".into()
+                } else {
+                    num(&first["memory_ratio_vs_exact"], 1.0, 1)
+                },
+            ];
+            row.extend(rays.iter().map(|ray| {
+                let of_ray: Vec<&Value> = records
+                    .iter()
+                    .copied()
+                    .filter(|r| text(&r["ray_type"]) == *ray)
+                    .collect();
+                if exact {
+                    median(
+                        of_ray
+                            .iter()
+                            .filter_map(|r| r["mrays_per_s"]["median"].as_f64()),
+                    )
+                    .map_or("-".into(), |m| format!("{m:.2} MRays/s"))
+                } else {
+                    median(of_ray.iter().filter_map(|r| r["speedup_vs_exact"].as_f64()))
+                        .map_or("-".into(), |m| format!("{m:.2}×"))
+                }
+            }));
+            let error = primary.map(|r| &r["error"]);
+            row.push(error.map_or("-".into(), |e| num(&e["t_err_p99"], 100.0, 2)));
+            row.push(error.map_or("-".into(), |e| num(&e["flip_mean"], 1.0, 3)));
+            row.push(
+                if records.iter().all(|r| r["valid"].as_bool() == Some(true)) {
+                    "yes"
+                } else {
+                    "**no**"
+                }
+                .into(),
+            );
+            row
+        })
+        .collect();
+    let align: Vec<char> = "ll"
+        .chars()
+        .chain(std::iter::repeat('r'))
+        .take(header.len() - 1)
+        .chain(std::iter::once('l'))
+        .collect();
+    markdown(&header, &align, &rows)
+}
+
+/// Where `level` of `scene` first appears in the files, so that a glance keeps their order.
+fn keys_order(runs: &[Vec<&Value>], scene: &str, level_name: &str) -> usize {
+    runs.iter()
+        .flatten()
+        .position(|r| text(&r["scene"]) == scene && level(r) == level_name)
+        .unwrap_or(usize::MAX)
+}
+
+/// The median of `values`, None when there are none.
+fn median(values: impl Iterator<Item = f64>) -> Option<f64> {
+    let mut v: Vec<f64> = values.collect();
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    match n {
+        0 => None,
+        _ if n % 2 == 1 => Some(v[n / 2]),
+        _ => Some(0.5 * (v[n / 2 - 1] + v[n / 2])),
+    }
+}
+
+/// The line under a glance: one [`measured_caption`] per group of files that share a host,
+/// device and settings, each naming the scenes it measured, so that a glance may set side by side
+/// a small scene measured three times and the paper's scale measured once, or two machines,
+/// and still say where every row was taken.
+fn glance_caption(jsons: &[Value], keeps: impl Fn(&Value) -> bool) -> Made<String> {
+    let key = |j: &Value| {
+        [
+            &j["host"],
+            &j["device"],
+            &j["driver"],
+            &j["width"],
+            &j["height"],
+            &j["runs"],
+        ]
+        .map(|v| v.to_string())
+    };
+    let mut groups: Vec<Vec<Value>> = Vec::new();
+    for json in jsons {
+        match groups.iter_mut().find(|g| key(&g[0]) == key(json)) {
+            Some(group) => group.push(json.clone()),
+            None => groups.push(vec![json.clone()]),
+        }
+    }
+    let parts = groups
+        .iter()
+        .map(|group| {
+            let mut scenes: Vec<String> = Vec::new();
+            for r in group
+                .iter()
+                .flat_map(|j| j["results"].as_array().into_iter().flatten())
+                .filter(|r| keeps(r))
+            {
+                let scene = text(&r["scene"]);
+                if !scenes.contains(&scene) {
+                    scenes.push(scene);
+                }
+            }
+            Ok(format!(
+                "{}: {}",
+                scenes.join(", "),
+                measured_caption(group)?
+            ))
+        })
+        .collect::<Made<Vec<String>>>()?;
+    Ok(parts.join(" "))
 }
 
 /// `rbvh shaders` results: a row per pipeline (`pipelines=default`: the variants the tracers use
@@ -920,6 +1085,68 @@ mod tests {
         let caption = measured_caption(&[file("x"), file("x")]).unwrap();
         assert!(caption.contains("medians of 2 invocations"), "{caption}");
         assert!(measured_caption(&[file("x"), file("y")]).is_err());
+    }
+
+    /// A glance puts the exact BVH first in each scene, takes the median speed of the
+    /// invocations that hold a record, and names every group of files it pools in its caption.
+    #[test]
+    fn a_glance_shows_each_scene_exact_first_and_names_every_host() {
+        let record = |scene: &str, quality: Option<&str>, rays: &str, speedup: f64| {
+            serde_json::json!({
+                "scene": scene, "ray_type": rays, "quality": quality, "method":
+                if quality.is_some() { "rbvh" } else { "exact" }, "params": null,
+                "mrays_per_s": {"median": 2.0 * speedup}, "speedup_vs_exact": speedup,
+                "memory_bytes": {"total": 4.0e6 / speedup}, "memory_ratio_vs_exact": speedup,
+                "error": {"t_err_p99": 0.005, "flip_mean": 0.04}, "valid": rays == "primary"
+            })
+        };
+        let small: Vec<Vec<Value>> = [1.5, 1.1, 1.2]
+            .iter()
+            .map(|&x| {
+                vec![
+                    record("small", Some("Q2"), "primary", x),
+                    record("small", None, "primary", 1.0),
+                    record("small", Some("Q2"), "shadow", 2.0 * x),
+                    record("small", None, "shadow", 1.0),
+                ]
+            })
+            .collect();
+        let large = [record("large", None, "primary", 1.0)];
+        let mut runs: Vec<Vec<&Value>> = small.iter().map(|r| r.iter().collect()).collect();
+        runs.push(large.iter().collect());
+        let table = glance_table(&runs);
+        let lines: Vec<&str> = table.lines().collect();
+        assert_eq!(
+            lines[0],
+            "| scene | level | MB | × smaller | primary × exact | shadow × exact | t p99 % | FLIP | valid |"
+        );
+        assert!(
+            lines[2].starts_with("| small | exact BVH | 4.00 | 1 | 2.00 MRays/s |"),
+            "{table}"
+        );
+        assert_eq!(
+            lines[3], "| small | Q2 | 2.67 | 1.5 | 1.20× | 2.40× | 0.50 | 0.040 | **no** |",
+            "{table}"
+        );
+        assert!(lines[4].starts_with("| large | exact BVH |"), "{table}");
+        let file = |cpu: &str, scene: &str| {
+            serde_json::json!({"device": "d", "driver": "v", "date": "2026-12-01T00:00:00Z",
+                "git": "abc", "host": {"cpu": cpu}, "width": 8, "height": 8, "runs": 3,
+                "results": [{"scene": scene}]})
+        };
+        let caption = glance_caption(
+            &[file("x", "small"), file("x", "small"), file("y", "large")],
+            |_| true,
+        )
+        .unwrap();
+        assert!(
+            caption.starts_with("small: Measured by `rbvh bench` (medians of 2 invocations"),
+            "{caption}"
+        );
+        assert!(
+            caption.contains(" large: Measured by `rbvh bench` at abc"),
+            "{caption}"
+        );
     }
 
     #[test]

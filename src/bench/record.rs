@@ -94,7 +94,7 @@ use crate::io::write_atomically;
 use crate::lod::LodParams;
 use crate::probe::MeanCounters;
 use crate::rays::RayType;
-use crate::rbvh::{RbvhParams, Refinement, Subdivision, TexelFormat};
+use crate::rbvh::{level_name, RbvhParams, Refinement, Subdivision, TexelFormat};
 use crate::{Error, Result};
 
 /// A whole run: provenance and records.
@@ -366,28 +366,18 @@ impl From<&RbvhParams> for Params {
 }
 
 impl Record {
-    /// The level as tables and charts show it: the quality (`-` for exact), with `h` appended for
-    /// a height-only RBVH (`"Q2h"`) and `s` where every triangle a height field can hold was
-    /// sampled (`"Q2s"`), as [`RbvhParams::level_label`] names them.
+    /// The level as tables and charts show it: `-` for exact, else its [`level_name`]
+    /// (`"Q2"`, `"Q2h"`, `"Q2s"`), as [`RbvhParams::level_label`] names the same level.
     pub fn level_label(&self) -> String {
-        let height_only = self
-            .params
-            .as_ref()
-            .is_some_and(|p| p.texels == TexelFormat::Height.name());
-        let suffix = if height_only {
-            TexelFormat::Height.level_suffix()
-        } else {
-            ""
+        let Some(q) = &self.quality else {
+            return "-".into();
         };
-        let sampled = if self.params.as_ref().is_some_and(|p| !p.exact_when_cheaper) {
-            crate::rbvh::SAMPLED_SUFFIX
-        } else {
-            ""
-        };
-        match &self.quality {
-            Some(q) => format!("{q}{suffix}{sampled}"),
-            None => "-".into(),
-        }
+        let params = self.params.as_ref();
+        level_name(
+            q,
+            params.is_some_and(|p| p.texels == TexelFormat::Height.name()),
+            params.is_some_and(|p| !p.exact_when_cheaper),
+        )
     }
 }
 

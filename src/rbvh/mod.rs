@@ -31,7 +31,9 @@ mod split;
 pub use build::RbvhSource;
 pub use layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT};
 pub use march::DeviceTwin;
-pub use params::{RbvhParams, Refinement, Subdivision, TexelFormat, QUALITY_NAMES, SAMPLED_SUFFIX};
+pub use params::{
+    level_name, RbvhParams, Refinement, Subdivision, TexelFormat, QUALITY_NAMES, SAMPLED_SUFFIX,
+};
 pub use raster::CREST_TEXELS;
 
 use crate::bvh::{GpuNode, GpuTriangle};

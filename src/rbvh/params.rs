@@ -135,6 +135,19 @@ pub struct RbvhParams {
 /// in tables, charts and file names.
 pub const SAMPLED_SUFFIX: &str = "s";
 
+/// A level's name, the one rule the CLI, the bench's records and the README's tables name levels
+/// by: its quality (`Q2`, `custom`), then [`TexelFormat::level_suffix`] for height-only texels,
+/// then [`SAMPLED_SUFFIX`] where every triangle is sampled: `Q2`, `Q2h`, `Q2s`, `Q2hs`.
+pub fn level_name(quality: &str, height_only: bool, sampled: bool) -> String {
+    let texels = if height_only {
+        TexelFormat::Height
+    } else {
+        TexelFormat::HeightNormal
+    };
+    let sampled = if sampled { SAMPLED_SUFFIX } else { "" };
+    format!("{quality}{}{sampled}", texels.level_suffix())
+}
+
 /// Quality preset names, coarsest to finest.
 pub const QUALITY_NAMES: [&str; 5] = ["Q0", "Q1", "Q2", "Q3", "Q4"];
 
@@ -214,19 +227,12 @@ impl RbvhParams {
             .map_or("custom", |level| QUALITY_NAMES[level as usize])
     }
 
-    /// [`RbvhParams::quality_name`] with the texel format's suffix
-    /// ([`TexelFormat::level_suffix`]) and [`SAMPLED_SUFFIX`] where it applies: `Q2`, `Q2h`,
-    /// `Q2s`, `Q2hs`, `customh`.
+    /// This level's [`level_name`]: `Q2`, `Q2h`, `Q2s`, `Q2hs`, `customh`.
     pub fn level_label(&self) -> String {
-        let sampled = if self.exact_when_cheaper {
-            ""
-        } else {
-            SAMPLED_SUFFIX
-        };
-        format!(
-            "{}{}{sampled}",
+        level_name(
             self.quality_name(),
-            self.texels.level_suffix()
+            self.texels == TexelFormat::Height,
+            !self.exact_when_cheaper,
         )
     }
 
