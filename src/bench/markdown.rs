@@ -255,7 +255,7 @@ impl Block {
                 .and_then(|table| Ok((table, glance_caption(&jsons, |r| self.keeps(r))?))),
             _ => self
                 .view_table(&jsons)
-                .and_then(|table| Ok((table, measured_caption(&jsons)?))),
+                .and_then(|table| Ok((table, measured_caption(&jsons, true)?))),
         };
         let (table, caption) =
             made.map_err(|m| format!("results file {}: {m}", names.join(", ")))?;
@@ -691,7 +691,7 @@ fn glance_table(runs: &[Vec<&Value>]) -> String {
                 }
             }));
             let error = primary.map(|r| &r["error"]);
-            row.push(error.map_or("-".into(), |e| num(&e["t_err_p99"], 100.0, 2)));
+            row.push(error.map_or("-".into(), |e| num(&e["t_err_p99"], 100.0, 3)));
             row.push(error.map_or("-".into(), |e| num(&e["flip_mean"], 1.0, 3)));
             row.push(
                 if records.iter().all(|r| r["valid"].as_bool() == Some(true)) {
@@ -773,7 +773,7 @@ fn glance_caption(jsons: &[Value], keeps: impl Fn(&Value) -> bool) -> Made<Strin
             Ok(format!(
                 "{}: {}",
                 scenes.join(", "),
-                measured_caption(group)?
+                measured_caption(group, false)?
             ))
         })
         .collect::<Made<Vec<String>>>()?;
@@ -895,8 +895,8 @@ fn transcribed_caption(t: &Value) -> Made<String> {
 
 /// The line under a view of raw results: the tool, commit, date, host and device; of several
 /// invocations, how many, and only where they share host, device and settings (ratios from
-/// different machines are not pooled).
-fn measured_caption(jsons: &[Value]) -> Made<String> {
+/// different machines are not pooled). `ranges`: whether the table brackets each median's range.
+fn measured_caption(jsons: &[Value], ranges: bool) -> Made<String> {
     let mut provenances = Vec::new();
     for json in jsons {
         if !json["host"].is_object() {
@@ -947,9 +947,10 @@ fn measured_caption(jsons: &[Value]) -> Made<String> {
             ),
         )
     };
-    let invocations = match jsons.len() {
-        1 => String::new(),
-        n => format!(" (medians of {n} invocations, their range in brackets)"),
+    let invocations = match (jsons.len(), ranges) {
+        (1, _) => String::new(),
+        (n, true) => format!(" (medians of {n} invocations, their range in brackets)"),
+        (n, false) => format!(" (medians of {n} invocations)"),
     };
     Ok(format!(
         "Measured by `{tool}`{invocations} at {commits} on {dates}{details}; host: {}; device: {} ({}).",
@@ -1082,9 +1083,9 @@ mod tests {
                 "git": "abc", "host": {"cpu": cpu}, "width": 8, "height": 8, "runs": 3,
                 "results": []})
         };
-        let caption = measured_caption(&[file("x"), file("x")]).unwrap();
+        let caption = measured_caption(&[file("x"), file("x")], true).unwrap();
         assert!(caption.contains("medians of 2 invocations"), "{caption}");
-        assert!(measured_caption(&[file("x"), file("y")]).is_err());
+        assert!(measured_caption(&[file("x"), file("y")], true).is_err());
     }
 
     /// A glance puts the exact BVH first in each scene, takes the median speed of the
@@ -1125,7 +1126,7 @@ mod tests {
             "{table}"
         );
         assert_eq!(
-            lines[3], "| small | Q2 | 2.67 | 1.5 | 1.20× | 2.40× | 0.50 | 0.040 | **no** |",
+            lines[3], "| small | Q2 | 2.67 | 1.5 | 1.20× | 2.40× | 0.500 | 0.040 | **no** |",
             "{table}"
         );
         assert!(lines[4].starts_with("| large | exact BVH |"), "{table}");
@@ -1140,7 +1141,7 @@ mod tests {
         )
         .unwrap();
         assert!(
-            caption.starts_with("small: Measured by `rbvh bench` (medians of 2 invocations"),
+            caption.starts_with("small: Measured by `rbvh bench` (medians of 2 invocations) at"),
             "{caption}"
         );
         assert!(

@@ -1,5 +1,5 @@
-//! How wrong a method is, measured against the exact BVH on the same rays — the measures of
-//! "Accuracy — how the trade is measured" in the design notes (`shared/docs/RBVH.md`):
+//! How wrong a method is, measured against the exact BVH on the same rays (the measures that
+//! `docs/measuring.md`, "Benchmarks: the speed/accuracy trade", reports for every level):
 //!
 //! * **hit/miss disagreement**: the fraction of rays that one side hits and the other misses;
 //! * **hit distance error** `|t − t_exact| · |dir| / diagonal`, over the rays both hit, as a

@@ -5,7 +5,7 @@
 //! [`RayType`]: camera rays, and ambient-occlusion, shadow and diffuse rays that all start at the
 //! *exact* primary hits ([`crate::rays`]), so that every method answers identical questions. Each method
 //! first traces once (warm-up), and those hits are compared with the exact BVH's
-//! ([`metrics`], following "Accuracy — how the trade is measured" in the design notes) and judged
+//! ([`metrics`]: hit/miss disagreement, hit-distance and normal errors, PSNR and FLIP) and judged
 //! ([`validate`]): a method whose answers are wrong is flagged, loudly, rather than reported as
 //! fast — the check tinybvh's speed test runs before timing each layout. Then all methods trace the
 //! rays `runs` times, interleaved, so that machine noise hits all of them alike ([`harness`]).

@@ -1,7 +1,8 @@
 //! Image-based lighting: Lambertian surfaces lit by an environment — an HDR latitude–longitude
 //! map or an analytic sky — with every light sample's visibility traced through the exact BVH or
 //! an RBVH. The paper names image-based lighting as one of the applications where an RBVH's
-//! approximate, compact visibility pays off (Novák & Dachsbacher 2012; `shared/docs/RBVH.md`).
+//! approximate, compact visibility pays off (Novák & Dachsbacher, "Rasterized Bounding Volume
+//! Hierarchies", Computer Graphics Forum 31(2), Eurographics 2012).
 //!
 //! * [`environment`]: where the light comes from;
 //! * [`sampling`]: reproducible cosine-distributed directions;

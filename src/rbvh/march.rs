@@ -6,8 +6,9 @@
 //! robust box test (Ize, "Robust BVH Ray Traversal", JCGT 2013). A triangle-leaf child is tested in place with the watertight test of
 //! Woop, Benthin & Wald ("Watertight Ray/Triangle Intersection", JCGT 2013); a height-field leaf
 //! (Novák & Dachsbacher 2012) takes an inner node's near-first/stack path and is marched when it
-//! comes up — the order the one traversal of `glsl/traverse.glsl` needs to keep its loop lean. The paper gives no detail of the march; this is our
-//! reading (`docs/RBVH.md`):
+//! comes up — the order the one traversal of `glsl/traverse.glsl` needs to keep its loop lean. The
+//! paper (Novák & Dachsbacher, "Rasterized Bounding Volume Hierarchies", Computer Graphics Forum
+//! 31(2), Eurographics 2012) gives no detail of the march; this is our reading of it:
 //!
 //! 1. **Frame**: the ray is moved into the leaf's frame `(s, t, h)`. The map is affine, so the ray
 //!    parameter is the same in both spaces and a hit's `t` needs no conversion.
