@@ -1159,3 +1159,311 @@ fn a_render_never_runs_on_a_null_device() {
     );
     assert!(!png.exists(), "nothing written");
 }
+
+/// Every flag does what its help says or is refused, naming itself and why: a flag that would
+/// have no effect in a combination (an RBVH's build parameters where none is built, a camera for
+/// rays from a file, a tolerance while blessing, ...) is an error there, before any work.
+#[test]
+fn flags_without_effect_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("never.png");
+    let file = dir.path().join("never.rbvh");
+    let (rays, hits) = (dir.path().join("r.bin"), dir.path().join("h.bin"));
+    let (png, file, rays, hits) = (arg(&png), arg(&file), arg(&rays), arg(&hits));
+    let render = |extra: &[&'static str]| -> Vec<String> {
+        let mut args = vec!["render", "--width", "8", "--height", "8", "--out", png];
+        args.extend(extra);
+        args.into_iter().map(String::from).collect()
+    };
+    let trace = |extra: &[&'static str]| -> Vec<String> {
+        let mut args = vec!["trace", "--scene", "sphere", "--rays", rays, "--hits", hits];
+        args.extend(extra);
+        args.into_iter().map(String::from).collect()
+    };
+    let paint = |extra: &[&'static str]| -> Vec<String> {
+        let mut args = vec!["paint", "--strokes", "s.txt", "--out", file];
+        args.extend(extra);
+        args.into_iter().map(String::from).collect()
+    };
+    let with_file = |mut args: Vec<String>, extra: &[&str]| -> Vec<String> {
+        args.extend(["--rbvh".to_string(), file.to_string()]);
+        args.extend(extra.iter().map(|s| s.to_string()));
+        args
+    };
+    let words = |args: &[&str]| -> Vec<String> { args.iter().map(|s| s.to_string()).collect() };
+    let not_given = "required arguments were not provided";
+    let cases: Vec<(Vec<String>, Vec<&str>)> = vec![
+        // An RBVH's build parameters where the exact BVH is traced.
+        (
+            render(&["--quality", "3"]),
+            vec!["--quality says how to build an RBVH", "--method exact"],
+        ),
+        (
+            render(&["--method", "exact", "--texels-per-diagonal", "64"]),
+            vec!["--texels-per-diagonal", "--method rbvh"],
+        ),
+        (
+            render(&["--sample-all"]),
+            vec!["--sample-all", "--method exact"],
+        ),
+        (
+            trace(&["--max-tile", "8"]),
+            vec!["--max-tile", "--method exact"],
+        ),
+        (
+            trace(&["--texels", "height"]),
+            vec!["--texels", "--method exact"],
+        ),
+        // ... and where a saved RBVH is loaded, built already.
+        (
+            with_file(render(&["--method", "rbvh"]), &["--quality", "1"]),
+            vec!["--quality", "--rbvh loads one built already"],
+        ),
+        (
+            with_file(trace(&[]), &["--split", "sah"]),
+            vec!["--split", "--rbvh loads one built already"],
+        ),
+        (
+            with_file(paint(&[]), &["--object-rate", "0.5"]),
+            vec!["--object-rate", "--rbvh loads one built already"],
+        ),
+        (
+            with_file(render(&["--method", "exact"]), &[]),
+            vec!["--method exact", "--rbvh"],
+        ),
+        // Flags of level of detail and of other outputs, without them.
+        (render(&["--lod-bias", "0"]), vec![not_given, "--lod"]),
+        (trace(&["--lod-spread", "0.1"]), vec![not_given, "--lod"]),
+        (
+            render(&["--method", "rbvh", "--lod", "--lod-spread", "0.1"]),
+            vec!["unexpected argument '--lod-spread'"],
+        ),
+        (
+            render(&["--heatmap-max", "9"]),
+            vec![not_given, "--heatmap"],
+        ),
+        (render(&["--vfov", "30"]), vec![not_given, "--camera-eye"]),
+        // Rays from a file have no camera, and the CPU tracer no device.
+        (
+            trace(&["--camera-eye", "0,0,4", "--camera-target", "0,0,0"]),
+            vec!["unexpected argument '--camera-eye'"],
+        ),
+        (
+            trace(&["--vfov", "30"]),
+            vec!["unexpected argument '--vfov'"],
+        ),
+        (
+            trace(&["--cpu", "--device", "llvmpipe"]),
+            vec!["'--cpu' cannot be used with '--device"],
+        ),
+        (
+            trace(&["--cpu", "--validate"]),
+            vec!["'--cpu' cannot be used with '--validate'"],
+        ),
+        // Paint samples everything it builds, into a colour channel a height-only RBVH lacks.
+        (
+            paint(&["--sample-all"]),
+            vec!["--sample-all: paint samples"],
+        ),
+        (
+            paint(&["--texels", "height"]),
+            vec!["--texels height", "no colours to paint"],
+        ),
+        (
+            paint(&["--method", "rbvh"]),
+            vec!["unexpected argument '--method'"],
+        ),
+        // build prints its table anyway without --out.
+        (
+            words(&["build", "--scene", "sphere", "--stats"]),
+            vec![not_given, "--out"],
+        ),
+        // bench: the AO radius without AO rays, a seed with nothing random to draw.
+        (
+            words(&["bench", "--rays", "primary,shadow", "--ao-radius", "0.1"]),
+            vec!["--ao-radius", "add ao to --rays"],
+        ),
+        (
+            words(&[
+                "bench",
+                "--rays",
+                "primary",
+                "--seam-rays",
+                "0",
+                "--seed",
+                "3",
+            ]),
+            vec!["--seed draws", "has none of them"],
+        ),
+        (
+            words(&["bench", "--lod-columns", "8"]),
+            vec![not_given, "--lod"],
+        ),
+        // regress: levels without an RBVH method, tolerances while blessing.
+        (
+            words(&["regress", "--method", "exact", "--quality", "2"]),
+            vec!["--quality picks the RBVH levels", "--method"],
+        ),
+        (
+            words(&["regress", "--bless", "--max-flip-mean", "0.1"]),
+            vec!["'--bless' cannot be used with '--max-flip-mean"],
+        ),
+        (
+            words(&["regress", "--bless", "--depth-tolerance", "0.1"]),
+            vec!["'--bless' cannot be used with '--depth-tolerance"],
+        ),
+        // shaders: wave32 is AMD's, and --amd picks the device.
+        (words(&["shaders", "--wave32"]), vec![not_given, "--amd"]),
+        (
+            words(&["shaders", "--amd", "navi21", "--device", "x"]),
+            vec!["cannot be used with"],
+        ),
+        // compare: its RBVH's parameters are the file's; no level of detail.
+        (
+            words(&["compare", "--rbvh", file, "--max-angle", "30"]),
+            vec!["--max-angle", "--rbvh loads one built already"],
+        ),
+        (
+            words(&["compare", "--lod"]),
+            vec!["unexpected argument '--lod'"],
+        ),
+    ];
+    common::every_case(cases, |(args, needles)| {
+        let out = rbvh(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        common::ensure(!out.status.success(), || format!("{args:?} succeeded"))?;
+        common::ensure(out.status.code() != Some(101), || {
+            format!("{args:?} panicked:\n{stderr}")
+        })?;
+        for needle in needles {
+            common::ensure(stderr.contains(needle), || {
+                format!("{args:?}: {needle:?} not in:\n{stderr}")
+            })?;
+        }
+        common::ensure(
+            std::fs::read_dir(dir.path()).unwrap().next().is_none(),
+            || format!("{args:?} wrote a file"),
+        )
+    });
+}
+
+/// The help of each command says what it takes: the commands that trace one RBVH offer one
+/// texel format (build and bench both), paint's mentions no --method, and trace's no camera.
+#[test]
+fn help_says_what_each_command_takes() {
+    let help = |command: &str| {
+        let out = rbvh(&[command, "--help"]);
+        assert!(out.status.success(), "{command}");
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    for command in ["render", "trace", "paint", "compare"] {
+        let text = help(command);
+        assert!(!text.contains("comma-separate both"), "{command}:\n{text}");
+        let shows = |flag: &str| text.lines().any(|l| l.trim_start().starts_with(flag));
+        assert_eq!(shows("--lod-spread"), command == "trace", "{command}");
+    }
+    for command in ["build", "bench"] {
+        assert!(help(command).contains("comma-separate both"), "{command}");
+    }
+    let paint = help("paint");
+    assert!(!paint.contains("--method"), "{paint}");
+    assert!(
+        !paint
+            .lines()
+            .any(|l| l.trim_start().starts_with("--sample-all")),
+        "{paint}"
+    );
+    let trace = help("trace");
+    for flag in ["--camera-eye", "--camera-target", "--vfov"] {
+        assert!(!trace.contains(flag), "{trace}");
+    }
+}
+
+/// `trace --cpu --stats` reports the CPU tracer's time and rate (it used to print nothing).
+#[test]
+fn trace_cpu_stats_reports_the_cpu_trace() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rays_path, hits_path) = (dir.path().join("r.bin"), dir.path().join("h.bin"));
+    let ray = Ray::new(
+        glam::Vec3::new(0.0, 0.0, -3.0),
+        glam::Vec3::Z,
+        0.0,
+        f32::INFINITY,
+    );
+    io::write_rays(&rays_path, &[ray; 64]).unwrap();
+    let out = rbvh(&[
+        "trace",
+        "--scene",
+        "sphere",
+        "--cpu",
+        "--stats",
+        "--rays",
+        arg(&rays_path),
+        "--hits",
+        arg(&hits_path),
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("trace (CPU reference, exact BVH): 64 rays") && stderr.contains("MRays/s"),
+        "{stderr}"
+    );
+    assert_eq!(io::read_hits(&hits_path).unwrap().len(), 64);
+}
+
+/// `rbvh compare` renders the scene through the exact BVH and an RBVH into one PNG, side by side,
+/// and prints each one's memory, speed and error.
+#[test]
+fn compare_puts_the_exact_bvh_and_an_rbvh_side_by_side() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("c.png");
+    let out = rbvh(&[
+        "compare",
+        "--scene",
+        "blob",
+        "--quality",
+        "1",
+        "--width",
+        "40",
+        "--height",
+        "30",
+        "--samples",
+        "2",
+        "--out",
+        arg(&png),
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let img = image::open(&png).unwrap();
+    assert_eq!((img.width(), img.height()), (80, 30));
+    for name in ["exact BVH", "RBVH Q1"] {
+        let line = stdout
+            .lines()
+            .find(|l| l.starts_with(name))
+            .unwrap_or_else(|| panic!("no {name} line in:\n{stdout}"));
+        for needle in ["memory", " MB", "speed", "MRays/s", "FLIP"] {
+            assert!(line.contains(needle), "{needle:?} not in {line:?}");
+        }
+    }
+    assert!(
+        stdout.contains("x smaller") && stdout.contains("PSNR") && stdout.contains("hit/miss"),
+        "{stdout}"
+    );
+    // The flags of a render that compare takes are checked as render checks them.
+    for (args, needle) in [
+        (&["--samples", "0"][..], "--samples"),
+        (&["--width", "9000"][..], "--width"),
+        (&["--out", "c.jpg"][..], "writes PNG"),
+    ] {
+        let out = rbvh(&[&["compare"], args].concat());
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && stderr.contains(needle),
+            "{args:?}: {stderr}"
+        );
+    }
+}

@@ -6,8 +6,9 @@ use std::path::PathBuf;
 use crate::progress::Bar;
 use anyhow::{Context as _, Result};
 use rbvh::bench::{self, BenchConfig, Device, Event, RayType};
+use rbvh::scene::PointSource;
 
-use crate::prepare::{context_options, flag_error, LodBuildArgs, PointsArg, Quality};
+use crate::prepare::{context_options, flag_error, Given, LodBuildArgs, PointsArg, Quality};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("quality", |a| a.default_value("all")))]
@@ -29,6 +30,7 @@ pub struct Args {
     /// Primary-ray image width (secondary rays start at its exact hits).
     #[arg(long, default_value_t = 256)]
     width: u32,
+    /// Primary-ray image height.
     #[arg(long, default_value_t = 256)]
     height: u32,
     /// Timed runs per method and ray type, after one warm-up.
@@ -37,13 +39,16 @@ pub struct Args {
     /// Shortest timed run (ms): a faster trace is repeated back to back within each run, so that a fast GPU is timed busy; 0: one pass per run.
     #[arg(long, default_value_t = 20.0)]
     min_run_ms: f64,
-    /// Ambient-occlusion ray length, as a fraction of the scene's bounding-box diagonal.
+    /// Ambient-occlusion ray length, as a fraction of the scene's bounding-box diagonal (for ao
+    /// rays: refused when --rays has none).
     #[arg(long, default_value_t = 0.05)]
     ao_radius: f32,
-    /// Seed of the secondary rays' random directions (default: a fixed seed, so runs repeat).
+    /// Seed of the random directions of ao and diffuse rays, of the seam rays and of --points N's
+    /// samples (default: a fixed seed, so runs repeat; refused where none of them is traced).
     #[arg(long)]
     seed: Option<u64>,
-    /// Lavapipe worker threads (sets LP_NUM_THREADS; default: Mesa's, one per CPU).
+    /// Lavapipe worker threads (sets LP_NUM_THREADS; default: Mesa's, one per CPU). Other
+    /// drivers do not read it.
     #[arg(long)]
     threads: Option<u32>,
     /// Vulkan device to use: any part of its name (default: $RBVH_DEVICE, else the best GPU, else lavapipe).
@@ -93,7 +98,21 @@ pub struct Args {
     lod_build: LodBuildArgs,
 }
 
-pub fn run(a: Args) -> Result<()> {
+pub fn run(a: Args, given: &Given) -> Result<()> {
+    anyhow::ensure!(
+        !given.has("ao_radius") || a.rays.contains(&RayType::Ao),
+        "--ao-radius is the length of ambient-occlusion rays, and --rays traces none: add ao to \
+         --rays"
+    );
+    let seeded = a.rays.contains(&RayType::Ao)
+        || a.rays.contains(&RayType::Diffuse)
+        || a.seam_rays > 0
+        || matches!(a.points.points, Some(PointSource::Sampled(_)));
+    anyhow::ensure!(
+        !given.has("seed") || seeded,
+        "--seed draws the directions of ao and diffuse rays, the seam rays and --points N's \
+         samples, and this run has none of them (add ao or diffuse to --rays, or --seam-rays)"
+    );
     if let Some(threads) = a.threads {
         anyhow::ensure!(threads >= 1, "--threads must be at least 1");
         // Mesa reads LP_NUM_THREADS when the Vulkan device is created, so it must be set before

@@ -23,11 +23,12 @@ pub struct Args {
     points: PointsArg,
     #[command(flatten)]
     quality: Quality,
-    /// Save the built RBVH to this file (load it with --rbvh on render/trace).
+    /// Save the built RBVH to this file (load it with --rbvh on render, trace, paint and compare);
+    /// one level in one texel format. Prints no table unless --stats.
     #[arg(long, short)]
     out: Option<PathBuf>,
-    /// Print the accounting table (printed anyway when there is no --out).
-    #[arg(long)]
+    /// With --out: print the accounting table too (without --out it is what the command prints).
+    #[arg(long, requires = "out")]
     stats: bool,
     /// Also build every level with each subdivision strategy (spatial median, modified SAH, and
     /// median without object split) and report build time and tracing cost: nodes, triangles and

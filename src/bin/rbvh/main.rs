@@ -1,7 +1,9 @@
-//! `rbvh`: render scenes, answer ray files, and (later) build and benchmark RBVHs.
+//! `rbvh`: render scenes, compare the exact BVH with an RBVH, answer ray files, build, paint and
+//! benchmark RBVHs.
 
 mod bench;
 mod build;
+mod compare;
 mod paint;
 mod prepare;
 mod progress;
@@ -11,7 +13,9 @@ mod shaders;
 mod tables;
 mod trace;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
+
+use crate::prepare::Given;
 
 #[derive(Parser)]
 #[command(
@@ -32,6 +36,10 @@ enum Command {
     /// Render a scene to PNG (and optionally EXR with depth and normals).
     #[command(allow_negative_numbers = true)]
     Render(render::Args),
+    /// Render a scene lit by a sky (shadows, ambient occlusion) through the exact BVH and an RBVH
+    /// into one PNG side by side, and print each one's memory, speed and error.
+    #[command(allow_negative_numbers = true)]
+    Compare(compare::Args),
     /// Build an RBVH and report its nodes, leaves, texels and memory against the exact BVH.
     #[command(allow_negative_numbers = true)]
     Build(build::Args),
@@ -58,14 +66,22 @@ enum Command {
 }
 
 fn main() {
-    let cli = Cli::parse();
+    let matches = Cli::command().get_matches();
+    let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    // Which flags were given rather than left at their defaults: a flag that would have no
+    // effect is refused, and its default cannot say whether it was asked for.
+    let given = matches
+        .subcommand()
+        .map(|(_, m)| Given::of(m))
+        .unwrap_or_default();
     let result = match cli.command {
-        Command::Render(a) => render::run(a),
-        Command::Trace(a) => trace::run(a),
+        Command::Render(a) => render::run(a, &given),
+        Command::Compare(a) => compare::run(a, &given),
+        Command::Trace(a) => trace::run(a, &given),
         Command::Build(a) => build::run(a),
-        Command::Bench(a) => bench::run(a),
-        Command::Regress(a) => regress::run(a),
-        Command::Paint(a) => paint::run(a),
+        Command::Bench(a) => bench::run(a, &given),
+        Command::Regress(a) => regress::run(a, &given),
+        Command::Paint(a) => paint::run(a, &given),
         Command::Shaders(a) => shaders::run(a),
         Command::Tables(a) => tables::run(a),
         Command::Scenes => {

@@ -13,14 +13,31 @@ use rbvh::surface::{strokes, Brush};
 use rbvh::{output, preview};
 
 use crate::prepare::{
-    check_image_size, prepare, Common, LodArgs, Method, Prepared, Source, Structure,
+    check_image_size, check_source, prepare, CameraArgs, Common, Given, LodArgs, Method, Prepared,
+    Source, Structure, TexelsArg,
 };
 use crate::progress::step;
 
 #[derive(clap::Args, Debug)]
+#[command(mut_arg("rbvh", |a| a.help(
+    "Paint this saved RBVH (from `rbvh build --out`) instead of building one; it is painted as it \
+     was built, so --quality and the free parameters are refused with it"
+)))]
+#[command(mut_arg("stats", |a| a.help(
+    "Print the scene, the RBVH (nodes, bytes, build time) and the device"
+)))]
+#[command(mut_arg("texels", |a| a.help(
+    "What each atlas texel holds: paint takes `normals` (height and normal, the default) alone, \
+     since a height-only RBVH keeps no colours to paint"
+)))]
+// Paint samples every triangle it builds (paint is stored in texels): --sample-all is what it
+// does anyway, so it is hidden and refused rather than accepted for nothing.
+#[command(mut_arg("sample_all", |a| a.hide(true)))]
 pub struct Args {
     #[command(flatten)]
     source: Source,
+    #[command(flatten)]
+    camera: CameraArgs,
     /// Strokes file (format in README.md, "Surface data and painting").
     #[arg(long)]
     strokes: PathBuf,
@@ -33,15 +50,26 @@ pub struct Args {
     /// Also render the RBVH after painting to this PNG.
     #[arg(long)]
     after: Option<PathBuf>,
-    /// Image size that the strokes' screen positions and the renders use.
+    /// Image width that the strokes' screen positions and the renders use, 1..=16384.
     #[arg(long, default_value_t = 800)]
     width: u32,
+    /// Image height that the strokes' screen positions and the renders use, 1..=16384.
     #[arg(long, default_value_t = 600)]
     height: u32,
 }
 
-pub fn run(a: Args) -> Result<()> {
+pub fn run(a: Args, given: &Given) -> Result<()> {
     check_image_size(a.width, a.height)?;
+    check_source(given, &a.source, None)?;
+    anyhow::ensure!(
+        !given.has("sample_all"),
+        "--sample-all: paint samples every triangle it builds anyway (paint is stored in texels)"
+    );
+    anyhow::ensure!(
+        !a.source.quality.texels.contains(&TexelsArg::Height),
+        "--texels height: a height-only RBVH keeps no colours to paint (paint takes normals, the \
+         default)"
+    );
     let dabs = strokes::load(&a.strokes)?;
     // Painting writes the RBVH's texels: no other structure, no coarse levels of detail (which
     // have none to paint), and every triangle a height field can hold sampled (`--sample-all`),
@@ -54,7 +82,7 @@ pub fn run(a: Args) -> Result<()> {
         method: Method::Rbvh,
         lod: LodArgs::off(),
     };
-    let mut p = prepare(&common)?;
+    let mut p = prepare(&common, a.camera.camera()?)?;
     let camera = p.scene.camera_or_framed(a.width as f32 / a.height as f32);
     if !matches!(p.structure, Structure::Rbvh(_)) {
         bail!("painting needs an RBVH");

@@ -33,10 +33,24 @@ pub struct Common {
 }
 
 /// Where the scene and its RBVH come from, and the device: what every command that traces takes
-/// (`paint`, which needs an RBVH without level of detail, takes only these). They trace one level.
+/// (`paint`, which needs an RBVH without level of detail, takes only these). They trace one level,
+/// in one texel format.
 #[derive(Args, Clone, Debug)]
 #[command(mut_arg("quality", |a| a.help(
-    "Quality preset of the RBVH: one of 0..4 or Q0..Q4 (Q0 coarsest, Q4 finest)"
+    "Quality preset of the RBVH: one of 0..4 or Q0..Q4 (Q0 coarsest, Q4 finest); for an RBVH \
+     this command builds, not for one loaded with --rbvh"
+)))]
+#[command(mut_arg("texels", |a| a.help(
+    "What each atlas texel holds: `normals` (height and normal, 3 or 4 bytes: 8- or 16-bit \
+     heights by tile) or `height` (height alone, 1 or 2 bytes: facet normals, no colours, no \
+     levels of detail); one of the two, since this command traces one RBVH (build and bench take \
+     both, comma-separated)"
+)))]
+#[command(mut_arg("sample_all", |a| a.help(
+    "Sample every triangle a height field can hold, as the paper does (the level is named with \
+     an `s`, e.g. Q2s). Presets trace triangles exactly where that costs fewer bytes than \
+     sampling them (a triangle covering at least 24 texels, 48 height-only, and a set whose \
+     tiles would cost more than its triangles)"
 )))]
 pub struct Source {
     /// Built-in scene name (`rbvh scenes` lists them), OBJ/glTF/GLB file, point cloud (.ply,
@@ -47,7 +61,9 @@ pub struct Source {
     pub points: PointsArg,
     #[command(flatten)]
     pub quality: Quality,
-    /// Trace this saved RBVH (from `rbvh build --out`) instead of building one (implies --method rbvh).
+    /// Trace this saved RBVH (from `rbvh build --out`) instead of building one (implies --method
+    /// rbvh; the file holds its build parameters, so --quality and the free parameters are
+    /// refused with it).
     #[arg(long)]
     pub rbvh: Option<PathBuf>,
     /// Vulkan device to use: any part of its name (default: $RBVH_DEVICE, else the best GPU, else lavapipe).
@@ -56,9 +72,16 @@ pub struct Source {
     /// Run the Vulkan validation layer and fail on any error it reports.
     #[arg(long)]
     pub validate: bool,
-    /// Print timings and ray throughput (for --method rbvh also the exact BVH's on the same rays).
+    /// Print the scene, the structure (nodes, bytes, build time), the device, and timings and ray
+    /// throughput (for --method rbvh also the exact BVH's on the same rays).
     #[arg(long)]
     pub stats: bool,
+}
+
+/// Where the camera stands, for the commands that make rays from one (`render`, `paint`,
+/// `compare`; `trace` takes its rays from a file).
+#[derive(Args, Clone, Debug)]
+pub struct CameraArgs {
     /// Camera position x,y,z (with --camera-target), for a mesh without a scene file or to
     /// replace the scene's camera; without it, the scene's camera or a framing view.
     #[arg(
@@ -83,9 +106,9 @@ pub struct Source {
     pub vfov: Option<f32>,
 }
 
-impl Source {
+impl CameraArgs {
     /// The camera the flags describe, when they describe one (+y up).
-    fn camera(&self) -> Result<Option<Camera>> {
+    pub fn camera(&self) -> Result<Option<Camera>> {
         let (Some(eye), Some(target)) = (&self.camera_eye, &self.camera_target) else {
             return Ok(None);
         };
@@ -106,6 +129,86 @@ impl Source {
             .map(Some)
             .map_err(|fault| anyhow::anyhow!("--camera-eye/--camera-target/--vfov: {fault}"))
     }
+}
+
+/// The flags given on the command line, by their clap ids, as opposed to those left at their
+/// defaults: what the refusals of flags that would have no effect look at, since a default
+/// value cannot tell whether the user asked for it.
+#[derive(Clone, Debug, Default)]
+pub struct Given(Vec<String>);
+
+impl Given {
+    /// The flags given in `matches` (a subcommand's).
+    pub fn of(matches: &clap::ArgMatches) -> Given {
+        Given(
+            matches
+                .ids()
+                .filter(|id| {
+                    matches.value_source(id.as_str())
+                        == Some(clap::parser::ValueSource::CommandLine)
+                })
+                .map(|id| id.as_str().to_string())
+                .collect(),
+        )
+    }
+
+    /// Whether the flag with clap id `id` (its field's name) was given.
+    pub fn has(&self, id: &str) -> bool {
+        self.0.iter().any(|given| given == id)
+    }
+
+    /// The first of `ids` that was given, as its flag (`--texels-per-diagonal`).
+    pub fn first(&self, ids: &[&str]) -> Option<String> {
+        ids.iter().find(|id| self.has(id)).map(|id| flag(id))
+    }
+}
+
+/// The long flag of clap id `id`: `--` and the field's name in kebab case.
+pub fn flag(id: &str) -> String {
+    format!("--{}", id.replace('_', "-"))
+}
+
+/// The clap ids of the flags that say how an RBVH is built ([`Quality`]).
+pub const BUILD_FLAGS: [&str; 12] = [
+    "quality",
+    "texels_per_diagonal",
+    "object_rate",
+    "max_angle",
+    "min_area_ratio",
+    "split",
+    "no_object_split",
+    "max_tile",
+    "min_leaf_texels",
+    "sampled_criterion_texels",
+    "sample_all",
+    "texels",
+];
+
+/// Refuses the build flags where no RBVH is built: with `--rbvh FILE` (which loads one built
+/// already, with the parameters it was built with) and with the exact BVH (`method` given as
+/// exact, or left at exact), and `--method exact` with `--rbvh FILE`. `method` is `None` for a
+/// command that always traces an RBVH.
+pub fn check_source(given: &Given, source: &Source, method: Option<Method>) -> Result<()> {
+    if source.rbvh.is_some() {
+        anyhow::ensure!(
+            method != Some(Method::Exact) || !given.has("method"),
+            "--method exact traces the exact BVH, but --rbvh names an RBVH to trace: give one of them"
+        );
+        if let Some(flag) = given.first(&BUILD_FLAGS) {
+            anyhow::bail!(
+                "{flag} says how to build an RBVH, but --rbvh loads one built already (with the \
+                 parameters it was built with): drop {flag}, or drop --rbvh to build one"
+            );
+        }
+    } else if method == Some(Method::Exact) {
+        if let Some(flag) = given.first(&BUILD_FLAGS) {
+            anyhow::bail!(
+                "{flag} says how to build an RBVH, but --method exact traces the exact BVH: add \
+                 --method rbvh"
+            );
+        }
+    }
+    Ok(())
 }
 
 /// `--points`: an RBVH of points sampled from the scene, or of a scan of it, refereed by the exact
@@ -158,13 +261,7 @@ pub struct LodArgs {
     pub lod: bool,
     #[command(flatten)]
     pub build: LodBuildArgs,
-    /// Cone spread of rays from a file (radians per unit of t; their width at t = 0 is 0).
-    #[arg(long, default_value_t = LOD_SPREAD, requires = "lod")]
-    pub lod_spread: f32,
 }
-
-/// The default of `--lod-spread`.
-const LOD_SPREAD: f32 = 1e-3;
 
 impl LodArgs {
     /// No level of detail, for a command without the flags.
@@ -177,7 +274,6 @@ impl LodArgs {
                 lod_min_leaves: d.min_leaves,
                 lod_bias: d.bias,
             },
-            lod_spread: LOD_SPREAD,
         }
     }
 }
@@ -311,9 +407,10 @@ pub fn flag_error(e: rbvh::Error) -> anyhow::Error {
     e.into()
 }
 
-pub fn prepare(c: &Common) -> Result<Prepared> {
+/// The scene, its structure and the device, as `c` says; `camera` (from [`CameraArgs`]) replaces
+/// the scene's camera when given.
+pub fn prepare(c: &Common, camera: Option<Camera>) -> Result<Prepared> {
     let t = Instant::now();
-    let camera = c.source.camera()?;
     let mut scene = step("loading scene", |bar| {
         Scene::load_observed(&c.source.scene, bar)
     })
@@ -575,9 +672,10 @@ pub struct Quality {
     /// --rbvh is painted as it was built.
     #[arg(long)]
     pub sample_all: bool,
-    /// What each atlas texel holds: `normals` (height and normal, 4 bytes) or `height` (height
-    /// alone, 2 bytes: facet normals, no colours, no levels of detail); comma-separate both to
-    /// build each level in each (a height-only level is named with an `h`, e.g. Q2h).
+    /// What each atlas texel holds: `normals` (height and normal, 3 or 4 bytes: 8- or 16-bit
+    /// heights by tile) or `height` (height alone, 1 or 2 bytes: facet normals, no colours, no
+    /// levels of detail); comma-separate both to build each level in each (a height-only level is
+    /// named with an `h`, e.g. Q2h).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "normals")]
     pub texels: Vec<TexelsArg>,
 }

@@ -8,7 +8,7 @@ use clap::ValueEnum;
 use rbvh::gpu::Context;
 use rbvh::regress::{self, Config, Method, Mode, Tolerance};
 
-use crate::prepare::context_options;
+use crate::prepare::{context_options, Given};
 use crate::progress::step;
 
 #[derive(clap::Args, Debug)]
@@ -20,13 +20,14 @@ pub struct Args {
     /// Methods, comma-separated; `rbvh` runs every --quality level.
     #[arg(long, value_enum, value_delimiter = ',', default_values_t = [MethodArg::Exact, MethodArg::Rbvh, MethodArg::RbvhLod])]
     method: Vec<MethodArg>,
-    /// RBVH quality presets: 0..4 or Q0..Q4, comma-separated, or `all`.
+    /// RBVH quality presets: 0..4 or Q0..Q4, comma-separated, or `all` (for the methods rbvh and
+    /// rbvh-lod: refused when --method names neither).
     #[arg(long, value_delimiter = ',', default_values_t = ["0".to_string(), "2".to_string(), "4".to_string()])]
     quality: Vec<String>,
     /// Folder of the golden images (<case>.png) and depths (<case>_depth.exr).
     #[arg(long, default_value = regress::GOLDEN_DIR)]
     golden: PathBuf,
-    /// Folder for failing cases' renders and error pictures.
+    /// Folder for failing cases' renders and error pictures (none are written with --bless).
     #[arg(long, default_value = "regress-out")]
     out: PathBuf,
     /// Image width in pixels (goldens are compared at the size they were blessed at).
@@ -35,8 +36,8 @@ pub struct Args {
     /// Image height in pixels.
     #[arg(long, default_value_t = regress::HEIGHT)]
     height: u32,
-    /// Write the renders as the new goldens instead of comparing.
-    #[arg(long)]
+    /// Write the renders as the new goldens instead of comparing (so no tolerances).
+    #[arg(long, conflicts_with_all = ["max_flip_mean", "max_outliers", "depth_tolerance", "max_depth_off"])]
     bless: bool,
     /// Most mean FLIP error per image.
     #[arg(long, default_value_t = Tolerance::default().flip_mean)]
@@ -103,7 +104,11 @@ fn methods(a: &Args) -> Result<Vec<Method>> {
     Ok(methods)
 }
 
-pub fn run(a: Args) -> Result<()> {
+pub fn run(a: Args, given: &Given) -> Result<()> {
+    ensure!(
+        !given.has("quality") || a.method.iter().any(|m| *m != MethodArg::Exact),
+        "--quality picks the RBVH levels, and --method names no RBVH: add rbvh or rbvh-lod to --method"
+    );
     let scenes = if a.scene.is_empty() {
         regress::SCENES.iter().map(|s| s.to_string()).collect()
     } else {

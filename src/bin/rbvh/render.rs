@@ -24,14 +24,23 @@ use rbvh::structure::Structure;
 use rbvh::surface::hit_albedo;
 
 use crate::prepare::{
-    check_image_size, prepare, report_counters, report_throughput, Common, Prepared,
+    check_image_size, check_source, prepare, report_counters, report_throughput, CameraArgs,
+    Common, Given, Prepared,
 };
 use crate::progress::step;
 
 #[derive(clap::Args, Debug)]
+#[command(mut_arg("stats", |a| a.help(
+    "Print the scene, the structure (nodes, bytes, build time), the device, the primary trace's \
+     time and MRays/s against the CPU reference's (for --method rbvh also the exact BVH's on the \
+     same rays) and each ray's work; with --shading ibl also the visibility rays' (and for an \
+     RBVH the exact reference render's, with the RBVH image's FLIP and PSNR against it)"
+)))]
 pub struct Args {
     #[command(flatten)]
     common: Common,
+    #[command(flatten)]
+    camera: CameraArgs,
     /// Output PNG.
     #[arg(long, short, default_value = "render.png")]
     out: PathBuf,
@@ -42,14 +51,17 @@ pub struct Args {
     /// stepped) per pixel, with a colour bar labelled with its scale.
     #[arg(long)]
     heatmap: Option<PathBuf>,
-    /// The heat map's scale: this many steps or more are dark red (default: the largest count),
-    /// so that two renders' maps compare.
+    /// With --heatmap: the heat map's scale, this many steps or more dark red (default: the
+    /// largest count), so that two renders' maps compare.
     #[arg(long, requires = "heatmap")]
     heatmap_max: Option<u32>,
+    /// Image width in pixels, 1..=16384.
     #[arg(long, default_value_t = 800)]
     width: u32,
+    /// Image height in pixels, 1..=16384.
     #[arg(long, default_value_t = 600)]
     height: u32,
+    /// How the picture is shaded from the primary rays' hits.
     #[arg(long, value_enum, default_value_t = Shading::Lambert)]
     shading: Shading,
     /// With --shading ibl: an HDR environment map (EXR, latitude-longitude, +y up) instead of the
@@ -82,15 +94,16 @@ enum Shading {
     Ibl,
 }
 
-pub fn run(a: Args) -> Result<()> {
+pub fn run(a: Args, given: &Given) -> Result<()> {
     check_image_size(a.width, a.height)?;
-    for (given, flag) in [
+    check_source(given, &a.common.source, Some(a.common.method))?;
+    for (set, flag) in [
         (a.env.is_some(), "--env"),
         (a.samples.is_some(), "--samples"),
         (a.seed.is_some(), "--seed"),
     ] {
         ensure!(
-            !given || a.shading == Shading::Ibl,
+            !set || a.shading == Shading::Ibl,
             "{flag} is for an image-based render: add --shading ibl"
         );
     }
@@ -125,7 +138,7 @@ pub fn run(a: Args) -> Result<()> {
                 .with_context(|| format!("loading environment map {}", path.display()))
         })
         .transpose()?;
-    let p = prepare(&a.common)?;
+    let p = prepare(&a.common, a.camera.camera()?)?;
     let camera = p.scene.camera_or_framed(a.width as f32 / a.height as f32);
     let rays = camera.primary_rays(a.width, a.height);
     let tracer = step("uploading", |bar| p.tracer(bar))?;
@@ -189,7 +202,7 @@ pub fn run(a: Args) -> Result<()> {
 
 /// The IBL albedo per pixel: the neutral grey ([`ibl::GREY`]) times the surfaces' base colour
 /// where the scene or RBVH has one, as the Lambert preview shades.
-fn ibl_albedo(
+pub(crate) fn ibl_albedo(
     scene: &Scene,
     rbvh: Option<&Rbvh>,
     lod: Option<&Lod>,
@@ -205,7 +218,7 @@ fn ibl_albedo(
 
 /// The procedural sky with its sun where the scene's directional light comes from, else where
 /// the default light does.
-fn sky_of(light: Option<&Light>) -> Sky {
+pub(crate) fn sky_of(light: Option<&Light>) -> Sky {
     match light {
         Some(Light::Directional { direction }) => Sky::towards(-*direction),
         _ => Sky::default(),
@@ -307,7 +320,7 @@ fn compare_with_exact(
 
 /// Runs `render` under a progress bar over its `samples` passes (hidden when stderr is not a
 /// terminal).
-fn progressive<T>(
+pub(crate) fn progressive<T>(
     label: &str,
     samples: u32,
     render: impl FnOnce(&mut dyn FnMut(&ibl::Pass)) -> rbvh::Result<T>,
@@ -325,7 +338,7 @@ fn progressive<T>(
 
 /// `--stats` of one IBL render: its visibility rays, their trace time, and the host time of the
 /// sample passes (ray generation, traces, accumulation; the primary trace is not included).
-fn report_ibl(what: &str, r: &ibl::Rendered) {
+pub(crate) fn report_ibl(what: &str, r: &ibl::Rendered) {
     let gpu = match r.timing.gpu_ms {
         Some(ms) => format!(
             "GPU {ms:.2} ms = {:.2} MRays/s",

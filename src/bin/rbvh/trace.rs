@@ -1,19 +1,29 @@
 //! `rbvh trace`: a ray file in, a hit file out, so that any outside harness can query the tracer.
 
 use std::path::PathBuf;
+use std::time::Instant;
 
 use anyhow::Result;
 use rbvh::gpu::Query;
 use rbvh::io;
 use rbvh::lod::RayCone;
 
-use crate::prepare::{prepare, report_throughput, Common};
+use crate::prepare::{check_source, prepare, report_throughput, Common, Given};
 use crate::progress::step;
 
 #[derive(clap::Args, Debug)]
+#[command(mut_arg("stats", |a| a.help(
+    "Print the scene, the structure (nodes, bytes, build time), the device, and the trace's time \
+     and MRays/s: on the GPU also the CPU reference's on the same rays (and for --method rbvh \
+     the exact BVH's); with --cpu the CPU tracer's"
+)))]
 pub struct Args {
     #[command(flatten)]
     common: Common,
+    /// With --lod: the cone spread of every ray of the file (radians per unit of t; their width
+    /// at t = 0 is 0), which picks the level of detail each ray traces.
+    #[arg(long, default_value_t = 1e-3, requires = "lod")]
+    lod_spread: f32,
     /// Input rays: 8 little-endian f32 each (ox oy oz tmin dx dy dz tmax).
     #[arg(long)]
     rays: PathBuf,
@@ -23,29 +33,27 @@ pub struct Args {
     /// Any-hit (occlusion) query instead of closest hit.
     #[arg(long)]
     any_hit: bool,
-    /// Trace with the CPU reference tracer instead of the GPU.
-    #[arg(long)]
+    /// Trace with the CPU reference tracer instead of the GPU (so no --device or --validate).
+    #[arg(long, conflicts_with_all = ["device", "validate"])]
     cpu: bool,
 }
 
-pub fn run(a: Args) -> Result<()> {
-    let spread = a.common.lod.lod_spread;
+pub fn run(a: Args, given: &Given) -> Result<()> {
+    check_source(given, &a.common.source, Some(a.common.method))?;
+    let spread = a.lod_spread;
     anyhow::ensure!(
         spread.is_finite() && spread >= 0.0,
         "--lod-spread must be a finite angle of at least 0 (got {spread})"
     );
     let rays = io::read_rays(&a.rays)?;
-    let p = prepare(&a.common)?;
+    let p = prepare(&a.common, None)?;
     let query = if a.any_hit {
         Query::Any
     } else {
         Query::Closest
     };
     let cones = vec![
-        RayCone {
-            width: 0.0,
-            spread: a.common.lod.lod_spread,
-        };
+        RayCone { width: 0.0, spread };
         if p.structure.lod().is_some() {
             rays.len()
         } else {
@@ -53,7 +61,20 @@ pub fn run(a: Args) -> Result<()> {
         }
     ];
     let hits = if a.cpu {
-        p.trace_cpu(&rays, &cones, a.any_hit)?
+        let t = Instant::now();
+        let hits = step("tracing on the CPU", |_| {
+            p.trace_cpu(&rays, &cones, a.any_hit)
+        })?;
+        if a.common.source.stats {
+            let ms = t.elapsed().as_secs_f64() * 1e3;
+            eprintln!(
+                "trace (CPU reference, {}): {} rays, {ms:.2} ms = {:.2} MRays/s",
+                p.structure.label(),
+                rays.len(),
+                rays.len() as f64 / (ms.max(f64::MIN_POSITIVE) * 1e3)
+            );
+        }
+        hits
     } else {
         let tracer = step("uploading", |bar| p.tracer(bar))?;
         let traced = step("tracing", |bar| {

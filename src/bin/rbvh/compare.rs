@@ -1,0 +1,335 @@
+//! `rbvh compare`: what the project is for, in one command. The scene is lit by a sky through
+//! [`rbvh::ibl`] — every pixel's visibility rays ask whether the sky is blocked, which is what
+//! casts its shadows and ambient occlusion — once through the exact BVH and once through an
+//! RBVH, from the same primary rays, samples and seed; the two pictures go side by side into one
+//! PNG (exact left), and each structure's memory, visibility-ray speed and error are printed.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{ensure, Context as _, Result};
+use rbvh::bench::metrics::image_errors;
+use rbvh::bvh::{BuildParams, Bvh};
+use rbvh::geom::Ray;
+use rbvh::glam::DVec3;
+use rbvh::gpu::{Query, Timing, Tracer};
+use rbvh::ibl::{self, Environment, Frame, Rendered, Settings};
+use rbvh::output::{self, Image};
+use rbvh::random::SplitMix64;
+use rbvh::structure::Structure;
+
+use crate::prepare::{check_source, prepare, CameraArgs, Common, Given, LodArgs, Method, Source};
+use crate::progress::step;
+use crate::render::{ibl_albedo, progressive, sky_of};
+
+#[derive(clap::Args, Debug)]
+#[command(mut_arg("quality", |a| a.help(
+    "Quality preset of the RBVH to compare with the exact BVH: one of 0..4 or Q0..Q4 (Q0 \
+     coarsest, Q4 finest); not with --rbvh FILE"
+)))]
+#[command(mut_arg("rbvh", |a| a.help(
+    "Compare this saved RBVH (from `rbvh build --out`) instead of building one; the file holds \
+     its build parameters, so --quality and the free parameters are refused with it"
+)))]
+#[command(mut_arg("stats", |a| a.help(
+    "Also print the scene, the RBVH (nodes, bytes, build time) and the device on stderr"
+)))]
+pub struct Args {
+    #[command(flatten)]
+    source: Source,
+    #[command(flatten)]
+    camera: CameraArgs,
+    /// Output PNG: the exact BVH's picture left, the RBVH's right, each --width × --height.
+    #[arg(long, short, default_value = "compare.png")]
+    out: PathBuf,
+    /// Width of each of the two pictures in pixels, 1..=8192 (the PNG is twice as wide).
+    #[arg(long, default_value_t = 384)]
+    width: u32,
+    /// Height of the pictures in pixels, 1..=16384.
+    #[arg(long, default_value_t = 256)]
+    height: u32,
+    /// Visibility rays per pixel, one per pass, 1..=65536: more is smoother, slower, and times
+    /// the structures over more passes.
+    #[arg(long, default_value_t = 64)]
+    samples: u32,
+    /// Random seed of the visibility rays' directions (the same for both structures).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Light the scene by this HDR environment map (EXR, latitude-longitude, +y up) instead of
+    /// the procedural sky.
+    #[arg(long)]
+    env: Option<PathBuf>,
+}
+
+pub fn run(a: Args, given: &Given) -> Result<()> {
+    let start = Instant::now();
+    ensure!(
+        (1..=8192).contains(&a.width) && (1..=16384).contains(&a.height),
+        "--width must be within 1..=8192 (the PNG holds two pictures side by side) and --height \
+         within 1..=16384 (got {}x{})",
+        a.width,
+        a.height
+    );
+    ensure!(
+        (1..=ibl::MAX_SAMPLES).contains(&a.samples),
+        "--samples must be within 1..={} (got {})",
+        ibl::MAX_SAMPLES,
+        a.samples
+    );
+    ensure!(
+        a.out
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("png")),
+        "--out {}: writes PNG, so give it a .png name",
+        a.out.display()
+    );
+    check_source(given, &a.source, None)?;
+    // Read the environment before the builds, so a bad file fails at once.
+    let env = a
+        .env
+        .as_ref()
+        .map(|path| {
+            step("loading environment map", |_| Environment::load(path))
+                .with_context(|| format!("loading environment map {}", path.display()))
+        })
+        .transpose()?;
+    let common = Common {
+        source: a.source.clone(),
+        method: Method::Rbvh,
+        lod: LodArgs::off(),
+    };
+    let p = prepare(&common, a.camera.camera()?)?;
+    ensure!(
+        p.scene.triangle_count() > 0,
+        "{} is a point cloud: there are no triangles for an exact BVH to compare its RBVH with",
+        p.scene.name
+    );
+    let rbvh = p.structure.rbvh().context("compare needs an RBVH")?;
+    let bvh = step("building BVH", |bar| {
+        Bvh::build_observed(&p.scene, &BuildParams::DEFAULT, bar)
+    })?;
+    let exact_bytes = bvh.tree_bytes() + bvh.triangle_bytes();
+    let rbvh_bytes = rbvh.total_bytes();
+    let exact = Tracer::new(&p.ctx, &Structure::from(bvh)).context("uploading the exact BVH")?;
+    let approx = step("uploading", |bar| p.tracer(bar))?;
+
+    let (width, height) = (a.width, a.height);
+    let camera = p.scene.camera_or_framed(width as f32 / height as f32);
+    let rays = camera.primary_rays(width, height);
+    let (exact_hits, rbvh_hits) = step("tracing", |_| -> Result<_> {
+        Ok((
+            exact.trace(&rays, Query::Closest)?.hits,
+            approx.trace(&rays, Query::Closest)?.hits,
+        ))
+    })?;
+    // One untimed any-hit trace through each first: neither pays for a first dispatch of the
+    // visibility pipeline in its timings.
+    let warm: Vec<Ray> = rays.iter().take(1024).copied().collect();
+    exact.trace(&warm, Query::Any)?;
+    approx.trace(&warm, Query::Any)?;
+
+    let env = env.unwrap_or_else(|| Environment::Sky(sky_of(p.scene.light.as_ref())));
+    let settings = Settings {
+        samples: a.samples,
+        seed: a.seed,
+        diagonal: p.scene.bounds().diagonal(),
+        surface_offset: 0.0,
+        cone: None,
+    };
+    let exact_albedo = ibl_albedo(&p.scene, None, None, &rays, &exact_hits);
+    let rbvh_albedo = ibl_albedo(&p.scene, Some(rbvh), None, &rays, &rbvh_hits);
+    let exact_frame = Frame {
+        width,
+        height,
+        rays: &rays,
+        hits: &exact_hits,
+        albedo: &exact_albedo,
+    };
+    let rbvh_frame = Frame {
+        hits: &rbvh_hits,
+        albedo: &rbvh_albedo,
+        ..exact_frame
+    };
+    // The RBVH's rays leave its surface a texel further out, since it may lie a fraction of a
+    // texel off the exact one (as `render --shading ibl` does).
+    let rbvh_settings = Settings {
+        surface_offset: rbvh.texel_size,
+        ..settings
+    };
+    // One pass of each at a time, alternating which goes first, so that both are timed under the
+    // same conditions (another process, a clock that changes) rather than one after the other.
+    let (reference, rendered) = progressive("IBL (exact BVH and RBVH)", a.samples, |on_pass| {
+        let mut exact_sum = Accumulated::new(rays.len());
+        let mut rbvh_sum = Accumulated::new(rays.len());
+        let mut seeds = SplitMix64::new(a.seed);
+        for pass in 0..a.samples {
+            let seed = seeds.next_u64();
+            let exact_pass = || {
+                let s = Settings {
+                    seed,
+                    samples: 1,
+                    ..settings
+                };
+                ibl::render(&exact, &exact_frame, &env, &s, |_| {})
+            };
+            let rbvh_pass = || {
+                let s = Settings {
+                    seed,
+                    samples: 1,
+                    ..rbvh_settings
+                };
+                ibl::render(&approx, &rbvh_frame, &env, &s, |_| {})
+            };
+            if pass % 2 == 0 {
+                exact_sum.add(&exact_pass()?);
+                rbvh_sum.add(&rbvh_pass()?);
+            } else {
+                rbvh_sum.add(&rbvh_pass()?);
+                exact_sum.add(&exact_pass()?);
+            }
+            on_pass(&ibl::Pass {
+                done: pass + 1,
+                total: a.samples,
+                rays: 0,
+                timing: Timing::default(),
+            });
+        }
+        Ok((
+            exact_sum.finish(width, height),
+            rbvh_sum.finish(width, height),
+        ))
+    })?;
+
+    let errors = image_errors(&reference.image, &rendered.image)?;
+    let mismatched = exact_hits
+        .iter()
+        .zip(&rbvh_hits)
+        .filter(|(e, r)| e.is_hit() != r.is_hit())
+        .count();
+    let picture = output::side_by_side(&[&reference.image, &rendered.image], 0)?;
+    output::write_png(&a.out, &picture)?;
+
+    let level = rbvh.params.level_label();
+    let (exact_speed, timer) = mrays(&reference);
+    let (rbvh_speed, _) = mrays(&rendered);
+    let lit = match &a.env {
+        Some(path) => format!("lit by {}", path.display()),
+        None => "lit by the procedural sky".to_string(),
+    };
+    let points = match p.scene.point_count() {
+        0 => String::new(),
+        n => format!(" (the RBVH's from {n} points)"),
+    };
+    println!(
+        "{}: {} triangles{points}, {width}x{height} per picture, {lit}, {} visibility rays per \
+         pixel (shadows and ambient occlusion), seed {}; device {} ({})",
+        p.scene.name,
+        p.scene.triangle_count(),
+        a.samples,
+        a.seed,
+        p.ctx.device_name(),
+        p.ctx.driver()
+    );
+    let row = |name: &str, memory: String, speed: String, error: String| {
+        println!("{name:<12} memory {memory:<26} speed {speed:<38} error {error}");
+    };
+    row(
+        "exact BVH",
+        format!("{:.2} MB", mb(exact_bytes)),
+        format!("{exact_speed:.2} MRays/s"),
+        "FLIP 0, the reference".to_string(),
+    );
+    row(
+        &format!("RBVH {level}"),
+        format!(
+            "{:.2} MB ({:.2}x smaller)",
+            mb(rbvh_bytes),
+            exact_bytes as f64 / rbvh_bytes.max(1) as f64
+        ),
+        format!(
+            "{rbvh_speed:.2} MRays/s ({:.2}x the exact BVH's)",
+            rbvh_speed / exact_speed.max(f64::MIN_POSITIVE)
+        ),
+        format!(
+            "FLIP {:.4}, PSNR {:.2} dB; primary rays hit/miss mismatch {:.2}% ({mismatched} of {})",
+            errors.flip_mean,
+            errors.psnr_db,
+            100.0 * mismatched as f64 / rays.len() as f64,
+            rays.len()
+        ),
+    );
+    println!(
+        "(memory: tree, atlas and triangles, as rbvh build and bench count them; speed: {} and {} \
+         visibility rays, one per sample of each hit pixel, timed by {timer}, one pass of each in \
+         turn; error: the RBVH picture against the exact one)",
+        reference.rays, rendered.rays
+    );
+    eprintln!(
+        "wrote {} (exact BVH left, RBVH {level} right) in {:.1} s",
+        a.out.display(),
+        start.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// One-sample renders summed: their pictures (each sample's mean is the render's), visibility
+/// rays and trace times.
+struct Accumulated {
+    pixels: Vec<DVec3>,
+    passes: u32,
+    rays: u64,
+    timing: Timing,
+}
+
+impl Accumulated {
+    fn new(pixels: usize) -> Accumulated {
+        Accumulated {
+            pixels: vec![DVec3::ZERO; pixels],
+            passes: 0,
+            rays: 0,
+            timing: Timing {
+                gpu_ms: Some(0.0),
+                wall_ms: 0.0,
+            },
+        }
+    }
+
+    fn add(&mut self, r: &Rendered) {
+        for (sum, p) in self.pixels.iter_mut().zip(&r.image.pixels) {
+            *sum += p.as_dvec3();
+        }
+        self.passes += 1;
+        self.rays += r.rays;
+        self.timing.wall_ms += r.timing.wall_ms;
+        self.timing.gpu_ms = self.timing.gpu_ms.zip(r.timing.gpu_ms).map(|(a, b)| a + b);
+    }
+
+    /// The render of all the samples added.
+    fn finish(self, width: u32, height: u32) -> Rendered {
+        let n = f64::from(self.passes.max(1));
+        Rendered {
+            image: Image {
+                width,
+                height,
+                pixels: self.pixels.iter().map(|p| (*p / n).as_vec3()).collect(),
+            },
+            rays: self.rays,
+            timing: self.timing,
+            wall_ms: self.timing.wall_ms,
+        }
+    }
+}
+
+/// A render's visibility rays per second, in millions, and what timed them: the device's
+/// timestamps where every pass had them, else the host's wait for each trace.
+fn mrays(r: &Rendered) -> (f64, &'static str) {
+    let (ms, timer) = match r.timing.gpu_ms {
+        Some(ms) => (ms, "GPU time"),
+        None => (r.timing.wall_ms, "wall time of the traces"),
+    };
+    (r.rays as f64 / (ms.max(f64::MIN_POSITIVE) * 1e3), timer)
+}
+
+fn mb(bytes: u64) -> f64 {
+    bytes as f64 / 1e6
+}
