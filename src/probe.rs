@@ -4,7 +4,7 @@
 //! ([`Read`], reported to a [`Probe`] by the CPU twins), from which `crate::bench::traffic` models
 //! memory traffic.
 //!
-//! The counters are how the README's "where a ray's work goes" tables are made, and how a speed
+//! The counters are how the "where a ray's work goes" tables of docs/ray-work.md are made, and how a speed
 //! difference is explained rather than only measured: the exact BVH's and the RBVH's steps are
 //! counted alike (an inner node is an inner node in both).
 

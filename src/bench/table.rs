@@ -138,7 +138,7 @@ pub fn work_table(report: &BenchReport) -> String {
                     rejection), block jumps, triangles; SIMD8: steps of a ray over its 8-ray \
                     group's longest. With --traffic (CPU twin, rays in 8x8 tiles): lines = \
                     distinct 128-byte lines per ray; set = the frame's working set; DRAMnM = \
-                    bytes per ray from DRAM behind an n MiB LRU cache (a model, see README)";
+                    bytes per ray from DRAM behind an n MiB LRU cache (a model, see docs/ray-work.md)";
     render(report, &WORK_COLUMNS, work_cells, footnote)
 }
 

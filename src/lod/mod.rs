@@ -50,7 +50,7 @@ pub struct LodParams {
     pub columns: u32,
     /// Fewest leaves below a node for it to get a grid: descending into a few leaves (each
     /// marched with block jumps) costs about what marching a grid does, so a grid there adds
-    /// error and memory for little speed (measured on `grove-aerial`, README "Level of detail").
+    /// error and memory for little speed (measured on `grove-aerial`, docs/level-of-detail.md).
     /// A value above the tree's leaf count leaves no node a grid.
     pub min_leaves: u32,
     /// A node is chosen where its column is no wider than `2^bias` footprints, so at least

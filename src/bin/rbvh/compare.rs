@@ -23,6 +23,11 @@ use crate::progress::step;
 use crate::render::{ibl_albedo, progressive, sky_of};
 
 #[derive(clap::Args, Debug)]
+#[command(mut_arg("scene", |a| a.help(
+    "Scene: a built-in name (`rbvh scenes`), an OBJ/glTF/GLB file or a scene file (.toml); not a \
+     point cloud, which has no triangles for the exact BVH (--points builds the RBVH from points \
+     sampled over a mesh)"
+)))]
 #[command(mut_arg("quality", |a| a.help(
     "Quality preset of the RBVH to compare with the exact BVH: one of 0..4 or Q0..Q4 (Q0 \
      coarsest, Q4 finest); not with --rbvh FILE"

@@ -43,7 +43,7 @@ enum Command {
     /// Build an RBVH and report its nodes, leaves, texels and memory against the exact BVH.
     #[command(allow_negative_numbers = true)]
     Build(build::Args),
-    /// Trace a ray file and write a hit file (formats in README.md).
+    /// Trace a ray file and write a hit file (formats in docs/cli.md, "Ray and hit files").
     #[command(allow_negative_numbers = true)]
     Trace(trace::Args),
     /// Benchmark the exact BVH and RBVH levels: speed, memory and error on the same rays.

@@ -38,7 +38,7 @@ pub struct Args {
     source: Source,
     #[command(flatten)]
     camera: CameraArgs,
-    /// Strokes file (format in README.md, "Surface data and painting").
+    /// Strokes file (format in docs/cli.md, "Surface data and painting").
     #[arg(long)]
     strokes: PathBuf,
     /// The painted RBVH file to write.
