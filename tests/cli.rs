@@ -390,6 +390,30 @@ fn parameter_errors_name_their_flag() {
             ][..],
             "--max-tile: 2 is outside",
         ),
+        (
+            &[
+                "build",
+                "--scene",
+                "sphere",
+                "--quality",
+                "2",
+                "--exact-from-texels=-1",
+            ][..],
+            "--exact-from-texels: -1 is outside",
+        ),
+        (
+            &[
+                "build",
+                "--scene",
+                "sphere",
+                "--quality",
+                "2",
+                "--exact-from-texels",
+                "1.5",
+                "--sample-all",
+            ][..],
+            "--exact-from-texels",
+        ),
     ] {
         let out = rbvh(args);
         let stderr = String::from_utf8_lossy(&out.stderr);

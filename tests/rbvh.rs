@@ -257,6 +257,49 @@ fn every_preset_and_strategy_builds_and_grows_with_quality() {
     }
 }
 
+/// `exact_from_texels` lowers the size from which triangles are traced exactly: on the torus at
+/// Q0 (triangles of a few texels, sampled by the presets' 24) tracing from 1.5 texels keeps more
+/// triangles exact and fewer texels, the level is `custom`, and the hits stay within the
+/// presets' accuracy; it needs `exact_when_cheaper` and a size of at least 0.
+#[test]
+fn exact_from_texels_traces_smaller_triangles_exactly() {
+    let scene = Scene::builtin("torus").unwrap();
+    let preset = RbvhParams::quality(0).unwrap();
+    let from = RbvhParams {
+        exact_from_texels: 1.5,
+        ..preset
+    };
+    assert_eq!(from.level_label(), "custom");
+    let (a, b) = (
+        Rbvh::build(&scene, &preset).unwrap(),
+        Rbvh::build(&scene, &from).unwrap(),
+    );
+    assert!(
+        b.triangles.len() > a.triangles.len() && b.atlas.texels.len() < a.atlas.texels.len(),
+        "triangles {} → {}, texels {} → {}",
+        a.triangles.len(),
+        b.triangles.len(),
+        a.atlas.texels.len(),
+        b.atlas.texels.len()
+    );
+    let rays = scene.camera_or_framed(1.0).primary_rays(64, 64);
+    let (_, _, mismatch) = error_vs_exact(&scene, &b, &rays);
+    assert!(mismatch < 0.02, "{mismatch}");
+    for bad in [
+        RbvhParams {
+            exact_from_texels: -1.0,
+            ..preset
+        },
+        RbvhParams {
+            exact_when_cheaper: false,
+            ..from
+        },
+    ] {
+        let message = Rbvh::build(&scene, &bad).unwrap_err().to_string();
+        assert!(message.contains("exact_from_texels"), "{message}");
+    }
+}
+
 /// The presets trace a mesh coarser than its texels as its triangles (`exact_when_cheaper`): each
 /// of the cube's twelve and the plane's two triangles is cheaper than the texels that would
 /// sample it, so no height field is built and every hit is the exact BVH's; a mesh with detail

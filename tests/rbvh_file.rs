@@ -13,7 +13,9 @@ use rbvh::rbvh::{
 use rbvh::Error;
 
 /// Bytes before the arrays, per the format table in `src/rbvh/file.rs`.
-const HEADER_BYTES: usize = 160;
+const HEADER_BYTES: usize = 164;
+/// The header of version 9, which ends before `params.exact_from_texels`.
+const V9_HEADER_BYTES: usize = 160;
 /// The header of version 8, which ends before `params.exact_when_cheaper`.
 const V8_HEADER_BYTES: usize = 156;
 /// The header of version 7, which ends before `atlas.narrow_rows`.
@@ -137,11 +139,12 @@ fn save_load_round_trips_exactly() {
     loaded.save(&again).unwrap();
     assert_eq!(std::fs::read(&again).unwrap(), bytes);
 
-    // The documented framing: magic, version 9, the sampling judgement's size, normal texels, no
-    // colour channel, each object's rate, the narrow rows and whether triangles were traced
-    // exactly where cheaper last, then the arrays after a 160-byte header.
+    // The documented framing: magic, version 10, the sampling judgement's size, normal texels, no
+    // colour channel, each object's rate, the narrow rows, whether triangles were traced exactly
+    // where cheaper and from what size last, then the arrays after a 164-byte header.
     assert_eq!(&bytes[..8], b"RBVHv\0\0\0");
-    assert_eq!(word(&bytes, 8), 9);
+    assert_eq!(word(&bytes, 8), 10);
+    assert_eq!(f32::from_bits(word(&bytes, 160)), 0.0);
     assert_eq!(f32::from_bits(word(&bytes, 148)), 0.375);
     assert_eq!(word(&bytes, 152), 0);
     assert_eq!(word(&bytes, 156), 1);
@@ -230,7 +233,7 @@ fn bad_magic_and_unknown_versions_are_rejected() {
     let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
     assert!(message.contains("not an RBVH file"), "{message}");
 
-    for version in [0, 10, u32::MAX] {
+    for version in [0, 11, u32::MAX] {
         let mut bytes = sample().to_bytes();
         bytes[8..12].copy_from_slice(&version.to_le_bytes());
         let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
@@ -238,14 +241,14 @@ fn bad_magic_and_unknown_versions_are_rejected() {
             message.contains(&format!("unsupported version {version}")),
             "{message}"
         );
-        assert!(message.contains("reads versions 1 to 9"), "{message}");
+        assert!(message.contains("reads versions 1 to 10"), "{message}");
     }
 }
 
 /// Files written before version 6 (1: normal texels; 2: with colours; 3: height-only; 4: with
 /// the sampled judgement's size and the texel format in the header, all with 64-byte nodes; 5:
 /// 48-byte nodes) load as the RBVHs they described, their nodes quantized, and are saved again as
-/// version 9. Before version 4 they were built by the paper's rule alone, before version 7
+/// version 10. Before version 4 they were built by the paper's rule alone, before version 7
 /// every texel was the scene's (`object_rate` 0), and before version 9 every triangle a height
 /// field could hold was sampled (`exact_when_cheaper` false). Their height codes
 /// carry no mark of which were sampled, so each even one becomes odd (extrapolated: no skirt)
@@ -302,7 +305,7 @@ fn older_versions_load_as_what_they_described() {
             ..rbvh
         };
         assert_eq!(loaded, expected, "version {version}");
-        assert_eq!(word(&loaded.to_bytes(), 8), 9);
+        assert_eq!(word(&loaded.to_bytes(), 8), 10);
         let header = if version < 4 { 136 } else { V6_HEADER_BYTES };
         let message = parse_error(Rbvh::from_bytes(&old[..old.len() - 1], path), path);
         assert!(
@@ -313,7 +316,7 @@ fn older_versions_load_as_what_they_described() {
 }
 
 /// A version 6 file (marked heights, no `object_rate`) loads as it was, every texel the
-/// scene's, and is saved again as version 9.
+/// scene's, and is saved again as version 10.
 #[test]
 fn version_6_loads_with_every_texel_the_scenes() {
     let rbvh = sample();
@@ -327,17 +330,19 @@ fn version_6_loads_with_every_texel_the_scenes() {
         ..rbvh
     };
     assert_eq!(loaded, expected);
-    assert_eq!(word(&loaded.to_bytes(), 8), 9);
+    assert_eq!(word(&loaded.to_bytes(), 8), 10);
 }
 
-/// `rbvh` as version 5–8 wrote it: its header without what later versions appended
-/// (`exact_when_cheaper` from 9, `narrow_rows` from 8, `object_rate` from 7).
+/// `rbvh` as version 5–9 wrote it: its header without what later versions appended
+/// (`exact_from_texels` from 10, `exact_when_cheaper` from 9, `narrow_rows` from 8,
+/// `object_rate` from 7).
 fn as_version(rbvh: &Rbvh, version: u32) -> Vec<u8> {
     let mut bytes = rbvh.to_bytes();
     let end = match version {
         ..=6 => V6_HEADER_BYTES,
         7 => V7_HEADER_BYTES,
-        _ => V8_HEADER_BYTES,
+        8 => V8_HEADER_BYTES,
+        _ => V9_HEADER_BYTES,
     };
     bytes.drain(end..HEADER_BYTES);
     bytes[8..12].copy_from_slice(&version.to_le_bytes());
@@ -374,6 +379,32 @@ fn exact_when_cheaper_round_trips_and_is_checked() {
         message.contains("params.exact_when_cheaper is 2, not 0 or 1"),
         "{message}"
     );
+}
+
+/// A version 9 file loads as tracing exactly from what 96 bytes of texels buy
+/// (`exact_from_texels` 0); a size round-trips; a NaN or negative one is refused.
+#[test]
+fn exact_from_texels_round_trips_and_is_checked() {
+    let rbvh = sample();
+    let path = Path::new("v9.rbvh");
+    assert_eq!(rbvh.params.exact_from_texels, 0.0);
+    assert_eq!(Rbvh::from_bytes(&as_version(&rbvh, 9), path).unwrap(), rbvh);
+    let from = Rbvh {
+        params: RbvhParams {
+            exact_from_texels: 1.5,
+            ..rbvh.params
+        },
+        ..rbvh.clone()
+    };
+    let bytes = from.to_bytes();
+    assert_eq!(f32::from_bits(word(&bytes, 160)), 1.5);
+    assert_eq!(Rbvh::from_bytes(&bytes, path).unwrap(), from);
+    for bad_value in [f32::NAN, -1.0] {
+        let mut bad = bytes.clone();
+        bad[160..164].copy_from_slice(&bad_value.to_le_bytes());
+        let message = parse_error(Rbvh::from_bytes(&bad, path), path);
+        assert!(message.contains("exact_from_texels"), "{message}");
+    }
 }
 
 /// `sample()` with its last four atlas rows narrow: their codes made 8-bit ones.

@@ -232,7 +232,7 @@ pub fn scene_file(data: &[u8]) {
 }
 
 /// Fuzz target: the bytes of an RBVH file. A file that loads must round-trip byte for byte (a
-/// file of an older version comes back as version 9: the same header, with bytes 40..52 inserted
+/// file of an older version comes back as version 10: the same header, with bytes 40..52 inserted
 /// before version 4, its 64-byte nodes quantized to 48 bytes before version 5, its height codes
 /// each within one of what they were and its normals kept, and the other arrays unchanged) and
 /// trace on the CPU without overflow and with well-formed hits (the loader promises "safe to
@@ -243,22 +243,25 @@ pub fn rbvh_file(data: &[u8]) {
     };
     let saved = r.to_bytes();
     let version = u32::from_le_bytes(data[8..12].try_into().expect("a loaded file has a version"));
-    if version == 9 {
+    if version == 10 {
         assert_eq!(saved, data, "save(load(file)) differs from the file");
     } else {
-        // Version 9 appended `exact_when_cheaper` (0 for older files) to version 8's 156-byte
+        // Version 10 appended `exact_from_texels` (0 for older files) to version 9's 160-byte
+        // header. Version 9 appended `exact_when_cheaper` (0 for older files) to version 8's 156-byte
         // header, which appended `narrow_rows` (0 for older files) to version 7's 152 bytes,
         // which appended `object_rate` (0 for older files) to the 148-byte header of versions
         // 4–6; versions 1–3 lack bytes 40..52 of those.
         const V6_HEADER: usize = 148;
         const V7_HEADER: usize = 152;
         const V8_HEADER: usize = 156;
-        const HEADER: usize = 160;
+        const V9_HEADER: usize = 160;
+        const HEADER: usize = 164;
         let old_header = match version {
             1..=3 => 136,
             4..=6 => V6_HEADER,
             7 => V7_HEADER,
-            _ => V8_HEADER,
+            8 => V8_HEADER,
+            _ => V9_HEADER,
         };
         let before_rate = old_header.min(V6_HEADER);
         assert_eq!(saved[12..40], data[12..40], "the upgraded header differs");
@@ -285,10 +288,19 @@ pub fn rbvh_file(data: &[u8]) {
         } else {
             assert_eq!(saved[V7_HEADER..V8_HEADER], data[V7_HEADER..V8_HEADER]);
         }
+        if version < 9 {
+            assert_eq!(
+                saved[V8_HEADER..V9_HEADER],
+                [0; 4],
+                "an old file does not sample every triangle"
+            );
+        } else {
+            assert_eq!(saved[V8_HEADER..V9_HEADER], data[V8_HEADER..V9_HEADER]);
+        }
         assert_eq!(
-            saved[V8_HEADER..HEADER],
+            saved[V9_HEADER..HEADER],
             [0; 4],
-            "an old file does not sample every triangle"
+            "an old file does not trace exactly from what 96 bytes buy"
         );
         let nodes = r.nodes.len();
         let old_node = if version < 5 { 64 } else { 48 };

@@ -52,7 +52,7 @@
 //! `max_angle_deg` (normal cone, else null), `min_ratio` (projected area, else null),
 //! `subdivision` (`"spatial_median"` \| `"area_sah"`), `object_split`, `max_tile`,
 //! `min_leaf_texels`, `sampled_criterion_texels`, `texels` (`"height_normal"` \| `"height"`),
-//! `exact_when_cheaper` — the fields of [`RbvhParams`].
+//! `exact_when_cheaper`, `exact_from_texels` — the fields of [`RbvhParams`].
 //!
 //! `lod` (`rbvh-lod` records, else null): `columns`, `min_leaves`, `bias` — the fields of
 //! [`LodParams`].
@@ -337,6 +337,9 @@ pub struct Params {
     /// Whether triangles are traced exactly where that costs fewer bytes than sampling them
     /// ([`RbvhParams::exact_when_cheaper`]).
     pub exact_when_cheaper: bool,
+    /// The size in texels from which a triangle is traced exactly, 0 for what 96 bytes buy
+    /// ([`RbvhParams::exact_from_texels`]).
+    pub exact_from_texels: f32,
 }
 
 impl From<&RbvhParams> for Params {
@@ -361,6 +364,7 @@ impl From<&RbvhParams> for Params {
             sampled_criterion_texels: p.sampled_criterion_texels,
             texels: p.texels.name(),
             exact_when_cheaper: p.exact_when_cheaper,
+            exact_from_texels: p.exact_from_texels,
         }
     }
 }

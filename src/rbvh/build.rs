@@ -513,7 +513,11 @@ impl Builder<'_> {
             Input::Triangles(all) if self.params.exact_when_cheaper => all,
             _ => return ((0..self.prims.len() as u32).collect(), Vec::new()),
         };
-        let texels = EXACT_TRIANGLE_BYTES / self.params.texels.bytes() as f32;
+        let texels = if self.params.exact_from_texels > 0.0 {
+            self.params.exact_from_texels
+        } else {
+            EXACT_TRIANGLE_BYTES / self.params.texels.bytes() as f32
+        };
         let (mut sampled, mut exact) = (Vec::new(), Vec::new());
         for (i, &[a, b, c]) in (0u32..).zip(all.iter()) {
             let texel = self.texel_of(&[i]);

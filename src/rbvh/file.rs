@@ -10,7 +10,7 @@
 //! | bytes | type | field |
 //! |---|---|---|
 //! | 0..8 | `[u8; 8]` | magic `RBVHv` followed by three zero bytes |
-//! | 8..12 | u32 | format version: 9 (this build writes it; it reads 1–8 as well, see below) |
+//! | 8..12 | u32 | format version: 10 (this build writes it; it reads 1–9 as well, see below) |
 //! | 12..16 | f32 | `params.texels_per_diagonal` |
 //! | 16..20, 20..24 | u32, f32 | `params.refinement`: tag (0 = `NormalCone`, 1 = `ProjectedArea`), its value (`max_angle_deg` or `min_ratio`) |
 //! | 24..28 | u32 | `params.subdivision`: 0 = `SpatialMedian`, 1 = `AreaSah` |
@@ -31,7 +31,8 @@
 //! | 148..152 | f32 | `params.object_rate` (0: none) |
 //! | 152..156 | u32 | `atlas.narrow_rows`: rows at the end whose heights are 8-bit codes |
 //! | 156..160 | u32 | `params.exact_when_cheaper`: 0 or 1 |
-//! | 160.. | `N` × 48 bytes | `nodes` ([`crate::bvh::GpuNode`], 12 words each) |
+//! | 160..164 | f32 | `params.exact_from_texels` (0: what 96 bytes buy) |
+//! | 164.. | `N` × 48 bytes | `nodes` ([`crate::bvh::GpuNode`], 12 words each) |
 //! | then | `T` × 48 bytes | `triangles` ([`crate::bvh::GpuTriangle`], 12 words each) |
 //! | then | `L` × 64 bytes | `leaves` ([`super::GpuHeightfield`], 16 words each) |
 //! | then | `X` × 4 bytes | `atlas.texels` ([`super::Texel`], one word each), row by row; height-only texels: `X` × 2 bytes, each texel's height code (u16) |
@@ -52,7 +53,8 @@
 //! (where the box allows: `unmark`), so that the march hangs no skirt under them and the RBVH
 //! traces as it was built. Versions 1–6 took every texel from the scene (`object_rate` 0). Versions 1–7 have 16-bit
 //! codes everywhere (`narrow_rows` 0). Versions 1–8 sampled every triangle a height field could
-//! hold (`exact_when_cheaper` false). Saving such an RBVH writes version 9. A colour section
+//! hold (`exact_when_cheaper` false), and versions 1–9 traced exactly the triangles of at least
+//! what 96 bytes of texels buy (`exact_from_texels` 0). Saving such an RBVH writes version 10. A colour section
 //! that is cut short, or whose count is not `X`, is an [`Error::Parse`] like any other
 //! malformation.
 //!
@@ -88,9 +90,11 @@ use crate::{Error, Result};
 /// The first eight bytes of every RBVH file.
 const MAGIC: [u8; 8] = *b"RBVHv\0\0\0";
 /// The format version this build writes.
-const VERSION: u32 = 9;
+const VERSION: u32 = 10;
 /// Bytes before the arrays (see the table in the module docs).
-const HEADER_BYTES: usize = 160;
+const HEADER_BYTES: usize = 164;
+/// Bytes before the arrays in version 9, whose header ends before `exact_from_texels`.
+const V9_HEADER_BYTES: usize = 160;
 /// Bytes before the arrays in version 8, whose header ends before `exact_when_cheaper`.
 const V8_HEADER_BYTES: usize = 156;
 /// Bytes before the arrays in version 7, whose header ends before `narrow_rows`.
@@ -191,6 +195,7 @@ impl Rbvh {
         put_f32(&mut out, p.object_rate);
         put_u32(&mut out, self.atlas.narrow_rows);
         put_u32(&mut out, u32::from(p.exact_when_cheaper));
+        put_f32(&mut out, p.exact_from_texels);
         debug_assert_eq!(out.len(), HEADER_BYTES);
 
         put_records(&mut out, &self.nodes);
@@ -303,6 +308,7 @@ impl Rbvh {
             4..=6 => V6_HEADER_BYTES,
             7 => V7_HEADER_BYTES,
             8 => V8_HEADER_BYTES,
+            9 => V9_HEADER_BYTES,
             _ => HEADER_BYTES,
         };
         let params = RbvhParams {
@@ -316,6 +322,7 @@ impl Rbvh {
             sampled_criterion_texels,
             texels,
             exact_when_cheaper: false,
+            exact_from_texels: 0.0,
         };
         let bounds = Aabb {
             min: [r.f32("bounds")?, r.f32("bounds")?, r.f32("bounds")?].into(),
@@ -362,8 +369,15 @@ impl Rbvh {
                 x => return Err(err(format!("params.exact_when_cheaper is {x}, not 0 or 1"))),
             },
         };
+        // Versions 1–9 traced exactly from what 96 bytes of texels buy.
+        let exact_from_texels = if version >= 10 {
+            r.f32("params.exact_from_texels")?
+        } else {
+            0.0
+        };
         let params = RbvhParams {
             exact_when_cheaper,
+            exact_from_texels,
             ..params
         };
 
@@ -373,12 +387,21 @@ impl Rbvh {
             ("params.refinement value", refinement_value(refinement)),
             ("params.min_leaf_texels", params.min_leaf_texels),
             ("params.sampled_criterion_texels", sampled_criterion_texels),
+            ("params.exact_from_texels", exact_from_texels),
             ("texel_size", texel_size),
         ];
         for (name, x) in floats {
             if x.is_nan() {
                 return Err(err(format!("{name} is NaN")));
             }
+        }
+        if !(exact_from_texels.is_finite() && exact_from_texels >= 0.0)
+            || (exact_from_texels > 0.0 && !exact_when_cheaper)
+        {
+            return Err(err(format!(
+                "params.exact_from_texels is {exact_from_texels}: a size in texels, at least 0, and \
+                 0 where exact_when_cheaper is off"
+            )));
         }
         // Infinite bounds are legitimate (the empty box of an empty scene); NaN is not.
         if bounds.min.is_nan() || bounds.max.is_nan() {

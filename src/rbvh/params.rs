@@ -128,6 +128,13 @@ pub struct RbvhParams {
     /// field can hold it, as the paper does. A point cloud has no triangles: the rule does
     /// nothing there.
     pub exact_when_cheaper: bool,
+    /// With `exact_when_cheaper`, the size in texels of its object from which a triangle is
+    /// traced exactly; 0 (the presets): what its 96 bytes buy, 24 texels with normals, 48
+    /// height-only. A triangle of a few texels costs about its bytes either way, but sampled its
+    /// silhouette widens by the rim: on the paper-scale scene tracing every triangle of 1.5
+    /// texels or more exactly made Q2 valid in the same bytes (docs/paper-scale.md, "What Q0–Q2
+    /// validity would take"). A free parameter until the presets are defined by it.
+    pub exact_from_texels: f32,
 }
 
 /// What a level's name gets appended when every triangle a height field can hold is sampled
@@ -203,6 +210,7 @@ impl RbvhParams {
             sampled_criterion_texels: 4.0,
             texels: TexelFormat::HeightNormal,
             exact_when_cheaper: true,
+            exact_from_texels: 0.0,
         }
     }
 
@@ -282,6 +290,22 @@ impl RbvhParams {
             return Err(Error::param(
                 "sampled_criterion_texels",
                 format!("{k} is outside 0..=1e4"),
+            ));
+        }
+        let e = self.exact_from_texels;
+        if !(e.is_finite() && (0.0..=1.0e4).contains(&e)) {
+            return Err(Error::param(
+                "exact_from_texels",
+                format!("{e} is outside 0..=1e4 (0: what 96 bytes of texels buy)"),
+            ));
+        }
+        if e > 0.0 && !self.exact_when_cheaper {
+            return Err(Error::param(
+                "exact_from_texels",
+                format!(
+                    "{e} sets which triangles are traced exactly, but exact_when_cheaper is off \
+                     (every triangle sampled)"
+                ),
             ));
         }
         Ok(())
