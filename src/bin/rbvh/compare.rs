@@ -20,7 +20,7 @@ use rbvh::structure::Structure;
 
 use crate::prepare::{check_source, prepare, CameraArgs, Common, Given, LodArgs, Method, Source};
 use crate::progress::step;
-use crate::render::{ibl_albedo, progressive, sky_of};
+use crate::render::{ibl_albedo, load_environment, progressive, sky_of};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("scene", |a| a.help(
@@ -90,14 +90,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     );
     check_source(given, &a.source, None)?;
     // Read the environment before the builds, so a bad file fails at once.
-    let env = a
-        .env
-        .as_ref()
-        .map(|path| {
-            step("loading environment map", |_| Environment::load(path))
-                .with_context(|| format!("loading environment map {}", path.display()))
-        })
-        .transpose()?;
+    let env = load_environment(a.env.as_ref())?;
     let common = Common {
         source: a.source.clone(),
         method: Method::Rbvh,

@@ -130,14 +130,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         }
     }
     // Read the environment before the (possibly long) build, so a bad file fails at once.
-    let env = a
-        .env
-        .as_ref()
-        .map(|path| {
-            step("loading environment map", |_| Environment::load(path))
-                .with_context(|| format!("loading environment map {}", path.display()))
-        })
-        .transpose()?;
+    let env = load_environment(a.env.as_ref())?;
     let p = prepare(&a.common, a.camera.camera()?)?;
     let camera = p.scene.camera_or_framed(a.width as f32 / a.height as f32);
     let rays = camera.primary_rays(a.width, a.height);
@@ -218,6 +211,15 @@ pub(crate) fn ibl_albedo(
 
 /// The procedural sky with its sun where the scene's directional light comes from, else where
 /// the default light does.
+/// The environment map of `--env`, if given, with an error naming the file.
+pub(crate) fn load_environment(path: Option<&PathBuf>) -> Result<Option<Environment>> {
+    path.map(|path| {
+        step("loading environment map", |_| Environment::load(path))
+            .with_context(|| format!("loading environment map {}", path.display()))
+    })
+    .transpose()
+}
+
 pub(crate) fn sky_of(light: Option<&Light>) -> Sky {
     match light {
         Some(Light::Directional { direction }) => Sky::towards(-*direction),
