@@ -35,7 +35,7 @@ pub mod render;
 pub mod sampling;
 
 pub use environment::{Environment, LatLongMap, Sky};
-pub use render::{render, Frame, Pass, Rendered, Settings, MAX_SAMPLES};
+pub use render::{render, render_side_by_side, Frame, Pass, Rendered, Settings, MAX_SAMPLES};
 
 /// The albedo of surfaces without a base colour: the neutral grey of the preview shading.
 pub const GREY: f32 = 0.8;

@@ -111,86 +111,179 @@ pub fn render(
     frame: &Frame,
     env: &Environment,
     settings: &Settings,
-    mut on_pass: impl FnMut(&Pass),
+    on_pass: impl FnMut(&Pass),
 ) -> Result<Rendered> {
+    let mut rendered = render_side_by_side(&[(tracer, frame, settings)], env, on_pass)?;
+    Ok(rendered.remove(0))
+}
+
+/// [`render`] of several structures at once (the exact BVH and an RBVH, say), pass by pass: each
+/// pass traces every job's visibility rays, starting with a different job each pass, so that
+/// their trace times are taken under the same conditions (a clock that changes, another process)
+/// rather than one render after the other, and a speed ratio of the two is a side-by-side one.
+/// Each job's image is the one [`render`] makes of it alone. The jobs take the same number of
+/// samples; `on_pass` hears each pass with every job's rays and trace times summed, and each
+/// render's `wall_ms` is the host time of them all.
+pub fn render_side_by_side(
+    jobs: &[(&Tracer, &Frame, &Settings)],
+    env: &Environment,
+    mut on_pass: impl FnMut(&Pass),
+) -> Result<Vec<Rendered>> {
     let start = Instant::now();
-    check(frame, settings)?;
-    // The fixed part of every visibility ray of a pixel: its pixel index, origin and normal.
-    let starts: Vec<(u64, Vec3, Vec3)> = frame
-        .rays
-        .par_iter()
-        .zip(frame.hits)
-        .enumerate()
-        .filter(|(_, (_, hit))| hit.is_hit())
-        .map(|(pixel, (ray, hit))| {
-            let point = ray.origin() + hit.t * ray.dir();
-            let mut normal = facing_normal(ray, hit);
-            if normal == Vec3::ZERO {
-                // A degenerate normal: face the camera, so the pixel is still lit sensibly.
-                normal = -ray.dir().normalize_or_zero();
-            }
-            let origin = offset_origin(point, normal, settings.diagonal, settings.surface_offset);
-            (pixel as u64, origin, normal)
-        })
-        .collect();
-    let visibility_cones = settings.cone.map(|c| {
-        let cone = RayCone {
-            width: 0.0,
-            spread: c.spread,
-        };
-        vec![cone; starts.len()]
-    });
-    let mut sums = vec![DVec3::ZERO; starts.len()];
-    let mut timing = Timing {
-        gpu_ms: Some(0.0),
-        wall_ms: 0.0,
+    let Some(samples) = jobs.first().map(|(_, _, s)| s.samples) else {
+        return Ok(Vec::new());
     };
-    for sample in 0..settings.samples {
-        let rays: Vec<Ray> = starts
+    if jobs.iter().any(|(_, _, s)| s.samples != samples) {
+        return Err(Error::param(
+            "samples",
+            "renders side by side take the same number of samples".to_string(),
+        ));
+    }
+    let mut states = jobs
+        .iter()
+        .map(|(_, frame, settings)| Accumulation::new(frame, settings))
+        .collect::<Result<Vec<_>>>()?;
+    for sample in 0..samples {
+        let mut pass = Pass {
+            done: sample + 1,
+            total: samples,
+            rays: 0,
+            timing: Timing {
+                gpu_ms: Some(0.0),
+                wall_ms: 0.0,
+            },
+        };
+        for k in 0..jobs.len() {
+            let job = (k + sample as usize) % jobs.len();
+            let (tracer, _, settings) = jobs[job];
+            let timing = states[job].pass(tracer, env, settings, sample)?;
+            pass.rays += states[job].starts.len();
+            pass.timing = add(pass.timing, timing);
+        }
+        on_pass(&pass);
+    }
+    let wall_ms = start.elapsed().as_secs_f64() * 1e3;
+    Ok(states
+        .into_iter()
+        .zip(jobs)
+        .map(|(state, (_, frame, settings))| state.finish(frame, env, settings, wall_ms))
+        .collect())
+}
+
+/// Two traces' times summed (GPU time only if both had timestamps).
+fn add(a: Timing, b: Timing) -> Timing {
+    Timing {
+        wall_ms: a.wall_ms + b.wall_ms,
+        gpu_ms: a.gpu_ms.zip(b.gpu_ms).map(|(a, b)| a + b),
+    }
+}
+
+/// One render in progress: the fixed part of every visibility ray of a hit pixel (its pixel
+/// index, origin and normal), each pixel's sum of unoccluded radiance, and the traces' times.
+struct Accumulation {
+    starts: Vec<(u64, Vec3, Vec3)>,
+    cones: Option<Vec<RayCone>>,
+    sums: Vec<DVec3>,
+    timing: Timing,
+}
+
+impl Accumulation {
+    fn new(frame: &Frame, settings: &Settings) -> Result<Accumulation> {
+        check(frame, settings)?;
+        let starts: Vec<(u64, Vec3, Vec3)> = frame
+            .rays
+            .par_iter()
+            .zip(frame.hits)
+            .enumerate()
+            .filter(|(_, (_, hit))| hit.is_hit())
+            .map(|(pixel, (ray, hit))| {
+                let point = ray.origin() + hit.t * ray.dir();
+                let mut normal = facing_normal(ray, hit);
+                if normal == Vec3::ZERO {
+                    // A degenerate normal: face the camera, so the pixel is still lit sensibly.
+                    normal = -ray.dir().normalize_or_zero();
+                }
+                let origin =
+                    offset_origin(point, normal, settings.diagonal, settings.surface_offset);
+                (pixel as u64, origin, normal)
+            })
+            .collect();
+        let cones = settings.cone.map(|c| {
+            let cone = RayCone {
+                width: 0.0,
+                spread: c.spread,
+            };
+            vec![cone; starts.len()]
+        });
+        Ok(Accumulation {
+            sums: vec![DVec3::ZERO; starts.len()],
+            starts,
+            cones,
+            timing: Timing {
+                gpu_ms: Some(0.0),
+                wall_ms: 0.0,
+            },
+        })
+    }
+
+    /// Traces pass `sample`'s visibility rays and adds what they see; returns the trace's time.
+    fn pass(
+        &mut self,
+        tracer: &Tracer,
+        env: &Environment,
+        settings: &Settings,
+        sample: u32,
+    ) -> Result<Timing> {
+        let rays: Vec<Ray> = self
+            .starts
             .par_iter()
             .map(|&(pixel, origin, normal)| {
                 let dir = sample_direction(normal, settings.seed, pixel, sample);
                 Ray::new(origin, dir, 0.0, f32::INFINITY)
             })
             .collect();
-        let traced = match &visibility_cones {
+        let traced = match &self.cones {
             Some(cones) => tracer.trace_lod(&rays, cones, Query::Any, false)?,
             None => tracer.trace(&rays, Query::Any)?,
         };
-        sums.par_iter_mut()
+        self.sums
+            .par_iter_mut()
             .zip(&rays)
             .zip(&traced.hits)
             .filter(|(_, hit)| !hit.is_hit())
             .for_each(|((sum, ray), _)| *sum += env.radiance(ray.dir()).as_dvec3());
-        timing.wall_ms += traced.timing.wall_ms;
-        timing.gpu_ms = timing.gpu_ms.zip(traced.timing.gpu_ms).map(|(a, b)| a + b);
-        on_pass(&Pass {
-            done: sample + 1,
-            total: settings.samples,
-            rays: rays.len(),
-            timing: traced.timing,
-        });
+        self.timing = add(self.timing, traced.timing);
+        Ok(traced.timing)
     }
-    let mut pixels: Vec<Vec3> = frame
-        .rays
-        .par_iter()
-        .map(|ray| env.radiance(ray.dir()))
-        .collect();
-    let samples = f64::from(settings.samples);
-    for (&(pixel, _, _), sum) in starts.iter().zip(&sums) {
-        let pixel = pixel as usize;
-        pixels[pixel] = frame.albedo[pixel] * (*sum / samples).as_vec3();
+
+    fn finish(
+        self,
+        frame: &Frame,
+        env: &Environment,
+        settings: &Settings,
+        wall_ms: f64,
+    ) -> Rendered {
+        let mut pixels: Vec<Vec3> = frame
+            .rays
+            .par_iter()
+            .map(|ray| env.radiance(ray.dir()))
+            .collect();
+        let samples = f64::from(settings.samples);
+        for (&(pixel, _, _), sum) in self.starts.iter().zip(&self.sums) {
+            let pixel = pixel as usize;
+            pixels[pixel] = frame.albedo[pixel] * (*sum / samples).as_vec3();
+        }
+        Rendered {
+            image: Image {
+                width: frame.width,
+                height: frame.height,
+                pixels,
+            },
+            rays: self.starts.len() as u64 * u64::from(settings.samples),
+            timing: self.timing,
+            wall_ms,
+        }
     }
-    Ok(Rendered {
-        image: Image {
-            width: frame.width,
-            height: frame.height,
-            pixels,
-        },
-        rays: starts.len() as u64 * u64::from(settings.samples),
-        timing,
-        wall_ms: start.elapsed().as_secs_f64() * 1e3,
-    })
 }
 
 /// The parameter checks of [`render`].

@@ -11,11 +11,9 @@ use anyhow::{ensure, Context as _, Result};
 use rbvh::bench::metrics::image_errors;
 use rbvh::bvh::{BuildParams, Bvh};
 use rbvh::geom::Ray;
-use rbvh::glam::DVec3;
-use rbvh::gpu::{Query, Timing, Tracer};
+use rbvh::gpu::{Query, Tracer};
 use rbvh::ibl::{self, Environment, Frame, Rendered, Settings};
-use rbvh::output::{self, Image};
-use rbvh::random::SplitMix64;
+use rbvh::output;
 use rbvh::structure::Structure;
 
 use crate::prepare::{check_source, prepare, CameraArgs, Common, Given, LodArgs, Method, Source};
@@ -154,48 +152,19 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         surface_offset: rbvh.texel_size,
         ..settings
     };
-    // One pass of each at a time, alternating which goes first, so that both are timed under the
-    // same conditions (another process, a clock that changes) rather than one after the other.
+    // Pass by pass, alternating which goes first, so that both are timed under the same
+    // conditions (another process, a clock that changes) rather than one after the other.
     let (reference, rendered) = progressive("IBL (exact BVH and RBVH)", a.samples, |on_pass| {
-        let mut exact_sum = Accumulated::new(rays.len());
-        let mut rbvh_sum = Accumulated::new(rays.len());
-        let mut seeds = SplitMix64::new(a.seed);
-        for pass in 0..a.samples {
-            let seed = seeds.next_u64();
-            let exact_pass = || {
-                let s = Settings {
-                    seed,
-                    samples: 1,
-                    ..settings
-                };
-                ibl::render(&exact, &exact_frame, &env, &s, |_| {})
-            };
-            let rbvh_pass = || {
-                let s = Settings {
-                    seed,
-                    samples: 1,
-                    ..rbvh_settings
-                };
-                ibl::render(&approx, &rbvh_frame, &env, &s, |_| {})
-            };
-            if pass % 2 == 0 {
-                exact_sum.add(&exact_pass()?);
-                rbvh_sum.add(&rbvh_pass()?);
-            } else {
-                rbvh_sum.add(&rbvh_pass()?);
-                exact_sum.add(&exact_pass()?);
-            }
-            on_pass(&ibl::Pass {
-                done: pass + 1,
-                total: a.samples,
-                rays: 0,
-                timing: Timing::default(),
-            });
-        }
-        Ok((
-            exact_sum.finish(width, height),
-            rbvh_sum.finish(width, height),
-        ))
+        let mut both = ibl::render_side_by_side(
+            &[
+                (&exact, &exact_frame, &settings),
+                (&approx, &rbvh_frame, &rbvh_settings),
+            ],
+            &env,
+            on_pass,
+        )?;
+        let rendered = both.pop().expect("two renders");
+        Ok((both.pop().expect("two renders"), rendered))
     })?;
 
     let errors = image_errors(&reference.image, &rendered.image)?;
@@ -268,54 +237,6 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         start.elapsed().as_secs_f64()
     );
     Ok(())
-}
-
-/// One-sample renders summed: their pictures (each sample's mean is the render's), visibility
-/// rays and trace times.
-struct Accumulated {
-    pixels: Vec<DVec3>,
-    passes: u32,
-    rays: u64,
-    timing: Timing,
-}
-
-impl Accumulated {
-    fn new(pixels: usize) -> Accumulated {
-        Accumulated {
-            pixels: vec![DVec3::ZERO; pixels],
-            passes: 0,
-            rays: 0,
-            timing: Timing {
-                gpu_ms: Some(0.0),
-                wall_ms: 0.0,
-            },
-        }
-    }
-
-    fn add(&mut self, r: &Rendered) {
-        for (sum, p) in self.pixels.iter_mut().zip(&r.image.pixels) {
-            *sum += p.as_dvec3();
-        }
-        self.passes += 1;
-        self.rays += r.rays;
-        self.timing.wall_ms += r.timing.wall_ms;
-        self.timing.gpu_ms = self.timing.gpu_ms.zip(r.timing.gpu_ms).map(|(a, b)| a + b);
-    }
-
-    /// The render of all the samples added.
-    fn finish(self, width: u32, height: u32) -> Rendered {
-        let n = f64::from(self.passes.max(1));
-        Rendered {
-            image: Image {
-                width,
-                height,
-                pixels: self.pixels.iter().map(|p| (*p / n).as_vec3()).collect(),
-            },
-            rays: self.rays,
-            timing: self.timing,
-            wall_ms: self.timing.wall_ms,
-        }
-    }
 }
 
 /// A render's visibility rays per second, in millions, and what timed them: the device's
