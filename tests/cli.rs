@@ -414,6 +414,31 @@ fn parameter_errors_name_their_flag() {
             ][..],
             "--exact-from-texels",
         ),
+        (
+            &[
+                "build",
+                "--scene",
+                "sphere",
+                "--quality",
+                "2",
+                "--exact-edge-fraction",
+                "2",
+            ][..],
+            "--exact-edge-fraction: 2 is outside",
+        ),
+        (
+            &[
+                "build",
+                "--scene",
+                "sphere",
+                "--quality",
+                "2",
+                "--exact-edge-fraction",
+                "0.01",
+                "--sample-all",
+            ][..],
+            "--exact-edge-fraction",
+        ),
     ] {
         let out = rbvh(args);
         let stderr = String::from_utf8_lossy(&out.stderr);

@@ -257,6 +257,71 @@ fn every_preset_and_strategy_builds_and_grows_with_quality() {
     }
 }
 
+/// `exact_edge_fraction` traces exactly every triangle whose longest edge spans that fraction of
+/// its object's diagonal: on the default scene at Q0 (five objects, tessellated shapes) every
+/// such triangle is among the RBVH's exact ones, there are more of them than the preset keeps,
+/// the level is `custom`, and the hits stay within the presets' accuracy; it needs
+/// `exact_when_cheaper` and a fraction in 0..=1.
+#[test]
+fn exact_edge_fraction_traces_long_triangles_exactly() {
+    let scene = Scene::builtin("default").unwrap();
+    let preset = RbvhParams::quality(0).unwrap();
+    let long = RbvhParams {
+        exact_edge_fraction: 1.0 / 32.0,
+        ..preset
+    };
+    assert_eq!(long.level_label(), "custom");
+    let (a, b) = (
+        Rbvh::build(&scene, &preset).unwrap(),
+        Rbvh::build(&scene, &long).unwrap(),
+    );
+    let exact: std::collections::HashSet<u32> = b.triangles.iter().map(|t| t.prim).collect();
+    let diagonals: Vec<f32> = scene.object_bounds().iter().map(|b| b.diagonal()).collect();
+    let mut expected = 0;
+    for (i, t) in scene.triangles.iter().enumerate() {
+        let [p, q, r] = t.map(|v| scene.positions[v as usize]);
+        let longest = (q - p).length().max((r - q).length()).max((p - r).length());
+        if longest >= diagonals[scene.object_of_triangle[i] as usize] / 32.0 {
+            expected += 1;
+            assert!(
+                exact.contains(&(i as u32)),
+                "triangle {i} ({longest}) is sampled"
+            );
+        }
+    }
+    assert!(
+        expected > 0,
+        "no triangle that long: the test tests nothing"
+    );
+    let preset_exact: std::collections::HashSet<u32> = a.triangles.iter().map(|t| t.prim).collect();
+    assert!(
+        exact.len() > preset_exact.len(),
+        "exact triangles {} → {}",
+        preset_exact.len(),
+        exact.len()
+    );
+    let rays = scene.camera_or_framed(1.0).primary_rays(64, 64);
+    let (_, _, mismatch) = error_vs_exact(&scene, &b, &rays);
+    assert!(mismatch < 0.02, "{mismatch}");
+    for bad in [
+        RbvhParams {
+            exact_edge_fraction: -0.5,
+            ..preset
+        },
+        RbvhParams {
+            exact_edge_fraction: 1.5,
+            ..preset
+        },
+        RbvhParams {
+            exact_when_cheaper: false,
+            ..long
+        },
+    ] {
+        let message = Rbvh::build(&scene, &bad).unwrap_err().to_string();
+        assert!(message.contains("exact_edge_fraction"), "{message}");
+    }
+}
+
 /// `exact_from_texels` lowers the size from which triangles are traced exactly: on the torus at
 /// Q0 (triangles of a few texels, sampled by the presets' 24) tracing from 1.5 texels keeps more
 /// triangles exact and fewer texels, the level is `custom`, and the hits stay within the

@@ -117,6 +117,9 @@ struct Builder<'a> {
     /// Per scene object, its texel ([`object_texels`]); empty when every object takes the
     /// scene's.
     object_texel: Vec<f32>,
+    /// Per scene object, its box's diagonal, for [`RbvhParams::exact_edge_fraction`]; empty
+    /// when that is 0.
+    object_diagonal: Vec<f32>,
     /// Per scene triangle, its object (`Scene::object_of_triangle`); empty for points.
     objects: &'a [u32],
     /// The scene's triangles in a BVH, for the surface around each leaf (its ring of samples).
@@ -394,6 +397,11 @@ impl Rbvh {
             params,
             texel,
             object_texel,
+            object_diagonal: if params.exact_edge_fraction > 0.0 {
+                source.objects.iter().map(|o| o.bounds.diagonal()).collect()
+            } else {
+                Vec::new()
+            },
             objects: match source.input() {
                 Input::Triangles(_) => &scene.object_of_triangle,
                 Input::Points(_) => &[],
@@ -507,7 +515,9 @@ impl Builder<'_> {
     /// its object ([`Builder::texel_of`]), at the texel format's full bytes a texel. Such a triangle has no detail between its corners for
     /// texels to sample: a wall, a floor, a column's face, a cube's side. Sampled, it would also
     /// be widened at its silhouette by the dilated rim, the largest error on architecture (the
-    /// columns and arches of the paper-scale scene's Sponza). Points have no such triangles.
+    /// columns and arches of the paper-scale scene's Sponza). With
+    /// [`RbvhParams::exact_edge_fraction`], so is every triangle whose longest edge is at least
+    /// that fraction of its object's diagonal. Points have no such triangles.
     fn exact_by_size(&self) -> (Vec<u32>, Vec<GpuTriangle>) {
         let all = match self.input {
             Input::Triangles(all) if self.params.exact_when_cheaper => all,
@@ -522,13 +532,27 @@ impl Builder<'_> {
         for (i, &[a, b, c]) in (0u32..).zip(all.iter()) {
             let texel = self.texel_of(&[i]);
             let area = 0.5 * (b - a).cross(c - a).length();
-            if area >= texels * texel * texel {
+            if area >= texels * texel * texel || self.long_edge(i, [a, b, c]) {
                 exact.push(GpuTriangle::new([a, b, c], i));
             } else {
                 sampled.push(i);
             }
         }
         (sampled, exact)
+    }
+
+    /// Whether triangle `i`, `corners`, has an edge of at least
+    /// [`RbvhParams::exact_edge_fraction`] of its object's diagonal (never where that is 0).
+    fn long_edge(&self, i: u32, [a, b, c]: [Vec3; 3]) -> bool {
+        let Some(&diagonal) = self
+            .objects
+            .get(i as usize)
+            .and_then(|&o| self.object_diagonal.get(o as usize))
+        else {
+            return false;
+        };
+        let longest = (b - a).length().max((c - b).length()).max((a - c).length());
+        longest >= self.params.exact_edge_fraction * diagonal
     }
 
     /// The texel of the set `order`: its objects' finest ([`RbvhParams::object_rate`]),

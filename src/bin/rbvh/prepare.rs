@@ -169,7 +169,7 @@ pub fn flag(id: &str) -> String {
 }
 
 /// The clap ids of the flags that say how an RBVH is built ([`Quality`]).
-pub const BUILD_FLAGS: [&str; 13] = [
+pub const BUILD_FLAGS: [&str; 14] = [
     "quality",
     "texels_per_diagonal",
     "object_rate",
@@ -181,6 +181,7 @@ pub const BUILD_FLAGS: [&str; 13] = [
     "min_leaf_texels",
     "sampled_criterion_texels",
     "exact_from_texels",
+    "exact_edge_fraction",
     "sample_all",
     "texels",
 ];
@@ -388,7 +389,7 @@ pub fn check_image_size(width: u32, height: u32) -> Result<()> {
 /// (the library names its fields: `texels_per_diagonal`, `lod columns`, ...); any other error as
 /// it is.
 pub fn flag_error(e: rbvh::Error) -> anyhow::Error {
-    const FLAGS: [(&str, &str); 11] = [
+    const FLAGS: [(&str, &str); 12] = [
         ("texels_per_diagonal", "--texels-per-diagonal"),
         ("object_rate", "--object-rate"),
         ("max_angle_deg", "--max-angle"),
@@ -397,6 +398,7 @@ pub fn flag_error(e: rbvh::Error) -> anyhow::Error {
         ("min_leaf_texels", "--min-leaf-texels"),
         ("sampled_criterion_texels", "--sampled-criterion-texels"),
         ("exact_from_texels", "--exact-from-texels"),
+        ("exact_edge_fraction", "--exact-edge-fraction"),
         ("lod columns", "--lod-columns"),
         ("lod min leaves", "--lod-min-leaves"),
         ("lod bias", "--lod-bias"),
@@ -672,6 +674,12 @@ pub struct Quality {
     /// same bytes); not with --sample-all.
     #[arg(long, conflicts_with = "sample_all")]
     pub exact_from_texels: Option<f32>,
+    /// Free parameter: trace exactly every triangle whose longest edge is at least this fraction
+    /// of its object's diagonal (presets: 0, none): shapes a mesh states at its own scale, such
+    /// as architecture, whose creases and silhouettes sampling would round by a texel (with
+    /// --object-rate 1, 0.0078125 made Q0 valid at the paper's scale); not with --sample-all.
+    #[arg(long, conflicts_with = "sample_all")]
+    pub exact_edge_fraction: Option<f32>,
     /// Sample every triangle a height field can hold, as the paper does, at every level asked
     /// for; such a level is named with an `s`, e.g. Q2s. Presets trace triangles exactly where
     /// that costs fewer bytes than sampling them (a triangle covering at least 24 texels, 48
@@ -716,6 +724,7 @@ impl Quality {
             || self.min_leaf_texels.is_some()
             || self.sampled_criterion_texels.is_some()
             || self.exact_from_texels.is_some()
+            || self.exact_edge_fraction.is_some()
     }
 
     /// The texel formats asked for, each once, in the order given.
@@ -809,6 +818,9 @@ impl Quality {
                 }
                 if let Some(e) = self.exact_from_texels {
                     p.exact_from_texels = e;
+                }
+                if let Some(f) = self.exact_edge_fraction {
+                    p.exact_edge_fraction = f;
                 }
                 p.validate().map_err(flag_error)?;
                 Ok(p)
