@@ -380,7 +380,7 @@ fn bad_rbvh_files_fail_cleanly() {
     let mut trailing = bytes.clone();
     trailing.extend([0u8; 7]);
     let mut version = bytes.clone();
-    version[8] = 12;
+    version[8] = 13;
     let cases: Vec<(&str, Vec<u8>, &str)> = vec![
         ("empty.rbvh", vec![], "truncated"),
         ("png.rbvh", PNG_HEAD.to_vec(), "not an RBVH file"),

@@ -439,6 +439,18 @@ fn parameter_errors_name_their_flag() {
             ][..],
             "--exact-edge-fraction",
         ),
+        (
+            &[
+                "build",
+                "--scene",
+                "sphere",
+                "--quality",
+                "2",
+                "--exact-crease",
+                "200",
+            ][..],
+            "--exact-crease: 200 is outside",
+        ),
     ] {
         let out = rbvh(args);
         let stderr = String::from_utf8_lossy(&out.stderr);

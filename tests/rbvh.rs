@@ -322,6 +322,66 @@ fn exact_edge_fraction_traces_long_triangles_exactly() {
     }
 }
 
+/// `exact_crease_deg` traces exactly every triangle that meets a neighbour at that angle or more
+/// and spans `CREASE_EDGE_TEXELS` texels: on the default scene at Q0 (its cube's, cylinder's and
+/// cone's edges; every object takes the scene's texel) every such triangle is among the RBVH's
+/// exact ones, there are more of them than the preset keeps, and the hits stay within the
+/// presets' accuracy; it needs `exact_when_cheaper` and an angle in 0..=180.
+#[test]
+fn exact_crease_deg_traces_creases_exactly() {
+    let scene = Scene::builtin("default").unwrap();
+    let preset = RbvhParams::quality(0).unwrap();
+    let crease = RbvhParams {
+        exact_crease_deg: 30.0,
+        ..preset
+    };
+    assert_eq!(crease.level_label(), "custom");
+    let (a, b) = (
+        Rbvh::build(&scene, &preset).unwrap(),
+        Rbvh::build(&scene, &crease).unwrap(),
+    );
+    let exact: std::collections::HashSet<u32> = b.triangles.iter().map(|t| t.prim).collect();
+    let texel = scene.bounds().diagonal() / preset.texels_per_diagonal;
+    let angles = rbvh::scene::creases(&scene);
+    let mut expected = 0;
+    for (i, t) in scene.triangles.iter().enumerate() {
+        let [p, q, r] = t.map(|v| scene.positions[v as usize]);
+        let longest = (q - p).length().max((r - q).length()).max((p - r).length());
+        if angles[i] >= 30.0 && longest >= rbvh::rbvh::CREASE_EDGE_TEXELS * texel {
+            expected += 1;
+            assert!(exact.contains(&(i as u32)), "triangle {i} is sampled");
+        }
+    }
+    assert!(expected > 0, "no crease that long: the test tests nothing");
+    let preset_exact: std::collections::HashSet<u32> = a.triangles.iter().map(|t| t.prim).collect();
+    assert!(
+        exact.len() > preset_exact.len(),
+        "exact triangles {} → {}",
+        preset_exact.len(),
+        exact.len()
+    );
+    let rays = scene.camera_or_framed(1.0).primary_rays(64, 64);
+    let (_, _, mismatch) = error_vs_exact(&scene, &b, &rays);
+    assert!(mismatch < 0.02, "{mismatch}");
+    for bad in [
+        RbvhParams {
+            exact_crease_deg: -1.0,
+            ..preset
+        },
+        RbvhParams {
+            exact_crease_deg: 181.0,
+            ..preset
+        },
+        RbvhParams {
+            exact_when_cheaper: false,
+            ..crease
+        },
+    ] {
+        let message = Rbvh::build(&scene, &bad).unwrap_err().to_string();
+        assert!(message.contains("exact_crease_deg"), "{message}");
+    }
+}
+
 /// `exact_from_texels` lowers the size from which triangles are traced exactly: on the torus at
 /// Q0 (triangles of a few texels, sampled by the presets' 24) tracing from 1.5 texels keeps more
 /// triangles exact and fewer texels, the level is `custom`, and the hits stay within the

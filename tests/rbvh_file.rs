@@ -13,7 +13,9 @@ use rbvh::rbvh::{
 use rbvh::Error;
 
 /// Bytes before the arrays, per the format table in `src/rbvh/file.rs`.
-const HEADER_BYTES: usize = 168;
+const HEADER_BYTES: usize = 172;
+/// The header of version 11, which ends before `params.exact_crease_deg`.
+const V11_HEADER_BYTES: usize = 168;
 /// The header of version 10, which ends before `params.exact_edge_fraction`.
 const V10_HEADER_BYTES: usize = 164;
 /// The header of version 9, which ends before `params.exact_from_texels`.
@@ -141,14 +143,15 @@ fn save_load_round_trips_exactly() {
     loaded.save(&again).unwrap();
     assert_eq!(std::fs::read(&again).unwrap(), bytes);
 
-    // The documented framing: magic, version 11, the sampling judgement's size, normal texels, no
+    // The documented framing: magic, version 12, the sampling judgement's size, normal texels, no
     // colour channel, each object's rate, the narrow rows, whether triangles were traced exactly
-    // where cheaper, from what size and from what edge last, then the arrays after a 168-byte
-    // header.
+    // where cheaper, from what size, from what edge and from what crease last, then the arrays
+    // after a 172-byte header.
     assert_eq!(&bytes[..8], b"RBVHv\0\0\0");
-    assert_eq!(word(&bytes, 8), 11);
+    assert_eq!(word(&bytes, 8), 12);
     assert_eq!(f32::from_bits(word(&bytes, 160)), 0.0);
     assert_eq!(f32::from_bits(word(&bytes, 164)), 0.0);
+    assert_eq!(f32::from_bits(word(&bytes, 168)), 0.0);
     assert_eq!(f32::from_bits(word(&bytes, 148)), 0.375);
     assert_eq!(word(&bytes, 152), 0);
     assert_eq!(word(&bytes, 156), 1);
@@ -237,7 +240,7 @@ fn bad_magic_and_unknown_versions_are_rejected() {
     let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
     assert!(message.contains("not an RBVH file"), "{message}");
 
-    for version in [0, 12, u32::MAX] {
+    for version in [0, 13, u32::MAX] {
         let mut bytes = sample().to_bytes();
         bytes[8..12].copy_from_slice(&version.to_le_bytes());
         let message = parse_error(Rbvh::from_bytes(&bytes, path), path);
@@ -245,14 +248,14 @@ fn bad_magic_and_unknown_versions_are_rejected() {
             message.contains(&format!("unsupported version {version}")),
             "{message}"
         );
-        assert!(message.contains("reads versions 1 to 11"), "{message}");
+        assert!(message.contains("reads versions 1 to 12"), "{message}");
     }
 }
 
 /// Files written before version 6 (1: normal texels; 2: with colours; 3: height-only; 4: with
 /// the sampled judgement's size and the texel format in the header, all with 64-byte nodes; 5:
 /// 48-byte nodes) load as the RBVHs they described, their nodes quantized, and are saved again as
-/// version 11. Before version 4 they were built by the paper's rule alone, before version 7
+/// version 12. Before version 4 they were built by the paper's rule alone, before version 7
 /// every texel was the scene's (`object_rate` 0), and before version 9 every triangle a height
 /// field could hold was sampled (`exact_when_cheaper` false). Their height codes
 /// carry no mark of which were sampled, so each even one becomes odd (extrapolated: no skirt)
@@ -309,7 +312,7 @@ fn older_versions_load_as_what_they_described() {
             ..rbvh
         };
         assert_eq!(loaded, expected, "version {version}");
-        assert_eq!(word(&loaded.to_bytes(), 8), 11);
+        assert_eq!(word(&loaded.to_bytes(), 8), 12);
         let header = if version < 4 { 136 } else { V6_HEADER_BYTES };
         let message = parse_error(Rbvh::from_bytes(&old[..old.len() - 1], path), path);
         assert!(
@@ -320,7 +323,7 @@ fn older_versions_load_as_what_they_described() {
 }
 
 /// A version 6 file (marked heights, no `object_rate`) loads as it was, every texel the
-/// scene's, and is saved again as version 11.
+/// scene's, and is saved again as version 12.
 #[test]
 fn version_6_loads_with_every_texel_the_scenes() {
     let rbvh = sample();
@@ -334,11 +337,11 @@ fn version_6_loads_with_every_texel_the_scenes() {
         ..rbvh
     };
     assert_eq!(loaded, expected);
-    assert_eq!(word(&loaded.to_bytes(), 8), 11);
+    assert_eq!(word(&loaded.to_bytes(), 8), 12);
 }
 
-/// `rbvh` as version 5–10 wrote it: its header without what later versions appended
-/// (`exact_edge_fraction` from 11, `exact_from_texels` from 10, `exact_when_cheaper` from 9, `narrow_rows` from 8,
+/// `rbvh` as version 5–11 wrote it: its header without what later versions appended
+/// (`exact_crease_deg` from 12, `exact_edge_fraction` from 11, `exact_from_texels` from 10, `exact_when_cheaper` from 9, `narrow_rows` from 8,
 /// `object_rate` from 7).
 fn as_version(rbvh: &Rbvh, version: u32) -> Vec<u8> {
     let mut bytes = rbvh.to_bytes();
@@ -347,7 +350,8 @@ fn as_version(rbvh: &Rbvh, version: u32) -> Vec<u8> {
         7 => V7_HEADER_BYTES,
         8 => V8_HEADER_BYTES,
         9 => V9_HEADER_BYTES,
-        _ => V10_HEADER_BYTES,
+        10 => V10_HEADER_BYTES,
+        _ => V11_HEADER_BYTES,
     };
     bytes.drain(end..HEADER_BYTES);
     bytes[8..12].copy_from_slice(&version.to_le_bytes());
@@ -444,6 +448,34 @@ fn exact_edge_fraction_round_trips_and_is_checked() {
     sampled[164..168].copy_from_slice(&0.0078125f32.to_le_bytes());
     let message = parse_error(Rbvh::from_bytes(&sampled, path), path);
     assert!(message.contains("exact_edge_fraction"), "{message}");
+}
+
+/// A version 11 file loads as tracing no triangle exactly for a crease (`exact_crease_deg` 0);
+/// an angle round-trips; a NaN, negative or above-180 one is refused.
+#[test]
+fn exact_crease_deg_round_trips_and_is_checked() {
+    let rbvh = sample();
+    let path = Path::new("v11.rbvh");
+    assert_eq!(
+        Rbvh::from_bytes(&as_version(&rbvh, 11), path).unwrap(),
+        rbvh
+    );
+    let crease = Rbvh {
+        params: RbvhParams {
+            exact_crease_deg: 30.0,
+            ..rbvh.params
+        },
+        ..rbvh.clone()
+    };
+    let bytes = crease.to_bytes();
+    assert_eq!(f32::from_bits(word(&bytes, 168)), 30.0);
+    assert_eq!(Rbvh::from_bytes(&bytes, path).unwrap(), crease);
+    for bad_value in [f32::NAN, -1.0, 200.0] {
+        let mut bad = bytes.clone();
+        bad[168..172].copy_from_slice(&bad_value.to_le_bytes());
+        let message = parse_error(Rbvh::from_bytes(&bad, path), path);
+        assert!(message.contains("exact_crease_deg"), "{message}");
+    }
 }
 
 /// `sample()` with its last four atlas rows narrow: their codes made 8-bit ones.

@@ -232,7 +232,7 @@ pub fn scene_file(data: &[u8]) {
 }
 
 /// Fuzz target: the bytes of an RBVH file. A file that loads must round-trip byte for byte (a
-/// file of an older version comes back as version 11: the same header, with bytes 40..52 inserted
+/// file of an older version comes back as version 12: the same header, with bytes 40..52 inserted
 /// before version 4, its 64-byte nodes quantized to 48 bytes before version 5, its height codes
 /// each within one of what they were and its normals kept, and the other arrays unchanged) and
 /// trace on the CPU without overflow and with well-formed hits (the loader promises "safe to
@@ -243,10 +243,11 @@ pub fn rbvh_file(data: &[u8]) {
     };
     let saved = r.to_bytes();
     let version = u32::from_le_bytes(data[8..12].try_into().expect("a loaded file has a version"));
-    if version == 11 {
+    if version == 12 {
         assert_eq!(saved, data, "save(load(file)) differs from the file");
     } else {
-        // Version 11 appended `exact_edge_fraction` (0 for older files) to version 10's 164-byte
+        // Version 12 appended `exact_crease_deg` (0 for older files) to version 11's 168-byte
+        // header. Version 11 appended `exact_edge_fraction` (0 for older files) to version 10's 164-byte
         // header. Version 10 appended `exact_from_texels` (0 for older files) to version 9's 160-byte
         // header. Version 9 appended `exact_when_cheaper` (0 for older files) to version 8's 156-byte
         // header, which appended `narrow_rows` (0 for older files) to version 7's 152 bytes,
@@ -257,14 +258,16 @@ pub fn rbvh_file(data: &[u8]) {
         const V8_HEADER: usize = 156;
         const V9_HEADER: usize = 160;
         const V10_HEADER: usize = 164;
-        const HEADER: usize = 168;
+        const V11_HEADER: usize = 168;
+        const HEADER: usize = 172;
         let old_header = match version {
             1..=3 => 136,
             4..=6 => V6_HEADER,
             7 => V7_HEADER,
             8 => V8_HEADER,
             9 => V9_HEADER,
-            _ => V10_HEADER,
+            10 => V10_HEADER,
+            _ => V11_HEADER,
         };
         let before_rate = old_header.min(V6_HEADER);
         assert_eq!(saved[12..40], data[12..40], "the upgraded header differs");
@@ -309,10 +312,19 @@ pub fn rbvh_file(data: &[u8]) {
         } else {
             assert_eq!(saved[V9_HEADER..V10_HEADER], data[V9_HEADER..V10_HEADER]);
         }
+        if version < 11 {
+            assert_eq!(
+                saved[V10_HEADER..V11_HEADER],
+                [0; 4],
+                "an old file traces no triangle exactly for its edges"
+            );
+        } else {
+            assert_eq!(saved[V10_HEADER..V11_HEADER], data[V10_HEADER..V11_HEADER]);
+        }
         assert_eq!(
-            saved[V10_HEADER..HEADER],
+            saved[V11_HEADER..HEADER],
             [0; 4],
-            "an old file traces no triangle exactly for its edges"
+            "an old file traces no triangle exactly for a crease"
         );
         let nodes = r.nodes.len();
         let old_node = if version < 5 { 64 } else { 48 };

@@ -52,8 +52,8 @@
 //! `max_angle_deg` (normal cone, else null), `min_ratio` (projected area, else null),
 //! `subdivision` (`"spatial_median"` \| `"area_sah"`), `object_split`, `max_tile`,
 //! `min_leaf_texels`, `sampled_criterion_texels`, `texels` (`"height_normal"` \| `"height"`),
-//! `exact_when_cheaper`, `exact_from_texels`, `exact_edge_fraction` — the fields of
-//! [`RbvhParams`].
+//! `exact_when_cheaper`, `exact_from_texels`, `exact_edge_fraction`, `exact_crease_deg` — the
+//! fields of [`RbvhParams`].
 //!
 //! `lod` (`rbvh-lod` records, else null): `columns`, `min_leaves`, `bias` — the fields of
 //! [`LodParams`].
@@ -344,6 +344,9 @@ pub struct Params {
     /// The fraction of its object's diagonal from which a triangle's longest edge makes it
     /// traced exactly, 0 for none ([`RbvhParams::exact_edge_fraction`]).
     pub exact_edge_fraction: f32,
+    /// The crease angle in degrees from which a triangle is traced exactly, 0 for none
+    /// ([`RbvhParams::exact_crease_deg`]).
+    pub exact_crease_deg: f32,
 }
 
 impl From<&RbvhParams> for Params {
@@ -370,6 +373,7 @@ impl From<&RbvhParams> for Params {
             exact_when_cheaper: p.exact_when_cheaper,
             exact_from_texels: p.exact_from_texels,
             exact_edge_fraction: p.exact_edge_fraction,
+            exact_crease_deg: p.exact_crease_deg,
         }
     }
 }

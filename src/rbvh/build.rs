@@ -55,7 +55,7 @@ use super::{Rbvh, RbvhParams, RbvhStats, TexelFormat};
 use crate::bvh::{join_halves, ChildRef, GpuNode, GpuTriangle, LinearBvh, LEAF_BIT, STACK_SIZE};
 use crate::geom::Aabb;
 use crate::progress::{step, Progress, Quiet};
-use crate::scene::{open_boundary, Scene};
+use crate::scene::{creases, open_boundary, Scene};
 use crate::{Error, Result};
 
 /// Most triangles in a triangle leaf.
@@ -99,6 +99,13 @@ enum Input<'a> {
     Points(&'a [Splat]),
 }
 
+/// The least longest edge, in texels of its object, of a triangle that
+/// [`RbvhParams::exact_crease_deg`] traces exactly: a crease shorter than that is detail the
+/// texels average (a scan's noise meets its neighbours at 30° and more in many places, and at 1
+/// texel the dragon's Q4 took 8.5% more bytes for the same accuracy; at 2, 1.4%:
+/// docs/paper-scale.md, "What the view asks of Q0").
+pub const CREASE_EDGE_TEXELS: f32 = 2.0;
+
 /// Leaves of the builder's BVH of the scene, which the ring of samples around each leaf is
 /// sampled from by short rays (`raster.rs`): leaves of four keep a ray's triangle tests few
 /// (with a median-split tree, 16 cost the dragon's Q4 a tenth more build time).
@@ -127,6 +134,9 @@ struct Builder<'a> {
     /// Per scene triangle, whether it touches the open boundary ([`open_boundary`]); empty
     /// for points and for scenes with no open edge.
     open: &'a [bool],
+    /// Per scene triangle, the angle at which it meets its neighbours ([`creases`]); empty for
+    /// points.
+    creases: &'a [f32],
 }
 
 /// What every level of an RBVH of one scene shares, made once for all of them: the scene
@@ -161,6 +171,9 @@ struct Shared<'s> {
     /// Per scene triangle, whether it touches the open boundary ([`open_boundary`]); empty
     /// for points and for scenes with no open edge.
     open: Vec<bool>,
+    /// Per scene triangle, the angle at which it meets its neighbours ([`creases`]), for
+    /// [`RbvhParams::exact_crease_deg`]; empty for points.
+    creases: Vec<f32>,
     /// Milliseconds making this took.
     ms: f64,
 }
@@ -297,11 +310,18 @@ impl<'s> RbvhSource<'s> {
         } else {
             Vec::new()
         };
+        let creases = match self.input() {
+            Input::Triangles(_) => step(progress, "finding the scene's creases", 0, || {
+                creases(scene)
+            }),
+            Input::Points(_) => Vec::new(),
+        };
         let ms = start.elapsed().as_secs_f64() * 1e3;
         Ok(self.shared.get_or_init(|| Shared {
             prims,
             surface,
             open,
+            creases,
             ms,
         }))
     }
@@ -409,6 +429,7 @@ impl Rbvh {
             progress,
             surface,
             open,
+            creases: &shared.creases,
         };
         let (mut order, exact) = builder.exact_by_size();
         let root = step(
@@ -517,7 +538,9 @@ impl Builder<'_> {
     /// be widened at its silhouette by the dilated rim, the largest error on architecture (the
     /// columns and arches of the paper-scale scene's Sponza). With
     /// [`RbvhParams::exact_edge_fraction`], so is every triangle whose longest edge is at least
-    /// that fraction of its object's diagonal. Points have no such triangles.
+    /// that fraction of its object's diagonal, and with [`RbvhParams::exact_crease_deg`] every
+    /// triangle on a crease that spans [`CREASE_EDGE_TEXELS`] texels. Points have no such
+    /// triangles.
     fn exact_by_size(&self) -> (Vec<u32>, Vec<GpuTriangle>) {
         let all = match self.input {
             Input::Triangles(all) if self.params.exact_when_cheaper => all,
@@ -532,7 +555,10 @@ impl Builder<'_> {
         for (i, &[a, b, c]) in (0u32..).zip(all.iter()) {
             let texel = self.texel_of(&[i]);
             let area = 0.5 * (b - a).cross(c - a).length();
-            if area >= texels * texel * texel || self.long_edge(i, [a, b, c]) {
+            if area >= texels * texel * texel
+                || self.long_edge(i, [a, b, c])
+                || self.on_crease(i, [a, b, c], texel)
+            {
                 exact.push(GpuTriangle::new([a, b, c], i));
             } else {
                 sampled.push(i);
@@ -553,6 +579,18 @@ impl Builder<'_> {
         };
         let longest = (b - a).length().max((c - b).length()).max((a - c).length());
         longest >= self.params.exact_edge_fraction * diagonal
+    }
+
+    /// Whether triangle `i`, `corners`, meets a neighbour at a crease of at least
+    /// [`RbvhParams::exact_crease_deg`] (never where that is 0) with an edge of at least
+    /// [`CREASE_EDGE_TEXELS`] of its object's `texel`.
+    fn on_crease(&self, i: u32, [a, b, c]: [Vec3; 3], texel: f32) -> bool {
+        let angle = self.params.exact_crease_deg;
+        if angle <= 0.0 || self.creases.get(i as usize).is_none_or(|&c| c < angle) {
+            return false;
+        }
+        let longest = (b - a).length().max((c - b).length()).max((a - c).length());
+        longest >= CREASE_EDGE_TEXELS * texel
     }
 
     /// The texel of the set `order`: its objects' finest ([`RbvhParams::object_rate`]),

@@ -10,7 +10,7 @@
 //! | bytes | type | field |
 //! |---|---|---|
 //! | 0..8 | `[u8; 8]` | magic `RBVHv` followed by three zero bytes |
-//! | 8..12 | u32 | format version: 11 (this build writes it; it reads 1–10 as well, see below) |
+//! | 8..12 | u32 | format version: 12 (this build writes it; it reads 1–11 as well, see below) |
 //! | 12..16 | f32 | `params.texels_per_diagonal` |
 //! | 16..20, 20..24 | u32, f32 | `params.refinement`: tag (0 = `NormalCone`, 1 = `ProjectedArea`), its value (`max_angle_deg` or `min_ratio`) |
 //! | 24..28 | u32 | `params.subdivision`: 0 = `SpatialMedian`, 1 = `AreaSah` |
@@ -33,7 +33,8 @@
 //! | 156..160 | u32 | `params.exact_when_cheaper`: 0 or 1 |
 //! | 160..164 | f32 | `params.exact_from_texels` (0: what 96 bytes buy) |
 //! | 164..168 | f32 | `params.exact_edge_fraction` (0: none) |
-//! | 168.. | `N` × 48 bytes | `nodes` ([`crate::bvh::GpuNode`], 12 words each) |
+//! | 168..172 | f32 | `params.exact_crease_deg` (0: none) |
+//! | 172.. | `N` × 48 bytes | `nodes` ([`crate::bvh::GpuNode`], 12 words each) |
 //! | then | `T` × 48 bytes | `triangles` ([`crate::bvh::GpuTriangle`], 12 words each) |
 //! | then | `L` × 64 bytes | `leaves` ([`super::GpuHeightfield`], 16 words each) |
 //! | then | `X` × 4 bytes | `atlas.texels` ([`super::Texel`], one word each), row by row; height-only texels: `X` × 2 bytes, each texel's height code (u16) |
@@ -56,7 +57,8 @@
 //! codes everywhere (`narrow_rows` 0). Versions 1–8 sampled every triangle a height field could
 //! hold (`exact_when_cheaper` false), and versions 1–9 traced exactly the triangles of at least
 //! what 96 bytes of texels buy (`exact_from_texels` 0), and versions 1–10 traced none exactly
-//! for the length of its edges (`exact_edge_fraction` 0). Saving such an RBVH writes version 11. A colour section
+//! for the length of its edges (`exact_edge_fraction` 0), and versions 1–11 none for a crease
+//! (`exact_crease_deg` 0). Saving such an RBVH writes version 12. A colour section
 //! that is cut short, or whose count is not `X`, is an [`Error::Parse`] like any other
 //! malformation.
 //!
@@ -92,9 +94,11 @@ use crate::{Error, Result};
 /// The first eight bytes of every RBVH file.
 const MAGIC: [u8; 8] = *b"RBVHv\0\0\0";
 /// The format version this build writes.
-const VERSION: u32 = 11;
+const VERSION: u32 = 12;
 /// Bytes before the arrays (see the table in the module docs).
-const HEADER_BYTES: usize = 168;
+const HEADER_BYTES: usize = 172;
+/// Bytes before the arrays in version 11, whose header ends before `exact_crease_deg`.
+const V11_HEADER_BYTES: usize = 168;
 /// Bytes before the arrays in version 10, whose header ends before `exact_edge_fraction`.
 const V10_HEADER_BYTES: usize = 164;
 /// Bytes before the arrays in version 9, whose header ends before `exact_from_texels`.
@@ -201,6 +205,7 @@ impl Rbvh {
         put_u32(&mut out, u32::from(p.exact_when_cheaper));
         put_f32(&mut out, p.exact_from_texels);
         put_f32(&mut out, p.exact_edge_fraction);
+        put_f32(&mut out, p.exact_crease_deg);
         debug_assert_eq!(out.len(), HEADER_BYTES);
 
         put_records(&mut out, &self.nodes);
@@ -315,6 +320,7 @@ impl Rbvh {
             8 => V8_HEADER_BYTES,
             9 => V9_HEADER_BYTES,
             10 => V10_HEADER_BYTES,
+            11 => V11_HEADER_BYTES,
             _ => HEADER_BYTES,
         };
         let params = RbvhParams {
@@ -330,6 +336,7 @@ impl Rbvh {
             exact_when_cheaper: false,
             exact_from_texels: 0.0,
             exact_edge_fraction: 0.0,
+            exact_crease_deg: 0.0,
         };
         let bounds = Aabb {
             min: [r.f32("bounds")?, r.f32("bounds")?, r.f32("bounds")?].into(),
@@ -388,10 +395,17 @@ impl Rbvh {
         } else {
             0.0
         };
+        // Versions 1–11 traced no triangle exactly for a crease.
+        let exact_crease_deg = if version >= 12 {
+            r.f32("params.exact_crease_deg")?
+        } else {
+            0.0
+        };
         let params = RbvhParams {
             exact_when_cheaper,
             exact_from_texels,
             exact_edge_fraction,
+            exact_crease_deg,
             ..params
         };
 
@@ -403,6 +417,7 @@ impl Rbvh {
             ("params.sampled_criterion_texels", sampled_criterion_texels),
             ("params.exact_from_texels", exact_from_texels),
             ("params.exact_edge_fraction", exact_edge_fraction),
+            ("params.exact_crease_deg", exact_crease_deg),
             ("texel_size", texel_size),
         ];
         for (name, x) in floats {
@@ -424,6 +439,14 @@ impl Rbvh {
             return Err(err(format!(
                 "params.exact_edge_fraction is {exact_edge_fraction}: a fraction of an object's \
                  diagonal, in 0..=1, and 0 where exact_when_cheaper is off"
+            )));
+        }
+        if !(0.0..=180.0).contains(&exact_crease_deg)
+            || (exact_crease_deg > 0.0 && !exact_when_cheaper)
+        {
+            return Err(err(format!(
+                "params.exact_crease_deg is {exact_crease_deg}: an angle in 0..=180 degrees, and \
+                 0 where exact_when_cheaper is off"
             )));
         }
         // Infinite bounds are legitimate (the empty box of an empty scene); NaN is not.

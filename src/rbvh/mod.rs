@@ -28,7 +28,7 @@ pub mod seams;
 mod splat;
 mod split;
 
-pub use build::RbvhSource;
+pub use build::{RbvhSource, CREASE_EDGE_TEXELS};
 pub use layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT};
 pub use march::DeviceTwin;
 pub use params::{

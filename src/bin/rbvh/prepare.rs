@@ -169,7 +169,7 @@ pub fn flag(id: &str) -> String {
 }
 
 /// The clap ids of the flags that say how an RBVH is built ([`Quality`]).
-pub const BUILD_FLAGS: [&str; 14] = [
+pub const BUILD_FLAGS: [&str; 15] = [
     "quality",
     "texels_per_diagonal",
     "object_rate",
@@ -182,6 +182,7 @@ pub const BUILD_FLAGS: [&str; 14] = [
     "sampled_criterion_texels",
     "exact_from_texels",
     "exact_edge_fraction",
+    "exact_crease_deg",
     "sample_all",
     "texels",
 ];
@@ -389,7 +390,7 @@ pub fn check_image_size(width: u32, height: u32) -> Result<()> {
 /// (the library names its fields: `texels_per_diagonal`, `lod columns`, ...); any other error as
 /// it is.
 pub fn flag_error(e: rbvh::Error) -> anyhow::Error {
-    const FLAGS: [(&str, &str); 12] = [
+    const FLAGS: [(&str, &str); 13] = [
         ("texels_per_diagonal", "--texels-per-diagonal"),
         ("object_rate", "--object-rate"),
         ("max_angle_deg", "--max-angle"),
@@ -399,6 +400,7 @@ pub fn flag_error(e: rbvh::Error) -> anyhow::Error {
         ("sampled_criterion_texels", "--sampled-criterion-texels"),
         ("exact_from_texels", "--exact-from-texels"),
         ("exact_edge_fraction", "--exact-edge-fraction"),
+        ("exact_crease_deg", "--exact-crease"),
         ("lod columns", "--lod-columns"),
         ("lod min leaves", "--lod-min-leaves"),
         ("lod bias", "--lod-bias"),
@@ -680,6 +682,16 @@ pub struct Quality {
     /// --object-rate 1, 0.0078125 made Q0 valid at the paper's scale); not with --sample-all.
     #[arg(long, conflicts_with = "sample_all")]
     pub exact_edge_fraction: Option<f32>,
+    /// Free parameter: trace exactly every triangle that meets a neighbour at a crease of at
+    /// least this many degrees and spans 2 texels of its object (presets: 0, none): edges the
+    /// mesh states, which sampling would round by a texel (30 made Q2 valid at the paper's
+    /// scale); not with --sample-all.
+    #[arg(
+        long = "exact-crease",
+        id = "exact_crease_deg",
+        conflicts_with = "sample_all"
+    )]
+    pub exact_crease_deg: Option<f32>,
     /// Sample every triangle a height field can hold, as the paper does, at every level asked
     /// for; such a level is named with an `s`, e.g. Q2s. Presets trace triangles exactly where
     /// that costs fewer bytes than sampling them (a triangle covering at least 24 texels, 48
@@ -725,6 +737,7 @@ impl Quality {
             || self.sampled_criterion_texels.is_some()
             || self.exact_from_texels.is_some()
             || self.exact_edge_fraction.is_some()
+            || self.exact_crease_deg.is_some()
     }
 
     /// The texel formats asked for, each once, in the order given.
@@ -821,6 +834,9 @@ impl Quality {
                 }
                 if let Some(f) = self.exact_edge_fraction {
                     p.exact_edge_fraction = f;
+                }
+                if let Some(c) = self.exact_crease_deg {
+                    p.exact_crease_deg = c;
                 }
                 p.validate().map_err(flag_error)?;
                 Ok(p)
