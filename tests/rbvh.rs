@@ -325,20 +325,21 @@ fn exact_edge_fraction_traces_long_triangles_exactly() {
 /// `exact_crease_deg` traces exactly every triangle that meets a neighbour at that angle or more
 /// and spans `CREASE_EDGE_TEXELS` texels: on the default scene at Q0 (its cube's, cylinder's and
 /// cone's edges; every object takes the scene's texel) every such triangle is among the RBVH's
-/// exact ones, there are more of them than the preset keeps, and the hits stay within the
-/// presets' accuracy; it needs `exact_when_cheaper` and an angle in 0..=180.
+/// exact ones, there are more of them than without the rule, and the hits stay within the
+/// presets' accuracy; the presets' angle is 30°, and an angle outside 0..=180 is refused.
 #[test]
 fn exact_crease_deg_traces_creases_exactly() {
     let scene = Scene::builtin("default").unwrap();
     let preset = RbvhParams::quality(0).unwrap();
-    let crease = RbvhParams {
-        exact_crease_deg: 30.0,
+    assert_eq!(preset.exact_crease_deg, 30.0);
+    let without = RbvhParams {
+        exact_crease_deg: 0.0,
         ..preset
     };
-    assert_eq!(crease.level_label(), "custom");
+    assert_eq!(without.level_label(), "custom");
     let (a, b) = (
+        Rbvh::build(&scene, &without).unwrap(),
         Rbvh::build(&scene, &preset).unwrap(),
-        Rbvh::build(&scene, &crease).unwrap(),
     );
     let exact: std::collections::HashSet<u32> = b.triangles.iter().map(|t| t.prim).collect();
     let texel = scene.bounds().diagonal() / preset.texels_per_diagonal;
@@ -353,30 +354,22 @@ fn exact_crease_deg_traces_creases_exactly() {
         }
     }
     assert!(expected > 0, "no crease that long: the test tests nothing");
-    let preset_exact: std::collections::HashSet<u32> = a.triangles.iter().map(|t| t.prim).collect();
+    let without_exact: std::collections::HashSet<u32> =
+        a.triangles.iter().map(|t| t.prim).collect();
     assert!(
-        exact.len() > preset_exact.len(),
+        exact.len() > without_exact.len(),
         "exact triangles {} → {}",
-        preset_exact.len(),
+        without_exact.len(),
         exact.len()
     );
     let rays = scene.camera_or_framed(1.0).primary_rays(64, 64);
     let (_, _, mismatch) = error_vs_exact(&scene, &b, &rays);
     assert!(mismatch < 0.02, "{mismatch}");
-    for bad in [
-        RbvhParams {
-            exact_crease_deg: -1.0,
+    for angle in [-1.0, 181.0, f32::NAN] {
+        let bad = RbvhParams {
+            exact_crease_deg: angle,
             ..preset
-        },
-        RbvhParams {
-            exact_crease_deg: 181.0,
-            ..preset
-        },
-        RbvhParams {
-            exact_when_cheaper: false,
-            ..crease
-        },
-    ] {
+        };
         let message = Rbvh::build(&scene, &bad).unwrap_err().to_string();
         assert!(message.contains("exact_crease_deg"), "{message}");
     }

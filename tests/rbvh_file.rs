@@ -93,6 +93,8 @@ fn sample() -> Rbvh {
             sampled_criterion_texels: 2.5,
             object_rate: 0.375,
             exact_when_cheaper: true,
+            // As every version before 12 loads: the crease rule is a field they lack.
+            exact_crease_deg: 0.0,
             ..RbvhParams::quality(3).unwrap()
         },
         nodes,

@@ -33,7 +33,7 @@
 //! | 156..160 | u32 | `params.exact_when_cheaper`: 0 or 1 |
 //! | 160..164 | f32 | `params.exact_from_texels` (0: what 96 bytes buy) |
 //! | 164..168 | f32 | `params.exact_edge_fraction` (0: none) |
-//! | 168..172 | f32 | `params.exact_crease_deg` (0: none) |
+//! | 168..172 | f32 | `params.exact_crease_deg` (0: none; nothing where `exact_when_cheaper` is 0) |
 //! | 172.. | `N` × 48 bytes | `nodes` ([`crate::bvh::GpuNode`], 12 words each) |
 //! | then | `T` × 48 bytes | `triangles` ([`crate::bvh::GpuTriangle`], 12 words each) |
 //! | then | `L` × 64 bytes | `leaves` ([`super::GpuHeightfield`], 16 words each) |
@@ -441,12 +441,9 @@ impl Rbvh {
                  diagonal, in 0..=1, and 0 where exact_when_cheaper is off"
             )));
         }
-        if !(0.0..=180.0).contains(&exact_crease_deg)
-            || (exact_crease_deg > 0.0 && !exact_when_cheaper)
-        {
+        if !(0.0..=180.0).contains(&exact_crease_deg) {
             return Err(err(format!(
-                "params.exact_crease_deg is {exact_crease_deg}: an angle in 0..=180 degrees, and \
-                 0 where exact_when_cheaper is off"
+                "params.exact_crease_deg is {exact_crease_deg}: an angle in 0..=180 degrees"
             )));
         }
         // Infinite bounds are legitimate (the empty box of an empty scene); NaN is not.

@@ -50,7 +50,7 @@ pub struct Common {
     "Sample every triangle a height field can hold, as the paper does (the level is named with \
      an `s`, e.g. Q2s). Presets trace triangles exactly where that costs fewer bytes than \
      sampling them (a triangle covering at least 24 texels, 48 height-only, and a set whose \
-     tiles would cost more than its triangles)"
+     tiles would cost more than its triangles) and on a crease of 30° or more spanning 2 texels"
 )))]
 pub struct Source {
     /// Built-in scene name (`rbvh scenes` lists them), OBJ/glTF/GLB file, point cloud (.ply,
@@ -683,9 +683,8 @@ pub struct Quality {
     #[arg(long, conflicts_with = "sample_all")]
     pub exact_edge_fraction: Option<f32>,
     /// Free parameter: trace exactly every triangle that meets a neighbour at a crease of at
-    /// least this many degrees and spans 2 texels of its object (presets: 0, none): edges the
-    /// mesh states, which sampling would round by a texel (30 made Q2 valid at the paper's
-    /// scale); not with --sample-all.
+    /// least this many degrees and spans 2 texels of its object (presets: 30; 0: none): edges
+    /// the mesh states, which sampling would round by a texel; not with --sample-all.
     #[arg(
         long = "exact-crease",
         id = "exact_crease_deg",
@@ -695,7 +694,8 @@ pub struct Quality {
     /// Sample every triangle a height field can hold, as the paper does, at every level asked
     /// for; such a level is named with an `s`, e.g. Q2s. Presets trace triangles exactly where
     /// that costs fewer bytes than sampling them (a triangle covering at least 24 texels, 48
-    /// height-only, and a set whose tiles would cost more than its triangles). `rbvh paint`
+    /// height-only, and a set whose tiles would cost more than its triangles) and on a crease
+    /// of 30° or more spanning 2 texels. `rbvh paint`
     /// samples everything it builds (paint is stored in texels); a file it is given with
     /// --rbvh is painted as it was built.
     #[arg(long)]
