@@ -55,7 +55,7 @@ use super::{Rbvh, RbvhParams, RbvhStats, TexelFormat};
 use crate::bvh::{join_halves, ChildRef, GpuNode, GpuTriangle, LinearBvh, LEAF_BIT, STACK_SIZE};
 use crate::geom::Aabb;
 use crate::progress::{step, Progress, Quiet};
-use crate::scene::{creases, open_boundary, Scene};
+use crate::scene::{topology, Scene, Topology};
 use crate::{Error, Result};
 
 /// Most triangles in a triangle leaf.
@@ -131,10 +131,10 @@ struct Builder<'a> {
     objects: &'a [u32],
     /// The scene's triangles in a BVH, for the surface around each leaf (its ring of samples).
     surface: Option<&'a LinearBvh<'a>>,
-    /// Per scene triangle, whether it touches the open boundary ([`open_boundary`]); empty
+    /// Per scene triangle, whether it touches the open boundary ([`crate::scene::open_boundary`]); empty
     /// for points and for scenes with no open edge.
     open: &'a [bool],
-    /// Per scene triangle, the angle at which it meets its neighbours ([`creases`]); empty for
+    /// Per scene triangle, the angle at which it meets its neighbours ([`crate::scene::creases`]); empty for
     /// points.
     creases: &'a [f32],
 }
@@ -168,10 +168,10 @@ struct Shared<'s> {
     prims: Vec<SplitPrim>,
     /// The scene's triangles in a BVH, for the surface around each leaf (its ring of samples).
     surface: Option<LinearBvh<'s>>,
-    /// Per scene triangle, whether it touches the open boundary ([`open_boundary`]); empty
+    /// Per scene triangle, whether it touches the open boundary ([`crate::scene::open_boundary`]); empty
     /// for points and for scenes with no open edge.
     open: Vec<bool>,
-    /// Per scene triangle, the angle at which it meets its neighbours ([`creases`]), for
+    /// Per scene triangle, the angle at which it meets its neighbours ([`crate::scene::creases`]), for
     /// [`RbvhParams::exact_crease_deg`]; empty for points.
     creases: Vec<f32>,
     /// Milliseconds making this took.
@@ -298,23 +298,23 @@ impl<'s> RbvhSource<'s> {
             Input::Triangles(_) => Some(LinearBvh::build(scene, SURFACE_LEAF)?),
             Input::Points(_) => None,
         };
-        // Kept only where some triangle touches the open boundary: a closed scene has none to fill.
-        let open = match self.input() {
-            Input::Triangles(_) => step(progress, "finding the scene's open edges", 0, || {
-                open_boundary(scene)
-            }),
-            Input::Points(_) => Vec::new(),
+        let Topology { open, creases } = match self.input() {
+            Input::Triangles(_) => step(
+                progress,
+                "finding the scene's open edges and creases",
+                0,
+                || topology(scene),
+            ),
+            Input::Points(_) => Topology {
+                open: Vec::new(),
+                creases: Vec::new(),
+            },
         };
+        // Kept only where some triangle touches the open boundary: a closed scene has none to fill.
         let open = if open.contains(&true) {
             open
         } else {
             Vec::new()
-        };
-        let creases = match self.input() {
-            Input::Triangles(_) => step(progress, "finding the scene's creases", 0, || {
-                creases(scene)
-            }),
-            Input::Points(_) => Vec::new(),
         };
         let ms = start.elapsed().as_secs_f64() * 1e3;
         Ok(self.shared.get_or_init(|| Shared {

@@ -31,4 +31,4 @@ pub use mesh::{ObjectSurface, Scene};
 pub use mipmap::MipChain;
 pub use sample::{PointSource, SCAN_MATCH};
 pub use texture::{Texture, Wrap};
-pub use topology::{creases, open_boundary};
+pub use topology::{creases, open_boundary, topology, Topology};

@@ -9,6 +9,9 @@
 //! vertex indices: OBJ and glTF files split vertices where normals or texture coordinates change,
 //! and such an edge is still closed.
 
+use std::sync::atomic::{AtomicU32, Ordering};
+
+use glam::Vec3;
 use rayon::prelude::*;
 
 use super::Scene;
@@ -18,51 +21,46 @@ use super::Scene;
 /// degenerate edge, both ends at one position, is never open). A leaf must reach the boundary
 /// through every cell such a triangle meets: a ray that enters the surface a hundredth of a
 /// texel from a hole's rim may hit the triangle beside the one that has the open edge.
-/// Sorting-based and in parallel, linear besides the sorts: 24 bytes per triangle and 16 per
-/// vertex while it runs, no hash map.
 pub fn open_boundary(scene: &Scene) -> Vec<bool> {
-    let (welded, count) = weld(scene);
-    // Every edge as its two welded ends, sorted: an open edge is a key found once.
-    let mut edges: Vec<u64> = scene
-        .triangles
-        .par_iter()
-        .flat_map_iter(|t| {
-            let w = t.map(|v| welded[v as usize]);
-            (0..3).map(move |e| edge_key(w[e], w[(e + 1) % 3]))
-        })
-        .collect();
-    edges.par_sort_unstable();
-    let mut on_open = vec![false; count as usize];
-    for run in edges.chunk_by(|a, b| a == b) {
-        let (a, b) = ((run[0] >> 32) as usize, (run[0] & 0xffff_ffff) as usize);
-        if run.len() == 1 && a != b {
-            on_open[a] = true;
-            on_open[b] = true;
-        }
-    }
-    scene
-        .triangles
-        .par_iter()
-        .map(|t| t.iter().any(|&v| on_open[welded[v as usize] as usize]))
-        .collect()
+    topology(scene).open
+}
+
+/// Per triangle, the largest angle in degrees between its normal (as wound) and the normal of a
+/// triangle sharing one of its edges, matched by position as for [`open_boundary`]; 0 for a
+/// triangle with no neighbour or a degenerate one. A mesh's crease — an edge of a moulding, a
+/// column, a cube — is an edge the surface does not continue smoothly across, which a height field
+/// would round by a texel; neighbours wound against each other count as 180°.
+pub fn creases(scene: &Scene) -> Vec<f32> {
+    topology(scene).creases
+}
+
+/// Where a scene's surface is open and where it folds, per triangle: what [`open_boundary`] and
+/// [`creases`] return, from one pass over its edges.
+pub struct Topology {
+    /// Whether the triangle touches the open boundary.
+    pub open: Vec<bool>,
+    /// The largest angle in degrees at which it meets a neighbour.
+    pub creases: Vec<f32>,
 }
 
 /// Most triangles on one edge whose normals [`creases`] compares pair by pair; an edge shared by
 /// more is a crease of 180° for all of them (no surface continues smoothly through a fan).
 const MOST_ON_AN_EDGE: usize = 8;
 
-/// Per triangle, the largest angle in degrees between its normal (as wound) and the normal of a
-/// triangle sharing one of its edges, matched by position as for [`open_boundary`]; 0 for a
-/// triangle with no neighbour or a degenerate one. A mesh's crease — an edge of a moulding, a
-/// column, a cube — is an edge the surface does not continue smoothly across, which a height field
-/// would round by a texel; neighbours wound against each other count as 180°. Sorting-based and
-/// in parallel, 16 bytes per triangle edge while it runs.
-pub fn creases(scene: &Scene) -> Vec<f32> {
-    let (welded, _) = weld(scene);
-    let normal = |t: u32| {
-        let [a, b, c] = scene.triangles[t as usize].map(|v| scene.positions[v as usize]);
-        (b - a).cross(c - a).normalize_or_zero()
-    };
+/// [`open_boundary`] and [`creases`] together: every non-degenerate edge as its two welded ends
+/// and its triangle, sorted, so that the triangles of one edge lie side by side (an open edge is
+/// one alone). Sorting-based and in parallel, linear besides the sorts: 16 bytes per edge and 12
+/// per triangle while it runs, no hash map.
+pub fn topology(scene: &Scene) -> Topology {
+    let (welded, count) = weld(scene);
+    let normals: Vec<Vec3> = scene
+        .triangles
+        .par_iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|v| scene.positions[v as usize]);
+            (b - a).cross(c - a).normalize_or_zero()
+        })
+        .collect();
     let mut edges: Vec<(u64, u32)> = scene
         .triangles
         .par_iter()
@@ -75,27 +73,57 @@ pub fn creases(scene: &Scene) -> Vec<f32> {
         })
         .collect();
     edges.par_sort_unstable();
-    let mut crease = vec![0.0f32; scene.triangles.len()];
-    for run in edges.chunk_by(|a, b| a.0 == b.0) {
-        if run.len() > MOST_ON_AN_EDGE {
-            for &(_, t) in run {
-                crease[t as usize] = 180.0;
-            }
-            continue;
-        }
-        for (k, &(_, a)) in run.iter().enumerate() {
-            for &(_, b) in &run[k + 1..] {
-                let (na, nb) = (normal(a), normal(b));
-                if na == glam::Vec3::ZERO || nb == glam::Vec3::ZERO {
-                    continue;
+    // Angles are at least 0, so their bits order as the angles do.
+    let crease: Vec<AtomicU32> = (0..scene.triangles.len())
+        .map(|_| AtomicU32::new(0))
+        .collect();
+    let open_ends: Vec<u32> = edges
+        .par_chunk_by(|a, b| a.0 == b.0)
+        .flat_map_iter(|run| {
+            let key = run[0].0;
+            if run.len() > MOST_ON_AN_EDGE {
+                for &(_, t) in run {
+                    crease[t as usize].fetch_max(180.0f32.to_bits(), Ordering::Relaxed);
                 }
-                let angle = na.dot(nb).clamp(-1.0, 1.0).acos().to_degrees();
-                crease[a as usize] = crease[a as usize].max(angle);
-                crease[b as usize] = crease[b as usize].max(angle);
+            } else {
+                crease_pairs(run, &normals, &crease);
             }
+            let open = (run.len() == 1).then_some([(key >> 32) as u32, key as u32]);
+            open.into_iter().flatten()
+        })
+        .collect();
+    drop(edges);
+    let mut on_open = vec![false; count as usize];
+    for v in open_ends {
+        on_open[v as usize] = true;
+    }
+    Topology {
+        open: scene
+            .triangles
+            .par_iter()
+            .map(|t| t.iter().any(|&v| on_open[welded[v as usize] as usize]))
+            .collect(),
+        creases: crease
+            .into_iter()
+            .map(|c| f32::from_bits(c.into_inner()))
+            .collect(),
+    }
+}
+
+/// Each pair of the triangles `run` on one edge: the angle between their `normals` raised into
+/// both triangles' `crease` (a degenerate triangle's zero normal compares with none).
+fn crease_pairs(run: &[(u64, u32)], normals: &[Vec3], crease: &[AtomicU32]) {
+    for (k, &(_, a)) in run.iter().enumerate() {
+        for &(_, b) in &run[k + 1..] {
+            let (na, nb) = (normals[a as usize], normals[b as usize]);
+            if na == Vec3::ZERO || nb == Vec3::ZERO {
+                continue;
+            }
+            let angle = na.dot(nb).clamp(-1.0, 1.0).acos().to_degrees().to_bits();
+            crease[a as usize].fetch_max(angle, Ordering::Relaxed);
+            crease[b as usize].fetch_max(angle, Ordering::Relaxed);
         }
     }
-    crease
 }
 
 /// One id per distinct vertex position (`-0.0` and `0.0` the same), per vertex, and how many
@@ -106,7 +134,7 @@ fn weld(scene: &Scene) -> (Vec<u32>, u32) {
         .par_iter()
         .enumerate()
         .map(|(v, &p)| {
-            let p = p + glam::Vec3::ZERO;
+            let p = p + Vec3::ZERO;
             ([p.x.to_bits(), p.y.to_bits(), p.z.to_bits()], v as u32)
         })
         .collect();
