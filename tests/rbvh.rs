@@ -3,6 +3,8 @@
 
 mod common;
 
+use std::collections::HashSet;
+
 use glam::Vec3;
 use rbvh::bvh::Bvh;
 use rbvh::geom::Ray;
@@ -257,6 +259,41 @@ fn every_preset_and_strategy_builds_and_grows_with_quality() {
     }
 }
 
+/// Asserts that every triangle of `scene` that `wanted` picks (by its index and longest edge) is
+/// among `with`'s exact triangles, that it picks some, and that `with` traces more triangles
+/// exactly than `without`, the same scene built without the rule.
+fn assert_traced_exactly(
+    scene: &Scene,
+    without: &Rbvh,
+    with: &Rbvh,
+    wanted: impl Fn(usize, f32) -> bool,
+) {
+    let exact = |r: &Rbvh| -> HashSet<u32> { r.triangles.iter().map(|t| t.prim).collect() };
+    let (before, after) = (exact(without), exact(with));
+    let mut picked = 0;
+    for (i, t) in scene.triangles.iter().enumerate() {
+        let [p, q, r] = t.map(|v| scene.positions[v as usize]);
+        let longest = (q - p).length().max((r - q).length()).max((p - r).length());
+        if wanted(i, longest) {
+            picked += 1;
+            assert!(
+                after.contains(&(i as u32)),
+                "triangle {i} ({longest}) is sampled"
+            );
+        }
+    }
+    assert!(
+        picked > 0,
+        "the rule picks no triangle: the test tests nothing"
+    );
+    assert!(
+        after.len() > before.len(),
+        "exact triangles {} → {}",
+        before.len(),
+        after.len()
+    );
+}
+
 /// `exact_edge_fraction` traces exactly every triangle whose longest edge spans that fraction of
 /// its object's diagonal: on the default scene at Q0 (five objects, tessellated shapes) every
 /// such triangle is among the RBVH's exact ones, there are more of them than the preset keeps,
@@ -275,31 +312,10 @@ fn exact_edge_fraction_traces_long_triangles_exactly() {
         Rbvh::build(&scene, &preset).unwrap(),
         Rbvh::build(&scene, &long).unwrap(),
     );
-    let exact: std::collections::HashSet<u32> = b.triangles.iter().map(|t| t.prim).collect();
     let diagonals: Vec<f32> = scene.object_bounds().iter().map(|b| b.diagonal()).collect();
-    let mut expected = 0;
-    for (i, t) in scene.triangles.iter().enumerate() {
-        let [p, q, r] = t.map(|v| scene.positions[v as usize]);
-        let longest = (q - p).length().max((r - q).length()).max((p - r).length());
-        if longest >= diagonals[scene.object_of_triangle[i] as usize] / 32.0 {
-            expected += 1;
-            assert!(
-                exact.contains(&(i as u32)),
-                "triangle {i} ({longest}) is sampled"
-            );
-        }
-    }
-    assert!(
-        expected > 0,
-        "no triangle that long: the test tests nothing"
-    );
-    let preset_exact: std::collections::HashSet<u32> = a.triangles.iter().map(|t| t.prim).collect();
-    assert!(
-        exact.len() > preset_exact.len(),
-        "exact triangles {} → {}",
-        preset_exact.len(),
-        exact.len()
-    );
+    assert_traced_exactly(&scene, &a, &b, |i, longest| {
+        longest >= diagonals[scene.object_of_triangle[i] as usize] / 32.0
+    });
     let rays = scene.camera_or_framed(1.0).primary_rays(64, 64);
     let (_, _, mismatch) = error_vs_exact(&scene, &b, &rays);
     assert!(mismatch < 0.02, "{mismatch}");
@@ -341,27 +357,11 @@ fn exact_crease_deg_traces_creases_exactly() {
         Rbvh::build(&scene, &without).unwrap(),
         Rbvh::build(&scene, &preset).unwrap(),
     );
-    let exact: std::collections::HashSet<u32> = b.triangles.iter().map(|t| t.prim).collect();
     let texel = scene.bounds().diagonal() / preset.texels_per_diagonal;
     let angles = rbvh::scene::creases(&scene);
-    let mut expected = 0;
-    for (i, t) in scene.triangles.iter().enumerate() {
-        let [p, q, r] = t.map(|v| scene.positions[v as usize]);
-        let longest = (q - p).length().max((r - q).length()).max((p - r).length());
-        if angles[i] >= 30.0 && longest >= rbvh::rbvh::CREASE_EDGE_TEXELS * texel {
-            expected += 1;
-            assert!(exact.contains(&(i as u32)), "triangle {i} is sampled");
-        }
-    }
-    assert!(expected > 0, "no crease that long: the test tests nothing");
-    let without_exact: std::collections::HashSet<u32> =
-        a.triangles.iter().map(|t| t.prim).collect();
-    assert!(
-        exact.len() > without_exact.len(),
-        "exact triangles {} → {}",
-        without_exact.len(),
-        exact.len()
-    );
+    assert_traced_exactly(&scene, &a, &b, |i, longest| {
+        angles[i] >= 30.0 && longest >= rbvh::rbvh::CREASE_EDGE_TEXELS * texel
+    });
     let rays = scene.camera_or_framed(1.0).primary_rays(64, 64);
     let (_, _, mismatch) = error_vs_exact(&scene, &b, &rays);
     assert!(mismatch < 0.02, "{mismatch}");
