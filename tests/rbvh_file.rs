@@ -343,8 +343,8 @@ fn version_6_loads_with_every_texel_the_scenes() {
 }
 
 /// `rbvh` as version 5–11 wrote it: its header without what later versions appended
-/// (`exact_crease_deg` from 12, `exact_edge_fraction` from 11, `exact_from_texels` from 10, `exact_when_cheaper` from 9, `narrow_rows` from 8,
-/// `object_rate` from 7).
+/// (`exact_crease_deg` from 12, `exact_edge_fraction` from 11, `exact_from_texels` from 10,
+/// `exact_when_cheaper` from 9, `narrow_rows` from 8, `object_rate` from 7).
 fn as_version(rbvh: &Rbvh, version: u32) -> Vec<u8> {
     let mut bytes = rbvh.to_bytes();
     let end = match version {

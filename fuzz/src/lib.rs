@@ -247,9 +247,9 @@ pub fn rbvh_file(data: &[u8]) {
         assert_eq!(saved, data, "save(load(file)) differs from the file");
     } else {
         // Version 12 appended `exact_crease_deg` (0 for older files) to version 11's 168-byte
-        // header. Version 11 appended `exact_edge_fraction` (0 for older files) to version 10's 164-byte
-        // header. Version 10 appended `exact_from_texels` (0 for older files) to version 9's 160-byte
-        // header. Version 9 appended `exact_when_cheaper` (0 for older files) to version 8's 156-byte
+        // header, which appended `exact_edge_fraction` (0 for older files) to version 10's
+        // 164 bytes, which appended `exact_from_texels` (0 for older files) to version 9's 160.
+        // Version 9 appended `exact_when_cheaper` (0 for older files) to version 8's 156-byte
         // header, which appended `narrow_rows` (0 for older files) to version 7's 152 bytes,
         // which appended `object_rate` (0 for older files) to the 148-byte header of versions
         // 4–6; versions 1–3 lack bytes 40..52 of those.

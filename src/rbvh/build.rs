@@ -131,11 +131,11 @@ struct Builder<'a> {
     objects: &'a [u32],
     /// The scene's triangles in a BVH, for the surface around each leaf (its ring of samples).
     surface: Option<&'a LinearBvh<'a>>,
-    /// Per scene triangle, whether it touches the open boundary ([`crate::scene::open_boundary`]); empty
-    /// for points and for scenes with no open edge.
+    /// Per scene triangle, whether it touches the open boundary
+    /// ([`crate::scene::open_boundary`]); empty for points and for scenes with no open edge.
     open: &'a [bool],
-    /// Per scene triangle, the angle at which it meets its neighbours ([`crate::scene::creases`]); empty for
-    /// points.
+    /// Per scene triangle, the angle at which it meets its neighbours
+    /// ([`crate::scene::creases`]); empty for points.
     creases: &'a [f32],
 }
 
@@ -168,11 +168,11 @@ struct Shared<'s> {
     prims: Vec<SplitPrim>,
     /// The scene's triangles in a BVH, for the surface around each leaf (its ring of samples).
     surface: Option<LinearBvh<'s>>,
-    /// Per scene triangle, whether it touches the open boundary ([`crate::scene::open_boundary`]); empty
-    /// for points and for scenes with no open edge.
+    /// Per scene triangle, whether it touches the open boundary
+    /// ([`crate::scene::open_boundary`]); empty for points and for scenes with no open edge.
     open: Vec<bool>,
-    /// Per scene triangle, the angle at which it meets its neighbours ([`crate::scene::creases`]), for
-    /// [`RbvhParams::exact_crease_deg`]; empty for points.
+    /// Per scene triangle, the angle at which it meets its neighbours
+    /// ([`crate::scene::creases`]), for [`RbvhParams::exact_crease_deg`]; empty for points.
     creases: Vec<f32>,
     /// Milliseconds making this took.
     ms: f64,
