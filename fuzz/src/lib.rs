@@ -246,28 +246,23 @@ pub fn rbvh_file(data: &[u8]) {
     if version == 12 {
         assert_eq!(saved, data, "save(load(file)) differs from the file");
     } else {
-        // Version 12 appended `exact_crease_deg` (0 for older files) to version 11's 168-byte
-        // header, which appended `exact_edge_fraction` (0 for older files) to version 10's
-        // 164 bytes, which appended `exact_from_texels` (0 for older files) to version 9's 160.
-        // Version 9 appended `exact_when_cheaper` (0 for older files) to version 8's 156-byte
-        // header, which appended `narrow_rows` (0 for older files) to version 7's 152 bytes,
-        // which appended `object_rate` (0 for older files) to the 148-byte header of versions
-        // 4–6; versions 1–3 lack bytes 40..52 of those.
+        // From version 7 on, each version appended one 4-byte field to the header of the one
+        // before, which an older file loads as 0: (the version that appended it, its name).
+        // Versions 4–6 have a 148-byte header; versions 1–3 lack bytes 40..52 of it.
         const V6_HEADER: usize = 148;
-        const V7_HEADER: usize = 152;
-        const V8_HEADER: usize = 156;
-        const V9_HEADER: usize = 160;
-        const V10_HEADER: usize = 164;
-        const V11_HEADER: usize = 168;
-        const HEADER: usize = 172;
+        const APPENDED: [(u32, &str); 6] = [
+            (7, "object_rate"),
+            (8, "narrow_rows"),
+            (9, "exact_when_cheaper"),
+            (10, "exact_from_texels"),
+            (11, "exact_edge_fraction"),
+            (12, "exact_crease_deg"),
+        ];
+        const HEADER: usize = V6_HEADER + 4 * APPENDED.len();
         let old_header = match version {
             1..=3 => 136,
             4..=6 => V6_HEADER,
-            7 => V7_HEADER,
-            8 => V8_HEADER,
-            9 => V9_HEADER,
-            10 => V10_HEADER,
-            _ => V11_HEADER,
+            v => V6_HEADER + 4 * (v as usize - 6),
         };
         let before_rate = old_header.min(V6_HEADER);
         assert_eq!(saved[12..40], data[12..40], "the upgraded header differs");
@@ -276,56 +271,14 @@ pub fn rbvh_file(data: &[u8]) {
             data[40..before_rate],
             "the upgraded header differs"
         );
-        if version < 7 {
-            assert_eq!(
-                saved[V6_HEADER..V7_HEADER],
-                [0; 4],
-                "an old file's object rate is not 0"
-            );
-        } else {
-            assert_eq!(saved[V6_HEADER..V7_HEADER], data[V6_HEADER..V7_HEADER]);
+        for (k, (since, field)) in APPENDED.into_iter().enumerate() {
+            let at = V6_HEADER + 4 * k..V6_HEADER + 4 * (k + 1);
+            if version < since {
+                assert_eq!(saved[at], [0; 4], "an old file's {field} is not 0");
+            } else {
+                assert_eq!(saved[at.clone()], data[at], "the upgraded {field} differs");
+            }
         }
-        if version < 8 {
-            assert_eq!(
-                saved[V7_HEADER..V8_HEADER],
-                [0; 4],
-                "an old file's narrow rows are not 0"
-            );
-        } else {
-            assert_eq!(saved[V7_HEADER..V8_HEADER], data[V7_HEADER..V8_HEADER]);
-        }
-        if version < 9 {
-            assert_eq!(
-                saved[V8_HEADER..V9_HEADER],
-                [0; 4],
-                "an old file does not sample every triangle"
-            );
-        } else {
-            assert_eq!(saved[V8_HEADER..V9_HEADER], data[V8_HEADER..V9_HEADER]);
-        }
-        if version < 10 {
-            assert_eq!(
-                saved[V9_HEADER..V10_HEADER],
-                [0; 4],
-                "an old file does not trace exactly from what 96 bytes buy"
-            );
-        } else {
-            assert_eq!(saved[V9_HEADER..V10_HEADER], data[V9_HEADER..V10_HEADER]);
-        }
-        if version < 11 {
-            assert_eq!(
-                saved[V10_HEADER..V11_HEADER],
-                [0; 4],
-                "an old file traces no triangle exactly for its edges"
-            );
-        } else {
-            assert_eq!(saved[V10_HEADER..V11_HEADER], data[V10_HEADER..V11_HEADER]);
-        }
-        assert_eq!(
-            saved[V11_HEADER..HEADER],
-            [0; 4],
-            "an old file traces no triangle exactly for a crease"
-        );
         let nodes = r.nodes.len();
         let old_node = if version < 5 { 64 } else { 48 };
         let (saved, old) = (

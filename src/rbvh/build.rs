@@ -555,9 +555,10 @@ impl Builder<'_> {
         for (i, &[a, b, c]) in (0u32..).zip(all.iter()) {
             let texel = self.texel_of(&[i]);
             let area = 0.5 * (b - a).cross(c - a).length();
+            let longest = (b - a).length().max((c - b).length()).max((a - c).length());
             if area >= texels * texel * texel
-                || self.long_edge(i, [a, b, c])
-                || self.on_crease(i, [a, b, c], texel)
+                || self.long_edge(i, longest)
+                || self.on_crease(i, longest, texel)
             {
                 exact.push(GpuTriangle::new([a, b, c], i));
             } else {
@@ -567,9 +568,9 @@ impl Builder<'_> {
         (sampled, exact)
     }
 
-    /// Whether triangle `i`, `corners`, has an edge of at least
+    /// Whether triangle `i`, whose longest edge is `longest`, has an edge of at least
     /// [`RbvhParams::exact_edge_fraction`] of its object's diagonal (never where that is 0).
-    fn long_edge(&self, i: u32, [a, b, c]: [Vec3; 3]) -> bool {
+    fn long_edge(&self, i: u32, longest: f32) -> bool {
         let Some(&diagonal) = self
             .objects
             .get(i as usize)
@@ -577,20 +578,16 @@ impl Builder<'_> {
         else {
             return false;
         };
-        let longest = (b - a).length().max((c - b).length()).max((a - c).length());
         longest >= self.params.exact_edge_fraction * diagonal
     }
 
-    /// Whether triangle `i`, `corners`, meets a neighbour at a crease of at least
-    /// [`RbvhParams::exact_crease_deg`] (never where that is 0) with an edge of at least
+    /// Whether triangle `i`, whose longest edge is `longest`, meets a neighbour at a crease of at
+    /// least [`RbvhParams::exact_crease_deg`] (never where that is 0) with an edge of at least
     /// [`CREASE_EDGE_TEXELS`] of its object's `texel`.
-    fn on_crease(&self, i: u32, [a, b, c]: [Vec3; 3], texel: f32) -> bool {
+    fn on_crease(&self, i: u32, longest: f32, texel: f32) -> bool {
         let angle = self.params.exact_crease_deg;
-        if angle <= 0.0 || self.creases.get(i as usize).is_none_or(|&c| c < angle) {
-            return false;
-        }
-        let longest = (b - a).length().max((c - b).length()).max((a - c).length());
-        longest >= CREASE_EDGE_TEXELS * texel
+        let on = self.creases.get(i as usize).is_some_and(|&c| c >= angle);
+        angle > 0.0 && on && longest >= CREASE_EDGE_TEXELS * texel
     }
 
     /// The texel of the set `order`: its objects' finest ([`RbvhParams::object_rate`]),

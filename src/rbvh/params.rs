@@ -318,51 +318,60 @@ impl RbvhParams {
                 format!("{o} is outside 0..=1 (a fraction of texels_per_diagonal)"),
             ));
         }
-        let k = self.sampled_criterion_texels;
-        if !(k.is_finite() && (0.0..=1.0e4).contains(&k)) {
-            return Err(Error::param(
+        let ranges = [
+            (
                 "sampled_criterion_texels",
-                format!("{k} is outside 0..=1e4"),
-            ));
-        }
-        let e = self.exact_from_texels;
-        if !(e.is_finite() && (0.0..=1.0e4).contains(&e)) {
-            return Err(Error::param(
+                self.sampled_criterion_texels,
+                1.0e4,
+                "1e4",
+                "",
+            ),
+            (
                 "exact_from_texels",
-                format!("{e} is outside 0..=1e4 (0: what 96 bytes of texels buy)"),
-            ));
-        }
-        if e > 0.0 && !self.exact_when_cheaper {
-            return Err(Error::param(
-                "exact_from_texels",
-                format!(
-                    "{e} sets which triangles are traced exactly, but exact_when_cheaper is off \
-                     (every triangle sampled)"
-                ),
-            ));
-        }
-        let f = self.exact_edge_fraction;
-        if !(f.is_finite() && (0.0..=1.0).contains(&f)) {
-            return Err(Error::param(
+                self.exact_from_texels,
+                1.0e4,
+                "1e4",
+                " (0: what 96 bytes of texels buy)",
+            ),
+            (
                 "exact_edge_fraction",
-                format!("{f} is outside 0..=1 (a fraction of each object's diagonal; 0: none)"),
-            ));
-        }
-        let c = self.exact_crease_deg;
-        if !(c.is_finite() && (0.0..=180.0).contains(&c)) {
-            return Err(Error::param(
+                self.exact_edge_fraction,
+                1.0,
+                "1",
+                " (a fraction of each object's diagonal; 0: none)",
+            ),
+            (
                 "exact_crease_deg",
-                format!("{c} is outside 0..=180 (degrees between neighbouring normals; 0: none)"),
-            ));
+                self.exact_crease_deg,
+                180.0,
+                "180",
+                " (degrees between neighbouring normals; 0: none)",
+            ),
+        ];
+        for (name, v, most, shown, hint) in ranges {
+            if !(v.is_finite() && (0.0..=most).contains(&v)) {
+                return Err(Error::param(
+                    name,
+                    format!("{v} is outside 0..={shown}{hint}"),
+                ));
+            }
         }
-        if f > 0.0 && !self.exact_when_cheaper {
-            return Err(Error::param(
-                "exact_edge_fraction",
-                format!(
-                    "{f} sets which triangles are traced exactly, but exact_when_cheaper is off \
-                     (every triangle sampled)"
-                ),
-            ));
+        // The crease angle is not among these: the presets set it, and their sampled twins
+        // (`Q2s`) keep it, doing nothing.
+        let needing_exact = [
+            ("exact_from_texels", self.exact_from_texels),
+            ("exact_edge_fraction", self.exact_edge_fraction),
+        ];
+        for (name, v) in needing_exact {
+            if v > 0.0 && !self.exact_when_cheaper {
+                return Err(Error::param(
+                    name,
+                    format!(
+                        "{v} sets which triangles are traced exactly, but exact_when_cheaper is \
+                         off (every triangle sampled)"
+                    ),
+                ));
+            }
         }
         Ok(())
     }

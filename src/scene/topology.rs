@@ -215,8 +215,9 @@ mod tests {
         );
     }
 
-    /// An `n` × `n` grid of quads (two triangles each) in the plane z = 0, its columns from
-    /// `n / 2` on turned up about the line x = n / 2 by `fold_deg`.
+    /// An `n` × `n` grid of quads (two triangles each) in the plane z = 0, vertex `j · (n + 1) +
+    /// i` at column i and row j, its columns from `n / 2` on turned up about their first edge by
+    /// `fold_deg`.
     fn grid(n: u32, fold_deg: f32) -> Scene {
         let half = (n / 2) as f32;
         let (sin, cos) = fold_deg.to_radians().sin_cos();
@@ -273,19 +274,8 @@ mod tests {
     #[test]
     fn triangles_with_a_corner_on_an_open_edge_are_marked() {
         const N: u32 = 5;
-        let positions: Vec<Vec3> = (0..=N)
-            .flat_map(|j| (0..=N).map(move |i| Vec3::new(i as f32, j as f32, 0.0)))
-            .collect();
-        let at = |i: u32, j: u32| j * (N + 1) + i;
-        let mut triangles = Vec::new();
-        for j in 0..N {
-            for i in 0..N {
-                triangles.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
-                triangles.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
-            }
-        }
-        let mut grid = Scene::new("grid");
-        grid.push_object("grid", &positions, &triangles);
+        let grid = grid(N, 0.0);
+        let triangles = &grid.triangles;
         let on_rim = |v: u32| {
             let (i, j) = (v % (N + 1), v / (N + 1));
             i == 0 || j == 0 || i == N || j == N
