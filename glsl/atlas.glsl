@@ -20,34 +20,39 @@ uint rbvh_atlas_texel_words(uint len, uint wide_len, bool height_only) {
 // `len`): what the walk reads. One load either side of `wide_len`, chosen by selects rather than
 // a branch: SIMD implementations such as lavapipe run both sides of a branch whose lanes differ,
 // and the two loads of a texel read both ways cost the march a tenth of its speed there.
+// One return, the hole's made before the read: an early return, once inlined into the walk's loops,
+// leaves a value the compiler carries from one leaf to the next (docs/speed.md, "What holds the
+// RBVH tracer's registers").
 uint rbvh_atlas_code(uint index, uint len, uint wide_len, bool height_only) {
-    if (index >= len) {
-        return 0xFFFFu;
+    uint code = 0xFFFFu;
+    if (index < len) {
+        bool narrow = index >= wide_len;
+        uint k = index - wide_len;
+        uint wide_words = height_only ? (wide_len + 1u) >> 1 : wide_len;
+        // A byte of the narrow band, a half-word without normals above it, else the texel's
+        // word; word indices and shifts made apart (a bit offset would overflow 32 bits past 2^27
+        // texels).
+        uint word = narrow ? wide_words + (k >> 2) : (height_only ? index >> 1 : index);
+        uint shift = narrow ? (k & 3u) << 3 : (height_only ? (index & 1u) << 4 : 0u);
+        uint bits = (RBVH_ATLAS_WORD(word) >> shift) & (narrow ? 0xFFu : 0xFFFFu);
+        code = narrow ? bits * 0x101u : bits;
     }
-    bool narrow = index >= wide_len;
-    uint k = index - wide_len;
-    uint wide_words = height_only ? (wide_len + 1u) >> 1 : wide_len;
-    // A byte of the narrow band, a half-word without normals above it, else the texel's word;
-    // word indices and shifts made apart (a bit offset would overflow 32 bits past 2^27 texels).
-    uint word = narrow ? wide_words + (k >> 2) : (height_only ? index >> 1 : index);
-    uint shift = narrow ? (k & 3u) << 3 : (height_only ? (index & 1u) << 4 : 0u);
-    uint code = (RBVH_ATLAS_WORD(word) >> shift) & (narrow ? 0xFFu : 0xFFFFu);
-    return narrow ? code * 0x101u : code;
+    return code;
 }
 
 // Texel `index` of an atlas with normals: its height code in bits 0-15 and its 8:8 octahedral
 // normal in bits 16-31 (a hole at or beyond `len`), as the host's Texel holds it.
 uint rbvh_atlas_texel(uint index, uint len, uint wide_len) {
-    if (index >= len) {
-        return 0xFFFFu;
+    uint texel = 0xFFFFu;
+    if (index < wide_len && index < len) {
+        texel = RBVH_ATLAS_WORD(index);
+    } else if (index < len) {
+        uint k = index - wide_len;
+        uint normals = wide_len + ((len - wide_len + 3u) >> 2);
+        uint normal = (RBVH_ATLAS_WORD(normals + (k >> 1)) << ((~k & 1u) << 4)) & 0xFFFF0000u;
+        texel = rbvh_atlas_code(index, len, wide_len, false) | normal;
     }
-    if (index < wide_len) {
-        return RBVH_ATLAS_WORD(index);
-    }
-    uint k = index - wide_len;
-    uint normals = wide_len + ((len - wide_len + 3u) >> 2);
-    uint normal = (RBVH_ATLAS_WORD(normals + (k >> 1)) << ((~k & 1u) << 4)) & 0xFFFF0000u;
-    return rbvh_atlas_code(index, len, wide_len, false) | normal;
+    return texel;
 }
 
 #endif

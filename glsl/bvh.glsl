@@ -102,13 +102,11 @@ uint rbvh_stack_entry(uint child, uint node, bool b) {
 // The reference and count that stack entry `entry` stands for (an inner child's count is 0: the
 // traversal reads a count only from leaves).
 void rbvh_stack_pop(uint entry, out uint reference, out uint count) {
+    uint node = (entry & ~RBVH_LEAF_BIT) >> 1;
     if ((entry & RBVH_LEAF_BIT) == 0u) {
         reference = entry;
         count = 0u;
-        return;
-    }
-    uint node = (entry & ~RBVH_LEAF_BIT) >> 1;
-    if ((entry & 1u) != 0u) {
+    } else if ((entry & 1u) != 0u) {
         reference = RBVH_BVH_NODE(node).b_child;
         count = RBVH_BVH_NODE(node).b_count;
     } else {

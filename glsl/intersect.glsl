@@ -23,18 +23,18 @@ bool rbvh_intersect_box(vec3 bmin, vec3 bmax, vec3 origin, vec3 inv_dir, float t
     return t_entry <= t_exit;
 }
 
-// Per-ray shear of Woop, Benthin & Wald, "Watertight Ray/Triangle Intersection" (JCGT 2013).
-// The permutation (kx, ky, kz) and shear are folded into three row vectors, so a vertex is
-// transformed with plain multiply-adds instead of dynamically indexed components (which compile to
-// chains of selects per SIMD lane on lavapipe). The rows mx and my each have one entry 1, one -S
-// and one 0, and mz one entry Sz and two 0s, so every sum is exactly the paper's
-// `a[kx] - Sx * a[kz]` (or `Sz * a[kz]`): adding a product with 0 changes nothing, and the CPU
-// reference computes bit-identical values.
+// Per-ray shear of Woop, Benthin & Wald, "Watertight Ray/Triangle Intersection" (JCGT 2013), as
+// src/geom/triangle.rs keeps it: the permutation (kx, ky, kz), kz the direction's largest
+// component, and the shear (Sx, Sy, Sz). A vertex is sheared as the host shears it,
+// `a[kx] - Sx * a[kz]`, its components picked by index (selects on a GPU), so that the CPU
+// reference computes the same bits. Six values a ray keeps, where the permutation folded into
+// three row vectors (an earlier form) kept twelve: on RADV's null device this took the exact
+// tracer from 56 VGPRs to 48 and the RBVH tracer, whose cell test shears four corners at once,
+// from 96 to 88 (docs/speed.md, "What holds the RBVH tracer's registers").
 struct RbvhShear {
     vec3 origin;
-    vec3 mx;   // e[kx] - Sx e[kz]
-    vec3 my;   // e[ky] - Sy e[kz]
-    vec3 mz;   // Sz e[kz]
+    ivec3 k;  // kx, ky, kz
+    vec3 s;   // Sx, Sy, Sz
 };
 
 RbvhShear rbvh_shear(Ray r) {
@@ -47,31 +47,32 @@ RbvhShear rbvh_shear(Ray r) {
         kx = ky;
         ky = tmp;
     }
-    float sx = r.dir[kx] / r.dir[kz];
-    float sy = r.dir[ky] / r.dir[kz];
-    float sz = 1.0 / r.dir[kz];
-    vec3 ex = vec3(equal(ivec3(kx), ivec3(0, 1, 2)));
-    vec3 ey = vec3(equal(ivec3(ky), ivec3(0, 1, 2)));
-    vec3 ez = vec3(equal(ivec3(kz), ivec3(0, 1, 2)));
-    RbvhShear sh;
-    sh.origin = r.origin;
-    sh.mx = ex - sx * ez;
-    sh.my = ey - sy * ez;
-    sh.mz = sz * ez;
-    return sh;
+    vec3 s = vec3(r.dir[kx] / r.dir[kz], r.dir[ky] / r.dir[kz], 1.0 / r.dir[kz]);
+    return RbvhShear(r.origin, ivec3(kx, ky, kz), s);
 }
 
 // A vertex in the ray's sheared frame: x and y (the edge functions' plane) and z (the distance
-// scale), each sum exact as RbvhShear's rows make it.
+// scale).
 vec3 rbvh_sheared(RbvhShear sh, vec3 v) {
     precise vec3 a = v - sh.origin;
-    precise vec3 ax = a * sh.mx;
-    precise vec3 ay = a * sh.my;
-    precise vec3 az = a * sh.mz;
-    precise float x = (ax.x + ax.y) + ax.z;
-    precise float y = (ay.x + ay.y) + ay.z;
-    precise float z = (az.x + az.y) + az.z;
+    precise float x = a[sh.k.x] - sh.s.x * a[sh.k.z];
+    precise float y = a[sh.k.y] - sh.s.y * a[sh.k.z];
+    precise float z = sh.s.z * a[sh.k.z];
     return vec3(x, y, z);
+}
+
+// The watertight test's second half (rbvh_intersect_sheared): the triangle whose edge functions
+// are u, v, w and whose corners' sheared depths are az, bz, cz. Hit distance in [tmin, tmax), or
+// a negative value on a miss.
+float rbvh_intersect_edges(float u, float v, float w, float az, float bz, float cz, float tmin, float tmax) {
+    bool mixed = (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0);
+    precise float det = u + v + w;
+    precise float t_scaled = u * az + v * bz + w * cz;
+    precise float lo = tmin * det;
+    precise float hi = tmax * det;
+    bool inside = det > 0.0 ? (t_scaled >= lo && t_scaled < hi) : (t_scaled <= lo && t_scaled > hi);
+    // One return: see rbvh_walk_start in rbvh.glsl.
+    return !mixed && det != 0.0 && inside ? t_scaled / det : -1.0;
 }
 
 // The watertight test of the triangle whose vertices are A, B, C in the ray's sheared frame
@@ -82,18 +83,7 @@ float rbvh_intersect_sheared(vec3 A, vec3 B, vec3 C, float tmin, float tmax) {
     precise float u = C.x * B.y - C.y * B.x;
     precise float v = A.x * C.y - A.y * C.x;
     precise float w = B.x * A.y - B.y * A.x;
-    if ((u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0)) {
-        return -1.0;
-    }
-    precise float det = u + v + w;
-    if (det == 0.0) {
-        return -1.0;
-    }
-    precise float t_scaled = u * A.z + v * B.z + w * C.z;
-    precise float lo = tmin * det;
-    precise float hi = tmax * det;
-    bool inside = det > 0.0 ? (t_scaled >= lo && t_scaled < hi) : (t_scaled <= lo && t_scaled > hi);
-    return inside ? t_scaled / det : -1.0;
+    return rbvh_intersect_edges(u, v, w, A.z, B.z, C.z, tmin, tmax);
 }
 
 // The watertight test of triangle (v0, v1, v2) for the ray sheared by `sh` (intersect_triangle in

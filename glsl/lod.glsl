@@ -77,22 +77,18 @@ bool rbvh_lod_selects(float texel_size, vec2 cone, float t_entry) {
 float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inout uint columns,
                      out uint normal_texel, inout bool cut) {
     normal_texel = RBVH_HOLE_CODE;
-    if (node >= lsz.node_count) {
-        return -1.0;
-    }
-    RbvhLod lod = RBVH_LOD_RECORD(node);
-    if (isinf(lod.texel_size) || isnan(lod.texel_size) || lod.res_u == 0u || lod.res_v == 0u || lod.axis > 2u) {
-        return -1.0;
+    // One return, as in rbvh_march (rbvh.glsl), which says why.
+    float t_hit = -1.0;
+    RbvhLod lod = RbvhLod(vec3(0.0), RBVH_INF, 0u, 0u, 0u, 0u, 0.0, 0.0, 0u, 0u);
+    if (node < lsz.node_count) {
+        lod = RBVH_LOD_RECORD(node);
     }
     uint cells = lod.res_u * lod.res_v;
-    if (lod.res_v != 0u && cells / lod.res_v != lod.res_u) {
-        return -1.0;
-    }
-    if (cells > (0xFFFFFFFFu - lod.base) / 2u || lod.base + 2u * cells > lsz.texel_len) {
-        return -1.0;
-    }
+    bool usable = node < lsz.node_count && !isinf(lod.texel_size) && !isnan(lod.texel_size) && lod.res_u != 0u &&
+                  lod.res_v != 0u && lod.axis <= 2u && cells / max(lod.res_v, 1u) == lod.res_u &&
+                  cells <= (0xFFFFFFFFu - lod.base) / 2u && lod.base + 2u * cells <= lsz.texel_len;
     // 1. Grid space.
-    uint w = lod.axis;
+    uint w = min(lod.axis, 2u);
     uint u = (w + 1u) % 3u;
     uint v = (w + 2u) % 3u;
     precise vec3 go = vec3((ray.origin[u] - lod.origin[u]) * lod.inv_texel,
@@ -105,83 +101,85 @@ float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inou
     precise float slack = RBVH_MARCH_SLACK * (abs(go.z) + h_top) + lod.h_scale;
     vec3 bmin = vec3(0.0, 0.0, -slack);
     precise vec3 bmax = vec3(float(lod.res_u), float(lod.res_v), h_top + slack);
-    float t0;
-    if (!rbvh_intersect_box(bmin, bmax, go, inv, ray.tmin, t_closest, t0)) {
-        return -1.0;
-    }
-    RBVH_COUNT_ADD(walks, 1u);
-    precise vec3 e0 = (bmin - go) * inv;
-    precise vec3 e1 = (bmax - go) * inv;
-    vec3 e = max(e0, e1);
-    float t1 = min(min(min(e.x, e.y), e.z), t_closest);
-    // 3. Walk.
-    precise vec3 entry = go + gd * t0;
-    int ci = rbvh_grid_cell(RBVH_COLUMNS, entry.x, int(lod.res_u) - 1);
-    int cj = rbvh_grid_cell(RBVH_COLUMNS, entry.y, int(lod.res_v) - 1);
-    int step_i = rbvh_grid_step(gd.x);
-    int step_j = rbvh_grid_step(gd.y);
-    float next_i = rbvh_grid_boundary_t(RBVH_COLUMNS, ci, step_i, go.x, inv.x);
-    float next_j = rbvh_grid_boundary_t(RBVH_COLUMNS, cj, step_j, go.y, inv.y);
-    float t_in = t0;
-    uint limit = lod.res_u + lod.res_v;
-    // A walk crosses at most res_u + res_v - 1 columns, so every normal ending is a `break`.
-    bool stopped = false;
-    for (uint n = 0u; n < limit; ++n) {
-        if (t_in > t1) {
-            stopped = true;
-            break;
-        }
-        columns += 1u;
-        float t_out = min(min(next_i, next_j), t1);
-        // 4. Column.
-        uint index = lod.base + 2u * (uint(cj) * lod.res_u + uint(ci));
-        bool inside = index + 1u < lsz.texel_len;
-        uint top_word = inside ? RBVH_LOD_TEXEL(index) : RBVH_HOLE_CODE;
-        uint bottom_word = inside ? RBVH_LOD_TEXEL(index + 1u) : RBVH_HOLE_CODE;
-        if (!rbvh_is_hole(top_word)) {
-            precise float top = float(top_word & 0xFFFFu) * lod.h_scale;
-            precise float bottom = float(bottom_word & 0xFFFFu) * lod.h_scale;
-            float za = rbvh_height_at(go.z, gd.z, t_in);
-            float zb = rbvh_height_at(go.z, gd.z, t_out);
-            if (max(za, zb) >= bottom && min(za, zb) <= top) {
-                precise float t_top = (top - go.z) * inv.z;
-                precise float t_bottom = (bottom - go.z) * inv.z;
-                precise float to_top = top - za;
-                precise float to_bottom = za - bottom;
-                float t = za > top ? t_top : (za < bottom ? t_bottom : t_in);
-                bool use_top = za > top || (za >= bottom && to_top <= to_bottom);
-                normal_texel = use_top ? top_word : bottom_word;
-                return min(max(t, t_in), t_out);
-            }
-        }
-        bool across_i = next_i <= next_j;
-        int step = across_i ? step_i : step_j;
-        if (step == 0) {
-            stopped = true;
-            break;
-        }
-        if (across_i) {
-            ci += step_i;
-            t_in = next_i;
-            if (ci < 0 || ci >= int(lod.res_u)) {
+    float t0 = 0.0;
+    bool box = rbvh_intersect_box(bmin, bmax, go, inv, ray.tmin, t_closest, t0);
+    if (usable && box) {
+        RBVH_COUNT_ADD(walks, 1u);
+        precise vec3 e0 = (bmin - go) * inv;
+        precise vec3 e1 = (bmax - go) * inv;
+        vec3 e = max(e0, e1);
+        float t1 = min(min(min(e.x, e.y), e.z), t_closest);
+        // 3. Walk.
+        precise vec3 entry = go + gd * t0;
+        int ci = rbvh_grid_cell(RBVH_COLUMNS, entry.x, int(lod.res_u) - 1);
+        int cj = rbvh_grid_cell(RBVH_COLUMNS, entry.y, int(lod.res_v) - 1);
+        int step_i = rbvh_grid_step(gd.x);
+        int step_j = rbvh_grid_step(gd.y);
+        float next_i = rbvh_grid_boundary_t(RBVH_COLUMNS, ci, step_i, go.x, inv.x);
+        float next_j = rbvh_grid_boundary_t(RBVH_COLUMNS, cj, step_j, go.y, inv.y);
+        float t_in = t0;
+        uint limit = lod.res_u + lod.res_v;
+        // A walk crosses at most res_u + res_v - 1 columns, so every normal ending is a `break`.
+        bool stopped = false;
+        for (uint n = 0u; n < limit; ++n) {
+            if (t_in > t1) {
                 stopped = true;
                 break;
             }
-            next_i = rbvh_grid_boundary_t(RBVH_COLUMNS, ci, step_i, go.x, inv.x);
-        } else {
-            cj += step_j;
-            t_in = next_j;
-            if (cj < 0 || cj >= int(lod.res_v)) {
+            columns += 1u;
+            float t_out = min(min(next_i, next_j), t1);
+            // 4. Column.
+            uint index = lod.base + 2u * (uint(cj) * lod.res_u + uint(ci));
+            bool inside = index + 1u < lsz.texel_len;
+            uint top_word = inside ? RBVH_LOD_TEXEL(index) : RBVH_HOLE_CODE;
+            uint bottom_word = inside ? RBVH_LOD_TEXEL(index + 1u) : RBVH_HOLE_CODE;
+            if (!rbvh_is_hole(top_word)) {
+                precise float top = float(top_word & 0xFFFFu) * lod.h_scale;
+                precise float bottom = float(bottom_word & 0xFFFFu) * lod.h_scale;
+                float za = rbvh_height_at(go.z, gd.z, t_in);
+                float zb = rbvh_height_at(go.z, gd.z, t_out);
+                if (max(za, zb) >= bottom && min(za, zb) <= top) {
+                    precise float t_top = (top - go.z) * inv.z;
+                    precise float t_bottom = (bottom - go.z) * inv.z;
+                    precise float to_top = top - za;
+                    precise float to_bottom = za - bottom;
+                    float t = za > top ? t_top : (za < bottom ? t_bottom : t_in);
+                    bool use_top = za > top || (za >= bottom && to_top <= to_bottom);
+                    normal_texel = use_top ? top_word : bottom_word;
+                    t_hit = min(max(t, t_in), t_out);
+                    stopped = true;
+                    break;
+                }
+            }
+            bool across_i = next_i <= next_j;
+            int step = across_i ? step_i : step_j;
+            if (step == 0) {
                 stopped = true;
                 break;
             }
-            next_j = rbvh_grid_boundary_t(RBVH_COLUMNS, cj, step_j, go.y, inv.y);
+            if (across_i) {
+                ci += step_i;
+                t_in = next_i;
+                if (ci < 0 || ci >= int(lod.res_u)) {
+                    stopped = true;
+                    break;
+                }
+                next_i = rbvh_grid_boundary_t(RBVH_COLUMNS, ci, step_i, go.x, inv.x);
+            } else {
+                cj += step_j;
+                t_in = next_j;
+                if (cj < 0 || cj >= int(lod.res_v)) {
+                    stopped = true;
+                    break;
+                }
+                next_j = rbvh_grid_boundary_t(RBVH_COLUMNS, cj, step_j, go.y, inv.y);
+            }
+        }
+        if (!stopped) {
+            cut = true;
         }
     }
-    if (!stopped) {
-        cut = true;
-    }
-    return -1.0;
+    return t_hit;
 }
 
 // The level-of-detail leaf hook for traverse.glsl (LodLeaves in src/lod/trace.rs): an inner child
@@ -214,24 +212,24 @@ uint rbvh_enter(RbvhLodLeafHook leaves, uint child, uint count, float t_entry) {
 
 bool rbvh_test(inout RbvhLodLeafHook leaves, Ray ray, bool any_hit, uint reference, uint count,
                inout float t_closest, inout uint steps, inout bool cut) {
+    bool hit = false;
     if ((reference & RBVH_LOD_BIT) == 0u) {
-        return rbvh_test(leaves.rbvh, ray, any_hit, reference, count, t_closest, steps, cut);
+        hit = rbvh_test(leaves.rbvh, ray, any_hit, reference, count, t_closest, steps, cut);
+    } else {
+        RBVH_COUNT_ADD(leaves, 1u);
+        uint columns = 0u;
+        uint normal_texel;
+        float t = rbvh_lod_march(reference & ~RBVH_LOD_BIT, leaves.lsz, ray, t_closest, columns, normal_texel, cut);
+        steps += columns;
+        RBVH_COUNT_ADD(cells, columns);
+        hit = t >= 0.0;
+        if (hit) {
+            t_closest = t;
+            leaves.rbvh.best = RBVH_LEAF_BIT | reference;
+            leaves.rbvh.best_normal = uvec2(normal_texel, 0u);
+        }
     }
-    RBVH_COUNT_ADD(leaves, 1u);
-    uint columns = 0u;
-    uint normal_texel;
-    float t = rbvh_lod_march(reference & ~RBVH_LOD_BIT, leaves.lsz, ray, t_closest, columns, normal_texel, cut);
-    steps += columns;
-    RBVH_COUNT_ADD(cells, columns);
-    if (t < 0.0) {
-        return false;
-    }
-    t_closest = t;
-    leaves.rbvh.best_id = RBVH_LEAF_BIT | reference;
-    leaves.rbvh.best_slot = RBVH_INVALID;
-    leaves.rbvh.best_normal = uvec2(normal_texel, 0u);
-    leaves.rbvh.best_facet = vec3(0.0);
-    return true;
+    return hit;
 }
 
 #define RBVH_TRAVERSE rbvh_traverse_rbvh_lod
@@ -246,7 +244,7 @@ Hit rbvh_trace_rbvh_lod(Ray ray, vec2 cone, bool any_hit, RbvhSizes sz, RbvhLodS
                         out uint steps, out bool overflow) {
     RbvhLodLeafHook leaves = RbvhLodLeafHook(rbvh_leaf_hook(sz), lsz, cone);
     float t = rbvh_traverse_rbvh_lod(ray, any_hit, leaves, steps, overflow);
-    return rbvh_rbvh_hit(leaves.rbvh, t, ray.dir);
+    return rbvh_rbvh_hit(leaves.rbvh, t, ray);
 }
 
 #endif

@@ -144,18 +144,64 @@ struct RbvhFrameRay {
     float tmax;
 };
 
+// `ray` over [tmin, t_closest) in `leaf`'s frame (step 1 of march.rs): each coordinate summed in
+// the host's order.
+RbvhFrameRay rbvh_frame_ray(RbvhLeaf leaf, Ray ray, float t_closest) {
+    precise vec3 rel = ray.origin - leaf.origin;
+    precise vec3 ru = rel * leaf.axis_u;
+    precise vec3 rv = rel * leaf.axis_v;
+    precise vec3 rw = rel * leaf.axis_w;
+    precise vec3 du = ray.dir * leaf.axis_u;
+    precise vec3 dv = ray.dir * leaf.axis_v;
+    precise vec3 dw = ray.dir * leaf.axis_w;
+    RbvhFrameRay fr;
+    fr.o = vec3((ru.x + ru.y) + ru.z, (rv.x + rv.y) + rv.z, (rw.x + rw.y) + rw.z);
+    fr.d = vec3((du.x + du.y) + du.z, (dv.x + dv.y) + dv.z, (dw.x + dw.y) + dw.z);
+    fr.tmin = ray.tmin;
+    fr.tmax = t_closest;
+    return fr;
+}
+
 // One cell of the walk: its indices, the ray's parameter range over it, and its four corners'
-// height codes as the walk read them (rbvh_texel).
+// height codes as the walk read them (rbvh_texel), two 16-bit codes a word (c00 | c10 << 16,
+// c01 | c11 << 16): the walk carries them from cell to cell, and on a GPU a word is a register
+// (AMD's compiler reads a half-word as an operand at no cost).
 struct RbvhCell {
     int i;
     int j;
     float t_in;
     float t_out;
-    uint c00;
-    uint c10;
-    uint c01;
-    uint c11;
+    uint c00_c10;
+    uint c01_c11;
 };
+
+uint rbvh_c00(RbvhCell cell) {
+    return cell.c00_c10 & 0xFFFFu;
+}
+
+uint rbvh_c10(RbvhCell cell) {
+    return cell.c00_c10 >> 16;
+}
+
+uint rbvh_c01(RbvhCell cell) {
+    return cell.c01_c11 & 0xFFFFu;
+}
+
+uint rbvh_c11(RbvhCell cell) {
+    return cell.c01_c11 >> 16;
+}
+
+// Whether all four corners of `cell` are samples (two triangles), not holes.
+bool rbvh_cell_full(RbvhCell cell) {
+    return !rbvh_is_hole(rbvh_c00(cell)) && !rbvh_is_hole(rbvh_c10(cell)) && !rbvh_is_hole(rbvh_c01(cell)) &&
+           !rbvh_is_hole(rbvh_c11(cell));
+}
+
+// `cell` with the codes of its corners read from `leaf`'s tile.
+void rbvh_read_corners(RbvhLeaf leaf, RbvhSizes sz, inout RbvhCell cell) {
+    cell.c00_c10 = rbvh_texel(leaf, sz, cell.i, cell.j) | rbvh_texel(leaf, sz, cell.i + 1, cell.j) << 16;
+    cell.c01_c11 = rbvh_texel(leaf, sz, cell.i, cell.j + 1) | rbvh_texel(leaf, sz, cell.i + 1, cell.j + 1) << 16;
+}
 
 // Step 4 of march.rs, its cheap half: reads the cell's corners and tells whether its triangles
 // can be hit at all — three or four corners present, and the ray's height over
@@ -163,106 +209,96 @@ struct RbvhCell {
 // arrays: dynamically indexed arrays become per-lane memory on SIMD implementations such as
 // lavapipe.
 bool rbvh_cell_candidate(RbvhLeaf leaf, RbvhSizes sz, RbvhFrameRay fr, float slack, inout RbvhCell cell) {
-    cell.c00 = rbvh_texel(leaf, sz, cell.i, cell.j);
-    cell.c10 = rbvh_texel(leaf, sz, cell.i + 1, cell.j);
-    cell.c01 = rbvh_texel(leaf, sz, cell.i, cell.j + 1);
-    cell.c11 = rbvh_texel(leaf, sz, cell.i + 1, cell.j + 1);
-    bool v00 = !rbvh_is_hole(cell.c00);
-    bool v10 = !rbvh_is_hole(cell.c10);
-    bool v01 = !rbvh_is_hole(cell.c01);
-    bool v11 = !rbvh_is_hole(cell.c11);
-    if (int(v00) + int(v10) + int(v01) + int(v11) < 3) {
-        return false;
-    }
-    precise float h00 = float(cell.c00 & 0xFFFFu) * leaf.h_scale;
-    precise float h10 = float(cell.c10 & 0xFFFFu) * leaf.h_scale;
-    precise float h01 = float(cell.c01 & 0xFFFFu) * leaf.h_scale;
-    precise float h11 = float(cell.c11 & 0xFFFFu) * leaf.h_scale;
+    rbvh_read_corners(leaf, sz, cell);
+    bool v00 = !rbvh_is_hole(rbvh_c00(cell));
+    bool v10 = !rbvh_is_hole(rbvh_c10(cell));
+    bool v01 = !rbvh_is_hole(rbvh_c01(cell));
+    bool v11 = !rbvh_is_hole(rbvh_c11(cell));
+    bool enough = int(v00) + int(v10) + int(v01) + int(v11) >= 3;
+    precise float h00 = float(rbvh_c00(cell)) * leaf.h_scale;
+    precise float h10 = float(rbvh_c10(cell)) * leaf.h_scale;
+    precise float h01 = float(rbvh_c01(cell)) * leaf.h_scale;
+    precise float h11 = float(rbvh_c11(cell)) * leaf.h_scale;
     float lo = min(min(v00 ? h00 : RBVH_INF, v10 ? h10 : RBVH_INF), min(v01 ? h01 : RBVH_INF, v11 ? h11 : RBVH_INF));
     float hi = max(max(v00 ? h00 : -RBVH_INF, v10 ? h10 : -RBVH_INF), max(v01 ? h01 : -RBVH_INF, v11 ? h11 : -RBVH_INF));
     float h_a = rbvh_height_at(fr.o.z, fr.d.z, cell.t_in);
     float h_b = rbvh_height_at(fr.o.z, fr.d.z, cell.t_out);
     precise float lo_s = lo - slack;
     precise float hi_s = hi + slack;
-    return !(max(h_a, h_b) < lo_s || min(h_a, h_b) > hi_s);
+    return enough && !(max(h_a, h_b) < lo_s || min(h_a, h_b) > hi_s);
 }
 
-// The first triangle of a cell with three or four corners present (`v..`, at points `p..`: in
-// the frame, or sheared for the ray): (c00, c10, c11) with all four, else the three present in
-// the cycle order c00, c10, c11, c01 (the winding stays the quad's), as `hit` and `surface_under`
-// in march.rs take it.
-void rbvh_first_triangle(bool v00, bool v10, bool v11, vec3 p00, vec3 p10, vec3 p01, vec3 p11,
-                         out vec3 a, out vec3 b, out vec3 c) {
-    a = v00 ? p00 : p10;
-    b = v00 ? (v10 ? p10 : p11) : p11;
-    c = (v00 && v10) ? (v11 ? p11 : p01) : p01;
+// Corner `q` of `cell` in the frame (0: c00, 1: c10, 2: c01, 3: c11), its height from its code,
+// as march.rs places samples, at i + 1/2: made one at a time where used.
+vec3 rbvh_cell_corner(RbvhLeaf leaf, RbvhCell cell, uint q) {
+    uint code = ((q & 2u) != 0u ? cell.c01_c11 : cell.c00_c10) >> ((q & 1u) << 4) & 0xFFFFu;
+    precise float h = float(code) * leaf.h_scale;
+    return vec3(float(cell.i + int(q & 1u)) + 0.5, float(cell.j + int(q >> 1)) + 0.5, h);
+}
+
+// The corners (rbvh_cell_corner's numbers) of the first triangle of a cell with three or four
+// corners present: (c00, c10, c11) with all four, else the three present in the cycle order c00,
+// c10, c11, c01 (the winding stays the quad's), as `hit` and `surface_under` in march.rs take
+// it. With all four, the second is (c00, c11, c01).
+uvec3 rbvh_first_triangle(RbvhCell cell) {
+    bool v00 = !rbvh_is_hole(rbvh_c00(cell));
+    bool v10 = !rbvh_is_hole(rbvh_c10(cell));
+    bool v11 = !rbvh_is_hole(rbvh_c11(cell));
+    return uvec3(v00 ? 0u : 1u, v00 ? (v10 ? 1u : 3u) : 3u, (v00 && v10) ? (v11 ? 3u : 2u) : 2u);
 }
 
 // Step 4 of march.rs, its costly half: the cell's two (or one) triangles; returns t (< 0 on a
-// miss) and, on a hit, the frame-space normal of the triangle hit, (b - a) x (c - a) of its
-// frame-space corners (used by height-only RBVHs). `cut` is set when the device ended the loop
-// early (see traverse.glsl).
-float rbvh_cell_triangles(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, out vec3 facet, inout bool cut) {
-    bool v00 = !rbvh_is_hole(cell.c00);
-    bool v10 = !rbvh_is_hole(cell.c10);
-    bool v01 = !rbvh_is_hole(cell.c01);
-    bool v11 = !rbvh_is_hole(cell.c11);
-    precise float h00 = float(cell.c00 & 0xFFFFu) * leaf.h_scale;
-    precise float h10 = float(cell.c10 & 0xFFFFu) * leaf.h_scale;
-    precise float h01 = float(cell.c01 & 0xFFFFu) * leaf.h_scale;
-    precise float h11 = float(cell.c11 & 0xFFFFu) * leaf.h_scale;
-    float s0 = float(cell.i) + 0.5;
-    float s1 = float(cell.i + 1) + 0.5;
-    float r0 = float(cell.j) + 0.5;
-    float r1 = float(cell.j + 1) + 0.5;
-    vec3 p00 = vec3(s0, r0, h00);
-    vec3 p10 = vec3(s1, r0, h10);
-    vec3 p01 = vec3(s0, r1, h01);
-    vec3 p11 = vec3(s1, r1, h11);
-    // The four corners in the ray's sheared frame once, for both triangles, rather than each
-    // triangle's three in its own test: the same values (those intersect_triangle in
-    // src/geom/triangle.rs makes of each corner), and far fewer live at once inside the walk
-    // (docs/speed.md, "What holds the RBVH tracer's registers").
+// miss) and, on a hit, which of them was hit (`tri`: 0 the first, 1 the second; see
+// rbvh_cell_facet). `cut` is set when the device ended the loop early (see traverse.glsl).
+float rbvh_cell_triangles(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, out int tri, inout bool cut) {
+    uvec3 first = rbvh_first_triangle(cell);
     RbvhShear shear = rbvh_shear(Ray(fr.o, fr.tmin, fr.d, fr.tmax));
-    vec3 q00 = rbvh_sheared(shear, p00);
-    vec3 q10 = rbvh_sheared(shear, p10);
-    vec3 q01 = rbvh_sheared(shear, p01);
-    vec3 q11 = rbvh_sheared(shear, p11);
-    vec3 a;
-    vec3 b;
-    vec3 c;
-    rbvh_first_triangle(v00, v10, v11, q00, q10, q01, q11, a, b, c);
-    // Then, with all four, (c00, c11, c01) when nearer; one call site for both triangles.
+    vec3 a = rbvh_sheared(shear, rbvh_cell_corner(leaf, cell, first.x));
+    vec3 b = rbvh_sheared(shear, rbvh_cell_corner(leaf, cell, first.y));
+    precise float w = b.x * a.y - b.y * a.x;
+    vec3 c = rbvh_sheared(shear, rbvh_cell_corner(leaf, cell, first.z));
+    precise float u = c.x * b.y - c.y * b.x;
+    precise float v = a.x * c.y - a.y * c.x;
+    vec3 d = rbvh_sheared(shear, rbvh_cell_corner(leaf, cell, 2u));
+    precise float u2 = d.x * c.y - d.y * c.x;
+    precise float v2 = a.x * d.y - a.y * d.x;
+    // One call site for both triangles: the second's corners' depths and edge functions take
+    // the first's places after it.
+    float b_z = b.z;
+    float c_z = c.z;
     float t_hit = -1.0;
-    facet = vec3(0.0);
-    int tris = (v00 && v10 && v01 && v11) ? 2 : 1;
+    tri = 0;
+    int tris = rbvh_cell_full(cell) ? 2 : 1;
     int k = 0;
     for (; k < tris; ++k) {
-        vec3 b_k = k == 0 ? b : q11;
-        vec3 c_k = k == 0 ? c : q01;
-        float t = rbvh_intersect_sheared(a, b_k, c_k, fr.tmin, t_hit >= 0.0 ? t_hit : fr.tmax);
+        float t = rbvh_intersect_edges(u, v, w, a.z, b_z, c_z, fr.tmin, t_hit >= 0.0 ? t_hit : fr.tmax);
         if (t >= 0.0) {
             t_hit = t;
-            if (RBVH_HEIGHT_ONLY) {
-                // The facet from the frame-space corners of the triangle hit.
-                vec3 pa;
-                vec3 pb;
-                vec3 pc;
-                rbvh_first_triangle(v00, v10, v11, p00, p10, p01, p11, pa, pb, pc);
-                vec3 pb_k = k == 0 ? pb : p11;
-                vec3 pc_k = k == 0 ? pc : p01;
-                precise vec3 e1 = pb_k - pa;
-                precise vec3 e2 = pc_k - pa;
-                precise vec3 n = vec3(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z,
-                                      e1.x * e2.y - e1.y * e2.x);
-                facet = n;
-            }
+            tri = k;
         }
+        precise float w2 = 0.0 - v;
+        u = u2;
+        v = v2;
+        w = w2;
+        b_z = c_z;
+        c_z = d.z;
     }
     if (k < tris) {
         cut = true;
     }
     return t_hit;
+}
+
+// The frame-space normal of triangle `tri` of `cell` (rbvh_cell_triangles): (b - a) x (c - a)
+// of its frame-space corners, for height-only RBVHs (facet_normal in march.rs).
+vec3 rbvh_cell_facet(RbvhLeaf leaf, RbvhCell cell, int tri) {
+    uvec3 first = rbvh_first_triangle(cell);
+    vec3 a = rbvh_cell_corner(leaf, cell, first.x);
+    vec3 b = rbvh_cell_corner(leaf, cell, tri == 0 ? first.y : 3u);
+    vec3 c = rbvh_cell_corner(leaf, cell, tri == 0 ? first.z : 2u);
+    precise vec3 e1 = b - a;
+    precise vec3 e2 = c - a;
+    return vec3(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
 }
 
 // The skirt of `full` texels under the edge from corner texel `ca` to `cb`, met at fraction `f`
@@ -295,15 +331,14 @@ bool rbvh_skirt_at(RbvhLeaf leaf, RbvhFrameRay fr, float slack, float uu, uint c
 // that edge are present: t_in on a hit, else -1.
 float rbvh_skirt(RbvhLeaf leaf, RbvhFrameRay fr, float slack, float uu, RbvhCell cell, int axis, int step) {
     bool across_s = axis == 0;
-    uint ca = across_s ? (step > 0 ? cell.c00 : cell.c10) : (step > 0 ? cell.c00 : cell.c01);
-    uint cb = across_s ? (step > 0 ? cell.c01 : cell.c11) : (step > 0 ? cell.c10 : cell.c11);
-    if (rbvh_is_hole(ca) || rbvh_is_hole(cb)) {
-        return -1.0;
-    }
+    uint ca = across_s ? (step > 0 ? rbvh_c00(cell) : rbvh_c10(cell)) : (step > 0 ? rbvh_c00(cell) : rbvh_c01(cell));
+    uint cb = across_s ? (step > 0 ? rbvh_c01(cell) : rbvh_c11(cell)) : (step > 0 ? rbvh_c10(cell) : rbvh_c11(cell));
+    bool present = !rbvh_is_hole(ca) && !rbvh_is_hole(cb);
     precise float at_s = fr.o.x + fr.d.x * cell.t_in;
     precise float at_t = fr.o.y + fr.d.y * cell.t_in;
     precise float along = across_s ? at_t - (float(cell.j) + 0.5) : at_s - (float(cell.i) + 0.5);
-    return rbvh_skirt_at(leaf, fr, slack, uu, ca, cb, along, RBVH_MARCH_SKIRT_TEXELS, cell.t_in) ? cell.t_in : -1.0;
+    bool hit = present && rbvh_skirt_at(leaf, fr, slack, uu, ca, cb, along, RBVH_MARCH_SKIRT_TEXELS, cell.t_in);
+    return hit ? cell.t_in : -1.0;
 }
 
 // The skirt under the diagonal of `cell`, whose corners are three samples and a hole
@@ -311,58 +346,31 @@ float rbvh_skirt(RbvhLeaf leaf, RbvhFrameRay fr, float slack, float uu, RbvhCell
 // diagonal that faces the hole, within [t_in, t_out], from the hole's side. That t on a hit,
 // else -1.
 float rbvh_diagonal_skirt(RbvhLeaf leaf, RbvhFrameRay fr, float slack, float uu, RbvhCell cell) {
-    bool h00 = rbvh_is_hole(cell.c00);
-    bool h01 = rbvh_is_hole(cell.c01);
-    bool h11 = rbvh_is_hole(cell.c11);
+    bool h00 = rbvh_is_hole(rbvh_c00(cell));
+    bool h01 = rbvh_is_hole(rbvh_c01(cell));
+    bool h11 = rbvh_is_hole(rbvh_c11(cell));
     // Through c10 and c01 (fs + ft = 1) for a hole at c00 or c11, else through c00 and c11.
     bool anti = h00 || h11;
-    uint ca = anti ? cell.c10 : cell.c00;
-    uint cb = anti ? cell.c01 : cell.c11;
+    uint ca = anti ? rbvh_c10(cell) : rbvh_c00(cell);
+    uint cb = anti ? rbvh_c01(cell) : rbvh_c11(cell);
     float side = (h00 || h01) ? -1.0 : 1.0;
     precise float fs0 = fr.o.x - (float(cell.i) + 0.5);
     precise float ft0 = fr.o.y - (float(cell.j) + 0.5);
     precise float q0 = anti ? (fs0 + ft0) - 1.0 : fs0 - ft0;
     precise float dq = anti ? fr.d.x + fr.d.y : fr.d.x - fr.d.y;
-    if (!(dq * side < 0.0)) {
-        return -1.0;
-    }
     precise float t = -q0 / dq;
-    if (!(t >= cell.t_in && t <= cell.t_out)) {
-        return -1.0;
-    }
+    bool crosses = dq * side < 0.0 && t >= cell.t_in && t <= cell.t_out;
     precise float f = anti ? ft0 + fr.d.y * t : fs0 + fr.d.x * t;
-    return rbvh_skirt_at(leaf, fr, slack, uu, ca, cb, f, RBVH_MARCH_DIAGONAL_SKIRT_TEXELS, t) ? t : -1.0;
+    bool hit = crosses && rbvh_skirt_at(leaf, fr, slack, uu, ca, cb, f, RBVH_MARCH_DIAGONAL_SKIRT_TEXELS, t);
+    return hit ? t : -1.0;
 }
 
-// The frame-space normal of a skirt hit at t in `cell` for height-only texels: the facet of the
-// cell's triangle over the point (surface_under in march.rs): with four corners (c00, c10, c11)
-// where s >= t within the cell, else (c00, c11, c01); with three, the one triangle.
-vec3 rbvh_skirt_facet(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, float t) {
-    bool v00 = !rbvh_is_hole(cell.c00);
-    bool v10 = !rbvh_is_hole(cell.c10);
-    bool v01 = !rbvh_is_hole(cell.c01);
-    bool v11 = !rbvh_is_hole(cell.c11);
-    float s0 = float(cell.i) + 0.5;
-    float s1 = float(cell.i + 1) + 0.5;
-    float r0 = float(cell.j) + 0.5;
-    float r1 = float(cell.j + 1) + 0.5;
-    vec3 p00 = vec3(s0, r0, float(cell.c00 & 0xFFFFu) * leaf.h_scale);
-    vec3 p10 = vec3(s1, r0, float(cell.c10 & 0xFFFFu) * leaf.h_scale);
-    vec3 p01 = vec3(s0, r1, float(cell.c01 & 0xFFFFu) * leaf.h_scale);
-    vec3 p11 = vec3(s1, r1, float(cell.c11 & 0xFFFFu) * leaf.h_scale);
-    vec3 a;
-    vec3 b;
-    vec3 c;
-    rbvh_first_triangle(v00, v10, v11, p00, p10, p01, p11, a, b, c);
-    precise float fs = (fr.o.x + fr.d.x * t) - s0;
-    precise float ft = (fr.o.y + fr.d.y * t) - r0;
-    if (v00 && v10 && v01 && v11 && fs < ft) {
-        b = p11;
-        c = p01;
-    }
-    precise vec3 e1 = b - a;
-    precise vec3 e2 = c - a;
-    return vec3(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
+// Which of `cell`'s triangles holds a skirt hit at t, for its facet (surface_under in march.rs):
+// with four corners the second, (c00, c11, c01), where s < t within the cell, else the first.
+int rbvh_skirt_triangle(RbvhFrameRay fr, RbvhCell cell, float t) {
+    precise float fs = (fr.o.x + fr.d.x * t) - (float(cell.i) + 0.5);
+    precise float ft = (fr.o.y + fr.d.y * t) - (float(cell.j) + 0.5);
+    return rbvh_cell_full(cell) && fs < ft ? 1 : 0;
 }
 
 // Step 5 of march.rs, its first half: where in `cell` a hit at `t_hit` lies and which corners it
@@ -375,9 +383,9 @@ uint rbvh_cell_normal_choice(RbvhFrameRay fr, RbvhCell cell, float t_hit) {
     precise float r = fr.o.y + fr.d.y * t_hit;
     bool right = clamp(floor(s), float(cell.i), float(cell.i + 1)) > float(cell.i);
     bool up = clamp(floor(r), float(cell.j), float(cell.j + 1)) > float(cell.j);
-    return uint(right) | uint(up) << 1 | uint(!rbvh_is_hole(cell.c00)) << 2
-        | uint(!rbvh_is_hole(cell.c10)) << 3 | uint(!rbvh_is_hole(cell.c01)) << 4
-        | uint(!rbvh_is_hole(cell.c11)) << 5;
+    return uint(right) | uint(up) << 1 | uint(!rbvh_is_hole(rbvh_c00(cell))) << 2
+        | uint(!rbvh_is_hole(rbvh_c10(cell))) << 3 | uint(!rbvh_is_hole(rbvh_c01(cell))) << 4
+        | uint(!rbvh_is_hole(rbvh_c11(cell))) << 5;
 }
 
 // Step 5 of march.rs, its second half: the texel whose normal a hit reports, given its cell's
@@ -415,13 +423,22 @@ uint rbvh_normal_texel(RbvhSizes sz, uint k00, uint choice, vec3 dir) {
 int rbvh_walk_start(float entry, int step, int last, float o, float inv, float d, float t0, float slack) {
     int c = rbvh_grid_cell(RBVH_BETWEEN_SAMPLES, entry, last);
     int back = c - step;
+    // One return: an early one leaves, once inlined into the traversal's loop, a value the
+    // compiler carries from one leaf to the next.
+    bool behind = false;
     if (step != 0 && back >= 0 && back <= last) {
         precise float gap = (t0 - rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, back, step, o, inv)) * abs(d);
-        if (gap <= slack) {
-            return back;
-        }
+        behind = gap <= slack;
     }
-    return c;
+    return behind ? back : c;
+}
+
+// A skirt's depth in frame units, with a margin for the square root's rounding (skirt_h in
+// march.rs; `uu` = |axis_u|^2): made where a block or a rim cell is checked rather than kept
+// through the walk, where it would hold a register.
+float rbvh_skirt_height(float uu) {
+    precise float h = 1.001 * RBVH_MARCH_SKIRT_TEXELS / sqrt(uu);
+    return h;
 }
 
 // The walk's loop bound: twice the (res_u - 1) + (res_v - 1) - 1 cells a walk can step through,
@@ -431,58 +448,95 @@ uint rbvh_walk_bound(int last_i, int last_j) {
     return 2u * uint(last_i + last_j + 1);
 }
 
-// Marches leaf `li` over [tmin, t_closest); returns t (< 0 on a miss) and, on a hit, where its
-// normal's texel is (`normal_cell`: the cell's c00 atlas index and rbvh_cell_normal_choice, for
-// rbvh_normal_texel once the ray is done), or with RBVH_HEIGHT_ONLY the world normal of the cell
-// triangle hit (`facet_normal`, as facet_normal in march.rs). `cells` counts
-// cells visited. `cut` is set when the device ended a loop early (see traverse.glsl).
-float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cells, out uvec2 normal_cell,
-                 out vec3 facet_normal, inout bool cut) {
-    normal_cell = uvec2(0u);
-    facet_normal = vec3(0.0);
-    if (li >= sz.leaf_count) {
-        return -1.0;
-    }
-    RbvhLeaf leaf = RBVH_LEAF(li);
-    if (leaf.res_u < 2u || leaf.res_v < 2u || leaf.res_u > sz.atlas_pitch) {
-        return -1.0;
-    }
-    // The tile's corner in the atlas. The pitch is a power of two (the builder makes it one, and
-    // the file reader and the upload refuse any other), which spares divisions: SIMD
-    // implementations such as lavapipe run both sides of a branch, and a vector division there is
-    // eight scalar ones. A tile must not wrap across atlas rows (as in tile_fits of march.rs): the
-    // block jumps below count on it.
-    if (sz.atlas_pitch == 0u || (sz.atlas_pitch & (sz.atlas_pitch - 1u)) != 0u) {
-        return -1.0;
-    }
-    uint shift = uint(findLSB(sz.atlas_pitch));
-    uint tile_u = leaf.atlas_base & (sz.atlas_pitch - 1u);
-    uint tile_v = leaf.atlas_base >> shift;
-    uint rows = sz.atlas_len >> shift;
-    if (tile_u + leaf.res_u > sz.atlas_pitch) {
-        return -1.0;
-    }
+// The walk's steps along s and t (-1, 0, 1) and the edge the current main cell was entered
+// across (0: s, 1: t, -1: none), two bits each, and its flags, in one word: on a GPU each value
+// the walk carries from cell to cell holds a register through it (docs/speed.md, "What holds the
+// RBVH tracer's registers").
+// The current cell is the extra one across a grid vertex (rbvh_walk_cell).
+const uint RBVH_WALK_EXTRA = 64u;
+// The last main cell walked had fewer than four samples, or there was none (prev_open in
+// march.rs, which says why, and why a block jump may leave it as it was).
+const uint RBVH_WALK_PREV_OPEN = 128u;
+// Why the inner loop handed the cell to the outer one: its triangles may be hit (TESTS), or its
+// skirts (RIM: under the edge it was entered across, EDGE_RIM, or its diagonal, DIAGONAL).
+const uint RBVH_WALK_TESTS = 256u;
+const uint RBVH_WALK_RIM = 512u;
+const uint RBVH_WALK_EDGE_RIM = 1024u;
+const uint RBVH_WALK_DIAGONAL = 2048u;
+const uint RBVH_WALK_FOUND = RBVH_WALK_TESTS | RBVH_WALK_RIM | RBVH_WALK_EDGE_RIM | RBVH_WALK_DIAGONAL;
+// The walk ended on its own (a hit, or the ray left the tile), not by a loop the device cut.
+const uint RBVH_WALK_STOPPED = 4096u;
+
+uint rbvh_walk_dirs(int step_i, int step_j, int entered) {
+    return uint(step_i + 1) | uint(step_j + 1) << 2 | uint(entered + 1) << 4 | RBVH_WALK_PREV_OPEN;
+}
+
+int rbvh_walk_step_i(uint dirs) {
+    return int(dirs & 3u) - 1;
+}
+
+int rbvh_walk_step_j(uint dirs) {
+    return int((dirs >> 2) & 3u) - 1;
+}
+
+int rbvh_walk_entered(uint dirs) {
+    return int((dirs >> 4) & 3u) - 1;
+}
+
+uint rbvh_walk_entered_across(uint dirs, int entered) {
+    return (dirs & ~(3u << 4)) | uint(entered + 1) << 4;
+}
+
+bool rbvh_walk_extra(uint dirs) {
+    return (dirs & RBVH_WALK_EXTRA) != 0u;
+}
+
+// The cell the walk is on (its codes not yet read): the main cell (ci, cj), entered at t_in, or,
+// with RBVH_WALK_EXTRA, the extra cell across the grid vertex the ray passes next, before the
+// step (the walk of march.rs). Made from the walk's state where needed rather than carried
+// beside it.
+RbvhCell rbvh_walk_cell(int ci, int cj, uint dirs, float t_in, float next_i, float next_j, float t1) {
+    float t_next = min(min(next_i, next_j), t1);
+    bool extra = rbvh_walk_extra(dirs);
+    bool across_s = next_i <= next_j;
+    int i = extra && !across_s ? ci + rbvh_walk_step_i(dirs) : ci;
+    int j = extra && across_s ? cj + rbvh_walk_step_j(dirs) : cj;
+    return RbvhCell(i, j, extra ? t_next : t_in, extra ? min(max(next_i, next_j), t1) : t_next, 0u, 0u);
+}
+
+// Whether `leaf`'s tile lies within the atlas as the march needs it (tile_fits in march.rs):
+// two samples or more each way, a power-of-two pitch (the builder makes it one, and the file
+// reader and the upload refuse any other; it spares divisions: SIMD implementations such as
+// lavapipe run both sides of a branch, and a vector division there is eight scalar ones), no
+// wrap across atlas rows (the block jumps count on it), and its last texel in the atlas.
+bool rbvh_tile_fits(RbvhLeaf leaf, RbvhSizes sz) {
+    bool pitch = sz.atlas_pitch != 0u && (sz.atlas_pitch & (sz.atlas_pitch - 1u)) == 0u;
+    bool sides = leaf.res_u >= 2u && leaf.res_v >= 2u && leaf.res_u <= sz.atlas_pitch;
+    bool row = (leaf.atlas_base & (sz.atlas_pitch - 1u)) + leaf.res_u <= sz.atlas_pitch;
     uint last_texel = leaf.atlas_base + (leaf.res_v - 1u) * sz.atlas_pitch + (leaf.res_u - 1u);
-    if (last_texel >= sz.atlas_len || last_texel < leaf.atlas_base) {
-        return -1.0;
+    return pitch && sides && row && last_texel < sz.atlas_len && last_texel >= leaf.atlas_base;
+}
+
+// Marches leaf `li` over [tmin, t_closest); returns t (< 0 on a miss) and, on a hit, where its
+// normal comes from (`normal_cell`): the cell's c00 atlas index, and rbvh_cell_normal_choice, or
+// with RBVH_HEIGHT_ONLY 1 + which of the cell's triangles was hit (0, 1) or 3 for a skirt, for
+// rbvh_height_field_facet once the ray is done. `cells` counts cells visited. `cut` is set when
+// the device ended a loop early (see traverse.glsl).
+//
+// Written with one return, as are the helpers the walk inlines: an early return leaves, once
+// inlined into the traversal's loop, values the compiler carries from one leaf to the next, each a
+// register through the walk (docs/speed.md, "What holds the RBVH tracer's registers").
+float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells, out uvec2 normal_cell,
+                 inout bool cut) {
+    cells = 0u;
+    normal_cell = uvec2(0u);
+    float t_hit = -1.0;
+    RbvhLeaf leaf = RbvhLeaf(vec3(0.0), 0u, vec3(0.0), 0u, vec3(0.0), 0u, vec3(0.0), 0.0);
+    if (li < sz.leaf_count) {
+        leaf = RBVH_LEAF(li);
     }
     // 1. Frame.
-    precise vec3 rel = ray.origin - leaf.origin;
-    precise vec3 ru = rel * leaf.axis_u;
-    precise vec3 rv = rel * leaf.axis_v;
-    precise vec3 rw = rel * leaf.axis_w;
-    precise vec3 du = ray.dir * leaf.axis_u;
-    precise vec3 dv = ray.dir * leaf.axis_v;
-    precise vec3 dw = ray.dir * leaf.axis_w;
-    RbvhFrameRay fr;
-    fr.o = vec3((ru.x + ru.y) + ru.z, (rv.x + rv.y) + rv.z, (rw.x + rw.y) + rw.z);
-    fr.d = vec3((du.x + du.y) + du.z, (dv.x + dv.y) + dv.z, (dw.x + dw.y) + dw.z);
-    fr.tmin = ray.tmin;
-    fr.tmax = t_closest;
-    Ray frame = Ray(fr.o, fr.tmin, fr.d, fr.tmax);
-    if (!rbvh_ray_valid(frame)) {
-        return -1.0;
-    }
+    RbvhFrameRay fr = rbvh_frame_ray(leaf, ray, t_closest);
     vec3 o = fr.o;
     vec3 d = fr.d;
     vec3 inv = rbvh_safe_inverse(d);
@@ -492,305 +546,283 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, inout uint cel
     vec3 bmin = vec3(0.5 - RBVH_MARCH_EDGE_PAD, 0.5 - RBVH_MARCH_EDGE_PAD, -slack);
     precise vec3 bmax = vec3(float(leaf.res_u) - 0.5 + RBVH_MARCH_EDGE_PAD,
                              float(leaf.res_v) - 0.5 + RBVH_MARCH_EDGE_PAD, h_top + slack);
-    float t0;
-    if (!rbvh_intersect_box(bmin, bmax, o, inv, fr.tmin, fr.tmax, t0)) {
-        return -1.0;
-    }
-    RBVH_COUNT_ADD(walks, 1u);
-    precise vec3 e0 = (bmin - o) * inv;
-    precise vec3 e1 = (bmax - o) * inv;
-    vec3 e = max(e0, e1);
-    float t1 = min(min(min(e.x, e.y), e.z), fr.tmax);
-    // The edge (0: s, 1: t, -1: none) the current cell was entered across, for the skirt: the
-    // first cell's when the ray enters the tile's box through its s or t side.
-    vec3 near = min(e0, e1);
-    int entered = t0 <= fr.tmin ? -1 : (t0 == near.x ? 0 : (t0 == near.y ? 1 : -1));
-    precise float uu = (leaf.axis_u.x * leaf.axis_u.x + leaf.axis_u.y * leaf.axis_u.y) + leaf.axis_u.z * leaf.axis_u.z;
-    precise float skirt_h = 1.001 * RBVH_MARCH_SKIRT_TEXELS / sqrt(uu);
+    float t0 = 0.0;
+    bool box = rbvh_intersect_box(bmin, bmax, o, inv, fr.tmin, fr.tmax, t0);
+    if (li < sz.leaf_count && rbvh_tile_fits(leaf, sz) && rbvh_ray_valid(Ray(fr.o, fr.tmin, fr.d, fr.tmax)) && box) {
+        RBVH_COUNT_ADD(walks, 1u);
+        uint shift = uint(findLSB(sz.atlas_pitch));
+        uint rows = sz.atlas_len >> shift;
+        precise vec3 e0 = (bmin - o) * inv;
+        precise vec3 e1 = (bmax - o) * inv;
+        vec3 e = max(e0, e1);
+        float t1 = min(min(min(e.x, e.y), e.z), fr.tmax);
+        // The edge (0: s, 1: t, -1: none) the current cell was entered across, for the skirt: the
+        // first cell's when the ray enters the tile's box through its s or t side.
+        vec3 near = min(e0, e1);
+        int entered = t0 <= fr.tmin ? -1 : (t0 == near.x ? 0 : (t0 == near.y ? 1 : -1));
+        precise float uu = (leaf.axis_u.x * leaf.axis_u.x + leaf.axis_u.y * leaf.axis_u.y) + leaf.axis_u.z * leaf.axis_u.z;
 
-    // 3. Walk.
-    int last_i = int(leaf.res_u) - 2;
-    int last_j = int(leaf.res_v) - 2;
-    precise vec3 entry = o + d * t0;
-    int step_i = rbvh_grid_step(d.x);
-    int step_j = rbvh_grid_step(d.y);
-    precise float corner_slack = RBVH_MARCH_SLACK * (((abs(o.x) + abs(o.y)) + float(leaf.res_u)) + float(leaf.res_v));
-    // Within rounding of the boundary behind the entry, the walk starts behind it (march.rs).
-    int ci = rbvh_walk_start(entry.x, step_i, last_i, o.x, inv.x, d.x, t0, corner_slack);
-    int cj = rbvh_walk_start(entry.y, step_j, last_j, o.y, inv.y, d.y, t0, corner_slack);
-    float next_i = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, ci, step_i, o.x, inv.x);
-    float next_j = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, cj, step_j, o.y, inv.y);
-    // The walk of march.rs: a main cell, then (when the ray passes a grid vertex too closely to
-    // resolve) the extra cell across it, then the step. "While-while" as in the traversal: the
-    // inner loop steps through cells while their cheap test (rbvh_cell_candidate) rejects them,
-    // and the outer loop tests the triangles of the cell that passes it, so that on SIMD
-    // hardware the triangle tests run once for the lanes that reached such a cell, not beside every
-    // step (on the dragon close-up at Q2, 1 in 3 cells of a primary ray passes, 1 in 24 of an AO
-    // ray). The step after a cell whose triangles missed opens the next inner round (`advance`).
-    // A single call site of each test keeps the inlined code from being duplicated.
-    // Block jumps (src/rbvh/ranges.rs): the blocks' height ranges follow the texels.
-    uint block_pitch = (sz.atlas_pitch + 7u) >> 3;
-    uint block_count = ((rows + 7u) >> 3) * block_pitch;
-    uint checked_block = 0xFFFFFFFFu;
-    float t_in = t0;
-    float t_out = t0;
-    RbvhCell cell = RbvhCell(ci, cj, t0, t0, 0u, 0u, 0u, 0u);
-    bool is_extra = false;
-    bool finished = false;
-    bool stopped = false;
-    bool advance = false;
-    bool skirt = false;
-    // Whether the last main cell walked had fewer than four samples, or there was none
-    // (prev_open in march.rs, which says why, and why a block jump may leave it as it was).
-    bool prev_open = true;
-    bool rim = false;
-    bool edge_rim = false;
-    bool diagonal = false;
-    bool tests = false;
-    float t_hit = -1.0;
-    vec3 facet = vec3(0.0);
-    uint n = 0u;
-    for (uint round = 0u; round < rbvh_walk_bound(last_i, last_j); ++round) {
-        bool candidate = false;
-        for (; n < rbvh_walk_bound(last_i, last_j); ++n) {
-            if (advance) {
-                if (is_extra) {
-                    is_extra = false;
-                    if (finished) {
-                        stopped = true;
-                        break;
-                    }
-                } else {
+        // 3. Walk.
+        int last_i = int(leaf.res_u) - 2;
+        int last_j = int(leaf.res_v) - 2;
+        precise vec3 entry = o + d * t0;
+        int step_i = rbvh_grid_step(d.x);
+        int step_j = rbvh_grid_step(d.y);
+        precise float corner_slack = RBVH_MARCH_SLACK * (((abs(o.x) + abs(o.y)) + float(leaf.res_u)) + float(leaf.res_v));
+        // Within rounding of the boundary behind the entry, the walk starts behind it (march.rs).
+        int ci = rbvh_walk_start(entry.x, step_i, last_i, o.x, inv.x, d.x, t0, corner_slack);
+        int cj = rbvh_walk_start(entry.y, step_j, last_j, o.y, inv.y, d.y, t0, corner_slack);
+        float next_i = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, ci, step_i, o.x, inv.x);
+        float next_j = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, cj, step_j, o.y, inv.y);
+        // The walk of march.rs: a main cell, then (when the ray passes a grid vertex too closely to
+        // resolve) the extra cell across it, then the step. "While-while" as in the traversal: the
+        // inner loop steps through cells while their cheap test (rbvh_cell_candidate) rejects them,
+        // and the outer loop tests the triangles of the cell that passes it, so that on SIMD
+        // hardware the triangle tests run once for the lanes that reached such a cell, not beside
+        // every step (on the dragon close-up at Q2, 1 in 3 cells of a primary ray passes, 1 in 24
+        // of an AO ray). The step after a cell whose triangles missed opens the next inner round.
+        // A single call site of each test keeps the inlined code from being duplicated. The walk
+        // carries only its position (ci, cj, next_i, next_j, t_in), `dirs`, the block checked, the
+        // cells walked and the codes of the cell handed to the outer loop; that cell is made anew
+        // from them (rbvh_walk_cell).
+        // Block jumps (src/rbvh/ranges.rs): the blocks' height ranges follow the texels.
+        uint block_pitch = (sz.atlas_pitch + 7u) >> 3;
+        uint block_count = ((rows + 7u) >> 3) * block_pitch;
+        uint checked_block = 0xFFFFFFFFu;
+        float t_in = t0;
+        // The codes of the cell that left the inner loop (RbvhCell's words).
+        uint c00_c10 = 0u;
+        uint c01_c11 = 0u;
+        uint dirs = rbvh_walk_dirs(step_i, step_j, entered);
+        // Both loops are bounded by the cells walked, which every round of either adds to or ends.
+        while (cells < rbvh_walk_bound(last_i, last_j)) {
+            dirs &= ~RBVH_WALK_FOUND;
+            while (cells < rbvh_walk_bound(last_i, last_j)) {
+                // Every round but the first steps from the cell before: to the extra cell across a
+                // grid vertex the ray passes within rounding of (march.rs walks it between the two
+                // main cells), else to the next main cell.
+                if (cells > 0u) {
                     bool across_s = next_i <= next_j;
-                    if (step_i != 0 && step_j != 0) {
-                        precise float gap = across_s ? (next_j - next_i) * abs(d.y) : (next_i - next_j) * abs(d.x);
-                        int xi = across_s ? ci : ci + step_i;
-                        int xj = across_s ? cj + step_j : cj;
-                        if (gap <= corner_slack && xi >= 0 && xi <= last_i && xj >= 0 && xj <= last_j) {
-                            is_extra = true;
-                            cell.i = xi;
-                            cell.j = xj;
-                            cell.t_in = t_out;
-                            cell.t_out = min(max(next_i, next_j), t1);
-                        }
-                    }
-                    if (across_s) {
-                        if (step_i == 0) {
-                            finished = true;
-                        } else {
-                            ci += step_i;
-                            t_in = next_i;
-                            entered = 0;
-                            if (ci < 0 || ci > last_i) {
+                    int step_i = rbvh_walk_step_i(dirs);
+                    int step_j = rbvh_walk_step_j(dirs);
+                    int xi = across_s ? ci : ci + step_i;
+                    int xj = across_s ? cj + step_j : cj;
+                    precise float gap = across_s ? (next_j - next_i) * abs(d.y) : (next_i - next_j) * abs(d.x);
+                    if (!rbvh_walk_extra(dirs) && step_i != 0 && step_j != 0 && gap <= corner_slack && xi >= 0 &&
+                        xi <= last_i && xj >= 0 && xj <= last_j) {
+                        dirs |= RBVH_WALK_EXTRA;
+                    } else {
+                        dirs &= ~RBVH_WALK_EXTRA;
+                        bool finished = false;
+                        if (across_s) {
+                            if (step_i == 0) {
                                 finished = true;
                             } else {
-                                next_i = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, ci, step_i, o.x, inv.x);
+                                ci += step_i;
+                                t_in = next_i;
+                                dirs = rbvh_walk_entered_across(dirs, 0);
+                                if (ci < 0 || ci > last_i) {
+                                    finished = true;
+                                } else {
+                                    next_i = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, ci, step_i, o.x, inv.x);
+                                }
+                            }
+                        } else {
+                            cj += step_j;
+                            t_in = next_j;
+                            dirs = rbvh_walk_entered_across(dirs, 1);
+                            if (cj < 0 || cj > last_j) {
+                                finished = true;
+                            } else {
+                                next_j = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, cj, step_j, o.y, inv.y);
                             }
                         }
-                    } else {
-                        cj += step_j;
-                        t_in = next_j;
-                        entered = 1;
-                        if (cj < 0 || cj > last_j) {
-                            finished = true;
-                        } else {
-                            next_j = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, cj, step_j, o.y, inv.y);
-                        }
-                    }
-                    if (finished && !is_extra) {
-                        stopped = true;
-                        break;
-                    }
-                }
-            }
-            advance = true;
-            if (!is_extra) {
-                // Past the box's exit, the cell stepped into within rounding of it is walked too.
-                if (t_in > t1) {
-                    precise float past = (t_in - t1) * abs(entered == 0 ? d.x : d.y);
-                    if (entered < 0 || !(past <= corner_slack)) {
-                        stopped = true;
-                        break;
-                    }
-                }
-                // On entering a block: if the ray passes wholly above or below its height range
-                // (with the cell test's slack), none of its cells can be hit, and the walk moves
-                // straight to the block's exit cell, as it would reach it cell by cell.
-                uint ax = tile_u + uint(ci);
-                uint ay = tile_v + uint(cj);
-                uint block = (ay >> 3) * block_pitch + (ax >> 3);
-                if (RBVH_BLOCK_JUMPS && block != checked_block && block < block_count) {
-                    checked_block = block;
-                    int i0 = int(ax & ~7u) - int(tile_u);
-                    int j0 = int(ay & ~7u) - int(tile_v);
-                    int edge_i = step_i > 0 ? min(i0 + 7, last_i) : max(i0, 0);
-                    int edge_j = step_j > 0 ? min(j0 + 7, last_j) : max(j0, 0);
-                    float leave_i = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, edge_i, step_i, o.x, inv.x);
-                    float leave_j = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, edge_j, step_j, o.y, inv.y);
-                    uint range = RBVH_ATLAS(rbvh_texel_words(sz) + block);
-                    uint code_lo = range & 0xFFFFu;
-                    uint code_hi = range >> 16;
-                    // Below by less than the skirt's depth, a block may hold a skirt hit (skirt_h
-                    // has a margin for the square root's rounding).
-                    precise float lo_s = float(code_lo) * leaf.h_scale - slack - skirt_h;
-                    precise float hi_s = float(code_hi) * leaf.h_scale + slack;
-                    float h_a = rbvh_height_at(o.z, d.z, t_in);
-                    float h_b = rbvh_height_at(o.z, d.z, min(min(leave_i, leave_j), t1));
-                    if (code_lo > code_hi || max(h_a, h_b) < lo_s || min(h_a, h_b) > hi_s) {
-                        RBVH_COUNT_ADD(jumps, 1u);
-                        if (t1 < min(leave_i, leave_j)) {
-                            stopped = true;
+                        if (finished) {
+                            dirs |= RBVH_WALK_STOPPED;
                             break;
                         }
-                        // Leaving through the i side (first on a tie, as the walk steps i
-                        // first): the j steps before it, then the step into the edge column; or
-                        // the same with i and j swapped. One loop for both sides: lavapipe runs
-                        // every loop at least once, whether or not a lane needs it.
-                        bool out_i = leave_i <= leave_j;
-                        int minor_step = out_i ? step_j : step_i;
-                        int major_step = out_i ? step_i : step_j;
-                        float leave = out_i ? leave_i : leave_j;
-                        int minor = out_i ? cj : ci;
-                        float next = out_i ? next_j : next_i;
-                        float minor_o = out_i ? o.y : o.x;
-                        float minor_inv = out_i ? inv.y : inv.x;
-                        float t_last = t_in;
-                        for (int m = 0; m < 8 && minor_step != 0 && (out_i ? next < leave : next <= leave); ++m) {
-                            t_last = next;
-                            entered = out_i ? 1 : 0;
-                            minor += minor_step;
-                            next = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, minor, minor_step, minor_o, minor_inv);
-                        }
-                        if (minor_step != 0 && (out_i ? next < leave : next <= leave)) {
-                            cut = true;  // ended early by the device
-                        }
-                        int major = out_i ? ci : cj;
-                        int edge = out_i ? edge_i : edge_j;
-                        float major_next = out_i ? next_i : next_j;
-                        if (major != edge) {
-                            float into_edge = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, edge - major_step, major_step,
-                                                                   out_i ? o.x : o.y, out_i ? inv.x : inv.y);
-                            if (into_edge >= t_last) {
-                                entered = out_i ? 0 : 1;
-                            }
-                            t_last = max(t_last, into_edge);
-                            major = edge;
-                            major_next = leave;
-                        }
-                        ci = out_i ? major : minor;
-                        cj = out_i ? minor : major;
-                        next_i = out_i ? major_next : next;
-                        next_j = out_i ? next : major_next;
-                        t_in = t_last;
                     }
                 }
-            }
-            t_out = min(min(next_i, next_j), t1);
-            if (!is_extra) {
-                cell.i = ci;
-                cell.j = cj;
-                cell.t_in = t_in;
-                cell.t_out = t_out;
-            }
-            cells += 1u;
-            tests = rbvh_cell_candidate(leaf, sz, fr, slack, cell);
-            // A main cell with a surface entered from one with a hole (or through the tile's
-            // side), or with three samples (its diagonal faces the hole), may hold a skirt hit:
-            // tested in the outer loop too, so that the inner one stays small.
-            rim = false;
-            if (!is_extra) {
-                int valid = int(!rbvh_is_hole(cell.c00)) + int(!rbvh_is_hole(cell.c10)) +
-                            int(!rbvh_is_hole(cell.c01)) + int(!rbvh_is_hole(cell.c11));
-                edge_rim = entered >= 0 && prev_open && valid >= 3;
-                diagonal = valid == 3;
-                prev_open = valid < 4;
-                rim = edge_rim || diagonal;
-                if (rim) {
-                    // Only a ray between the cell's lowest sample less the skirt's depth and its
-                    // highest sample can be caught by its skirts: the others need not leave the
-                    // inner loop. A hole's code is the largest, so it takes no part in the
-                    // highest. Each bound has a quantum beyond the skirt's own slack, against the
-                    // rounding of the edge's height there.
-                    uint code_lo = min(min(cell.c00 & 0xFFFFu, cell.c10 & 0xFFFFu), min(cell.c01 & 0xFFFFu, cell.c11 & 0xFFFFu));
-                    uint code_hi = max(max(rbvh_is_hole(cell.c00) ? 0u : cell.c00 & 0xFFFFu,
-                                           rbvh_is_hole(cell.c10) ? 0u : cell.c10 & 0xFFFFu),
-                                       max(rbvh_is_hole(cell.c01) ? 0u : cell.c01 & 0xFFFFu,
-                                           rbvh_is_hole(cell.c11) ? 0u : cell.c11 & 0xFFFFu));
-                    float h_in = rbvh_height_at(o.z, d.z, cell.t_in);
-                    float h_out = rbvh_height_at(o.z, d.z, cell.t_out);
-                    rim = max(h_in, h_out) >= float(code_lo) * leaf.h_scale - slack - skirt_h - abs(leaf.h_scale) &&
-                          min(h_in, h_out) <= float(code_hi) * leaf.h_scale + slack + abs(leaf.h_scale);
+                if (!rbvh_walk_extra(dirs)) {
+                    // Past the box's exit, the cell stepped into within rounding of it is walked too.
+                    if (t_in > t1) {
+                        precise float past = (t_in - t1) * abs(rbvh_walk_entered(dirs) == 0 ? d.x : d.y);
+                        if (rbvh_walk_entered(dirs) < 0 || !(past <= corner_slack)) {
+                            dirs |= RBVH_WALK_STOPPED;
+                            break;
+                        }
+                    }
+                    // On entering a block: if the ray passes wholly above or below its height range
+                    // (with the cell test's slack), none of its cells can be hit, and the walk moves
+                    // straight to the block's exit cell, as it would reach it cell by cell.
+                    uint k = leaf.atlas_base + uint(cj) * sz.atlas_pitch + uint(ci);
+                    uint ax = k & (sz.atlas_pitch - 1u);
+                    uint ay = k >> shift;
+                    uint block = (ay >> 3) * block_pitch + (ax >> 3);
+                    if (RBVH_BLOCK_JUMPS && block != checked_block && block < block_count) {
+                        checked_block = block;
+                        int step_i = rbvh_walk_step_i(dirs);
+                        int step_j = rbvh_walk_step_j(dirs);
+                        int i0 = ci - int(ax & 7u);
+                        int j0 = cj - int(ay & 7u);
+                        int edge_i = step_i > 0 ? min(i0 + 7, last_i) : max(i0, 0);
+                        int edge_j = step_j > 0 ? min(j0 + 7, last_j) : max(j0, 0);
+                        float leave_i = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, edge_i, step_i, o.x, inv.x);
+                        float leave_j = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, edge_j, step_j, o.y, inv.y);
+                        uint range = RBVH_ATLAS(rbvh_texel_words(sz) + block);
+                        uint code_lo = range & 0xFFFFu;
+                        uint code_hi = range >> 16;
+                        // Below by less than the skirt's depth, a block may hold a skirt hit (skirt_h
+                        // has a margin for the square root's rounding).
+                        precise float lo_s = float(code_lo) * leaf.h_scale - slack - rbvh_skirt_height(uu);
+                        precise float hi_s = float(code_hi) * leaf.h_scale + slack;
+                        float h_a = rbvh_height_at(o.z, d.z, t_in);
+                        float h_b = rbvh_height_at(o.z, d.z, min(min(leave_i, leave_j), t1));
+                        if (code_lo > code_hi || max(h_a, h_b) < lo_s || min(h_a, h_b) > hi_s) {
+                            RBVH_COUNT_ADD(jumps, 1u);
+                            if (t1 < min(leave_i, leave_j)) {
+                                dirs |= RBVH_WALK_STOPPED;
+                                break;
+                            }
+                            // Leaving through the i side (first on a tie, as the walk steps i
+                            // first): the j steps before it, then the step into the edge column; or
+                            // the same with i and j swapped. One loop for both sides: lavapipe runs
+                            // every loop at least once, whether or not a lane needs it.
+                            bool out_i = leave_i <= leave_j;
+                            int minor_step = out_i ? step_j : step_i;
+                            int major_step = out_i ? step_i : step_j;
+                            float leave = out_i ? leave_i : leave_j;
+                            int minor = out_i ? cj : ci;
+                            float next = out_i ? next_j : next_i;
+                            float minor_o = out_i ? o.y : o.x;
+                            float minor_inv = out_i ? inv.y : inv.x;
+                            float t_last = t_in;
+                            for (int m = 0; m < 8 && minor_step != 0 && (out_i ? next < leave : next <= leave); ++m) {
+                                t_last = next;
+                                dirs = rbvh_walk_entered_across(dirs, out_i ? 1 : 0);
+                                minor += minor_step;
+                                next = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, minor, minor_step, minor_o, minor_inv);
+                            }
+                            if (minor_step != 0 && (out_i ? next < leave : next <= leave)) {
+                                cut = true;  // ended early by the device
+                            }
+                            int major = out_i ? ci : cj;
+                            int edge = out_i ? edge_i : edge_j;
+                            float major_next = out_i ? next_i : next_j;
+                            if (major != edge) {
+                                float into_edge = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, edge - major_step, major_step,
+                                                                       out_i ? o.x : o.y, out_i ? inv.x : inv.y);
+                                if (into_edge >= t_last) {
+                                    dirs = rbvh_walk_entered_across(dirs, out_i ? 0 : 1);
+                                }
+                                t_last = max(t_last, into_edge);
+                                major = edge;
+                                major_next = leave;
+                            }
+                            ci = out_i ? major : minor;
+                            cj = out_i ? minor : major;
+                            next_i = out_i ? major_next : next;
+                            next_j = out_i ? next : major_next;
+                            t_in = t_last;
+                        }
+                    }
+                }
+                RbvhCell cell = rbvh_walk_cell(ci, cj, dirs, t_in, next_i, next_j, t1);
+                cells += 1u;
+                bool tests = rbvh_cell_candidate(leaf, sz, fr, slack, cell);
+                // A main cell with a surface entered from one with a hole (or through the tile's
+                // side), or with three samples (its diagonal faces the hole), may hold a skirt hit:
+                // tested in the outer loop too, so that the inner one stays small.
+                c00_c10 = cell.c00_c10;
+                c01_c11 = cell.c01_c11;
+                bool rim = false;
+                bool edge_rim = false;
+                bool diagonal = false;
+                if (!rbvh_walk_extra(dirs)) {
+                    int valid = int(!rbvh_is_hole(rbvh_c00(cell))) + int(!rbvh_is_hole(rbvh_c10(cell))) +
+                                int(!rbvh_is_hole(rbvh_c01(cell))) + int(!rbvh_is_hole(rbvh_c11(cell)));
+                    edge_rim = rbvh_walk_entered(dirs) >= 0 && (dirs & RBVH_WALK_PREV_OPEN) != 0u && valid >= 3;
+                    diagonal = valid == 3;
+                    dirs = valid < 4 ? dirs | RBVH_WALK_PREV_OPEN : dirs & ~RBVH_WALK_PREV_OPEN;
+                    rim = edge_rim || diagonal;
+                    if (rim) {
+                        // Only a ray between the cell's lowest sample less the skirt's depth and its
+                        // highest sample can be caught by its skirts: the others need not leave the
+                        // inner loop. A hole's code is the largest, so it takes no part in the
+                        // highest. Each bound has a quantum beyond the skirt's own slack, against the
+                        // rounding of the edge's height there.
+                        uint code_lo = min(min(rbvh_c00(cell), rbvh_c10(cell)), min(rbvh_c01(cell), rbvh_c11(cell)));
+                        uint code_hi = max(max(rbvh_is_hole(rbvh_c00(cell)) ? 0u : rbvh_c00(cell),
+                                               rbvh_is_hole(rbvh_c10(cell)) ? 0u : rbvh_c10(cell)),
+                                           max(rbvh_is_hole(rbvh_c01(cell)) ? 0u : rbvh_c01(cell),
+                                               rbvh_is_hole(rbvh_c11(cell)) ? 0u : rbvh_c11(cell)));
+                        float h_in = rbvh_height_at(o.z, d.z, cell.t_in);
+                        float h_out = rbvh_height_at(o.z, d.z, cell.t_out);
+                        precise float skirt_h = rbvh_skirt_height(uu);
+                        rim = max(h_in, h_out) >= float(code_lo) * leaf.h_scale - slack - skirt_h - abs(leaf.h_scale) &&
+                              min(h_in, h_out) <= float(code_hi) * leaf.h_scale + slack + abs(leaf.h_scale);
+                    }
+                }
+                if (tests || rim) {
+                    dirs |= (tests ? RBVH_WALK_TESTS : 0u) | (rim ? RBVH_WALK_RIM : 0u) |
+                            (edge_rim ? RBVH_WALK_EDGE_RIM : 0u) | (diagonal ? RBVH_WALK_DIAGONAL : 0u);
+                    break;
                 }
             }
-            if (tests || rim) {
-                candidate = true;
+            if ((dirs & RBVH_WALK_FOUND) == 0u) {
                 break;
             }
-        }
-        if (!candidate) {
-            break;
-        }
-        if (rim) {
-            float t_skirt = edge_rim ? rbvh_skirt(leaf, fr, slack, uu, cell, entered, entered == 0 ? step_i : step_j) : -1.0;
-            if (t_skirt < 0.0 && diagonal) {
-                t_skirt = rbvh_diagonal_skirt(leaf, fr, slack, uu, cell);
+            RbvhCell cell = rbvh_walk_cell(ci, cj, dirs, t_in, next_i, next_j, t1);
+            cell.c00_c10 = c00_c10;
+            cell.c01_c11 = c01_c11;
+            // What was hit: 0 or 1, the cell's first or second triangle; 2, a skirt.
+            int kind = 2;
+            float t = -1.0;
+            if ((dirs & RBVH_WALK_RIM) != 0u) {
+                int entered = rbvh_walk_entered(dirs);
+                int step = entered == 0 ? rbvh_walk_step_i(dirs) : rbvh_walk_step_j(dirs);
+                t = (dirs & RBVH_WALK_EDGE_RIM) != 0u ? rbvh_skirt(leaf, fr, slack, uu, cell, entered, step) : -1.0;
+                if (t < 0.0 && (dirs & RBVH_WALK_DIAGONAL) != 0u) {
+                    t = rbvh_diagonal_skirt(leaf, fr, slack, uu, cell);
+                }
             }
-            if (t_skirt >= 0.0) {
-                skirt = true;
-                t_hit = t_skirt;
-                stopped = true;
-                break;
+            if (t < 0.0 && (dirs & RBVH_WALK_TESTS) != 0u) {
+                RBVH_COUNT_ADD(cells_tested, 1u);
+                t = rbvh_cell_triangles(leaf, fr, cell, kind, cut);
             }
-        }
-        if (tests) {
-            RBVH_COUNT_ADD(cells_tested, 1u);
-            float t = rbvh_cell_triangles(leaf, fr, cell, facet, cut);
             if (t >= 0.0) {
+                // Where the hit's normal comes from, recorded here so that no cell outlives the walk.
+                uint k00 = leaf.atlas_base + uint(cell.j) * sz.atlas_pitch + uint(cell.i);
+                normal_cell = uvec2(k00, RBVH_HEIGHT_ONLY ? uint(1 + kind) : rbvh_cell_normal_choice(fr, cell, t));
                 t_hit = t;
-                stopped = true;
+                dirs |= RBVH_WALK_STOPPED;
                 break;
             }
         }
-        n += 1u;
-    }
-    if (!stopped && n < rbvh_walk_bound(last_i, last_j)) {
-        cut = true;
-    }
-    if (t_hit >= 0.0) {
-        if (RBVH_HEIGHT_ONLY && skirt) {
-            facet = rbvh_skirt_facet(leaf, fr, cell, t_hit);
-        }
-        if (RBVH_HEIGHT_ONLY) {
-            // The leaf's frame again (read anew rather than kept through the walk): normals map
-            // back by the frame's transpose.
-            RbvhLeaf frame_leaf = RBVH_LEAF(li);
-            precise vec3 n = (frame_leaf.axis_u * facet.x + frame_leaf.axis_v * facet.y) + frame_leaf.axis_w * facet.z;
-            facet_normal = normalize(n);
-        } else {
-            uint k00 = leaf.atlas_base + uint(cell.j) * sz.atlas_pitch + uint(cell.i);
-            normal_cell = uvec2(k00, rbvh_cell_normal_choice(fr, cell, t_hit));
+        if ((dirs & RBVH_WALK_STOPPED) == 0u && cells < rbvh_walk_bound(last_i, last_j)) {
+            cut = true;
         }
     }
     return t_hit;
 }
 
 // The RBVH's leaf hook for traverse.glsl: height fields marched, hybrid triangle leaves tested as
-// the exact BVH's (RbvhLeaves in src/rbvh/march.rs). It keeps the nearest hit: a triangle's slot,
-// or the id of a height field (or, with level of detail, a chosen node) and where its normal
-// comes from. Its id and normal are read and decoded once, after the loops (rbvh_rbvh_hit), so
+// the exact BVH's (RbvhLeaves in src/rbvh/march.rs). It keeps the nearest hit in one word, `best`:
+// a triangle's slot (below LEAF_BIT: slots are fewer than 2^31), or the id of a height field (or,
+// with level of detail, a chosen node), LEAF_BIT set, with where its normal comes from; RBVH_INVALID
+// while none. Its id and normal are read and decoded once, after the loops (rbvh_rbvh_hit), so
 // that the SIMD loops do not carry them.
 struct RbvhLeafHook {
     RbvhSizes sz;
-    uint best_id;
-    uint best_slot;
-    // A height field's hit: its cell's c00 at atlas index x and rbvh_cell_normal_choice in y
-    // (rbvh_normal_texel); a level-of-detail hit: its normal texel in x and 0 in y.
+    uint best;
+    // A height field's hit: its cell's c00 at atlas index x and, in y, rbvh_cell_normal_choice
+    // (RBVH_HEIGHT_ONLY: the triangle or skirt hit; see rbvh_march); a level-of-detail hit: its
+    // normal texel in x and 0 in y.
     uvec2 best_normal;
-    vec3 best_facet;  // RBVH_HEIGHT_ONLY: the hit's normal, made by the march
 };
 
 RbvhLeafHook rbvh_leaf_hook(RbvhSizes sz) {
-    return RbvhLeafHook(sz, RBVH_INVALID, RBVH_INVALID, uvec2(RBVH_HOLE_CODE, 0u), vec3(0.0));
+    return RbvhLeafHook(sz, RBVH_INVALID, uvec2(RBVH_HOLE_CODE, 0u));
 }
 
 uint rbvh_node_count(RbvhLeafHook leaves) {
@@ -813,29 +845,28 @@ uint rbvh_enter(RbvhLeafHook leaves, uint child, uint count, float t_entry) {
 
 bool rbvh_test(inout RbvhLeafHook leaves, Ray ray, bool any_hit, uint reference, uint count,
                inout float t_closest, inout uint steps, inout bool cut) {
+    bool hit = false;
     if (count != RBVH_HEIGHTFIELD_COUNT) {
         uint first = reference & ~RBVH_LEAF_BIT;
         // The shear is made per leaf rather than kept across the loops: see RbvhFrameRay.
-        return rbvh_test_triangles(rbvh_shear(ray), ray, any_hit, first,
-                                   rbvh_slot_end(first, count, leaves.sz.tri_count), t_closest,
-                                   leaves.best_slot, steps, cut);
+        hit = rbvh_test_triangles(rbvh_shear(ray), ray, any_hit, first,
+                                  rbvh_slot_end(first, count, leaves.sz.tri_count), t_closest, leaves.best,
+                                  steps, cut);
+    } else {
+        RBVH_COUNT_ADD(leaves, 1u);
+        uint cells;
+        uvec2 normal_cell;
+        float t = rbvh_march(reference & ~RBVH_LEAF_BIT, leaves.sz, ray, t_closest, cells, normal_cell, cut);
+        steps += cells;
+        RBVH_COUNT_ADD(cells, cells);
+        hit = t >= 0.0;
+        if (hit) {
+            t_closest = t;
+            leaves.best = reference;
+            leaves.best_normal = normal_cell;
+        }
     }
-    RBVH_COUNT_ADD(leaves, 1u);
-    uint cells = 0u;
-    uvec2 normal_cell;
-    vec3 facet_normal;
-    float t = rbvh_march(reference & ~RBVH_LEAF_BIT, leaves.sz, ray, t_closest, cells, normal_cell, facet_normal, cut);
-    steps += cells;
-    RBVH_COUNT_ADD(cells, cells);
-    if (t < 0.0) {
-        return false;
-    }
-    t_closest = t;
-    leaves.best_id = reference;
-    leaves.best_slot = RBVH_INVALID;
-    leaves.best_normal = normal_cell;
-    leaves.best_facet = facet_normal;
-    return true;
+    return hit;
 }
 
 #define RBVH_TRAVERSE rbvh_traverse_rbvh
@@ -844,24 +875,42 @@ bool rbvh_test(inout RbvhLeafHook leaves, Ray ray, bool any_hit, uint reference,
 #undef RBVH_TRAVERSE
 #undef RBVH_LEAVES
 
-// The hit that `leaves` kept at distance t along a ray in direction `dir`: a triangle's id and
-// normal, read now, or a height field's id (LEAF_BIT | leaf index; with level of detail
-// LEAF_BIT | LOD_BIT | node) and its texel's normal, read now (RBVH_HEIGHT_ONLY: the facet's,
-// made by the march).
-Hit rbvh_rbvh_hit(RbvhLeafHook leaves, float t, vec3 dir) {
+// The world normal of a height-only RBVH's hit at t along `ray` in leaf `li`, whose cell's c00 is
+// at atlas index `k00` and `kind` is what rbvh_march hit (1 + triangle, or 3: a skirt): the facet
+// of the cell triangle hit, made from the cell's texels read again (facet_normal in march.rs). Made
+// once the ray is done, so that neither the walk nor the traversal carries it.
+vec3 rbvh_height_field_facet(RbvhSizes sz, uint li, uint k00, uint kind, Ray ray, float t) {
+    RbvhLeaf leaf = RBVH_LEAF(li);
+    uint rel = k00 - leaf.atlas_base;
+    int i = int(rel & (sz.atlas_pitch - 1u));
+    int j = int(rel >> uint(findLSB(sz.atlas_pitch)));
+    RbvhCell cell = RbvhCell(i, j, t, t, 0u, 0u);
+    rbvh_read_corners(leaf, sz, cell);
+    int tri = kind == 3u ? rbvh_skirt_triangle(rbvh_frame_ray(leaf, ray, t), cell, t) : int(kind) - 1;
+    vec3 facet = rbvh_cell_facet(leaf, cell, tri);
+    // Normals map back by the frame's transpose.
+    precise vec3 n = (leaf.axis_u * facet.x + leaf.axis_v * facet.y) + leaf.axis_w * facet.z;
+    return normalize(n);
+}
+
+// The hit that `leaves` kept at distance t along `ray`: a triangle's id and normal, read now, or a
+// height field's id (LEAF_BIT | leaf index; with level of detail LEAF_BIT | LOD_BIT | node) and
+// its texel's normal, read now (RBVH_HEIGHT_ONLY: its facet's, rbvh_height_field_facet).
+Hit rbvh_rbvh_hit(RbvhLeafHook leaves, float t, Ray ray) {
     vec3 nrm;
-    uint id = leaves.best_id;
-    if (leaves.best_slot != RBVH_INVALID) {
-        BvhTriangle tri = RBVH_BVH_TRIANGLE(leaves.best_slot);
+    uint id = leaves.best;
+    if (id == RBVH_INVALID) {
+        return rbvh_miss();
+    } else if ((id & RBVH_LEAF_BIT) == 0u) {
+        BvhTriangle tri = RBVH_BVH_TRIANGLE(id);
         id = tri.prim;
         nrm = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
-    } else if (id == RBVH_INVALID) {
-        return rbvh_miss();
     } else if (RBVH_HEIGHT_ONLY) {
-        nrm = leaves.best_facet;
+        nrm = rbvh_height_field_facet(leaves.sz, id & ~RBVH_LEAF_BIT, leaves.best_normal.x, leaves.best_normal.y, ray,
+                                      t);
     } else {
         uvec2 b = leaves.best_normal;
-        uint texel = b.y == 0u ? b.x : rbvh_normal_texel(leaves.sz, b.x, b.y, dir);
+        uint texel = b.y == 0u ? b.x : rbvh_normal_texel(leaves.sz, b.x, b.y, ray.dir);
         nrm = rbvh_decode_normal(texel);
     }
     return Hit(t, nrm.x, nrm.y, nrm.z, id, 0u, 0u, 0u);
@@ -872,7 +921,7 @@ Hit rbvh_rbvh_hit(RbvhLeafHook leaves, float t, vec3 dir) {
 Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out bool overflow) {
     RbvhLeafHook leaves = rbvh_leaf_hook(sz);
     float t = rbvh_traverse_rbvh(ray, any_hit, leaves, steps, overflow);
-    return rbvh_rbvh_hit(leaves, t, ray.dir);
+    return rbvh_rbvh_hit(leaves, t, ray);
 }
 
 // With RBVH_LOD, also rbvh_trace_rbvh_lod: the same traversal with lod.glsl's hook.

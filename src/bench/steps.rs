@@ -106,7 +106,6 @@ fn ray_steps(
     let mut out = RaySteps::default();
     let leaf_size = std::mem::size_of::<GpuHeightfield>() as u64;
     let node_size = std::mem::size_of::<GpuNode>() as u64;
-    let mut last_leaf = None;
     for read in reads {
         match read.array {
             // A node visit reads the whole node; a leaf popped off the stack reads its child and
@@ -117,13 +116,10 @@ fn ray_steps(
                 out.depth_sum += u64::from(d);
                 out.nodes += 1;
             }
-            Array::Leaves => {
+            // A march reads its leaf's whole record; a height-only hit's facet reads parts of it
+            // again once the ray is done, which is no march.
+            Array::Leaves if u64::from(read.bytes) == leaf_size => {
                 let leaf = (read.offset / leaf_size) as u32;
-                // A height-only hit reads its leaf again after the walk: one leaf, one march.
-                if last_leaf == Some(leaf) {
-                    continue;
-                }
-                last_leaf = Some(leaf);
                 let Some((walked, t)) = march(leaf) else {
                     continue;
                 };

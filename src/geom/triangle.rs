@@ -8,8 +8,8 @@
 //! precision when an edge function is exactly zero; we instead accept zeros on both sides (a ray
 //! through an edge or vertex hits every triangle there), which is equally watertight, needs no
 //! `float64` on the GPU, and only costs a duplicate hit at the same `t`, harmless for closest-hit
-//! and any-hit queries. The GLSL twin (`glsl/intersect.glsl`) folds the permutation into row
-//! vectors (computing the very same values) and marks its arithmetic `precise` so that FMA
+//! and any-hit queries. The GLSL twin (`glsl/intersect.glsl`) keeps the same permutation and
+//! shear, computes the very same values, and marks its arithmetic `precise` so that FMA
 //! contraction cannot break the negation symmetry.
 
 use glam::Vec3;

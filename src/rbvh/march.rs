@@ -153,9 +153,18 @@ impl<'a> RbvhLeaves<'a> {
         if self.triangle_nearest {
             return self.triangles.hit(probe).unwrap_or(Hit::MISS);
         }
-        for texel in self.normal_reads.iter() {
-            for read in self.rbvh.atlas.normal_reads(texel as usize) {
+        if let Some((leaf, skirt)) = self.normal_reads.facet {
+            for read in NormalReads::facet_leaf_reads(leaf, skirt) {
                 probe.read(read);
+            }
+            for texel in self.normal_reads.iter() {
+                probe.read(self.rbvh.atlas.code_read(texel as usize, TexelFormat::Height));
+            }
+        } else {
+            for texel in self.normal_reads.iter() {
+                for read in self.rbvh.atlas.normal_reads(texel as usize) {
+                    probe.read(read);
+                }
             }
         }
         self.best
@@ -661,30 +670,46 @@ pub(super) fn tile_fits(leaf: &GpuHeightfield, atlas: &Atlas) -> bool {
     last < atlas.texels.len() as u64
 }
 
-/// A height-field hit's normal, and the atlas texels the device reads for it once its ray is done
-/// (none for a facet's normal, which the march makes): what [`RbvhLeaves::finish`] reports.
+/// A height-field hit's normal, and what the device reads for it once its ray is done: what
+/// [`RbvhLeaves::finish`] reports.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct HitNormal {
     pub(crate) normal: Vec3,
     reads: NormalReads,
 }
 
-impl HitNormal {
-    /// A facet's normal (height-only texels), for which the device reads no texel.
-    fn facet(normal: Vec3) -> HitNormal {
-        HitNormal {
-            normal,
-            reads: NormalReads::default(),
-        }
-    }
-}
-
 /// Atlas indices of the texels read for a hit's normal, in order: at most the nearest corner and
-/// then the four corners.
+/// then the four corners; for a facet's normal (height-only texels), the cell's corner codes
+/// present in the atlas, after the leaf's record (`facet`).
 #[derive(Clone, Copy, Debug, Default)]
 struct NormalReads {
     texels: [u32; 5],
     len: usize,
+    /// A facet's leaf, and whether the hit is a skirt's: the device makes the facet once the ray
+    /// is done from the leaf's frame and the cell's codes, read again
+    /// (`rbvh_height_field_facet` in `glsl/rbvh.glsl`), and a skirt's from the frame ray too,
+    /// which needs the leaf's origin.
+    facet: Option<(u32, bool)>,
+}
+
+impl NormalReads {
+    /// The device's reads of leaf `leaf`'s record for a facet: from `atlas_base` to `h_scale`
+    /// (the frame and the tile), and the origin before them for a skirt. Never the whole record,
+    /// which only a march reads.
+    fn facet_leaf_reads(leaf: u32, skirt: bool) -> impl Iterator<Item = Read> {
+        let base = u64::from(leaf) * std::mem::size_of::<GpuHeightfield>() as u64;
+        let frame = Read {
+            array: Array::Leaves,
+            offset: base + 12,
+            bytes: 52,
+        };
+        let origin = Read {
+            array: Array::Leaves,
+            offset: base,
+            bytes: 12,
+        };
+        std::iter::once(frame).chain(skirt.then_some(origin))
+    }
 }
 
 impl NormalReads {
@@ -739,7 +764,7 @@ fn texel(atlas: &Atlas, leaf: &GpuHeightfield, i: i64, j: i64) -> (Texel, Option
 struct Cells<'a> {
     atlas: &'a Atlas,
     leaf: &'a GpuHeightfield,
-    /// Which leaf `leaf` is (for the re-read of its record that a height-only hit reports).
+    /// Which leaf `leaf` is (for the reads again that a height-only hit's normal costs).
     leaf_index: u32,
     fr: &'a FrameRay,
     /// The world ray's direction, which a hit's normal should face.
@@ -752,6 +777,22 @@ struct Cells<'a> {
 }
 
 impl Cells<'_> {
+    /// A facet's `normal` (height-only texels) for a hit in cell `(ci, cj)`, on its skirt or not,
+    /// with the reads the device makes for it once the ray is done ([`NormalReads::facet`]).
+    fn facet(&self, normal: Vec3, (ci, cj): (i64, i64), skirt: bool) -> HitNormal {
+        let mut reads = NormalReads {
+            facet: Some((self.leaf_index, skirt)),
+            ..NormalReads::default()
+        };
+        for k in 0..4 {
+            let (_, index) = texel(self.atlas, self.leaf, ci + (k & 1) as i64, cj + (k >> 1) as i64);
+            if let Some(index) = index {
+                reads.push(index as u32);
+            }
+        }
+        HitNormal { normal, reads }
+    }
+
     /// Steps 4 and 5: intersects the ray with cell `(ci, cj)`, which it crosses over
     /// `[t_in, t_out]`; returns the nearest hit distance of the cell's triangles within the frame
     /// ray's interval, and the normal. Counts the cell in `cells_tested` when it gets past the
@@ -824,13 +865,9 @@ impl Cells<'_> {
         }
         let t = t_hit?;
         if self.format == TexelFormat::Height {
-            // The device reads the leaf's frame again after its walk, for the facet's normal.
-            probe.read(element::<GpuHeightfield>(
-                Array::Leaves,
-                self.leaf_index as usize,
-            ));
             let [a, b, c] = hit_triangle.map(|k| pos[k]);
-            return Some((t, HitNormal::facet(facet_normal(leaf, a, b, c))));
+            let normal = facet_normal(leaf, a, b, c);
+            return Some((t, self.facet(normal, (ci, cj), false)));
         }
 
         Some((t, self.nearest_normal(&corner, ci, cj, t)))
@@ -1035,10 +1072,6 @@ impl Cells<'_> {
             }
         }
         if self.format == TexelFormat::Height {
-            probe.read(element::<GpuHeightfield>(
-                Array::Leaves,
-                self.leaf_index as usize,
-            ));
             let pos: [Vec3; 4] = std::array::from_fn(|k| {
                 Vec3::new(
                     (ci + (k & 1) as i64) as f32 + 0.5,
@@ -1049,7 +1082,8 @@ impl Cells<'_> {
             let fs = o.x + d.x * t - (ci as f32 + 0.5);
             let ft = o.y + d.y * t - (cj as f32 + 0.5);
             let [a, b, c] = surface_under(corner, fs, ft).map(|k| pos[k]);
-            return Some((t, HitNormal::facet(facet_normal(leaf, a, b, c))));
+            let normal = facet_normal(leaf, a, b, c);
+            return Some((t, self.facet(normal, (ci, cj), true)));
         }
         Some((t, self.nearest_normal(corner, ci, cj, t)))
     }
