@@ -99,12 +99,16 @@ fn a_broken_rbvh_shader_fails_with_a_diff_image() {
             .unwrap();
     // A plausible slip: one of a cell's four corners taken at half its height in the cell's
     // triangles.
-    let correct = "vec3 p11 = vec3(s1, r1, h11);";
+    let correct = "precise float h = float(code) * leaf.h_scale;";
     assert!(
         source.matches(correct).count() == 1,
         "rbvh.glsl changed; update this test's edit"
     );
-    let broken = source.replacen(correct, "vec3 p11 = vec3(s1, r1, h11 * 0.5);", 1);
+    let broken = source.replacen(
+        correct,
+        "precise float h = float(code) * leaf.h_scale * (q == 3u ? 0.5 : 1.0);",
+        1,
+    );
     let case = Case::new("blob", Method::rbvh(2));
 
     // Control: the same compile path with the source unchanged renders the golden.
