@@ -158,7 +158,11 @@ impl<'a> RbvhLeaves<'a> {
                 probe.read(read);
             }
             for texel in self.normal_reads.iter() {
-                probe.read(self.rbvh.atlas.code_read(texel as usize, TexelFormat::Height));
+                probe.read(
+                    self.rbvh
+                        .atlas
+                        .code_read(texel as usize, TexelFormat::Height),
+                );
             }
         } else {
             for texel in self.normal_reads.iter() {
@@ -785,7 +789,12 @@ impl Cells<'_> {
             ..NormalReads::default()
         };
         for k in 0..4 {
-            let (_, index) = texel(self.atlas, self.leaf, ci + (k & 1) as i64, cj + (k >> 1) as i64);
+            let (_, index) = texel(
+                self.atlas,
+                self.leaf,
+                ci + (k & 1) as i64,
+                cj + (k >> 1) as i64,
+            );
             if let Some(index) = index {
                 reads.push(index as u32);
             }

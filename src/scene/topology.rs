@@ -22,7 +22,7 @@ use super::Scene;
 /// through every cell such a triangle meets: a ray that enters the surface a hundredth of a
 /// texel from a hole's rim may hit the triangle beside the one that has the open edge.
 pub fn open_boundary(scene: &Scene) -> Vec<bool> {
-    topology(scene).open
+    analyse(scene, false).open
 }
 
 /// Per triangle, the largest angle in degrees between its normal (as wound) and the normal of a
@@ -52,15 +52,25 @@ const MOST_ON_AN_EDGE: usize = 8;
 /// one alone). Sorting-based and in parallel, linear besides the sorts: 16 bytes per edge and 12
 /// per triangle while it runs, no hash map.
 pub fn topology(scene: &Scene) -> Topology {
+    analyse(scene, true)
+}
+
+/// [`topology`], its creases only `with_creases` (else empty): the seam probe's
+/// [`open_boundary`] needs no normals.
+fn analyse(scene: &Scene, with_creases: bool) -> Topology {
     let (welded, count) = weld(scene);
-    let normals: Vec<Vec3> = scene
-        .triangles
-        .par_iter()
-        .map(|t| {
-            let [a, b, c] = t.map(|v| scene.positions[v as usize]);
-            (b - a).cross(c - a).normalize_or_zero()
-        })
-        .collect();
+    let normals: Vec<Vec3> = if with_creases {
+        scene
+            .triangles
+            .par_iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|v| scene.positions[v as usize]);
+                (b - a).cross(c - a).normalize_or_zero()
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     let mut edges: Vec<(u64, u32)> = scene
         .triangles
         .par_iter()
@@ -74,18 +84,22 @@ pub fn topology(scene: &Scene) -> Topology {
         .collect();
     edges.par_sort_unstable();
     // Angles are at least 0, so their bits order as the angles do.
-    let crease: Vec<AtomicU32> = (0..scene.triangles.len())
+    let crease: Vec<AtomicU32> = (0..if with_creases {
+        scene.triangles.len()
+    } else {
+        0
+    })
         .map(|_| AtomicU32::new(0))
         .collect();
     let open_ends: Vec<u32> = edges
         .par_chunk_by(|a, b| a.0 == b.0)
         .flat_map_iter(|run| {
             let key = run[0].0;
-            if run.len() > MOST_ON_AN_EDGE {
+            if with_creases && run.len() > MOST_ON_AN_EDGE {
                 for &(_, t) in run {
                     crease[t as usize].fetch_max(180.0f32.to_bits(), Ordering::Relaxed);
                 }
-            } else {
+            } else if with_creases {
                 crease_pairs(run, &normals, &crease);
             }
             let open = (run.len() == 1).then_some([(key >> 32) as u32, key as u32]);
