@@ -20,9 +20,9 @@ uint rbvh_atlas_texel_words(uint len, uint wide_len, bool height_only) {
 // `len`): what the walk reads. One load either side of `wide_len`, chosen by selects rather than
 // a branch: SIMD implementations such as lavapipe run both sides of a branch whose lanes differ,
 // and the two loads of a texel read both ways cost the march a tenth of its speed there.
-// One return, the hole's made before the read: an early return, once inlined into the walk's loops,
-// leaves a value the compiler carries from one leaf to the next (docs/speed.md, "What holds the
-// RBVH tracer's registers").
+// One return, the hole's made before the read: an early return, once inlined into the walk's
+// loops, leaves a value the compiler carries from one leaf to the next (docs/speed.md, "Values the
+// compiler carried from leaf to leaf").
 uint rbvh_atlas_code(uint index, uint len, uint wide_len, bool height_only) {
     uint code = 0xFFFFu;
     if (index < len) {

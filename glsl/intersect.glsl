@@ -30,7 +30,7 @@ bool rbvh_intersect_box(vec3 bmin, vec3 bmax, vec3 origin, vec3 inv_dir, float t
 // reference computes the same bits. Six values a ray keeps, where the permutation folded into
 // three row vectors (an earlier form) kept twelve: on RADV's null device this took the exact
 // tracer from 56 VGPRs to 48 and the RBVH tracer, whose cell test shears four corners at once,
-// from 96 to 88 (docs/speed.md, "What holds the RBVH tracer's registers").
+// from 96 to 88 (docs/speed.md, "Values the compiler carried from leaf to leaf").
 struct RbvhShear {
     vec3 origin;
     ivec3 k;  // kx, ky, kz

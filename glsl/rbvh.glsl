@@ -441,17 +441,15 @@ float rbvh_skirt_height(float uu) {
     return h;
 }
 
-// The walk's loop bound: twice the (res_u - 1) + (res_v - 1) - 1 cells a walk can step through,
-// made from the last cell indices where it is used rather than kept through the walk, where it
-// held a register (docs/speed.md, "What holds the RBVH tracer's registers").
+// The walk's loop bound: twice the (res_u - 1) + (res_v - 1) - 1 cells a walk can step through.
 uint rbvh_walk_bound(int last_i, int last_j) {
     return 2u * uint(last_i + last_j + 1);
 }
 
 // The walk's steps along s and t (-1, 0, 1) and the edge the current main cell was entered
 // across (0: s, 1: t, -1: none), two bits each, and its flags, in one word: on a GPU each value
-// the walk carries from cell to cell holds a register through it (docs/speed.md, "What holds the
-// RBVH tracer's registers").
+// the walk carries from cell to cell holds a register through it (docs/speed.md, "Values the
+// compiler carried from leaf to leaf").
 // The current cell is the extra one across a grid vertex (rbvh_walk_cell).
 const uint RBVH_WALK_EXTRA = 64u;
 // The last main cell walked had fewer than four samples, or there was none (prev_open in
@@ -525,7 +523,7 @@ bool rbvh_tile_fits(RbvhLeaf leaf, RbvhSizes sz) {
 //
 // Written with one return, as are the helpers the walk inlines: an early return leaves, once
 // inlined into the traversal's loop, values the compiler carries from one leaf to the next, each a
-// register through the walk (docs/speed.md, "What holds the RBVH tracer's registers").
+// register through the walk (docs/speed.md, "Values the compiler carried from leaf to leaf").
 float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells, out uvec2 normal_cell,
                  inout bool cut) {
     cells = 0u;

@@ -1275,6 +1275,16 @@ fn flags_without_effect_are_refused() {
             trace(&["--texels", "height"]),
             vec!["--texels", "--method exact"],
         ),
+        // Level of detail needs normals in the texels.
+        (
+            words(&["bench", "--texels", "height", "--lod", "--quality", "0"]),
+            vec!["--lod measures levels with normals", "--texels height"],
+        ),
+        // Named as the user types it, not as the field it fills.
+        (
+            render(&["--exact-crease", "20"]),
+            vec!["--exact-crease says how to build an RBVH", "--method exact"],
+        ),
         // ... and where a saved RBVH is loaded, built already.
         (
             with_file(render(&["--method", "rbvh"]), &["--quality", "1"]),
@@ -1372,6 +1382,10 @@ fn flags_without_effect_are_refused() {
         (
             words(&["regress", "--bless", "--depth-tolerance", "0.1"]),
             vec!["'--bless' cannot be used with '--depth-tolerance"],
+        ),
+        (
+            words(&["regress", "--bless", "--out", "elsewhere"]),
+            vec!["'--bless' cannot be used with '--out"],
         ),
         // shaders: wave32 is AMD's, and --amd picks the device.
         (words(&["shaders", "--wave32"]), vec![not_given, "--amd"]),

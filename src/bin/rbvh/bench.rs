@@ -66,7 +66,8 @@ pub struct Args {
     /// Write per-scene charts (SVG) and renders and error images (PNG) under this directory.
     #[arg(long)]
     plot: Option<PathBuf>,
-    /// Also measure every level traced with level of detail (method rbvh-lod).
+    /// Also measure every level traced with level of detail (method rbvh-lod): the levels with
+    /// normals in their texels (a height-only level has no level of detail).
     #[arg(long)]
     lod: bool,
     /// Also model each method's memory traffic from its CPU twin's reads: cache lines per ray,
@@ -128,6 +129,14 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     );
     config.levels = levels;
     config.texels = a.quality.texel_formats();
+    anyhow::ensure!(
+        !a.lod
+            || config
+                .texels
+                .contains(&rbvh::rbvh::TexelFormat::HeightNormal),
+        "--lod measures levels with normals in their texels, and --texels height builds none: \
+         add normals to --texels (--texels normals,height) or drop --lod"
+    );
     config.ray_types = a.rays.clone();
     config.width = a.width;
     config.height = a.height;

@@ -182,7 +182,7 @@ pub const BUILD_FLAGS: [&str; 15] = [
     "sampled_criterion_texels",
     "exact_from_texels",
     "exact_edge_fraction",
-    "exact_crease_deg",
+    "exact_crease",
     "sample_all",
     "texels",
 ];
@@ -687,7 +687,8 @@ pub struct Quality {
     /// the mesh states, which sampling would round by a texel; not with --sample-all.
     #[arg(
         long = "exact-crease",
-        id = "exact_crease_deg",
+        id = "exact_crease",
+        value_name = "DEGREES",
         conflicts_with = "sample_all"
     )]
     pub exact_crease_deg: Option<f32>,

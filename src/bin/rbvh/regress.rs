@@ -36,8 +36,11 @@ pub struct Args {
     /// Image height in pixels.
     #[arg(long, default_value_t = regress::HEIGHT)]
     height: u32,
-    /// Write the renders as the new goldens instead of comparing (so no tolerances).
-    #[arg(long, conflicts_with_all = ["max_flip_mean", "max_outliers", "depth_tolerance", "max_depth_off"])]
+    /// Write the renders as the new goldens instead of comparing (so no tolerances, and no --out).
+    #[arg(
+        long,
+        conflicts_with_all = ["out", "max_flip_mean", "max_outliers", "depth_tolerance", "max_depth_off"]
+    )]
     bless: bool,
     /// Most mean FLIP error per image.
     #[arg(long, default_value_t = Tolerance::default().flip_mean)]
