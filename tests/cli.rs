@@ -1486,6 +1486,61 @@ fn trace_cpu_stats_reports_the_cpu_trace() {
     assert_eq!(io::read_hits(&hits_path).unwrap().len(), 64);
 }
 
+/// `trace --cpu` opens no Vulkan device: it traces where the loader finds no driver at all, where
+/// the GPU trace says it could not create the device.
+#[test]
+fn trace_cpu_needs_no_vulkan_driver() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rays_path, hits_path) = (dir.path().join("r.bin"), dir.path().join("h.bin"));
+    let ray = Ray::new(
+        glam::Vec3::new(0.0, 0.0, -3.0),
+        glam::Vec3::Z,
+        0.0,
+        f32::INFINITY,
+    );
+    io::write_rays(&rays_path, &[ray; 8]).unwrap();
+    let no_driver = dir.path().join("no-driver.json");
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "trace",
+            "--scene",
+            "sphere",
+            "--method",
+            "rbvh",
+            "--quality",
+            "0",
+            "--stats",
+            "--rays",
+            arg(&rays_path),
+            "--hits",
+            arg(&hits_path),
+        ];
+        args.extend(extra);
+        Command::new(env!("CARGO_BIN_EXE_rbvh"))
+            .args(&args)
+            .env("VK_ICD_FILENAMES", &no_driver)
+            .env("VK_DRIVER_FILES", &no_driver)
+            .env("RBVH_VALIDATION", "off")
+            .output()
+            .expect("run rbvh")
+    };
+    let out = run(&["--cpu"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("trace (CPU reference, RBVH"), "{stderr}");
+    let hits = io::read_hits(&hits_path).unwrap();
+    assert!(
+        hits.len() == 8 && hits.iter().all(|h| h.is_hit()),
+        "{hits:?}"
+    );
+    let out = run(&[]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("creating the Vulkan device"),
+        "{stderr}"
+    );
+}
+
 /// `rbvh compare` renders the scene through the exact BVH and an RBVH into one PNG, side by side,
 /// and prints each one's memory, speed and error.
 #[test]

@@ -106,7 +106,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     })?;
     let exact_bytes = bvh.tree_bytes() + bvh.triangle_bytes();
     let rbvh_bytes = rbvh.total_bytes();
-    let exact = Tracer::new(&p.ctx, &Structure::from(bvh)).context("uploading the exact BVH")?;
+    let exact = Tracer::new(p.ctx()?, &Structure::from(bvh)).context("uploading the exact BVH")?;
     let approx = step("uploading", |bar| p.tracer(bar))?;
 
     let (width, height) = (a.width, a.height);
@@ -194,8 +194,8 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         p.scene.triangle_count(),
         a.samples,
         a.seed,
-        p.ctx.device_name(),
-        p.ctx.driver()
+        p.ctx()?.device_name(),
+        p.ctx()?.driver()
     );
     let row = |name: &str, memory: String, speed: String, error: String| {
         println!("{name:<12} memory {memory:<26} speed {speed:<38} error {error}");

@@ -87,7 +87,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     if !matches!(p.structure, Structure::Rbvh(_)) {
         bail!("painting needs an RBVH");
     }
-    let tracer = Tracer::new(&p.ctx, &p.structure).context("uploading the RBVH")?;
+    let tracer = Tracer::new(p.ctx()?, &p.structure).context("uploading the RBVH")?;
 
     let (rays, hits) = if a.before.is_some() || a.after.is_some() {
         let rays = camera.primary_rays(a.width, a.height);

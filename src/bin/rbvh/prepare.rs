@@ -320,21 +320,30 @@ pub struct Prepared {
     pub scene: Scene,
     /// With `--lod`, the RBVH with its levels of detail.
     pub structure: Structure,
-    pub ctx: Context,
+    /// The Vulkan device; none for a CPU trace ([`prepare_cpu`]).
+    ctx: Option<Context>,
 }
 
 impl Prepared {
+    /// The Vulkan device the structure is traced on.
+    pub fn ctx(&self) -> Result<&Context> {
+        self.ctx
+            .as_ref()
+            .context("no Vulkan device was opened: this command traces on the CPU")
+    }
+
     /// The structure uploaded, with its levels of detail when there are any, its bytes counted
     /// on `progress`. Says so on stderr when the structure is too large for storage-buffer
     /// bindings and is read through buffer device addresses instead.
     pub fn tracer(&self, progress: &dyn rbvh::progress::Progress) -> Result<Tracer> {
-        let tracer = Tracer::new_observed(&self.ctx, &self.structure, progress)
+        let ctx = self.ctx()?;
+        let tracer = Tracer::new_observed(ctx, &self.structure, progress)
             .with_context(|| format!("uploading the {}", self.structure.label()))?;
-        if tracer.reach() == Reach::DeviceAddresses && self.ctx.addressing() == Addressing::Auto {
+        if tracer.reach() == Reach::DeviceAddresses && ctx.addressing() == Addressing::Auto {
             eprintln!(
                 "note: an array of the structure exceeds maxStorageBufferRange ({} bytes); it is \
                  read through buffer device addresses",
-                self.ctx.limits().max_storage_buffer_range
+                ctx.limits().max_storage_buffer_range
             );
         }
         Ok(tracer)
@@ -416,6 +425,15 @@ pub fn flag_error(e: rbvh::Error) -> anyhow::Error {
 /// The scene, its structure and the device, as `c` says; `camera` (from [`CameraArgs`]) replaces
 /// the scene's camera when given.
 pub fn prepare(c: &Common, camera: Option<Camera>) -> Result<Prepared> {
+    prepare_on(c, camera, true)
+}
+
+/// [`prepare`] for a trace on the CPU: no Vulkan device is opened, so none is needed.
+pub fn prepare_cpu(c: &Common) -> Result<Prepared> {
+    prepare_on(c, None, false)
+}
+
+fn prepare_on(c: &Common, camera: Option<Camera>, device: bool) -> Result<Prepared> {
     let t = Instant::now();
     let mut scene = step("loading scene", |bar| {
         Scene::load_observed(&c.source.scene, bar)
@@ -488,11 +506,12 @@ pub fn prepare(c: &Common, camera: Option<Camera>) -> Result<Prepared> {
         }
         (_, true) => anyhow::bail!("--lod needs an RBVH: add --method rbvh (or --rbvh FILE)"),
     };
-    let ctx = Context::new(&context_options(
-        c.source.device.as_deref(),
-        c.source.validate,
-    )?)
-    .context("creating the Vulkan device")?;
+    let ctx = if device {
+        let options = context_options(c.source.device.as_deref(), c.source.validate)?;
+        Some(Context::new(&options).context("creating the Vulkan device")?)
+    } else {
+        None
+    };
     if c.source.stats {
         eprintln!(
             "scene {}: {} triangles, {} points, loaded in {load_ms:.1} ms",
@@ -539,7 +558,9 @@ pub fn prepare(c: &Common, camera: Option<Camera>) -> Result<Prepared> {
             );
         }
         // The line the bench prints above its tables: host, device, driver, commit and date.
-        eprintln!("{}", Provenance::of(&ctx).line());
+        if let Some(ctx) = &ctx {
+            eprintln!("{}", Provenance::of(ctx).line());
+        }
     }
     Ok(Prepared {
         scene,
@@ -581,7 +602,7 @@ pub fn report_throughput(
         cpu_ms / gpu_ms
     );
     if let Structure::RbvhLod(r, _) = &p.structure {
-        let plain = Tracer::new(&p.ctx, &Structure::from(r.clone()))?.trace(rays, query)?;
+        let plain = Tracer::new(p.ctx()?, &Structure::from(r.clone()))?.trace(rays, query)?;
         if let Some(plain_ms) = plain.timing.gpu_ms {
             eprintln!(
                 "same RBVH without level of detail: GPU {plain_ms:.2} ms = {:.2} MRays/s; LOD speedup {:.2}x",
@@ -593,7 +614,7 @@ pub fn report_throughput(
     if p.structure.rbvh().is_some() && p.scene.triangle_count() == 0 {
         eprintln!("no exact BVH to compare with: the scene is a point cloud, without triangles");
     } else if p.structure.rbvh().is_some() {
-        let exact = Tracer::new(&p.ctx, &Structure::from(Bvh::build(&p.scene)?))?;
+        let exact = Tracer::new(p.ctx()?, &Structure::from(Bvh::build(&p.scene)?))?;
         let timed = exact.trace(rays, query)?;
         if let Some(exact_ms) = timed.timing.gpu_ms {
             eprintln!(

@@ -284,7 +284,7 @@ fn compare_with_exact(
     }
     let t = Instant::now();
     let bvh = step("building BVH", |_| Bvh::build(&p.scene))?;
-    let exact = Tracer::new(&p.ctx, &Structure::from(bvh)).context("uploading the exact BVH")?;
+    let exact = Tracer::new(p.ctx()?, &Structure::from(bvh)).context("uploading the exact BVH")?;
     let setup_ms = t.elapsed().as_secs_f64() * 1e3;
     let exact_hits = exact.trace(frame.rays, Query::Closest)?.hits;
     let exact_albedo = ibl_albedo(&p.scene, None, None, frame.rays, &exact_hits);

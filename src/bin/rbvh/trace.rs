@@ -8,7 +8,7 @@ use rbvh::gpu::Query;
 use rbvh::io;
 use rbvh::lod::RayCone;
 
-use crate::prepare::{check_source, prepare, report_throughput, Common, Given};
+use crate::prepare::{check_source, prepare, prepare_cpu, report_throughput, Common, Given};
 use crate::progress::step;
 
 #[derive(clap::Args, Debug)]
@@ -33,7 +33,8 @@ pub struct Args {
     /// Any-hit (occlusion) query instead of closest hit.
     #[arg(long)]
     any_hit: bool,
-    /// Trace with the CPU reference tracer instead of the GPU (so no --device or --validate).
+    /// Trace with the CPU reference tracer instead of the GPU: no Vulkan device is opened (so no
+    /// --device or --validate).
     #[arg(long, conflicts_with_all = ["device", "validate"])]
     cpu: bool,
 }
@@ -46,7 +47,11 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         "--lod-spread must be a finite angle of at least 0 (got {spread})"
     );
     let rays = io::read_rays(&a.rays)?;
-    let p = prepare(&a.common, None)?;
+    let p = if a.cpu {
+        prepare_cpu(&a.common)?
+    } else {
+        prepare(&a.common, None)?
+    };
     let query = if a.any_hit {
         Query::Any
     } else {
