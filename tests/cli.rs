@@ -1454,18 +1454,25 @@ fn help_says_what_each_command_takes() {
     }
 }
 
-/// `trace --cpu --stats` reports the CPU tracer's time and rate (it used to print nothing).
-#[test]
-fn trace_cpu_stats_reports_the_cpu_trace() {
-    let dir = tempfile::tempdir().unwrap();
-    let (rays_path, hits_path) = (dir.path().join("r.bin"), dir.path().join("h.bin"));
+/// A ray file in `dir` of `n` rays at the built-in sphere from 3 units away, and where its hits
+/// go.
+fn rays_at_the_sphere(dir: &Path, n: usize) -> (std::path::PathBuf, std::path::PathBuf) {
+    let (rays, hits) = (dir.join("r.bin"), dir.join("h.bin"));
     let ray = Ray::new(
         glam::Vec3::new(0.0, 0.0, -3.0),
         glam::Vec3::Z,
         0.0,
         f32::INFINITY,
     );
-    io::write_rays(&rays_path, &[ray; 64]).unwrap();
+    io::write_rays(&rays, &vec![ray; n]).unwrap();
+    (rays, hits)
+}
+
+/// `trace --cpu --stats` reports the CPU tracer's time and rate (it used to print nothing).
+#[test]
+fn trace_cpu_stats_reports_the_cpu_trace() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rays_path, hits_path) = rays_at_the_sphere(dir.path(), 64);
     let out = rbvh(&[
         "trace",
         "--scene",
@@ -1491,14 +1498,7 @@ fn trace_cpu_stats_reports_the_cpu_trace() {
 #[test]
 fn trace_cpu_needs_no_vulkan_driver() {
     let dir = tempfile::tempdir().unwrap();
-    let (rays_path, hits_path) = (dir.path().join("r.bin"), dir.path().join("h.bin"));
-    let ray = Ray::new(
-        glam::Vec3::new(0.0, 0.0, -3.0),
-        glam::Vec3::Z,
-        0.0,
-        f32::INFINITY,
-    );
-    io::write_rays(&rays_path, &[ray; 8]).unwrap();
+    let (rays_path, hits_path) = rays_at_the_sphere(dir.path(), 8);
     let no_driver = dir.path().join("no-driver.json");
     let run = |extra: &[&str]| {
         let mut args = vec![
