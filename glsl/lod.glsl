@@ -111,68 +111,49 @@ float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inou
         float t1 = min(min(min(e.x, e.y), e.z), t_closest);
         // 3. Walk.
         precise vec3 entry = go + gd * t0;
-        int ci = rbvh_grid_cell(RBVH_COLUMNS, entry.x, int(lod.res_u) - 1);
-        int cj = rbvh_grid_cell(RBVH_COLUMNS, entry.y, int(lod.res_v) - 1);
+        int last_i = int(lod.res_u) - 1;
+        int last_j = int(lod.res_v) - 1;
         int step_i = rbvh_grid_step(gd.x);
         int step_j = rbvh_grid_step(gd.y);
-        float next_i = rbvh_grid_boundary_t(RBVH_COLUMNS, ci, step_i, go.x, inv.x);
-        float next_j = rbvh_grid_boundary_t(RBVH_COLUMNS, cj, step_j, go.y, inv.y);
-        float t_in = t0;
+        RbvhGridWalk w = rbvh_grid_walk(RBVH_COLUMNS, rbvh_grid_cell(RBVH_COLUMNS, entry.x, last_i),
+                                        rbvh_grid_cell(RBVH_COLUMNS, entry.y, last_j), step_i, step_j, go.xy, inv.xy,
+                                        t0);
         uint limit = lod.res_u + lod.res_v;
         // A walk crosses at most res_u + res_v - 1 columns, so every normal ending is a `break`.
         bool stopped = false;
         for (uint n = 0u; n < limit; ++n) {
-            if (t_in > t1) {
+            if (w.t_in > t1) {
                 stopped = true;
                 break;
             }
             columns += 1u;
-            float t_out = min(min(next_i, next_j), t1);
+            float t_out = min(min(w.next_i, w.next_j), t1);
             // 4. Column.
-            uint index = lod.base + 2u * (uint(cj) * lod.res_u + uint(ci));
+            uint index = lod.base + 2u * (uint(w.cj) * lod.res_u + uint(w.ci));
             bool inside = index + 1u < lsz.texel_len;
             uint top_word = inside ? RBVH_LOD_TEXEL(index) : RBVH_HOLE_CODE;
             uint bottom_word = inside ? RBVH_LOD_TEXEL(index + 1u) : RBVH_HOLE_CODE;
             if (!rbvh_is_hole(top_word)) {
                 precise float top = float(top_word & 0xFFFFu) * lod.h_scale;
                 precise float bottom = float(bottom_word & 0xFFFFu) * lod.h_scale;
-                float za = rbvh_height_at(go.z, gd.z, t_in);
+                float za = rbvh_height_at(go.z, gd.z, w.t_in);
                 float zb = rbvh_height_at(go.z, gd.z, t_out);
                 if (max(za, zb) >= bottom && min(za, zb) <= top) {
                     precise float t_top = (top - go.z) * inv.z;
                     precise float t_bottom = (bottom - go.z) * inv.z;
                     precise float to_top = top - za;
                     precise float to_bottom = za - bottom;
-                    float t = za > top ? t_top : (za < bottom ? t_bottom : t_in);
+                    float t = za > top ? t_top : (za < bottom ? t_bottom : w.t_in);
                     bool use_top = za > top || (za >= bottom && to_top <= to_bottom);
                     normal_texel = use_top ? top_word : bottom_word;
-                    t_hit = min(max(t, t_in), t_out);
+                    t_hit = min(max(t, w.t_in), t_out);
                     stopped = true;
                     break;
                 }
             }
-            bool across_i = next_i <= next_j;
-            int step = across_i ? step_i : step_j;
-            if (step == 0) {
+            if (rbvh_grid_advance(w, RBVH_COLUMNS, step_i, step_j, last_i, last_j, go.xy, inv.xy) < 0) {
                 stopped = true;
                 break;
-            }
-            if (across_i) {
-                ci += step_i;
-                t_in = next_i;
-                if (ci < 0 || ci >= int(lod.res_u)) {
-                    stopped = true;
-                    break;
-                }
-                next_i = rbvh_grid_boundary_t(RBVH_COLUMNS, ci, step_i, go.x, inv.x);
-            } else {
-                cj += step_j;
-                t_in = next_j;
-                if (cj < 0 || cj >= int(lod.res_v)) {
-                    stopped = true;
-                    break;
-                }
-                next_j = rbvh_grid_boundary_t(RBVH_COLUMNS, cj, step_j, go.y, inv.y);
             }
         }
         if (!stopped) {

@@ -489,17 +489,17 @@ bool rbvh_walk_extra(uint dirs) {
     return (dirs & RBVH_WALK_EXTRA) != 0u;
 }
 
-// The cell the walk is on (its codes not yet read): the main cell (ci, cj), entered at t_in, or,
+// The cell the walk `w` is on (its codes not yet read): its main cell, or,
 // with RBVH_WALK_EXTRA, the extra cell across the grid vertex the ray passes next, before the
 // step (the walk of march.rs). Made from the walk's state where needed rather than carried
 // beside it.
-RbvhCell rbvh_walk_cell(int ci, int cj, uint dirs, float t_in, float next_i, float next_j, float t1) {
-    float t_next = min(min(next_i, next_j), t1);
+RbvhCell rbvh_walk_cell(RbvhGridWalk w, uint dirs, float t1) {
+    float t_next = min(min(w.next_i, w.next_j), t1);
     bool extra = rbvh_walk_extra(dirs);
-    bool across_s = next_i <= next_j;
-    int i = extra && !across_s ? ci + rbvh_walk_step_i(dirs) : ci;
-    int j = extra && across_s ? cj + rbvh_walk_step_j(dirs) : cj;
-    return RbvhCell(i, j, extra ? t_next : t_in, extra ? min(max(next_i, next_j), t1) : t_next, 0u, 0u);
+    bool across_s = w.next_i <= w.next_j;
+    int i = extra && !across_s ? w.ci + rbvh_walk_step_i(dirs) : w.ci;
+    int j = extra && across_s ? w.cj + rbvh_walk_step_j(dirs) : w.cj;
+    return RbvhCell(i, j, extra ? t_next : w.t_in, extra ? min(max(w.next_i, w.next_j), t1) : t_next, 0u, 0u);
 }
 
 // Whether `leaf`'s tile lies within the atlas as the march needs it (tile_fits in march.rs):
@@ -568,10 +568,10 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
         int step_j = rbvh_grid_step(d.y);
         precise float corner_slack = RBVH_MARCH_SLACK * (((abs(o.x) + abs(o.y)) + float(leaf.res_u)) + float(leaf.res_v));
         // Within rounding of the boundary behind the entry, the walk starts behind it (march.rs).
-        int ci = rbvh_walk_start(entry.x, step_i, last_i, o.x, inv.x, d.x, t0, corner_slack);
-        int cj = rbvh_walk_start(entry.y, step_j, last_j, o.y, inv.y, d.y, t0, corner_slack);
-        float next_i = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, ci, step_i, o.x, inv.x);
-        float next_j = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, cj, step_j, o.y, inv.y);
+        RbvhGridWalk w = rbvh_grid_walk(RBVH_BETWEEN_SAMPLES,
+                                        rbvh_walk_start(entry.x, step_i, last_i, o.x, inv.x, d.x, t0, corner_slack),
+                                        rbvh_walk_start(entry.y, step_j, last_j, o.y, inv.y, d.y, t0, corner_slack),
+                                        step_i, step_j, o.xy, inv.xy, t0);
         // The walk of march.rs: a main cell, then (when the ray passes a grid vertex too closely to
         // resolve) the extra cell across it, then the step. "While-while" as in the traversal: the
         // inner loop steps through cells while their cheap test (rbvh_cell_candidate) rejects them,
@@ -580,14 +580,13 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
         // every step (on the dragon close-up at Q2, 1 in 3 cells of a primary ray passes, 1 in 24
         // of an AO ray). The step after a cell whose triangles missed opens the next inner round.
         // A single call site of each test keeps the inlined code from being duplicated. The walk
-        // carries only its position (ci, cj, next_i, next_j, t_in), `dirs`, the block checked, the
-        // cells walked and the codes of the cell handed to the outer loop; that cell is made anew
-        // from them (rbvh_walk_cell).
+        // carries only its position (`w`: grid.glsl's one walk, which the block jumps move too),
+        // `dirs`, the block checked, the cells walked and the codes of the cell handed to the outer
+        // loop; that cell is made anew from them (rbvh_walk_cell).
         // Block jumps (src/rbvh/ranges.rs): the blocks' height ranges follow the texels.
         uint block_pitch = (sz.atlas_pitch + 7u) >> 3;
         uint block_count = ((rows + 7u) >> 3) * block_pitch;
         uint checked_block = 0xFFFFFFFFu;
-        float t_in = t0;
         // The codes of the cell that left the inner loop (RbvhCell's words).
         uint c00_c10 = 0u;
         uint c01_c11 = 0u;
@@ -600,51 +599,31 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
                 // grid vertex the ray passes within rounding of (march.rs walks it between the two
                 // main cells), else to the next main cell.
                 if (cells > 0u) {
-                    bool across_s = next_i <= next_j;
+                    bool across_s = w.next_i <= w.next_j;
                     int step_i = rbvh_walk_step_i(dirs);
                     int step_j = rbvh_walk_step_j(dirs);
-                    int xi = across_s ? ci : ci + step_i;
-                    int xj = across_s ? cj + step_j : cj;
-                    precise float gap = across_s ? (next_j - next_i) * abs(d.y) : (next_i - next_j) * abs(d.x);
+                    int xi = across_s ? w.ci : w.ci + step_i;
+                    int xj = across_s ? w.cj + step_j : w.cj;
+                    precise float gap =
+                        across_s ? (w.next_j - w.next_i) * abs(d.y) : (w.next_i - w.next_j) * abs(d.x);
                     if (!rbvh_walk_extra(dirs) && step_i != 0 && step_j != 0 && gap <= corner_slack && xi >= 0 &&
                         xi <= last_i && xj >= 0 && xj <= last_j) {
                         dirs |= RBVH_WALK_EXTRA;
                     } else {
                         dirs &= ~RBVH_WALK_EXTRA;
-                        bool finished = false;
-                        if (across_s) {
-                            if (step_i == 0) {
-                                finished = true;
-                            } else {
-                                ci += step_i;
-                                t_in = next_i;
-                                dirs = rbvh_walk_entered_across(dirs, 0);
-                                if (ci < 0 || ci > last_i) {
-                                    finished = true;
-                                } else {
-                                    next_i = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, ci, step_i, o.x, inv.x);
-                                }
-                            }
-                        } else {
-                            cj += step_j;
-                            t_in = next_j;
-                            dirs = rbvh_walk_entered_across(dirs, 1);
-                            if (cj < 0 || cj > last_j) {
-                                finished = true;
-                            } else {
-                                next_j = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, cj, step_j, o.y, inv.y);
-                            }
-                        }
-                        if (finished) {
+                        int axis = rbvh_grid_advance(w, RBVH_BETWEEN_SAMPLES, step_i, step_j, last_i, last_j, o.xy,
+                                                     inv.xy);
+                        if (axis < 0) {
                             dirs |= RBVH_WALK_STOPPED;
                             break;
                         }
+                        dirs = rbvh_walk_entered_across(dirs, axis);
                     }
                 }
                 if (!rbvh_walk_extra(dirs)) {
                     // Past the box's exit, the cell stepped into within rounding of it is walked too.
-                    if (t_in > t1) {
-                        precise float past = (t_in - t1) * abs(rbvh_walk_entered(dirs) == 0 ? d.x : d.y);
+                    if (w.t_in > t1) {
+                        precise float past = (w.t_in - t1) * abs(rbvh_walk_entered(dirs) == 0 ? d.x : d.y);
                         if (rbvh_walk_entered(dirs) < 0 || !(past <= corner_slack)) {
                             dirs |= RBVH_WALK_STOPPED;
                             break;
@@ -653,7 +632,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
                     // On entering a block: if the ray passes wholly above or below its height range
                     // (with the cell test's slack), none of its cells can be hit, and the walk moves
                     // straight to the block's exit cell, as it would reach it cell by cell.
-                    uint k = leaf.atlas_base + uint(cj) * sz.atlas_pitch + uint(ci);
+                    uint k = leaf.atlas_base + uint(w.cj) * sz.atlas_pitch + uint(w.ci);
                     uint ax = k & (sz.atlas_pitch - 1u);
                     uint ay = k >> shift;
                     uint block = (ay >> 3) * block_pitch + (ax >> 3);
@@ -661,8 +640,8 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
                         checked_block = block;
                         int step_i = rbvh_walk_step_i(dirs);
                         int step_j = rbvh_walk_step_j(dirs);
-                        int i0 = ci - int(ax & 7u);
-                        int j0 = cj - int(ay & 7u);
+                        int i0 = w.ci - int(ax & 7u);
+                        int j0 = w.cj - int(ay & 7u);
                         int edge_i = step_i > 0 ? min(i0 + 7, last_i) : max(i0, 0);
                         int edge_j = step_j > 0 ? min(j0 + 7, last_j) : max(j0, 0);
                         float leave_i = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, edge_i, step_i, o.x, inv.x);
@@ -674,7 +653,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
                         // has a margin for the square root's rounding).
                         precise float lo_s = float(code_lo) * leaf.h_scale - slack - rbvh_skirt_height(uu);
                         precise float hi_s = float(code_hi) * leaf.h_scale + slack;
-                        float h_a = rbvh_height_at(o.z, d.z, t_in);
+                        float h_a = rbvh_height_at(o.z, d.z, w.t_in);
                         float h_b = rbvh_height_at(o.z, d.z, min(min(leave_i, leave_j), t1));
                         if (code_lo > code_hi || max(h_a, h_b) < lo_s || min(h_a, h_b) > hi_s) {
                             RBVH_COUNT_ADD(jumps, 1u);
@@ -690,11 +669,11 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
                             int minor_step = out_i ? step_j : step_i;
                             int major_step = out_i ? step_i : step_j;
                             float leave = out_i ? leave_i : leave_j;
-                            int minor = out_i ? cj : ci;
-                            float next = out_i ? next_j : next_i;
+                            int minor = out_i ? w.cj : w.ci;
+                            float next = out_i ? w.next_j : w.next_i;
                             float minor_o = out_i ? o.y : o.x;
                             float minor_inv = out_i ? inv.y : inv.x;
-                            float t_last = t_in;
+                            float t_last = w.t_in;
                             for (int m = 0; m < 8 && minor_step != 0 && (out_i ? next < leave : next <= leave); ++m) {
                                 t_last = next;
                                 dirs = rbvh_walk_entered_across(dirs, out_i ? 1 : 0);
@@ -704,9 +683,9 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
                             if (minor_step != 0 && (out_i ? next < leave : next <= leave)) {
                                 cut = true;  // ended early by the device
                             }
-                            int major = out_i ? ci : cj;
+                            int major = out_i ? w.ci : w.cj;
                             int edge = out_i ? edge_i : edge_j;
-                            float major_next = out_i ? next_i : next_j;
+                            float major_next = out_i ? w.next_i : w.next_j;
                             if (major != edge) {
                                 float into_edge = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, edge - major_step, major_step,
                                                                        out_i ? o.x : o.y, out_i ? inv.x : inv.y);
@@ -717,15 +696,15 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
                                 major = edge;
                                 major_next = leave;
                             }
-                            ci = out_i ? major : minor;
-                            cj = out_i ? minor : major;
-                            next_i = out_i ? major_next : next;
-                            next_j = out_i ? next : major_next;
-                            t_in = t_last;
+                            w.ci = out_i ? major : minor;
+                            w.cj = out_i ? minor : major;
+                            w.next_i = out_i ? major_next : next;
+                            w.next_j = out_i ? next : major_next;
+                            w.t_in = t_last;
                         }
                     }
                 }
-                RbvhCell cell = rbvh_walk_cell(ci, cj, dirs, t_in, next_i, next_j, t1);
+                RbvhCell cell = rbvh_walk_cell(w, dirs, t1);
                 cells += 1u;
                 bool tests = rbvh_cell_candidate(leaf, sz, fr, slack, cell);
                 // A main cell with a surface entered from one with a hole (or through the tile's
@@ -770,7 +749,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
             if ((dirs & RBVH_WALK_FOUND) == 0u) {
                 break;
             }
-            RbvhCell cell = rbvh_walk_cell(ci, cj, dirs, t_in, next_i, next_j, t1);
+            RbvhCell cell = rbvh_walk_cell(w, dirs, t1);
             cell.c00_c10 = c00_c10;
             cell.c01_c11 = c01_c11;
             // What was hit: 0 or 1, the cell's first or second triangle; 2, a skirt.
