@@ -1,6 +1,7 @@
-// Stepping a ray through a 2D grid of cells (Amanatides & Woo 1987): the GLSL twin of
-// src/geom/grid.rs, operation for operation, for the height-field march (rbvh.glsl, cells between
-// samples at i + 1/2) and the column march of level of detail (lod.glsl, integer boundaries).
+// Stepping a ray through a 2D grid of cells (Amanatides & Woo 1987), and the walk itself
+// (RbvhGridWalk): the GLSL twin of src/geom/grid.rs, operation for operation, for the height-field
+// march (rbvh.glsl, cells between samples at i + 1/2) and the column march of level of detail
+// (lod.glsl, integer boundaries).
 // A grid is named by its origin: cell i spans [i + origin, i + 1 + origin) along each axis.
 #ifndef RBVH_GRID_GLSL
 #define RBVH_GRID_GLSL

@@ -14,7 +14,7 @@
 use glam::Vec3;
 
 use super::layout::GpuLod;
-use crate::geom::grid::{height_at, step_of, Grid};
+use crate::geom::grid::{height_at, step_of, Grid, GridWalk};
 use crate::geom::{safe_inverse, Aabb, Ray};
 use crate::probe::{Array, Probe, RayCounters, Read};
 use crate::rbvh::layout::{decode_octahedral, MARCH_SLACK};
@@ -62,19 +62,21 @@ pub(crate) fn march<P: Probe>(
     let t1 = e0.max(e1).min_element().min(t_closest);
     // 3. Walk.
     let entry = go + gd * t0;
-    let mut ci = Grid::COLUMNS.cell_of(entry.x, i64::from(lod.res_u) - 1);
-    let mut cj = Grid::COLUMNS.cell_of(entry.y, i64::from(lod.res_v) - 1);
-    let step_i = step_of(gd.x);
-    let step_j = step_of(gd.y);
-    let mut next_i = Grid::COLUMNS.boundary_t(ci, step_i, go.x, inv.x);
-    let mut next_j = Grid::COLUMNS.boundary_t(cj, step_j, go.y, inv.y);
-    let mut t_in = t0;
+    let last = (i64::from(lod.res_u) - 1, i64::from(lod.res_v) - 1);
+    let cell = (
+        Grid::COLUMNS.cell_of(entry.x, last.0),
+        Grid::COLUMNS.cell_of(entry.y, last.1),
+    );
+    let step = (step_of(gd.x), step_of(gd.y));
+    let (o, inv2) = ((go.x, go.y), (inv.x, inv.y));
+    let mut w = GridWalk::new(Grid::COLUMNS, cell, step, o, inv2, t0);
     for _ in 0..lod.res_u + lod.res_v {
+        let (ci, cj, t_in) = (w.ci, w.cj, w.t_in);
         if t_in > t1 {
             break;
         }
         counters.cells += 1;
-        let t_out = next_i.min(next_j).min(t1);
+        let t_out = w.next_i.min(w.next_j).min(t1);
         // 4. Column.
         if let Some((column, index)) = lod.column(texels, ci as u32, cj as u32) {
             probe.read(Read {
@@ -104,25 +106,8 @@ pub(crate) fn march<P: Probe>(
                 }
             }
         }
-        let across_i = next_i <= next_j;
-        let step = if across_i { step_i } else { step_j };
-        if step == 0 {
+        if w.advance(Grid::COLUMNS, step, last, o, inv2).is_none() {
             break;
-        }
-        if across_i {
-            ci += step_i;
-            t_in = next_i;
-            if ci < 0 || ci >= i64::from(lod.res_u) {
-                break;
-            }
-            next_i = Grid::COLUMNS.boundary_t(ci, step_i, go.x, inv.x);
-        } else {
-            cj += step_j;
-            t_in = next_j;
-            if cj < 0 || cj >= i64::from(lod.res_v) {
-                break;
-            }
-            next_j = Grid::COLUMNS.boundary_t(cj, step_j, go.y, inv.y);
         }
     }
     None

@@ -42,7 +42,7 @@ use super::layout::{
 use super::ranges::{block_ranges, BLOCK};
 use super::{Rbvh, TexelFormat};
 use crate::bvh::{Leaves, Triangles};
-use crate::geom::grid::{height_at, step_of, Grid};
+use crate::geom::grid::{height_at, step_of, Grid, GridWalk};
 use crate::geom::{intersect_triangle, safe_inverse, Aabb, Hit, Ray, RayShear};
 use crate::probe::{element, Array, Probe, Read, TraceStats};
 
@@ -412,10 +412,17 @@ impl Rbvh {
                 c
             }
         };
-        let mut ci = start(entry.x, step_i, last_i, o.x, inv.x, d.x);
-        let mut cj = start(entry.y, step_j, last_j, o.y, inv.y, d.y);
-        let mut next_i = CELLS.boundary_t(ci, step_i, o.x, inv.x);
-        let mut next_j = CELLS.boundary_t(cj, step_j, o.y, inv.y);
+        let start_cell = (
+            start(entry.x, step_i, last_i, o.x, inv.x, d.x),
+            start(entry.y, step_j, last_j, o.y, inv.y, d.y),
+        );
+        let (step, last, o2, inv2) = (
+            (step_i, step_j),
+            (last_i, last_j),
+            (o.x, o.y),
+            (inv.x, inv.y),
+        );
+        let mut w = GridWalk::new(CELLS, start_cell, step, o2, inv2, t0);
         // A straight line crosses each of the (res − 2) inner boundaries per axis at most once, so
         // it takes at most this many steps, each visiting one cell (two near a grid vertex).
         let max_steps = u64::from(leaf.res_u - 1) + u64::from(leaf.res_v - 1) - 1;
@@ -424,7 +431,6 @@ impl Rbvh {
             Walk::Blocks(ranges) => Some(Blocks::of(&self.atlas, leaf, ranges)),
         };
         let mut checked_block = None;
-        let mut t_in = t0;
         // Whether the last main cell walked had fewer than four samples, or there was none (the
         // ray came in through the tile's side): a skirt hangs under an edge of a cell's surface
         // where the ray comes from a cell with a hole, if not from under a surface there (a cell
@@ -435,9 +441,9 @@ impl Rbvh {
         let mut prev_open = true;
         for _ in 0..max_steps {
             // Past the box's exit, the cell stepped into within rounding of it is walked too.
-            if t_in > t1 {
+            if w.t_in > t1 {
                 let across = if entered == Some(0) { d.x } else { d.y };
-                let past = (t_in - t1) * across.abs();
+                let past = (w.t_in - t1) * across.abs();
                 if entered.is_none() || past > corner_slack || past.is_nan() {
                     break;
                 }
@@ -445,10 +451,10 @@ impl Rbvh {
             if let Some(b) = &blocks {
                 // On entering a block whose height range the ray passes wholly above or below,
                 // straight to the block's exit cell, as the walk would reach it cell by cell.
-                let block = b.index(ci, cj);
+                let block = b.index(w.ci, w.cj);
                 if checked_block != Some(block) && block < b.count {
                     checked_block = Some(block);
-                    let (i0, j0) = b.first_cell(ci, cj);
+                    let (i0, j0) = b.first_cell(w.ci, w.cj);
                     let edge_i = if step_i > 0 {
                         (i0 + BLOCK as i64 - 1).min(last_i)
                     } else {
@@ -473,7 +479,7 @@ impl Rbvh {
                     // rounding on the device) jumps.
                     let lo_s = code_lo as f32 * leaf.h_scale - slack - skirt_h;
                     let hi_s = code_hi as f32 * leaf.h_scale + slack;
-                    let h_a = height_at(o.z, d.z, t_in);
+                    let h_a = height_at(o.z, d.z, w.t_in);
                     let h_b = height_at(o.z, d.z, leave_i.min(leave_j).min(t1));
                     if code_lo > code_hi || h_a.max(h_b) < lo_s || h_a.min(h_b) > hi_s {
                         stats.counters.jumps += 1;
@@ -486,11 +492,11 @@ impl Rbvh {
                         let out_i = leave_i <= leave_j;
                         let leave = if out_i { leave_i } else { leave_j };
                         let before = |t: f32| if out_i { t < leave } else { t <= leave };
-                        let mut t_last = t_in;
+                        let mut t_last = w.t_in;
                         let (minor, minor_next, minor_step, minor_o, minor_inv) = if out_i {
-                            (&mut cj, &mut next_j, step_j, o.y, inv.y)
+                            (&mut w.cj, &mut w.next_j, step_j, o.y, inv.y)
                         } else {
-                            (&mut ci, &mut next_i, step_i, o.x, inv.x)
+                            (&mut w.ci, &mut w.next_i, step_i, o.x, inv.x)
                         };
                         let (minor_axis, major_axis) = if out_i { (1, 0) } else { (0, 1) };
                         for _ in 0..BLOCK {
@@ -503,9 +509,9 @@ impl Rbvh {
                             *minor_next = CELLS.boundary_t(*minor, minor_step, minor_o, minor_inv);
                         }
                         let (major, major_next, major_step, major_o, major_inv, edge) = if out_i {
-                            (&mut ci, &mut next_i, step_i, o.x, inv.x, edge_i)
+                            (&mut w.ci, &mut w.next_i, step_i, o.x, inv.x, edge_i)
                         } else {
-                            (&mut cj, &mut next_j, step_j, o.y, inv.y, edge_j)
+                            (&mut w.cj, &mut w.next_j, step_j, o.y, inv.y, edge_j)
                         };
                         if *major != edge {
                             let into_edge =
@@ -517,75 +523,59 @@ impl Rbvh {
                             *major = edge;
                             *major_next = leave;
                         }
-                        t_in = t_last;
+                        w.t_in = t_last;
                     }
                 }
             }
             stats.counters.cells += 1;
-            let t_out = next_i.min(next_j).min(t1);
-            let corner = cells.corners(ci, cj);
+            let t_out = w.next_i.min(w.next_j).min(t1);
+            let corner = cells.corners(w.ci, w.cj);
             let valid = corner.iter().filter(|c| !c.is_hole()).count();
             if let (Some(axis), true, true) = (entered, prev_open, valid >= 3) {
                 let step = if axis == 0 { step_i } else { step_j };
-                let hit = cells.skirt(&corner, (ci, cj), axis, step, t_in, probe);
+                let hit = cells.skirt(&corner, (w.ci, w.cj), axis, step, w.t_in, probe);
                 if hit.is_some() {
                     return hit;
                 }
             }
             if valid == 3 {
-                let hit = cells.diagonal_skirt(&corner, (ci, cj), t_in, t_out, probe);
+                let hit = cells.diagonal_skirt(&corner, (w.ci, w.cj), w.t_in, t_out, probe);
                 if hit.is_some() {
                     return hit;
                 }
             }
             prev_open = valid < 4;
-            let hit = cells.hit(ci, cj, t_in, t_out, stats, probe);
+            let hit = cells.hit(w.ci, w.cj, w.t_in, t_out, stats, probe);
             if hit.is_some() {
                 return hit;
             }
             // Step across the nearer boundary; on a tie (the ray through a grid vertex) `s` goes
             // first. Both boundaries infinite: the ray runs along `h`, one cell is all.
-            let across_s = next_i <= next_j;
+            let across_s = w.next_i <= w.next_j;
             if step_i != 0 && step_j != 0 {
                 // The gap, in texels, by which the ray misses the vertex the step passes.
                 let gap = if across_s {
-                    (next_j - next_i) * d.y.abs()
+                    (w.next_j - w.next_i) * d.y.abs()
                 } else {
-                    (next_i - next_j) * d.x.abs()
+                    (w.next_i - w.next_j) * d.x.abs()
                 };
                 let (xi, xj) = if across_s {
-                    (ci, cj + step_j)
+                    (w.ci, w.cj + step_j)
                 } else {
-                    (ci + step_i, cj)
+                    (w.ci + step_i, w.cj)
                 };
                 if gap <= corner_slack && xi >= 0 && xi <= last_i && xj >= 0 && xj <= last_j {
                     stats.counters.cells += 1;
-                    let t_x = next_i.max(next_j).min(t1);
+                    let t_x = w.next_i.max(w.next_j).min(t1);
                     let hit = cells.hit(xi, xj, t_out, t_x, stats, probe);
                     if hit.is_some() {
                         return hit;
                     }
                 }
             }
-            if across_s {
-                if step_i == 0 {
-                    break;
-                }
-                ci += step_i;
-                t_in = next_i;
-                entered = Some(0);
-                if ci < 0 || ci > last_i {
-                    break;
-                }
-                next_i = CELLS.boundary_t(ci, step_i, o.x, inv.x);
-            } else {
-                cj += step_j;
-                t_in = next_j;
-                entered = Some(1);
-                if cj < 0 || cj > last_j {
-                    break;
-                }
-                next_j = CELLS.boundary_t(cj, step_j, o.y, inv.y);
+            match w.advance(CELLS, step, last, o2, inv2) {
+                Some(axis) => entered = Some(axis),
+                None => break,
             }
         }
         None
