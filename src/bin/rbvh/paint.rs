@@ -21,7 +21,8 @@ use crate::progress::step;
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("rbvh", |a| a.help(
     "Paint this saved RBVH (from `rbvh build --out`) instead of building one; it is painted as it \
-     was built, so --quality and the free parameters are refused with it"
+     was built, so --quality and the free parameters are refused with it. An RBVH paint builds \
+     samples every triangle (paint is stored in texels), as --sample-all does elsewhere"
 )))]
 #[command(mut_arg("stats", |a| a.help(
     "Print the scene, the RBVH (nodes, bytes, build time) and the device"

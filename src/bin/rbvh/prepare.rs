@@ -259,7 +259,7 @@ impl PointsArg {
 #[derive(Args, Clone, Debug)]
 pub struct LodArgs {
     /// Trace with level of detail: each ray uses the coarsest representation whose columns are at
-    /// most 2^--lod-bias footprints wide (a pixel's cone for render; --lod-spread for trace).
+    /// most 2^--lod-bias of its footprint wide (each command says whose footprint).
     #[arg(long)]
     pub lod: bool,
     #[command(flatten)]
@@ -717,9 +717,7 @@ pub struct Quality {
     /// for; such a level is named with an `s`, e.g. Q2s. Presets trace triangles exactly where
     /// that costs fewer bytes than sampling them (a triangle covering at least 24 texels, 48
     /// height-only, and a set whose tiles would cost more than its triangles) and on a crease
-    /// of 30° or more spanning 2 texels. `rbvh paint`
-    /// samples everything it builds (paint is stored in texels); a file it is given with
-    /// --rbvh is painted as it was built.
+    /// of 30° or more spanning 2 texels.
     #[arg(long)]
     pub sample_all: bool,
     /// What each atlas texel holds: `normals` (height and normal, 3 or 4 bytes: 8- or 16-bit

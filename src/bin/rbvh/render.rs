@@ -30,6 +30,10 @@ use crate::prepare::{
 use crate::progress::step;
 
 #[derive(clap::Args, Debug)]
+#[command(mut_arg("lod", |a| a.help(
+    "Trace with level of detail: each pixel's ray uses the coarsest representation whose columns \
+     are at most 2^--lod-bias of the pixel's footprint wide"
+)))]
 #[command(mut_arg("stats", |a| a.help(
     "Print the scene, the structure (nodes, bytes, build time), the device, the primary trace's \
      time and MRays/s against the CPU reference's (for --method rbvh also the exact BVH's on the \

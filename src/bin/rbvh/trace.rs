@@ -12,6 +12,10 @@ use crate::prepare::{check_source, prepare, prepare_cpu, report_throughput, Comm
 use crate::progress::step;
 
 #[derive(clap::Args, Debug)]
+#[command(mut_arg("lod", |a| a.help(
+    "Trace with level of detail: each ray uses the coarsest representation whose columns are at \
+     most 2^--lod-bias of its footprint wide, a cone of --lod-spread"
+)))]
 #[command(mut_arg("stats", |a| a.help(
     "Print the scene, the structure (nodes, bytes, build time), the device, and the trace's time \
      and MRays/s: on the GPU also the CPU reference's on the same rays (and for --method rbvh \
