@@ -201,14 +201,8 @@ bool rbvh_test(inout RbvhLodLeafHook leaves, Ray ray, bool any_hit, uint referen
         uint columns = 0u;
         uint normal_texel;
         float t = rbvh_lod_march(reference & ~RBVH_LOD_BIT, leaves.lsz, ray, t_closest, columns, normal_texel, cut);
-        steps += columns;
-        RBVH_COUNT_ADD(cells, columns);
-        hit = t >= 0.0;
-        if (hit) {
-            t_closest = t;
-            leaves.rbvh.best = RBVH_LEAF_BIT | reference;
-            leaves.rbvh.best_normal = uvec2(normal_texel, 0u);
-        }
+        hit = rbvh_keep_march(leaves.rbvh, t, columns, RBVH_LEAF_BIT | reference, uvec2(normal_texel, 0u), t_closest,
+                              steps);
     }
     return hit;
 }

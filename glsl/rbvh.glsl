@@ -820,6 +820,22 @@ uint rbvh_enter(RbvhLeafHook leaves, uint child, uint count, float t_entry) {
     return child;
 }
 
+// Keeps what marching a leaf found, for this hook and lod.glsl's: the cells (or columns) walked
+// in `steps` and the counters, and, when t is a hit, t as the nearest with the hit's id and where
+// its normal comes from. Whether it was a hit.
+bool rbvh_keep_march(inout RbvhLeafHook leaves, float t, uint walked, uint id, uvec2 normal, inout float t_closest,
+                     inout uint steps) {
+    steps += walked;
+    RBVH_COUNT_ADD(cells, walked);
+    bool hit = t >= 0.0;
+    if (hit) {
+        t_closest = t;
+        leaves.best = id;
+        leaves.best_normal = normal;
+    }
+    return hit;
+}
+
 bool rbvh_test(inout RbvhLeafHook leaves, Ray ray, bool any_hit, uint reference, uint count,
                inout float t_closest, inout uint steps, inout bool cut) {
     bool hit = false;
@@ -834,14 +850,7 @@ bool rbvh_test(inout RbvhLeafHook leaves, Ray ray, bool any_hit, uint reference,
         uint cells;
         uvec2 normal_cell;
         float t = rbvh_march(reference & ~RBVH_LEAF_BIT, leaves.sz, ray, t_closest, cells, normal_cell, cut);
-        steps += cells;
-        RBVH_COUNT_ADD(cells, cells);
-        hit = t >= 0.0;
-        if (hit) {
-            t_closest = t;
-            leaves.best = reference;
-            leaves.best_normal = normal_cell;
-        }
+        hit = rbvh_keep_march(leaves, t, cells, reference, normal_cell, t_closest, steps);
     }
     return hit;
 }
