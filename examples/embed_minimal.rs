@@ -13,6 +13,7 @@ use rbvh::gpu_allocator::vulkan::{
     Allocation, AllocationCreateDesc, AllocationScheme, Allocator, AllocatorCreateDesc,
 };
 use rbvh::gpu_allocator::MemoryLocation;
+use rbvh::lod::Cones;
 use rbvh::{Context, External, Hit, Query, Rbvh, RbvhParams, Scene, Structure, Tracer};
 
 fn main() -> Result<(), Box<dyn Error>> {
@@ -97,7 +98,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     let same = |(g, c): &(&Hit, Hit)| (g.id, g.t) == (c.id, c.t);
     let agree = hits
         .iter()
-        .zip(rbvh.trace_cpu(&rays, &[], false)?)
+        .zip(rbvh.trace_cpu(&rays, Cones::None, false)?)
         .filter(same)
         .count();
     let hit_count = hits.iter().filter(|h| h.is_hit()).count();

@@ -1,16 +1,22 @@
 //! Which structure rays are traced through: the exact BVH, an RBVH, or an RBVH with its levels of
-//! detail. One type for the CLI, the image regression and embedders alike (pbrt-v4 has one
-//! `CreateAccelerator` behind one interface), so that "which structure" is decided once and every
-//! user uploads ([`crate::gpu::Tracer::new`] takes one), traces and names it the same way. It
-//! sits below the GPU side: a structure is data, and the tracer chooses its shader by
+//! detail. One type for the CLI, the image regression, the bench and embedders alike (pbrt-v4 has
+//! one `CreateAccelerator` behind one interface), so that "which structure" is decided once: a
+//! [`Recipe`] says what to build, [`Structure::build`] builds it, [`Structure::memory`] says what
+//! it costs, and every user uploads it ([`crate::gpu::Tracer::new`] takes one), traces it (rays
+//! with their footprints, [`Cones`], whatever the structure) and names it the same way. It sits
+//! below the GPU side: a structure is data, and the tracer chooses its shader by
 //! [`Structure::kind`].
 
 use std::sync::Arc;
 
-use crate::bvh::Bvh;
+use serde::Serialize;
+
+use crate::bvh::{BuildParams, Bvh};
 use crate::geom::{Hit, Ray};
-use crate::lod::{Lod, RayCone};
-use crate::rbvh::Rbvh;
+use crate::lod::{Cones, Lod, LodParams};
+use crate::progress::{Progress, Quiet};
+use crate::rbvh::{Rbvh, RbvhParams, RbvhSource};
+use crate::scene::Scene;
 use crate::Result;
 
 /// Which structure, without it: the `method` of benchmark records (`"exact"`, `"rbvh"`,
@@ -36,6 +42,72 @@ impl Kind {
             Kind::RbvhLod => "rbvh-lod",
         }
     }
+}
+
+/// What to build: the kind of structure with its parameters. Building the exact BVH takes none
+/// of an RBVH's, and an RBVH's levels of detail are made from the RBVH they belong to, so each
+/// kind holds exactly what it is built from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Recipe {
+    /// The exact triangle BVH, built by binned SAH ([`BuildParams::DEFAULT`]).
+    Exact,
+    /// An RBVH built with these parameters.
+    Rbvh(RbvhParams),
+    /// An RBVH built with the first parameters, traced with levels of detail built with the
+    /// second.
+    RbvhLod(RbvhParams, LodParams),
+}
+
+impl Recipe {
+    /// Which structure it builds.
+    pub fn kind(&self) -> Kind {
+        match self {
+            Recipe::Exact => Kind::Exact,
+            Recipe::Rbvh(_) => Kind::Rbvh,
+            Recipe::RbvhLod(..) => Kind::RbvhLod,
+        }
+    }
+
+    /// The RBVH's parameters, for the RBVH kinds.
+    pub fn rbvh(&self) -> Option<&RbvhParams> {
+        match self {
+            Recipe::Exact => None,
+            Recipe::Rbvh(params) | Recipe::RbvhLod(params, _) => Some(params),
+        }
+    }
+
+    /// Checks every parameter ([`RbvhParams::validate`], [`LodParams::validate`]), before
+    /// anything is built.
+    pub fn validate(&self) -> Result<()> {
+        match self {
+            Recipe::Exact => Ok(()),
+            Recipe::Rbvh(params) => params.validate(),
+            Recipe::RbvhLod(params, lod) => {
+                params.validate()?;
+                lod.validate()
+            }
+        }
+    }
+}
+
+/// Bytes of one structure, as uploaded.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct Memory {
+    /// Nodes, plus height-field leaf records for an RBVH and coarse columns for `rbvh-lod`.
+    pub tree: u64,
+    /// Atlas texels and the blocks' height ranges; 0 for exact.
+    pub atlas: u64,
+    /// Triangles: all of them for exact, those of hybrid triangle leaves for an RBVH.
+    pub triangles: u64,
+    /// `tree + atlas + triangles`.
+    pub total: u64,
+    /// Texels of the height-field tiles (the atlas's unused ones not counted); 0 for exact.
+    /// `atlas / texels` is what a texel costs on the device ([`Rbvh::bytes_per_texel`]).
+    ///
+    /// [`Rbvh::bytes_per_texel`]: crate::rbvh::Rbvh::bytes_per_texel
+    pub texels: u64,
+    /// Of `texels`, those of tiles with 8-bit heights ([`crate::rbvh::Rbvh::narrow_texels`]).
+    pub narrow_texels: u64,
 }
 
 /// A built structure, ready to upload ([`crate::gpu::Tracer::new`]) or to trace on the CPU.
@@ -68,6 +140,96 @@ impl From<Arc<Rbvh>> for Structure {
 }
 
 impl Structure {
+    /// Builds what `recipe` says for `scene`.
+    pub fn build(scene: &Scene, recipe: &Recipe) -> Result<Structure> {
+        Structure::build_observed(scene, recipe, &Quiet)
+    }
+
+    /// [`Structure::build`], reporting the build's counted steps to `progress`.
+    pub fn build_observed(
+        scene: &Scene,
+        recipe: &Recipe,
+        progress: &dyn Progress,
+    ) -> Result<Structure> {
+        recipe.validate()?;
+        match recipe {
+            Recipe::Exact => Ok(Structure::Exact(Bvh::build_observed(
+                scene,
+                &BuildParams::DEFAULT,
+                progress,
+            )?)),
+            _ => Structure::build_from(&RbvhSource::new(scene)?, recipe, progress),
+        }
+    }
+
+    /// [`Structure::build_observed`] of an RBVH kind from `source`, what every level of a scene
+    /// shares (its parts, and the BVH its rings are sampled by), so that several levels are built
+    /// from one; the exact BVH is built from the source's scene.
+    pub fn build_from(
+        source: &RbvhSource,
+        recipe: &Recipe,
+        progress: &dyn Progress,
+    ) -> Result<Structure> {
+        recipe.validate()?;
+        match recipe {
+            Recipe::Exact => Structure::build_observed(source.scene(), recipe, progress),
+            Recipe::Rbvh(params) => Ok(Rbvh::build_from(source, params, progress)?.into()),
+            Recipe::RbvhLod(params, lod) => {
+                Structure::from(Rbvh::build_from(source, params, progress)?).with_levels(lod)
+            }
+        }
+    }
+
+    /// The same RBVH (shared, not copied) traced with levels of detail built by `params`: what a
+    /// measurement of both needs. Fails for the exact BVH, which has none.
+    pub fn with_levels(&self, params: &LodParams) -> Result<Structure> {
+        let rbvh = match self {
+            Structure::Exact(_) => {
+                return Err(crate::Error::param(
+                    "lod",
+                    "levels of detail are built for an RBVH, not the exact BVH".to_string(),
+                ))
+            }
+            Structure::Rbvh(rbvh) | Structure::RbvhLod(rbvh, _) => rbvh,
+        };
+        let lod = Lod::build(rbvh, params)?;
+        Ok(Structure::RbvhLod(Arc::clone(rbvh), Box::new(lod)))
+    }
+
+    /// What it costs on the device, by array. Levels of detail count with the tree: their
+    /// columns are traversal data.
+    pub fn memory(&self) -> Memory {
+        match self {
+            Structure::Exact(bvh) => Memory {
+                tree: bvh.tree_bytes(),
+                triangles: bvh.triangle_bytes(),
+                total: bvh.tree_bytes() + bvh.triangle_bytes(),
+                ..Memory::default()
+            },
+            Structure::Rbvh(rbvh) | Structure::RbvhLod(rbvh, _) => {
+                let lod = self.lod().map_or(0, Lod::bytes);
+                Memory {
+                    tree: rbvh.tree_bytes() + lod,
+                    atlas: rbvh.atlas_bytes(),
+                    triangles: rbvh.triangle_bytes(),
+                    total: rbvh.total_bytes() + lod,
+                    texels: rbvh.stats.tile_texels,
+                    narrow_texels: rbvh.narrow_texels(),
+                }
+            }
+        }
+    }
+
+    /// How long it took to build, in milliseconds (an RBVH's and its levels of detail's
+    /// together).
+    pub fn build_ms(&self) -> f64 {
+        match self {
+            Structure::Exact(bvh) => bvh.build_ms,
+            Structure::Rbvh(rbvh) => rbvh.stats.build_ms,
+            Structure::RbvhLod(rbvh, lod) => rbvh.stats.build_ms + lod.stats.build_ms,
+        }
+    }
+
     /// `rbvh` traced with its levels of detail `lod` (built for it by [`Lod::build`]).
     pub fn with_lod(rbvh: impl Into<Arc<Rbvh>>, lod: Lod) -> Self {
         Structure::RbvhLod(rbvh.into(), Box::new(lod))
@@ -124,13 +286,87 @@ impl Structure {
         }
     }
 
-    /// The CPU reference of a trace of `rays`: closest hits, or with `any_hit` any hits. `cones`
-    /// (one per ray) are read only with levels of detail, which fail without them.
-    pub fn trace_cpu(&self, rays: &[Ray], cones: &[RayCone], any_hit: bool) -> Result<Vec<Hit>> {
+    /// The CPU reference of a trace of `rays`: closest hits, or with `any_hit` any hits. `cones`,
+    /// the rays' footprints, are read only with levels of detail, which fail without them; as
+    /// [`crate::gpu::Tracer::trace_with`].
+    pub fn trace_cpu<'c>(
+        &self,
+        rays: &[Ray],
+        cones: impl Into<Cones<'c>>,
+        any_hit: bool,
+    ) -> Result<Vec<Hit>> {
         Ok(match self {
             Structure::Exact(bvh) => bvh.trace_cpu(rays, any_hit),
             Structure::Rbvh(rbvh) => rbvh.trace_cpu(rays, any_hit),
             Structure::RbvhLod(rbvh, lod) => rbvh.trace_cpu_lod(lod, rays, cones, any_hit)?,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each recipe builds its kind, and its memory is the sum of its arrays: the exact BVH's
+    /// nodes and triangles, the RBVH's tree, atlas and triangles, and the levels of detail with
+    /// the tree.
+    #[test]
+    fn a_recipe_builds_its_kind_and_counts_its_bytes() {
+        let scene = Scene::builtin("sphere").unwrap();
+        let params = RbvhParams::quality(1).unwrap();
+        let lod = LodParams::default();
+        let exact = Structure::build(&scene, &Recipe::Exact).unwrap();
+        let rbvh = Structure::build(&scene, &Recipe::Rbvh(params)).unwrap();
+        let with_lod = Structure::build(&scene, &Recipe::RbvhLod(params, lod)).unwrap();
+        for (structure, kind) in [
+            (&exact, Kind::Exact),
+            (&rbvh, Kind::Rbvh),
+            (&with_lod, Kind::RbvhLod),
+        ] {
+            assert_eq!(structure.kind(), kind);
+            let m = structure.memory();
+            assert_eq!(m.total, m.tree + m.atlas + m.triangles, "{kind:?}");
+            assert!(m.total > 0 && structure.build_ms() > 0.0, "{kind:?}");
+        }
+        let bvh = exact.bvh().unwrap();
+        assert_eq!(
+            exact.memory().total,
+            bvh.tree_bytes() + bvh.triangle_bytes()
+        );
+        let r = rbvh.rbvh().unwrap();
+        assert_eq!(rbvh.memory().total, r.total_bytes());
+        assert_eq!(rbvh.memory().texels, r.stats.tile_texels);
+        // The same RBVH, built twice from one recipe, and its levels of detail on top.
+        assert_eq!(with_lod.rbvh().unwrap().nodes, r.nodes);
+        let lod_bytes = with_lod.lod().unwrap().bytes();
+        assert_eq!(with_lod.memory().tree, rbvh.memory().tree + lod_bytes);
+        assert_eq!(with_lod.memory().atlas, rbvh.memory().atlas);
+        // Levels added to a built RBVH share it rather than copy it.
+        let shared = rbvh.with_levels(&lod).unwrap();
+        assert!(std::ptr::eq(shared.rbvh().unwrap(), r));
+        assert!(exact.with_levels(&lod).is_err());
+    }
+
+    /// A recipe is checked before anything is built, its errors naming the parameter.
+    #[test]
+    fn a_bad_recipe_is_refused_by_name() {
+        let scene = Scene::builtin("sphere").unwrap();
+        let bad = RbvhParams {
+            texels_per_diagonal: -1.0,
+            ..RbvhParams::quality(1).unwrap()
+        };
+        let err = Structure::build(&scene, &Recipe::Rbvh(bad)).err().unwrap();
+        assert!(err.to_string().contains("texels_per_diagonal"), "{err}");
+        let lod = LodParams {
+            columns: 0,
+            ..LodParams::default()
+        };
+        let good = RbvhParams::quality(1).unwrap();
+        let err = Structure::build(&scene, &Recipe::RbvhLod(good, lod))
+            .err()
+            .unwrap();
+        assert!(err.to_string().contains("columns"), "{err}");
+        assert_eq!(Recipe::RbvhLod(good, lod).kind(), Kind::RbvhLod);
+        assert_eq!(Recipe::Exact.rbvh(), None);
     }
 }

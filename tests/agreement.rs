@@ -10,6 +10,7 @@ use glam::Vec3;
 use rbvh::bvh::Bvh;
 use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{Query, Tracer};
+use rbvh::lod::Cones;
 use rbvh::scene::Scene;
 use rbvh::structure::Structure;
 
@@ -119,7 +120,7 @@ fn gpu_and_cpu_tracers_agree() {
         let rays = rays_for(&scene, side, random, k as u64 + 1);
         for (query, any) in [(Query::Closest, false), (Query::Any, true)] {
             let gpu = tracer.trace(&rays, query).unwrap().hits;
-            let cpu = exact.trace_cpu(&rays, &[], any).unwrap();
+            let cpu = exact.trace_cpu(&rays, Cones::None, any).unwrap();
             compare(&scene, &rays, &gpu, &cpu, any, &mut tally);
         }
     }
@@ -190,13 +191,13 @@ fn repeated_passes_trace_the_same_hits_and_time_one_pass() {
     ] {
         for query in [Query::Closest, Query::Any] {
             let once = tracer.trace(&rays, query).unwrap();
-            let thrice = tracer.trace_repeated(&rays, None, query, 3).unwrap();
+            let thrice = tracer.trace_repeated(&rays, Cones::None, query, 3).unwrap();
             // Each pass sees the last one's writes and writes the same hits again.
             assert_eq!(once.hits, thrice.hits, "{query:?}");
             assert!(thrice.timing.ms() > 0.0 && thrice.timing.wall_ms > 0.0);
         }
         let err = tracer
-            .trace_repeated(&rays, None, Query::Closest, 0)
+            .trace_repeated(&rays, Cones::None, Query::Closest, 0)
             .unwrap_err()
             .to_string();
         assert!(err.contains("at least one pass"), "{err}");

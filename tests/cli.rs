@@ -358,8 +358,7 @@ fn parameter_errors_name_their_flag() {
                 "--scene",
                 "sphere",
                 "--method",
-                "rbvh",
-                "--lod",
+                "rbvh-lod",
                 "--lod-columns",
                 "0",
             ][..],
@@ -372,7 +371,8 @@ fn parameter_errors_name_their_flag() {
                 "sphere",
                 "--quality",
                 "2",
-                "--lod",
+                "--method",
+                "rbvh-lod",
                 "--lod-bias",
                 "20",
             ][..],
@@ -534,10 +534,9 @@ fn render_and_trace_with_level_of_detail() {
         "--scene",
         "blob",
         "--method",
-        "rbvh",
+        "rbvh-lod",
         "--quality",
         "3",
-        "--lod",
         "--lod-bias",
         "-0.5",
         "--stats",
@@ -575,8 +574,7 @@ fn render_and_trace_with_level_of_detail() {
             "--scene",
             "blob",
             "--method",
-            "rbvh",
-            "--lod",
+            "rbvh-lod",
             "--lod-spread",
             "0.05",
             "--rays",
@@ -601,9 +599,21 @@ fn render_and_trace_with_level_of_detail() {
         );
     }
 
-    let out = rbvh(&["render", "--scene", "blob", "--lod", "--out", arg(&png)]);
+    let out = rbvh(&[
+        "render",
+        "--scene",
+        "blob",
+        "--method",
+        "rbvh-lod",
+        "--texels",
+        "height",
+        "--out",
+        arg(&png),
+    ]);
     assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--lod needs an RBVH"));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("levels of detail need the texels' normals")
+    );
     for (args, needle) in [
         (vec!["--lod-spread", "NaN"], "--lod-spread"),
         (vec!["--lod-spread=-1"], "--lod-spread"),
@@ -617,8 +627,7 @@ fn render_and_trace_with_level_of_detail() {
             "--scene",
             "blob",
             "--method",
-            "rbvh",
-            "--lod",
+            "rbvh-lod",
             "--rays",
             arg(&rays_path),
             "--hits",
@@ -812,7 +821,8 @@ fn bench_exits_non_zero_on_an_invalid_measurement() {
 }
 
 /// Each command shows the flags it uses: `paint` (an RBVH, never level of detail or another
-/// structure) has no --method or --lod, and the commands that trace one level say so.
+/// structure) shows no --method or level-of-detail flags, and the commands that trace one level
+/// say so.
 #[test]
 fn commands_show_only_the_flags_they_use() {
     let help = |command: &str| {
@@ -821,15 +831,29 @@ fn commands_show_only_the_flags_they_use() {
         String::from_utf8_lossy(&out.stdout).into_owned()
     };
     let paint = help("paint");
-    for flag in ["--method", "--lod"] {
+    for flag in ["--method", "--lod-bias", "--lod-columns"] {
         assert!(
             !paint.lines().any(|l| l.trim_start().starts_with(flag)),
             "paint shows {flag}:\n{paint}"
         );
     }
     assert!(paint.contains("--strokes") && paint.contains("--quality"));
-    let out = rbvh(&["paint", "--lod", "--strokes", "s.txt", "--out", "o.rbvh"]);
-    assert!(!out.status.success());
+    for method in ["exact", "rbvh-lod"] {
+        let out = rbvh(&[
+            "paint",
+            "--method",
+            method,
+            "--strokes",
+            "s.txt",
+            "--out",
+            "o.rbvh",
+        ]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && err.contains("takes rbvh alone"),
+            "{err}"
+        );
+    }
     for command in ["render", "trace", "paint"] {
         assert!(help(command).contains("one of 0..4"), "{command}");
     }
@@ -1277,8 +1301,19 @@ fn flags_without_effect_are_refused() {
         ),
         // Level of detail needs normals in the texels.
         (
-            words(&["bench", "--texels", "height", "--lod", "--quality", "0"]),
-            vec!["--lod measures levels with normals", "--texels height"],
+            words(&[
+                "bench",
+                "--texels",
+                "height",
+                "--method",
+                "exact,rbvh-lod",
+                "--quality",
+                "0",
+            ]),
+            vec![
+                "--method rbvh-lod measures levels with normals",
+                "--texels height",
+            ],
         ),
         // Named as the user types it, not as the field it fills.
         (
@@ -1303,11 +1338,21 @@ fn flags_without_effect_are_refused() {
             vec!["--method exact", "--rbvh"],
         ),
         // Flags of level of detail and of other outputs, without them.
-        (render(&["--lod-bias", "0"]), vec![not_given, "--lod"]),
-        (trace(&["--lod-spread", "0.1"]), vec![not_given, "--lod"]),
         (
-            render(&["--method", "rbvh", "--lod", "--lod-spread", "0.1"]),
+            render(&["--lod-bias", "0"]),
+            vec!["--lod-bias says how levels of detail", "--method rbvh-lod"],
+        ),
+        (
+            trace(&["--method", "rbvh", "--lod-spread", "0.1"]),
+            vec!["--lod-spread is the rays' footprint", "--method rbvh-lod"],
+        ),
+        (
+            render(&["--method", "rbvh-lod", "--lod-spread", "0.1"]),
             vec!["unexpected argument '--lod-spread'"],
+        ),
+        (
+            render(&["--method", "exact,rbvh"]),
+            vec!["--method: this command traces one structure"],
         ),
         (
             render(&["--heatmap-max", "9"]),
@@ -1341,8 +1386,8 @@ fn flags_without_effect_are_refused() {
             vec!["--texels height", "no colours to paint"],
         ),
         (
-            paint(&["--method", "rbvh"]),
-            vec!["unexpected argument '--method'"],
+            paint(&["--method", "exact"]),
+            vec!["--method: paint paints an RBVH's texels"],
         ),
         // build prints its table anyway without --out.
         (
@@ -1368,12 +1413,23 @@ fn flags_without_effect_are_refused() {
         ),
         (
             words(&["bench", "--lod-columns", "8"]),
-            vec![not_given, "--lod"],
+            vec![
+                "--lod-columns says how levels of detail",
+                "--method rbvh-lod",
+            ],
         ),
         // regress: levels without an RBVH method, tolerances while blessing.
         (
             words(&["regress", "--method", "exact", "--quality", "2"]),
-            vec!["--quality picks the RBVH levels", "--method"],
+            vec!["--quality says how to build an RBVH", "--method rbvh"],
+        ),
+        (
+            words(&["regress", "--texels-per-diagonal", "300"]),
+            vec!["--texels-per-diagonal: regress compares the presets"],
+        ),
+        (
+            words(&["regress", "--lod-bias", "0"]),
+            vec!["--lod-bias: regress compares the presets"],
         ),
         (
             words(&["regress", "--bless", "--max-flip-mean", "0.1"]),
@@ -1393,14 +1449,14 @@ fn flags_without_effect_are_refused() {
             words(&["shaders", "--amd", "navi21", "--device", "x"]),
             vec!["cannot be used with"],
         ),
-        // compare: its RBVH's parameters are the file's; no level of detail.
+        // compare: its RBVH's parameters are the file's; never the exact BVH beside itself.
         (
             words(&["compare", "--rbvh", file, "--max-angle", "30"]),
             vec!["--max-angle", "--rbvh loads one built already"],
         ),
         (
-            words(&["compare", "--lod"]),
-            vec!["unexpected argument '--lod'"],
+            words(&["compare", "--method", "exact"]),
+            vec!["--method exact: compare sets an RBVH beside the exact BVH"],
         ),
     ];
     common::every_case(cases, |(args, needles)| {

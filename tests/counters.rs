@@ -9,7 +9,7 @@ mod common;
 use rbvh::bvh::Bvh;
 use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{Query, Tracer};
-use rbvh::lod::{Lod, LodParams, RayCone};
+use rbvh::lod::{Cones, Lod, LodParams, RayCone};
 use rbvh::probe::{Array, RayCounters, Read, TraceStats};
 use rbvh::rbvh::{Rbvh, RbvhParams, TexelFormat};
 use rbvh::scene::Scene;
@@ -94,7 +94,7 @@ fn device_and_cpu_twin_count_the_same_work() {
                 assert_eq!(tracer.block_jumps(), jumping);
                 let twin = r.device_twin().with_block_jumps(jumping);
                 let any = query == Query::Any;
-                let gpu = tracer.trace_with(&rays, query, true).unwrap();
+                let gpu = tracer.trace_with(&rays, Cones::None, query, true).unwrap();
                 let cpu: Vec<_> = rays
                     .iter()
                     .map(|ray| twin.trace(ray, any, &mut ()))
@@ -123,7 +123,7 @@ fn device_and_cpu_twin_count_the_same_work() {
             }
         }
         for query in [Query::Closest, Query::Any] {
-            let gpu = exact.trace_with(&rays, query, true).unwrap();
+            let gpu = exact.trace_with(&rays, Cones::None, query, true).unwrap();
             let cpu: Vec<_> = rays
                 .iter()
                 .map(|ray| bvh.trace_probed(ray, query == Query::Any, &mut ()))
@@ -155,7 +155,7 @@ fn level_of_detail_counts_agree_too() {
     };
     let cones = vec![cone; rays.len()];
     let gpu = tracer
-        .trace_lod(&rays, &cones, Query::Closest, true)
+        .trace_with(&rays, &cones, Query::Closest, true)
         .unwrap();
     let twin = lod
         .device_twin(&r)

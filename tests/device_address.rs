@@ -8,7 +8,7 @@ use glam::Vec3;
 use rbvh::bvh::{Bvh, LEAF_BIT};
 use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{Addressing, Painter, Query, Reach, Tracer};
-use rbvh::lod::{Lod, LodParams, RayCone, LOD_BIT};
+use rbvh::lod::{Cones, Lod, LodParams, RayCone, LOD_BIT};
 use rbvh::rbvh::{Rbvh, RbvhParams};
 use rbvh::scene::Scene;
 use rbvh::structure::Structure;
@@ -66,8 +66,8 @@ fn every_tracer_gives_identical_hits_through_device_addresses() {
         for (what, b, a) in &pairs {
             assert_eq!(b.reach(), Reach::Bindings);
             assert_eq!(a.reach(), Reach::DeviceAddresses);
-            let hb = b.trace_with(&rays, query, true).unwrap();
-            let ha = a.trace_with(&rays, query, true).unwrap();
+            let hb = b.trace_with(&rays, Cones::None, query, true).unwrap();
+            let ha = a.trace_with(&rays, Cones::None, query, true).unwrap();
             assert!(hb.hits.iter().any(Hit::is_hit), "{what}: no hits at all");
             assert_identical(&format!("{what} {query:?}"), &hb.hits, &ha.hits);
             assert_eq!(hb.counters, ha.counters, "{what} {query:?}: counters");
@@ -75,8 +75,8 @@ fn every_tracer_gives_identical_hits_through_device_addresses() {
         let b = Tracer::new(&bound, &with_lod).unwrap();
         let a = Tracer::new(&addressed, &with_lod).unwrap();
         assert_eq!(a.reach(), Reach::DeviceAddresses);
-        let hb = b.trace_lod(&rays, &cones, query, true).unwrap();
-        let ha = a.trace_lod(&rays, &cones, query, true).unwrap();
+        let hb = b.trace_with(&rays, &cones, query, true).unwrap();
+        let ha = a.trace_with(&rays, &cones, query, true).unwrap();
         assert_identical(&format!("LOD {query:?}"), &hb.hits, &ha.hits);
         assert_eq!(hb.counters, ha.counters, "LOD {query:?}: counters");
         let any = query == Query::Any;

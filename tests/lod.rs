@@ -9,7 +9,7 @@ use rbvh::bench::metrics::image_errors;
 use rbvh::bvh::Bvh;
 use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{Query, Tracer};
-use rbvh::lod::{Lod, LodParams, RayCone};
+use rbvh::lod::{Cones, Lod, LodParams, RayCone};
 use rbvh::output;
 use rbvh::rbvh::{Rbvh, RbvhParams};
 use rbvh::scene::Scene;
@@ -106,10 +106,12 @@ fn grove_lod_is_near_fine_never_worse_than_coarse_and_ends_traversal_sooner() {
     ] {
         let (rays, cones) = view(view_scene);
         let exact_hits = exact.trace(&rays, Query::Closest).unwrap().hits;
-        let fine_traced = fine_tracer.trace_with(&rays, Query::Closest, true).unwrap();
+        let fine_traced = fine_tracer
+            .trace_with(&rays, Cones::None, Query::Closest, true)
+            .unwrap();
         let coarse_hits = coarse_tracer.trace(&rays, Query::Closest).unwrap().hits;
         let lod_traced = lod_tracer
-            .trace_lod(&rays, &cones, Query::Closest, true)
+            .trace_with(&rays, &cones, Query::Closest, true)
             .unwrap();
         let reference = shade(&rays, &exact_hits);
         let fine_image = shade(&rays, &fine_traced.hits);
@@ -227,7 +229,7 @@ fn gpu_and_cpu_agree_with_lod_and_point_cones_change_nothing() {
         let tracer = Tracer::new(&ctx, &with_lod).unwrap();
         let (rays, cones) = rays_and_cones(&scene, 96, 4000, k as u64);
         for (query, any) in [(Query::Closest, false), (Query::Any, true)] {
-            let gpu = tracer.trace_lod(&rays, &cones, query, false).unwrap().hits;
+            let gpu = tracer.trace_with(&rays, &cones, query, false).unwrap().hits;
             let cpu = r.trace_cpu_lod(lod, &rays, &cones, any).unwrap();
             let chosen = cpu
                 .iter()
@@ -249,7 +251,7 @@ fn gpu_and_cpu_agree_with_lod_and_point_cones_change_nothing() {
             .unwrap()
             .hits;
         let pointed = tracer
-            .trace_lod(&rays, &points, Query::Closest, false)
+            .trace_with(&rays, &points, Query::Closest, false)
             .unwrap()
             .hits;
         assert_eq!(plain, pointed, "{name} Q{level}: GPU");
@@ -301,7 +303,7 @@ fn lod_refuses_mismatched_input() {
     let tracer = Tracer::new(&ctx, &with_lod).unwrap();
     is_param(
         tracer
-            .trace_lod(&rays, &cones[1..], Query::Closest, false)
+            .trace_with(&rays, &cones[1..], Query::Closest, false)
             .unwrap_err(),
         "cones",
     );
@@ -309,7 +311,7 @@ fn lod_refuses_mismatched_input() {
     bad[3].spread = f32::NAN;
     is_param(
         tracer
-            .trace_lod(&rays, &bad, Query::Closest, false)
+            .trace_with(&rays, &bad, Query::Closest, false)
             .unwrap_err(),
         "cone 3",
     );
@@ -323,14 +325,48 @@ fn lod_refuses_mismatched_input() {
     );
     is_param(
         tracer.trace(&rays, Query::Closest).unwrap_err(),
-        "trace_lod",
+        "footprints",
     );
-    let plain = Tracer::new(&ctx, &Structure::from(r.clone())).unwrap();
     is_param(
+        with_lod.trace_cpu(&rays, Cones::None, false).unwrap_err(),
+        "footprints",
+    );
+    // Every other structure ignores the footprints, so a caller passes what its rays carry.
+    let plain_structure = Structure::from(r.clone());
+    let plain = Tracer::new(&ctx, &plain_structure).unwrap();
+    assert_eq!(
         plain
-            .trace_lod(&rays, &cones, Query::Closest, false)
-            .unwrap_err(),
-        "levels of detail",
+            .trace_with(&rays, &cones, Query::Closest, false)
+            .unwrap()
+            .hits,
+        plain.trace(&rays, Query::Closest).unwrap().hits
+    );
+    assert_eq!(
+        plain_structure.trace_cpu(&rays, &bad, false).unwrap(),
+        plain_structure
+            .trace_cpu(&rays, Cones::None, false)
+            .unwrap()
+    );
+    // One cone for all rays traces as that cone given to each, on the device and the CPU.
+    let same = RayCone {
+        width: 0.0,
+        spread: 0.02,
+    };
+    let each = vec![same; rays.len()];
+    let gpu = tracer
+        .trace_with(&rays, Cones::Same(same), Query::Closest, false)
+        .unwrap()
+        .hits;
+    assert_eq!(
+        gpu,
+        tracer
+            .trace_with(&rays, &each, Query::Closest, false)
+            .unwrap()
+            .hits
+    );
+    assert_eq!(
+        with_lod.trace_cpu(&rays, Cones::Same(same), false).unwrap(),
+        r.trace_cpu_lod(lod, &rays, &each, false).unwrap()
     );
     for (params, what) in [
         (
@@ -415,7 +451,7 @@ fn ibl_visibility_rays_trace_with_level_of_detail() {
         .unwrap();
         let tracer = Tracer::new(&ctx, &Structure::with_lod(r.clone(), lod)).unwrap();
         let hits = tracer
-            .trace_lod(&rays, &cones, Query::Closest, false)
+            .trace_with(&rays, &cones, Query::Closest, false)
             .unwrap()
             .hits;
         let image = render(&tracer, &hits, r.texel_size, Some(cone));
@@ -442,7 +478,7 @@ fn ibl_visibility_rays_trace_with_level_of_detail() {
         sharper_flip < 3.5 * plain_flip + 0.002 && sharper_flip < flip,
         "bias -2: {sharper_flip}, default bias: {flip}, without LOD: {plain_flip}"
     );
-    // A plain tracer cannot take cones.
+    // A plain tracer ignores the cones: the same render with them as without.
     let albedo = vec![glam::Vec3::splat(ibl::GREY); rays.len()];
     let frame = Frame {
         width: w,
@@ -458,7 +494,13 @@ fn ibl_visibility_rays_trace_with_level_of_detail() {
         surface_offset: r.texel_size,
         cone: Some(cone),
     };
-    assert!(ibl::render(&plain, &frame, &env, &settings, |_| {}).is_err());
+    let with_cones = ibl::render(&plain, &frame, &env, &settings, |_| {}).unwrap();
+    let without = Settings {
+        cone: None,
+        ..settings
+    };
+    let without = ibl::render(&plain, &frame, &env, &without, |_| {}).unwrap();
+    assert_eq!(with_cones.image, without.image);
 }
 
 #[test]
@@ -472,7 +514,7 @@ fn recorded_lod_trace_matches_the_submitted_one() {
     let n = rays.len() as u32;
     let expected = Tracer::new(&ctx, &with_lod)
         .unwrap()
-        .trace_lod(&rays, &cones, Query::Closest, false)
+        .trace_with(&rays, &cones, Query::Closest, false)
         .unwrap()
         .hits;
     let ray_buf = ctx.upload_storage("rays", &rays).unwrap();
@@ -529,10 +571,10 @@ fn coarse_hits_carry_the_colour_of_the_surface_they_stand_for() {
     let mut with_lod = Structure::with_lod(r, lod);
     let hits = Tracer::new(&ctx, &with_lod)
         .unwrap()
-        .trace_lod(&rays, &cones, Query::Closest, false)
+        .trace_with(&rays, &cones, Query::Closest, false)
         .unwrap()
         .hits;
-    let albedo = hit_albedo(&scene, with_lod.rbvh(), with_lod.lod(), &rays, &hits).unwrap();
+    let albedo = hit_albedo(&scene, &with_lod, &rays, &hits).unwrap();
     let mut coarse = 0;
     for (hit, colour) in hits.iter().zip(&albedo) {
         if hit.is_hit() {

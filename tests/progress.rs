@@ -9,7 +9,7 @@ mod common;
 
 use rbvh::bvh::{BuildParams, Bvh};
 use rbvh::gpu::{Query, Tracer, OBSERVED_BATCH};
-use rbvh::lod::{Lod, LodParams, RayCone};
+use rbvh::lod::{Cones, Lod, LodParams, RayCone};
 use rbvh::progress::Progress;
 use rbvh::rbvh::{Rbvh, RbvhParams};
 use rbvh::scene::Scene;
@@ -139,7 +139,7 @@ fn a_watched_trace_counts_its_rays_in_batches_and_answers_as_an_unwatched_one() 
     let tracer = Tracer::new(&ctx, &Structure::from(rbvh.clone())).unwrap();
     let tally = Tally::default();
     let watched = tracer
-        .trace_observed(&rays, None, Query::Closest, false, &tally)
+        .trace_observed(&rays, Cones::None, Query::Closest, false, &tally)
         .unwrap();
     assert_eq!(tally.counted(), [format!("tracing rays {}", rays.len())]);
     assert_eq!(
@@ -152,17 +152,17 @@ fn a_watched_trace_counts_its_rays_in_batches_and_answers_as_an_unwatched_one() 
     let cones = vec![RayCone::pixel(&camera, 768); rays.len()];
     let tally = Tally::default();
     let watched = tracer
-        .trace_observed(&rays, Some(&cones), Query::Closest, true, &tally)
+        .trace_observed(&rays, &cones, Query::Closest, true, &tally)
         .unwrap();
     assert_eq!(tally.counted(), [format!("tracing rays {}", rays.len())]);
     let plain = tracer
-        .trace_lod(&rays, &cones, Query::Closest, true)
+        .trace_with(&rays, &cones, Query::Closest, true)
         .unwrap();
     assert_eq!(watched.hits, plain.hits);
     assert_eq!(watched.counters, plain.counters);
     // A level-of-detail tracer without cones is refused, as trace_with refuses it.
     assert!(tracer
-        .trace_observed(&rays, None, Query::Closest, false, &tally)
+        .trace_observed(&rays, Cones::None, Query::Closest, false, &tally)
         .is_err());
 }
 

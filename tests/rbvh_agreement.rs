@@ -9,6 +9,7 @@ mod common;
 
 use rbvh::geom::Ray;
 use rbvh::gpu::{Query, Tracer};
+use rbvh::lod::Cones;
 use rbvh::rbvh::{Rbvh, RbvhParams, TexelFormat};
 use rbvh::scene::Scene;
 use rbvh::structure::Structure;
@@ -91,7 +92,7 @@ fn block_jumps_skip_many_cells_of_grazing_rays_and_change_no_hit() {
     // On whatever this device's default.
     tracer.set_block_jumps(true).unwrap();
     for (query, any) in [(Query::Closest, false), (Query::Any, true)] {
-        let gpu = tracer.trace_with(&rays, query, true).unwrap();
+        let gpu = tracer.trace_with(&rays, Cones::None, query, true).unwrap();
         let (mut cpu_steps, mut hits) = (0u64, 0usize);
         for (i, ray) in rays.iter().enumerate() {
             let (hit, stats) = if any {
@@ -427,7 +428,9 @@ fn block_jumps_agree_with_the_plain_walk_on_steep_unaligned_tiles() {
             .collect();
         let mut tracer = Tracer::new(&ctx, &Structure::from(r.clone())).unwrap();
         tracer.set_block_jumps(true).unwrap();
-        let gpu = tracer.trace_with(&rays, Query::Closest, true).unwrap();
+        let gpu = tracer
+            .trace_with(&rays, Cones::None, Query::Closest, true)
+            .unwrap();
         let cpu = r.trace_cpu(&rays, false);
         agreement.add(&format!("steep tile {case}"), &gpu.hits, &cpu, false);
         gpu_steps += gpu

@@ -68,7 +68,8 @@ fn down_ray(x: f32, y: f32) -> Ray {
 fn check_quadrants(scene: &Scene, expect: [Vec3; 4]) {
     let ctx = common::context();
     let rays: Vec<Ray> = QUADRANTS.iter().map(|&(x, y)| down_ray(x, y)).collect();
-    let exact = Tracer::new(&ctx, &Structure::from(Bvh::build(scene).unwrap()))
+    let exact_structure = Structure::from(Bvh::build(scene).unwrap());
+    let exact = Tracer::new(&ctx, &exact_structure)
         .unwrap()
         .trace(&rays, Query::Closest)
         .unwrap()
@@ -77,7 +78,7 @@ fn check_quadrants(scene: &Scene, expect: [Vec3; 4]) {
     // the hit); with every triangle sampled it is a height field whose texels hold the colour.
     let preset = RbvhParams::quality(4).unwrap();
     let sampled = common::sampled_preset(4);
-    let mut structures = vec![("exact", None, exact)];
+    let mut structures = vec![("exact", exact_structure, exact)];
     for (name, params) in [("rbvh Q4", preset), ("rbvh Q4s", sampled)] {
         let rbvh = Arc::new(Rbvh::build(scene, &params).unwrap());
         assert!(rbvh.colours.is_some());
@@ -86,15 +87,16 @@ fn check_quadrants(scene: &Scene, expect: [Vec3; 4]) {
             !params.exact_when_cheaper,
             "{name}"
         );
-        let hits = Tracer::new(&ctx, &Structure::from(rbvh.clone()))
+        let structure = Structure::from(rbvh);
+        let hits = Tracer::new(&ctx, &structure)
             .unwrap()
             .trace(&rays, Query::Closest)
             .unwrap()
             .hits;
-        structures.push((name, Some(rbvh), hits));
+        structures.push((name, structure, hits));
     }
     for (name, structure, hits) in &structures {
-        let albedo = hit_albedo(scene, structure.as_deref(), None, &rays, hits).unwrap();
+        let albedo = hit_albedo(scene, structure, &rays, hits).unwrap();
         for (k, (&got, want)) in albedo.iter().zip(expect).enumerate() {
             assert!(
                 (got - want).abs().max_element() < 0.05,
@@ -152,7 +154,7 @@ fn kd_only_obj_colours_objects_and_leaves_plain_meshes_without_materials() {
     assert!(r.colours.is_none() && r.colour_bytes() == 0);
     let rays = [down_ray(0.0, 0.0)];
     let hits = r.trace_cpu(&rays, false);
-    assert!(hit_albedo(&plain, Some(&r), None, &rays, &hits).is_none());
+    assert!(hit_albedo(&plain, &Structure::from(r), &rays, &hits).is_none());
 }
 
 /// A glTF quad with its buffer as a data URI, its base colour texture `image` (a JSON image

@@ -24,7 +24,6 @@
 
 use std::collections::HashSet;
 use std::path::PathBuf;
-use std::sync::Arc;
 
 use rayon::prelude::*;
 
@@ -33,17 +32,17 @@ use super::metrics::{self, HitErrors, Summary};
 use super::plot;
 use super::provenance::{self, Provenance};
 use super::record::{
-    BenchReport, Errors, Memory, Params, Record, SeamRecord, ShaderRecord, Spread, TimingSource,
+    BenchReport, Errors, Params, Record, SeamRecord, ShaderRecord, Spread, TimingSource,
     TrafficRecord,
 };
 use super::steps;
 use super::traffic::{self, TrafficModel, CACHE_SIZES, DRAM_LINE};
 use super::validate;
 use super::{BenchConfig, Device};
-use crate::bvh::{BuildParams, Bvh};
+use crate::bvh::Bvh;
 use crate::geom::{Hit, Ray};
 use crate::gpu::{Context, Query, Timing, Traced, Tracer};
-use crate::lod::{Lod, RayCone};
+use crate::lod::{Cones, Lod, RayCone};
 use crate::output::{self, Image};
 use crate::probe::{MeanCounters, Read, TraceStats};
 use crate::progress::{Progress, Quiet};
@@ -51,7 +50,7 @@ use crate::rays::{self, RayType, Secondary, DEFAULT_LIGHT};
 use crate::rbvh::seams::closed_triangles;
 use crate::rbvh::{Rbvh, RbvhParams, RbvhSource, TexelFormat};
 use crate::scene::Scene;
-use crate::structure::{Kind, Structure};
+use crate::structure::{Kind, Recipe, Structure};
 use crate::{Error, Result};
 
 /// What the run tells its caller while it works.
@@ -172,8 +171,6 @@ struct Candidate {
     /// The RBVH's parameters (its level); None for the exact BVH.
     params: Option<RbvhParams>,
     tracer: Tracer,
-    build_ms: f64,
-    memory: Memory,
     /// Leaks through the seams (plain RBVHs, when asked for).
     seams: Option<SeamRecord>,
 }
@@ -206,31 +203,14 @@ impl Candidate {
         }
     }
 
-    /// Traces `rays`; a level-of-detail candidate with `cones`; `counters` through the counting
-    /// pipeline.
-    fn trace(
-        &self,
-        rays: &[Ray],
-        cones: &[RayCone],
-        query: Query,
-        counters: bool,
-    ) -> Result<Traced> {
-        if self.method() == Kind::RbvhLod {
-            self.tracer.trace_lod(rays, cones, query, counters)
-        } else {
-            self.tracer.trace_with(rays, query, counters)
-        }
+    /// Traces `rays` with their footprints (read by a level-of-detail candidate); `counters`
+    /// through the counting pipeline.
+    fn trace(&self, rays: &[Ray], cones: Cones, query: Query, counters: bool) -> Result<Traced> {
+        self.tracer.trace_with(rays, cones, query, counters)
     }
 
     /// Traces `rays` `passes` times back to back, for timing ([`Tracer::trace_repeated`]).
-    fn trace_timed(
-        &self,
-        rays: &[Ray],
-        cones: &[RayCone],
-        query: Query,
-        passes: u32,
-    ) -> Result<Traced> {
-        let cones = (self.method() == Kind::RbvhLod).then_some(cones);
+    fn trace_timed(&self, rays: &[Ray], cones: Cones, query: Query, passes: u32) -> Result<Traced> {
         self.tracer.trace_repeated(rays, cones, query, passes)
     }
 }
@@ -296,23 +276,11 @@ impl<'a> SceneBench<'a> {
             "{}: building the exact BVH",
             scene.name
         )));
-        let bvh = Bvh::build_observed(&scene, &BuildParams::DEFAULT, progress)?;
-        let (build_ms, memory) = (
-            bvh.build_ms,
-            Memory {
-                tree: bvh.tree_bytes(),
-                triangles: bvh.triangle_bytes(),
-                total: bvh.tree_bytes() + bvh.triangle_bytes(),
-                ..Memory::default()
-            },
-        );
-        let structure = Structure::Exact(bvh);
+        let structure = Structure::build_observed(&scene, &Recipe::Exact, progress)?;
         let mut candidates = vec![Candidate {
             tracer: Tracer::new_observed(ctx, &structure, progress)?,
             structure,
             params: None,
-            build_ms,
-            memory,
             seams: None,
         }];
         // Secondary rays leave the exact surface by at least the coarsest RBVH's texel: an RBVH
@@ -332,7 +300,6 @@ impl<'a> SceneBench<'a> {
         // level that counts leaks.
         let mut closed: Option<Vec<bool>> = None;
         for (k, (level, texels)) in builds.into_iter().enumerate() {
-            level.validate()?;
             let params = RbvhParams { texels, ..*level };
             observe(Event::Progress(format!(
                 "{}: building RBVH {}",
@@ -343,23 +310,16 @@ impl<'a> SceneBench<'a> {
                 Some(source) => source,
                 None => RbvhSource::new(&scene)?,
             };
-            let rbvh = Arc::new(Rbvh::build_from(&source, &params, progress)?);
+            let structure = Structure::build_from(&source, &Recipe::Rbvh(params), progress)?;
             if k < last_build {
                 shared = Some(source);
             }
+            let rbvh = structure.rbvh().expect("an RBVH recipe builds an RBVH");
             surface_offset = surface_offset.max(rbvh.texel_size);
-            let memory = Memory {
-                tree: rbvh.tree_bytes(),
-                atlas: rbvh.atlas_bytes(),
-                triangles: rbvh.triangle_bytes(),
-                total: rbvh.total_bytes(),
-                texels: rbvh.stats.tile_texels,
-                narrow_texels: rbvh.narrow_texels(),
-            };
             let exact = candidates[0]
                 .structure
                 .bvh()
-                .filter(|_| config.seam_rays > 0);
+                .filter(|_| config.plain && config.seam_rays > 0);
             let seams = exact.and_then(|exact| {
                 observe(Event::Progress(format!(
                     "{}: {} rays at the seams of RBVH {}",
@@ -368,31 +328,21 @@ impl<'a> SceneBench<'a> {
                     params.level_label()
                 )));
                 let closed = closed.get_or_insert_with(|| closed_triangles(&scene));
-                seam_leaks(exact, closed, &rbvh, config.seam_rays, config.seed)
+                seam_leaks(exact, closed, rbvh, config.seam_rays, config.seed)
             });
-            let structure = Structure::Rbvh(Arc::clone(&rbvh));
-            candidates.push(Candidate {
-                tracer: with_jumps(
-                    Tracer::new_observed(ctx, &structure, progress)?,
-                    config.block_jumps,
-                )?,
-                structure,
-                params: Some(params),
-                build_ms: rbvh.stats.build_ms,
-                memory,
-                seams,
-            });
-            let lod = config.lod.filter(|_| texels == TexelFormat::HeightNormal);
-            if let Some(lod_params) = &lod {
-                observe(Event::Progress(format!(
-                    "{}: building levels of detail of {}",
-                    scene.name,
-                    params.quality_name()
-                )));
-                let lod = Lod::build(&rbvh, lod_params)?;
-                // The coarse columns are counted with the tree: they are traversal data.
-                let (build_ms, lod_bytes) = (rbvh.stats.build_ms + lod.stats.build_ms, lod.bytes());
-                let structure = Structure::RbvhLod(Arc::clone(&rbvh), Box::new(lod));
+            let lod = match config.lod.filter(|_| texels == TexelFormat::HeightNormal) {
+                Some(lod_params) => {
+                    observe(Event::Progress(format!(
+                        "{}: building levels of detail of {}",
+                        scene.name,
+                        params.quality_name()
+                    )));
+                    Some(structure.with_levels(&lod_params)?)
+                }
+                None => None,
+            };
+            let plain = config.plain.then_some((structure, seams));
+            for (structure, seams) in plain.into_iter().chain(lod.map(|l| (l, None))) {
                 candidates.push(Candidate {
                     tracer: with_jumps(
                         Tracer::new_observed(ctx, &structure, progress)?,
@@ -400,13 +350,7 @@ impl<'a> SceneBench<'a> {
                     )?,
                     structure,
                     params: Some(params),
-                    seams: None,
-                    build_ms,
-                    memory: Memory {
-                        tree: memory.tree + lod_bytes,
-                        total: memory.total + lod_bytes,
-                        ..memory
-                    },
+                    seams,
                 });
             }
         }
@@ -470,12 +414,8 @@ impl<'a> SceneBench<'a> {
                 spread: self.pixel_cone.spread,
             },
         };
-        let cones = if self.config.lod.is_some() {
-            vec![cone; rays.len()]
-        } else {
-            Vec::new()
-        };
-        let m = self.trace_all(rays, &cones, ray_type.query())?;
+        let cones = Cones::Same(cone);
+        let m = self.trace_all(rays, cones, ray_type.query())?;
         if m.source == TimingSource::Wall {
             observe(Event::Warning(format!(
                 "{name}, {} rays: the device has no timestamp queries; timing with host wall time \
@@ -511,7 +451,7 @@ impl<'a> SceneBench<'a> {
         let exact_cpu =
             self.candidates[0]
                 .structure
-                .trace_cpu(&m.rays, &[], m.query == Query::Any)?;
+                .trace_cpu(&m.rays, Cones::None, m.query == Query::Any)?;
         // The pixel each ray belongs to (secondary rays: one per exact primary hit, in order), for
         // the traffic model's screen tiles.
         let pixels: Vec<u32> = if ray_type == RayType::Primary {
@@ -534,11 +474,11 @@ impl<'a> SceneBench<'a> {
                     (false, false) => "",
                 }
             )));
-            let traced = c.trace(&m.rays, &cones, m.query, true)?;
+            let traced = c.trace(&m.rays, cones, m.query, true)?;
             let any = m.query == Query::Any;
             let device = traced.counters.unwrap_or_default();
             let traffic = if self.config.traffic {
-                Some(self.traffic(c, &m, &cones, &pixels, &device)?)
+                Some(self.traffic(c, &m, cone, &pixels, &device)?)
             } else {
                 None
             };
@@ -610,9 +550,10 @@ impl<'a> SceneBench<'a> {
                 rays: m.rays.len() as u64,
                 mrays_per_s: speeds[i].clone(),
                 speedup_vs_exact: speeds[i].median / speeds[0].median,
-                build_ms: c.build_ms,
-                memory_bytes: c.memory,
-                memory_ratio_vs_exact: exact.memory.total as f64 / c.memory.total.max(1) as f64,
+                build_ms: c.structure.build_ms(),
+                memory_bytes: c.structure.memory(),
+                memory_ratio_vs_exact: exact.structure.memory().total as f64
+                    / c.structure.memory().total.max(1) as f64,
                 error: errors,
                 valid: invalid.is_none(),
                 invalid_reason: invalid,
@@ -630,12 +571,12 @@ impl<'a> SceneBench<'a> {
 
     /// The CPU twin of candidate `c` on `m`'s rays: its counters, checked against the device's
     /// (`device`, per ray), and the memory traffic of its reads with the rays taken in 8 × 8
-    /// screen tiles of `pixels` (each ray's pixel).
+    /// screen tiles of `pixels` (each ray's pixel); every ray's footprint is `cone`.
     fn traffic(
         &self,
         c: &Candidate,
         m: &Measured,
-        cones: &[RayCone],
+        cone: RayCone,
         pixels: &[u32],
         device: &[crate::probe::RayCounters],
     ) -> Result<TrafficRecord> {
@@ -671,17 +612,11 @@ impl<'a> SceneBench<'a> {
                 )
             }
             Structure::RbvhLod(r, lod) => {
-                if cones.len() != m.rays.len() {
-                    return Err(Error::param(
-                        "cones",
-                        format!("{} cones for {} rays", cones.len(), m.rays.len()),
-                    ));
-                }
                 lod_twin = lod.device_twin(r)?.with_block_jumps(c.tracer.block_jumps());
                 let twin = &lod_twin;
                 (
                     rbvh_arrays(r, Some(lod)),
-                    Box::new(move |k, reads| twin.trace(&m.rays[k], any, &cones[k], reads).1),
+                    Box::new(move |k, reads| twin.trace(&m.rays[k], any, &cone, reads).1),
                 )
             }
         };
@@ -730,7 +665,7 @@ impl<'a> SceneBench<'a> {
 
     /// One warm-up trace per candidate (whose hits are kept), which also sizes its runs
     /// ([`passes_for`]), then `runs` interleaved rounds.
-    fn trace_all(&self, rays: Vec<Ray>, cones: &[RayCone], query: Query) -> Result<Measured> {
+    fn trace_all(&self, rays: Vec<Ray>, cones: Cones, query: Query) -> Result<Measured> {
         let min_ms = self.config.min_run_ms;
         let mut hits = Vec::with_capacity(self.candidates.len());
         let mut passes = Vec::with_capacity(self.candidates.len());

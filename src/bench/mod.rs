@@ -99,6 +99,10 @@ pub struct BenchConfig {
     pub device: Device,
     /// Write charts and error images under this directory, one subdirectory per scene.
     pub plot_dir: Option<PathBuf>,
+    /// Measure every level traced without level of detail (method `rbvh`); the default. Off,
+    /// only the levels with level of detail are measured (and no seam rays are aimed: they
+    /// referee the plain levels).
+    pub plain: bool,
     /// Also measure every level traced with level of detail, built with these parameters. Primary
     /// rays get their pixel's cone; secondary rays a cone from their origin with the pixel's
     /// spread (no width, so that the surface a ray leaves is never coarsened under it).
@@ -149,6 +153,7 @@ impl BenchConfig {
             seed: 0x5EED_2012,
             device,
             plot_dir: None,
+            plain: true,
             lod: None,
             traffic: false,
             steps: false,
@@ -198,6 +203,12 @@ impl BenchConfig {
         }
         for level in &self.levels {
             level.validate()?;
+        }
+        if !self.plain && self.lod.is_none() {
+            return Err(Error::param(
+                "plain",
+                "neither the plain levels nor levels of detail: no RBVH to measure".to_string(),
+            ));
         }
         if let Some(lod) = &self.lod {
             lod.validate()?;

@@ -86,6 +86,7 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 
 use crate::structure::Kind;
+pub use crate::structure::Memory;
 
 use super::provenance::Provenance;
 use super::steps::StepsRecord;
@@ -282,26 +283,6 @@ impl Spread {
             samples: values.to_vec(),
         }
     }
-}
-
-/// Bytes of one structure, as uploaded.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
-pub struct Memory {
-    /// Nodes, plus height-field leaf records for an RBVH and coarse columns for `rbvh-lod`.
-    pub tree: u64,
-    /// Atlas texels and the blocks' height ranges; 0 for exact.
-    pub atlas: u64,
-    /// Triangles: all of them for exact, those of hybrid triangle leaves for an RBVH.
-    pub triangles: u64,
-    /// `tree + atlas + triangles`.
-    pub total: u64,
-    /// Texels of the height-field tiles (the atlas's unused ones not counted); 0 for exact.
-    /// `atlas / texels` is what a texel costs on the device ([`Rbvh::bytes_per_texel`]).
-    ///
-    /// [`Rbvh::bytes_per_texel`]: crate::rbvh::Rbvh::bytes_per_texel
-    pub texels: u64,
-    /// Of `texels`, those of tiles with 8-bit heights ([`crate::rbvh::Rbvh::narrow_texels`]).
-    pub narrow_texels: u64,
 }
 
 /// [`RbvhParams`] with named enums, for the records.

@@ -21,8 +21,7 @@ use super::pipeline::DescriptorSet;
 use super::{shaders, Buffer, ComputePipeline, Context, Reach, Timing};
 use crate::bvh::{Bvh, STACK_SIZE};
 use crate::geom::{Hit, Ray};
-use crate::lod::cone::check_cones;
-use crate::lod::{Lod, RayCone};
+use crate::lod::{Cones, Lod};
 use crate::probe::RayCounters;
 use crate::progress::{step, Progress, Quiet};
 use crate::rbvh::{Rbvh, TexelFormat};
@@ -394,7 +393,7 @@ impl Tracer {
     /// Uploads `structure` (its arrays reached as [`Context::reach`] decides) with the crate's
     /// own trace shader for it: the exact BVH's nodes and triangles; an RBVH's nodes,
     /// triangle-leaf triangles, height-field leaves and atlas; with levels of detail, also their
-    /// records and columns (traces then take one [`RayCone`] per ray, [`Tracer::trace_lod`]).
+    /// records and columns (traces then take the rays' footprints, [`Cones`], in [`Tracer::trace_with`]).
     pub fn new(ctx: &Context, structure: &Structure) -> Result<Self> {
         Self::new_observed(ctx, structure, &Quiet)
     }
@@ -735,24 +734,21 @@ impl Tracer {
         }
     }
 
-    /// Whether `cones` suit this tracer: one per ray for a level-of-detail tracer, none for
-    /// another ([`Error::InvalidParameter`] naming `trace` otherwise).
-    fn check_trace_cones(&self, rays: &[Ray], cones: Option<&[RayCone]>) -> Result<()> {
-        match cones {
-            Some(cones) => {
-                self.expect_lod(
-                    true,
-                    "trace",
-                    "this tracer has no levels of detail: make it from a Structure::RbvhLod",
-                )?;
-                check_cones(rays, cones)
-            }
-            None => self.expect_lod(
-                false,
-                "trace",
-                "a level-of-detail tracer needs one cone per ray: use Tracer::trace_lod",
-            ),
+    /// Whether `cones` suit this tracer: a level-of-detail tracer needs footprints, one valid
+    /// cone per ray or one for all ([`Error::InvalidParameter`] naming `trace` otherwise);
+    /// another ignores them.
+    fn check_trace_cones(&self, rays: &[Ray], cones: Cones) -> Result<()> {
+        if self.lod.is_none() {
+            return Ok(());
         }
+        if !cones.is_some() {
+            return Err(Error::param(
+                "trace",
+                "a level-of-detail tracer needs the rays' footprints: pass Cones to \
+                 Tracer::trace_with",
+            ));
+        }
+        cones.check(rays)
     }
 
     /// Bytes of the structure (and its levels of detail) on the device.
@@ -773,59 +769,58 @@ impl Tracer {
             .map(|b| (b, sz.atlas_pitch, sz.atlas_len, sz.atlas_wide_len))
     }
 
-    /// Traces `rays` without per-ray counters: [`Tracer::trace_with`] with `counters` off.
+    /// Traces `rays` without footprints or per-ray counters: [`Tracer::trace_with`] with
+    /// neither (so not through levels of detail, which need the rays' footprints).
     pub fn trace(&self, rays: &[Ray], query: Query) -> Result<Traced> {
-        self.trace_with(rays, query, false)
+        self.trace_with(rays, Cones::None, query, false)
     }
 
-    /// Traces `rays`, in batches that fit `maxStorageBufferRange`; `counters` also returns what
-    /// each ray's traversal did (through the counting pipeline, whose timing is not that of
-    /// [`Tracer::trace`]). Fails with [`Error::StackOverflow`] if any ray overflowed its stack.
-    pub fn trace_with(&self, rays: &[Ray], query: Query, counters: bool) -> Result<Traced> {
-        self.check_trace_cones(rays, None)?;
-        self.trace_batches(rays, None, query, counters, None, 1)
-    }
-
-    /// Traces `rays` with level of detail, `cones[i]` the footprint of `rays[i]` (see
-    /// [`crate::lod`]); only for a tracer made for a [`Structure::RbvhLod`]. Otherwise as
-    /// [`Tracer::trace_with`].
-    pub fn trace_lod(
+    /// Traces `rays`, in batches that fit `maxStorageBufferRange`. `cones` are the rays'
+    /// footprints: read with levels of detail (which need them, see [`crate::lod`]), ignored by
+    /// any other structure, so that a caller passes what its rays carry whatever it traces.
+    /// `counters` also returns what each ray's traversal did (through the counting pipeline,
+    /// whose timing is not that of a trace without). Fails with [`Error::StackOverflow`] if any
+    /// ray overflowed its stack.
+    pub fn trace_with<'c>(
         &self,
         rays: &[Ray],
-        cones: &[RayCone],
+        cones: impl Into<Cones<'c>>,
         query: Query,
         counters: bool,
     ) -> Result<Traced> {
-        self.check_trace_cones(rays, Some(cones))?;
-        self.trace_batches(rays, Some(cones), query, counters, None, 1)
+        let cones = cones.into();
+        self.check_trace_cones(rays, cones)?;
+        self.trace_batches(rays, cones, query, counters, None, 1)
     }
 
-    /// [`Tracer::trace`], or with `cones` [`Tracer::trace_lod`] without counters, each batch traced
-    /// `passes` times back to back in its submission ([`super::ComputePipeline::run_repeated`]):
-    /// the hits are the same, and the timing is per pass. For timing a fast GPU, where one pass
-    /// over a frame's rays is too short to time well.
-    pub fn trace_repeated(
+    /// [`Tracer::trace_with`] without counters, each batch traced `passes` times back to back in
+    /// its submission ([`super::ComputePipeline::run_repeated`]): the hits are the same, and the
+    /// timing is per pass. For timing a fast GPU, where one pass over a frame's rays is too short
+    /// to time well.
+    pub fn trace_repeated<'c>(
         &self,
         rays: &[Ray],
-        cones: Option<&[RayCone]>,
+        cones: impl Into<Cones<'c>>,
         query: Query,
         passes: u32,
     ) -> Result<Traced> {
+        let cones = cones.into();
         self.check_trace_cones(rays, cones)?;
         self.trace_batches(rays, cones, query, false, None, passes)
     }
 
-    /// [`Tracer::trace_with`], or with `cones` [`Tracer::trace_lod`], reporting the rays traced
-    /// to `progress`: in batches of at most [`OBSERVED_BATCH`] rays, each its own submission, so
-    /// that a trace of seconds shows how far it is (the timing is the batches' sum).
-    pub fn trace_observed(
+    /// [`Tracer::trace_with`], reporting the rays traced to `progress`: in batches of at most
+    /// [`OBSERVED_BATCH`] rays, each its own submission, so that a trace of seconds shows how far
+    /// it is (the timing is the batches' sum).
+    pub fn trace_observed<'c>(
         &self,
         rays: &[Ray],
-        cones: Option<&[RayCone]>,
+        cones: impl Into<Cones<'c>>,
         query: Query,
         counters: bool,
         progress: &dyn Progress,
     ) -> Result<Traced> {
+        let cones = cones.into();
         self.check_trace_cones(rays, cones)?;
         step(progress, "tracing rays", rays.len() as u64, || {
             self.trace_batches(rays, cones, query, counters, Some(progress), 1)
@@ -835,7 +830,7 @@ impl Tracer {
     fn trace_batches(
         &self,
         rays: &[Ray],
-        cones: Option<&[RayCone]>,
+        cones: Cones,
         query: Query,
         counters: bool,
         progress: Option<&dyn Progress>,
@@ -860,7 +855,7 @@ impl Tracer {
             timing: Timing::default(),
         };
         for (k, chunk) in rays.chunks(batch).enumerate() {
-            let chunk_cones = cones.map(|c| &c[k * batch..k * batch + chunk.len()]);
+            let chunk_cones = cones.slice(k * batch..k * batch + chunk.len());
             let (hits, chunk_counters, timing) =
                 self.trace_batch(chunk, chunk_cones, query, counters, passes)?;
             out.hits.extend(hits);
@@ -883,7 +878,7 @@ impl Tracer {
     fn trace_batch(
         &self,
         rays: &[Ray],
-        cones: Option<&[RayCone]>,
+        cones: Cones,
         query: Query,
         counters: bool,
         passes: u32,
@@ -913,8 +908,8 @@ impl Tracer {
             Query::Closest => 0,
             Query::Any => FLAG_ANY_HIT,
         };
-        let cone_buf = match cones {
-            Some(c) => Some(self.ctx.upload_storage("ray cones", c)?),
+        let cone_buf = match cones.per_ray(rays.len()).filter(|_| self.lod.is_some()) {
+            Some(c) => Some(self.ctx.upload_storage("ray cones", &c)?),
             None => None,
         };
         let views = self.views(

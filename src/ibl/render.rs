@@ -19,7 +19,7 @@ use super::environment::Environment;
 use super::sampling::sample_direction;
 use crate::geom::{Hit, Ray};
 use crate::gpu::{Query, Timing, Tracer};
-use crate::lod::RayCone;
+use crate::lod::{Cones, RayCone};
 use crate::output::Image;
 use crate::rays::{facing_normal, offset_origin};
 use crate::{Error, Result};
@@ -59,8 +59,9 @@ pub struct Settings {
     /// BVH. Without it an RBVH surface, which may lie a fraction of a texel off the exact one,
     /// would shadow itself.
     pub surface_offset: f32,
-    /// Level of detail: the cone of the primary rays, when `tracer` was made with levels of
-    /// detail ([`crate::structure::Structure::RbvhLod`]). Each visibility ray then gets a cone
+    /// The footprint of the primary rays (their pixel's cone), read only by a tracer with levels
+    /// of detail ([`crate::structure::Structure::RbvhLod`]), which needs it. Each visibility ray
+    /// then gets a cone
     /// from its origin with this spread and no width, so that the surface a ray leaves is never
     /// coarsened under it. The cone is not widened by the sampling lobe as ray cones for glossy
     /// bounces are (Akenine-Möller et al. 2019): solid coarse columns then swallow concave
@@ -182,7 +183,8 @@ fn add(a: Timing, b: Timing) -> Timing {
 /// index, origin and normal), each pixel's sum of unoccluded radiance, and the traces' times.
 struct Accumulation {
     starts: Vec<(u64, Vec3, Vec3)>,
-    cones: Option<Vec<RayCone>>,
+    /// Every visibility ray's footprint.
+    cone: Option<RayCone>,
     sums: Vec<DVec3>,
     timing: Timing,
 }
@@ -208,17 +210,14 @@ impl Accumulation {
                 (pixel as u64, origin, normal)
             })
             .collect();
-        let cones = settings.cone.map(|c| {
-            let cone = RayCone {
-                width: 0.0,
-                spread: c.spread,
-            };
-            vec![cone; starts.len()]
+        let cone = settings.cone.map(|c| RayCone {
+            width: 0.0,
+            spread: c.spread,
         });
         Ok(Accumulation {
             sums: vec![DVec3::ZERO; starts.len()],
             starts,
-            cones,
+            cone,
             timing: Timing {
                 gpu_ms: Some(0.0),
                 wall_ms: 0.0,
@@ -242,10 +241,8 @@ impl Accumulation {
                 Ray::new(origin, dir, 0.0, f32::INFINITY)
             })
             .collect();
-        let traced = match &self.cones {
-            Some(cones) => tracer.trace_lod(&rays, cones, Query::Any, false)?,
-            None => tracer.trace(&rays, Query::Any)?,
-        };
+        let cones = self.cone.map_or(Cones::None, Cones::Same);
+        let traced = tracer.trace_with(&rays, cones, Query::Any, false)?;
         self.sums
             .par_iter_mut()
             .zip(&rays)

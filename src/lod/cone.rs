@@ -93,6 +93,83 @@ pub fn check_cones(rays: &[Ray], cones: &[RayCone]) -> Result<()> {
         .try_for_each(|(i, c)| c.validate(&format!("cone {i}")))
 }
 
+/// The footprints of a batch of rays, as a trace takes them: none, one cone for every ray (a
+/// camera's pixel cone: every primary ray of [`RayCone::pixel`] has the same), or one per ray.
+/// Only a structure with levels of detail reads them ([`crate::structure::Structure::RbvhLod`]);
+/// every other structure ignores them, so that a caller hands its rays' cones to whatever
+/// structure it traces without asking which one it is, as a texture sampler takes ray
+/// differentials whether or not the texture has mip levels.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum Cones<'a> {
+    /// No footprints: a level-of-detail trace refuses such rays.
+    #[default]
+    None,
+    /// The same cone for every ray.
+    Same(RayCone),
+    /// One cone per ray, in ray order.
+    PerRay(&'a [RayCone]),
+}
+
+impl<'a> Cones<'a> {
+    /// Whether there are footprints at all.
+    pub fn is_some(&self) -> bool {
+        !matches!(self, Cones::None)
+    }
+
+    /// The cones of `rays[range]` (the same cone stays the same).
+    pub fn slice(&self, range: std::ops::Range<usize>) -> Cones<'a> {
+        match *self {
+            Cones::PerRay(cones) => Cones::PerRay(&cones[range]),
+            other => other,
+        }
+    }
+
+    /// The cone of ray `i`, if there are footprints.
+    pub fn get(&self, i: usize) -> Option<RayCone> {
+        match *self {
+            Cones::None => None,
+            Cones::Same(cone) => Some(cone),
+            Cones::PerRay(cones) => cones.get(i).copied(),
+        }
+    }
+
+    /// One cone per ray of `count` rays, for a device buffer; `None` without footprints.
+    pub fn per_ray(&self, count: usize) -> Option<std::borrow::Cow<'a, [RayCone]>> {
+        match *self {
+            Cones::None => None,
+            Cones::Same(cone) => Some(std::borrow::Cow::Owned(vec![cone; count])),
+            Cones::PerRay(cones) => Some(std::borrow::Cow::Borrowed(cones)),
+        }
+    }
+
+    /// Checks that the footprints fit `rays`: one valid cone per ray, or one valid cone for all.
+    pub fn check(&self, rays: &[Ray]) -> Result<()> {
+        match self {
+            Cones::None => Ok(()),
+            Cones::Same(cone) => cone.validate("cone"),
+            Cones::PerRay(cones) => check_cones(rays, cones),
+        }
+    }
+}
+
+impl<'a> From<&'a [RayCone]> for Cones<'a> {
+    fn from(cones: &'a [RayCone]) -> Self {
+        Cones::PerRay(cones)
+    }
+}
+
+impl<'a> From<&'a Vec<RayCone>> for Cones<'a> {
+    fn from(cones: &'a Vec<RayCone>) -> Self {
+        Cones::PerRay(cones)
+    }
+}
+
+impl From<RayCone> for Cones<'_> {
+    fn from(cone: RayCone) -> Self {
+        Cones::Same(cone)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -35,7 +35,7 @@ pub mod layout;
 pub(crate) mod march;
 mod trace;
 
-pub use cone::{selects, RayCone};
+pub use cone::{selects, Cones, RayCone};
 pub use layout::{Column, GpuLod, LOD_BIT};
 pub use trace::LodTwin;
 

@@ -8,15 +8,14 @@
 
 use rayon::prelude::*;
 
-use super::cone::check_cones;
 use super::march::march;
-use super::{selects, GpuLod, Lod, RayCone, LOD_BIT};
+use super::{selects, Cones, GpuLod, Lod, RayCone, LOD_BIT};
 use crate::bvh::{Leaves, LEAF_BIT};
 use crate::geom::{Hit, Ray};
 use crate::probe::{element, Array, Probe, TraceStats};
 use crate::rbvh::march::{DeviceTwin, RbvhLeaves, Walk};
 use crate::rbvh::Rbvh;
-use crate::Result;
+use crate::{Error, Result};
 
 /// The RBVH's leaves, and the coarse nodes `cone` selects in `lod`.
 struct LodLeaves<'a> {
@@ -122,21 +121,34 @@ impl Rbvh {
         trace(self, lod, ray, cone, any_hit, Walk::Plain, &mut ())
     }
 
-    /// [`Rbvh::hit_lod`] for many rays, one cone each, in parallel; hits in ray order. Fails when
-    /// `lod` was built for another tree or the cones do not match the rays.
-    pub fn trace_cpu_lod(
+    /// [`Rbvh::hit_lod`] for many rays, each with its footprint in `cones` (one per ray, or one
+    /// for all), in parallel; hits in ray order. Fails when `lod` was built for another tree, or
+    /// the rays have no footprints or not one per ray.
+    pub fn trace_cpu_lod<'c>(
         &self,
         lod: &Lod,
         rays: &[Ray],
-        cones: &[RayCone],
+        cones: impl Into<Cones<'c>>,
         any_hit: bool,
     ) -> Result<Vec<Hit>> {
         lod.check_for(self)?;
-        check_cones(rays, cones)?;
+        let cones = cones.into();
+        if !cones.is_some() {
+            return Err(Error::param(
+                "cones",
+                "a trace with levels of detail needs the rays' footprints: one cone per ray, or \
+                 one for all"
+                    .to_string(),
+            ));
+        }
+        cones.check(rays)?;
         Ok(rays
             .par_iter()
-            .zip(cones)
-            .map(|(r, c)| trace(self, lod, r, c, any_hit, Walk::Plain, &mut ()).0)
+            .enumerate()
+            .map(|(i, r)| {
+                let cone = cones.get(i).unwrap_or(RayCone::POINT);
+                trace(self, lod, r, &cone, any_hit, Walk::Plain, &mut ()).0
+            })
             .collect())
     }
 }

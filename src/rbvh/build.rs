@@ -179,6 +179,11 @@ struct Shared<'s> {
 }
 
 impl<'s> RbvhSource<'s> {
+    /// The scene it gathers.
+    pub fn scene(&self) -> &'s Scene {
+        self.scene
+    }
+
     /// Checks `scene` (finite, and fewer than 2^31 triangles and points) and gathers its
     /// triangles or points.
     pub fn new(scene: &'s Scene) -> Result<RbvhSource<'s>> {

@@ -5,16 +5,15 @@
 use std::fmt;
 use std::path::Path;
 
-use crate::bvh::Bvh;
 use crate::geom::Hit;
 use crate::gpu::{Query, Tracer};
-use crate::lod::{Lod, LodParams, RayCone};
+use crate::lod::{Cones, LodParams, RayCone};
 use crate::output::Image;
 use crate::preview;
-use crate::rbvh::{Rbvh, RbvhParams};
+use crate::rbvh::RbvhParams;
 use crate::scene::Scene;
-use crate::structure::Kind;
 pub use crate::structure::Structure;
+use crate::structure::{Kind, Recipe};
 use crate::{Error, Result};
 
 /// The structure a case traces through: a [`Kind`] of structure and, for the RBVH kinds, the
@@ -135,18 +134,21 @@ pub fn cross(scenes: &[String], methods: &[Method]) -> Vec<Case> {
 }
 
 impl Method {
+    /// What this method builds: the preset's RBVH, with default levels of detail for
+    /// `rbvh-lod`.
+    pub fn recipe(self) -> Result<Recipe> {
+        Ok(match self.kind {
+            Kind::Exact => Recipe::Exact,
+            Kind::Rbvh => Recipe::Rbvh(RbvhParams::quality(self.level)?),
+            Kind::RbvhLod => {
+                Recipe::RbvhLod(RbvhParams::quality(self.level)?, LodParams::default())
+            }
+        })
+    }
+
     /// Builds the structure this method traces through, for `scene`.
     pub fn build(self, scene: &Scene) -> Result<Structure> {
-        if self.kind == Kind::Exact {
-            return Ok(Structure::from(Bvh::build(scene)?));
-        }
-        let rbvh = Rbvh::build(scene, &RbvhParams::quality(self.level)?)?;
-        Ok(if self.kind == Kind::RbvhLod {
-            let lod = Lod::build(&rbvh, &LodParams::default())?;
-            Structure::with_lod(rbvh, lod)
-        } else {
-            Structure::from(rbvh)
-        })
+        Structure::build(scene, &self.recipe()?)
     }
 }
 
@@ -169,22 +171,9 @@ pub fn render(
 ) -> Result<Render> {
     let camera = scene.camera_or_framed(width as f32 / height as f32);
     let rays = camera.primary_rays(width, height);
-    let hits = match structure {
-        Structure::RbvhLod(..) => {
-            let cones = vec![RayCone::pixel(&camera, height); rays.len()];
-            tracer.trace_lod(&rays, &cones, Query::Closest, false)?.hits
-        }
-        _ => tracer.trace(&rays, Query::Closest)?.hits,
-    };
-    let image = preview::shade(
-        scene,
-        structure.rbvh(),
-        structure.lod(),
-        &rays,
-        &hits,
-        width,
-        height,
-    )?;
+    let cones = Cones::Same(RayCone::pixel(&camera, height));
+    let hits = tracer.trace_with(&rays, cones, Query::Closest, false)?.hits;
+    let image = preview::shade(scene, structure, &rays, &hits, width, height)?;
     Ok(Render { image, hits })
 }
 

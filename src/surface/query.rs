@@ -11,11 +11,12 @@ use rayon::prelude::*;
 
 use crate::bvh::LEAF_BIT;
 use crate::geom::{Hit, Ray};
-use crate::lod::{Lod, LOD_BIT};
+use crate::lod::LOD_BIT;
 use crate::rbvh::layout::Texel;
 use crate::rbvh::Rbvh;
 use crate::rgba;
 use crate::scene::Scene;
+use crate::structure::Structure;
 
 /// A texel of a height-field leaf: sample `(i, j)` of leaf `leaf`, at `atlas_index` in
 /// [`Rbvh::atlas`] (and in [`Rbvh::colours`]).
@@ -204,21 +205,21 @@ pub fn blank_colours(texels: &[Texel]) -> Vec<u32> {
 
 /// Per pixel, the linear RGB base colour of the hit (white for misses and for surfaces without
 /// colour), or `None` when there is no colour to show: neither the scene has materials nor
-/// `rbvh` (the structure traced, if it was an RBVH) a colour channel — renders then stay
+/// the `structure` traced (if an RBVH) a colour channel — renders then stay
 /// exactly as they were without surface data. Hit ids: a coarse level-of-detail hit (`LEAF_BIT |
-/// LOD_BIT`) reads the colour of the column it hit in `lod` ([`Lod::colour_at`]); a height-field
+/// LOD_BIT`) reads the colour of the column it hit in the levels of detail ([`crate::lod::Lod::colour_at`]); a height-field
 /// hit (`LEAF_BIT`) the RBVH's colours filtered at the hit ([`Rbvh::filtered_colour`]), and so
 /// does a hit on an exact part beside a height field (its colours are the RBVH's surface data,
 /// painted strokes included); any other hit is a scene triangle, coloured by its material at the
 /// hit point's barycentrics.
 pub fn hit_albedo(
     scene: &Scene,
-    rbvh: Option<&Rbvh>,
-    lod: Option<&Lod>,
+    structure: &Structure,
     rays: &[Ray],
     hits: &[Hit],
 ) -> Option<Vec<Vec3>> {
-    let channel = rbvh.filter(|r| r.colours.is_some());
+    let channel = structure.rbvh().filter(|r| r.colours.is_some());
+    let lod = structure.lod();
     if scene.surface.is_none() && channel.is_none() {
         return None;
     }

@@ -13,6 +13,7 @@ use glam::{DVec3, Mat4, Vec3};
 use rbvh::bvh::{BuildParams, Bvh, STACK_SIZE};
 use rbvh::geom::{intersect_triangle, Hit, Ray, RayShear};
 use rbvh::gpu::{Context, Query, Tracer};
+use rbvh::lod::Cones;
 use rbvh::rbvh::{Rbvh, RbvhParams, Refinement};
 use rbvh::scene::Scene;
 use rbvh::structure::Structure;
@@ -42,7 +43,9 @@ fn exact_hits(ctx: &Context, exact: &Structure, rays: &[Ray], query: Query) -> [
         .hits;
     [
         gpu,
-        exact.trace_cpu(rays, &[], query == Query::Any).unwrap(),
+        exact
+            .trace_cpu(rays, Cones::None, query == Query::Any)
+            .unwrap(),
     ]
 }
 

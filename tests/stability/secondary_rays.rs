@@ -47,7 +47,7 @@ fn secondary_rays_leave_a_convex_surface_without_acne() {
             out
         };
         let exact = Structure::from(Bvh::build(&scene).unwrap());
-        let hits = exact.trace_cpu(&primary, &[], false).unwrap();
+        let hits = exact.trace_cpu(&primary, Cones::None, false).unwrap();
         let rays = secondary(&hits, 1e-4 * diag, &mut rng);
         for query in [Query::Closest, Query::Any] {
             for (which, hits) in PATHS.iter().zip(exact_hits(&ctx, &exact, &rays, query)) {

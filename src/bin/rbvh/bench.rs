@@ -8,16 +8,22 @@ use anyhow::{Context as _, Result};
 use rbvh::bench::{self, BenchConfig, Device, Event, RayType};
 use rbvh::scene::PointSource;
 
-use crate::prepare::{context_options, flag_error, Given, LodBuildArgs, PointsArg, Quality};
+use crate::prepare::{context_options, flag_error, Given, Method, PointsArg, Structures};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("quality", |a| a.default_value("all")))]
+#[command(mut_arg("method", |a| a.default_value("exact,rbvh").help(
+    "Structures to measure, comma-separated: `exact` (the exact triangle BVH: always measured, \
+     it is the referee of every other), `rbvh` (every --quality level in every --texels format), \
+     `rbvh-lod` (each level with normals traced with level of detail: primary rays with their \
+     pixel's cone, secondary rays with its spread from their origin)"
+)))]
 pub struct Args {
     /// Scenes: built-in names, OBJ/glTF/GLB files or scene files (.toml); repeat or comma-separate.
     #[arg(long, default_value = "default", value_delimiter = ',')]
     scene: Vec<String>,
     #[command(flatten)]
-    quality: Quality,
+    structures: Structures,
     #[command(flatten)]
     points: PointsArg,
     /// Ray types to trace, comma-separated: primary, ao, shadow, diffuse.
@@ -66,10 +72,6 @@ pub struct Args {
     /// Write per-scene charts (SVG) and renders and error images (PNG) under this directory.
     #[arg(long)]
     plot: Option<PathBuf>,
-    /// Also measure every level traced with level of detail (method rbvh-lod): the levels with
-    /// normals in their texels (a height-only level has no level of detail).
-    #[arg(long)]
-    lod: bool,
     /// Also model each method's memory traffic from its CPU twin's reads: cache lines per ray,
     /// working set, DRAM bytes per ray behind 4, 32 and 72 MiB caches (slower: a CPU trace each).
     #[arg(long)]
@@ -95,11 +97,10 @@ pub struct Args {
     /// default the command then fails, after writing the table, JSON, CSV and charts.
     #[arg(long)]
     allow_invalid: bool,
-    #[command(flatten)]
-    lod_build: LodBuildArgs,
 }
 
 pub fn run(a: Args, given: &Given) -> Result<()> {
+    a.structures.check(given, false)?;
     anyhow::ensure!(
         !given.has("ao_radius") || a.rays.contains(&RayType::Ao),
         "--ao-radius is the length of ambient-occlusion rays, and --rays traces none: add ao to \
@@ -122,20 +123,21 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         // thread is undefined behaviour in C.
         std::env::set_var("LP_NUM_THREADS", threads.to_string());
     }
-    let levels = a.quality.quality_levels()?;
+    let quality = &a.structures.quality;
+    let levels = quality.quality_levels()?;
     let mut config = BenchConfig::new(
         a.scene.iter().map(|s| s.trim().to_string()).collect(),
         Device::Create(context_options(a.device.as_deref(), a.validate)?),
     );
     config.levels = levels;
-    config.texels = a.quality.texel_formats();
+    config.texels = quality.texel_formats();
+    let lod = a.structures.has(Method::RbvhLod);
     anyhow::ensure!(
-        !a.lod
-            || config
-                .texels
-                .contains(&rbvh::rbvh::TexelFormat::HeightNormal),
-        "--lod measures levels with normals in their texels, and --texels height builds none: \
-         add normals to --texels (--texels normals,height) or drop --lod"
+        !lod || config
+            .texels
+            .contains(&rbvh::rbvh::TexelFormat::HeightNormal),
+        "--method rbvh-lod measures levels with normals in their texels, and --texels height \
+         builds none: add normals to --texels (--texels normals,height) or drop rbvh-lod"
     );
     config.ray_types = a.rays.clone();
     config.width = a.width;
@@ -147,7 +149,8 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         config.seed = seed;
     }
     config.plot_dir = a.plot.clone();
-    config.lod = a.lod.then(|| a.lod_build.params());
+    config.plain = a.structures.has(Method::Rbvh);
+    config.lod = lod.then(|| a.structures.lod.params());
     config.traffic = a.traffic;
     config.steps = a.steps;
     config.seam_rays = a.seam_rays;

@@ -9,14 +9,14 @@ use std::time::Instant;
 
 use anyhow::{ensure, Context as _, Result};
 use rbvh::bench::metrics::image_errors;
-use rbvh::bvh::{BuildParams, Bvh};
 use rbvh::geom::Ray;
 use rbvh::gpu::{Query, Tracer};
 use rbvh::ibl::{self, Environment, Frame, Rendered, Settings};
+use rbvh::lod::{Cones, RayCone};
 use rbvh::output;
-use rbvh::structure::Structure;
+use rbvh::structure::{Recipe, Structure};
 
-use crate::prepare::{check_source, prepare, CameraArgs, Common, Given, LodArgs, Method, Source};
+use crate::prepare::{prepare, CameraArgs, Common, Given, Method};
 use crate::progress::step;
 use crate::render::{ibl_albedo, load_environment, progressive, sky_of};
 
@@ -37,9 +37,14 @@ use crate::render::{ibl_albedo, load_environment, progressive, sky_of};
 #[command(mut_arg("stats", |a| a.help(
     "Also print the scene, the RBVH (nodes, bytes, build time) and the device on stderr"
 )))]
+#[command(mut_arg("method", |a| a.default_value("rbvh").help(
+    "What to compare with the exact BVH: `rbvh` (a Rasterized BVH at --quality) or `rbvh-lod` \
+     (that RBVH traced with level of detail: each ray uses the coarsest representation whose \
+     columns are at most 2^--lod-bias of its pixel's footprint wide)"
+)))]
 pub struct Args {
     #[command(flatten)]
-    source: Source,
+    common: Common,
     #[command(flatten)]
     camera: CameraArgs,
     /// Output PNG: the exact BVH's picture left, the RBVH's right, each --width × --height.
@@ -86,43 +91,45 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         "--out {}: writes PNG, so give it a .png name",
         a.out.display()
     );
-    check_source(given, &a.source, None)?;
+    a.common.check(given)?;
+    ensure!(
+        a.common.structures.method()? != Method::Exact,
+        "--method exact: compare sets an RBVH beside the exact BVH; give rbvh or rbvh-lod"
+    );
     // Read the environment before the builds, so a bad file fails at once.
     let env = load_environment(a.env.as_ref())?;
-    let common = Common {
-        source: a.source.clone(),
-        method: Method::Rbvh,
-        lod: LodArgs::off(),
-    };
-    let p = prepare(&common, a.camera.camera()?)?;
+    let p = prepare(&a.common, a.camera.camera()?)?;
     ensure!(
         p.scene.triangle_count() > 0,
         "{} is a point cloud: there are no triangles for an exact BVH to compare its RBVH with",
         p.scene.name
     );
     let rbvh = p.structure.rbvh().context("compare needs an RBVH")?;
-    let bvh = step("building BVH", |bar| {
-        Bvh::build_observed(&p.scene, &BuildParams::DEFAULT, bar)
+    let exact_structure = step("building BVH", |bar| {
+        Structure::build_observed(&p.scene, &Recipe::Exact, bar)
     })?;
-    let exact_bytes = bvh.tree_bytes() + bvh.triangle_bytes();
-    let rbvh_bytes = rbvh.total_bytes();
-    let exact = Tracer::new(p.ctx()?, &Structure::from(bvh)).context("uploading the exact BVH")?;
+    let exact_bytes = exact_structure.memory().total;
+    let rbvh_bytes = p.structure.memory().total;
+    let exact = Tracer::new(p.ctx()?, &exact_structure).context("uploading the exact BVH")?;
     let approx = step("uploading", |bar| p.tracer(bar))?;
 
     let (width, height) = (a.width, a.height);
     let camera = p.scene.camera_or_framed(width as f32 / height as f32);
     let rays = camera.primary_rays(width, height);
+    let cone = RayCone::pixel(&camera, height);
     let (exact_hits, rbvh_hits) = step("tracing", |_| -> Result<_> {
         Ok((
             exact.trace(&rays, Query::Closest)?.hits,
-            approx.trace(&rays, Query::Closest)?.hits,
+            approx
+                .trace_with(&rays, Cones::Same(cone), Query::Closest, false)?
+                .hits,
         ))
     })?;
     // One untimed any-hit trace through each first: neither pays for a first dispatch of the
     // visibility pipeline in its timings.
     let warm: Vec<Ray> = rays.iter().take(1024).copied().collect();
     exact.trace(&warm, Query::Any)?;
-    approx.trace(&warm, Query::Any)?;
+    approx.trace_with(&warm, Cones::Same(cone), Query::Any, false)?;
 
     let env = env.unwrap_or_else(|| Environment::Sky(sky_of(p.scene.light.as_ref())));
     let settings = Settings {
@@ -130,10 +137,10 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         seed: a.seed,
         diagonal: p.scene.bounds().diagonal(),
         surface_offset: 0.0,
-        cone: None,
+        cone: Some(cone),
     };
-    let exact_albedo = ibl_albedo(&p.scene, None, None, &rays, &exact_hits);
-    let rbvh_albedo = ibl_albedo(&p.scene, Some(rbvh), None, &rays, &rbvh_hits);
+    let exact_albedo = ibl_albedo(&p.scene, &exact_structure, &rays, &exact_hits);
+    let rbvh_albedo = ibl_albedo(&p.scene, &p.structure, &rays, &rbvh_hits);
     let exact_frame = Frame {
         width,
         height,
@@ -176,7 +183,10 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     let picture = output::side_by_side(&[&reference.image, &rendered.image], 0)?;
     output::write_png(&a.out, &picture)?;
 
-    let level = rbvh.params.level_label();
+    let level = match p.structure.lod() {
+        Some(_) => format!("{} with LOD", rbvh.params.level_label()),
+        None => rbvh.params.level_label(),
+    };
     let (exact_speed, timer) = mrays(&reference);
     let (rbvh_speed, _) = mrays(&rendered);
     let lit = match &a.env {

@@ -13,10 +13,10 @@ use rbvh::surface::{strokes, Brush};
 use rbvh::{output, preview};
 
 use crate::prepare::{
-    check_image_size, check_source, prepare, CameraArgs, Common, Given, LodArgs, Method, Prepared,
-    Source, Structure, TexelsArg,
+    check_image_size, prepare, CameraArgs, Common, Given, Method, Prepared, TexelsArg,
 };
 use crate::progress::step;
+use rbvh::structure::Structure;
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("rbvh", |a| a.help(
@@ -34,9 +34,15 @@ use crate::progress::step;
 // Paint samples every triangle it builds (paint is stored in texels): --sample-all is what it
 // does anyway, so it is hidden and refused rather than accepted for nothing.
 #[command(mut_arg("sample_all", |a| a.hide(true)))]
+// Paint writes a plain RBVH's texels: the one method it takes is the default, and levels of
+// detail (which have no texels to paint) are not built.
+#[command(mut_arg("method", |a| a.default_value("rbvh").hide(true)))]
+#[command(mut_arg("lod_columns", |a| a.hide(true)))]
+#[command(mut_arg("lod_min_leaves", |a| a.hide(true)))]
+#[command(mut_arg("lod_bias", |a| a.hide(true)))]
 pub struct Args {
     #[command(flatten)]
-    source: Source,
+    common: Common,
     #[command(flatten)]
     camera: CameraArgs,
     /// Strokes file (format in docs/cli.md, "Surface data and painting").
@@ -61,13 +67,22 @@ pub struct Args {
 
 pub fn run(a: Args, given: &Given) -> Result<()> {
     check_image_size(a.width, a.height)?;
-    check_source(given, &a.source, None)?;
+    a.common.check(given)?;
+    anyhow::ensure!(
+        a.common.structures.method()? == Method::Rbvh,
+        "--method: paint paints an RBVH's texels, so it takes rbvh alone (the exact BVH has no \
+         texels, levels of detail none to paint)"
+    );
     anyhow::ensure!(
         !given.has("sample_all"),
         "--sample-all: paint samples every triangle it builds anyway (paint is stored in texels)"
     );
     anyhow::ensure!(
-        !a.source.quality.texels.contains(&TexelsArg::Height),
+        !a.common
+            .structures
+            .quality
+            .texels
+            .contains(&TexelsArg::Height),
         "--texels height: a height-only RBVH keeps no colours to paint (paint takes normals, the \
          default)"
     );
@@ -76,13 +91,8 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     // have none to paint), and every triangle a height field can hold sampled (`--sample-all`),
     // or the walls and floors the presets trace exactly would take no paint. A file given with
     // `--rbvh` is painted as it was built.
-    let mut source = a.source.clone();
-    source.quality.sample_all = true;
-    let common = Common {
-        source,
-        method: Method::Rbvh,
-        lod: LodArgs::off(),
-    };
+    let mut common = a.common.clone();
+    common.structures.quality.sample_all = true;
     let mut p = prepare(&common, a.camera.camera()?)?;
     let camera = p.scene.camera_or_framed(a.width as f32 / a.height as f32);
     if !matches!(p.structure, Structure::Rbvh(_)) {
@@ -184,15 +194,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
 
 /// The before or after picture: the preview shading of `hits` with the RBVH's colours.
 fn write_render(path: &Path, p: &Prepared, rays: &[Ray], hits: &[Hit], a: &Args) -> Result<()> {
-    let image = preview::shade(
-        &p.scene,
-        p.structure.rbvh(),
-        None,
-        rays,
-        hits,
-        a.width,
-        a.height,
-    )?;
+    let image = preview::shade(&p.scene, &p.structure, rays, hits, a.width, a.height)?;
     output::write_png(path, &image)?;
     eprintln!("wrote {}", path.display());
     Ok(())

@@ -2,7 +2,6 @@
 //! structure — with a spinner on long steps (hidden when stderr is not a terminal).
 
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{Context as _, Result};
@@ -10,35 +9,29 @@ use anyhow::{Context as _, Result};
 use crate::progress::step;
 use clap::{Args, ValueEnum};
 use rbvh::bench::provenance::Provenance;
-use rbvh::bvh::{BuildParams, Bvh};
+use rbvh::bvh::Bvh;
 use rbvh::geom::{Hit, Ray};
 use rbvh::glam::Vec3;
 use rbvh::gpu::{Addressing, Context, ContextOptions, Query, Reach, Traced, Tracer, Validation};
-use rbvh::lod::{Lod, LodParams, RayCone};
+use rbvh::lod::{Cones, LodParams};
 use rbvh::points::MIN_POINTS;
 use rbvh::probe::{MeanCounters, RayCounters};
-use rbvh::rbvh::{Rbvh, TexelFormat};
+use rbvh::rbvh::{Rbvh, RbvhParams, TexelFormat};
 use rbvh::scene::{Camera, PointSource, Scene, DEFAULT_VFOV_DEG};
+use rbvh::structure::Recipe;
 
-/// Options shared by the commands that trace through a structure of their choice.
-#[derive(Args, Clone, Debug)]
-pub struct Common {
-    #[command(flatten)]
-    pub source: Source,
-    /// Acceleration structure to trace through.
-    #[arg(long, value_enum, default_value_t = Method::Exact)]
-    pub method: Method,
-    #[command(flatten)]
-    pub lod: LodArgs,
-}
-
-/// Where the scene and its RBVH come from, and the device: what every command that traces takes
-/// (`paint`, which needs an RBVH without level of detail, takes only these). They trace one level,
-/// in one texel format.
+/// Options shared by the commands that trace through one structure (`render`, `trace`, `compare`,
+/// `paint`): one level, in one texel format.
 #[derive(Args, Clone, Debug)]
 #[command(mut_arg("quality", |a| a.help(
     "Quality preset of the RBVH: one of 0..4 or Q0..Q4 (Q0 coarsest, Q4 finest); for an RBVH \
      this command builds, not for one loaded with --rbvh"
+)))]
+#[command(mut_arg("method", |a| a.help(
+    "Structure to trace through: `exact` (the exact triangle BVH, the referee), `rbvh` (a \
+     Rasterized BVH at --quality), `rbvh-lod` (that RBVH traced with level of detail: each ray \
+     uses the coarsest representation whose columns are at most 2^--lod-bias of its footprint \
+     wide); one of them"
 )))]
 #[command(mut_arg("texels", |a| a.help(
     "What each atlas texel holds: `normals` (height and normal, 3 or 4 bytes: 8- or 16-bit \
@@ -52,6 +45,106 @@ pub struct Common {
      sampling them (a triangle covering at least 24 texels, 48 height-only, and a set whose \
      tiles would cost more than its triangles) and on a crease of 30° or more spanning 2 texels"
 )))]
+pub struct Common {
+    #[command(flatten)]
+    pub source: Source,
+    #[command(flatten)]
+    pub structures: Structures,
+}
+
+impl Common {
+    /// Refuses the flags that would have no effect ([`Structures::check`]).
+    pub fn check(&self, given: &Given) -> Result<()> {
+        self.structures.check(given, self.source.rbvh.is_some())
+    }
+}
+
+/// Which structure: `--method`, `--quality` with the free parameters and `--texels`, and how
+/// levels of detail are built. Every command that traces takes this group, with the same flags,
+/// help and refusals, and makes its [`Recipe`]s from it; commands differ only in their defaults
+/// and in how many structures they take (`render`, `trace`, `compare` and `paint` one; `bench`
+/// and `regress` several).
+#[derive(Args, Clone, Debug)]
+pub struct Structures {
+    /// Structure to trace through: `exact` (the exact triangle BVH, the referee), `rbvh` (a
+    /// Rasterized BVH at --quality), `rbvh-lod` (that RBVH traced with level of detail: each ray
+    /// uses the coarsest representation whose columns are at most 2^--lod-bias of its footprint
+    /// wide); comma-separated where a command measures several.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "exact")]
+    pub method: Vec<Method>,
+    #[command(flatten)]
+    pub quality: Quality,
+    #[command(flatten)]
+    pub lod: LodBuildArgs,
+}
+
+impl Structures {
+    /// The one method of a command that traces one structure.
+    pub fn method(&self) -> Result<Method> {
+        match self.method.as_slice() {
+            [method] => Ok(*method),
+            _ => anyhow::bail!("--method: this command traces one structure, give one method"),
+        }
+    }
+
+    /// Whether `method` is asked for.
+    pub fn has(&self, method: Method) -> bool {
+        self.method.contains(&method)
+    }
+
+    /// The recipe of a command that traces one structure built from the scene: the method at
+    /// the one --quality level, in the one --texels format.
+    pub fn recipe(&self) -> Result<Recipe> {
+        let method = self.method()?;
+        if method == Method::Exact {
+            return Ok(Recipe::Exact);
+        }
+        let mut levels = self.quality.levels()?;
+        anyhow::ensure!(
+            levels.len() == 1,
+            "--quality and --texels: give one level in one texel format to trace"
+        );
+        Ok(method.recipe(levels.remove(0), self.lod.params()))
+    }
+
+    /// Refuses what would have no effect: the build flags where no RBVH is built (only the exact
+    /// BVH asked for, or `--rbvh FILE` loading one built already, with the parameters it was
+    /// built with), and the level-of-detail flags without `rbvh-lod`.
+    pub fn check(&self, given: &Given, loaded: bool) -> Result<()> {
+        if loaded {
+            anyhow::ensure!(
+                !self.has(Method::Exact) || !given.has("method"),
+                "--method exact traces the exact BVH, but --rbvh names an RBVH to trace: give one of them"
+            );
+            if let Some(flag) = given.first(&BUILD_FLAGS) {
+                anyhow::bail!(
+                    "{flag} says how to build an RBVH, but --rbvh loads one built already (with \
+                     the parameters it was built with): drop {flag}, or drop --rbvh to build one"
+                );
+            }
+        } else if self.method.iter().all(|m| *m == Method::Exact) {
+            if let Some(flag) = given.first(&BUILD_FLAGS) {
+                anyhow::bail!(
+                    "{flag} says how to build an RBVH, but --method exact traces the exact BVH: \
+                     use --method rbvh"
+                );
+            }
+        }
+        if !self.has(Method::RbvhLod) {
+            if let Some(flag) = given.first(&LOD_FLAGS) {
+                anyhow::bail!(
+                    "{flag} says how levels of detail are built and chosen, and --method asks for \
+                     none: use --method rbvh-lod"
+                );
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Where the scene and its RBVH come from, and the device: what every command that traces one
+/// structure takes.
+#[derive(Args, Clone, Debug)]
 pub struct Source {
     /// Built-in scene name (`rbvh scenes` lists them), OBJ/glTF/GLB file, point cloud (.ply,
     /// .xyz; traced through an RBVH of its points), or scene file (.toml).
@@ -59,11 +152,9 @@ pub struct Source {
     pub scene: String,
     #[command(flatten)]
     pub points: PointsArg,
-    #[command(flatten)]
-    pub quality: Quality,
     /// Trace this saved RBVH (from `rbvh build --out`) instead of building one (implies --method
-    /// rbvh; the file holds its build parameters, so --quality and the free parameters are
-    /// refused with it).
+    /// rbvh, or give rbvh-lod; the file holds its build parameters, so --quality and the free
+    /// parameters are refused with it).
     #[arg(long)]
     pub rbvh: Option<PathBuf>,
     /// Vulkan device to use: any part of its name (default: $RBVH_DEVICE, else the best GPU, else lavapipe).
@@ -187,32 +278,9 @@ pub const BUILD_FLAGS: [&str; 15] = [
     "texels",
 ];
 
-/// Refuses the build flags where no RBVH is built: with `--rbvh FILE` (which loads one built
-/// already, with the parameters it was built with) and with the exact BVH (`method` given as
-/// exact, or left at exact), and `--method exact` with `--rbvh FILE`. `method` is `None` for a
-/// command that always traces an RBVH.
-pub fn check_source(given: &Given, source: &Source, method: Option<Method>) -> Result<()> {
-    if source.rbvh.is_some() {
-        anyhow::ensure!(
-            method != Some(Method::Exact) || !given.has("method"),
-            "--method exact traces the exact BVH, but --rbvh names an RBVH to trace: give one of them"
-        );
-        if let Some(flag) = given.first(&BUILD_FLAGS) {
-            anyhow::bail!(
-                "{flag} says how to build an RBVH, but --rbvh loads one built already (with the \
-                 parameters it was built with): drop {flag}, or drop --rbvh to build one"
-            );
-        }
-    } else if method == Some(Method::Exact) {
-        if let Some(flag) = given.first(&BUILD_FLAGS) {
-            anyhow::bail!(
-                "{flag} says how to build an RBVH, but --method exact traces the exact BVH: add \
-                 --method rbvh"
-            );
-        }
-    }
-    Ok(())
-}
+/// The clap ids of the flags that say how levels of detail are built and chosen
+/// ([`LodBuildArgs`]).
+pub const LOD_FLAGS: [&str; 3] = ["lod_columns", "lod_min_leaves", "lod_bias"];
 
 /// `--points`: an RBVH of points sampled from the scene, or of a scan of it, refereed by the exact
 /// BVH of its triangles.
@@ -255,44 +323,19 @@ impl PointsArg {
     }
 }
 
-/// Level of detail (RBVH only): coarse column grids at inner nodes, chosen per ray by its cone.
-#[derive(Args, Clone, Debug)]
-pub struct LodArgs {
-    /// Trace with level of detail: each ray uses the coarsest representation whose columns are at
-    /// most 2^--lod-bias of its footprint wide (each command says whose footprint).
-    #[arg(long)]
-    pub lod: bool,
-    #[command(flatten)]
-    pub build: LodBuildArgs,
-}
-
-impl LodArgs {
-    /// No level of detail, for a command without the flags.
-    pub fn off() -> LodArgs {
-        let d = LodParams::default();
-        LodArgs {
-            lod: false,
-            build: LodBuildArgs {
-                lod_columns: d.columns,
-                lod_min_leaves: d.min_leaves,
-                lod_bias: d.bias,
-            },
-        }
-    }
-}
-
-/// How levels of detail are built and chosen (with --lod): see `rbvh::lod::LodParams`.
+/// How levels of detail are built and chosen (with `--method rbvh-lod`): see
+/// `rbvh::lod::LodParams`.
 #[derive(Args, Clone, Debug)]
 pub struct LodBuildArgs {
     /// Columns along the longer side of every coarse node's grid.
-    #[arg(long, default_value_t = LodParams::default().columns, requires = "lod")]
+    #[arg(long, default_value_t = LodParams::default().columns)]
     pub lod_columns: u32,
     /// Fewest leaves below a node for it to get a coarse grid.
-    #[arg(long, default_value_t = LodParams::default().min_leaves, requires = "lod")]
+    #[arg(long, default_value_t = LodParams::default().min_leaves)]
     pub lod_min_leaves: u32,
     /// A node is chosen where its column is at most 2^bias footprints wide: -1 puts two columns in
     /// a footprint, 0 one (lower: sharper and slower; higher: coarser and faster).
-    #[arg(long, default_value_t = LodParams::default().bias, requires = "lod", allow_negative_numbers = true)]
+    #[arg(long, default_value_t = LodParams::default().bias, allow_negative_numbers = true)]
     pub lod_bias: f32,
 }
 
@@ -306,15 +349,31 @@ impl LodBuildArgs {
     }
 }
 
+/// `--method`: which kind of structure ([`rbvh::structure::Kind`], spelt as bench records spell
+/// it), the one value enum of every command's `--method`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum Method {
-    /// Exact triangle BVH (the reference).
+    /// Exact triangle BVH (the referee).
     Exact,
     /// Rasterized BVH at --quality.
     Rbvh,
+    /// Rasterized BVH at --quality, traced with level of detail.
+    RbvhLod,
 }
 
-pub use rbvh::structure::Structure;
+impl Method {
+    /// What it builds with an RBVH level `params` and levels of detail `lod` (each read only by
+    /// the kinds that have them).
+    pub fn recipe(self, params: RbvhParams, lod: LodParams) -> Recipe {
+        match self {
+            Method::Exact => Recipe::Exact,
+            Method::Rbvh => Recipe::Rbvh(params),
+            Method::RbvhLod => Recipe::RbvhLod(params, lod),
+        }
+    }
+}
+
+use rbvh::structure::Structure;
 
 pub struct Prepared {
     pub scene: Scene,
@@ -350,22 +409,21 @@ impl Prepared {
     }
 
     /// Traces `rays` through `tracer` (from [`Prepared::tracer`]), counting them on `progress`;
-    /// `cones` gives their footprints when tracing with level of detail.
+    /// `cones` are their footprints (read with level of detail).
     pub fn trace(
         &self,
         tracer: &Tracer,
         rays: &[Ray],
-        cones: impl FnOnce() -> Vec<RayCone>,
+        cones: Cones,
         query: Query,
         counters: bool,
         progress: &dyn rbvh::progress::Progress,
     ) -> Result<Traced> {
-        let cones = self.structure.lod().is_some().then(cones);
-        Ok(tracer.trace_observed(rays, cones.as_deref(), query, counters, progress)?)
+        Ok(tracer.trace_observed(rays, cones, query, counters, progress)?)
     }
 
     /// The CPU reference of [`Prepared::trace`].
-    pub fn trace_cpu(&self, rays: &[Ray], cones: &[RayCone], any_hit: bool) -> Result<Vec<Hit>> {
+    pub fn trace_cpu(&self, rays: &[Ray], cones: Cones, any_hit: bool) -> Result<Vec<Hit>> {
         Ok(self.structure.trace_cpu(rays, cones, any_hit)?)
     }
 }
@@ -439,8 +497,9 @@ fn prepare_on(c: &Common, camera: Option<Camera>, device: bool) -> Result<Prepar
         Scene::load_observed(&c.source.scene, bar)
     })
     .with_context(|| format!("loading scene {:?}", c.source.scene))?;
+    let method = c.structures.method()?;
     anyhow::ensure!(
-        c.source.points.points.is_none() || c.method == Method::Rbvh || c.source.rbvh.is_some(),
+        c.source.points.points.is_none() || method != Method::Exact || c.source.rbvh.is_some(),
         "--points builds the RBVH from points: add --method rbvh (the exact BVH traces the triangles)"
     );
     c.source.points.apply(&mut scene)?;
@@ -452,59 +511,57 @@ fn prepare_on(c: &Common, camera: Option<Camera>, device: bool) -> Result<Prepar
         eprintln!("warning: {warning}");
     }
     let t = Instant::now();
-    let structure = match (&c.source.rbvh, c.method) {
-        (Some(path), _) => {
+    let structure = match &c.source.rbvh {
+        Some(path) => {
             let r = step("loading RBVH", |_| Rbvh::load(path))
                 .with_context(|| format!("loading RBVH {}", path.display()))?;
             r.check_built_from(&scene).with_context(|| {
                 format!("RBVH {} with scene {:?}", path.display(), c.source.scene)
             })?;
-            Structure::Rbvh(Arc::new(r))
+            if scene.surface.is_some()
+                && r.colours.is_none()
+                && r.params.texels == TexelFormat::HeightNormal
+            {
+                eprintln!(
+                    "warning: {} has materials but the RBVH file has no colour channel: its \
+                     height-field surfaces show white (rebuild it from this scene to bake colours)",
+                    scene.name
+                );
+            }
+            Structure::from(r)
         }
-        (None, Method::Exact) if scene.triangle_count() == 0 && scene.points.is_some() => {
+        None if method == Method::Exact
+            && scene.triangle_count() == 0
+            && scene.points.is_some() =>
+        {
             anyhow::bail!(
                 "{} is a point cloud: there are no triangles for the exact BVH; trace it with --method rbvh",
                 scene.name
             )
         }
-        (None, Method::Exact) => Structure::Exact(step("building BVH", |bar| {
-            Bvh::build_observed(&scene, &BuildParams::DEFAULT, bar)
-        })?),
-        (None, Method::Rbvh) => {
-            let mut levels = c.source.quality.levels()?;
-            anyhow::ensure!(
-                levels.len() == 1,
-                "--quality and --texels: give one level in one texel format to trace"
-            );
-            let params = levels.remove(0);
-            Structure::Rbvh(Arc::new(step("building RBVH", |bar| {
-                Rbvh::build_observed(&scene, &params, bar).map_err(flag_error)
-            })?))
+        None => {
+            // The levels of detail are built below, for a loaded RBVH as for a built one.
+            let recipe = match c.structures.recipe()? {
+                Recipe::RbvhLod(params, _) => Recipe::Rbvh(params),
+                recipe => recipe,
+            };
+            let what = match recipe {
+                Recipe::Exact => "building BVH",
+                _ => "building RBVH",
+            };
+            step(what, |bar| {
+                Structure::build_observed(&scene, &recipe, bar).map_err(flag_error)
+            })?
         }
     };
-    if let (Structure::Rbvh(r), Some(_)) = (&structure, &c.source.rbvh) {
-        if scene.surface.is_some()
-            && r.colours.is_none()
-            && r.params.texels == TexelFormat::HeightNormal
-        {
-            eprintln!(
-                "warning: {} has materials but the RBVH file has no colour channel: its \
-                 height-field surfaces show white (rebuild it from this scene to bake colours)",
-                scene.name
-            );
-        }
-    }
     let structure_ms = t.elapsed().as_secs_f64() * 1e3;
-    let structure = match (structure, c.lod.lod) {
-        (structure, false) => structure,
-        (Structure::Rbvh(r), true) => {
-            let params = c.lod.build.params();
-            let lod = step("building levels of detail", |_| {
-                Lod::build(&r, &params).map_err(flag_error)
-            })?;
-            Structure::RbvhLod(r, Box::new(lod))
-        }
-        (_, true) => anyhow::bail!("--lod needs an RBVH: add --method rbvh (or --rbvh FILE)"),
+    let structure = if method == Method::RbvhLod {
+        let params = c.structures.lod.params();
+        step("building levels of detail", |_| {
+            structure.with_levels(&params).map_err(flag_error)
+        })?
+    } else {
+        structure
     };
     let ctx = if device {
         let options = context_options(c.source.device.as_deref(), c.source.validate)?;
@@ -575,7 +632,7 @@ fn prepare_on(c: &Common, camera: Option<Camera>, device: bool) -> Result<Prepar
 pub fn report_throughput(
     p: &Prepared,
     rays: &[Ray],
-    cones: &[RayCone],
+    cones: Cones,
     query: Query,
     traced: &Traced,
 ) -> Result<()> {
@@ -623,7 +680,7 @@ pub fn report_throughput(
                 exact_ms / gpu_ms
             );
         }
-        if let Some(c) = exact.trace_with(rays, query, true)?.counters {
+        if let Some(c) = exact.trace_with(rays, Cones::None, query, true)?.counters {
             report_counters("exact BVH", &c);
         }
     }
@@ -728,6 +785,26 @@ pub struct Quality {
     pub texels: Vec<TexelsArg>,
 }
 
+/// The presets `--quality` names (0..4, Q0..Q4, or `all`), in the order given: the one parser of
+/// every command's `--quality`.
+pub fn presets(quality: &[String]) -> Result<Vec<u32>> {
+    let mut levels = Vec::new();
+    for q in quality {
+        let q = q.trim();
+        if q.eq_ignore_ascii_case("all") {
+            levels.extend(0..5);
+            continue;
+        }
+        let digits = q.strip_prefix(['Q', 'q']).unwrap_or(q);
+        let level: u32 = digits.parse().ok().filter(|l| *l <= 4).ok_or_else(|| {
+            anyhow::anyhow!("--quality {q:?} is not a preset: use 0..4, Q0..Q4 or all")
+        })?;
+        levels.push(level);
+    }
+    anyhow::ensure!(!levels.is_empty(), "--quality names no level");
+    Ok(levels)
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum TexelsArg {
     /// Height and normal per texel (the paper's texels).
@@ -796,20 +873,7 @@ impl Quality {
     /// triangles all sampled if asked.
     pub fn quality_levels(&self) -> Result<Vec<rbvh::rbvh::RbvhParams>> {
         use rbvh::rbvh::{RbvhParams, Refinement, Subdivision};
-        let mut levels = Vec::new();
-        for q in &self.quality {
-            let q = q.trim();
-            if q.eq_ignore_ascii_case("all") {
-                levels.extend(0..5);
-                continue;
-            }
-            let digits = q.strip_prefix(['Q', 'q']).unwrap_or(q);
-            let level: u32 = digits.parse().ok().filter(|l| *l <= 4).ok_or_else(|| {
-                anyhow::anyhow!("--quality {q:?} is not a preset: use 0..4, Q0..Q4 or all")
-            })?;
-            levels.push(level);
-        }
-        anyhow::ensure!(!levels.is_empty(), "--quality names no level");
+        let levels = presets(&self.quality)?;
         anyhow::ensure!(
             !self.is_custom() || levels.len() == 1,
             "free parameters adjust one preset: give a single --quality with them"

@@ -4,26 +4,37 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, ensure, Context as _, Result};
-use clap::ValueEnum;
 use rbvh::gpu::Context;
 use rbvh::regress::{self, Config, Method, Mode, Tolerance};
 
-use crate::prepare::{context_options, Given};
+use crate::prepare::{self, context_options, presets, Given, Structures, BUILD_FLAGS, LOD_FLAGS};
 use crate::progress::step;
 
 #[derive(clap::Args, Debug)]
+#[command(mut_arg("method", |a| a.default_value("exact,rbvh,rbvh-lod").help(
+    "Structures, comma-separated: `exact` (the exact triangle BVH), `rbvh` (every --quality \
+     preset), `rbvh-lod` (every --quality preset traced with level of detail, its default \
+     parameters: each pixel's ray uses the coarsest representation whose columns are at most \
+     half its footprint wide)"
+)))]
+#[command(mut_arg("quality", |a| a.default_value("0,2,4").help(
+    "RBVH quality presets: 0..4 or Q0..Q4, comma-separated, or `all` (for the methods rbvh and \
+     rbvh-lod: refused when --method names neither)"
+)))]
+// The goldens are of the presets as shipped: the flags that change a preset or its levels of
+// detail are refused (`run`), and kept out of the help.
+#[command(mut_args(|a| if a.get_id() == "quality" || !is_structure_flag(a.get_id().as_str()) {
+    a
+} else {
+    a.hide(true)
+}))]
 pub struct Args {
     /// Scenes to render (built-in names or files), repeatable or comma-separated; replaces the
     /// shipped set (default, sphere, blob).
     #[arg(long, value_delimiter = ',')]
     scene: Vec<String>,
-    /// Methods, comma-separated; `rbvh` runs every --quality level.
-    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [MethodArg::Exact, MethodArg::Rbvh, MethodArg::RbvhLod])]
-    method: Vec<MethodArg>,
-    /// RBVH quality presets: 0..4 or Q0..Q4, comma-separated, or `all` (for the methods rbvh and
-    /// rbvh-lod: refused when --method names neither).
-    #[arg(long, value_delimiter = ',', default_values_t = ["0".to_string(), "2".to_string(), "4".to_string()])]
-    quality: Vec<String>,
+    #[command(flatten)]
+    structures: Structures,
     /// Folder of the golden images (<case>.png) and depths (<case>_depth.exr).
     #[arg(long, default_value = regress::GOLDEN_DIR)]
     golden: PathBuf,
@@ -62,56 +73,35 @@ pub struct Args {
     validate: bool,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-enum MethodArg {
-    /// Exact triangle BVH.
-    Exact,
-    /// Rasterized BVH, at each --quality level.
-    Rbvh,
-    /// Rasterized BVH traced with level of detail, at each --quality level.
-    RbvhLod,
+/// Whether clap id `id` is one of the flags that say how a structure is built.
+fn is_structure_flag(id: &str) -> bool {
+    BUILD_FLAGS.contains(&id) || LOD_FLAGS.contains(&id)
 }
 
-/// The methods asked for, in the order given: each `rbvh` expands to the --quality levels.
+/// The cases' methods, in the order given: each RBVH method at every --quality preset.
 fn methods(a: &Args) -> Result<Vec<Method>> {
-    let mut levels = Vec::new();
-    for q in &a.quality {
-        let q = q.trim();
-        if q.eq_ignore_ascii_case("all") {
-            levels.extend(0..5);
-            continue;
-        }
-        let digits = q.strip_prefix(['Q', 'q']).unwrap_or(q);
-        match digits.parse::<u32>() {
-            Ok(level) if level <= 4 => levels.push(level),
-            _ => bail!("--quality {q:?} is not a preset: use 0..4, Q0..Q4 or all"),
-        }
-    }
+    let levels = presets(&a.structures.quality.quality)?;
     let mut methods = Vec::new();
-    for m in &a.method {
+    for m in &a.structures.method {
         match m {
-            MethodArg::Exact => methods.push(Method::EXACT),
-            MethodArg::Rbvh => {
-                ensure!(!levels.is_empty(), "--method rbvh needs a --quality level");
-                methods.extend(levels.iter().map(|&l| Method::rbvh(l)));
-            }
-            MethodArg::RbvhLod => {
-                ensure!(
-                    !levels.is_empty(),
-                    "--method rbvh-lod needs a --quality level"
-                );
-                methods.extend(levels.iter().map(|&l| Method::rbvh_lod(l)));
-            }
+            prepare::Method::Exact => methods.push(Method::EXACT),
+            prepare::Method::Rbvh => methods.extend(levels.iter().map(|&l| Method::rbvh(l))),
+            prepare::Method::RbvhLod => methods.extend(levels.iter().map(|&l| Method::rbvh_lod(l))),
         }
     }
     Ok(methods)
 }
 
 pub fn run(a: Args, given: &Given) -> Result<()> {
-    ensure!(
-        !given.has("quality") || a.method.iter().any(|m| *m != MethodArg::Exact),
-        "--quality picks the RBVH levels, and --method names no RBVH: add rbvh or rbvh-lod to --method"
-    );
+    let changes: Vec<&str> = BUILD_FLAGS
+        .into_iter()
+        .chain(LOD_FLAGS)
+        .filter(|id| *id != "quality")
+        .collect();
+    if let Some(flag) = given.first(&changes) {
+        bail!("{flag}: regress compares the presets as shipped with their goldens; give --quality");
+    }
+    a.structures.check(given, false)?;
     let scenes = if a.scene.is_empty() {
         regress::SCENES.iter().map(|s| s.to_string()).collect()
     } else {

@@ -10,29 +10,29 @@ use clap::ValueEnum;
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use rbvh::bench::metrics::image_errors;
-use rbvh::bvh::Bvh;
 use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{Query, Tracer};
 use rbvh::ibl::{self, Environment, Frame, Settings, Sky};
-use rbvh::lod::{Lod, RayCone};
+use rbvh::lod::{Cones, RayCone};
 use rbvh::output::{self, Image};
 use rbvh::preview;
 use rbvh::probe::RayCounters;
-use rbvh::rbvh::Rbvh;
 use rbvh::scene::{Light, Scene};
-use rbvh::structure::Structure;
+use rbvh::structure::{Recipe, Structure};
 use rbvh::surface::hit_albedo;
 
 use crate::prepare::{
-    check_image_size, check_source, prepare, report_counters, report_throughput, CameraArgs,
-    Common, Given, Prepared,
+    check_image_size, prepare, report_counters, report_throughput, CameraArgs, Common, Given,
+    Prepared,
 };
 use crate::progress::step;
 
 #[derive(clap::Args, Debug)]
-#[command(mut_arg("lod", |a| a.help(
-    "Trace with level of detail: each pixel's ray uses the coarsest representation whose columns \
-     are at most 2^--lod-bias of the pixel's footprint wide"
+#[command(mut_arg("method", |a| a.help(
+    "Structure to trace through: `exact` (the exact triangle BVH, the referee), `rbvh` (a \
+     Rasterized BVH at --quality), `rbvh-lod` (that RBVH traced with level of detail: each \
+     pixel's ray uses the coarsest representation whose columns are at most 2^--lod-bias of the \
+     pixel's footprint wide); one of them"
 )))]
 #[command(mut_arg("stats", |a| a.help(
     "Print the scene, the structure (nodes, bytes, build time), the device, the primary trace's \
@@ -100,7 +100,7 @@ enum Shading {
 
 pub fn run(a: Args, given: &Given) -> Result<()> {
     check_image_size(a.width, a.height)?;
-    check_source(given, &a.common.source, Some(a.common.method))?;
+    a.common.check(given)?;
     for (set, flag) in [
         (a.env.is_some(), "--env"),
         (a.samples.is_some(), "--samples"),
@@ -140,7 +140,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     let rays = camera.primary_rays(a.width, a.height);
     let tracer = step("uploading", |bar| p.tracer(bar))?;
     let cone = RayCone::pixel(&camera, a.height);
-    let cones = || vec![cone; rays.len()];
+    let cones = Cones::Same(cone);
     let traced = step("tracing", |bar| {
         p.trace(&tracer, &rays, cones, Query::Closest, false, bar)
     })?;
@@ -154,7 +154,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         None
     };
     if a.common.source.stats {
-        report_throughput(&p, &rays, &cones(), Query::Closest, &traced)?;
+        report_throughput(&p, &rays, cones, Query::Closest, &traced)?;
         if let Some(c) = &counters {
             report_counters(p.structure.label(), c);
         }
@@ -162,8 +162,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     let image = match a.shading {
         Shading::Lambert => preview::shade(
             &p.scene,
-            p.structure.rbvh(),
-            p.structure.lod(),
+            &p.structure,
             &rays,
             &traced.hits,
             a.width,
@@ -201,13 +200,12 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
 /// where the scene or RBVH has one, as the Lambert preview shades.
 pub(crate) fn ibl_albedo(
     scene: &Scene,
-    rbvh: Option<&Rbvh>,
-    lod: Option<&Lod>,
+    structure: &Structure,
     rays: &[Ray],
     hits: &[Hit],
 ) -> Vec<Vec3> {
     let grey = Vec3::splat(ibl::GREY);
-    match hit_albedo(scene, rbvh, lod, rays, hits) {
+    match hit_albedo(scene, structure, rays, hits) {
         Some(colours) => colours.into_iter().map(|c| grey * c).collect(),
         None => vec![grey; rays.len()],
     }
@@ -244,13 +242,13 @@ fn render_ibl(
     let rbvh = p.structure.rbvh();
     let surface_offset = rbvh.map_or(0.0, |r| r.texel_size);
     // The surfaces' base colour where the scene or RBVH has one, else the neutral grey.
-    let albedo = ibl_albedo(&p.scene, rbvh, p.structure.lod(), rays, hits);
+    let albedo = ibl_albedo(&p.scene, &p.structure, rays, hits);
     let settings = Settings {
         samples: a.samples(),
         seed: a.seed.unwrap_or(0),
         diagonal: p.scene.bounds().diagonal(),
         surface_offset,
-        cone: p.structure.lod().map(|_| cone),
+        cone: Some(cone),
     };
     let frame = Frame {
         width: a.width,
@@ -287,11 +285,13 @@ fn compare_with_exact(
         return Ok(());
     }
     let t = Instant::now();
-    let bvh = step("building BVH", |_| Bvh::build(&p.scene))?;
-    let exact = Tracer::new(p.ctx()?, &Structure::from(bvh)).context("uploading the exact BVH")?;
+    let structure = step("building BVH", |_| {
+        Structure::build(&p.scene, &Recipe::Exact)
+    })?;
+    let exact = Tracer::new(p.ctx()?, &structure).context("uploading the exact BVH")?;
     let setup_ms = t.elapsed().as_secs_f64() * 1e3;
     let exact_hits = exact.trace(frame.rays, Query::Closest)?.hits;
-    let exact_albedo = ibl_albedo(&p.scene, None, None, frame.rays, &exact_hits);
+    let exact_albedo = ibl_albedo(&p.scene, &structure, frame.rays, &exact_hits);
     let exact_frame = Frame {
         hits: &exact_hits,
         albedo: &exact_albedo,
@@ -299,7 +299,6 @@ fn compare_with_exact(
     };
     let exact_settings = Settings {
         surface_offset: 0.0,
-        cone: None,
         ..*settings
     };
     let reference = progressive("IBL (exact reference)", settings.samples, |on_pass| {

@@ -6,15 +6,17 @@ use std::time::Instant;
 use anyhow::Result;
 use rbvh::gpu::Query;
 use rbvh::io;
-use rbvh::lod::RayCone;
+use rbvh::lod::{Cones, RayCone};
 
-use crate::prepare::{check_source, prepare, prepare_cpu, report_throughput, Common, Given};
+use crate::prepare::{prepare, prepare_cpu, report_throughput, Common, Given, Method};
 use crate::progress::step;
 
 #[derive(clap::Args, Debug)]
-#[command(mut_arg("lod", |a| a.help(
-    "Trace with level of detail: each ray uses the coarsest representation whose columns are at \
-     most 2^--lod-bias of its footprint wide, a cone of --lod-spread"
+#[command(mut_arg("method", |a| a.help(
+    "Structure to trace through: `exact` (the exact triangle BVH, the referee), `rbvh` (a \
+     Rasterized BVH at --quality), `rbvh-lod` (that RBVH traced with level of detail: each ray \
+     uses the coarsest representation whose columns are at most 2^--lod-bias of its footprint \
+     wide, a cone of --lod-spread); one of them"
 )))]
 #[command(mut_arg("stats", |a| a.help(
     "Print the scene, the structure (nodes, bytes, build time), the device, and the trace's time \
@@ -24,9 +26,9 @@ use crate::progress::step;
 pub struct Args {
     #[command(flatten)]
     common: Common,
-    /// With --lod: the cone spread of every ray of the file (radians per unit of t; their width
-    /// at t = 0 is 0), which picks the level of detail each ray traces.
-    #[arg(long, default_value_t = 1e-3, requires = "lod")]
+    /// With --method rbvh-lod: the cone spread of every ray of the file (radians per unit of t;
+    /// their width at t = 0 is 0), which picks the level of detail each ray traces.
+    #[arg(long, default_value_t = 1e-3)]
     lod_spread: f32,
     /// Input rays: 8 little-endian f32 each (ox oy oz tmin dx dy dz tmax).
     #[arg(long)]
@@ -44,7 +46,12 @@ pub struct Args {
 }
 
 pub fn run(a: Args, given: &Given) -> Result<()> {
-    check_source(given, &a.common.source, Some(a.common.method))?;
+    a.common.check(given)?;
+    anyhow::ensure!(
+        !given.has("lod_spread") || a.common.structures.has(Method::RbvhLod),
+        "--lod-spread is the rays' footprint for level of detail, and --method asks for none: use \
+         --method rbvh-lod"
+    );
     let spread = a.lod_spread;
     anyhow::ensure!(
         spread.is_finite() && spread >= 0.0,
@@ -61,18 +68,11 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     } else {
         Query::Closest
     };
-    let cones = vec![
-        RayCone { width: 0.0, spread };
-        if p.structure.lod().is_some() {
-            rays.len()
-        } else {
-            0
-        }
-    ];
+    let cones = Cones::Same(RayCone { width: 0.0, spread });
     let hits = if a.cpu {
         let t = Instant::now();
         let hits = step("tracing on the CPU", |_| {
-            p.trace_cpu(&rays, &cones, a.any_hit)
+            p.trace_cpu(&rays, cones, a.any_hit)
         })?;
         if a.common.source.stats {
             let ms = t.elapsed().as_secs_f64() * 1e3;
@@ -87,10 +87,10 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     } else {
         let tracer = step("uploading", |bar| p.tracer(bar))?;
         let traced = step("tracing", |bar| {
-            p.trace(&tracer, &rays, || cones.clone(), query, false, bar)
+            p.trace(&tracer, &rays, cones, query, false, bar)
         })?;
         if a.common.source.stats {
-            report_throughput(&p, &rays, &cones, query, &traced)?;
+            report_throughput(&p, &rays, cones, query, &traced)?;
         }
         traced.hits
     };
