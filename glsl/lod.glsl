@@ -1,15 +1,18 @@
 // Coarse representations of inner nodes for level-of-detail traversal: the GLSL twin of
 // src/lod/march.rs, step for step, on the packed data of src/lod/layout.rs, and its leaf hook for
-// the one traversal (traverse.glsl). Included at the end of rbvh.glsl (whose march helpers and
-// RBVH hook it uses) when RBVH_LOD is defined (trace_rbvh_lod.comp); shaders that do not define
-// it are unchanged.
+// the one traversal (traverse.glsl). It builds on rbvh.glsl (whose march helpers and RBVH hook
+// it uses, and which it includes): a shader that traces with level of detail includes this file
+// (trace_rbvh_main.glsl does for trace_rbvh_lod.comp), one that does not includes rbvh.glsl alone.
 //
-// The includer chooses where the buffers live by defining, before the #include:
+// The includer chooses where the buffers live by defining, before the #include, what rbvh.glsl
+// takes and:
 //   RBVH_LODS_BINDING       binding of the per-node records (default 8)
 //   RBVH_LOD_TEXELS_BINDING binding of the column words     (default 9)
 // or, with RBVH_DEVICE_ADDRESS (see bvh.glsl), RBVH_LODS_ADDRESS and RBVH_LOD_TEXELS_ADDRESS.
 #ifndef RBVH_LOD_GLSL
 #define RBVH_LOD_GLSL
+
+#include "rbvh.glsl"
 
 #ifndef RBVH_LODS_BINDING
 #define RBVH_LODS_BINDING 8

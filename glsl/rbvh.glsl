@@ -910,9 +910,4 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
     return rbvh_rbvh_hit(leaves, t, ray);
 }
 
-// With RBVH_LOD, also rbvh_trace_rbvh_lod: the same traversal with lod.glsl's hook.
-#ifdef RBVH_LOD
-#include "lod.glsl"
-#endif
-
 #endif

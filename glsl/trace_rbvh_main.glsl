@@ -22,6 +22,9 @@ layout(constant_id = 2) const bool rbvh_height_only = false;
 
 #include "trace_params.glsl"
 #include "rbvh.glsl"
+#ifdef RBVH_LOD
+#include "lod.glsl"
+#endif
 
 #define RBVH_TRACE_IO_BINDING 4
 #include "trace_io.glsl"

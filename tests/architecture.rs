@@ -1,7 +1,9 @@
-//! The architecture the README draws holds in the code: data flows one way, so no two top-level
-//! modules of `src/` import each other (issue 21: `rbvh` ↔ `lod`, `rbvh` ↔ `surface`, `scene` ↔
-//! `output` once did). A module's imports are the `crate::<module>` paths in its code, comments
-//! and test modules left out.
+//! The architecture the README draws holds in the code: data flows one way. No cycle runs
+//! through the top-level modules of `src/` (issue 21: `rbvh` ↔ `lod`, `rbvh` ↔ `surface`,
+//! `scene` ↔ `output` once did), nor through the files of one module, nor through the GLSL
+//! headers' includes; and no source file grows past what one reader holds in mind. A module's
+//! imports are the `crate::` and `super::` paths in its code (grouped `{..}` imports included),
+//! comments and test modules left out.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -20,40 +22,123 @@ fn rust_files(dir: &Path) -> Vec<PathBuf> {
             out.push(path);
         }
     }
+    out.sort();
     out
 }
 
-/// The top-level modules that the code of `file` names through `crate::`.
-fn imports(file: &Path) -> BTreeSet<String> {
+/// The code of `file` that is the data flow: without its test module and comments.
+fn code_of(file: &Path) -> String {
     let text = std::fs::read_to_string(file).unwrap();
     // Test modules may reach anywhere: they are not the data flow.
     let code = text
         .find("#[cfg(test)]\nmod tests")
         .or_else(|| text.find("#[cfg(test)]\npub(super) mod tests"))
         .map_or(text.as_str(), |end| &text[..end]);
+    code.lines()
+        .map(|line| line.split("//").next().unwrap_or(""))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// The first path segment of every path that follows `prefix` in `code`: `a` of `prefix a::b`,
+/// and `a`, `b` of `prefix {a::x, b}` (a grouped import, nested groups included).
+fn segments_after(code: &str, prefix: &str) -> BTreeSet<String> {
+    let ident = |s: &str| -> String {
+        s.trim_start()
+            .chars()
+            .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+            .collect()
+    };
     let mut out = BTreeSet::new();
-    for line in code.lines() {
-        let line = line.split("//").next().unwrap_or("");
-        let mut rest = line;
-        while let Some(at) = rest.find("crate::") {
-            rest = &rest[at + "crate::".len()..];
-            let name: String = rest
-                .chars()
-                .take_while(|c| c.is_ascii_lowercase() || *c == '_')
-                .collect();
-            if !name.is_empty() {
-                out.insert(name);
+    let mut rest = code;
+    while let Some(at) = rest.find(prefix) {
+        // `prefix` must start a path, not end another word (`my_crate::`).
+        let before = rest[..at].chars().next_back();
+        rest = &rest[at + prefix.len()..];
+        if before.is_some_and(|c| c.is_ascii_alphanumeric() || c == '_') {
+            continue;
+        }
+        if let Some(group) = rest.strip_prefix('{') {
+            let mut depth = 1;
+            let mut item = String::new();
+            for c in group.chars() {
+                match c {
+                    '{' => depth += 1,
+                    '}' => depth -= 1,
+                    ',' if depth == 1 => {
+                        out.insert(ident(&item));
+                        item.clear();
+                        continue;
+                    }
+                    _ => {}
+                }
+                if depth == 0 {
+                    break;
+                }
+                if depth == 1 {
+                    item.push(c);
+                }
             }
+            out.insert(ident(&item));
+        } else {
+            out.insert(ident(rest));
         }
     }
+    out.retain(|s| !s.is_empty() && s.starts_with(|c: char| c.is_ascii_lowercase()));
     out
 }
 
-#[test]
-fn no_two_top_level_modules_import_each_other() {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let mut graph: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
-    for entry in std::fs::read_dir(&src).unwrap() {
+/// A cycle of `graph` (its nodes in order, the first repeated at the end), if it has one.
+fn cycle(graph: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String>> {
+    // Depth-first, colouring nodes: on the path (1) or done (2); an edge back to the path closes
+    // a cycle.
+    fn visit(
+        node: &str,
+        graph: &BTreeMap<String, BTreeSet<String>>,
+        colour: &mut BTreeMap<String, u8>,
+        path: &mut Vec<String>,
+    ) -> Option<Vec<String>> {
+        colour.insert(node.to_string(), 1);
+        path.push(node.to_string());
+        for next in graph.get(node).into_iter().flatten() {
+            match colour.get(next.as_str()) {
+                Some(1) => {
+                    let start = path.iter().position(|n| n == next).unwrap();
+                    let mut found = path[start..].to_vec();
+                    found.push(next.clone());
+                    return Some(found);
+                }
+                Some(_) => {}
+                None => {
+                    if let Some(found) = visit(next, graph, colour, path) {
+                        return Some(found);
+                    }
+                }
+            }
+        }
+        path.pop();
+        colour.insert(node.to_string(), 2);
+        None
+    }
+    let mut colour = BTreeMap::new();
+    for node in graph.keys() {
+        if !colour.contains_key(node.as_str()) {
+            if let Some(found) = visit(node, graph, &mut colour, &mut Vec::new()) {
+                return Some(found);
+            }
+        }
+    }
+    None
+}
+
+fn src() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("src")
+}
+
+/// The top-level modules of `src/` and the others each one's code names through `crate::`.
+fn top_level_graph() -> BTreeMap<String, BTreeSet<String>> {
+    let mut graph = BTreeMap::new();
+    for entry in std::fs::read_dir(src()).unwrap() {
         let path = entry.unwrap().path();
         let name = path.file_stem().unwrap().to_string_lossy().into_owned();
         if name == "lib" || name == "bin" {
@@ -61,24 +146,164 @@ fn no_two_top_level_modules_import_each_other() {
         }
         let deps = rust_files(&path)
             .iter()
-            .flat_map(|f| imports(f))
+            .flat_map(|f| segments_after(&code_of(f), "crate::"))
             .filter(|d| *d != name)
             .collect();
         graph.insert(name, deps);
     }
+    graph
+}
+
+#[test]
+fn no_cycle_runs_through_the_top_level_modules() {
+    let graph = top_level_graph();
     assert!(graph.len() > 20, "modules found: {:?}", graph.keys());
     assert!(graph["rbvh"].contains("bvh") && graph["lod"].contains("rbvh"));
-    let mutual: Vec<(String, String)> = graph
-        .iter()
-        .flat_map(|(a, deps)| {
-            deps.iter()
-                .filter(|b| a < *b && graph.get(*b).is_some_and(|d| d.contains(a)))
-                .map(|b| (a.clone(), b.clone()))
-                .collect::<Vec<_>>()
-        })
-        .collect();
-    assert!(
-        mutual.is_empty(),
-        "modules importing each other: {mutual:?}"
+    // Grouped imports count: `use crate::{lod::Cones, ..}` in the tracer.
+    assert!(graph["gpu"].contains("structure") && graph["structure"].contains("lod"));
+    assert_eq!(cycle(&graph), None, "a cycle among the top-level modules");
+}
+
+/// The files (and folders) directly inside module folder `dir` and, per each, the others its
+/// code names: through `super::x` (from a file directly in `dir`) or `crate::<module>::x`, and
+/// through a name that `dir/mod.rs` re-exports from `x` (`pub use x::{Name, ..}`), since
+/// `super::Name` then reaches `x` through the facade. `mod.rs` itself is the facade, not a node.
+fn module_graph(dir: &Path) -> BTreeMap<String, BTreeSet<String>> {
+    let module = dir.file_name().unwrap().to_string_lossy().into_owned();
+    let mut children = BTreeMap::new();
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_stem().unwrap().to_string_lossy().into_owned();
+        if name != "mod" && (path.is_dir() || path.extension().is_some_and(|e| e == "rs")) {
+            children.insert(name, path);
+        }
+    }
+    // Names re-exported by the facade, by the child that defines them.
+    let facade = code_of(&dir.join("mod.rs"));
+    let mut exported: BTreeMap<String, String> = BTreeMap::new();
+    for line in facade.split(';') {
+        let line = line.trim();
+        let Some(path) = line
+            .strip_prefix("pub use ")
+            .or_else(|| line.strip_prefix("pub(crate) use "))
+        else {
+            continue;
+        };
+        let Some((child, names)) = path.split_once("::") else {
+            continue;
+        };
+        if !children.contains_key(child) {
+            continue;
+        }
+        let names = names.trim_start_matches('{').trim_end_matches('}');
+        for name in names.split(',') {
+            let name = name.split_whitespace().last().unwrap_or("");
+            exported.insert(name.to_string(), child.to_string());
+        }
+    }
+    let mut graph = BTreeMap::new();
+    for (name, path) in &children {
+        let mut deps = BTreeSet::new();
+        for file in rust_files(path) {
+            let code = code_of(&file);
+            let mut named = segments_after(&code, &format!("crate::{module}::"));
+            if file.parent() == Some(dir) {
+                named.extend(segments_after(&code, "super::"));
+                // Facade names: `super::Name` / `super::{Name, ..}` (upper case).
+                for (export, child) in &exported {
+                    let direct = format!("super::{export}");
+                    let mentioned = code.match_indices(&direct).any(|(at, _)| {
+                        !code[at + direct.len()..].starts_with(|c: char| c.is_alphanumeric())
+                    }) || code.contains("super::{") && {
+                        let groups = code.split("super::{").skip(1);
+                        groups
+                            .map(|g| g.split('}').next().unwrap_or(""))
+                            .any(|g| g.split(',').any(|item| item.trim() == export))
+                    };
+                    if mentioned {
+                        deps.insert(child.clone());
+                    }
+                }
+            }
+            deps.extend(named.into_iter().filter(|d| children.contains_key(d)));
+        }
+        deps.remove(name);
+        graph.insert(name.clone(), deps);
+    }
+    graph
+}
+
+#[test]
+fn no_cycle_runs_through_the_files_of_a_module() {
+    let mut checked = 0;
+    for entry in std::fs::read_dir(src()).unwrap() {
+        let dir = entry.unwrap().path();
+        if !dir.is_dir() || !dir.join("mod.rs").exists() {
+            continue;
+        }
+        let graph = module_graph(&dir);
+        checked += graph.len();
+        assert_eq!(cycle(&graph), None, "a cycle among the files of {dir:?}");
+    }
+    assert!(checked > 60, "{checked} files checked");
+    // The scene loader reaches its meshes through one file, which reaches no loader back.
+    let scene = module_graph(&src().join("scene"));
+    assert!(scene["load"].contains("mesh_file") && scene["scene_file"].contains("mesh_file"));
+    assert!(scene["texture"].contains("regular_file"));
+}
+
+/// The GLSL files and the files each `#include`s.
+fn include_graph() -> BTreeMap<String, BTreeSet<String>> {
+    let glsl = Path::new(env!("CARGO_MANIFEST_DIR")).join("glsl");
+    let mut graph = BTreeMap::new();
+    for entry in std::fs::read_dir(glsl).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let includes = text
+            .lines()
+            .filter_map(|l| l.trim().strip_prefix("#include"))
+            .map(|rest| rest.trim().trim_matches('"').to_string())
+            .collect();
+        graph.insert(name, includes);
+    }
+    graph
+}
+
+#[test]
+fn no_cycle_runs_through_the_glsl_includes() {
+    let graph = include_graph();
+    assert!(graph.len() > 15, "{:?}", graph.keys());
+    for (file, includes) in &graph {
+        for include in includes {
+            assert!(graph.contains_key(include), "{file} includes {include}");
+        }
+    }
+    // Level of detail builds on the RBVH's march, not the other way round: the main shader
+    // includes both.
+    assert!(graph["lod.glsl"].contains("rbvh.glsl"));
+    assert!(!graph["rbvh.glsl"].contains("lod.glsl"));
+    assert_eq!(cycle(&graph), None, "a cycle among the GLSL includes");
+}
+
+#[test]
+fn the_checks_find_what_they_look_for() {
+    let grouped = segments_after(
+        "use crate::{geom::{Hit, Ray}, lod::Cones};\nlet x = my_crate::nope; crate::io::x()",
+        "crate::",
     );
+    assert_eq!(
+        grouped.into_iter().collect::<Vec<_>>(),
+        ["geom", "io", "lod"]
+    );
+    let mut graph: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for (a, b) in [("a", "b"), ("b", "c"), ("c", "a"), ("c", "d")] {
+        graph.entry(a.into()).or_default().insert(b.into());
+    }
+    assert_eq!(
+        cycle(&graph),
+        Some(vec!["a".into(), "b".into(), "c".into(), "a".into()])
+    );
+    graph.get_mut("c").unwrap().remove("a");
+    assert_eq!(cycle(&graph), None);
 }

@@ -89,10 +89,9 @@ const FOREIGN_LOD: &str = r#"
 layout(local_size_x = 32) in;
 
 #define RBVH_BVH_SET 1
-#define RBVH_LOD 1
 #define RBVH_LODS_BINDING 11
 #define RBVH_LOD_TEXELS_BINDING 12
-#include "rbvh.glsl"
+#include "lod.glsl"
 
 layout(std430, set = 0, binding = 0) writeonly buffer EngineDepth { float depth[]; };
 layout(push_constant) uniform EnginePush { RbvhSizes sizes; RbvhLodSizes lod_sizes; float spread; } push;
@@ -142,14 +141,13 @@ layout(push_constant) uniform EnginePush {
 } push;
 
 #define RBVH_DEVICE_ADDRESS 1
-#define RBVH_LOD 1
 #define RBVH_BVH_NODES_ADDRESS push.rbvh_arrays[0]
 #define RBVH_BVH_TRIS_ADDRESS push.rbvh_arrays[1]
 #define RBVH_LEAVES_ADDRESS push.rbvh_arrays[2]
 #define RBVH_ATLAS_ADDRESS push.rbvh_arrays[3]
 #define RBVH_LODS_ADDRESS push.rbvh_arrays[4]
 #define RBVH_LOD_TEXELS_ADDRESS push.rbvh_arrays[5]
-#include "rbvh.glsl"
+#include "lod.glsl"
 
 layout(std430, set = 0, binding = 0) writeonly buffer EngineDepth { float depth[]; };
 
@@ -179,12 +177,11 @@ fn header_reads_through_device_addresses_the_includer_passes() {
 
 #[test]
 fn each_header_compiles_on_its_own() {
-    // lod.glsl is the RBVH_LOD part of rbvh.glsl, compiled above through it; traverse.glsl is a
-    // template that bvh.glsl, rbvh.glsl and lod.glsl instantiate, and atlas.glsl one that
-    // rbvh.glsl and the paint shader instantiate, compiled through them.
+    // traverse.glsl is a template that bvh.glsl, rbvh.glsl and lod.glsl instantiate, and
+    // atlas.glsl one that rbvh.glsl and the paint shader instantiate, compiled through them.
     for (header, _) in rbvh::gpu::shaders::GLSL_HEADERS
         .iter()
-        .filter(|(name, _)| !["lod.glsl", "traverse.glsl", "atlas.glsl"].contains(name))
+        .filter(|(name, _)| !["traverse.glsl", "atlas.glsl"].contains(name))
     {
         let source = format!(
             "#version 460\n#extension GL_GOOGLE_include_directive : require\nlayout(local_size_x = 1) in;\n#include \"{header}\"\nvoid main() {{}}\n"
@@ -201,8 +198,7 @@ const CONSTANTS_PROBE: &str = r#"
 #version 460
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x = 1) in;
-#define RBVH_LOD 1
-#include "rbvh.glsl"
+#include "lod.glsl"
 
 layout(std430, set = 0, binding = 0) writeonly buffer Out { uint words[]; };
 

@@ -8,7 +8,6 @@
 //! addresses come in the push constants. The per-trace buffers (rays, hits, status, steps, cones)
 //! stay bound in both: the host splits them into batches that fit.
 
-use super::Context;
 use crate::{Error, Result};
 
 /// How the trace and paint shaders reach the arrays of a structure (nodes, triangles, leaves,
@@ -48,61 +47,11 @@ impl Addressing {
     }
 }
 
-/// How one structure's arrays reach its shader, as [`Context::reach`] decided.
+/// How one structure's arrays reach its shader, as [`super::Context::reach`] decided.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Reach {
     /// Each array is a storage-buffer binding.
     Bindings,
     /// Each array is read through its buffer device address.
     DeviceAddresses,
-}
-
-impl Context {
-    /// How a structure with `arrays` (name, bytes) reaches its shader under this context's
-    /// [`Addressing`], checked before anything is uploaded: an array too large for the chosen way
-    /// is a [`Error::DeviceLimit`] naming it, the limit and what would help.
-    pub fn reach(&self, arrays: &[(&str, u64)]) -> Result<Reach> {
-        let limits = self.limits();
-        let over_range = arrays
-            .iter()
-            .any(|&(_, bytes)| bytes > limits.max_storage_buffer_range);
-        let reach = match self.addressing() {
-            Addressing::DeviceAddress => Reach::DeviceAddresses,
-            Addressing::Auto if over_range && limits.buffer_device_address => {
-                Reach::DeviceAddresses
-            }
-            Addressing::Auto | Addressing::Bindings => Reach::Bindings,
-        };
-        for &(name, bytes) in arrays {
-            match reach {
-                Reach::Bindings => {
-                    let hint = match self.addressing() {
-                        Addressing::Bindings => {
-                            "the context was made with Addressing::Bindings; Addressing::Auto reads \
-                             such arrays through buffer device addresses"
-                        }
-                        _ => {
-                            "this device has no bufferDeviceAddress to read larger arrays through; \
-                             lower the quality or the scene's size"
-                        }
-                    };
-                    self.check_storage_range(name, bytes, hint)?;
-                }
-                Reach::DeviceAddresses => {
-                    if bytes > limits.max_memory_allocation_size {
-                        return Err(Error::DeviceLimit {
-                            resource: name.to_string(),
-                            limit: "maxMemoryAllocationSize",
-                            required: bytes,
-                            available: limits.max_memory_allocation_size,
-                            hint: "one array must fit one allocation: lower the quality or the \
-                                   scene's size"
-                                .into(),
-                        });
-                    }
-                }
-            }
-        }
-        Ok(reach)
-    }
 }

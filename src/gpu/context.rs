@@ -16,7 +16,7 @@ use gpu_allocator::vulkan::Allocator;
 #[cfg(feature = "loaded")]
 use gpu_allocator::vulkan::AllocatorCreateDesc;
 
-use super::Addressing;
+use super::{Addressing, Reach};
 use crate::{Error, Result};
 
 /// Whether to run the Khronos validation layer.
@@ -470,7 +470,7 @@ impl Partial {
         let queue_info = [vk::DeviceQueueCreateInfo::default()
             .queue_family_index(queue_family)
             .queue_priorities(&priorities)];
-        let statistics = super::statistics::offered(&instance, physical_device);
+        let statistics = offers_pipeline_statistics(&instance, physical_device);
         let extensions: Vec<*const c_char> = [
             addresses.then_some(ash::khr::buffer_device_address::NAME),
             statistics.then_some(ash::khr::pipeline_executable_properties::NAME),
@@ -594,12 +594,20 @@ fn describe(
     (limits, device_name, driver)
 }
 
+/// Whether `pd` offers `VK_KHR_pipeline_executable_properties` with `pipelineExecutableInfo`.
+#[cfg(feature = "loaded")]
+fn offers_pipeline_statistics(instance: &ash::Instance, pd: vk::PhysicalDevice) -> bool {
+    if !offers_extension(instance, pd, ash::khr::pipeline_executable_properties::NAME) {
+        return false;
+    }
+    let mut executable = vk::PhysicalDevicePipelineExecutablePropertiesFeaturesKHR::default();
+    let mut features = vk::PhysicalDeviceFeatures2::default().push_next(&mut executable);
+    unsafe { instance.get_physical_device_features2(pd, &mut features) };
+    executable.pipeline_executable_info == vk::TRUE
+}
+
 /// Whether `pd` lists the device extension `name`.
-pub(crate) fn offers_extension(
-    instance: &ash::Instance,
-    pd: vk::PhysicalDevice,
-    name: &CStr,
-) -> bool {
+fn offers_extension(instance: &ash::Instance, pd: vk::PhysicalDevice, name: &CStr) -> bool {
     unsafe { instance.enumerate_device_extension_properties(pd) }
         .unwrap_or_default()
         .iter()
@@ -782,5 +790,55 @@ impl Drop for Shared {
                 self.instance.destroy_instance(None);
             }
         }
+    }
+}
+
+impl Context {
+    /// How a structure with `arrays` (name, bytes) reaches its shader under this context's
+    /// [`Addressing`], checked before anything is uploaded: an array too large for the chosen way
+    /// is a [`Error::DeviceLimit`] naming it, the limit and what would help.
+    pub fn reach(&self, arrays: &[(&str, u64)]) -> Result<Reach> {
+        let limits = self.limits();
+        let over_range = arrays
+            .iter()
+            .any(|&(_, bytes)| bytes > limits.max_storage_buffer_range);
+        let reach = match self.addressing() {
+            Addressing::DeviceAddress => Reach::DeviceAddresses,
+            Addressing::Auto if over_range && limits.buffer_device_address => {
+                Reach::DeviceAddresses
+            }
+            Addressing::Auto | Addressing::Bindings => Reach::Bindings,
+        };
+        for &(name, bytes) in arrays {
+            match reach {
+                Reach::Bindings => {
+                    let hint = match self.addressing() {
+                        Addressing::Bindings => {
+                            "the context was made with Addressing::Bindings; Addressing::Auto reads \
+                             such arrays through buffer device addresses"
+                        }
+                        _ => {
+                            "this device has no bufferDeviceAddress to read larger arrays through; \
+                             lower the quality or the scene's size"
+                        }
+                    };
+                    self.check_storage_range(name, bytes, hint)?;
+                }
+                Reach::DeviceAddresses => {
+                    if bytes > limits.max_memory_allocation_size {
+                        return Err(Error::DeviceLimit {
+                            resource: name.to_string(),
+                            limit: "maxMemoryAllocationSize",
+                            required: bytes,
+                            available: limits.max_memory_allocation_size,
+                            hint: "one array must fit one allocation: lower the quality or the \
+                                   scene's size"
+                                .into(),
+                        });
+                    }
+                }
+            }
+        }
+        Ok(reach)
     }
 }

@@ -6,6 +6,7 @@ mod addressing;
 mod buffer;
 mod compiled;
 mod context;
+mod every_pipeline;
 mod painter;
 mod pipeline;
 pub mod shaders;
@@ -16,8 +17,9 @@ mod tracer;
 
 pub use addressing::{Addressing, Reach};
 pub use buffer::Buffer;
-pub use compiled::{compile_every_pipeline, CompiledPipeline};
+pub use compiled::CompiledPipeline;
 pub use context::{Context, ContextOptions, DeviceLimits, External, Validation};
+pub use every_pipeline::compile_every_pipeline;
 pub use painter::{PaintParams, PaintRecording, PaintStats, Painter, MAX_BRUSHES_PER_PASS};
 pub use pipeline::{ComputePipeline, DescriptorSet};
 pub use statistics::{ShaderStatistic, StatisticValue};

@@ -10,7 +10,7 @@ pub fn words(bytes: &[u8]) -> std::io::Result<Vec<u32>> {
 /// The GLSL headers an engine includes in its own shaders (README, "Embedding in an engine"), by
 /// the name `#include` gives them: `rbvh.glsl` (the RBVH's march and leaf hook), `bvh.glsl` (the
 /// exact BVH), `traverse.glsl` (the one traversal they instantiate), `grid.glsl` (grid stepping
-/// for both marches), `lod.glsl` (level of detail, with `RBVH_LOD`) and what they include. An
+/// for both marches), `lod.glsl` (level of detail, on top of `rbvh.glsl`) and what they include. An
 /// engine that compiles its shaders resolves its includes from this table and needs no files of
 /// this crate.
 pub const GLSL_HEADERS: [(&str, &str); 8] = [

@@ -95,19 +95,3 @@ pub(crate) unsafe fn query(
         })
         .collect()
 }
-
-/// Whether `pd` offers `VK_KHR_pipeline_executable_properties` with `pipelineExecutableInfo`.
-#[cfg(feature = "loaded")]
-pub(crate) fn offered(instance: &ash::Instance, pd: vk::PhysicalDevice) -> bool {
-    if !super::context::offers_extension(
-        instance,
-        pd,
-        ash::khr::pipeline_executable_properties::NAME,
-    ) {
-        return false;
-    }
-    let mut executable = vk::PhysicalDevicePipelineExecutablePropertiesFeaturesKHR::default();
-    let mut features = vk::PhysicalDeviceFeatures2::default().push_next(&mut executable);
-    unsafe { instance.get_physical_device_features2(pd, &mut features) };
-    executable.pipeline_executable_info == vk::TRUE
-}

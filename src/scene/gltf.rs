@@ -73,7 +73,7 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
                         format!("buffer {}: {}: {e}", buffer.index(), file.display()),
                     )
                 })?;
-                super::load::regular_file(&file, &metadata)?;
+                super::regular_file::regular_file(&file, &metadata)?;
             }
         }
     }

@@ -13,7 +13,7 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use super::camera::DEFAULT_VFOV_DEG;
-use super::load::load_mesh_file;
+use super::mesh_file::{check_mesh_file, load_mesh_file};
 use super::{Camera, CameraFault, Light, Scene};
 use crate::progress::{step, Progress};
 use crate::{Error, Result};
@@ -282,7 +282,7 @@ impl Source<'_> {
             )),
             MeshRef::File(file) => {
                 let path = dir.join(file.get_ref());
-                super::load::check_mesh_file(&path)
+                check_mesh_file(&path)
                     .map(|_| ())
                     .map_err(|e| self.error(file.span(), format!("cannot load mesh: {e}")))
             }

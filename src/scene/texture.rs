@@ -94,7 +94,7 @@ impl Texture {
     /// corrupt one [`Error::Parse`] naming it.
     pub fn load(path: &Path) -> Result<Texture> {
         let metadata = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
-        super::load::regular_file(path, &metadata)?;
+        super::regular_file::regular_file(path, &metadata)?;
         let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
         Self::decode(&bytes, path, "texture")
     }
