@@ -107,7 +107,7 @@ enum Input<'a> {
 pub const CREASE_EDGE_TEXELS: f32 = 2.0;
 
 /// Leaves of the builder's BVH of the scene, which the ring of samples around each leaf is
-/// sampled from by short rays (`raster.rs`): leaves of four keep a ray's triangle tests few
+/// sampled from by short rays (`raster/ring.rs`): leaves of four keep a ray's triangle tests few
 /// (with a median-split tree, 16 cost the dragon's Q4 a tenth more build time).
 const SURFACE_LEAF: usize = 4;
 

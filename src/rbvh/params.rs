@@ -111,7 +111,7 @@ pub struct RbvhParams {
     pub min_leaf_texels: f32,
     /// A set whose box diagonal spans at most this many texels, and whose triangles fail
     /// `refinement`, is judged again on its surface *as sampled*: the cells of its rasterized
-    /// tile must pass the same criterion (see `raster.rs`). Detail below the sampling rate cannot
+    /// tile must pass the same criterion (see `raster/judge.rs`). Detail below the sampling rate cannot
     /// be represented anyway, and on a scanned mesh its noise fails the criterion at every size,
     /// so the paper's rule (0: triangles only) cuts a small or distant scan into leaves of a few
     /// texels each, a 64-byte record and a node apiece (issue "The paper's scale", item 6).
