@@ -71,8 +71,8 @@ pub(crate) enum Walk<'a> {
 /// [`crate::gpu::Tracer::block_jumps`], which is off on CPU devices), so that its [`TraceStats`]
 /// equal the device's counters ray by ray, and reports to a [`Probe`] every
 /// read the shader makes of the structure's arrays, at its byte offset in the device buffers
-/// (`src/gpu/tracer.rs` binds them in [`Array`](crate::probe::Array) order; the atlas buffer holds the texels, then the
-/// block ranges). Made by [`Rbvh::device_twin`]; with level of detail, `crate::lod::LodTwin`.
+/// (`src/gpu/tracer.rs` binds them in [`Array`](crate::probe::Array) order; the atlas buffer
+/// holds the texels, then the block ranges). Made by [`Rbvh::device_twin`]; with level of detail, `crate::lod::LodTwin`.
 pub struct DeviceTwin<'a> {
     rbvh: &'a Rbvh,
     ranges: Vec<u32>,

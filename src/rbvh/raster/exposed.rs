@@ -55,10 +55,11 @@ const STEEP_CELL_TEXELS: f32 = 3.0;
 
 /// The `triangles` (by index, ascending) that the finished height field does not cover well
 /// enough for a ray entering the solid through them to be sure to meet it, so that the builder
-/// adds them to the tree as triangles, traced exactly (`build.rs`): those that meet
-/// * the *bare* part of a cell, which no cell triangle covers ([`cell_triangles`](crate::rbvh::layout::cell_triangles)): all of a
-///   cell with two holes or more among its corners, or the half on a lone hole's side of the
-///   diagonal between its neighbours. Edge-on triangles (a wall between two samples) count;
+/// adds them to the tree as triangles, traced exactly (`build/leaf.rs`): those that meet
+/// * the *bare* part of a cell, which no cell triangle covers
+///   ([`cell_triangles`](crate::rbvh::layout::cell_triangles)): all of a cell with two holes or
+///   more among its corners, or the half on a lone hole's side of the diagonal between its
+///   neighbours. Edge-on triangles (a wall between two samples) count;
 ///   touching the bare part along an edge or at a point does not. After the ring and the open
 ///   boundary, these are cells over which the ring found no surface within its reach (a rim
 ///   seen nearly edge-on, a crease whose other sheet lies further), where rays aimed at the
