@@ -1,4 +1,4 @@
-//! The GPU RBVH tracer (`glsl/rbvh.glsl`) agrees with the CPU reference caster (`src/rbvh/march.rs`)
+//! The GPU RBVH tracer (`glsl/rbvh.glsl`) agrees with the CPU reference caster (`src/rbvh/march/`)
 //! on the same rays: over 100k rays on several scenes at every quality level, closest and any hit.
 //! The two run the same operations in the same order (`precise` in GLSL); what may still differ is
 //! the last bit of a division or a `normalize` on the device. So a hit/miss disagreement is

@@ -250,7 +250,7 @@ fn gpu_agrees(ctx: &Context, r: Rbvh, rays: &[Ray], what: &str) {
 /// triangle sampled and as the presets build them: 200,000 rays aimed at the rims of each
 /// level's leaves on the sphere and the blob (up to four million in all),
 /// counted against the exact BVH. Each leaf's ring of samples comes from the neighbouring surface
-/// itself (`raster.rs`, step 4), so neighbouring leaves overlap on the real surface, corners
+/// itself (`raster/ring.rs`, step 4), so neighbouring leaves overlap on the real surface, corners
 /// included. (Before that ring, one dilation ring let 1 / 0 / 0 / 0 / 0 of them through on the
 /// sphere and 78 / 36 / 10 / 7 / 2 on the blob.)
 #[test]
@@ -390,7 +390,7 @@ fn holed(name: &str) -> Scene {
 
 /// **Bound: no leaks by the rims of holes** at any preset, with every triangle sampled and as
 /// the presets build them: 200,000 seam rays a level on the blob with three holes punched in it. Nothing continues the surface beyond an open edge, so the
-/// cells that the triangles beside it meet are filled from their planes (`raster.rs`, step 4,
+/// cells that the triangles beside it meet are filled from their planes (`raster/mod.rs`, step 4,
 /// the open boundary); before, 47 / 24 / 19 / 11 / 8 of them passed through within a texel of
 /// a hole's rim (the Stanford bunny's base: 75 / 62 / 69 / 24 / 29 per million, now 2 / 2 / 0 /
 /// 0 / 1). The cost is a rim that overhangs the hole by up to a cell (docs/guarantees.md).
@@ -403,11 +403,11 @@ fn no_seam_leaks_by_the_rims_of_holes() {
 /// **Bound: no leaks at the extreme criteria either**: 200,000 seam rays at Q0 on the sphere
 /// and the blob at each.
 /// * The strictest (A⊥/A ≥ 1.0, φ_max 0.5°), where every leaf is a few triangles, many of them
-///   holding no sample centre or few: full cells cover each leaf's whole footprint (`raster.rs`,
+///   holding no sample centre or few: full cells cover each leaf's whole footprint (`raster/ring.rs`,
 ///   step 4: the corners of every cell its triangles overlap come from the surface); before
 ///   that, 582 and 1,042 of a million leaked at A⊥/A 1.0 and 477 on the blob at 0.5°.
 /// * Leaves seen nearly edge-on (φ_max 89.5°, A⊥/A 0.01), whose rims turn edge-on and whose
-///   rings can only be extrapolated: the walls (`raster.rs`, step 4) take those samples down the
+///   rings can only be extrapolated: the walls (`raster/walls.rs`, step 4) take those samples down the
 ///   leaf's own triangles, and the skirt (`MARCH_SKIRT_TEXELS`) hangs under the rims sampled
 ///   from the surface and under the walls steeper than 45°, tapers to nothing half-way to an
 ///   extrapolated end, and hangs a tenth of a texel under the diagonal of a cell of three
@@ -471,7 +471,7 @@ fn seam_leaks(bvh: &Bvh, r: &Rbvh) -> (usize, usize) {
 
 /// **Exact where the height fields cannot cover**: a leaf's own triangles that meet a cell the
 /// ring left bare, or rise above or sink under a cell's surface beyond what it stands in for
-/// (`raster.rs`, `exposed`), are in the tree as triangle leaves too, so a ray entering the solid through one
+/// (`raster/exposed.rs`), are in the tree as triangle leaves too, so a ray entering the solid through one
 /// meets it however the leaves' rims fall. Each part lies on its scene triangle, wound as it
 /// is, and a ray along its normal at its centroid that meets that triangle first hits the RBVH
 /// no later than the exact BVH, on the CPU and on the GPU. On the sphere at A⊥/A 0.01, where

@@ -4,7 +4,7 @@
 //! Parallelism in the Construction of BVHs, Octrees, and k-d Trees", 2012).
 //!
 //! For builders that need *a* tree of the scene quickly rather than a good one: the RBVH builder
-//! samples the ring around each leaf by rays a few texels long ([`crate::rbvh`]'s `raster.rs`),
+//! samples the ring around each leaf by rays a few texels long ([`crate::rbvh`]'s `raster/ring.rs`),
 //! for which node quality matters little, while a median-split [`super::Bvh`] cost a third of the whole
 //! RBVH build at the paper's scale (a selection over scattered centroids per level, and a copy of
 //! every triangle: 1 GB there). Here one parallel sort does the ordering, each split is a binary

@@ -82,8 +82,8 @@ use std::path::Path;
 
 use bytemuck::{Pod, Zeroable};
 
+use super::layout::tile_fits;
 use super::layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT, LEAF_BIT};
-use super::march::tile_fits;
 use super::params::{RbvhParams, Refinement, Subdivision, TexelFormat};
 use super::{Rbvh, RbvhStats};
 use crate::bvh::{ChildRef, GpuNode, GpuTriangle};

@@ -14,14 +14,14 @@
 //! u / texel_size`) and height `h = (p − origin)·axis_w`. Sample `(i, j)` sits at the texel centre
 //! `(s, t) = (i + ½, j + ½)` with height `q · h_scale`, `q` its 16-bit quantized height. The surface
 //! inside the *cell* between samples `(i, j)` and `(i + 1, j + 1)` is two triangles through the four
-//! corner samples (see `march.rs`); cells with a missing corner keep the triangle of the other three.
+//! corner samples (see `march/cell.rs`); cells with a missing corner keep the triangle of the other three.
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Vec2, Vec3};
 
 pub use crate::bvh::{GpuNode, GpuTriangle, LEAF_BIT};
 
-/// Relative rounding slack of the height-field march (steps 2–4 of `march.rs`); `glsl/rbvh.glsl`
+/// Relative rounding slack of the height-field march (steps 2–4 of `march/`); `glsl/rbvh.glsl`
 /// defines the same value. Frame-space quantities (the ray's height `o_h + d_h·t`,
 /// the triangle test's hit, boundary crossings) carry rounding errors of a few ulps of the
 /// magnitudes involved; the march's box and per-cell height rejection are widened by this much of
@@ -104,7 +104,7 @@ pub struct GpuHeightfield {
 const _: () = assert!(std::mem::size_of::<GpuHeightfield>() == 64);
 
 /// The leaf frame's maps, in one place for every user outside the march (which inlines the same
-/// dot products: `march.rs` step 1; `glsl/paint.comp` mirrors [`GpuHeightfield::sample_point`]).
+/// dot products: `march/walk.rs` step 1; `glsl/paint.comp` mirrors [`GpuHeightfield::sample_point`]).
 impl GpuHeightfield {
     /// Frame coordinates `(s, t, h)` of world point `p`: `s`, `t` in texels, `h` in world units.
     pub fn to_frame(&self, p: Vec3) -> Vec3 {
@@ -283,7 +283,7 @@ impl SampleGrid {
 /// The surface of one cell from its corners in cycle order c00, c10, c11, c01 (`None` for a
 /// hole): with all four, the triangles (c00, c10, c11) and (c00, c11, c01); with one hole, the
 /// triangle of the other three in that cycle (so the winding stays the quad's); with two or more,
-/// none. The march (`march.rs`, steps 4–5, and `glsl/rbvh.glsl`) inlines this choice for speed;
+/// none. The march (`march/`, steps 4–5, and `glsl/rbvh.glsl`) inlines this choice for speed;
 /// everything else that needs a cell's triangles takes them from here.
 pub(crate) fn cell_triangles<T: Copy>(corners: [Option<T>; 4]) -> impl Iterator<Item = [T; 3]> {
     let mut present = corners.into_iter().flatten();
@@ -375,9 +375,29 @@ impl Atlas {
     }
 }
 
+/// Whether every texel of `leaf`'s tile lies in the atlas: at least one sample per side, each tile
+/// row within one atlas row, and its last texel `atlas_base + (res_v − 1)·pitch + res_u − 1` in
+/// range.
+/// The loader rejects files with a leaf that does not fit; the march treats one as empty.
+pub(super) fn tile_fits(leaf: &GpuHeightfield, atlas: &Atlas) -> bool {
+    if leaf.res_u == 0 || leaf.res_v == 0 || leaf.res_u > atlas.pitch {
+        return false;
+    }
+    // A tile must not wrap across atlas rows: its rows are atlas rows (and the device march's
+    // block jumps, `src/rbvh/ranges.rs`, count on it).
+    if leaf.atlas_base % atlas.pitch + leaf.res_u > atlas.pitch {
+        return false;
+    }
+    let last = u64::from(leaf.atlas_base)
+        + u64::from(leaf.res_v - 1) * u64::from(atlas.pitch)
+        + u64::from(leaf.res_u - 1);
+    last < atlas.texels.len() as u64
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::rbvh::march::tests::flat_leaf;
 
     #[test]
     fn codes_carry_their_mark_within_one_code() {
@@ -472,5 +492,29 @@ mod tests {
         assert_eq!(t.height_code(), 1234);
         assert!(!t.is_hole() && Texel::HOLE.is_hole());
         assert!(t.normal().dot(Vec3::Y) > 0.9999);
+    }
+
+    #[test]
+    fn tile_fits_checks_the_last_texel_and_refuses_rows_that_wrap() {
+        let atlas = Atlas {
+            pitch: 8,
+            rows: 4,
+            narrow_rows: 0,
+            texels: vec![Texel::HOLE; 32],
+        };
+        let fits = |base, res_u, res_v| {
+            tile_fits(
+                &GpuHeightfield {
+                    atlas_base: base,
+                    ..flat_leaf(0.0, res_u, res_v, 0.0)
+                },
+                &atlas,
+            )
+        };
+        assert!(fits(0, 8, 4) && fits(4, 4, 4) && fits(31, 1, 1));
+        assert!(!fits(5, 4, 4) && !fits(0, 9, 1) && !fits(0, 0, 1) && !fits(32, 1, 1));
+        assert!(!fits(u32::MAX, u32::MAX, u32::MAX));
+        // Columns 6, 7 of one row, then 0, 1 of the next: in range, but wrapped.
+        assert!(fits(6, 2, 2) && !fits(6, 3, 2) && !fits(14, 4, 1));
     }
 }

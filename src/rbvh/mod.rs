@@ -78,7 +78,7 @@ pub struct RbvhStats {
     /// Leaves that became height fields (= `leaves.len()`).
     pub heightfield_leaves: u32,
     /// Leaves of triangles, traced exactly: sets kept as triangles (hybrid leaves), and beside
-    /// height fields the triangles their tiles leave uncovered (`raster.rs`, `exposed`).
+    /// height fields the triangles their tiles leave uncovered (`raster/exposed.rs`).
     pub triangle_leaves: u32,
     /// Texels of all tiles (the atlas has `atlas.pitch × atlas.rows`, the difference is waste).
     pub tile_texels: u64,

@@ -23,7 +23,7 @@ pub enum Refinement {
 }
 
 /// Where to split a set that cannot be one height field. The splits decide the leaves; the tree a
-/// ray traverses over them may be built again by the SAH where that is cheaper (`build.rs`,
+/// ray traverses over them may be built again by the SAH where that is cheaper (`build/flatten.rs`,
 /// `upper_tree`), so a strategy is measured by the leaves it makes as much as by its tree.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Subdivision {
@@ -111,7 +111,7 @@ pub struct RbvhParams {
     pub min_leaf_texels: f32,
     /// A set whose box diagonal spans at most this many texels, and whose triangles fail
     /// `refinement`, is judged again on its surface *as sampled*: the cells of its rasterized
-    /// tile must pass the same criterion (see `raster.rs`). Detail below the sampling rate cannot
+    /// tile must pass the same criterion (see `raster/judge.rs`). Detail below the sampling rate cannot
     /// be represented anyway, and on a scanned mesh its noise fails the criterion at every size,
     /// so the paper's rule (0: triangles only) cuts a small or distant scan into leaves of a few
     /// texels each, a 64-byte record and a node apiece (issue "The paper's scale", item 6).
@@ -120,7 +120,7 @@ pub struct RbvhParams {
     pub texels: TexelFormat,
     /// Triangles are traced exactly where that costs fewer bytes than sampling them: a triangle
     /// covering more texels than its 96 bytes buy, and a set whose tiles (texels, leaf records,
-    /// nodes, exact parts) cost more than its triangles would (`build.rs`). Such triangles have
+    /// nodes, exact parts) cost more than its triangles would (`build/exact.rs`). Such triangles have
     /// no detail between their corners for texels to sample (walls, floors, a cube's faces, a
     /// mesh coarser than the sampling rate), and a height field of them widens their silhouettes
     /// by its rim. On in the presets (a texel exists because the scene needs it); off (RBVH

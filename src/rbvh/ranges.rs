@@ -17,7 +17,7 @@
 //! when the ray's height over the block lies outside it (with the cell test's slack), it moves
 //! straight to the block's exit cell. The main cells it skips could not be hit (their own test
 //! reads and rounds heights the same way and would reject them), so the hits are those of the
-//! plain walk (the CPU caster in `march.rs` walks every cell, and the agreement tests compare). One
+//! plain walk (the CPU caster in `march/` walks every cell, and the agreement tests compare). One
 //! gap remains in principle: an "extra" cell, the neighbour the walk also tests where a ray passes
 //! a grid vertex within rounding, lies outside the block when that vertex is on the block's edge;
 //! it is skipped too, and could only have been hit within rounding times the surface's slope of

@@ -1,7 +1,7 @@
 //! Rays aimed at the seams between height-field leaves, and the leaks they find (issue "No leaks
 //! between height fields").
 //!
-//! Each leaf's surface ends one dilation ring beyond its own triangles (`raster.rs`, step 4), and
+//! Each leaf's surface ends one dilation ring beyond its own triangles (`raster/`, step 4), and
 //! neighbouring leaves meet by overlapping there; under the rims sampled from the surface the
 //! march hangs a skirt one texel deep (`layout::MARCH_SKIRT_TEXELS`). Where they do not overlap — at corners where
 //! several leaves meet, or at a rim the texel grid cannot hold — a ray can pass between them and

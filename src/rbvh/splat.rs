@@ -1,5 +1,5 @@
 //! Splatting one leaf's points into its height-field tile: the point-cloud counterpart of
-//! `raster.rs`, which it shares dilation, the sampled judgement and quantization with. The paper
+//! `raster/`, which it shares dilation, the sampled judgement and quantization with. The paper
 //! takes point-based input "natively" because a height field is a set of samples of a surface
 //! (Novák & Dachsbacher 2012, abstract); a scan's points are such samples, only not on the grid.
 //!
@@ -20,7 +20,7 @@
 //!    by samples that far apart) are two layers folded onto one texel: the set is not a height
 //!    field (`None`), unless the leaf is `forced`.
 //! 4. Then as for triangles: the optional sampled judgement, one ring of dilation, 16-bit
-//!    quantization over the tile's height range (`raster.rs`, steps 3–5).
+//!    quantization over the tile's height range (`raster/`, steps 3–5).
 //!
 //! A `forced` leaf is one the builder cannot split further (a single point, or a set smaller
 //! than `min_leaf_texels` that is still not a height field): triangles would stay exact in a

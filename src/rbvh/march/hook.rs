@@ -1,0 +1,155 @@
+//! The march's leaves in the one tree traversal of `crate::bvh` (`traverse.rs`), as its hook
+//! ([`RbvhLeaves`]): a triangle-leaf child tested in place, exactly, as the exact BVH tests its
+//! own; a height-field leaf marched ([`super::walk`]) when it comes up from the near-first order
+//! or the stack. Here a new kind of leaf would be told apart and tested.
+
+use glam::Vec3;
+
+use super::normal::NormalReads;
+use super::Walk;
+use crate::bvh::{Leaves, Triangles};
+use crate::geom::{Hit, Ray};
+use crate::probe::{Probe, TraceStats};
+use crate::rbvh::layout::{HEIGHTFIELD_COUNT, LEAF_BIT};
+use crate::rbvh::{Rbvh, TexelFormat};
+
+/// An RBVH's leaves for the shared traversal (`crate::bvh::traverse`): hybrid triangle leaves
+/// tested exactly, height fields marched. Level of detail wraps it (`crate::lod`'s `LodLeaves`),
+/// recording the hits of the coarse nodes it marches here ([`RbvhLeaves::record`]).
+pub(crate) struct RbvhLeaves<'a> {
+    rbvh: &'a Rbvh,
+    ray: &'a Ray,
+    /// The hybrid triangle leaves, tested as the exact BVH tests its own.
+    triangles: Triangles<'a>,
+    walk: Walk<'a>,
+    /// The nearest hit on a height field (or a coarse node): the best unless a triangle's is
+    /// nearer.
+    best: Hit,
+    /// Whether the triangles' hit is the nearest.
+    triangle_nearest: bool,
+    /// The texels the device reads for `best`'s normal once the ray is done.
+    normal_reads: NormalReads,
+}
+
+impl<'a> RbvhLeaves<'a> {
+    /// The ray traced.
+    pub(crate) fn ray(&self) -> &'a Ray {
+        self.ray
+    }
+
+    /// Keeps a hit at `t` with `normal` and `id` found by a hook around these leaves.
+    pub(crate) fn record(&mut self, t: f32, normal: Vec3, id: u32) {
+        self.best = Hit {
+            t,
+            normal: normal.to_array(),
+            id,
+            reserved: [0; 3],
+        };
+        self.triangle_nearest = false;
+        self.normal_reads = NormalReads::default();
+    }
+
+    /// The hit kept. The device reads the nearest triangle once more, after its loops, for the
+    /// hit's id and normal, when the best hit is a triangle, and a height field's texels for its
+    /// normal: those reads go to `probe`.
+    pub(crate) fn finish<P: Probe>(self, probe: &mut P) -> Hit {
+        if self.triangle_nearest {
+            return self.triangles.hit(probe).unwrap_or(Hit::MISS);
+        }
+        if let Some((leaf, skirt)) = self.normal_reads.facet {
+            for read in NormalReads::facet_leaf_reads(leaf, skirt) {
+                probe.read(read);
+            }
+            for texel in self.normal_reads.iter() {
+                probe.read(
+                    self.rbvh
+                        .atlas
+                        .code_read(texel as usize, TexelFormat::Height),
+                );
+            }
+        } else {
+            for texel in self.normal_reads.iter() {
+                for read in self.rbvh.atlas.normal_reads(texel as usize) {
+                    probe.read(read);
+                }
+            }
+        }
+        self.best
+    }
+}
+
+impl<P: Probe> Leaves<P> for RbvhLeaves<'_> {
+    fn test(
+        &mut self,
+        node: u32,
+        count: u32,
+        t_closest: &mut f32,
+        stats: &mut TraceStats,
+        probe: &mut P,
+    ) -> bool {
+        let (ray, rbvh) = (self.ray, self.rbvh);
+        if count != HEIGHTFIELD_COUNT {
+            // A triangle leaf (hybrid RBVH): tested exactly.
+            let found = self.triangles.test(node, count, t_closest, stats, probe);
+            self.triangle_nearest |= found;
+            return found;
+        }
+        // A height-field leaf that came up from the near-first order or the stack.
+        stats.counters.leaves += 1;
+        let Some((t, normal)) =
+            rbvh.march(node & !LEAF_BIT, ray, *t_closest, self.walk, stats, probe)
+        else {
+            return false;
+        };
+        *t_closest = t;
+        self.record(t, normal.normal, node);
+        self.normal_reads = normal.reads;
+        true
+    }
+}
+
+impl Rbvh {
+    pub(super) fn traverse<P: Probe>(
+        &self,
+        ray: &Ray,
+        any_hit: bool,
+        walk: Walk,
+        probe: &mut P,
+    ) -> (Hit, TraceStats) {
+        self.traverse_with(self.leaf_hook(ray, any_hit, walk), ray, any_hit, probe)
+    }
+
+    /// This RBVH's leaves for `ray`, walking cells as `walk` says.
+    pub(crate) fn leaf_hook<'a>(
+        &'a self,
+        ray: &'a Ray,
+        any_hit: bool,
+        walk: Walk<'a>,
+    ) -> RbvhLeaves<'a> {
+        RbvhLeaves {
+            rbvh: self,
+            ray,
+            triangles: Triangles::new(&self.triangles, ray, any_hit),
+            walk,
+            best: Hit::MISS,
+            triangle_nearest: false,
+            normal_reads: NormalReads::default(),
+        }
+    }
+
+    /// The shared traversal of this RBVH's nodes with `leaves` (its own, or a hook around them),
+    /// and the hit they kept.
+    pub(crate) fn traverse_with<'a, P: Probe, L>(
+        &self,
+        mut leaves: L,
+        ray: &Ray,
+        any_hit: bool,
+        probe: &mut P,
+    ) -> (Hit, TraceStats)
+    where
+        L: Leaves<P> + Into<RbvhLeaves<'a>>,
+    {
+        let stats = crate::bvh::traverse(&self.nodes, ray, any_hit, &mut leaves, probe);
+        (leaves.into().finish(probe), stats)
+    }
+}
