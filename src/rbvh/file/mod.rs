@@ -4,7 +4,7 @@
 //! The file is a table of typed, versioned sections (format version 13), so that what is still to
 //! come (texel encodings, instances' many meshes) adds a section, or a version of one, instead of
 //! a version of the whole file, and a reader skips what it may ignore and refuses what it may not.
-//! Files of versions 1–12 (a fixed header, then the arrays) load through [`legacy`], upgraded in
+//! Files of versions 1–12 (a fixed header, then the arrays) load through `legacy`, upgraded in
 //! memory; `rbvh upgrade` rewrites one as version 13. Their colour channels may be painted, and
 //! paint cannot be rebuilt from the scene, so every old file stays readable.
 //!
@@ -36,7 +36,7 @@
 //! optional; a required one it does not know refuses the file, naming it: a section that changes
 //! what the others mean (a new texel encoding) is required, so that no older reader misreads it,
 //! and one that only adds (a hint, a cache) is optional. The sections this build writes, in this
-//! order (each array word by word as [`put_records`] writes it, no padding inside):
+//! order (each array's records one after another, every 4-byte word little-endian):
 //!
 //! | tag | version | flags | content |
 //! |---|---|---|---|
@@ -147,7 +147,7 @@ impl Rbvh {
 
     /// Parses the bytes of an RBVH file of any version; `name_for_errors` is the file named in
     /// every error. An older version is upgraded in memory as its module documents
-    /// ([`legacy`]).
+    /// (`legacy`).
     pub fn from_bytes(bytes: &[u8], name_for_errors: &Path) -> Result<Rbvh> {
         let version = file_version(bytes, name_for_errors)?;
         if version < VERSION {
