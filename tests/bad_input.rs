@@ -361,8 +361,8 @@ fn bad_ray_files_fail_cleanly() {
 }
 
 /// **Bad RBVH files fail `render --rbvh` and `trace --rbvh` cleanly, naming the file**: missing,
-/// empty, a PNG, a real file cut at several points (in the header, in the arrays), with a byte
-/// of the node count flipped, with trailing bytes, and with an unknown version. No image or hit
+/// empty, a PNG, a real file cut at several points (in the section table, in the sections), with
+/// a byte of the node section's length flipped, with trailing bytes, and with an unknown version. No image or hit
 /// file is left behind. (`tests/rbvh_file.rs` checks the library's messages one by one.)
 #[test]
 fn bad_rbvh_files_fail_cleanly() {
@@ -376,11 +376,12 @@ fn bad_rbvh_files_fail_cleanly() {
     };
     let bytes = Rbvh::build(&scene, &params).unwrap().to_bytes();
     let mut flipped = bytes.clone();
-    flipped[116] ^= 0x40;
+    // Table entry 2 (bytes 72..100) is the nodes'; its last 8 bytes their length.
+    flipped[92] ^= 0x40;
     let mut trailing = bytes.clone();
     trailing.extend([0u8; 7]);
     let mut version = bytes.clone();
-    version[8] = 13;
+    version[8] = 14;
     let cases: Vec<(&str, Vec<u8>, &str)> = vec![
         ("empty.rbvh", vec![], "truncated"),
         ("png.rbvh", PNG_HEAD.to_vec(), "not an RBVH file"),

@@ -12,12 +12,13 @@
 //! * [`ranges`]: height ranges of the atlas's 8 × 8 blocks, for the device march's jumps;
 //! * `march`: the CPU reference caster on exactly that packed data, and its [`DeviceTwin`];
 //! * [`seams`]: rays aimed at the seams between leaves, and the leaks they find;
-//! * `file`: save and load.
+//! * [`file`](mod@file): save and load, and the file format's tables (its older versions in
+//!   `file::legacy`).
 
 mod atlas;
 mod bake;
 mod build;
-mod file;
+pub mod file;
 mod frame;
 pub mod layout;
 pub(crate) mod march;

@@ -12,6 +12,7 @@ mod render;
 mod shaders;
 mod tables;
 mod trace;
+mod upgrade;
 
 use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 
@@ -63,6 +64,8 @@ enum Command {
     Tables(tables::Args),
     /// List the built-in scenes, which every command takes for --scene without any file.
     Scenes,
+    /// Rewrite an .rbvh file of any version as the current one, painted colours and all.
+    Upgrade(upgrade::Args),
 }
 
 fn main() {
@@ -84,6 +87,7 @@ fn main() {
         Command::Paint(a) => paint::run(a, &given),
         Command::Shaders(a) => shaders::run(a),
         Command::Tables(a) => tables::run(a),
+        Command::Upgrade(a) => upgrade::run(a),
         Command::Scenes => {
             for name in rbvh::scene::builtin::NAMES {
                 println!("{name}");
