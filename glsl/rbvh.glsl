@@ -1,5 +1,5 @@
 // The RBVH's height-field march and its leaf hook for the one traversal (traverse.glsl): the GLSL
-// twin of src/rbvh/march.rs, step for step, on the packed data of src/rbvh/layout.rs. Includes
+// twin of src/rbvh/march/ (mod.rs lists its steps), step for step, on the packed data of src/rbvh/layout.rs. Includes
 // bvh.glsl for the node and triangle buffers.
 //
 // The includer chooses where the buffers live by defining, before the #include:
@@ -144,7 +144,7 @@ struct RbvhFrameRay {
     float tmax;
 };
 
-// `ray` over [tmin, t_closest) in `leaf`'s frame (step 1 of march.rs): each coordinate summed in
+// `ray` over [tmin, t_closest) in `leaf`'s frame (step 1, march/walk.rs): each coordinate summed in
 // the host's order.
 RbvhFrameRay rbvh_frame_ray(RbvhLeaf leaf, Ray ray, float t_closest) {
     precise vec3 rel = ray.origin - leaf.origin;
@@ -203,7 +203,7 @@ void rbvh_read_corners(RbvhLeaf leaf, RbvhSizes sz, inout RbvhCell cell) {
     cell.c01_c11 = rbvh_texel(leaf, sz, cell.i, cell.j + 1) | rbvh_texel(leaf, sz, cell.i + 1, cell.j + 1) << 16;
 }
 
-// Step 4 of march.rs, its cheap half: reads the cell's corners and tells whether its triangles
+// Step 4 (march/cell.rs), its cheap half: reads the cell's corners and tells whether its triangles
 // can be hit at all — three or four corners present, and the ray's height over
 // [t_in, t_out] within their height range (with the walk's slack). Written without local
 // arrays: dynamically indexed arrays become per-lane memory on SIMD implementations such as
@@ -229,7 +229,7 @@ bool rbvh_cell_candidate(RbvhLeaf leaf, RbvhSizes sz, RbvhFrameRay fr, float sla
 }
 
 // Corner `q` of `cell` in the frame (0: c00, 1: c10, 2: c01, 3: c11), its height from its code,
-// as march.rs places samples, at i + 1/2: made one at a time where used.
+// as the march places samples, at i + 1/2: made one at a time where used.
 vec3 rbvh_cell_corner(RbvhLeaf leaf, RbvhCell cell, uint q) {
     uint code = ((q & 2u) != 0u ? cell.c01_c11 : cell.c00_c10) >> ((q & 1u) << 4) & 0xFFFFu;
     precise float h = float(code) * leaf.h_scale;
@@ -238,7 +238,7 @@ vec3 rbvh_cell_corner(RbvhLeaf leaf, RbvhCell cell, uint q) {
 
 // The corners (rbvh_cell_corner's numbers) of the first triangle of a cell with three or four
 // corners present: (c00, c10, c11) with all four, else the three present in the cycle order c00,
-// c10, c11, c01 (the winding stays the quad's), as `hit` and `surface_under` in march.rs take
+// c10, c11, c01 (the winding stays the quad's), as `hit` and `surface_under` in march/cell.rs and march/skirt.rs take
 // it. With all four, the second is (c00, c11, c01).
 uvec3 rbvh_first_triangle(RbvhCell cell) {
     bool v00 = !rbvh_is_hole(rbvh_c00(cell));
@@ -247,7 +247,7 @@ uvec3 rbvh_first_triangle(RbvhCell cell) {
     return uvec3(v00 ? 0u : 1u, v00 ? (v10 ? 1u : 3u) : 3u, (v00 && v10) ? (v11 ? 3u : 2u) : 2u);
 }
 
-// Step 4 of march.rs, its costly half: the cell's two (or one) triangles; returns t (< 0 on a
+// Step 4 (march/cell.rs), its costly half: the cell's two (or one) triangles; returns t (< 0 on a
 // miss) and, on a hit, which of them was hit (`tri`: 0 the first, 1 the second; see
 // rbvh_cell_facet). `cut` is set when the device ended the loop early (see traverse.glsl).
 float rbvh_cell_triangles(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, out int tri, inout bool cut) {
@@ -290,7 +290,7 @@ float rbvh_cell_triangles(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, out int
 }
 
 // The frame-space normal of triangle `tri` of `cell` (rbvh_cell_triangles): (b - a) x (c - a)
-// of its frame-space corners, for height-only RBVHs (facet_normal in march.rs).
+// of its frame-space corners, for height-only RBVHs (facet_normal in march/normal.rs).
 vec3 rbvh_cell_facet(RbvhLeaf leaf, RbvhCell cell, int tri) {
     uvec3 first = rbvh_first_triangle(cell);
     vec3 a = rbvh_cell_corner(leaf, cell, first.x);
@@ -302,7 +302,7 @@ vec3 rbvh_cell_facet(RbvhLeaf leaf, RbvhCell cell, int tri) {
 }
 
 // The skirt of `full` texels under the edge from corner texel `ca` to `cb`, met at fraction `f`
-// along it (clamped) at `t` (skirt_hit and skirt_depth in march.rs): true when `t` lies in the
+// along it (clamped) at `t` (skirt_hit and skirt_depth in march/skirt.rs): true when `t` lies in the
 // ray's interval and the ray is below the edge there by at most the skirt's depth: `full` under
 // an edge of two samples taken from the surface (even codes: Texel::is_sampled); from such a
 // sample to an extrapolated one, `full` at the sampled end tapering to nothing half-way; none
@@ -325,7 +325,7 @@ bool rbvh_skirt_at(RbvhLeaf leaf, RbvhFrameRay fr, float slack, float uu, uint c
     return t >= fr.tmin && t < fr.tmax && below >= -slack && depth2 <= depth * depth;
 }
 
-// The skirt under the edge of `cell` (skirt in march.rs) that the ray entered at cell.t_in from a
+// The skirt under the edge of `cell` (skirt in march/skirt.rs) that the ray entered at cell.t_in from a
 // cell with fewer than four samples or through the tile's side, across its edge
 // on `axis` (0: an s boundary, 1: a t boundary) stepping `step` along it, when both samples of
 // that edge are present: t_in on a hit, else -1.
@@ -342,7 +342,7 @@ float rbvh_skirt(RbvhLeaf leaf, RbvhFrameRay fr, float slack, float uu, RbvhCell
 }
 
 // The skirt under the diagonal of `cell`, whose corners are three samples and a hole
-// (diagonal_skirt in march.rs; MARCH_DIAGONAL_SKIRT_TEXELS deep): where the ray crosses the
+// (diagonal_skirt in march/skirt.rs; MARCH_DIAGONAL_SKIRT_TEXELS deep): where the ray crosses the
 // diagonal that faces the hole, within [t_in, t_out], from the hole's side. That t on a hit,
 // else -1.
 float rbvh_diagonal_skirt(RbvhLeaf leaf, RbvhFrameRay fr, float slack, float uu, RbvhCell cell) {
@@ -365,7 +365,7 @@ float rbvh_diagonal_skirt(RbvhLeaf leaf, RbvhFrameRay fr, float slack, float uu,
     return hit ? t : -1.0;
 }
 
-// Which of `cell`'s triangles holds a skirt hit at t, for its facet (surface_under in march.rs):
+// Which of `cell`'s triangles holds a skirt hit at t, for its facet (surface_under in march/skirt.rs):
 // with four corners the second, (c00, c11, c01), where s < t within the cell, else the first.
 int rbvh_skirt_triangle(RbvhFrameRay fr, RbvhCell cell, float t) {
     precise float fs = (fr.o.x + fr.d.x * t) - (float(cell.i) + 0.5);
@@ -373,7 +373,7 @@ int rbvh_skirt_triangle(RbvhFrameRay fr, RbvhCell cell, float t) {
     return rbvh_cell_full(cell) && fs < ft ? 1 : 0;
 }
 
-// Step 5 of march.rs, its first half: where in `cell` a hit at `t_hit` lies and which corners it
+// Step 5 (march/normal.rs), its first half: where in `cell` a hit at `t_hit` lies and which corners it
 // has, for rbvh_normal_texel: bit 0 right of the cell's middle, bit 1 above it, bits 2-5 corners
 // c00, c10, c01, c11 present; never 0 for a hit (a cell with a surface has three corners). The
 // normals are read once a ray is done (rbvh_rbvh_hit), not in the SIMD loops: read after every
@@ -388,10 +388,10 @@ uint rbvh_cell_normal_choice(RbvhFrameRay fr, RbvhCell cell, float t_hit) {
         | uint(!rbvh_is_hole(rbvh_c11(cell))) << 5;
 }
 
-// Step 5 of march.rs, its second half: the texel whose normal a hit reports, given its cell's
+// Step 5 (march/normal.rs), its second half: the texel whose normal a hit reports, given its cell's
 // texel c00 at atlas index `k00` and rbvh_cell_normal_choice: the nearest present corner sample,
 // or, when that faces away from the world direction `dir` and another present corner faces it,
-// the first such in the order c00, c10, c01, c11 (nearest_normal in march.rs).
+// the first such in the order c00, c10, c01, c11 (nearest_normal in march/normal.rs).
 uint rbvh_normal_texel(RbvhSizes sz, uint k00, uint choice, vec3 dir) {
     bool right = (choice & 1u) != 0u;
     bool up = (choice & 2u) != 0u;
@@ -417,7 +417,7 @@ uint rbvh_normal_texel(RbvhSizes sz, uint k00, uint choice, vec3 dir) {
     return nearest;
 }
 
-// The walk's first cell along one axis (`start` in march.rs): the cell holding the entry, or
+// The walk's first cell along one axis (`start` in march/walk.rs): the cell holding the entry, or
 // the one behind it where the ray crosses their boundary within `slack` texels of the entry at
 // `t0`, or after it (a flat tile's box is thinner than the rounding of the frame coordinates).
 int rbvh_walk_start(float entry, int step, int last, float o, float inv, float d, float t0, float slack) {
@@ -434,7 +434,7 @@ int rbvh_walk_start(float entry, int step, int last, float o, float inv, float d
 }
 
 // A skirt's depth in frame units, with a margin for the square root's rounding (skirt_h in
-// march.rs; `uu` = |axis_u|^2): made where a block or a rim cell is checked rather than kept
+// march/walk.rs; `uu` = |axis_u|^2): made where a block or a rim cell is checked rather than kept
 // through the walk, where it would hold a register.
 float rbvh_skirt_height(float uu) {
     precise float h = 1.001 * RBVH_MARCH_SKIRT_TEXELS / sqrt(uu);
@@ -453,7 +453,7 @@ uint rbvh_walk_bound(int last_i, int last_j) {
 // The current cell is the extra one across a grid vertex (rbvh_walk_cell).
 const uint RBVH_WALK_EXTRA = 64u;
 // The last main cell walked had fewer than four samples, or there was none (prev_open in
-// march.rs, which says why, and why a block jump may leave it as it was).
+// march/walk.rs, which says why, and why a block jump may leave it as it was).
 const uint RBVH_WALK_PREV_OPEN = 128u;
 // Why the inner loop handed the cell to the outer one: its triangles may be hit (TESTS), or its
 // skirts (RIM: under the edge it was entered across, EDGE_RIM, or its diagonal, DIAGONAL).
@@ -491,7 +491,7 @@ bool rbvh_walk_extra(uint dirs) {
 
 // The cell the walk `w` is on (its codes not yet read): its main cell, or,
 // with RBVH_WALK_EXTRA, the extra cell across the grid vertex the ray passes next, before the
-// step (the walk of march.rs). Made from the walk's state where needed rather than carried
+// step (the walk of march/walk.rs). Made from the walk's state where needed rather than carried
 // beside it.
 RbvhCell rbvh_walk_cell(RbvhGridWalk w, uint dirs, float t1) {
     float t_next = min(min(w.next_i, w.next_j), t1);
@@ -502,7 +502,7 @@ RbvhCell rbvh_walk_cell(RbvhGridWalk w, uint dirs, float t1) {
     return RbvhCell(i, j, extra ? t_next : w.t_in, extra ? min(max(w.next_i, w.next_j), t1) : t_next, 0u, 0u);
 }
 
-// Whether `leaf`'s tile lies within the atlas as the march needs it (tile_fits in march.rs):
+// Whether `leaf`'s tile lies within the atlas as the march needs it (tile_fits in src/rbvh/layout.rs):
 // two samples or more each way, a power-of-two pitch (the builder makes it one, and the file
 // reader and the upload refuse any other; it spares divisions: SIMD implementations such as
 // lavapipe run both sides of a branch, and a vector division there is eight scalar ones), no
@@ -567,12 +567,12 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
         int step_i = rbvh_grid_step(d.x);
         int step_j = rbvh_grid_step(d.y);
         precise float corner_slack = RBVH_MARCH_SLACK * (((abs(o.x) + abs(o.y)) + float(leaf.res_u)) + float(leaf.res_v));
-        // Within rounding of the boundary behind the entry, the walk starts behind it (march.rs).
+        // Within rounding of the boundary behind the entry, the walk starts behind it (march/walk.rs).
         RbvhGridWalk w = rbvh_grid_walk(RBVH_BETWEEN_SAMPLES,
                                         rbvh_walk_start(entry.x, step_i, last_i, o.x, inv.x, d.x, t0, corner_slack),
                                         rbvh_walk_start(entry.y, step_j, last_j, o.y, inv.y, d.y, t0, corner_slack),
                                         step_i, step_j, o.xy, inv.xy, t0);
-        // The walk of march.rs: a main cell, then (when the ray passes a grid vertex too closely to
+        // The walk of march/walk.rs: a main cell, then (when the ray passes a grid vertex too closely to
         // resolve) the extra cell across it, then the step. "While-while" as in the traversal: the
         // inner loop steps through cells while their cheap test (rbvh_cell_candidate) rejects them,
         // and the outer loop tests the triangles of the cell that passes it, so that on SIMD
@@ -596,7 +596,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
             dirs &= ~RBVH_WALK_FOUND;
             while (cells < rbvh_walk_bound(last_i, last_j)) {
                 // Every round but the first steps from the cell before: to the extra cell across a
-                // grid vertex the ray passes within rounding of (march.rs walks it between the two
+                // grid vertex the ray passes within rounding of (march/walk.rs walks it between the two
                 // main cells), else to the next main cell.
                 if (cells > 0u) {
                     bool across_s = w.next_i <= w.next_j;
@@ -784,7 +784,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
 }
 
 // The RBVH's leaf hook for traverse.glsl: height fields marched, hybrid triangle leaves tested as
-// the exact BVH's (RbvhLeaves in src/rbvh/march.rs). It keeps the nearest hit in one word, `best`:
+// the exact BVH's (RbvhLeaves in src/rbvh/march/hook.rs). It keeps the nearest hit in one word, `best`:
 // a triangle's slot (below LEAF_BIT: slots are fewer than 2^31), or the id of a height field (or,
 // with level of detail, a chosen node), LEAF_BIT set, with where its normal comes from; RBVH_INVALID
 // while none. Its id and normal are read and decoded once, after the loops (rbvh_rbvh_hit), so
@@ -863,7 +863,7 @@ bool rbvh_test(inout RbvhLeafHook leaves, Ray ray, bool any_hit, uint reference,
 
 // The world normal of a height-only RBVH's hit at t along `ray` in leaf `li`, whose cell's c00 is
 // at atlas index `k00` and `kind` is what rbvh_march hit (1 + triangle, or 3: a skirt): the facet
-// of the cell triangle hit, made from the cell's texels read again (facet_normal in march.rs). Made
+// of the cell triangle hit, made from the cell's texels read again (facet_normal in march/normal.rs). Made
 // once the ray is done, so that neither the walk nor the traversal carries it.
 vec3 rbvh_height_field_facet(RbvhSizes sz, uint li, uint k00, uint kind, Ray ray, float t) {
     RbvhLeaf leaf = RBVH_LEAF(li);

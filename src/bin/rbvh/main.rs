@@ -1,5 +1,5 @@
-//! `rbvh`: render scenes, compare the exact BVH with an RBVH, answer ray files, build, paint and
-//! benchmark RBVHs.
+//! `rbvh`: render scenes, compare the exact BVH with an RBVH, answer ray files, build, paint,
+//! upgrade and benchmark RBVHs.
 
 mod bench;
 mod build;

@@ -92,8 +92,7 @@ use std::path::Path;
 
 use bytemuck::Pod;
 
-use super::layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT, LEAF_BIT};
-use super::layout::tile_fits;
+use super::layout::{tile_fits, Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT, LEAF_BIT};
 use super::params::{Refinement, Subdivision, TexelFormat};
 use super::Rbvh;
 use crate::bvh::GpuTriangle;

@@ -41,6 +41,7 @@
 mod blocks;
 mod cell;
 mod hook;
+mod leaf;
 mod normal;
 mod skirt;
 mod walk;

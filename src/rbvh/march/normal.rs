@@ -5,7 +5,7 @@
 
 use glam::Vec3;
 
-use super::cell::{texel, Cells};
+use super::leaf::{texel, Cells};
 use crate::probe::{Array, Read};
 use crate::rbvh::layout::{GpuHeightfield, Texel};
 

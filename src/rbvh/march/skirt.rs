@@ -6,7 +6,8 @@
 
 use glam::Vec3;
 
-use super::cell::{first_triangle, texel, Cells};
+use super::cell::first_triangle;
+use super::leaf::{texel, Cells};
 use super::normal::{facet_normal, HitNormal};
 use crate::geom::grid::height_at;
 use crate::probe::Probe;

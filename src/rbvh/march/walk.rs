@@ -7,7 +7,7 @@
 use glam::Vec3;
 
 use super::blocks::Blocks;
-use super::cell::Cells;
+use super::leaf::{Cells, FrameRay};
 use super::normal::HitNormal;
 use super::Walk;
 use crate::geom::grid::{height_at, step_of, Grid, GridWalk};
@@ -311,14 +311,6 @@ impl Rbvh {
         }
         None
     }
-}
-
-/// A ray in a leaf's frame `(s, t, h)` with its interval `[tmin, t_closest)`, its shear for the
-/// watertight test, and its height `slack` (see [`SLACK`]); computed once per leaf.
-pub(super) struct FrameRay {
-    pub(super) ray: Ray,
-    pub(super) shear: RayShear,
-    pub(super) slack: f32,
 }
 
 /// The exit distance of a ray from `b`: the far end of the slab test of [`Aabb::intersect`]. It
