@@ -1,7 +1,7 @@
 // The body of paint.comp and paint_bda.comp (which defines RBVH_DEVICE_ADDRESS). Paints brush
 // dabs into an RBVH's colour channel: one dispatch per candidate height-field leaf, one
 // invocation per texel of its tile. A surface texel whose world-space sample point lies
-// within a brush's radius gets that brush's colour composited over its own (src/surface/rgba.rs
+// within a brush's radius gets that brush's colour composited over its own (src/rgba.rs
 // `over`, in integer arithmetic; opaque brushes replace, the last one wins). The rule, and the
 // arithmetic order, are those of src/surface/paint.rs (the CPU reference) and
 // GpuHeightfield::sample_point in src/rbvh/layout.rs; `precise` forbids fused multiply-adds, so
@@ -16,7 +16,7 @@ layout(local_size_x = 64) in;
 struct PaintBrush {
     vec3 centre;
     float radius;
-    uint colour;    // packed RGBA8 (src/surface/rgba.rs)
+    uint colour;    // packed RGBA8 (src/rgba.rs)
     uint pad0;
     uint pad1;
     uint pad2;
@@ -71,7 +71,7 @@ layout(std430, set = 0, binding = 2) buffer Colours {
 #define RBVH_ATLAS_WORD(i) PAINT_ATLAS(i)
 #include "atlas.glsl"
 
-// rgba::over of src/surface/rgba.rs, byte for byte.
+// rgba::over of src/rgba.rs, byte for byte.
 uint paint_over(uint src, uint dst) {
     uint a = src >> 24;
     uint out_word = 0u;

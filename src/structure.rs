@@ -76,15 +76,16 @@ impl Recipe {
         }
     }
 
-    /// Checks every parameter ([`RbvhParams::validate`], [`LodParams::validate`]), before
-    /// anything is built.
+    /// Checks every parameter ([`RbvhParams::validate`], [`LodParams::validate`]) and that
+    /// levels of detail have the texels' normals to read, before anything is built.
     pub fn validate(&self) -> Result<()> {
         match self {
             Recipe::Exact => Ok(()),
             Recipe::Rbvh(params) => params.validate(),
             Recipe::RbvhLod(params, lod) => {
                 params.validate()?;
-                lod.validate()
+                lod.validate()?;
+                crate::lod::no_height_only_texels(params.texels)
             }
         }
     }
@@ -367,6 +368,14 @@ mod tests {
             .unwrap();
         assert!(err.to_string().contains("columns"), "{err}");
         assert_eq!(Recipe::RbvhLod(good, lod).kind(), Kind::RbvhLod);
+        let height_only = RbvhParams {
+            texels: crate::rbvh::TexelFormat::Height,
+            ..good
+        };
+        let lod = LodParams::default();
+        let err = Recipe::RbvhLod(height_only, lod).validate().unwrap_err();
+        assert!(err.to_string().contains("normals"), "{err}");
+        assert!(Recipe::Rbvh(height_only).validate().is_ok());
         assert_eq!(Recipe::Exact.rbvh(), None);
     }
 }

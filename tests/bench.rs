@@ -471,6 +471,29 @@ fn lod_adds_a_valid_rbvh_lod_record_per_level_and_ray_type() {
         assert_eq!((chunk[0].lod, plain.lod), (None, None));
     }
     assert!(dir.path().join("sphere").join("q4s_lod.png").exists());
+    // Level of detail alone: the same records but the plain level's, and no seam rays aimed.
+    let mut alone = small_config(None);
+    alone.levels = config.levels.clone();
+    alone.ray_types = vec![RayType::Primary];
+    alone.width = 64;
+    alone.height = 64;
+    alone.lod = config.lod;
+    alone.plain = false;
+    let alone = bench::run(&alone).unwrap();
+    let methods: Vec<_> = alone.results.iter().map(|r| r.method.name()).collect();
+    assert_eq!(methods, ["exact", "rbvh-lod"]);
+    assert!(alone.results.iter().all(|r| r.seams.is_none()));
+    assert_eq!(
+        alone.results[1].memory_bytes,
+        report.results[2].memory_bytes
+    );
+    let mut neither = small_config(None);
+    neither.plain = false;
+    let err = bench::run(&neither).unwrap_err().to_string();
+    assert!(
+        err.contains("plain") && err.contains("no RBVH to measure"),
+        "{err}"
+    );
     // One line per method, named in the legend (the levels with and without LOD no longer share
     // one zig-zagging line).
     let svg =

@@ -1306,7 +1306,7 @@ fn flags_without_effect_are_refused() {
                 "--texels",
                 "height",
                 "--method",
-                "exact,rbvh-lod",
+                "exact,rbvh,rbvh-lod",
                 "--quality",
                 "0",
             ]),
@@ -1406,6 +1406,37 @@ fn flags_without_effect_are_refused() {
                 "primary",
                 "--seam-rays",
                 "0",
+                "--seed",
+                "3",
+            ]),
+            vec!["--seed draws", "has none of them"],
+        ),
+        // bench: RBVHs beside the exact BVH, seams and height-only levels of the plain levels.
+        (
+            words(&["bench", "--method", "exact"]),
+            vec!["--method exact: bench measures RBVHs beside the exact BVH"],
+        ),
+        (
+            words(&["bench", "--method", "exact,rbvh-lod", "--seam-rays", "5"]),
+            vec!["--seam-rays aims at the seams", "add rbvh to --method"],
+        ),
+        (
+            words(&[
+                "bench",
+                "--method",
+                "rbvh-lod",
+                "--texels",
+                "normals,height",
+            ]),
+            vec!["--texels height builds levels only --method rbvh measures"],
+        ),
+        (
+            words(&[
+                "bench",
+                "--method",
+                "exact,rbvh-lod",
+                "--rays",
+                "primary",
                 "--seed",
                 "3",
             ]),
@@ -1638,6 +1669,36 @@ fn compare_puts_the_exact_bvh_and_an_rbvh_side_by_side() {
     assert!(
         stdout.contains("x smaller") && stdout.contains("PSNR") && stdout.contains("hit/miss"),
         "{stdout}"
+    );
+    // The same with level of detail, its coarse columns counted with the RBVH's memory.
+    let out = rbvh(&[
+        "compare",
+        "--scene",
+        "blob",
+        "--method",
+        "rbvh-lod",
+        "--quality",
+        "1",
+        "--width",
+        "40",
+        "--height",
+        "30",
+        "--samples",
+        "2",
+        "--out",
+        arg(&png),
+    ]);
+    let lod_stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        lod_stdout
+            .lines()
+            .any(|l| l.starts_with("RBVH Q1 with LOD") && l.contains("FLIP")),
+        "{lod_stdout}"
     );
     // The flags of a render that compare takes are checked as render checks them.
     for (args, needle) in [

@@ -1013,7 +1013,7 @@ fn broken_section_tables_are_refused_naming_the_section() {
     );
     refused(
         &with(&|p| drop(p.remove(4))),
-        &["no section LEAF (the file's sections: PARM, HEAD, NODE, TRIS, TEXN)"],
+        &["no section LEAF of a version this build reads (the file's sections: PARM v7, HEAD v1, NODE v1, TRIS v1, TEXN v1)"],
     );
     refused(&with(&|p| drop(p.remove(0))), &["no section PARM"]);
     refused(

@@ -557,8 +557,11 @@ impl Tracer {
         self.bind_views(rays, hits, None, count)
     }
 
-    /// As [`Tracer::bind`], for a level-of-detail tracer ([`Tracer::new_recorded`] of an RBVH with levels of detail): also
-    /// `count` cones (the [`RayCone`] layout, 8 bytes each) read from `cones`.
+    /// As [`Tracer::bind`], with the rays' footprints: `count` cones (the
+    /// [`crate::lod::RayCone`] layout, 8 bytes each) read from `cones` by a level-of-detail
+    /// tracer ([`Tracer::new_recorded`] of an RBVH with levels of detail), which needs them, and
+    /// ignored by any other, so that an engine binds what its rays carry whatever it traces (as
+    /// [`Tracer::trace_with`] takes them).
     pub fn bind_with_cones(
         &self,
         rays: BufferView,
@@ -566,12 +569,8 @@ impl Tracer {
         cones: BufferView,
         count: u32,
     ) -> Result<TraceBinding> {
-        self.expect_lod(
-            true,
-            "trace binding",
-            "this tracer has no levels of detail: bind without cones",
-        )?;
-        self.bind_views(rays, hits, Some(cones), count)
+        let cones = self.lod.is_some().then_some(cones);
+        self.bind_views(rays, hits, cones, count)
     }
 
     fn bind_views(
@@ -743,7 +742,7 @@ impl Tracer {
         }
         if !cones.is_some() {
             return Err(Error::param(
-                "trace",
+                "cones",
                 "a level-of-detail tracer needs the rays' footprints: pass Cones to \
                  Tracer::trace_with",
             ));

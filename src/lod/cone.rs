@@ -80,7 +80,7 @@ pub fn selects(texel_size: f32, cone: &RayCone, t_entry: f32) -> bool {
 }
 
 /// Checks that there is one valid cone per ray.
-pub fn check_cones(rays: &[Ray], cones: &[RayCone]) -> Result<()> {
+fn check_cones(rays: &[Ray], cones: &[RayCone]) -> Result<()> {
     if rays.len() != cones.len() {
         return Err(Error::param(
             "cones",
@@ -116,10 +116,11 @@ impl<'a> Cones<'a> {
         !matches!(self, Cones::None)
     }
 
-    /// The cones of `rays[range]` (the same cone stays the same).
+    /// The cones of `rays[range]` (the same cone stays the same); none where a per-ray list is
+    /// shorter than `range`, which only a structure that ignores the cones is given.
     pub fn slice(&self, range: std::ops::Range<usize>) -> Cones<'a> {
         match *self {
-            Cones::PerRay(cones) => Cones::PerRay(&cones[range]),
+            Cones::PerRay(cones) => cones.get(range).map_or(Cones::None, Cones::PerRay),
             other => other,
         }
     }

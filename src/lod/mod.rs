@@ -20,7 +20,7 @@
 //! The data is built from a finished RBVH ([`Lod::build`]), not from the scene: it approximates the
 //! RBVH's own surface (height-field samples and triangle-leaf triangles, but for the exact parts
 //! beside height fields that the fields stand for: `GpuTriangle::PART` without `BARE`), works for RBVHs loaded
-//! from files, and exists only when asked for — a trace without `--lod` allocates nothing.
+//! from files, and exists only when asked for — a trace that does not ask for them (with `--method rbvh-lod`) allocates nothing.
 //!
 //! * [`cone`]: ray cones and the selection rule;
 //! * `build`: splatting the subtree's surface samples into each node's columns;
@@ -232,7 +232,12 @@ impl Lod {
 /// Levels of detail take their columns' normals from the texels, which a height-only RBVH
 /// ([`crate::rbvh::TexelFormat::Height`]) does not keep: refused with a way out.
 pub(crate) fn no_height_only(rbvh: &crate::rbvh::Rbvh) -> Result<()> {
-    if rbvh.params.texels == crate::rbvh::TexelFormat::Height {
+    no_height_only_texels(rbvh.params.texels)
+}
+
+/// [`no_height_only`] of an RBVH to be built with `texels`, before it is built.
+pub(crate) fn no_height_only_texels(texels: crate::rbvh::TexelFormat) -> Result<()> {
+    if texels == crate::rbvh::TexelFormat::Height {
         return Err(Error::param(
             "lod",
             "levels of detail need the texels' normals, which a height-only RBVH does not keep: \

@@ -101,6 +101,20 @@ pub struct Args {
 
 pub fn run(a: Args, given: &Given) -> Result<()> {
     a.structures.check(given, false)?;
+    let (plain, lod) = (
+        a.structures.has(Method::Rbvh),
+        a.structures.has(Method::RbvhLod),
+    );
+    anyhow::ensure!(
+        plain || lod,
+        "--method exact: bench measures RBVHs beside the exact BVH (which it always measures, \
+         the referee); add rbvh or rbvh-lod"
+    );
+    anyhow::ensure!(
+        plain || !given.has("seam_rays"),
+        "--seam-rays aims at the seams of the levels traced without level of detail, and \
+         --method measures none: add rbvh to --method"
+    );
     anyhow::ensure!(
         !given.has("ao_radius") || a.rays.contains(&RayType::Ao),
         "--ao-radius is the length of ambient-occlusion rays, and --rays traces none: add ao to \
@@ -108,7 +122,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     );
     let seeded = a.rays.contains(&RayType::Ao)
         || a.rays.contains(&RayType::Diffuse)
-        || a.seam_rays > 0
+        || (plain && a.seam_rays > 0)
         || matches!(a.points.points, Some(PointSource::Sampled(_)));
     anyhow::ensure!(
         !given.has("seed") || seeded,
@@ -131,7 +145,11 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     );
     config.levels = levels;
     config.texels = quality.texel_formats();
-    let lod = a.structures.has(Method::RbvhLod);
+    anyhow::ensure!(
+        plain || !config.texels.contains(&rbvh::rbvh::TexelFormat::Height),
+        "--texels height builds levels only --method rbvh measures (a height-only level has no \
+         level of detail): add rbvh to --method"
+    );
     anyhow::ensure!(
         !lod || config
             .texels
@@ -149,7 +167,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         config.seed = seed;
     }
     config.plot_dir = a.plot.clone();
-    config.plain = a.structures.has(Method::Rbvh);
+    config.plain = plain;
     config.lod = lod.then(|| a.structures.lod.params());
     config.traffic = a.traffic;
     config.steps = a.steps;

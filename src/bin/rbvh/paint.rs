@@ -16,7 +16,6 @@ use crate::prepare::{
     check_image_size, prepare, CameraArgs, Common, Given, Method, Prepared, TexelsArg,
 };
 use crate::progress::step;
-use rbvh::structure::Structure;
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("rbvh", |a| a.help(
@@ -95,9 +94,6 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     common.structures.quality.sample_all = true;
     let mut p = prepare(&common, a.camera.camera()?)?;
     let camera = p.scene.camera_or_framed(a.width as f32 / a.height as f32);
-    if !matches!(p.structure, Structure::Rbvh(_)) {
-        bail!("painting needs an RBVH");
-    }
     let tracer = Tracer::new(p.ctx()?, &p.structure).context("uploading the RBVH")?;
 
     let (rays, hits) = if a.before.is_some() || a.after.is_some() {

@@ -164,7 +164,7 @@ pub struct Source {
     #[arg(long)]
     pub validate: bool,
     /// Print the scene, the structure (nodes, bytes, build time), the device, and timings and ray
-    /// throughput (for --method rbvh also the exact BVH's on the same rays).
+    /// throughput (for an RBVH also the exact BVH's on the same rays).
     #[arg(long)]
     pub stats: bool,
 }
@@ -377,7 +377,7 @@ use rbvh::structure::Structure;
 
 pub struct Prepared {
     pub scene: Scene,
-    /// With `--lod`, the RBVH with its levels of detail.
+    /// With `--method rbvh-lod`, the RBVH with its levels of detail.
     pub structure: Structure,
     /// The Vulkan device; none for a CPU trace ([`prepare_cpu`]).
     ctx: Option<Context>,
@@ -498,6 +498,12 @@ fn prepare_on(c: &Common, camera: Option<Camera>, device: bool) -> Result<Prepar
     })
     .with_context(|| format!("loading scene {:?}", c.source.scene))?;
     let method = c.structures.method()?;
+    // Every parameter before the scene is loaded and anything built (which may take minutes).
+    if c.source.rbvh.is_none() {
+        c.structures.recipe()?.validate().map_err(flag_error)?;
+    } else if method == Method::RbvhLod {
+        c.structures.lod.params().validate().map_err(flag_error)?;
+    }
     anyhow::ensure!(
         c.source.points.points.is_none() || method != Method::Exact || c.source.rbvh.is_some(),
         "--points builds the RBVH from points: add --method rbvh (the exact BVH traces the triangles)"

@@ -36,7 +36,7 @@ use crate::progress::step;
 )))]
 #[command(mut_arg("stats", |a| a.help(
     "Print the scene, the structure (nodes, bytes, build time), the device, the primary trace's \
-     time and MRays/s against the CPU reference's (for --method rbvh also the exact BVH's on the \
+     time and MRays/s against the CPU reference's (for an RBVH also the exact BVH's on the \
      same rays) and each ray's work; with --shading ibl also the visibility rays' (and for an \
      RBVH the exact reference render's, with the RBVH image's FLIP and PSNR against it)"
 )))]

@@ -20,7 +20,7 @@ use crate::progress::step;
 )))]
 #[command(mut_arg("stats", |a| a.help(
     "Print the scene, the structure (nodes, bytes, build time), the device, and the trace's time \
-     and MRays/s: on the GPU also the CPU reference's on the same rays (and for --method rbvh \
+     and MRays/s: on the GPU also the CPU reference's on the same rays (and for an RBVH \
      the exact BVH's); with --cpu the CPU tracer's"
 )))]
 pub struct Args {

@@ -350,9 +350,10 @@ pub fn section_table(bytes: &[u8], name_for_errors: &Path) -> Result<Vec<Section
     }
 
     // In file order, each section starts at the first aligned byte after the one before (the
-    // table for the first), and the file ends where the last one does.
+    // table for the first), and the file ends where the last one does. An empty section comes
+    // before a section at its offset, wherever the table lists it.
     let mut order: Vec<usize> = (0..table.len()).collect();
-    order.sort_by_key(|&k| (table[k].offset, k));
+    order.sort_by_key(|&k| (table[k].offset, table[k].length, k));
     let (mut end, mut before) = (
         table_end,
         format!("the section table (bytes 0..{table_end})"),
@@ -436,7 +437,7 @@ pub(super) fn read(bytes: &[u8], path: &Path) -> Result<Rbvh> {
     let need = |tag: [u8; 4]| {
         section(tag).ok_or_else(|| {
             err(format!(
-                "no section {} (the file's sections: {})",
+                "no section {} of a version this build reads (the file's sections: {})",
                 tag.escape_ascii(),
                 names(&table)
             ))
@@ -575,7 +576,7 @@ fn names(table: &[Section]) -> String {
     }
     table
         .iter()
-        .map(Section::name)
+        .map(|s| format!("{} v{}", s.name(), s.version))
         .collect::<Vec<_>>()
         .join(", ")
 }

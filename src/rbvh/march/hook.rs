@@ -1,7 +1,7 @@
 //! The march's leaves in the one tree traversal of `crate::bvh` (`traverse.rs`), as its hook
-//! ([`RbvhLeaves`]): a triangle-leaf child tested in place, exactly, as the exact BVH tests its
-//! own; a height-field leaf marched ([`super::walk`]) when it comes up from the near-first order
-//! or the stack. Here a new kind of leaf would be told apart and tested.
+//! ([`RbvhLeaves`]): a triangle leaf tested exactly, as the exact BVH tests its own, and a
+//! height-field leaf marched ([`super::walk`]), each when it comes up from the near-first order or
+//! the stack. Here a new kind of leaf would be told apart and tested.
 
 use glam::Vec3;
 

@@ -3,10 +3,11 @@
 //!
 //! **Tree**: the one traversal of `crate::bvh` (`traverse.rs`), with this module's leaves as its
 //! hook (`RbvhLeaves`): nearest child first, the same tie rule, the same bounded stack, the same
-//! robust box test (Ize, "Robust BVH Ray Traversal", JCGT 2013). A triangle-leaf child is tested in place with the watertight test of
-//! Woop, Benthin & Wald ("Watertight Ray/Triangle Intersection", JCGT 2013); a height-field leaf
-//! (Novák & Dachsbacher 2012) takes an inner node's near-first/stack path and is marched when it
-//! comes up — the order the one traversal of `glsl/traverse.glsl` needs to keep its loop lean. The
+//! robust box test (Ize, "Robust BVH Ray Traversal", JCGT 2013). Every leaf takes an inner node's
+//! near-first/stack path and is handled when it comes up — the order the one traversal of
+//! `glsl/traverse.glsl` needs to keep its loop lean: a triangle leaf tested with the watertight
+//! test of Woop, Benthin & Wald ("Watertight Ray/Triangle Intersection", JCGT 2013), a
+//! height-field leaf (Novák & Dachsbacher 2012) marched. The
 //! paper (Novák & Dachsbacher, "Rasterized Bounding Volume Hierarchies", Computer Graphics Forum
 //! 31(2), Eurographics 2012) gives no detail of the march; this is our reading of it:
 //!
