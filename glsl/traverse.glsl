@@ -17,8 +17,13 @@
 //                    inout float t_closest, inout uint steps, inout bool cut)
 //         tests the leaf over [tmin, t_closest); on a hit lowers t_closest, keeps the hit and
 //         returns true. Sets `cut` where the device ended one of its loops early.
-// and include it; then `float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves,
-// out uint steps, out bool overflow)` returns the nearest distance found (ray.tmax if none; the
+// It also uses, from bvh.glsl (included before it wherever it is instantiated: bvh.glsl,
+// rbvh.glsl, lod.glsl) and what that includes (common.glsl, intersect.glsl): Ray, BvhNode,
+// RBVH_BVH_NODE(i), rbvh_node_boxes, RBVH_LEAF_BIT, RBVH_INVALID, RBVH_STACK_SIZE,
+// rbvh_stack_entry, rbvh_stack_pop, rbvh_ray_valid, rbvh_safe_inverse, rbvh_intersect_box,
+// RBVH_COUNT_RESET and RBVH_COUNT_ADD. Define the two names above and include it; then
+// `float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint steps, out bool
+// overflow)` returns the nearest distance found (ray.tmax if none; the
 // hook tells whether it kept a hit). `steps` = nodes visited plus what the hook adds;
 // `overflow` is set when the stack or a loop bound was exceeded or the device ended a loop early,
 // and the hit is then not trustworthy, so the caller reports it.

@@ -333,6 +333,33 @@ fn no_cycle_runs_through_the_glsl_includes() {
     assert_eq!(cycle(&graph), None, "a cycle among the GLSL includes");
 }
 
+/// The traversal template lists, in its header comment, every name it takes from its includer
+/// (the hook's and those of the headers before it): a new hook finds there all it must provide or
+/// include.
+#[test]
+fn the_traversal_template_lists_the_names_it_uses() {
+    let text =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("glsl/traverse.glsl"))
+            .unwrap();
+    let (header, code): (Vec<&str>, Vec<&str>) =
+        text.lines().partition(|l| l.trim_start().starts_with("//"));
+    let header = header.join("\n");
+    let code = code.join("\n");
+    // The names the template defines itself.
+    let own = |name: &str| code.contains(&format!("#define {name}"));
+    let mut missing = BTreeSet::new();
+    for word in code.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_')) {
+        let foreign = word.starts_with("rbvh_")
+            || word.starts_with("RBVH_")
+            || word.starts_with("Bvh")
+            || word == "Ray";
+        if foreign && !own(word) && !header.contains(word) {
+            missing.insert(word.to_string());
+        }
+    }
+    assert!(missing.is_empty(), "used but not listed: {missing:?}");
+}
+
 #[test]
 fn the_checks_find_what_they_look_for() {
     let grouped = segments_after(

@@ -1,16 +1,16 @@
-//! Rays aimed at the seams between height-field leaves (`rbvh::seams`), and the leaks they find:
+//! Rays aimed at the seams between height-field leaves (`rbvh::bench::seams`), and the leaks they find:
 //! where they are aimed, how a leak is counted, and the counts at every preset on the closed
 //! built-in meshes, which may not grow (issue "No leaks between height fields").
 
 mod common;
 
-use rbvh::bvh::Bvh;
-use rbvh::geom::{Hit, Ray};
-use rbvh::gpu::{Context, Query, Tracer};
-use rbvh::rbvh::seams::{
+use rbvh::bench::seams::{
     closed_triangles, count_leaks, exact_entries, passes_deeper, Entry, Leaks, CHORD_POINTS,
     CLEARANCE_TEXELS, DEPTH_TEXELS, LEAK_TEXELS,
 };
+use rbvh::bvh::Bvh;
+use rbvh::geom::{Hit, Ray};
+use rbvh::gpu::{Context, Query, Tracer};
 use rbvh::rbvh::{Rbvh, RbvhParams};
 use rbvh::scene::Scene;
 use rbvh::structure::Structure;

@@ -35,6 +35,7 @@ use super::record::{
     BenchReport, Errors, Params, Record, SeamRecord, ShaderRecord, Spread, TimingSource,
     TrafficRecord,
 };
+use super::seams::closed_triangles;
 use super::steps;
 use super::traffic::{self, TrafficModel, CACHE_SIZES, DRAM_LINE};
 use super::validate;
@@ -47,7 +48,6 @@ use crate::output::{self, Image};
 use crate::probe::{MeanCounters, Read, TraceStats};
 use crate::progress::{Progress, Quiet};
 use crate::rays::{self, RayType, Secondary, DEFAULT_LIGHT};
-use crate::rbvh::seams::closed_triangles;
 use crate::rbvh::{Rbvh, RbvhParams, RbvhSource, TexelFormat};
 use crate::scene::Scene;
 use crate::structure::{Kind, Recipe, Structure};
@@ -756,7 +756,7 @@ impl<'a> SceneBench<'a> {
 
 /// `count` rays aimed at `rbvh`'s seams ([`Rbvh::seam_rays`]), traced by the CPU twins of the
 /// exact BVH and of `rbvh`, and how many leaked and passed through
-/// ([`crate::rbvh::seams::count_leaks`]);
+/// ([`super::seams::count_leaks`]);
 /// `closed` per scene triangle as [`closed_triangles`] gives it. None when there is nothing to
 /// aim at: no height-field leaf (all triangle leaves), or no
 /// triangle for the exact BVH to referee.
@@ -772,9 +772,9 @@ fn seam_leaks(
     if rays.is_empty() || exact.triangles.is_empty() {
         return None;
     }
-    let entries = crate::rbvh::seams::exact_entries(exact, rays, texels, closed);
+    let entries = super::seams::exact_entries(exact, rays, texels, closed);
     let approx = rbvh.trace_cpu(rays, false);
-    let leaks = crate::rbvh::seams::count_leaks(exact, rays, &entries, &approx, texels);
+    let leaks = super::seams::count_leaks(exact, rays, &entries, &approx, texels);
     Some(SeamRecord {
         rays: rays.len() as u64,
         leaks: leaks.leaks as u64,

@@ -33,6 +33,7 @@ pub mod metrics;
 pub mod plot;
 pub mod provenance;
 pub mod record;
+pub mod seams;
 pub mod shaders;
 pub mod steps;
 pub mod table;
@@ -115,7 +116,7 @@ pub struct BenchConfig {
     /// steps go ([`steps`]): nodes by depth, why leaves handed to the march gave no hit, leaf
     /// boxes at the hit. Costs a CPU trace per method and ray type.
     pub steps: bool,
-    /// Rays aimed at every plain RBVH level's seams between leaves ([`crate::rbvh::seams`]),
+    /// Rays aimed at every plain RBVH level's seams between leaves ([`seams`]),
     /// traced by the CPU twins of it and of the exact BVH, for the level's leak count (0: none).
     pub seam_rays: usize,
     /// Texel formats to build every level in, each measured as its own RBVH (at least one; the

@@ -188,7 +188,7 @@ pub struct Record {
 }
 
 /// Rays aimed at an RBVH level's seams between leaves and how many leaked through the surface
-/// ([`crate::rbvh::seams`]: the exact BVH finds the ray entering the solid a texel or more from
+/// ([`super::seams`]: the exact BVH finds the ray entering the solid a texel or more from
 /// its origin and passing half a texel or more inside, and the RBVH finds nothing within two
 /// texels behind the entry), and how many of those passed through the solid (nothing within two
 /// texels behind the exit either).

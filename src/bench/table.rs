@@ -112,7 +112,7 @@ pub fn table(report: &BenchReport) -> String {
             format!(
                 "; leaks: of {} rays aimed at each level's seams between leaves, those that \
                  passed through the surface, through: those that passed through the solid \
-                 (rbvh::seams)",
+                 (rbvh::bench::seams)",
                 s.rays
             )
         });

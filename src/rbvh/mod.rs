@@ -11,7 +11,6 @@
 //! * [`layout`]: the packed data the GPU reads;
 //! * [`ranges`]: height ranges of the atlas's 8 × 8 blocks, for the device march's jumps;
 //! * `march`: the CPU reference caster on exactly that packed data, and its [`DeviceTwin`];
-//! * [`seams`]: rays aimed at the seams between leaves, and the leaks they find;
 //! * [`file`](mod@file): save and load, and the file format's tables (its older versions in
 //!   `file::legacy`).
 
@@ -25,7 +24,6 @@ pub(crate) mod march;
 pub mod params;
 pub mod ranges;
 pub(crate) mod raster;
-pub mod seams;
 mod splat;
 mod split;
 

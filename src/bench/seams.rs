@@ -1,5 +1,6 @@
 //! Rays aimed at the seams between height-field leaves, and the leaks they find (issue "No leaks
-//! between height fields").
+//! between height fields"): a probe of an RBVH that the bench (its `leaks` and `through`
+//! columns) and the seam tests run, so it sits beside the bench rather than in the structure.
 //!
 //! Each leaf's surface ends one dilation ring beyond its own triangles (`raster/`, step 4), and
 //! neighbouring leaves meet by overlapping there; under the rims sampled from the surface the
@@ -34,10 +35,10 @@ use glam::Vec3;
 
 use rayon::prelude::*;
 
-use super::{Rbvh, TexelFormat};
 use crate::bvh::Bvh;
 use crate::geom::{Hit, Ray};
 use crate::random::{mix64, SplitMix64};
+use crate::rbvh::{Rbvh, TexelFormat};
 use crate::scene::{open_boundary, Scene};
 
 /// How far behind the exact hit an RBVH hit counts as a leak, in texels.
