@@ -128,7 +128,7 @@ uint rbvh_slot_end(uint first, uint count, uint tri_count) {
 }
 
 // Tests the triangles in slots [first, end) over [tmin, t_closest) with the watertight test: the
-// leaves of the exact BVH and the RBVH's hybrid leaves alike (bvh::Triangles in
+// leaves of the exact BVH and the RBVH's hybrid leaves alike (bvh::BvhLeafHook in
 // src/bvh/traverse.rs). On a hit, lowers t_closest, keeps the slot in `best_slot` and returns
 // true; with `any_hit` it stops at the first. `steps` counts the triangles tested.
 bool rbvh_test_triangles(RbvhShear sh, Ray ray, bool any_hit, uint first, uint end, inout float t_closest,

@@ -166,7 +166,7 @@ float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inou
     return t_hit;
 }
 
-// The level-of-detail leaf hook for traverse.glsl (LodLeaves in src/lod/trace.rs): an inner child
+// The level-of-detail leaf hook for traverse.glsl (RbvhLodLeafHook in src/lod/trace.rs): an inner child
 // whose coarse representation the ray's cone selects at the child's box entry is pushed as
 // LOD_BIT | node and its columns are marched when it comes up, instead of descending; such hits
 // report id = LEAF_BIT | LOD_BIT | node. The RBVH's own leaves go to its hook.

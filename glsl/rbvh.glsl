@@ -784,7 +784,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
 }
 
 // The RBVH's leaf hook for traverse.glsl: height fields marched, hybrid triangle leaves tested as
-// the exact BVH's (RbvhLeaves in src/rbvh/march/hook.rs). It keeps the nearest hit in one word, `best`:
+// the exact BVH's (RbvhLeafHook in src/rbvh/march/hook.rs). It keeps the nearest hit in one word, `best`:
 // a triangle's slot (below LEAF_BIT: slots are fewer than 2^31), or the id of a height field (or,
 // with level of detail, a chosen node), LEAF_BIT set, with where its normal comes from; RBVH_INVALID
 // while none. Its id and normal are read and decoded once, after the loops (rbvh_rbvh_hit), so

@@ -183,8 +183,10 @@ impl StackEntry {
 }
 
 /// Triangle leaves, tested with the watertight test: the exact BVH's leaves, and an RBVH's hybrid
-/// ones. Keeps the slot (leaf order) and distance of the nearest hit.
-pub(crate) struct Triangles<'a> {
+/// ones. Keeps the slot (leaf order) and distance of the nearest hit. Named as its GLSL twin in
+/// `glsl/bvh.glsl` is, as the RBVH's (`RbvhLeafHook`) and level of detail's (`RbvhLodLeafHook`)
+/// hooks are.
+pub(crate) struct BvhLeafHook<'a> {
     triangles: &'a [GpuTriangle],
     shear: RayShear,
     tmin: f32,
@@ -193,11 +195,11 @@ pub(crate) struct Triangles<'a> {
     best: Option<(usize, f32)>,
 }
 
-impl<'a> Triangles<'a> {
+impl<'a> BvhLeafHook<'a> {
     /// The leaves over `triangles` (in leaf order) for `ray`; with `any_hit`, a leaf stops at its
     /// first hit.
     pub(crate) fn new(triangles: &'a [GpuTriangle], ray: &Ray, any_hit: bool) -> Self {
-        Triangles {
+        BvhLeafHook {
             triangles,
             shear: RayShear::new(ray),
             tmin: ray.tmin,
@@ -221,7 +223,7 @@ impl<'a> Triangles<'a> {
     }
 }
 
-impl<P: Probe> Leaves<P> for Triangles<'_> {
+impl<P: Probe> Leaves<P> for BvhLeafHook<'_> {
     fn test(
         &mut self,
         reference: u32,
@@ -283,7 +285,7 @@ impl Bvh {
     }
 
     fn traverse<P: Probe>(&self, ray: &Ray, any_hit: bool, probe: &mut P) -> (Hit, TraceStats) {
-        let mut leaves = Triangles::new(&self.triangles, ray, any_hit);
+        let mut leaves = BvhLeafHook::new(&self.triangles, ray, any_hit);
         let stats = traverse(&self.nodes, ray, any_hit, &mut leaves, probe);
         (leaves.hit(probe).unwrap_or(Hit::MISS), stats)
     }

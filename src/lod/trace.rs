@@ -13,24 +13,24 @@ use super::{selects, Cones, GpuLod, Lod, RayCone, LOD_BIT};
 use crate::bvh::{Leaves, LEAF_BIT};
 use crate::geom::{Hit, Ray};
 use crate::probe::{element, Array, Probe, TraceStats};
-use crate::rbvh::march::{DeviceTwin, RbvhLeaves, Walk};
+use crate::rbvh::march::{DeviceTwin, RbvhLeafHook, Walk};
 use crate::rbvh::Rbvh;
 use crate::{Error, Result};
 
 /// The RBVH's leaves, and the coarse nodes `cone` selects in `lod`.
-struct LodLeaves<'a> {
-    inner: RbvhLeaves<'a>,
+struct RbvhLodLeafHook<'a> {
+    inner: RbvhLeafHook<'a>,
     lod: &'a Lod,
     cone: &'a RayCone,
 }
 
-impl<'a> From<LodLeaves<'a>> for RbvhLeaves<'a> {
-    fn from(leaves: LodLeaves<'a>) -> Self {
+impl<'a> From<RbvhLodLeafHook<'a>> for RbvhLeafHook<'a> {
+    fn from(leaves: RbvhLodLeafHook<'a>) -> Self {
         leaves.inner
     }
 }
 
-impl<P: Probe> Leaves<P> for LodLeaves<'_> {
+impl<P: Probe> Leaves<P> for RbvhLodLeafHook<'_> {
     fn is_leaf(&self, reference: u32) -> bool {
         reference & (LEAF_BIT | LOD_BIT) != 0
     }
@@ -97,7 +97,7 @@ fn trace<P: Probe>(
     walk: Walk,
     probe: &mut P,
 ) -> (Hit, TraceStats) {
-    let leaves = LodLeaves {
+    let leaves = RbvhLodLeafHook {
         inner: rbvh.leaf_hook(ray, any_hit, walk),
         lod,
         cone,

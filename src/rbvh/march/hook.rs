@@ -1,5 +1,5 @@
 //! The march's leaves in the one tree traversal of `crate::bvh` (`traverse.rs`), as its hook
-//! ([`RbvhLeaves`]): a triangle leaf tested exactly, as the exact BVH tests its own, and a
+//! ([`RbvhLeafHook`]): a triangle leaf tested exactly, as the exact BVH tests its own, and a
 //! height-field leaf marched ([`super::walk`]), each when it comes up from the near-first order or
 //! the stack. Here a new kind of leaf would be told apart and tested.
 
@@ -7,20 +7,20 @@ use glam::Vec3;
 
 use super::normal::NormalReads;
 use super::Walk;
-use crate::bvh::{Leaves, Triangles};
+use crate::bvh::{BvhLeafHook, Leaves};
 use crate::geom::{Hit, Ray};
 use crate::probe::{Probe, TraceStats};
 use crate::rbvh::layout::{HEIGHTFIELD_COUNT, LEAF_BIT};
 use crate::rbvh::{Rbvh, TexelFormat};
 
 /// An RBVH's leaves for the shared traversal (`crate::bvh::traverse`): hybrid triangle leaves
-/// tested exactly, height fields marched. Level of detail wraps it (`crate::lod`'s `LodLeaves`),
-/// recording the hits of the coarse nodes it marches here ([`RbvhLeaves::record`]).
-pub(crate) struct RbvhLeaves<'a> {
+/// tested exactly, height fields marched. Level of detail wraps it (`crate::lod`'s `RbvhLodLeafHook`),
+/// recording the hits of the coarse nodes it marches here ([`RbvhLeafHook::record`]).
+pub(crate) struct RbvhLeafHook<'a> {
     rbvh: &'a Rbvh,
     ray: &'a Ray,
     /// The hybrid triangle leaves, tested as the exact BVH tests its own.
-    triangles: Triangles<'a>,
+    triangles: BvhLeafHook<'a>,
     walk: Walk<'a>,
     /// The nearest hit on a height field (or a coarse node): the best unless a triangle's is
     /// nearer.
@@ -31,7 +31,7 @@ pub(crate) struct RbvhLeaves<'a> {
     normal_reads: NormalReads,
 }
 
-impl<'a> RbvhLeaves<'a> {
+impl<'a> RbvhLeafHook<'a> {
     /// The ray traced.
     pub(crate) fn ray(&self) -> &'a Ray {
         self.ray
@@ -78,7 +78,7 @@ impl<'a> RbvhLeaves<'a> {
     }
 }
 
-impl<P: Probe> Leaves<P> for RbvhLeaves<'_> {
+impl<P: Probe> Leaves<P> for RbvhLeafHook<'_> {
     fn test(
         &mut self,
         node: u32,
@@ -125,11 +125,11 @@ impl Rbvh {
         ray: &'a Ray,
         any_hit: bool,
         walk: Walk<'a>,
-    ) -> RbvhLeaves<'a> {
-        RbvhLeaves {
+    ) -> RbvhLeafHook<'a> {
+        RbvhLeafHook {
             rbvh: self,
             ray,
-            triangles: Triangles::new(&self.triangles, ray, any_hit),
+            triangles: BvhLeafHook::new(&self.triangles, ray, any_hit),
             walk,
             best: Hit::MISS,
             triangle_nearest: false,
@@ -147,7 +147,7 @@ impl Rbvh {
         probe: &mut P,
     ) -> (Hit, TraceStats)
     where
-        L: Leaves<P> + Into<RbvhLeaves<'a>>,
+        L: Leaves<P> + Into<RbvhLeafHook<'a>>,
     {
         let stats = crate::bvh::traverse(&self.nodes, ray, any_hit, &mut leaves, probe);
         (leaves.into().finish(probe), stats)

@@ -2,7 +2,7 @@
 //! It is the oracle of the GLSL march: every step below is meant to be mirrored line by line.
 //!
 //! **Tree**: the one traversal of `crate::bvh` (`traverse.rs`), with this module's leaves as its
-//! hook (`RbvhLeaves`): nearest child first, the same tie rule, the same bounded stack, the same
+//! hook (`RbvhLeafHook`): nearest child first, the same tie rule, the same bounded stack, the same
 //! robust box test (Ize, "Robust BVH Ray Traversal", JCGT 2013). Every leaf takes an inner node's
 //! near-first/stack path and is handled when it comes up — the order the one traversal of
 //! `glsl/traverse.glsl` needs to keep its loop lean: a triangle leaf tested with the watertight
@@ -49,7 +49,7 @@ mod walk;
 
 use rayon::prelude::*;
 
-pub(crate) use hook::RbvhLeaves;
+pub(crate) use hook::RbvhLeafHook;
 
 use super::ranges::block_ranges;
 use super::Rbvh;

@@ -10,7 +10,7 @@ use crate::probe::{Array, Read};
 use crate::rbvh::layout::{GpuHeightfield, Texel};
 
 /// A height-field hit's normal, and what the device reads for it once its ray is done: what
-/// [`RbvhLeaves::finish`] reports.
+/// [`RbvhLeafHook::finish`] reports.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct HitNormal {
     pub(crate) normal: Vec3,
