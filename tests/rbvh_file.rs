@@ -1147,3 +1147,25 @@ fn every_earlier_version_upgrades_to_a_file_that_round_trips() {
         sample()
     );
 }
+
+/// An empty section lies at the offset of the section after it, and the table may list the two in
+/// either order (the docs: "sections may come in any order"); the file loads as it was.
+#[test]
+fn an_empty_section_may_be_listed_after_the_one_at_its_offset() {
+    let bytes = sample().to_bytes();
+    let mut p = parts(&bytes);
+    let leaf = p.iter().position(|s| &s.0 == b"LEAF").unwrap();
+    p.insert(leaf, (*b"XTRA", 1, 0, Vec::new()));
+    let mut file = assemble(&p);
+    // Swap the two table entries; the layout stays.
+    let (a, b) = (16 + 28 * leaf, 16 + 28 * (leaf + 1));
+    let entry = file[a..a + 28].to_vec();
+    file.copy_within(b..b + 28, a);
+    file[b..b + 28].copy_from_slice(&entry);
+    let path = Path::new("x.rbvh");
+    let table = section_table(&file, path).unwrap();
+    assert_eq!((&table[leaf].tag, &table[leaf + 1].tag), (b"LEAF", b"XTRA"));
+    assert_eq!(table[leaf].offset, table[leaf + 1].offset);
+    let loaded = Rbvh::from_bytes(&file, path).unwrap();
+    assert_eq!(loaded.to_bytes(), bytes);
+}
