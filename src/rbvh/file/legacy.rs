@@ -71,7 +71,7 @@ use crate::bvh::{ChildRef, GpuNode, GpuTriangle};
 use crate::geom::Aabb;
 use crate::rbvh::layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT, LEAF_BIT};
 use crate::rbvh::params::{RbvhParams, TexelFormat};
-use crate::rbvh::{Rbvh, RbvhStats};
+use crate::rbvh::Rbvh;
 use crate::{Error, Result};
 
 /// Bytes before the arrays in version 12.
@@ -143,18 +143,7 @@ pub(super) fn read(bytes: &[u8], version: u32, path: &Path) -> Result<Rbvh> {
         11 => V11_HEADER_BYTES,
         _ => V12_HEADER_BYTES,
     };
-    let bounds = Aabb {
-        min: [r.f32("bounds")?, r.f32("bounds")?, r.f32("bounds")?].into(),
-        max: [r.f32("bounds")?, r.f32("bounds")?, r.f32("bounds")?].into(),
-    };
-    let depth = r.u32("depth")?;
-    let texel_size = r.f32("texel_size")?;
-    let stats = RbvhStats {
-        build_ms: f64::from_bits(r.u64("stats.build_ms")?),
-        heightfield_leaves: r.u32("stats.heightfield_leaves")?,
-        triangle_leaves: r.u32("stats.triangle_leaves")?,
-        tile_texels: r.u64("stats.tile_texels")?,
-    };
+    let (bounds, depth, texel_size, stats) = r.structure_head()?;
     let pitch = r.u32("atlas.pitch")?;
     let rows = r.u32("atlas.rows")?;
     let counts = [

@@ -94,8 +94,9 @@ use bytemuck::Pod;
 
 use super::layout::{tile_fits, Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT, LEAF_BIT};
 use super::params::{Refinement, Subdivision, TexelFormat};
-use super::Rbvh;
+use super::{Rbvh, RbvhStats};
 use crate::bvh::GpuTriangle;
+use crate::geom::Aabb;
 use crate::io::write_atomically;
 use crate::{Error, Result};
 
@@ -544,6 +545,37 @@ struct Reader<'a> {
     bytes: &'a [u8],
     pos: usize,
     path: &'a Path,
+}
+
+impl Reader<'_> {
+    /// The structure's bounds, depth, texel size and build statistics, in the order every
+    /// version since 1 stores them (the v1–12 header from byte 52, the `HEAD` section from its
+    /// start).
+    fn structure_head(&mut self) -> Result<(Aabb, u32, f32, RbvhStats)> {
+        let bounds = Aabb {
+            min: [
+                self.f32("bounds")?,
+                self.f32("bounds")?,
+                self.f32("bounds")?,
+            ]
+            .into(),
+            max: [
+                self.f32("bounds")?,
+                self.f32("bounds")?,
+                self.f32("bounds")?,
+            ]
+            .into(),
+        };
+        let depth = self.u32("depth")?;
+        let texel_size = self.f32("texel_size")?;
+        let stats = RbvhStats {
+            build_ms: f64::from_bits(self.u64("stats.build_ms")?),
+            heightfield_leaves: self.u32("stats.heightfield_leaves")?,
+            triangle_leaves: self.u32("stats.triangle_leaves")?,
+            tile_texels: self.u64("stats.tile_texels")?,
+        };
+        Ok((bounds, depth, texel_size, stats))
+    }
 }
 
 impl<'a> Reader<'a> {

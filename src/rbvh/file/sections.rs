@@ -9,10 +9,9 @@ use super::{
     refinement_words, subdivision, subdivision_tag, Part, Reader, MAGIC, VERSION,
 };
 use crate::bvh::{GpuNode, GpuTriangle};
-use crate::geom::Aabb;
 use crate::rbvh::layout::{Atlas, GpuHeightfield, Texel};
 use crate::rbvh::params::{RbvhParams, TexelFormat};
-use crate::rbvh::{Rbvh, RbvhStats};
+use crate::rbvh::Rbvh;
 use crate::{Error, Result};
 
 /// Where the section table starts: after the magic, the version and the section count.
@@ -483,18 +482,7 @@ pub(super) fn read(bytes: &[u8], path: &Path) -> Result<Rbvh> {
         )));
     }
     let mut h = Reader::new(head_bytes, path);
-    let bounds = Aabb {
-        min: [h.f32("bounds")?, h.f32("bounds")?, h.f32("bounds")?].into(),
-        max: [h.f32("bounds")?, h.f32("bounds")?, h.f32("bounds")?].into(),
-    };
-    let depth = h.u32("depth")?;
-    let texel_size = h.f32("texel_size")?;
-    let stats = RbvhStats {
-        build_ms: f64::from_bits(h.u64("stats.build_ms")?),
-        heightfield_leaves: h.u32("stats.heightfield_leaves")?,
-        triangle_leaves: h.u32("stats.triangle_leaves")?,
-        tile_texels: h.u64("stats.tile_texels")?,
-    };
+    let (bounds, depth, texel_size, stats) = h.structure_head()?;
     let (pitch, rows, narrow_rows) = (
         h.u32("atlas.pitch")?,
         h.u32("atlas.rows")?,
