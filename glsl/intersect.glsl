@@ -71,7 +71,7 @@ float rbvh_intersect_edges(float u, float v, float w, float az, float bz, float 
     precise float lo = tmin * det;
     precise float hi = tmax * det;
     bool inside = det > 0.0 ? (t_scaled >= lo && t_scaled < hi) : (t_scaled <= lo && t_scaled > hi);
-    // One return: see rbvh_walk_start in rbvh.glsl.
+    // One return: see rbvh_grid_start in grid.glsl.
     return !mixed && det != 0.0 && inside ? t_scaled / det : -1.0;
 }
 

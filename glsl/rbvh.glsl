@@ -417,28 +417,54 @@ uint rbvh_normal_texel(RbvhSizes sz, uint k00, uint choice, vec3 dir) {
     return nearest;
 }
 
-// The walk's first cell along one axis (`start` in march/walk.rs): the cell holding the entry, or
-// the one behind it where the ray crosses their boundary within `slack` texels of the entry at
-// `t0`, or after it (a flat tile's box is thinner than the rounding of the frame coordinates).
-int rbvh_walk_start(float entry, int step, int last, float o, float inv, float d, float t0, float slack) {
-    int c = rbvh_grid_cell(RBVH_BETWEEN_SAMPLES, entry, last);
-    int back = c - step;
-    // One return: an early one leaves, once inlined into the traversal's loop, a value the
-    // compiler carries from one leaf to the next.
-    bool behind = false;
-    if (step != 0 && back >= 0 && back <= last) {
-        precise float gap = (t0 - rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, back, step, o, inv)) * abs(d);
-        behind = gap <= slack;
-    }
-    return behind ? back : c;
-}
-
 // A skirt's depth in frame units, with a margin for the square root's rounding (skirt_h in
 // march/walk.rs; `uu` = |axis_u|^2): made where a block or a rim cell is checked rather than kept
 // through the walk, where it would hold a register.
 float rbvh_skirt_height(float uu) {
     precise float h = 1.001 * RBVH_MARCH_SKIRT_TEXELS / sqrt(uu);
     return h;
+}
+
+// The last cell of the 8x8 atlas block holding cell c (at atlas column or row a) that a walk
+// stepping by `step` reaches, clamped to [0, last] (Blocks's exit_cell in march/blocks.rs).
+int rbvh_block_exit(int c, uint a, int step, int last) {
+    int first = c - int(a & 7u);
+    return step > 0 ? min(first + 7, last) : max(first, 0);
+}
+
+// Whether the ray, at heights o_h + d_h * t from t_a to t_b, passes block `block`'s height range
+// wholly above or below, beyond the march's slack and, below, the skirt's depth (a block passed
+// below by less may hold a skirt hit; skirt_h has a margin for the square root's rounding): then
+// none of its cells can be hit (Blocks's jump in march/blocks.rs). An empty block's range is
+// inverted, and every ray passes it.
+bool rbvh_block_clear(RbvhLeaf leaf, RbvhSizes sz, uint block, float o_h, float d_h, float t_a, float t_b, float slack,
+                      float uu) {
+    uint range = RBVH_ATLAS(rbvh_texel_words(sz) + block);
+    uint code_lo = range & 0xFFFFu;
+    uint code_hi = range >> 16;
+    precise float lo_s = float(code_lo) * leaf.h_scale - slack - rbvh_skirt_height(uu);
+    precise float hi_s = float(code_hi) * leaf.h_scale + slack;
+    float h_a = rbvh_height_at(o_h, d_h, t_a);
+    float h_b = rbvh_height_at(o_h, d_h, t_b);
+    return code_lo > code_hi || max(h_a, h_b) < lo_s || min(h_a, h_b) > hi_s;
+}
+
+// Whether a ray at heights o_h + d_h * t over the cell's stretch passes between its lowest
+// sample less the skirt's depth and its highest sample: only such a ray can be caught by the
+// cell's skirts; the others need not leave the walk's inner loop. A hole's code is the largest,
+// so it takes no part in the highest. Each bound has a quantum beyond the skirt's own slack,
+// against the rounding of the edge's height there.
+bool rbvh_rim_reach(RbvhLeaf leaf, RbvhCell cell, float o_h, float d_h, float slack, float uu) {
+    uint code_lo = min(min(rbvh_c00(cell), rbvh_c10(cell)), min(rbvh_c01(cell), rbvh_c11(cell)));
+    uint code_hi = max(max(rbvh_is_hole(rbvh_c00(cell)) ? 0u : rbvh_c00(cell),
+                           rbvh_is_hole(rbvh_c10(cell)) ? 0u : rbvh_c10(cell)),
+                       max(rbvh_is_hole(rbvh_c01(cell)) ? 0u : rbvh_c01(cell),
+                           rbvh_is_hole(rbvh_c11(cell)) ? 0u : rbvh_c11(cell)));
+    float h_in = rbvh_height_at(o_h, d_h, cell.t_in);
+    float h_out = rbvh_height_at(o_h, d_h, cell.t_out);
+    precise float skirt_h = rbvh_skirt_height(uu);
+    return max(h_in, h_out) >= float(code_lo) * leaf.h_scale - slack - skirt_h - abs(leaf.h_scale) &&
+           min(h_in, h_out) <= float(code_hi) * leaf.h_scale + slack + abs(leaf.h_scale);
 }
 
 // The walk's loop bound: twice the (res_u - 1) + (res_v - 1) - 1 cells a walk can step through.
@@ -568,10 +594,11 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
         int step_j = rbvh_grid_step(d.y);
         precise float corner_slack = RBVH_MARCH_SLACK * (((abs(o.x) + abs(o.y)) + float(leaf.res_u)) + float(leaf.res_v));
         // Within rounding of the boundary behind the entry, the walk starts behind it (march/walk.rs).
-        RbvhGridWalk w = rbvh_grid_walk(RBVH_BETWEEN_SAMPLES,
-                                        rbvh_walk_start(entry.x, step_i, last_i, o.x, inv.x, d.x, t0, corner_slack),
-                                        rbvh_walk_start(entry.y, step_j, last_j, o.y, inv.y, d.y, t0, corner_slack),
-                                        step_i, step_j, o.xy, inv.xy, t0);
+        RbvhGridWalk w = rbvh_grid_walk(
+            RBVH_BETWEEN_SAMPLES,
+            rbvh_grid_start(RBVH_BETWEEN_SAMPLES, entry.x, step_i, last_i, o.x, inv.x, d.x, t0, corner_slack),
+            rbvh_grid_start(RBVH_BETWEEN_SAMPLES, entry.y, step_j, last_j, o.y, inv.y, d.y, t0, corner_slack), step_i,
+            step_j, o.xy, inv.xy, t0);
         // The walk of march/walk.rs: a main cell, then (when the ray passes a grid vertex too closely to
         // resolve) the extra cell across it, then the step. "While-while" as in the traversal: the
         // inner loop steps through cells while their cheap test (rbvh_cell_candidate) rejects them,
@@ -599,15 +626,10 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
                 // grid vertex the ray passes within rounding of (march/walk.rs walks it between the two
                 // main cells), else to the next main cell.
                 if (cells > 0u) {
-                    bool across_s = w.next_i <= w.next_j;
                     int step_i = rbvh_walk_step_i(dirs);
                     int step_j = rbvh_walk_step_j(dirs);
-                    int xi = across_s ? w.ci : w.ci + step_i;
-                    int xj = across_s ? w.cj + step_j : w.cj;
-                    precise float gap =
-                        across_s ? (w.next_j - w.next_i) * abs(d.y) : (w.next_i - w.next_j) * abs(d.x);
-                    if (!rbvh_walk_extra(dirs) && step_i != 0 && step_j != 0 && gap <= corner_slack && xi >= 0 &&
-                        xi <= last_i && xj >= 0 && xj <= last_j) {
+                    if (!rbvh_walk_extra(dirs) &&
+                        rbvh_grid_across_vertex(w, step_i, step_j, last_i, last_j, d.xy, corner_slack)) {
                         dirs |= RBVH_WALK_EXTRA;
                     } else {
                         dirs &= ~RBVH_WALK_EXTRA;
@@ -640,67 +662,22 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
                         checked_block = block;
                         int step_i = rbvh_walk_step_i(dirs);
                         int step_j = rbvh_walk_step_j(dirs);
-                        int i0 = w.ci - int(ax & 7u);
-                        int j0 = w.cj - int(ay & 7u);
-                        int edge_i = step_i > 0 ? min(i0 + 7, last_i) : max(i0, 0);
-                        int edge_j = step_j > 0 ? min(j0 + 7, last_j) : max(j0, 0);
+                        int edge_i = rbvh_block_exit(w.ci, ax, step_i, last_i);
+                        int edge_j = rbvh_block_exit(w.cj, ay, step_j, last_j);
                         float leave_i = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, edge_i, step_i, o.x, inv.x);
                         float leave_j = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, edge_j, step_j, o.y, inv.y);
-                        uint range = RBVH_ATLAS(rbvh_texel_words(sz) + block);
-                        uint code_lo = range & 0xFFFFu;
-                        uint code_hi = range >> 16;
-                        // Below by less than the skirt's depth, a block may hold a skirt hit (skirt_h
-                        // has a margin for the square root's rounding).
-                        precise float lo_s = float(code_lo) * leaf.h_scale - slack - rbvh_skirt_height(uu);
-                        precise float hi_s = float(code_hi) * leaf.h_scale + slack;
-                        float h_a = rbvh_height_at(o.z, d.z, w.t_in);
-                        float h_b = rbvh_height_at(o.z, d.z, min(min(leave_i, leave_j), t1));
-                        if (code_lo > code_hi || max(h_a, h_b) < lo_s || min(h_a, h_b) > hi_s) {
+                        if (rbvh_block_clear(leaf, sz, block, o.z, d.z, w.t_in, min(min(leave_i, leave_j), t1), slack,
+                                             uu)) {
                             RBVH_COUNT_ADD(jumps, 1u);
                             if (t1 < min(leave_i, leave_j)) {
                                 dirs |= RBVH_WALK_STOPPED;
                                 break;
                             }
-                            // Leaving through the i side (first on a tie, as the walk steps i
-                            // first): the j steps before it, then the step into the edge column; or
-                            // the same with i and j swapped. One loop for both sides: lavapipe runs
-                            // every loop at least once, whether or not a lane needs it.
-                            bool out_i = leave_i <= leave_j;
-                            int minor_step = out_i ? step_j : step_i;
-                            int major_step = out_i ? step_i : step_j;
-                            float leave = out_i ? leave_i : leave_j;
-                            int minor = out_i ? w.cj : w.ci;
-                            float next = out_i ? w.next_j : w.next_i;
-                            float minor_o = out_i ? o.y : o.x;
-                            float minor_inv = out_i ? inv.y : inv.x;
-                            float t_last = w.t_in;
-                            for (int m = 0; m < 8 && minor_step != 0 && (out_i ? next < leave : next <= leave); ++m) {
-                                t_last = next;
-                                dirs = rbvh_walk_entered_across(dirs, out_i ? 1 : 0);
-                                minor += minor_step;
-                                next = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, minor, minor_step, minor_o, minor_inv);
+                            int crossed = rbvh_grid_jump(w, RBVH_BETWEEN_SAMPLES, step_i, step_j, edge_i, edge_j,
+                                                         leave_i, leave_j, o.xy, inv.xy);
+                            if (crossed >= 0) {
+                                dirs = rbvh_walk_entered_across(dirs, crossed);
                             }
-                            if (minor_step != 0 && (out_i ? next < leave : next <= leave)) {
-                                cut = true;  // ended early by the device
-                            }
-                            int major = out_i ? w.ci : w.cj;
-                            int edge = out_i ? edge_i : edge_j;
-                            float major_next = out_i ? w.next_i : w.next_j;
-                            if (major != edge) {
-                                float into_edge = rbvh_grid_boundary_t(RBVH_BETWEEN_SAMPLES, edge - major_step, major_step,
-                                                                       out_i ? o.x : o.y, out_i ? inv.x : inv.y);
-                                if (into_edge >= t_last) {
-                                    dirs = rbvh_walk_entered_across(dirs, out_i ? 0 : 1);
-                                }
-                                t_last = max(t_last, into_edge);
-                                major = edge;
-                                major_next = leave;
-                            }
-                            w.ci = out_i ? major : minor;
-                            w.cj = out_i ? minor : major;
-                            w.next_i = out_i ? major_next : next;
-                            w.next_j = out_i ? next : major_next;
-                            w.t_in = t_last;
                         }
                     }
                 }
@@ -721,24 +698,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
                     edge_rim = rbvh_walk_entered(dirs) >= 0 && (dirs & RBVH_WALK_PREV_OPEN) != 0u && valid >= 3;
                     diagonal = valid == 3;
                     dirs = valid < 4 ? dirs | RBVH_WALK_PREV_OPEN : dirs & ~RBVH_WALK_PREV_OPEN;
-                    rim = edge_rim || diagonal;
-                    if (rim) {
-                        // Only a ray between the cell's lowest sample less the skirt's depth and its
-                        // highest sample can be caught by its skirts: the others need not leave the
-                        // inner loop. A hole's code is the largest, so it takes no part in the
-                        // highest. Each bound has a quantum beyond the skirt's own slack, against the
-                        // rounding of the edge's height there.
-                        uint code_lo = min(min(rbvh_c00(cell), rbvh_c10(cell)), min(rbvh_c01(cell), rbvh_c11(cell)));
-                        uint code_hi = max(max(rbvh_is_hole(rbvh_c00(cell)) ? 0u : rbvh_c00(cell),
-                                               rbvh_is_hole(rbvh_c10(cell)) ? 0u : rbvh_c10(cell)),
-                                           max(rbvh_is_hole(rbvh_c01(cell)) ? 0u : rbvh_c01(cell),
-                                               rbvh_is_hole(rbvh_c11(cell)) ? 0u : rbvh_c11(cell)));
-                        float h_in = rbvh_height_at(o.z, d.z, cell.t_in);
-                        float h_out = rbvh_height_at(o.z, d.z, cell.t_out);
-                        precise float skirt_h = rbvh_skirt_height(uu);
-                        rim = max(h_in, h_out) >= float(code_lo) * leaf.h_scale - slack - skirt_h - abs(leaf.h_scale) &&
-                              min(h_in, h_out) <= float(code_hi) * leaf.h_scale + slack + abs(leaf.h_scale);
-                    }
+                    rim = (edge_rim || diagonal) && rbvh_rim_reach(leaf, cell, o.z, d.z, slack, uu);
                 }
                 if (tests || rim) {
                     dirs |= (tests ? RBVH_WALK_TESTS : 0u) | (rim ? RBVH_WALK_RIM : 0u) |

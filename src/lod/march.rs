@@ -14,7 +14,7 @@
 use glam::Vec3;
 
 use super::layout::GpuLod;
-use crate::geom::grid::{height_at, step_of, Grid, GridWalk};
+use crate::geom::grid::{height_at, Grid, GridRay, GridWalk};
 use crate::geom::{safe_inverse, Aabb, Ray};
 use crate::probe::{Array, Probe, RayCounters, Read};
 use crate::rbvh::layout::{decode_octahedral, MARCH_SLACK};
@@ -62,21 +62,23 @@ pub(crate) fn march<P: Probe>(
     let t1 = e0.max(e1).min_element().min(t_closest);
     // 3. Walk.
     let entry = go + gd * t0;
-    let last = (i64::from(lod.res_u) - 1, i64::from(lod.res_v) - 1);
-    let cell = (
-        Grid::COLUMNS.cell_of(entry.x, last.0),
-        Grid::COLUMNS.cell_of(entry.y, last.1),
+    let last = [i64::from(lod.res_u) - 1, i64::from(lod.res_v) - 1];
+    let cells = GridRay::new(
+        Grid::COLUMNS,
+        [go.x, go.y],
+        [gd.x, gd.y],
+        [inv.x, inv.y],
+        last,
     );
-    let step = (step_of(gd.x), step_of(gd.y));
-    let (o, inv2) = ((go.x, go.y), (inv.x, inv.y));
-    let mut w = GridWalk::new(Grid::COLUMNS, cell, step, o, inv2, t0);
+    let cell = [0, 1].map(|a| Grid::COLUMNS.cell_of(entry[a], last[a]));
+    let mut w = GridWalk::new(cells, cell, t0);
     for _ in 0..lod.res_u + lod.res_v {
-        let (ci, cj, t_in) = (w.ci, w.cj, w.t_in);
+        let ([ci, cj], t_in) = (w.cell, w.t_in);
         if t_in > t1 {
             break;
         }
         counters.cells += 1;
-        let t_out = w.next_i.min(w.next_j).min(t1);
+        let t_out = w.t_out().min(t1);
         // 4. Column.
         if let Some((column, index)) = lod.column(texels, ci as u32, cj as u32) {
             probe.read(Read {
@@ -106,7 +108,7 @@ pub(crate) fn march<P: Probe>(
                 }
             }
         }
-        if w.advance(Grid::COLUMNS, step, last, o, inv2).is_none() {
+        if w.advance().is_none() {
             break;
         }
     }

@@ -6,18 +6,17 @@
 
 use glam::Vec3;
 
-use super::blocks::Blocks;
+use super::blocks::{Blocks, Clearance, Jump};
 use super::leaf::{Cells, FrameRay};
 use super::normal::HitNormal;
 use super::Walk;
-use crate::geom::grid::{height_at, step_of, Grid, GridWalk};
+use crate::geom::grid::{Grid, GridRay, GridWalk};
 use crate::geom::{safe_inverse, Aabb, Ray, RayShear};
-use crate::probe::{element, Array, Probe, Read, TraceStats};
+use crate::probe::{element, Array, Probe, TraceStats};
 use crate::rbvh::layout::{
     tile_fits, GpuHeightfield, Texel, MARCH_EDGE_PAD as EDGE_PAD,
     MARCH_SKIRT_TEXELS as SKIRT_TEXELS, MARCH_SLACK as SLACK,
 };
-use crate::rbvh::ranges::BLOCK;
 use crate::rbvh::Rbvh;
 
 /// The cells the walk steps through: between the tile's samples.
@@ -47,25 +46,8 @@ impl Rbvh {
             return None;
         }
         // 1. Frame.
-        let (u, v, w) = (
-            Vec3::from(leaf.axis_u),
-            Vec3::from(leaf.axis_v),
-            Vec3::from(leaf.axis_w),
-        );
-        let rel = ray.origin() - Vec3::from(leaf.origin);
-        let d = ray.dir();
-        let frame = Ray::new(
-            Vec3::new(rel.dot(u), rel.dot(v), rel.dot(w)),
-            Vec3::new(d.dot(u), d.dot(v), d.dot(w)),
-            ray.tmin,
-            t_closest,
-        );
-        // Degenerate or non-finite axes (corrupt data) give a ray no test can answer.
-        if !frame.is_valid() {
-            return None;
-        }
-        let o = frame.origin();
-        let d = frame.dir();
+        let frame = frame_ray(leaf, ray, t_closest)?;
+        let (o, d) = (frame.origin(), frame.dir());
         let inv = safe_inverse(d);
         // 2. Clip to the tile's box, padded in height by `slack`: a flat tile (h_scale 0) would
         // otherwise have a box of zero height, whose entry point *is* the hit, and rounding in
@@ -84,6 +66,19 @@ impl Rbvh {
         let t0 = tile.intersect(o, inv, frame.tmin, frame.tmax)?;
         stats.counters.walks += 1;
         let t1 = box_exit(&tile, o, inv).min(frame.tmax);
+        // The edge (its axis: 0 for s, 1 for t) the current cell was entered across, for the
+        // skirt: the first cell's when the ray enters the tile's box through its s or t side, not
+        // through its top or bottom nor from inside it.
+        let near = ((tile.min - o) * inv).min((tile.max - o) * inv);
+        let mut entered = if t0 <= frame.tmin {
+            None
+        } else if t0 == near.x {
+            Some(0)
+        } else if t0 == near.y {
+            Some(1)
+        } else {
+            None
+        };
         let fr = FrameRay {
             shear: RayShear::new(&frame),
             ray: frame,
@@ -98,68 +93,47 @@ impl Rbvh {
             format: self.params.texels,
             uu: Vec3::from(leaf.axis_u).length_squared(),
         };
-        // The edge (its axis: 0 for s, 1 for t) the current cell was entered across, for the
-        // skirt: the first cell's when the ray enters the tile's box through its s or t side, not
-        // through its top or bottom nor from inside it.
-        let near = ((tile.min - o) * inv).min((tile.max - o) * inv);
-        let skirt_h = 1.001 * SKIRT_TEXELS / cells.uu.sqrt();
-        let mut entered = if t0 <= frame.tmin {
-            None
-        } else if t0 == near.x {
-            Some(0)
-        } else if t0 == near.y {
-            Some(1)
-        } else {
-            None
-        };
 
-        // 3. Walk. The start cell is the one holding the entry point, clamped so that the padding
-        // and rounding at the tile's border cannot put it outside.
-        let last_i = i64::from(leaf.res_u) - 2;
-        let last_j = i64::from(leaf.res_v) - 2;
-        let entry = o + d * t0;
-        let step_i = step_of(d.x);
-        let step_j = step_of(d.y);
-        // Where the ray passes a grid vertex closer than rounding can resolve, the walk goes
-        // round it on one side while the watertight test may report the hit in the cell on the
-        // other side; that cell is then tested too. `corner_slack` bounds, in texels, the
-        // rounding of the frame coordinates the two tests work on.
+        // 3. Walk. Where the ray passes a grid vertex closer than rounding can resolve, the walk
+        // goes round it on one side while the watertight test may report the hit in the cell on
+        // the other side; that cell is then tested too. `corner_slack` bounds, in texels, the
+        // rounding of the frame coordinates the two tests work on. The same rounding at the
+        // walk's ends: a flat tile's box is a slab thinner than it, tens of texels from the
+        // origin, so where the entry lies that close to a boundary behind it the walk starts in
+        // the cell behind (and where the box's exit lies that close to the boundary ahead, it
+        // goes on into the cell there, below), lest the watertight test report the hit in a cell
+        // the walk skipped (the default scene's ground: three in four of the rays aimed at its
+        // leaves' rims that passed through).
         let corner_slack = SLACK * (o.x.abs() + o.y.abs() + leaf.res_u as f32 + leaf.res_v as f32);
-        // The same rounding at the walk's ends: a flat tile's box is a slab thinner than it,
-        // tens of texels from the origin, so where the entry lies that close to a boundary
-        // behind it the walk starts in the cell behind (and where the box's exit lies that close
-        // to the boundary ahead, it goes on into the cell there, below), lest the watertight test
-        // report the hit in a cell the walk skipped (the default scene's ground: three in four
-        // of the rays aimed at its leaves' rims that passed through).
-        let start = |entry: f32, step: i64, last: i64, o: f32, inv: f32, d: f32| {
-            let c = CELLS.cell_of(entry, last);
-            let back = c - step;
-            let behind = step != 0
-                && (0..=last).contains(&back)
-                && (t0 - CELLS.boundary_t(back, step, o, inv)) * d.abs() <= corner_slack;
-            if behind {
-                back
-            } else {
-                c
-            }
-        };
-        let start_cell = (
-            start(entry.x, step_i, last_i, o.x, inv.x, d.x),
-            start(entry.y, step_j, last_j, o.y, inv.y, d.y),
+        let grid = GridRay::new(
+            CELLS,
+            [o.x, o.y],
+            [d.x, d.y],
+            [inv.x, inv.y],
+            [i64::from(leaf.res_u) - 2, i64::from(leaf.res_v) - 2],
         );
-        let (step, last, o2, inv2) = (
-            (step_i, step_j),
-            (last_i, last_j),
-            (o.x, o.y),
-            (inv.x, inv.y),
+        let entry = o + d * t0;
+        let mut w = GridWalk::new(
+            grid,
+            grid.start_cell([entry.x, entry.y], t0, corner_slack),
+            t0,
         );
-        let mut w = GridWalk::new(CELLS, start_cell, step, o2, inv2, t0);
         // A straight line crosses each of the (res − 2) inner boundaries per axis at most once, so
         // it takes at most this many steps, each visiting one cell (two near a grid vertex).
         let max_steps = u64::from(leaf.res_u - 1) + u64::from(leaf.res_v - 1) - 1;
         let blocks = match walk {
             Walk::Plain => None,
-            Walk::Blocks(ranges) => Some(Blocks::of(&self.atlas, leaf, ranges)),
+            Walk::Blocks(ranges) => {
+                let words = self.atlas.texel_words(self.params.texels);
+                Some(Blocks::of(&self.atlas, leaf, ranges, words))
+            }
+        };
+        let clearance = Clearance {
+            o_h: o.z,
+            d_h: d.z,
+            h_scale: leaf.h_scale,
+            slack,
+            skirt_h: 1.001 * SKIRT_TEXELS / cells.uu.sqrt(),
         };
         let mut checked_block = None;
         // Whether the last main cell walked had fewer than four samples, or there was none (the
@@ -173,144 +147,82 @@ impl Rbvh {
         for _ in 0..max_steps {
             // Past the box's exit, the cell stepped into within rounding of it is walked too.
             if w.t_in > t1 {
-                let across = if entered == Some(0) { d.x } else { d.y };
-                let past = (w.t_in - t1) * across.abs();
-                if entered.is_none() || past > corner_slack || past.is_nan() {
+                let past = entered.map(|axis| (w.t_in - t1) * grid.d[axis].abs());
+                if !past.is_some_and(|past| past <= corner_slack) {
                     break;
                 }
             }
             if let Some(b) = &blocks {
-                // On entering a block whose height range the ray passes wholly above or below,
-                // straight to the block's exit cell, as the walk would reach it cell by cell.
-                let block = b.index(w.ci, w.cj);
-                if checked_block != Some(block) && block < b.count {
-                    checked_block = Some(block);
-                    let (i0, j0) = b.first_cell(w.ci, w.cj);
-                    let edge_i = if step_i > 0 {
-                        (i0 + BLOCK as i64 - 1).min(last_i)
-                    } else {
-                        i0.max(0)
-                    };
-                    let edge_j = if step_j > 0 {
-                        (j0 + BLOCK as i64 - 1).min(last_j)
-                    } else {
-                        j0.max(0)
-                    };
-                    let leave_i = CELLS.boundary_t(edge_i, step_i, o.x, inv.x);
-                    let leave_j = CELLS.boundary_t(edge_j, step_j, o.y, inv.y);
-                    probe.read(Read {
-                        array: Array::Atlas,
-                        offset: 4 * (self.atlas.texel_words(self.params.texels) + block),
-                        bytes: 4,
-                    });
-                    let range = b.range(block);
-                    let (code_lo, code_hi) = (range & 0xFFFF, range >> 16);
-                    // A block the ray passes below by less than the skirt's depth may hold a
-                    // skirt hit: only a ray below that (with a margin for the square root's
-                    // rounding on the device) jumps.
-                    let lo_s = code_lo as f32 * leaf.h_scale - slack - skirt_h;
-                    let hi_s = code_hi as f32 * leaf.h_scale + slack;
-                    let h_a = height_at(o.z, d.z, w.t_in);
-                    let h_b = height_at(o.z, d.z, leave_i.min(leave_j).min(t1));
-                    if code_lo > code_hi || h_a.max(h_b) < lo_s || h_a.min(h_b) > hi_s {
+                match b.jump(&mut w, &mut checked_block, &clearance, t1, probe) {
+                    Jump::Stay => {}
+                    Jump::Jumped(crossed) => {
                         stats.counters.jumps += 1;
-                        if t1 < leave_i.min(leave_j) {
-                            break;
-                        }
-                        // Leaving through the i side (first on a tie, as the walk steps i
-                        // first): the j steps before it, then the step into the edge column; or
-                        // the same with i and j swapped. One loop for both, as glsl/rbvh.glsl.
-                        let out_i = leave_i <= leave_j;
-                        let leave = if out_i { leave_i } else { leave_j };
-                        let before = |t: f32| if out_i { t < leave } else { t <= leave };
-                        let mut t_last = w.t_in;
-                        let (minor, minor_next, minor_step, minor_o, minor_inv) = if out_i {
-                            (&mut w.cj, &mut w.next_j, step_j, o.y, inv.y)
-                        } else {
-                            (&mut w.ci, &mut w.next_i, step_i, o.x, inv.x)
-                        };
-                        let (minor_axis, major_axis) = if out_i { (1, 0) } else { (0, 1) };
-                        for _ in 0..BLOCK {
-                            if minor_step == 0 || !before(*minor_next) {
-                                break;
-                            }
-                            t_last = *minor_next;
-                            entered = Some(minor_axis);
-                            *minor += minor_step;
-                            *minor_next = CELLS.boundary_t(*minor, minor_step, minor_o, minor_inv);
-                        }
-                        let (major, major_next, major_step, major_o, major_inv, edge) = if out_i {
-                            (&mut w.ci, &mut w.next_i, step_i, o.x, inv.x, edge_i)
-                        } else {
-                            (&mut w.cj, &mut w.next_j, step_j, o.y, inv.y, edge_j)
-                        };
-                        if *major != edge {
-                            let into_edge =
-                                CELLS.boundary_t(edge - major_step, major_step, major_o, major_inv);
-                            if into_edge >= t_last {
-                                entered = Some(major_axis);
-                            }
-                            t_last = t_last.max(into_edge);
-                            *major = edge;
-                            *major_next = leave;
-                        }
-                        w.t_in = t_last;
+                        entered = crossed.or(entered);
+                    }
+                    Jump::Ended => {
+                        stats.counters.jumps += 1;
+                        break;
                     }
                 }
             }
+            // 4. The cell, and the skirts under its rims.
             stats.counters.cells += 1;
-            let t_out = w.next_i.min(w.next_j).min(t1);
-            let corner = cells.corners(w.ci, w.cj);
+            let [ci, cj] = w.cell;
+            let t_out = w.t_out().min(t1);
+            let corner = cells.corners(ci, cj);
             let valid = corner.iter().filter(|c| !c.is_hole()).count();
             if let (Some(axis), true, true) = (entered, prev_open, valid >= 3) {
-                let step = if axis == 0 { step_i } else { step_j };
-                let hit = cells.skirt(&corner, (w.ci, w.cj), axis, step, w.t_in, probe);
+                let step = grid.step[axis];
+                let hit = cells.skirt(&corner, (ci, cj), axis, step, w.t_in, probe);
                 if hit.is_some() {
                     return hit;
                 }
             }
             if valid == 3 {
-                let hit = cells.diagonal_skirt(&corner, (w.ci, w.cj), w.t_in, t_out, probe);
+                let hit = cells.diagonal_skirt(&corner, (ci, cj), w.t_in, t_out, probe);
                 if hit.is_some() {
                     return hit;
                 }
             }
             prev_open = valid < 4;
-            let hit = cells.hit(w.ci, w.cj, w.t_in, t_out, stats, probe);
+            let hit = cells.hit(ci, cj, w.t_in, t_out, stats, probe);
             if hit.is_some() {
                 return hit;
             }
-            // Step across the nearer boundary; on a tie (the ray through a grid vertex) `s` goes
-            // first. Both boundaries infinite: the ray runs along `h`, one cell is all.
-            let across_s = w.next_i <= w.next_j;
-            if step_i != 0 && step_j != 0 {
-                // The gap, in texels, by which the ray misses the vertex the step passes.
-                let gap = if across_s {
-                    (w.next_j - w.next_i) * d.y.abs()
-                } else {
-                    (w.next_i - w.next_j) * d.x.abs()
-                };
-                let (xi, xj) = if across_s {
-                    (w.ci, w.cj + step_j)
-                } else {
-                    (w.ci + step_i, w.cj)
-                };
-                if gap <= corner_slack && xi >= 0 && xi <= last_i && xj >= 0 && xj <= last_j {
-                    stats.counters.cells += 1;
-                    let t_x = w.next_i.max(w.next_j).min(t1);
-                    let hit = cells.hit(xi, xj, t_out, t_x, stats, probe);
-                    if hit.is_some() {
-                        return hit;
-                    }
+            if let Some([xi, xj]) = w.across_vertex(corner_slack) {
+                stats.counters.cells += 1;
+                let t_x = w.next[0].max(w.next[1]).min(t1);
+                let hit = cells.hit(xi, xj, t_out, t_x, stats, probe);
+                if hit.is_some() {
+                    return hit;
                 }
             }
-            match w.advance(CELLS, step, last, o2, inv2) {
+            match w.advance() {
                 Some(axis) => entered = Some(axis),
                 None => break,
             }
         }
         None
     }
+}
+
+/// The ray in `leaf`'s frame `(s, t, h)` over `[tmin, t_closest)` (step 1), or `None` where
+/// degenerate or non-finite axes (corrupt data) give a ray no test can answer.
+fn frame_ray(leaf: &GpuHeightfield, ray: &Ray, t_closest: f32) -> Option<Ray> {
+    let (u, v, w) = (
+        Vec3::from(leaf.axis_u),
+        Vec3::from(leaf.axis_v),
+        Vec3::from(leaf.axis_w),
+    );
+    let rel = ray.origin() - Vec3::from(leaf.origin);
+    let d = ray.dir();
+    let frame = Ray::new(
+        Vec3::new(rel.dot(u), rel.dot(v), rel.dot(w)),
+        Vec3::new(d.dot(u), d.dot(v), d.dot(w)),
+        ray.tmin,
+        t_closest,
+    );
+    frame.is_valid().then_some(frame)
 }
 
 /// The exit distance of a ray from `b`: the far end of the slab test of [`Aabb::intersect`]. It
