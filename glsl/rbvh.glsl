@@ -44,6 +44,13 @@
 #define RBVH_HOLE_CODE 65535u
 const uint RBVH_HEIGHTFIELD_COUNT = 0xFFFFFFFFu;
 
+// Whether a leaf's reference (LEAF_BIT set) with `count` names a height field rather than
+// triangles: the one place the shaders tell a leaf's kind, as src/rbvh/child.rs (Child) is on the
+// CPU; a new kind of leaf starts in both.
+bool rbvh_is_heightfield(uint count) {
+    return count == RBVH_HEIGHTFIELD_COUNT;
+}
+
 // 64 bytes: see GpuHeightfield.
 struct RbvhLeaf {
     vec3 origin;
@@ -839,7 +846,7 @@ bool rbvh_keep_march(inout RbvhLeafHook leaves, float t, uint walked, uint id, u
 bool rbvh_test(inout RbvhLeafHook leaves, Ray ray, bool any_hit, uint reference, uint count,
                inout float t_closest, inout uint steps, inout bool cut) {
     bool hit = false;
-    if (count != RBVH_HEIGHTFIELD_COUNT) {
+    if (!rbvh_is_heightfield(count)) {
         uint first = reference & ~RBVH_LEAF_BIT;
         // The shear is made per leaf rather than kept across the loops: see RbvhFrameRay.
         hit = rbvh_test_triangles(rbvh_shear(ray), ray, any_hit, first,

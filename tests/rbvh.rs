@@ -9,7 +9,7 @@ use glam::Vec3;
 use rbvh::bvh::Bvh;
 use rbvh::geom::Ray;
 use rbvh::progress::Quiet;
-use rbvh::rbvh::{Rbvh, RbvhParams, RbvhSource, Refinement, Subdivision, HEIGHTFIELD_COUNT};
+use rbvh::rbvh::{Child, Rbvh, RbvhParams, RbvhSource, Refinement, Subdivision};
 use rbvh::scene::Scene;
 
 /// Preset `level` with every triangle sampled: these tests referee the height fields on the
@@ -45,8 +45,8 @@ fn error_vs_exact(scene: &Scene, r: &Rbvh, rays: &[Ray]) -> (f64, f64, f64) {
 fn heightfield_leaf_count(r: &Rbvh) -> usize {
     r.nodes
         .iter()
-        .flat_map(|n| [n.a_count, n.b_count])
-        .filter(|&c| c == HEIGHTFIELD_COUNT)
+        .flat_map(|n| n.children())
+        .filter(|c| matches!(c.kind(), Child::Heightfield(_)))
         .count()
 }
 

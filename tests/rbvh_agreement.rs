@@ -161,7 +161,7 @@ fn one_leaf(
     atlas: rbvh::rbvh::Atlas,
     box_max: glam::Vec3,
 ) -> Rbvh {
-    use rbvh::bvh::{ChildRef, GpuNode, LEAF_BIT};
+    use rbvh::bvh::{ChildRef, GpuNode};
     let leaf = rbvh::rbvh::GpuHeightfield {
         origin: [-2.0, 1.0, -2.0],
         atlas_base: base,
@@ -172,11 +172,10 @@ fn one_leaf(
         axis_w: [0.0, 1.0, 0.0],
         h_scale,
     };
-    let child = ChildRef {
-        bounds: rbvh::geom::Aabb::from_points([glam::Vec3::new(-3.0, 0.0, -3.0), box_max]),
-        child: LEAF_BIT,
-        count: rbvh::rbvh::HEIGHTFIELD_COUNT,
-    };
+    let child = rbvh::rbvh::Child::Heightfield(0).with_bounds(rbvh::geom::Aabb::from_points([
+        glam::Vec3::new(-3.0, 0.0, -3.0),
+        box_max,
+    ]));
     hand_made(
         vec![GpuNode::new(child, ChildRef::ABSENT)],
         vec![],

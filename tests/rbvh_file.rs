@@ -7,12 +7,12 @@ use std::ops::Range;
 use std::path::Path;
 
 use glam::Vec3;
-use rbvh::bvh::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT};
+use rbvh::bvh::{GpuNode, GpuTriangle, LEAF_BIT};
 use rbvh::geom::Aabb;
 use rbvh::rbvh::file::{section_table, REQUIRED};
 use rbvh::rbvh::{
-    Atlas, GpuHeightfield, Rbvh, RbvhParams, RbvhStats, Refinement, Subdivision, Texel,
-    TexelFormat, HEIGHTFIELD_COUNT,
+    Atlas, Child, GpuHeightfield, Rbvh, RbvhParams, RbvhStats, Refinement, Subdivision, Texel,
+    TexelFormat,
 };
 use rbvh::Error;
 
@@ -56,23 +56,11 @@ fn sample() -> Rbvh {
         min: Vec3::splat(-1.0),
         max: Vec3::splat(6.0),
     };
-    let hf = |index| ChildRef {
-        bounds: unit,
-        child: LEAF_BIT | index,
-        count: HEIGHTFIELD_COUNT,
-    };
+    let hf = |index| Child::Heightfield(index).with_bounds(unit);
     let nodes = vec![
         GpuNode::new(
-            ChildRef {
-                bounds: unit,
-                child: 1,
-                count: 0,
-            },
-            ChildRef {
-                bounds: unit,
-                child: LEAF_BIT,
-                count: 2,
-            },
+            Child::Inner(1).with_bounds(unit),
+            Child::Triangles { first: 0, count: 2 }.with_bounds(unit),
         ),
         GpuNode::new(hf(0), hf(1)),
     ];

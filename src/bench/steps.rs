@@ -210,18 +210,15 @@ fn leaf_boxes_holding(nodes: &[GpuNode], p: Vec3) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bvh::{ChildRef, LEAF_BIT};
+    use crate::bvh::ChildRef;
     use crate::geom::Aabb;
+    use crate::rbvh::Child;
 
     fn leaf(min: [f32; 3], max: [f32; 3], first: u32) -> ChildRef {
-        ChildRef {
-            bounds: Aabb {
-                min: Vec3::from(min),
-                max: Vec3::from(max),
-            },
-            child: LEAF_BIT | first,
-            count: 1,
-        }
+        Child::Triangles { first, count: 1 }.with_bounds(Aabb {
+            min: Vec3::from(min),
+            max: Vec3::from(max),
+        })
     }
 
     #[test]

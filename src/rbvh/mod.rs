@@ -9,6 +9,8 @@
 //! * `atlas`: packing tiles into one atlas;
 //! * `bake`: the scene's base colour into the per-texel colour channel (packed as [`crate::rgba`]);
 //! * [`layout`]: the packed data the GPU reads;
+//! * [`child`]: what a node's child is (inner, absent, triangles, height field): the one decoder of
+//!   its encoding, where a new kind of leaf starts;
 //! * [`ranges`]: height ranges of the atlas's 8 × 8 blocks, for the device march's jumps;
 //! * `march`: the CPU reference caster on exactly that packed data, and its [`DeviceTwin`];
 //! * [`file`](mod@file): save and load, and the file format's tables (its older versions in
@@ -17,6 +19,7 @@
 mod atlas;
 mod bake;
 mod build;
+pub mod child;
 pub mod file;
 mod frame;
 pub mod layout;
@@ -28,7 +31,8 @@ mod splat;
 mod split;
 
 pub use build::{RbvhSource, CREASE_EDGE_TEXELS};
-pub use layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT};
+pub use child::{Child, HEIGHTFIELD_COUNT};
+pub use layout::{Atlas, GpuHeightfield, Texel};
 pub use march::DeviceTwin;
 pub use params::{
     level_name, RbvhParams, Refinement, Subdivision, TexelFormat, QUALITY_NAMES, SAMPLED_SUFFIX,

@@ -69,7 +69,8 @@ use bytemuck::{Pod, Zeroable};
 use super::{check, flag, records, refinement, subdivision, Reader};
 use crate::bvh::{ChildRef, GpuNode, GpuTriangle};
 use crate::geom::Aabb;
-use crate::rbvh::layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT, LEAF_BIT};
+use crate::rbvh::child::Child;
+use crate::rbvh::layout::{Atlas, GpuHeightfield, Texel};
 use crate::rbvh::params::{RbvhParams, TexelFormat};
 use crate::rbvh::Rbvh;
 use crate::{Error, Result};
@@ -374,8 +375,8 @@ fn unmark(r: &mut Rbvh) {
     let mut boxes = vec![r.bounds; r.leaves.len()];
     for node in &r.nodes {
         for c in node.children() {
-            if c.child & LEAF_BIT != 0 && c.count == HEIGHTFIELD_COUNT {
-                boxes[(c.child & !LEAF_BIT) as usize] = c.bounds;
+            if let Child::Heightfield(index) = c.kind() {
+                boxes[index as usize] = c.bounds;
             }
         }
     }

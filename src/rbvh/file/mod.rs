@@ -92,7 +92,8 @@ use std::path::Path;
 
 use bytemuck::Pod;
 
-use super::layout::{tile_fits, Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT, LEAF_BIT};
+use super::child::Child;
+use super::layout::{tile_fits, Atlas, GpuHeightfield, Texel, LEAF_BIT};
 use super::params::{Refinement, Subdivision, TexelFormat};
 use super::{Rbvh, RbvhStats};
 use crate::bvh::GpuTriangle;
@@ -410,34 +411,32 @@ fn check_triangles(triangles: &[GpuTriangle], leaves: usize) -> std::result::Res
     Ok(())
 }
 
-/// Checks one child reference against the layout rules (see [`super::layout`]).
+/// Checks one child reference against the layout rules (see [`super::child`]). An absent child's
+/// index is not read, by the device or here.
 fn check_child(child: u32, count: u32, r: &Rbvh) -> std::result::Result<(), String> {
-    let index = child & !LEAF_BIT;
-    if child & LEAF_BIT == 0 {
-        if count != 0 {
-            return Err(format!("inner node reference with count {count}, not 0"));
+    match Child::decode(child, count) {
+        Child::Inner(_) if count != 0 => {
+            Err(format!("inner node reference with count {count}, not 0"))
         }
-        if index as usize >= r.nodes.len() {
-            return Err(format!(
-                "node index {index} is out of range (there are {} nodes)",
-                r.nodes.len()
-            ));
+        Child::Inner(index) if index as usize >= r.nodes.len() => Err(format!(
+            "node index {index} is out of range (there are {} nodes)",
+            r.nodes.len()
+        )),
+        Child::Heightfield(index) if index as usize >= r.leaves.len() => Err(format!(
+            "height-field leaf index {index} is out of range (there are {} leaves)",
+            r.leaves.len()
+        )),
+        Child::Triangles { first, count }
+            if u64::from(first) + u64::from(count) > r.triangles.len() as u64 =>
+        {
+            Err(format!(
+                "triangles {first}..{} are out of range (there are {})",
+                u64::from(first) + u64::from(count),
+                r.triangles.len()
+            ))
         }
-    } else if count == HEIGHTFIELD_COUNT {
-        if index as usize >= r.leaves.len() {
-            return Err(format!(
-                "height-field leaf index {index} is out of range (there are {} leaves)",
-                r.leaves.len()
-            ));
-        }
-    } else if u64::from(index) + u64::from(count) > r.triangles.len() as u64 {
-        return Err(format!(
-            "triangles {index}..{} are out of range (there are {})",
-            u64::from(index) + u64::from(count),
-            r.triangles.len()
-        ));
+        Child::Inner(_) | Child::Absent | Child::Triangles { .. } | Child::Heightfield(_) => Ok(()),
     }
-    Ok(())
 }
 
 /// Checks that a leaf's frame is finite and its tile lies in the atlas.

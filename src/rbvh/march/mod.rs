@@ -170,7 +170,8 @@ pub(super) mod tests {
     use crate::bvh::{ChildRef, GpuNode, GpuTriangle};
     use crate::geom::Aabb;
     use crate::probe::{Array, Read};
-    use crate::rbvh::layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT, LEAF_BIT};
+    use crate::rbvh::child::Child;
+    use crate::rbvh::layout::{Atlas, GpuHeightfield, Texel, LEAF_BIT};
     use crate::rbvh::{RbvhParams, RbvhStats};
 
     /// World size of one texel in the test leaves.
@@ -222,11 +223,7 @@ pub(super) mod tests {
     }
 
     pub(super) fn hf_child(l: &GpuHeightfield, index: u32) -> ChildRef {
-        ChildRef {
-            bounds: leaf_box(l),
-            child: LEAF_BIT | index,
-            count: HEIGHTFIELD_COUNT,
-        }
+        Child::Heightfield(index).with_bounds(leaf_box(l))
     }
 
     /// A tile of `res_u × res_v` texels (pitch `res_u`) from `f(i, j)`.
@@ -358,17 +355,10 @@ pub(super) mod tests {
             ],
             7,
         );
-        let tri_leaf = ChildRef {
-            bounds: Aabb::from_points(tri.vertices()),
-            child: LEAF_BIT,
-            count: 1,
-        };
+        let tri_leaf =
+            Child::Triangles { first: 0, count: 1 }.with_bounds(Aabb::from_points(tri.vertices()));
         let node1 = GpuNode::new(hf_child(&l0, 0), hf_child(&l1, 1));
-        let inner = ChildRef {
-            bounds: leaf_box(&l0).union(leaf_box(&l1)),
-            child: 1,
-            count: 0,
-        };
+        let inner = Child::Inner(1).with_bounds(leaf_box(&l0).union(leaf_box(&l1)));
         let root = GpuNode::new(inner, tri_leaf);
         let mut texels = tile(8, 8, |_, _| Texel::new(0, Vec3::Y));
         texels.extend(tile(8, 8, |_, _| Texel::new(0, -Vec3::Y)));
@@ -457,11 +447,7 @@ pub(super) mod tests {
             ..ChildRef::ABSENT
         };
         let corrupt = [
-            with_root(ChildRef {
-                child: LEAF_BIT | 5,
-                count: HEIGHTFIELD_COUNT,
-                ..big
-            }),
+            with_root(Child::Heightfield(5).with_bounds(big.bounds)),
             with_root(ChildRef {
                 child: 99,
                 count: 0,
