@@ -40,7 +40,7 @@ void main() {
     if (i >= pc.ray_count) {
         return;
     }
-    RbvhSizes sz = RbvhSizes(pc.node_count, pc.tri_count, pc.leaf_count, pc.atlas_pitch, pc.atlas_len,
+    RbvhSizes sz = RbvhSizes(pc.node_count, pc.tri_count, pc.heightfield_count, pc.atlas_pitch, pc.atlas_len,
                              pc.atlas_wide_len);
     uint steps;
     bool overflow;

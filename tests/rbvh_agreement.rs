@@ -130,18 +130,18 @@ fn block_jumps_skip_many_cells_of_grazing_rays_and_change_no_hit() {
     }
 }
 
-/// A hand-made RBVH around `nodes`, `triangles`, `leaves` and `atlas`.
+/// A hand-made RBVH around `nodes`, `triangles`, `heightfields` and `atlas`.
 fn hand_made(
     nodes: Vec<rbvh::bvh::GpuNode>,
     triangles: Vec<rbvh::bvh::GpuTriangle>,
-    leaves: Vec<rbvh::rbvh::GpuHeightfield>,
+    heightfields: Vec<rbvh::rbvh::GpuHeightfield>,
     atlas: rbvh::rbvh::Atlas,
 ) -> Rbvh {
     Rbvh {
         params: RbvhParams::quality(2).unwrap(),
         nodes,
         triangles,
-        leaves,
+        heightfields,
         atlas,
         bounds: rbvh::geom::Aabb::from_points([glam::Vec3::splat(-10.0), glam::Vec3::splat(80.0)]),
         depth: 2,
@@ -473,8 +473,8 @@ fn height_only_texels_hit_the_same_and_report_the_facet_normal() {
             };
             let height = Arc::new(Rbvh::build(&scene, &params).unwrap());
             assert_eq!(
-                (&height.nodes, &height.leaves),
-                (&normals.nodes, &normals.leaves)
+                (&height.nodes, &height.heightfields),
+                (&normals.nodes, &normals.heightfields)
             );
             assert!(height.colours.is_none());
             assert!(height.atlas_bytes() < normals.atlas_bytes() * 3 / 4);

@@ -31,7 +31,7 @@ fn sample() -> Rbvh {
         axis_w: [0.0, 1.0, 0.0],
         h_scale: 1.0e-4,
     };
-    let leaves = vec![
+    let heightfields = vec![
         leaf([0.0, 0.0, 0.0], 0, 4, 4),
         leaf([5.0, -1.0, 0.5], 36, 3, 5),
     ];
@@ -78,7 +78,7 @@ fn sample() -> Rbvh {
         },
         nodes,
         triangles,
-        leaves,
+        heightfields,
         atlas: Atlas {
             pitch: 8,
             rows: 9,
@@ -651,13 +651,13 @@ fn inconsistent_contents_are_rejected_with_the_reason() {
     r.nodes[0].a_count = 5;
     check(r, "inner node reference with count 5");
     let mut r = sample();
-    r.leaves[1].res_v = 6;
+    r.heightfields[1].res_v = 6;
     check(r, "height-field leaf 1");
     let mut r = sample();
-    r.leaves[0].atlas_base = u32::MAX;
+    r.heightfields[0].atlas_base = u32::MAX;
     check(r, "does not fit");
     let mut r = sample();
-    r.leaves[0].axis_w[1] = f32::NAN;
+    r.heightfields[0].axis_w[1] = f32::NAN;
     check(r, "not finite");
     let mut r = sample();
     r.atlas.rows = 8;

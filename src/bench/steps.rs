@@ -118,7 +118,7 @@ fn ray_steps(
             }
             // A march reads its leaf's whole record; a height-only hit's facet reads parts of it
             // again once the ray is done, which is no march.
-            Array::Leaves if u64::from(read.bytes) == leaf_size => {
+            Array::Heightfields if u64::from(read.bytes) == leaf_size => {
                 let leaf = (read.offset / leaf_size) as u32;
                 let Some((walked, t)) = march(leaf) else {
                     continue;

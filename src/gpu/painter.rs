@@ -194,7 +194,7 @@ pub struct Painter {
     reach: Reach,
     /// Device addresses of the atlas and the colours with [`Reach::DeviceAddresses`], else zero.
     addresses: (u64, u64),
-    leaves: Vec<GpuHeightfield>,
+    heightfields: Vec<GpuHeightfield>,
     /// Its own upload, or the atlas of the tracer it shares ([`Painter::sharing`]).
     atlas: Arc<Buffer>,
     colours: Buffer,
@@ -306,7 +306,7 @@ impl Painter {
             )?,
             reach,
             addresses,
-            leaves: rbvh.leaves.clone(),
+            heightfields: rbvh.heightfields.clone(),
             atlas,
             colours,
             pitch: rbvh.atlas.pitch,
@@ -351,7 +351,7 @@ impl Painter {
             ctx.record_transfer_to_compute(cmd);
         }
         let set = self.descriptor_set(&brush_buf)?;
-        let leaves = candidate_leaves(&self.leaves, brushes);
+        let leaves = candidate_leaves(&self.heightfields, brushes);
         self.record_leaves(ctx.device(), cmd, &set, &leaves, brushes.len() as u32);
         Ok(PaintRecording {
             _set: set,
@@ -384,7 +384,7 @@ impl Painter {
     ) {
         let (atlas_address, colours_address) = self.addresses;
         for &k in leaves {
-            let Some(leaf) = self.leaves.get(k as usize) else {
+            let Some(leaf) = self.heightfields.get(k as usize) else {
                 continue;
             };
             let grid = leaf.grid();
@@ -423,7 +423,7 @@ impl Painter {
         let ctx = self.atlas.context().clone();
         let mut stats = PaintStats::default();
         for batch in brushes.chunks(MAX_BRUSHES_PER_PASS) {
-            let leaves = candidate_leaves(&self.leaves, batch);
+            let leaves = candidate_leaves(&self.heightfields, batch);
             if leaves.is_empty() {
                 continue;
             }
@@ -436,7 +436,7 @@ impl Painter {
             stats.texels += leaves
                 .iter()
                 .map(|&k| {
-                    let l = &self.leaves[k as usize];
+                    let l = &self.heightfields[k as usize];
                     u64::from(l.res_u) * u64::from(l.res_v)
                 })
                 .sum::<u64>();

@@ -65,8 +65,8 @@ pub struct TraceParams {
     /// GLSL `tri_count`: triangles of the BVH, or of the RBVH's triangle leaves (whose reads the
     /// RBVH traversal clamps to it).
     pub tri_count: u32,
-    /// GLSL `leaf_count`: height-field leaves of the RBVH; 0 for the exact BVH.
-    pub leaf_count: u32,
+    /// GLSL `heightfield_count`: height-field leaves of the RBVH; 0 for the exact BVH.
+    pub heightfield_count: u32,
     /// GLSL `atlas_pitch`: texels per atlas row, a power of two; 0 for the exact BVH.
     pub atlas_pitch: u32,
     /// GLSL `atlas_len`: texels in the atlas; the blocks' height ranges follow them in the same
@@ -81,8 +81,8 @@ pub struct TraceParams {
     pub lod_texel_len: u32,
     /// GLSL `reserved`: zero, so that `addresses` are 8-byte aligned.
     pub reserved: u32,
-    /// Device addresses of the structure's arrays in binding order (nodes, triangles, leaves,
-    /// atlas, LOD records, LOD columns), read by the `_bda` shaders; zero where arrays are bound.
+    /// Device addresses of the structure's arrays in binding order (nodes, triangles, height
+    /// fields, atlas, LOD records, LOD columns), read by the `_bda` shaders; zero where arrays are bound.
     pub addresses: [u64; 6],
 }
 const _: () = assert!(std::mem::size_of::<TraceParams>() == 96);
@@ -339,7 +339,7 @@ fn rbvh_parts<'a>(rbvh: &'a Rbvh, atlas_words: &'a [u32]) -> Result<(TraceParams
     let sizes = TraceParams {
         node_count: count("nodes", rbvh.nodes.len())?,
         tri_count: count("triangles", rbvh.triangles.len())?,
-        leaf_count: count("leaves", rbvh.leaves.len())?,
+        heightfield_count: count("height fields", rbvh.heightfields.len())?,
         atlas_pitch: rbvh.atlas.pitch,
         atlas_len: count("atlas texels", rbvh.atlas.texels.len())?,
         atlas_wide_len: count("atlas texels", rbvh.atlas.wide_len())?,
@@ -352,7 +352,7 @@ fn rbvh_parts<'a>(rbvh: &'a Rbvh, atlas_words: &'a [u32]) -> Result<(TraceParams
         ("RBVH triangles", bytemuck::cast_slice(&rbvh.triangles)),
         (
             "RBVH height-field leaves",
-            bytemuck::cast_slice(&rbvh.leaves),
+            bytemuck::cast_slice(&rbvh.heightfields),
         ),
         ("RBVH atlas", bytemuck::cast_slice(atlas_words)),
     ];
@@ -371,14 +371,14 @@ fn lod_parts<'a>(
     nodes: &'a [crate::bvh::GpuNode],
 ) -> Result<(TraceParams, Arrays<'a, 6>)> {
     lod.check_for(rbvh)?;
-    let (mut sizes, [_, tris, leaves, atlas]) = rbvh_parts(rbvh, atlas_words)?;
+    let (mut sizes, [_, tris, heightfields, atlas]) = rbvh_parts(rbvh, atlas_words)?;
     sizes.lod_node_count = lod.nodes.len() as u32;
     sizes.lod_texel_len = u32::try_from(lod.texels.len())
         .map_err(|_| Error::param("lod", "more than 2^32 column words"))?;
     let arrays = [
         ("RBVH nodes (LOD-annotated)", bytemuck::cast_slice(nodes)),
         tris,
-        leaves,
+        heightfields,
         atlas,
         ("LOD records", bytemuck::cast_slice(&lod.nodes)),
         ("LOD columns", bytemuck::cast_slice(&lod.texels)),

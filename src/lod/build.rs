@@ -198,7 +198,7 @@ impl Source {
     fn sample_count(&self, rbvh: &Rbvh) -> u64 {
         match *self {
             Source::Heightfield(leaf) => rbvh
-                .leaves
+                .heightfields
                 .get(leaf as usize)
                 .map_or(0, |hf| u64::from(hf.res_u) * u64::from(hf.res_v)),
             Source::Triangles { first, count } => leaf_triangles(rbvh, first, count)
@@ -238,7 +238,7 @@ fn leaf_triangles(rbvh: &Rbvh, first: u32, count: u32) -> impl Iterator<Item = &
 }
 
 fn heightfield_samples(rbvh: &Rbvh, leaf: u32) -> Vec<Sample> {
-    let Some(hf) = rbvh.leaves.get(leaf as usize) else {
+    let Some(hf) = rbvh.heightfields.get(leaf as usize) else {
         return Vec::new();
     };
     let grid = hf.grid();

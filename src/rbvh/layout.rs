@@ -77,7 +77,7 @@ pub const MARCH_DIAGONAL_SKIRT_TEXELS: f32 = 0.1;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuHeightfield {
-    /// GLSL `RbvhLeaf.origin`: world-space origin of the leaf frame (`s = t = h = 0`).
+    /// GLSL `RbvhHeightfield.origin`: world-space origin of the leaf frame (`s = t = h = 0`).
     pub origin: [f32; 3],
     /// GLSL `atlas_base`: atlas index of texel (0, 0) of the tile.
     pub atlas_base: u32,

@@ -53,8 +53,9 @@ pub struct Rbvh {
     pub nodes: Vec<GpuNode>,
     /// Triangles of the triangle (hybrid) leaves, in leaf order.
     pub triangles: Vec<GpuTriangle>,
-    /// Height-field leaves.
-    pub leaves: Vec<GpuHeightfield>,
+    /// The height-field leaves' records, which a node's [`Child::Heightfield`] indexes (named
+    /// apart from the tree's leaves, which are triangle leaves too).
+    pub heightfields: Vec<GpuHeightfield>,
     /// Texels of all height-field tiles, addressed by [`GpuHeightfield::atlas_base`].
     pub atlas: Atlas,
     /// World box of the root's children: the leaves' boxes, dilated rims included, so it may
@@ -78,7 +79,7 @@ pub struct Rbvh {
 pub struct RbvhStats {
     /// Wall time of [`Rbvh::build`] in milliseconds (as recorded at build time for a loaded file).
     pub build_ms: f64,
-    /// Leaves that became height fields (= `leaves.len()`).
+    /// Leaves that became height fields (= `heightfields.len()`).
     pub heightfield_leaves: u32,
     /// Leaves of triangles, traced exactly: sets kept as triangles (hybrid leaves), and beside
     /// height fields the triangles their tiles leave uncovered (`raster/exposed.rs`).
@@ -96,7 +97,7 @@ impl Rbvh {
     /// Bytes of the node array and the height-field leaf records.
     pub fn tree_bytes(&self) -> u64 {
         (std::mem::size_of_val(self.nodes.as_slice())
-            + std::mem::size_of_val(self.leaves.as_slice())) as u64
+            + std::mem::size_of_val(self.heightfields.as_slice())) as u64
     }
 
     /// The atlas as the device holds it: the texels and the blocks' height ranges
@@ -184,7 +185,7 @@ impl Rbvh {
     /// Texels of the tiles with 8-bit heights (in the atlas's narrow band, [`Atlas::narrow_rows`]).
     pub fn narrow_texels(&self) -> u64 {
         let wide = self.atlas.wide_len() as u64;
-        self.leaves
+        self.heightfields
             .iter()
             .filter(|l| u64::from(l.atlas_base) >= wide)
             .map(|l| u64::from(l.res_u) * u64::from(l.res_v))

@@ -55,7 +55,7 @@ pub(super) struct Flattened {
     /// ([`crate::bvh::tree_over`]).
     refs: Vec<ChildRef>,
     pub(super) triangles: Vec<GpuTriangle>,
-    pub(super) leaves: Vec<crate::rbvh::GpuHeightfield>,
+    pub(super) heightfields: Vec<crate::rbvh::GpuHeightfield>,
     pub(super) tiles: Vec<Tile>,
     pub(super) triangle_leaves: u32,
     /// The leaf of the first tile of the [`Node::Surface`] being flattened, which its parts'
@@ -73,7 +73,7 @@ impl Flattened {
         b: &Builder,
         order: &[u32],
     ) -> [ChildRef; 2] {
-        let first_leaf = self.leaves.len() as u32;
+        let first_leaf = self.heightfields.len() as u32;
         let l = self.flatten(&children[0], b, order);
         if matches!(node, Node::Surface(_)) {
             self.surface_leaves = first_leaf;
@@ -93,8 +93,8 @@ impl Flattened {
                 return Child::Inner(index).with_bounds(l.bounds.union(r.bounds));
             }
             Node::Heightfield(tile) => {
-                let index = self.leaves.len() as u32;
-                self.leaves.push(tile.heightfield(0));
+                let index = self.heightfields.len() as u32;
+                self.heightfields.push(tile.heightfield(0));
                 self.tiles.push((**tile).clone());
                 Child::Heightfield(index).with_bounds(tile.surface_bounds())
             }

@@ -122,7 +122,7 @@ impl Rbvh {
     ///
     /// The hit `id` tells the two kinds of leaf apart: a triangle-leaf hit reports the scene
     /// triangle index (`prim`, below 2³¹); a height-field hit reports `LEAF_BIT | leaf index`
-    /// (bit 31 set; the index is into [`Rbvh::leaves`]). A height-field hit's normal is the stored
+    /// (bit 31 set; the index is into [`Rbvh::heightfields`]). A height-field hit's normal is the stored
     /// (world-space, dilated, octahedral-quantized) normal of the sample nearest the hit (with
     /// height-only texels, the normal of the cell triangle hit); a triangle's is its geometric
     /// normal as wound.
@@ -240,14 +240,14 @@ pub(super) mod tests {
     pub(super) fn rbvh(
         nodes: Vec<GpuNode>,
         triangles: Vec<GpuTriangle>,
-        leaves: Vec<GpuHeightfield>,
+        heightfields: Vec<GpuHeightfield>,
         atlas: Atlas,
     ) -> Rbvh {
         Rbvh {
             params: RbvhParams::quality(2).unwrap(),
             nodes,
             triangles,
-            leaves,
+            heightfields,
             atlas,
             bounds: Aabb::EMPTY,
             depth: 1,
@@ -329,7 +329,7 @@ pub(super) mod tests {
             reads,
             [
                 read(Array::Nodes, 0, 48),
-                read(Array::Leaves, 0, 64),
+                read(Array::Heightfields, 0, 64),
                 read(Array::Atlas, 4 * 64, 4),
                 read(Array::Atlas, 4 * 28, 4),
                 read(Array::Atlas, 4 * 29, 4),
@@ -419,7 +419,7 @@ pub(super) mod tests {
         assert_hit(&good, &ray, 9.0, LEAF_BIT);
         let with_leaf = |f: &dyn Fn(&mut GpuHeightfield)| {
             let mut r = good.clone();
-            f(&mut r.leaves[0]);
+            f(&mut r.heightfields[0]);
             r
         };
         let corrupt = [
@@ -434,7 +434,7 @@ pub(super) mod tests {
         ];
         for r in &corrupt {
             let (hit, stats) = r.closest_hit(&ray);
-            assert_eq!(hit, Hit::MISS, "{:?}", r.leaves[0]);
+            assert_eq!(hit, Hit::MISS, "{:?}", r.heightfields[0]);
             assert!(!stats.overflow);
         }
         let with_root = |a: ChildRef| {
