@@ -6,8 +6,8 @@
 //
 // The includer chooses where the buffers live by defining, before the #include, what rbvh.glsl
 // takes and:
-//   RBVH_LODS_BINDING       binding of the per-node records (default 8)
-//   RBVH_LOD_TEXELS_BINDING binding of the column words     (default 9)
+//   RBVH_LODS_BINDING       binding of the per-node records
+//   RBVH_LOD_TEXELS_BINDING binding of the column words
 // or, with RBVH_DEVICE_ADDRESS (see bvh.glsl), RBVH_LODS_ADDRESS and RBVH_LOD_TEXELS_ADDRESS.
 #ifndef RBVH_LOD_GLSL
 #define RBVH_LOD_GLSL

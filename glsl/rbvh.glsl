@@ -3,9 +3,9 @@
 // bvh.glsl for the node and triangle buffers.
 //
 // The includer chooses where the buffers live by defining, before the #include:
-//   RBVH_BVH_SET, RBVH_BVH_NODES_BINDING, RBVH_BVH_TRIS_BINDING   (see bvh.glsl; defaults 0, 0, 1)
-//   RBVH_HEIGHTFIELDS_BINDING  binding of the height-field leaves' records (default 2)
-//   RBVH_ATLAS_BINDING         binding of the texel atlas                  (default 3)
+//   RBVH_BVH_SET, RBVH_BVH_NODES_BINDING, RBVH_BVH_TRIS_BINDING   (see bvh.glsl)
+//   RBVH_HEIGHTFIELDS_BINDING  binding of the height-field leaves' records
+//   RBVH_ATLAS_BINDING         binding of the texel atlas
 // or, with RBVH_DEVICE_ADDRESS (see bvh.glsl), RBVH_HEIGHTFIELDS_ADDRESS and RBVH_ATLAS_ADDRESS.
 // and, to trace with level of detail, RBVH_LOD (see lod.glsl for its two bindings): then
 // rbvh_trace_rbvh_lod is defined too, taking each ray's cone and the LOD array sizes.

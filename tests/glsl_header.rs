@@ -124,6 +124,52 @@ fn lod_header_compiles_in_a_foreign_shader_with_its_own_bindings() {
     }
 }
 
+/// An engine shader that picks no bindings, tracing with level of detail: every buffer of the
+/// headers at its default.
+const FOREIGN_DEFAULTS: &str = r#"
+#version 460
+#extension GL_GOOGLE_include_directive : require
+layout(local_size_x = 32) in;
+
+#include "lod.glsl"
+
+layout(std430, set = 1, binding = 0) writeonly buffer EngineDepth { float depth[]; };
+layout(push_constant) uniform EnginePush { RbvhSizes sizes; RbvhLodSizes lod_sizes; float spread; } push;
+
+void main() {
+    Ray ray = Ray(vec3(gl_GlobalInvocationID.x, 0.0, -10.0), 0.0, vec3(0.0, 0.0, 1.0), 1e30);
+    uint steps;
+    bool overflow;
+    Hit hit = rbvh_trace_rbvh_lod(ray, vec2(0.0, push.spread), false, push.sizes, push.lod_sizes,
+                                  steps, overflow);
+    depth[gl_GlobalInvocationID.x] = overflow ? -1.0 : hit.t;
+}
+"#;
+
+/// The defaults of `bvh.glsl`, `rbvh.glsl` and `lod.glsl` are the bindings of the library's own
+/// trace shaders (`glsl/bindings.glsl`, which those include first): the headers keep their own, so
+/// that an engine needs no other file, and this keeps the two one table.
+#[test]
+fn header_defaults_are_the_library_bindings() {
+    use rbvh::gpu::bindings;
+    let r = spirv::reflect(&compile(FOREIGN_DEFAULTS).unwrap());
+    for (block, binding) in [
+        ("RbvhBvhNodes", bindings::BVH_NODES),
+        ("RbvhBvhTriangles", bindings::BVH_TRIS),
+        ("RbvhHeightfields", bindings::HEIGHTFIELDS),
+        ("RbvhAtlas", bindings::ATLAS),
+        ("RbvhLods", bindings::LODS),
+        ("RbvhLodTexels", bindings::LOD_TEXELS),
+    ] {
+        assert_eq!(
+            r.bindings.get(block),
+            Some(&(0, binding)),
+            "{block}: {:?}",
+            r.bindings
+        );
+    }
+}
+
 /// The engine shader reading the RBVH and its LOD through buffer device addresses it passes in its
 /// own push constants: no RBVH binding is left in the SPIR-V.
 const FOREIGN_ADDRESSED: &str = r#"

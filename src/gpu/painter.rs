@@ -10,6 +10,7 @@ use bytemuck::{Pod, Zeroable};
 
 use ash::vk;
 
+use super::bindings;
 use super::pipeline::DescriptorSet;
 use super::{shaders, Buffer, BufferView, ComputePipeline, Context, Reach, Timing, Tracer};
 use crate::rbvh::GpuHeightfield;
@@ -134,6 +135,14 @@ fn no_height_only(rbvh: &Rbvh) -> Result<()> {
 
 const ATLAS: &str = "RBVH atlas (painting)";
 const COLOURS: &str = "RBVH colours";
+
+/// The paint shader's SPIR-V for an atlas and colours reached by `reach`.
+pub(crate) fn shader_spirv(reach: Reach) -> &'static [u8] {
+    match reach {
+        Reach::Bindings => shaders::PAINT,
+        Reach::DeviceAddresses => shaders::PAINT_BDA,
+    }
+}
 
 /// How the atlas and the colours reach the paint shader ([`Context::reach`]), both checked, from
 /// the bytes of the buffers that will hold them.
@@ -284,10 +293,6 @@ impl Painter {
         atlas: Arc<Buffer>,
         colours: Buffer,
     ) -> Result<Painter> {
-        let (spirv, bindings): (&[u8], &[u32]) = match reach {
-            Reach::Bindings => (shaders::PAINT, &[0, 1, 2]),
-            Reach::DeviceAddresses => (shaders::PAINT_BDA, &[1]),
-        };
         let address = |b: &Buffer| {
             b.device_address()
                 .ok_or_else(|| Error::NoDevice(format!("{}: no device address", b.name())))
@@ -300,8 +305,8 @@ impl Painter {
             pipeline: ComputePipeline::new(
                 ctx,
                 "paint",
-                spirv,
-                bindings,
+                shader_spirv(reach),
+                bindings::paint(reach),
                 std::mem::size_of::<PaintParams>() as u32,
             )?,
             reach,

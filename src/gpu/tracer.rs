@@ -2,9 +2,10 @@
 //! (`glsl/trace_rbvh.comp`), or an RBVH with level of detail (`glsl/trace_rbvh_lod.comp`). All
 //! share the push constants ([`TraceParams`]) and the bindings after the structure's own buffers:
 //! rays, hits, status, per-ray counters; the LOD trace then binds the LOD records and columns and
-//! the per-ray cones. Counting each ray's work ([`RayCounters`]) takes a second pipeline of the
-//! same shader, made on first use, with the specialization constant `rbvh_count` set: the timed
-//! pipeline compiles the counting away. Each shader has a `_bda` twin that reads the structure's
+//! the per-ray cones (each numbered once, in `glsl/bindings.glsl`: [`super::bindings`]). Counting
+//! each ray's work ([`RayCounters`]) takes a second pipeline of the same shader, made on first
+//! use, with the specialization constant `rbvh_count` set: the timed pipeline compiles the
+//! counting away. Each shader has a `_bda` twin that reads the structure's
 //! arrays through buffer device addresses rather than bindings, for arrays over
 //! `maxStorageBufferRange` ([`Reach`]). The RBVH shaders' block jumps are a second specialization
 //! constant, `rbvh_block_jumps` ([`Tracer::block_jumps`]).
@@ -16,6 +17,7 @@ use bytemuck::{Pod, Zeroable};
 
 use ash::vk;
 
+use super::bindings;
 use super::compiled::{variant_name, CompiledPipeline};
 use super::pipeline::DescriptorSet;
 use super::{shaders, Buffer, ComputePipeline, Context, Reach, Timing};
@@ -125,32 +127,6 @@ pub(crate) fn shader_spirv(kind: Kind, reach: Reach) -> &'static [u8] {
     }
 }
 
-/// The structure arrays bound before the per-trace buffers (the LOD's two come after them).
-fn leading_arrays(kind: Kind) -> u32 {
-    match kind {
-        Kind::Exact => 2,
-        Kind::Rbvh | Kind::RbvhLod => 4,
-    }
-}
-
-/// The shader's bindings, in the order buffers are given: the leading structure arrays, the
-/// per-trace buffers, then for LOD its two arrays and the cones; arrays reached through device
-/// addresses have none.
-fn bindings(kind: Kind, reach: Reach) -> Vec<u32> {
-    let lead = leading_arrays(kind);
-    let bound = reach == Reach::Bindings;
-    let mut b: Vec<u32> = if bound { (0..lead).collect() } else { vec![] };
-    b.extend(lead..lead + PER_TRACE_BUFFERS);
-    if kind == Kind::RbvhLod {
-        let after = lead + PER_TRACE_BUFFERS;
-        if bound {
-            b.extend([after, after + 1]);
-        }
-        b.push(after + 2);
-    }
-    b
-}
-
 /// The specialization constants of `kind`'s trace shader as (GLSL name, `constant_id`, value):
 /// `rbvh_count` to `counting` (the pipeline that counts each ray's work; the timed one compiles
 /// the counting away), for the RBVH kinds `rbvh_block_jumps` to `block_jumps`, and for a plain
@@ -195,7 +171,7 @@ pub(crate) fn make_pipeline(
         ctx,
         &name,
         spirv,
-        &bindings(shader.0, reach),
+        &bindings::trace(shader.0, reach),
         std::mem::size_of::<TraceParams>() as u32,
         &ids,
     )
@@ -385,9 +361,6 @@ fn lod_parts<'a>(
     ];
     Ok((sizes, arrays))
 }
-
-/// Bindings after the structure's own: rays, hits, status, per-ray counters.
-const PER_TRACE_BUFFERS: u32 = 4;
 
 impl Tracer {
     /// Uploads `structure` (its arrays reached as [`Context::reach`] decides) with the crate's
@@ -702,9 +675,9 @@ impl Tracer {
         Ok(self.counting.get_or_init(|| pipeline))
     }
 
-    /// The buffers of one trace in the pipeline's binding order ([`bindings`]): the
-    /// structure's when bound, the per-trace four (rays, hits, status, counters), then the LOD arrays
-    /// when bound and the cones.
+    /// The buffers of one trace in the pipeline's binding order ([`bindings::trace`]): the
+    /// structure's when bound, the per-trace four (rays, hits, status, counters), then the LOD
+    /// arrays when bound and the cones.
     fn views(
         &self,
         per_trace: [(vk::Buffer, u64); 4],
