@@ -3,8 +3,10 @@
 //
 // The includer chooses where the two buffers live by defining, before the #include:
 //   RBVH_BVH_SET            descriptor set              (default 0)
-//   RBVH_BVH_NODES_BINDING  binding of the node buffer  (default 0)
-//   RBVH_BVH_TRIS_BINDING   binding of the triangles    (default 1)
+//   RBVH_BVH_NODES_BINDING  binding of the node buffer
+//   RBVH_BVH_TRIS_BINDING   binding of the triangles
+// (the bindings' defaults below are those of the library's own shaders, glsl/bindings.glsl, as
+// tests/glsl_header.rs checks; so are rbvh.glsl's and lod.glsl's)
 // or, to read every array through buffer device addresses instead of bindings (for arrays over
 // maxStorageBufferRange; src/gpu/addressing.rs), RBVH_DEVICE_ADDRESS, having enabled
 // GL_EXT_buffer_reference and GL_EXT_buffer_reference_uvec2, with each array's address as a uvec2

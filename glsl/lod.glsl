@@ -6,8 +6,8 @@
 //
 // The includer chooses where the buffers live by defining, before the #include, what rbvh.glsl
 // takes and:
-//   RBVH_LODS_BINDING       binding of the per-node records (default 8)
-//   RBVH_LOD_TEXELS_BINDING binding of the column words     (default 9)
+//   RBVH_LODS_BINDING       binding of the per-node records
+//   RBVH_LOD_TEXELS_BINDING binding of the column words
 // or, with RBVH_DEVICE_ADDRESS (see bvh.glsl), RBVH_LODS_ADDRESS and RBVH_LOD_TEXELS_ADDRESS.
 #ifndef RBVH_LOD_GLSL
 #define RBVH_LOD_GLSL
@@ -118,43 +118,43 @@ float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inou
         int last_j = int(lod.res_v) - 1;
         int step_i = rbvh_grid_step(gd.x);
         int step_j = rbvh_grid_step(gd.y);
-        RbvhGridWalk w = rbvh_grid_walk(RBVH_COLUMNS, rbvh_grid_cell(RBVH_COLUMNS, entry.x, last_i),
+        RbvhGridWalk walk = rbvh_grid_walk(RBVH_COLUMNS, rbvh_grid_cell(RBVH_COLUMNS, entry.x, last_i),
                                         rbvh_grid_cell(RBVH_COLUMNS, entry.y, last_j), step_i, step_j, go.xy, inv.xy,
                                         t0);
         uint limit = lod.res_u + lod.res_v;
         // A walk crosses at most res_u + res_v - 1 columns, so every normal ending is a `break`.
         bool stopped = false;
         for (uint n = 0u; n < limit; ++n) {
-            if (w.t_in > t1) {
+            if (walk.t_in > t1) {
                 stopped = true;
                 break;
             }
             columns += 1u;
-            float t_out = min(min(w.next_i, w.next_j), t1);
+            float t_out = min(min(walk.next_i, walk.next_j), t1);
             // 4. Column.
-            uint index = lod.base + 2u * (uint(w.cj) * lod.res_u + uint(w.ci));
+            uint index = lod.base + 2u * (uint(walk.cj) * lod.res_u + uint(walk.ci));
             bool inside = index + 1u < lsz.texel_len;
             uint top_word = inside ? RBVH_LOD_TEXEL(index) : RBVH_HOLE_CODE;
             uint bottom_word = inside ? RBVH_LOD_TEXEL(index + 1u) : RBVH_HOLE_CODE;
             if (!rbvh_is_hole(top_word)) {
                 precise float top = float(top_word & 0xFFFFu) * lod.h_scale;
                 precise float bottom = float(bottom_word & 0xFFFFu) * lod.h_scale;
-                float za = rbvh_height_at(go.z, gd.z, w.t_in);
+                float za = rbvh_height_at(go.z, gd.z, walk.t_in);
                 float zb = rbvh_height_at(go.z, gd.z, t_out);
                 if (max(za, zb) >= bottom && min(za, zb) <= top) {
                     precise float t_top = (top - go.z) * inv.z;
                     precise float t_bottom = (bottom - go.z) * inv.z;
                     precise float to_top = top - za;
                     precise float to_bottom = za - bottom;
-                    float t = za > top ? t_top : (za < bottom ? t_bottom : w.t_in);
+                    float t = za > top ? t_top : (za < bottom ? t_bottom : walk.t_in);
                     bool use_top = za > top || (za >= bottom && to_top <= to_bottom);
                     normal_texel = use_top ? top_word : bottom_word;
-                    t_hit = min(max(t, w.t_in), t_out);
+                    t_hit = min(max(t, walk.t_in), t_out);
                     stopped = true;
                     break;
                 }
             }
-            if (rbvh_grid_advance(w, RBVH_COLUMNS, step_i, step_j, last_i, last_j, go.xy, inv.xy) < 0) {
+            if (rbvh_grid_advance(walk, RBVH_COLUMNS, step_i, step_j, last_i, last_j, go.xy, inv.xy) < 0) {
                 stopped = true;
                 break;
             }

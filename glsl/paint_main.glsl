@@ -10,6 +10,8 @@
 #ifndef RBVH_PAINT_MAIN_GLSL
 #define RBVH_PAINT_MAIN_GLSL
 
+#include "bindings.glsl"
+
 layout(local_size_x = 64) in;
 
 // 32 bytes: see src/surface/paint.rs (Brush).
@@ -21,7 +23,7 @@ struct PaintBrush {
     uint pad1;
     uint pad2;
 };
-layout(std430, set = 0, binding = 1) readonly buffer Brushes {
+layout(std430, set = 0, binding = RBVH_PAINT_BRUSHES_BINDING) readonly buffer Brushes {
     PaintBrush brushes[];
 };
 
@@ -59,10 +61,10 @@ layout(buffer_reference, std430, buffer_reference_align = 4) buffer PaintColours
 #define PAINT_ATLAS(i) PaintAtlasRef(pc.atlas_address).texels[i]
 #define PAINT_COLOUR(i) PaintColoursRef(pc.colours_address).colours[i]
 #else
-layout(std430, set = 0, binding = 0) readonly buffer Atlas {
+layout(std430, set = 0, binding = RBVH_PAINT_ATLAS_BINDING) readonly buffer Atlas {
     uint atlas[];
 };
-layout(std430, set = 0, binding = 2) buffer Colours {
+layout(std430, set = 0, binding = RBVH_PAINT_COLOURS_BINDING) buffer Colours {
     uint colours[];
 };
 #define PAINT_ATLAS(i) atlas[i]

@@ -1,14 +1,14 @@
 // The RBVH's height-field march and its leaf hook for the one traversal (traverse.glsl): the GLSL
-// twin of src/rbvh/march/ (mod.rs lists its steps), step for step, on the packed data of src/rbvh/layout.rs. Includes
-// bvh.glsl for the node and triangle buffers.
+// twin of src/rbvh/march/ (mod.rs lists its steps), step for step, on the packed data of
+// src/rbvh/layout.rs. Includes bvh.glsl for the node and triangle buffers.
 //
 // The includer chooses where the buffers live by defining, before the #include:
-//   RBVH_BVH_SET, RBVH_BVH_NODES_BINDING, RBVH_BVH_TRIS_BINDING   (see bvh.glsl; defaults 0, 0, 1)
-//   RBVH_LEAVES_BINDING  binding of the height-field leaves (default 2)
-//   RBVH_ATLAS_BINDING   binding of the texel atlas         (default 3)
-// or, with RBVH_DEVICE_ADDRESS (see bvh.glsl), RBVH_LEAVES_ADDRESS and RBVH_ATLAS_ADDRESS.
-// and, to trace with level of detail, RBVH_LOD (see lod.glsl for its two bindings): then
-// rbvh_trace_rbvh_lod is defined too, taking each ray's cone and the LOD array sizes.
+//   RBVH_BVH_SET, RBVH_BVH_NODES_BINDING, RBVH_BVH_TRIS_BINDING   (see bvh.glsl)
+//   RBVH_HEIGHTFIELDS_BINDING  binding of the height-field leaves' records
+//   RBVH_ATLAS_BINDING         binding of the texel atlas
+// or, with RBVH_DEVICE_ADDRESS (see bvh.glsl), RBVH_HEIGHTFIELDS_ADDRESS and RBVH_ATLAS_ADDRESS.
+// To trace with level of detail, include lod.glsl instead (it includes this file, and defines
+// rbvh_trace_rbvh_lod, taking each ray's cone and the LOD array sizes; see it for its two bindings).
 // RBVH_BLOCK_JUMPS (default true) is the condition under which the march jumps over blocks the
 // ray passes above or below; the hits are the same either way. On CPU implementations such as
 // lavapipe, which run every branch, the walk is faster without (see Tracer::block_jumps).
@@ -21,8 +21,11 @@
 #include "bvh.glsl"
 #include "grid.glsl"
 
-#ifndef RBVH_LEAVES_BINDING
-#define RBVH_LEAVES_BINDING 2
+#ifdef RBVH_LEAVES_BINDING
+#error "RBVH_LEAVES_BINDING is now RBVH_HEIGHTFIELDS_BINDING (and RbvhLeaf RbvhHeightfield)"
+#endif
+#ifndef RBVH_HEIGHTFIELDS_BINDING
+#define RBVH_HEIGHTFIELDS_BINDING 2
 #endif
 #ifndef RBVH_ATLAS_BINDING
 #define RBVH_ATLAS_BINDING 3
@@ -44,8 +47,15 @@
 #define RBVH_HOLE_CODE 65535u
 const uint RBVH_HEIGHTFIELD_COUNT = 0xFFFFFFFFu;
 
+// Whether a leaf's reference (LEAF_BIT set) with `count` names a height field rather than
+// triangles: the one place the shaders tell a leaf's kind, as src/rbvh/child.rs (Child) is on the
+// CPU; a new kind of leaf starts in both.
+bool rbvh_is_heightfield(uint count) {
+    return count == RBVH_HEIGHTFIELD_COUNT;
+}
+
 // 64 bytes: see GpuHeightfield.
-struct RbvhLeaf {
+struct RbvhHeightfield {
     vec3 origin;
     uint atlas_base;
     vec3 axis_u;
@@ -59,22 +69,22 @@ struct RbvhLeaf {
 // Atlas texels, as rbvh_texel returns them: bits 0-15 height code (0xFFFF = hole), bits 16-31
 // the 8:8 octahedral normal; atlas.glsl reads them from the atlas's words.
 #ifdef RBVH_DEVICE_ADDRESS
-layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer RbvhLeavesRef {
-    RbvhLeaf leaves[];
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer RbvhHeightfieldsRef {
+    RbvhHeightfield heightfields[];
 };
 layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer RbvhAtlasRef {
     uint texels[];
 };
-#define RBVH_LEAF(i) RbvhLeavesRef(RBVH_LEAVES_ADDRESS).leaves[i]
+#define RBVH_HEIGHTFIELD(i) RbvhHeightfieldsRef(RBVH_HEIGHTFIELDS_ADDRESS).heightfields[i]
 #define RBVH_ATLAS(i) RbvhAtlasRef(RBVH_ATLAS_ADDRESS).texels[i]
 #else
-layout(std430, set = RBVH_BVH_SET, binding = RBVH_LEAVES_BINDING) readonly buffer RbvhLeaves {
-    RbvhLeaf rbvh_leaves[];
+layout(std430, set = RBVH_BVH_SET, binding = RBVH_HEIGHTFIELDS_BINDING) readonly buffer RbvhHeightfields {
+    RbvhHeightfield rbvh_heightfields[];
 };
 layout(std430, set = RBVH_BVH_SET, binding = RBVH_ATLAS_BINDING) readonly buffer RbvhAtlas {
     uint rbvh_atlas[];
 };
-#define RBVH_LEAF(i) rbvh_leaves[i]
+#define RBVH_HEIGHTFIELD(i) rbvh_heightfields[i]
 #define RBVH_ATLAS(i) rbvh_atlas[i]
 #endif
 #define RBVH_ATLAS_WORD(i) RBVH_ATLAS(i)
@@ -84,7 +94,7 @@ layout(std430, set = RBVH_BVH_SET, binding = RBVH_ATLAS_BINDING) readonly buffer
 struct RbvhSizes {
     uint node_count;
     uint tri_count;
-    uint leaf_count;
+    uint heightfield_count;
     uint atlas_pitch;  // texels per atlas row: a power of two (the march skips leaves otherwise)
     uint atlas_len;
     uint atlas_wide_len;  // texels before the narrow band (atlas.glsl)
@@ -122,7 +132,7 @@ bool rbvh_is_hole(uint texel) {
 
 // The height code of sample (i, j) of `leaf`'s tile: the walk needs no normals (a hit's are read
 // once the ray is done, rbvh_normal_texel), so that a texel of the narrow band is one read.
-uint rbvh_texel(RbvhLeaf leaf, RbvhSizes sz, int i, int j) {
+uint rbvh_texel(RbvhHeightfield leaf, RbvhSizes sz, int i, int j) {
     uint index = leaf.atlas_base + uint(j) * sz.atlas_pitch + uint(i);
     return rbvh_atlas_code(index, sz.atlas_len, sz.atlas_wide_len, RBVH_HEIGHT_ONLY);
 }
@@ -146,7 +156,7 @@ struct RbvhFrameRay {
 
 // `ray` over [tmin, t_closest) in `leaf`'s frame (step 1, march/walk.rs): each coordinate summed in
 // the host's order.
-RbvhFrameRay rbvh_frame_ray(RbvhLeaf leaf, Ray ray, float t_closest) {
+RbvhFrameRay rbvh_frame_ray(RbvhHeightfield leaf, Ray ray, float t_closest) {
     precise vec3 rel = ray.origin - leaf.origin;
     precise vec3 ru = rel * leaf.axis_u;
     precise vec3 rv = rel * leaf.axis_v;
@@ -198,7 +208,7 @@ bool rbvh_cell_full(RbvhCell cell) {
 }
 
 // `cell` with the codes of its corners read from `leaf`'s tile.
-void rbvh_read_corners(RbvhLeaf leaf, RbvhSizes sz, inout RbvhCell cell) {
+void rbvh_read_corners(RbvhHeightfield leaf, RbvhSizes sz, inout RbvhCell cell) {
     cell.c00_c10 = rbvh_texel(leaf, sz, cell.i, cell.j) | rbvh_texel(leaf, sz, cell.i + 1, cell.j) << 16;
     cell.c01_c11 = rbvh_texel(leaf, sz, cell.i, cell.j + 1) | rbvh_texel(leaf, sz, cell.i + 1, cell.j + 1) << 16;
 }
@@ -208,7 +218,7 @@ void rbvh_read_corners(RbvhLeaf leaf, RbvhSizes sz, inout RbvhCell cell) {
 // [t_in, t_out] within their height range (with the walk's slack). Written without local
 // arrays: dynamically indexed arrays become per-lane memory on SIMD implementations such as
 // lavapipe.
-bool rbvh_cell_candidate(RbvhLeaf leaf, RbvhSizes sz, RbvhFrameRay fr, float slack, inout RbvhCell cell) {
+bool rbvh_cell_candidate(RbvhHeightfield leaf, RbvhSizes sz, RbvhFrameRay fr, float slack, inout RbvhCell cell) {
     rbvh_read_corners(leaf, sz, cell);
     bool v00 = !rbvh_is_hole(rbvh_c00(cell));
     bool v10 = !rbvh_is_hole(rbvh_c10(cell));
@@ -230,7 +240,7 @@ bool rbvh_cell_candidate(RbvhLeaf leaf, RbvhSizes sz, RbvhFrameRay fr, float sla
 
 // Corner `q` of `cell` in the frame (0: c00, 1: c10, 2: c01, 3: c11), its height from its code,
 // as the march places samples, at i + 1/2: made one at a time where used.
-vec3 rbvh_cell_corner(RbvhLeaf leaf, RbvhCell cell, uint q) {
+vec3 rbvh_cell_corner(RbvhHeightfield leaf, RbvhCell cell, uint q) {
     uint code = ((q & 2u) != 0u ? cell.c01_c11 : cell.c00_c10) >> ((q & 1u) << 4) & 0xFFFFu;
     precise float h = float(code) * leaf.h_scale;
     return vec3(float(cell.i + int(q & 1u)) + 0.5, float(cell.j + int(q >> 1)) + 0.5, h);
@@ -250,7 +260,7 @@ uvec3 rbvh_first_triangle(RbvhCell cell) {
 // Step 4 (march/cell.rs), its costly half: the cell's two (or one) triangles; returns t (< 0 on a
 // miss) and, on a hit, which of them was hit (`tri`: 0 the first, 1 the second; see
 // rbvh_cell_facet). `cut` is set when the device ended the loop early (see traverse.glsl).
-float rbvh_cell_triangles(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, out int tri, inout bool cut) {
+float rbvh_cell_triangles(RbvhHeightfield leaf, RbvhFrameRay fr, RbvhCell cell, out int tri, inout bool cut) {
     uvec3 first = rbvh_first_triangle(cell);
     RbvhShear shear = rbvh_shear(Ray(fr.o, fr.tmin, fr.d, fr.tmax));
     vec3 a = rbvh_sheared(shear, rbvh_cell_corner(leaf, cell, first.x));
@@ -291,7 +301,7 @@ float rbvh_cell_triangles(RbvhLeaf leaf, RbvhFrameRay fr, RbvhCell cell, out int
 
 // The frame-space normal of triangle `tri` of `cell` (rbvh_cell_triangles): (b - a) x (c - a)
 // of its frame-space corners, for height-only RBVHs (facet_normal in march/normal.rs).
-vec3 rbvh_cell_facet(RbvhLeaf leaf, RbvhCell cell, int tri) {
+vec3 rbvh_cell_facet(RbvhHeightfield leaf, RbvhCell cell, int tri) {
     uvec3 first = rbvh_first_triangle(cell);
     vec3 a = rbvh_cell_corner(leaf, cell, first.x);
     vec3 b = rbvh_cell_corner(leaf, cell, tri == 0 ? first.y : 3u);
@@ -307,7 +317,7 @@ vec3 rbvh_cell_facet(RbvhLeaf leaf, RbvhCell cell, int tri) {
 // an edge of two samples taken from the surface (even codes: Texel::is_sampled); from such a
 // sample to an extrapolated one, `full` at the sampled end tapering to nothing half-way; none
 // under two extrapolated ones (`uu` = |axis_u|^2, so that no square root is needed).
-bool rbvh_skirt_at(RbvhLeaf leaf, RbvhFrameRay fr, float slack, float uu, uint ca, uint cb, float f, float full,
+bool rbvh_skirt_at(RbvhHeightfield leaf, RbvhFrameRay fr, float slack, float uu, uint ca, uint cb, float f, float full,
                    float t) {
     bool sa = (ca & 1u) == 0u;
     bool sb = (cb & 1u) == 0u;
@@ -329,7 +339,7 @@ bool rbvh_skirt_at(RbvhLeaf leaf, RbvhFrameRay fr, float slack, float uu, uint c
 // cell with fewer than four samples or through the tile's side, across its edge
 // on `axis` (0: an s boundary, 1: a t boundary) stepping `step` along it, when both samples of
 // that edge are present: t_in on a hit, else -1.
-float rbvh_skirt(RbvhLeaf leaf, RbvhFrameRay fr, float slack, float uu, RbvhCell cell, int axis, int step) {
+float rbvh_skirt(RbvhHeightfield leaf, RbvhFrameRay fr, float slack, float uu, RbvhCell cell, int axis, int step) {
     bool across_s = axis == 0;
     uint ca = across_s ? (step > 0 ? rbvh_c00(cell) : rbvh_c10(cell)) : (step > 0 ? rbvh_c00(cell) : rbvh_c01(cell));
     uint cb = across_s ? (step > 0 ? rbvh_c01(cell) : rbvh_c11(cell)) : (step > 0 ? rbvh_c10(cell) : rbvh_c11(cell));
@@ -345,7 +355,7 @@ float rbvh_skirt(RbvhLeaf leaf, RbvhFrameRay fr, float slack, float uu, RbvhCell
 // (diagonal_skirt in march/skirt.rs; MARCH_DIAGONAL_SKIRT_TEXELS deep): where the ray crosses the
 // diagonal that faces the hole, within [t_in, t_out], from the hole's side. That t on a hit,
 // else -1.
-float rbvh_diagonal_skirt(RbvhLeaf leaf, RbvhFrameRay fr, float slack, float uu, RbvhCell cell) {
+float rbvh_diagonal_skirt(RbvhHeightfield leaf, RbvhFrameRay fr, float slack, float uu, RbvhCell cell) {
     bool h00 = rbvh_is_hole(rbvh_c00(cell));
     bool h01 = rbvh_is_hole(rbvh_c01(cell));
     bool h11 = rbvh_is_hole(rbvh_c11(cell));
@@ -437,8 +447,8 @@ int rbvh_block_exit(int c, uint a, int step, int last) {
 // below by less may hold a skirt hit; skirt_h has a margin for the square root's rounding): then
 // none of its cells can be hit (Blocks's jump in march/blocks.rs). An empty block's range is
 // inverted, and every ray passes it.
-bool rbvh_block_clear(RbvhLeaf leaf, RbvhSizes sz, uint block, float o_h, float d_h, float t_a, float t_b, float slack,
-                      float uu) {
+bool rbvh_block_clear(RbvhHeightfield leaf, RbvhSizes sz, uint block, float o_h, float d_h, float t_a, float t_b,
+                      float slack, float uu) {
     uint range = RBVH_ATLAS(rbvh_texel_words(sz) + block);
     uint code_lo = range & 0xFFFFu;
     uint code_hi = range >> 16;
@@ -454,7 +464,7 @@ bool rbvh_block_clear(RbvhLeaf leaf, RbvhSizes sz, uint block, float o_h, float 
 // cell's skirts; the others need not leave the walk's inner loop. A hole's code is the largest,
 // so it takes no part in the highest. Each bound has a quantum beyond the skirt's own slack,
 // against the rounding of the edge's height there.
-bool rbvh_rim_reach(RbvhLeaf leaf, RbvhCell cell, float o_h, float d_h, float slack, float uu) {
+bool rbvh_rim_reach(RbvhHeightfield leaf, RbvhCell cell, float o_h, float d_h, float slack, float uu) {
     uint code_lo = min(min(rbvh_c00(cell), rbvh_c10(cell)), min(rbvh_c01(cell), rbvh_c11(cell)));
     uint code_hi = max(max(rbvh_is_hole(rbvh_c00(cell)) ? 0u : rbvh_c00(cell),
                            rbvh_is_hole(rbvh_c10(cell)) ? 0u : rbvh_c10(cell)),
@@ -533,7 +543,7 @@ RbvhCell rbvh_walk_cell(RbvhGridWalk w, uint dirs, float t1) {
 // reader and the upload refuse any other; it spares divisions: SIMD implementations such as
 // lavapipe run both sides of a branch, and a vector division there is eight scalar ones), no
 // wrap across atlas rows (the block jumps count on it), and its last texel in the atlas.
-bool rbvh_tile_fits(RbvhLeaf leaf, RbvhSizes sz) {
+bool rbvh_tile_fits(RbvhHeightfield leaf, RbvhSizes sz) {
     bool pitch = sz.atlas_pitch != 0u && (sz.atlas_pitch & (sz.atlas_pitch - 1u)) == 0u;
     bool sides = leaf.res_u >= 2u && leaf.res_v >= 2u && leaf.res_u <= sz.atlas_pitch;
     bool row = (leaf.atlas_base & (sz.atlas_pitch - 1u)) + leaf.res_u <= sz.atlas_pitch;
@@ -555,9 +565,9 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
     cells = 0u;
     normal_cell = uvec2(0u);
     float t_hit = -1.0;
-    RbvhLeaf leaf = RbvhLeaf(vec3(0.0), 0u, vec3(0.0), 0u, vec3(0.0), 0u, vec3(0.0), 0.0);
-    if (li < sz.leaf_count) {
-        leaf = RBVH_LEAF(li);
+    RbvhHeightfield leaf = RbvhHeightfield(vec3(0.0), 0u, vec3(0.0), 0u, vec3(0.0), 0u, vec3(0.0), 0.0);
+    if (li < sz.heightfield_count) {
+        leaf = RBVH_HEIGHTFIELD(li);
     }
     // 1. Frame.
     RbvhFrameRay fr = rbvh_frame_ray(leaf, ray, t_closest);
@@ -572,7 +582,8 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
                              float(leaf.res_v) - 0.5 + RBVH_MARCH_EDGE_PAD, h_top + slack);
     float t0 = 0.0;
     bool box = rbvh_intersect_box(bmin, bmax, o, inv, fr.tmin, fr.tmax, t0);
-    if (li < sz.leaf_count && rbvh_tile_fits(leaf, sz) && rbvh_ray_valid(Ray(fr.o, fr.tmin, fr.d, fr.tmax)) && box) {
+    if (li < sz.heightfield_count && rbvh_tile_fits(leaf, sz) && rbvh_ray_valid(Ray(fr.o, fr.tmin, fr.d, fr.tmax)) &&
+        box) {
         RBVH_COUNT_ADD(walks, 1u);
         uint shift = uint(findLSB(sz.atlas_pitch));
         uint rows = sz.atlas_len >> shift;
@@ -769,7 +780,7 @@ uint rbvh_node_count(RbvhLeafHook leaves) {
 // One round per marched or tested leaf (a tree has at most one leaf more than it has inner nodes;
 // with level of detail, chosen nodes replace subtrees), plus the first.
 uint rbvh_round_bound(RbvhLeafHook leaves) {
-    return leaves.sz.node_count + leaves.sz.leaf_count + 1u;
+    return leaves.sz.node_count + leaves.sz.heightfield_count + 1u;
 }
 
 bool rbvh_is_leaf(RbvhLeafHook leaves, uint reference) {
@@ -799,7 +810,7 @@ bool rbvh_keep_march(inout RbvhLeafHook leaves, float t, uint walked, uint id, u
 bool rbvh_test(inout RbvhLeafHook leaves, Ray ray, bool any_hit, uint reference, uint count,
                inout float t_closest, inout uint steps, inout bool cut) {
     bool hit = false;
-    if (count != RBVH_HEIGHTFIELD_COUNT) {
+    if (!rbvh_is_heightfield(count)) {
         uint first = reference & ~RBVH_LEAF_BIT;
         // The shear is made per leaf rather than kept across the loops: see RbvhFrameRay.
         hit = rbvh_test_triangles(rbvh_shear(ray), ray, any_hit, first,
@@ -826,7 +837,7 @@ bool rbvh_test(inout RbvhLeafHook leaves, Ray ray, bool any_hit, uint reference,
 // of the cell triangle hit, made from the cell's texels read again (facet_normal in march/normal.rs). Made
 // once the ray is done, so that neither the walk nor the traversal carries it.
 vec3 rbvh_height_field_facet(RbvhSizes sz, uint li, uint k00, uint kind, Ray ray, float t) {
-    RbvhLeaf leaf = RBVH_LEAF(li);
+    RbvhHeightfield leaf = RBVH_HEIGHTFIELD(li);
     uint rel = k00 - leaf.atlas_base;
     int i = int(rel & (sz.atlas_pitch - 1u));
     int j = int(rel >> uint(findLSB(sz.atlas_pitch)));

@@ -1,8 +1,11 @@
 // The body of trace_exact.comp and trace_exact_bda.comp (which defines RBVH_DEVICE_ADDRESS): one
-// invocation per ray through the exact BVH. Bindings: nodes and triangles (0, 1; read through the
-// device addresses in the push constants instead in the _bda twin), rays, hits, status, counters (2-5).
+// invocation per ray through the exact BVH. Bindings (bindings.glsl): nodes and triangles (read
+// through the device addresses in the push constants instead in the _bda twin), rays, hits,
+// status, counters.
 #ifndef RBVH_TRACE_EXACT_MAIN_GLSL
 #define RBVH_TRACE_EXACT_MAIN_GLSL
+
+#include "bindings.glsl"
 
 layout(local_size_x = 64) in;
 
@@ -13,8 +16,6 @@ layout(constant_id = 0) const bool rbvh_count = false;
 
 #include "trace_params.glsl"
 #include "bvh.glsl"
-
-#define RBVH_TRACE_IO_BINDING 2
 #include "trace_io.glsl"
 
 void main() {

@@ -1,20 +1,20 @@
-// The per-trace buffers of every trace shader, at four bindings from RBVH_TRACE_IO_BINDING (which
-// the includer defines: right after the structure's own arrays): rays, hits, the count of rays
-// whose traversal overflowed, and per-ray counters (RbvhCounters, 8 words a ray; written only by the
-// counting specialization, RBVH_COUNT, else the binding may hold a 4-byte dummy).
+// The per-trace buffers of every trace shader, at the bindings bindings.glsl gives them (which the
+// includer includes): rays, hits, the count of rays whose traversal overflowed, and per-ray
+// counters (RbvhCounters, 8 words a ray; written only by the counting specialization, RBVH_COUNT,
+// else the binding may hold a 4-byte dummy).
 #ifndef RBVH_TRACE_IO_GLSL
 #define RBVH_TRACE_IO_GLSL
 
-layout(std430, set = 0, binding = RBVH_TRACE_IO_BINDING) readonly buffer Rays {
+layout(std430, set = 0, binding = RBVH_RAYS_BINDING) readonly buffer Rays {
     Ray rays[];
 };
-layout(std430, set = 0, binding = RBVH_TRACE_IO_BINDING + 1) writeonly buffer Hits {
+layout(std430, set = 0, binding = RBVH_HITS_BINDING) writeonly buffer Hits {
     Hit hits[];
 };
-layout(std430, set = 0, binding = RBVH_TRACE_IO_BINDING + 2) buffer Status {
+layout(std430, set = 0, binding = RBVH_STATUS_BINDING) buffer Status {
     uint overflow_rays;
 };
-layout(std430, set = 0, binding = RBVH_TRACE_IO_BINDING + 3) writeonly buffer Counters {
+layout(std430, set = 0, binding = RBVH_COUNTERS_BINDING) writeonly buffer Counters {
     RbvhCounters counters_out[];
 };
 

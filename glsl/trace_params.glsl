@@ -1,7 +1,7 @@
 // The push constants of every trace shader (src/gpu/tracer.rs, TraceParams; tests/layout.rs
 // checks that both sides agree). With RBVH_DEVICE_ADDRESS it also names, for the headers, where
-// each structure array lives: `addresses` in binding order — nodes, triangles, leaves, atlas, LOD
-// records, LOD columns (the exact BVH uses the first two).
+// each structure array lives: `addresses` in binding order — nodes, triangles, height fields,
+// atlas, LOD records, LOD columns (the exact BVH uses the first two).
 #ifndef RBVH_TRACE_PARAMS_GLSL
 #define RBVH_TRACE_PARAMS_GLSL
 
@@ -11,7 +11,7 @@ layout(push_constant) uniform Params {
     uint flags;       // bit 0: any hit
     uint node_count;
     uint tri_count;
-    uint leaf_count;
+    uint heightfield_count;
     uint atlas_pitch;
     uint atlas_len;
     uint atlas_wide_len;  // atlas texels before the narrow band (atlas.glsl)
@@ -24,7 +24,7 @@ layout(push_constant) uniform Params {
 #ifdef RBVH_DEVICE_ADDRESS
 #define RBVH_BVH_NODES_ADDRESS pc.addresses[0]
 #define RBVH_BVH_TRIS_ADDRESS pc.addresses[1]
-#define RBVH_LEAVES_ADDRESS pc.addresses[2]
+#define RBVH_HEIGHTFIELDS_ADDRESS pc.addresses[2]
 #define RBVH_ATLAS_ADDRESS pc.addresses[3]
 #define RBVH_LODS_ADDRESS pc.addresses[4]
 #define RBVH_LOD_TEXELS_ADDRESS pc.addresses[5]

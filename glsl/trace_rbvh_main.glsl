@@ -1,10 +1,12 @@
 // The body of trace_rbvh.comp and trace_rbvh_lod.comp (which defines RBVH_LOD), and of their
-// *_bda twins (which define RBVH_DEVICE_ADDRESS): one invocation per ray. Bindings: the RBVH's four
-// arrays (0-3), rays, hits, status, counters (4-7); with RBVH_LOD also the LOD records and columns
-// (8, 9; see lod.glsl) and the per-ray cones (10). The *_bda twins read the structure's arrays
-// (0-3, 8, 9) through the device addresses in the push constants instead.
+// *_bda twins (which define RBVH_DEVICE_ADDRESS): one invocation per ray. Bindings (bindings.glsl):
+// the RBVH's four arrays, rays, hits, status, counters; with RBVH_LOD also the LOD records and
+// columns (see lod.glsl) and the per-ray cones. The *_bda twins read the structure's arrays (the
+// RBVH's four, the LOD's two) through the device addresses in the push constants instead.
 #ifndef RBVH_TRACE_RBVH_MAIN_GLSL
 #define RBVH_TRACE_RBVH_MAIN_GLSL
+
+#include "bindings.glsl"
 
 layout(local_size_x = 64) in;
 
@@ -26,11 +28,10 @@ layout(constant_id = 2) const bool rbvh_height_only = false;
 #include "lod.glsl"
 #endif
 
-#define RBVH_TRACE_IO_BINDING 4
 #include "trace_io.glsl"
 #ifdef RBVH_LOD
 // Per-ray cones (width, spread): see RayCone in src/lod/cone.rs.
-layout(std430, set = 0, binding = 10) readonly buffer Cones {
+layout(std430, set = 0, binding = RBVH_CONES_BINDING) readonly buffer Cones {
     vec2 cones[];
 };
 #endif
@@ -40,7 +41,7 @@ void main() {
     if (i >= pc.ray_count) {
         return;
     }
-    RbvhSizes sz = RbvhSizes(pc.node_count, pc.tri_count, pc.leaf_count, pc.atlas_pitch, pc.atlas_len,
+    RbvhSizes sz = RbvhSizes(pc.node_count, pc.tri_count, pc.heightfield_count, pc.atlas_pitch, pc.atlas_len,
                              pc.atlas_wide_len);
     uint steps;
     bool overflow;

@@ -106,7 +106,7 @@ pub enum Array {
     /// Triangles of triangle leaves (`GpuTriangle`, 48 bytes each).
     Triangles = 1,
     /// Height-field leaf records (`GpuHeightfield`, 64 bytes each).
-    Leaves = 2,
+    Heightfields = 2,
     /// The atlas words (`Atlas::device_words`): texels, then the 8×8 blocks' height ranges.
     Atlas = 3,
     /// Level-of-detail records (`GpuLod`, 48 bytes each).
@@ -120,7 +120,7 @@ impl Array {
     pub const ALL: [Array; 6] = [
         Array::Nodes,
         Array::Triangles,
-        Array::Leaves,
+        Array::Heightfields,
         Array::Atlas,
         Array::LodRecords,
         Array::LodColumns,

@@ -47,6 +47,11 @@ impl Kind {
 /// What to build: the kind of structure with its parameters. Building the exact BVH takes none
 /// of an RBVH's, and an RBVH's levels of detail are made from the RBVH they belong to, so each
 /// kind holds exactly what it is built from.
+///
+/// A recipe says how a mesh is built, not where it is placed. Rates per object live in the
+/// parameters ([`RbvhParams::object_rate`] sizes each object's texel by the object); a scene of
+/// instances (one mesh placed many times) takes one recipe for the bottom level of each mesh,
+/// with the top level over the placements beside it, so this type needs no variant for them.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Recipe {
     /// The exact triangle BVH, built by binned SAH ([`BuildParams::DEFAULT`]).

@@ -305,10 +305,10 @@ fn sample_all_samples_what_the_presets_trace_exactly() {
         let r = rbvh::rbvh::Rbvh::load(&file).unwrap();
         assert_eq!(r.params.exact_when_cheaper, !sampled, "{label}");
         assert_eq!(
-            !r.leaves.is_empty(),
+            !r.heightfields.is_empty(),
             sampled,
             "{label}: {} leaves",
-            r.leaves.len()
+            r.heightfields.len()
         );
     }
 }

@@ -255,7 +255,7 @@ fn the_twins_reads_match_their_counters() {
         assert_eq!(visits(&reads), c.nodes as usize);
         assert!(leaf_rereads(&reads) <= (c.leaves + c.triangle_leaves) as usize);
         rereads[0] += leaf_rereads(&reads);
-        assert_eq!(count(&reads, Array::Leaves), c.leaves as usize);
+        assert_eq!(count(&reads, Array::Heightfields), c.leaves as usize);
         let triangle_hit = hit.is_hit() && hit.id & rbvh::bvh::LEAF_BIT == 0;
         assert_eq!(
             count(&reads, Array::Triangles),

@@ -190,7 +190,7 @@ fn an_atlas_over_the_storage_buffer_range_is_traced_and_painted_through_device_a
     let beyond = gpu
         .iter()
         .filter(|h| {
-            let leaf = &r.leaves[(h.id & !LEAF_BIT) as usize];
+            let leaf = &r.heightfields[(h.id & !LEAF_BIT) as usize];
             u64::from(leaf.atlas_base) * 4 >= range
         })
         .count();

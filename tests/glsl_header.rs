@@ -16,7 +16,7 @@ layout(local_size_x = 32) in;
 #define RBVH_BVH_SET 2
 #define RBVH_BVH_NODES_BINDING 5
 #define RBVH_BVH_TRIS_BINDING 6
-#define RBVH_LEAVES_BINDING 7
+#define RBVH_HEIGHTFIELDS_BINDING 7
 #define RBVH_ATLAS_BINDING 8
 #include "rbvh.glsl"
 
@@ -69,7 +69,7 @@ fn header_compiles_in_a_foreign_shader_with_its_own_bindings() {
     for (block, binding) in [
         ("RbvhBvhNodes", 5),
         ("RbvhBvhTriangles", 6),
-        ("RbvhLeaves", 7),
+        ("RbvhHeightfields", 7),
         ("RbvhAtlas", 8),
     ] {
         assert_eq!(
@@ -124,6 +124,52 @@ fn lod_header_compiles_in_a_foreign_shader_with_its_own_bindings() {
     }
 }
 
+/// An engine shader that picks no bindings, tracing with level of detail: every buffer of the
+/// headers at its default.
+const FOREIGN_DEFAULTS: &str = r#"
+#version 460
+#extension GL_GOOGLE_include_directive : require
+layout(local_size_x = 32) in;
+
+#include "lod.glsl"
+
+layout(std430, set = 1, binding = 0) writeonly buffer EngineDepth { float depth[]; };
+layout(push_constant) uniform EnginePush { RbvhSizes sizes; RbvhLodSizes lod_sizes; float spread; } push;
+
+void main() {
+    Ray ray = Ray(vec3(gl_GlobalInvocationID.x, 0.0, -10.0), 0.0, vec3(0.0, 0.0, 1.0), 1e30);
+    uint steps;
+    bool overflow;
+    Hit hit = rbvh_trace_rbvh_lod(ray, vec2(0.0, push.spread), false, push.sizes, push.lod_sizes,
+                                  steps, overflow);
+    depth[gl_GlobalInvocationID.x] = overflow ? -1.0 : hit.t;
+}
+"#;
+
+/// The defaults of `bvh.glsl`, `rbvh.glsl` and `lod.glsl` are the bindings of the library's own
+/// trace shaders (`glsl/bindings.glsl`, which those include first): the headers keep their own, so
+/// that an engine needs no other file, and this keeps the two one table.
+#[test]
+fn header_defaults_are_the_library_bindings() {
+    use rbvh::gpu::bindings;
+    let r = spirv::reflect(&compile(FOREIGN_DEFAULTS).unwrap());
+    for (block, binding) in [
+        ("RbvhBvhNodes", bindings::BVH_NODES),
+        ("RbvhBvhTriangles", bindings::BVH_TRIS),
+        ("RbvhHeightfields", bindings::HEIGHTFIELDS),
+        ("RbvhAtlas", bindings::ATLAS),
+        ("RbvhLods", bindings::LODS),
+        ("RbvhLodTexels", bindings::LOD_TEXELS),
+    ] {
+        assert_eq!(
+            r.bindings.get(block),
+            Some(&(0, binding)),
+            "{block}: {:?}",
+            r.bindings
+        );
+    }
+}
+
 /// The engine shader reading the RBVH and its LOD through buffer device addresses it passes in its
 /// own push constants: no RBVH binding is left in the SPIR-V.
 const FOREIGN_ADDRESSED: &str = r#"
@@ -135,7 +181,7 @@ layout(local_size_x = 32) in;
 
 layout(push_constant) uniform EnginePush {
     uvec2 rbvh_arrays[6];
-    uint node_count, tri_count, leaf_count, atlas_pitch, atlas_len, atlas_wide_len, lod_nodes,
+    uint node_count, tri_count, heightfield_count, atlas_pitch, atlas_len, atlas_wide_len, lod_nodes,
         lod_texels;
     float spread;
 } push;
@@ -143,7 +189,7 @@ layout(push_constant) uniform EnginePush {
 #define RBVH_DEVICE_ADDRESS 1
 #define RBVH_BVH_NODES_ADDRESS push.rbvh_arrays[0]
 #define RBVH_BVH_TRIS_ADDRESS push.rbvh_arrays[1]
-#define RBVH_LEAVES_ADDRESS push.rbvh_arrays[2]
+#define RBVH_HEIGHTFIELDS_ADDRESS push.rbvh_arrays[2]
 #define RBVH_ATLAS_ADDRESS push.rbvh_arrays[3]
 #define RBVH_LODS_ADDRESS push.rbvh_arrays[4]
 #define RBVH_LOD_TEXELS_ADDRESS push.rbvh_arrays[5]
@@ -153,7 +199,7 @@ layout(std430, set = 0, binding = 0) writeonly buffer EngineDepth { float depth[
 
 void main() {
     Ray ray = Ray(vec3(gl_GlobalInvocationID.x, 0.0, -10.0), 0.0, vec3(0.0, 0.0, 1.0), 1e30);
-    RbvhSizes sz = RbvhSizes(push.node_count, push.tri_count, push.leaf_count, push.atlas_pitch,
+    RbvhSizes sz = RbvhSizes(push.node_count, push.tri_count, push.heightfield_count, push.atlas_pitch,
                              push.atlas_len, push.atlas_wide_len);
     uint steps;
     bool overflow;

@@ -138,7 +138,7 @@ fn rbvh_leaf_layout_matches() {
     let r = spirv::reflect(&shaders::words(shaders::TRACE_RBVH).unwrap());
     check(
         &r,
-        "RbvhLeaf",
+        "RbvhHeightfield",
         size_of::<L>(),
         &[
             ("origin", offset_of!(L, origin)),
@@ -171,7 +171,7 @@ fn push_constants_match_in_every_trace_shader() {
         ("flags", offset_of!(P, flags)),
         ("node_count", offset_of!(P, node_count)),
         ("tri_count", offset_of!(P, tri_count)),
-        ("leaf_count", offset_of!(P, leaf_count)),
+        ("heightfield_count", offset_of!(P, heightfield_count)),
         ("atlas_pitch", offset_of!(P, atlas_pitch)),
         ("atlas_len", offset_of!(P, atlas_len)),
         ("atlas_wide_len", offset_of!(P, atlas_wide_len)),

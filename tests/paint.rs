@@ -25,7 +25,7 @@ fn cube() -> Rbvh {
 /// Every surface texel: (atlas index, world sample point, leaf index, stored normal).
 fn surface_texels(r: &Rbvh) -> Vec<(usize, Vec3, usize, Vec3)> {
     let mut out = Vec::new();
-    for (l, leaf) in r.leaves.iter().enumerate() {
+    for (l, leaf) in r.heightfields.iter().enumerate() {
         for j in 0..leaf.res_v {
             for i in 0..leaf.res_u {
                 let k = (leaf.atlas_base + j * r.atlas.pitch + i) as usize;
@@ -65,7 +65,7 @@ fn a_stroke_on_a_cube_edge_paints_both_faces_and_nothing_else() {
     let mut painter = Painter::new(&ctx, &r).unwrap();
     let stats = painter.paint(&brushes).unwrap();
     assert!(
-        stats.leaves >= 2 && (stats.leaves as usize) < r.leaves.len(),
+        stats.leaves >= 2 && (stats.leaves as usize) < r.heightfields.len(),
         "{stats:?}"
     );
     let gpu = painter.colours().unwrap();

@@ -75,7 +75,7 @@ fn sphere_from_points_lies_on_the_sphere_at_every_level() {
             .count();
         println!(
             "Q{level}: {} leaves, texel {texel:.2e}, radial p99 {p99:.2e} max {worst:.2e}, {misses} misses, {mismatches} of {} random rays disagree with exact",
-            r.leaves.len(),
+            r.heightfields.len(),
             rays.len()
         );
         common::ensure(misses == 0, || format!("Q{level}: {misses} rays missed"))?;
@@ -289,7 +289,7 @@ fn a_thin_sheet_scanned_from_both_sides_is_two_height_fields() {
     common::every_case([0, 2, 4], |level| {
         let single = Rbvh::build(&one, &q(level)).map_err(|e| e.to_string())?;
         let r = Rbvh::build(&two, &q(level)).map_err(|e| e.to_string())?;
-        let (leaves, alone) = (r.leaves.len(), single.leaves.len());
+        let (leaves, alone) = (r.heightfields.len(), single.heightfields.len());
         common::ensure(2 * leaves <= 5 * alone, || {
             format!("Q{level}: {leaves} leaves for both sides, {alone} for one")
         })?;
@@ -332,9 +332,13 @@ fn exact_when_cheaper_changes_nothing_for_points() {
     assert!(with.params.exact_when_cheaper);
     assert!(with.triangles.is_empty() && without.triangles.is_empty());
     assert_eq!(
-        (with.leaves.len(), with.atlas.texels.len(), with.nodes.len()),
         (
-            without.leaves.len(),
+            with.heightfields.len(),
+            with.atlas.texels.len(),
+            with.nodes.len()
+        ),
+        (
+            without.heightfields.len(),
             without.atlas.texels.len(),
             without.nodes.len()
         )

@@ -9,7 +9,7 @@ use glam::Vec3;
 use rbvh::bvh::Bvh;
 use rbvh::geom::Ray;
 use rbvh::progress::Quiet;
-use rbvh::rbvh::{Rbvh, RbvhParams, RbvhSource, Refinement, Subdivision, HEIGHTFIELD_COUNT};
+use rbvh::rbvh::{Child, Rbvh, RbvhParams, RbvhSource, Refinement, Subdivision};
 use rbvh::scene::Scene;
 
 /// Preset `level` with every triangle sampled: these tests referee the height fields on the
@@ -45,8 +45,8 @@ fn error_vs_exact(scene: &Scene, r: &Rbvh, rays: &[Ray]) -> (f64, f64, f64) {
 fn heightfield_leaf_count(r: &Rbvh) -> usize {
     r.nodes
         .iter()
-        .flat_map(|n| [n.a_count, n.b_count])
-        .filter(|&c| c == HEIGHTFIELD_COUNT)
+        .flat_map(|n| n.children())
+        .filter(|c| matches!(c.kind(), Child::Heightfield(_)))
         .count()
 }
 
@@ -59,16 +59,19 @@ fn plane_is_one_leaf_with_exact_heights() {
         ..q(2)
     };
     let r = Rbvh::build(&scene, &params).unwrap();
-    assert_eq!((r.leaves.len(), r.stats.triangle_leaves), (1, 0));
+    assert_eq!((r.heightfields.len(), r.stats.triangle_leaves), (1, 0));
     assert_eq!(heightfield_leaf_count(&r), 1);
     assert_eq!(
-        r.leaves[0].h_scale, 0.0,
+        r.heightfields[0].h_scale, 0.0,
         "a flat leaf needs no height range"
     );
     // With the default tile limit the plane is subdivided into tiles, still with no triangles.
     let tiled = Rbvh::build(&scene, &q(2)).unwrap();
-    assert!(tiled.leaves.len() > 1 && tiled.stats.triangle_leaves == 0);
-    assert!(tiled.leaves.iter().all(|l| l.res_u <= 64 && l.res_v <= 64));
+    assert!(tiled.heightfields.len() > 1 && tiled.stats.triangle_leaves == 0);
+    assert!(tiled
+        .heightfields
+        .iter()
+        .all(|l| l.res_u <= 64 && l.res_v <= 64));
     let mut rng = common::Rng::new(11);
     for r in [&r, &tiled] {
         for _ in 0..2000 {
@@ -98,10 +101,10 @@ fn sphere_leaves_respect_the_cone_and_height_error_bound() {
             panic!()
         };
         let r = Rbvh::build(&scene, &params).unwrap();
-        assert!(r.leaves.len() > 1);
+        assert!(r.heightfields.len() > 1);
         // Every stored normal lies within φ_max of its leaf's axis (plus the 8-bit encoding error).
         let cos = (max_angle_deg + 1.5).to_radians().cos();
-        for leaf in &r.leaves {
+        for leaf in &r.heightfields {
             let w = Vec3::from(leaf.axis_w);
             for j in 0..leaf.res_v {
                 for i in 0..leaf.res_u {
@@ -130,7 +133,7 @@ fn sphere_leaves_respect_the_cone_and_height_error_bound() {
         let (p99, worst) = (errors[errors.len() * 99 / 100], errors[errors.len() - 1]);
         println!(
             "Q{level}: {} leaves, radial error p99 {p99:.2e}, max {worst:.2e}, texel {:.2e}",
-            r.leaves.len(),
+            r.heightfields.len(),
             r.texel_size
         );
         assert!(
@@ -159,8 +162,8 @@ fn build_is_identical_for_any_thread_count() {
         };
         let (a, b) = (build(1), build(3));
         assert_eq!(
-            (&a.nodes, &a.leaves, &a.triangles),
-            (&b.nodes, &b.leaves, &b.triangles)
+            (&a.nodes, &a.heightfields, &a.triangles),
+            (&b.nodes, &b.heightfields, &b.triangles)
         );
         assert_eq!(a.atlas, b.atlas);
     }
@@ -431,9 +434,9 @@ fn a_mesh_coarser_than_its_texels_is_its_triangles_in_the_presets() {
         for level in 0..5 {
             let r = Rbvh::build(&scene, &RbvhParams::quality(level).unwrap()).unwrap();
             assert!(
-                r.leaves.is_empty() && r.atlas.texels.is_empty(),
+                r.heightfields.is_empty() && r.atlas.texels.is_empty(),
                 "{name} Q{level}: {} height fields",
-                r.leaves.len()
+                r.heightfields.len()
             );
             assert_eq!(r.triangles.len(), scene.triangle_count(), "{name} Q{level}");
             for ray in &rays {
@@ -451,9 +454,9 @@ fn a_mesh_coarser_than_its_texels_is_its_triangles_in_the_presets() {
     let blob = Scene::builtin("blob").unwrap();
     let r = Rbvh::build(&blob, &RbvhParams::quality(0).unwrap()).unwrap();
     assert!(
-        r.leaves.len() > 1,
+        r.heightfields.len() > 1,
         "the blob at Q0: {} height fields",
-        r.leaves.len()
+        r.heightfields.len()
     );
 }
 
@@ -482,7 +485,7 @@ fn degenerate_inputs() {
     let mut one = Scene::new("one");
     one.push_object("t", &[Vec3::ZERO, Vec3::X, Vec3::Y], &[[0, 1, 2]]);
     let r = Rbvh::build(&one, &q(2)).unwrap();
-    assert!(!r.leaves.is_empty() && r.stats.triangle_leaves == 0);
+    assert!(!r.heightfields.is_empty() && r.stats.triangle_leaves == 0);
     assert!((r.closest_hit(&ray).0.t - 5.0).abs() < 1e-4);
     // Zero-area triangles and duplicated vertices (same positions, different indices).
     let mut odd = Scene::new("odd");
@@ -539,7 +542,7 @@ fn parameters_out_of_range_and_huge_rates_are_errors() {
         },
     )
     .unwrap();
-    assert!(tiny.leaves.len() >= 2);
+    assert!(tiny.heightfields.len() >= 2);
     tiny.closest_hit(&ray);
     let coarse = Rbvh::build(
         &scene,
@@ -647,18 +650,18 @@ fn a_small_noisy_scan_is_judged_at_the_sampling_rate() {
             "Q{level}, texel {:.4}: paper's rule {} leaves, {} tree bytes, error (mean, max, \
              mismatch) {rule_error:?}; sampled {} leaves, {} tree bytes, {sampled_error:?}",
             sampled.texel_size,
-            by_rule.leaves.len(),
+            by_rule.heightfields.len(),
             by_rule.tree_bytes(),
-            sampled.leaves.len(),
+            sampled.heightfields.len(),
             sampled.tree_bytes(),
         );
         // Measured: 9× and 2.2× fewer leaves, 15× and 3.7× smaller trees (Q0, Q2); mean errors
         // 0.58× and 1.09× the paper's rule's, and no hit/miss mismatch with either.
         assert!(
-            2 * sampled.leaves.len() <= by_rule.leaves.len(),
+            2 * sampled.heightfields.len() <= by_rule.heightfields.len(),
             "Q{level}: {} leaves against {}",
-            sampled.leaves.len(),
-            by_rule.leaves.len()
+            sampled.heightfields.len(),
+            by_rule.heightfields.len()
         );
         assert!(3 * sampled.tree_bytes() <= by_rule.tree_bytes());
         assert!(
@@ -707,7 +710,7 @@ fn each_object_is_sampled_at_its_own_rate() {
     // A leaf's texel is its grid's step; the ball's leaves start near the ball (the ground's
     // tiles, 64 texels a side, have none of their corners there).
     let texels = |r: &Rbvh, on_ball: bool| -> Vec<f32> {
-        r.leaves
+        r.heightfields
             .iter()
             .filter(|l| ((Vec3::from(l.origin) - Vec3::Y).length() < 1.5) == on_ball)
             .map(|l| l.grid().step_u.length())
@@ -745,6 +748,6 @@ fn each_object_is_sampled_at_its_own_rate() {
         },
     )
     .unwrap();
-    assert_eq!(alone.leaves, as_before.leaves);
+    assert_eq!(alone.heightfields, as_before.heightfields);
     assert_eq!(alone.atlas, as_before.atlas);
 }

@@ -130,18 +130,18 @@ fn block_jumps_skip_many_cells_of_grazing_rays_and_change_no_hit() {
     }
 }
 
-/// A hand-made RBVH around `nodes`, `triangles`, `leaves` and `atlas`.
+/// A hand-made RBVH around `nodes`, `triangles`, `heightfields` and `atlas`.
 fn hand_made(
     nodes: Vec<rbvh::bvh::GpuNode>,
     triangles: Vec<rbvh::bvh::GpuTriangle>,
-    leaves: Vec<rbvh::rbvh::GpuHeightfield>,
+    heightfields: Vec<rbvh::rbvh::GpuHeightfield>,
     atlas: rbvh::rbvh::Atlas,
 ) -> Rbvh {
     Rbvh {
         params: RbvhParams::quality(2).unwrap(),
         nodes,
         triangles,
-        leaves,
+        heightfields,
         atlas,
         bounds: rbvh::geom::Aabb::from_points([glam::Vec3::splat(-10.0), glam::Vec3::splat(80.0)]),
         depth: 2,
@@ -161,7 +161,7 @@ fn one_leaf(
     atlas: rbvh::rbvh::Atlas,
     box_max: glam::Vec3,
 ) -> Rbvh {
-    use rbvh::bvh::{ChildRef, GpuNode, LEAF_BIT};
+    use rbvh::bvh::{ChildRef, GpuNode};
     let leaf = rbvh::rbvh::GpuHeightfield {
         origin: [-2.0, 1.0, -2.0],
         atlas_base: base,
@@ -172,11 +172,10 @@ fn one_leaf(
         axis_w: [0.0, 1.0, 0.0],
         h_scale,
     };
-    let child = ChildRef {
-        bounds: rbvh::geom::Aabb::from_points([glam::Vec3::new(-3.0, 0.0, -3.0), box_max]),
-        child: LEAF_BIT,
-        count: rbvh::rbvh::HEIGHTFIELD_COUNT,
-    };
+    let child = rbvh::rbvh::Child::Heightfield(0).with_bounds(rbvh::geom::Aabb::from_points([
+        glam::Vec3::new(-3.0, 0.0, -3.0),
+        box_max,
+    ]));
     hand_made(
         vec![GpuNode::new(child, ChildRef::ABSENT)],
         vec![],
@@ -474,8 +473,8 @@ fn height_only_texels_hit_the_same_and_report_the_facet_normal() {
             };
             let height = Arc::new(Rbvh::build(&scene, &params).unwrap());
             assert_eq!(
-                (&height.nodes, &height.leaves),
-                (&normals.nodes, &normals.leaves)
+                (&height.nodes, &height.heightfields),
+                (&normals.nodes, &normals.heightfields)
             );
             assert!(height.colours.is_none());
             assert!(height.atlas_bytes() < normals.atlas_bytes() * 3 / 4);

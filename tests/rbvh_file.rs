@@ -7,12 +7,12 @@ use std::ops::Range;
 use std::path::Path;
 
 use glam::Vec3;
-use rbvh::bvh::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT};
+use rbvh::bvh::{GpuNode, GpuTriangle, LEAF_BIT};
 use rbvh::geom::Aabb;
 use rbvh::rbvh::file::{section_table, REQUIRED};
 use rbvh::rbvh::{
-    Atlas, GpuHeightfield, Rbvh, RbvhParams, RbvhStats, Refinement, Subdivision, Texel,
-    TexelFormat, HEIGHTFIELD_COUNT,
+    Atlas, Child, GpuHeightfield, Rbvh, RbvhParams, RbvhStats, Refinement, Subdivision, Texel,
+    TexelFormat,
 };
 use rbvh::Error;
 
@@ -31,7 +31,7 @@ fn sample() -> Rbvh {
         axis_w: [0.0, 1.0, 0.0],
         h_scale: 1.0e-4,
     };
-    let leaves = vec![
+    let heightfields = vec![
         leaf([0.0, 0.0, 0.0], 0, 4, 4),
         leaf([5.0, -1.0, 0.5], 36, 3, 5),
     ];
@@ -56,23 +56,11 @@ fn sample() -> Rbvh {
         min: Vec3::splat(-1.0),
         max: Vec3::splat(6.0),
     };
-    let hf = |index| ChildRef {
-        bounds: unit,
-        child: LEAF_BIT | index,
-        count: HEIGHTFIELD_COUNT,
-    };
+    let hf = |index| Child::Heightfield(index).with_bounds(unit);
     let nodes = vec![
         GpuNode::new(
-            ChildRef {
-                bounds: unit,
-                child: 1,
-                count: 0,
-            },
-            ChildRef {
-                bounds: unit,
-                child: LEAF_BIT,
-                count: 2,
-            },
+            Child::Inner(1).with_bounds(unit),
+            Child::Triangles { first: 0, count: 2 }.with_bounds(unit),
         ),
         GpuNode::new(hf(0), hf(1)),
     ];
@@ -90,7 +78,7 @@ fn sample() -> Rbvh {
         },
         nodes,
         triangles,
-        leaves,
+        heightfields,
         atlas: Atlas {
             pitch: 8,
             rows: 9,
@@ -662,14 +650,18 @@ fn inconsistent_contents_are_rejected_with_the_reason() {
     let mut r = sample();
     r.nodes[0].a_count = 5;
     check(r, "inner node reference with count 5");
+    // An absent child's index is read by nothing, the device included: any index loads.
     let mut r = sample();
-    r.leaves[1].res_v = 6;
+    (r.nodes[0].b_child, r.nodes[0].b_count) = (LEAF_BIT | 1000, 0);
+    Rbvh::from_bytes(&r.to_bytes(), path).expect("an absent child with any index loads");
+    let mut r = sample();
+    r.heightfields[1].res_v = 6;
     check(r, "height-field leaf 1");
     let mut r = sample();
-    r.leaves[0].atlas_base = u32::MAX;
+    r.heightfields[0].atlas_base = u32::MAX;
     check(r, "does not fit");
     let mut r = sample();
-    r.leaves[0].axis_w[1] = f32::NAN;
+    r.heightfields[0].axis_w[1] = f32::NAN;
     check(r, "not finite");
     let mut r = sample();
     r.atlas.rows = 8;

@@ -537,7 +537,7 @@ fn height_field_colours_are_filtered_between_samples() {
             .collect(),
     );
     let (l, leaf) = r
-        .leaves
+        .heightfields
         .iter()
         .enumerate()
         .find(|(_, l)| l.res_u > 4 && l.res_v > 4)

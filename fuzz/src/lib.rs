@@ -279,7 +279,7 @@ fn check_upgrade(r: &Rbvh, data: &[u8], version: u32) {
         &saved[HEADER + 48 * nodes..],
         &data[old_header + old_node * nodes..],
     );
-    let texels_at = 48 * r.triangles.len() + 64 * r.leaves.len();
+    let texels_at = 48 * r.triangles.len() + 64 * r.heightfields.len();
     let texel_bytes = r.params.texels.bytes() as usize;
     let texels_end = texels_at + texel_bytes * r.atlas.texels.len();
     assert_eq!(

@@ -592,7 +592,7 @@ impl<'a> SceneBench<'a> {
             [
                 std::mem::size_of_val(r.nodes.as_slice()) as u64,
                 r.triangle_bytes(),
-                std::mem::size_of_val(r.leaves.as_slice()) as u64,
+                std::mem::size_of_val(r.heightfields.as_slice()) as u64,
                 r.atlas_bytes(),
                 lod_bytes[0],
                 lod_bytes[1],

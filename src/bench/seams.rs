@@ -215,7 +215,7 @@ impl Rbvh {
     pub fn seam_targets(&self) -> Vec<SeamTarget> {
         let mut out = Vec::new();
         let pitch = self.atlas.pitch as usize;
-        for leaf in &self.leaves {
+        for leaf in &self.heightfields {
             let (res_u, res_v) = (leaf.res_u as i64, leaf.res_v as i64);
             let grid = leaf.grid();
             let (du, dv, w) = (grid.step_u, grid.step_v, grid.axis_w);

@@ -118,7 +118,7 @@ fn ray_steps(
             }
             // A march reads its leaf's whole record; a height-only hit's facet reads parts of it
             // again once the ray is done, which is no march.
-            Array::Leaves if u64::from(read.bytes) == leaf_size => {
+            Array::Heightfields if u64::from(read.bytes) == leaf_size => {
                 let leaf = (read.offset / leaf_size) as u32;
                 let Some((walked, t)) = march(leaf) else {
                     continue;
@@ -210,18 +210,15 @@ fn leaf_boxes_holding(nodes: &[GpuNode], p: Vec3) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bvh::{ChildRef, LEAF_BIT};
+    use crate::bvh::ChildRef;
     use crate::geom::Aabb;
+    use crate::rbvh::Child;
 
     fn leaf(min: [f32; 3], max: [f32; 3], first: u32) -> ChildRef {
-        ChildRef {
-            bounds: Aabb {
-                min: Vec3::from(min),
-                max: Vec3::from(max),
-            },
-            child: LEAF_BIT | first,
-            count: 1,
-        }
+        Child::Triangles { first, count: 1 }.with_bounds(Aabb {
+            min: Vec3::from(min),
+            max: Vec3::from(max),
+        })
     }
 
     #[test]

@@ -140,7 +140,12 @@ impl GridWalk {
     /// The axis whose boundary the ray leaves the cell across: the nearer, `i`'s on a tie (a ray
     /// through a grid vertex steps `i` first).
     pub(crate) fn across(&self) -> usize {
-        usize::from(self.next[0] > self.next[1])
+        // `<=` as the GLSL twin writes it: a NaN (only in corrupt data) crosses `j` there too.
+        if self.next[0] <= self.next[1] {
+            0
+        } else {
+            1
+        }
     }
 
     /// Where the ray leaves the cell.
@@ -190,7 +195,7 @@ impl GridWalk {
     /// [`GridWalk::advance`]), the steps along the other axis before it, then the step into the
     /// edge row or column. Returns the axis the last step crossed, `None` if it took none.
     pub(crate) fn jump(&mut self, edge: [i64; 2], leave: [f32; 2]) -> Option<usize> {
-        let out = usize::from(leave[0] > leave[1]);
+        let out = if leave[0] <= leave[1] { 0 } else { 1 };
         let other = 1 - out;
         // A step along `other` before the one across the `out` side; equal times go to `i`.
         let before = |t: f32| {

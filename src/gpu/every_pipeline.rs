@@ -5,7 +5,7 @@
 
 use super::compiled::{variant_name, CompiledPipeline};
 use super::tracer::{make_pipeline, shader_name, shader_spirv, specialization};
-use super::{shaders, ComputePipeline, Context, PaintParams, Reach};
+use super::{bindings, painter, ComputePipeline, Context, PaintParams, Reach};
 use crate::rbvh::TexelFormat;
 use crate::structure::Kind;
 use crate::Result;
@@ -54,13 +54,10 @@ pub fn compile_every_pipeline(ctx: &Context) -> Result<Vec<CompiledPipeline>> {
                 }
             }
         }
-        let (paint, bindings): (&[u8], &[u32]) = match reach {
-            Reach::Bindings => (shaders::PAINT, &[0, 1, 2]),
-            Reach::DeviceAddresses => (shaders::PAINT_BDA, &[1]),
-        };
         let name = variant_name("paint", &[], reach);
         let push = std::mem::size_of::<PaintParams>() as u32;
-        let pipeline = ComputePipeline::new(ctx, &name, paint, bindings, push)?;
+        let paint = painter::shader_spirv(reach);
+        let pipeline = ComputePipeline::new(ctx, &name, paint, bindings::paint(reach), push)?;
         compiled.push(CompiledPipeline::of(&pipeline, "paint", reach, &[], true));
     }
     Ok(compiled)

@@ -1,8 +1,10 @@
 //! Vulkan compute: a headless context (or an engine's own device), buffers through
-//! `gpu-allocator`, compute pipelines whose workgroup size is read from their SPIR-V, timed
-//! one-shot submissions, and the tracers built on them.
+//! `gpu-allocator`, compute pipelines whose workgroup size is read from their SPIR-V and whose
+//! bindings are numbered in one table ([`bindings`]), timed one-shot submissions, and the tracers
+//! built on them.
 
 mod addressing;
+pub mod bindings;
 mod buffer;
 mod compiled;
 mod context;

@@ -10,6 +10,7 @@ use bytemuck::{Pod, Zeroable};
 
 use ash::vk;
 
+use super::bindings;
 use super::pipeline::DescriptorSet;
 use super::{shaders, Buffer, BufferView, ComputePipeline, Context, Reach, Timing, Tracer};
 use crate::rbvh::GpuHeightfield;
@@ -135,6 +136,14 @@ fn no_height_only(rbvh: &Rbvh) -> Result<()> {
 const ATLAS: &str = "RBVH atlas (painting)";
 const COLOURS: &str = "RBVH colours";
 
+/// The paint shader's SPIR-V for an atlas and colours reached by `reach`.
+pub(crate) fn shader_spirv(reach: Reach) -> &'static [u8] {
+    match reach {
+        Reach::Bindings => shaders::PAINT,
+        Reach::DeviceAddresses => shaders::PAINT_BDA,
+    }
+}
+
 /// How the atlas and the colours reach the paint shader ([`Context::reach`]), both checked, from
 /// the bytes of the buffers that will hold them.
 fn reach_of(ctx: &Context, atlas_bytes: u64, colours: &[u32]) -> Result<Reach> {
@@ -194,7 +203,7 @@ pub struct Painter {
     reach: Reach,
     /// Device addresses of the atlas and the colours with [`Reach::DeviceAddresses`], else zero.
     addresses: (u64, u64),
-    leaves: Vec<GpuHeightfield>,
+    heightfields: Vec<GpuHeightfield>,
     /// Its own upload, or the atlas of the tracer it shares ([`Painter::sharing`]).
     atlas: Arc<Buffer>,
     colours: Buffer,
@@ -284,10 +293,6 @@ impl Painter {
         atlas: Arc<Buffer>,
         colours: Buffer,
     ) -> Result<Painter> {
-        let (spirv, bindings): (&[u8], &[u32]) = match reach {
-            Reach::Bindings => (shaders::PAINT, &[0, 1, 2]),
-            Reach::DeviceAddresses => (shaders::PAINT_BDA, &[1]),
-        };
         let address = |b: &Buffer| {
             b.device_address()
                 .ok_or_else(|| Error::NoDevice(format!("{}: no device address", b.name())))
@@ -300,13 +305,13 @@ impl Painter {
             pipeline: ComputePipeline::new(
                 ctx,
                 "paint",
-                spirv,
-                bindings,
+                shader_spirv(reach),
+                bindings::paint(reach),
                 std::mem::size_of::<PaintParams>() as u32,
             )?,
             reach,
             addresses,
-            leaves: rbvh.leaves.clone(),
+            heightfields: rbvh.heightfields.clone(),
             atlas,
             colours,
             pitch: rbvh.atlas.pitch,
@@ -351,7 +356,7 @@ impl Painter {
             ctx.record_transfer_to_compute(cmd);
         }
         let set = self.descriptor_set(&brush_buf)?;
-        let leaves = candidate_leaves(&self.leaves, brushes);
+        let leaves = candidate_leaves(&self.heightfields, brushes);
         self.record_leaves(ctx.device(), cmd, &set, &leaves, brushes.len() as u32);
         Ok(PaintRecording {
             _set: set,
@@ -384,7 +389,7 @@ impl Painter {
     ) {
         let (atlas_address, colours_address) = self.addresses;
         for &k in leaves {
-            let Some(leaf) = self.leaves.get(k as usize) else {
+            let Some(leaf) = self.heightfields.get(k as usize) else {
                 continue;
             };
             let grid = leaf.grid();
@@ -423,7 +428,7 @@ impl Painter {
         let ctx = self.atlas.context().clone();
         let mut stats = PaintStats::default();
         for batch in brushes.chunks(MAX_BRUSHES_PER_PASS) {
-            let leaves = candidate_leaves(&self.leaves, batch);
+            let leaves = candidate_leaves(&self.heightfields, batch);
             if leaves.is_empty() {
                 continue;
             }
@@ -436,7 +441,7 @@ impl Painter {
             stats.texels += leaves
                 .iter()
                 .map(|&k| {
-                    let l = &self.leaves[k as usize];
+                    let l = &self.heightfields[k as usize];
                     u64::from(l.res_u) * u64::from(l.res_v)
                 })
                 .sum::<u64>();

@@ -2,9 +2,10 @@
 //! (`glsl/trace_rbvh.comp`), or an RBVH with level of detail (`glsl/trace_rbvh_lod.comp`). All
 //! share the push constants ([`TraceParams`]) and the bindings after the structure's own buffers:
 //! rays, hits, status, per-ray counters; the LOD trace then binds the LOD records and columns and
-//! the per-ray cones. Counting each ray's work ([`RayCounters`]) takes a second pipeline of the
-//! same shader, made on first use, with the specialization constant `rbvh_count` set: the timed
-//! pipeline compiles the counting away. Each shader has a `_bda` twin that reads the structure's
+//! the per-ray cones (each numbered once, in `glsl/bindings.glsl`: [`super::bindings`]). Counting
+//! each ray's work ([`RayCounters`]) takes a second pipeline of the same shader, made on first
+//! use, with the specialization constant `rbvh_count` set: the timed pipeline compiles the
+//! counting away. Each shader has a `_bda` twin that reads the structure's
 //! arrays through buffer device addresses rather than bindings, for arrays over
 //! `maxStorageBufferRange` ([`Reach`]). The RBVH shaders' block jumps are a second specialization
 //! constant, `rbvh_block_jumps` ([`Tracer::block_jumps`]).
@@ -16,6 +17,7 @@ use bytemuck::{Pod, Zeroable};
 
 use ash::vk;
 
+use super::bindings;
 use super::compiled::{variant_name, CompiledPipeline};
 use super::pipeline::DescriptorSet;
 use super::{shaders, Buffer, ComputePipeline, Context, Reach, Timing};
@@ -65,8 +67,8 @@ pub struct TraceParams {
     /// GLSL `tri_count`: triangles of the BVH, or of the RBVH's triangle leaves (whose reads the
     /// RBVH traversal clamps to it).
     pub tri_count: u32,
-    /// GLSL `leaf_count`: height-field leaves of the RBVH; 0 for the exact BVH.
-    pub leaf_count: u32,
+    /// GLSL `heightfield_count`: height-field leaves of the RBVH; 0 for the exact BVH.
+    pub heightfield_count: u32,
     /// GLSL `atlas_pitch`: texels per atlas row, a power of two; 0 for the exact BVH.
     pub atlas_pitch: u32,
     /// GLSL `atlas_len`: texels in the atlas; the blocks' height ranges follow them in the same
@@ -81,8 +83,8 @@ pub struct TraceParams {
     pub lod_texel_len: u32,
     /// GLSL `reserved`: zero, so that `addresses` are 8-byte aligned.
     pub reserved: u32,
-    /// Device addresses of the structure's arrays in binding order (nodes, triangles, leaves,
-    /// atlas, LOD records, LOD columns), read by the `_bda` shaders; zero where arrays are bound.
+    /// Device addresses of the structure's arrays in binding order (nodes, triangles, height
+    /// fields, atlas, LOD records, LOD columns), read by the `_bda` shaders; zero where arrays are bound.
     pub addresses: [u64; 6],
 }
 const _: () = assert!(std::mem::size_of::<TraceParams>() == 96);
@@ -123,32 +125,6 @@ pub(crate) fn shader_spirv(kind: Kind, reach: Reach) -> &'static [u8] {
         (Kind::RbvhLod, Reach::Bindings) => shaders::TRACE_RBVH_LOD,
         (Kind::RbvhLod, Reach::DeviceAddresses) => shaders::TRACE_RBVH_LOD_BDA,
     }
-}
-
-/// The structure arrays bound before the per-trace buffers (the LOD's two come after them).
-fn leading_arrays(kind: Kind) -> u32 {
-    match kind {
-        Kind::Exact => 2,
-        Kind::Rbvh | Kind::RbvhLod => 4,
-    }
-}
-
-/// The shader's bindings, in the order buffers are given: the leading structure arrays, the
-/// per-trace buffers, then for LOD its two arrays and the cones; arrays reached through device
-/// addresses have none.
-fn bindings(kind: Kind, reach: Reach) -> Vec<u32> {
-    let lead = leading_arrays(kind);
-    let bound = reach == Reach::Bindings;
-    let mut b: Vec<u32> = if bound { (0..lead).collect() } else { vec![] };
-    b.extend(lead..lead + PER_TRACE_BUFFERS);
-    if kind == Kind::RbvhLod {
-        let after = lead + PER_TRACE_BUFFERS;
-        if bound {
-            b.extend([after, after + 1]);
-        }
-        b.push(after + 2);
-    }
-    b
 }
 
 /// The specialization constants of `kind`'s trace shader as (GLSL name, `constant_id`, value):
@@ -195,7 +171,7 @@ pub(crate) fn make_pipeline(
         ctx,
         &name,
         spirv,
-        &bindings(shader.0, reach),
+        &bindings::trace(shader.0, reach),
         std::mem::size_of::<TraceParams>() as u32,
         &ids,
     )
@@ -339,7 +315,7 @@ fn rbvh_parts<'a>(rbvh: &'a Rbvh, atlas_words: &'a [u32]) -> Result<(TraceParams
     let sizes = TraceParams {
         node_count: count("nodes", rbvh.nodes.len())?,
         tri_count: count("triangles", rbvh.triangles.len())?,
-        leaf_count: count("leaves", rbvh.leaves.len())?,
+        heightfield_count: count("height fields", rbvh.heightfields.len())?,
         atlas_pitch: rbvh.atlas.pitch,
         atlas_len: count("atlas texels", rbvh.atlas.texels.len())?,
         atlas_wide_len: count("atlas texels", rbvh.atlas.wide_len())?,
@@ -352,7 +328,7 @@ fn rbvh_parts<'a>(rbvh: &'a Rbvh, atlas_words: &'a [u32]) -> Result<(TraceParams
         ("RBVH triangles", bytemuck::cast_slice(&rbvh.triangles)),
         (
             "RBVH height-field leaves",
-            bytemuck::cast_slice(&rbvh.leaves),
+            bytemuck::cast_slice(&rbvh.heightfields),
         ),
         ("RBVH atlas", bytemuck::cast_slice(atlas_words)),
     ];
@@ -371,23 +347,20 @@ fn lod_parts<'a>(
     nodes: &'a [crate::bvh::GpuNode],
 ) -> Result<(TraceParams, Arrays<'a, 6>)> {
     lod.check_for(rbvh)?;
-    let (mut sizes, [_, tris, leaves, atlas]) = rbvh_parts(rbvh, atlas_words)?;
+    let (mut sizes, [_, tris, heightfields, atlas]) = rbvh_parts(rbvh, atlas_words)?;
     sizes.lod_node_count = lod.nodes.len() as u32;
     sizes.lod_texel_len = u32::try_from(lod.texels.len())
         .map_err(|_| Error::param("lod", "more than 2^32 column words"))?;
     let arrays = [
         ("RBVH nodes (LOD-annotated)", bytemuck::cast_slice(nodes)),
         tris,
-        leaves,
+        heightfields,
         atlas,
         ("LOD records", bytemuck::cast_slice(&lod.nodes)),
         ("LOD columns", bytemuck::cast_slice(&lod.texels)),
     ];
     Ok((sizes, arrays))
 }
-
-/// Bindings after the structure's own: rays, hits, status, per-ray counters.
-const PER_TRACE_BUFFERS: u32 = 4;
 
 impl Tracer {
     /// Uploads `structure` (its arrays reached as [`Context::reach`] decides) with the crate's
@@ -702,9 +675,9 @@ impl Tracer {
         Ok(self.counting.get_or_init(|| pipeline))
     }
 
-    /// The buffers of one trace in the pipeline's binding order ([`bindings`]): the
-    /// structure's when bound, the per-trace four (rays, hits, status, counters), then the LOD arrays
-    /// when bound and the cones.
+    /// The buffers of one trace in the pipeline's binding order ([`bindings::trace`]): the
+    /// structure's when bound, the per-trace four (rays, hits, status, counters), then the LOD
+    /// arrays when bound and the cones.
     fn views(
         &self,
         per_trace: [(vk::Buffer, u64); 4],

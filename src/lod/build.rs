@@ -21,7 +21,8 @@ use super::layout::{Column, GpuLod, LOD_BIT};
 use super::{Lod, LodParams, LodStats};
 use crate::bvh::GpuTriangle;
 use crate::geom::Aabb;
-use crate::rbvh::layout::{decode_octahedral, encode_octahedral, HEIGHTFIELD_COUNT, LEAF_BIT};
+use crate::rbvh::layout::{decode_octahedral, encode_octahedral};
+use crate::rbvh::Child;
 use crate::rbvh::{Rbvh, Texel};
 use crate::{Error, Result};
 
@@ -171,15 +172,13 @@ fn subtree_order(rbvh: &Rbvh) -> SubtreeOrder {
                 }
                 stack.push(Step::Leave(node, bounds, sources.len()));
                 for c in gpu.children().iter().rev() {
-                    if c.child & LEAF_BIT == 0 {
-                        stack.push(Step::Enter(c.child, c.bounds));
-                    } else if c.count == HEIGHTFIELD_COUNT {
-                        sources.push(Source::Heightfield(c.child & !LEAF_BIT));
-                    } else if c.count > 0 {
-                        sources.push(Source::Triangles {
-                            first: c.child & !LEAF_BIT,
-                            count: c.count,
-                        });
+                    match c.kind() {
+                        Child::Inner(child) => stack.push(Step::Enter(child, c.bounds)),
+                        Child::Heightfield(index) => sources.push(Source::Heightfield(index)),
+                        Child::Triangles { first, count } => {
+                            sources.push(Source::Triangles { first, count })
+                        }
+                        Child::Absent => {}
                     }
                 }
             }
@@ -199,7 +198,7 @@ impl Source {
     fn sample_count(&self, rbvh: &Rbvh) -> u64 {
         match *self {
             Source::Heightfield(leaf) => rbvh
-                .leaves
+                .heightfields
                 .get(leaf as usize)
                 .map_or(0, |hf| u64::from(hf.res_u) * u64::from(hf.res_v)),
             Source::Triangles { first, count } => leaf_triangles(rbvh, first, count)
@@ -239,7 +238,7 @@ fn leaf_triangles(rbvh: &Rbvh, first: u32, count: u32) -> impl Iterator<Item = &
 }
 
 fn heightfield_samples(rbvh: &Rbvh, leaf: u32) -> Vec<Sample> {
-    let Some(hf) = rbvh.leaves.get(leaf as usize) else {
+    let Some(hf) = rbvh.heightfields.get(leaf as usize) else {
         return Vec::new();
     };
     let grid = hf.grid();
@@ -419,15 +418,14 @@ mod tests {
         rbvh.nodes[node as usize]
             .children()
             .iter()
-            .map(|c| {
-                if c.child & LEAF_BIT == 0 {
-                    return leaves_below(rbvh, c.child);
+            .map(|c| match c.kind() {
+                Child::Inner(child) => leaves_below(rbvh, child),
+                Child::Absent => (0, 0),
+                Child::Heightfield(_) => (1, 1),
+                Child::Triangles { first, count } => {
+                    let surface = leaf_triangles(rbvh, first, count).next().is_some();
+                    (1, usize::from(surface))
                 }
-                let surface = c.count == HEIGHTFIELD_COUNT
-                    || leaf_triangles(rbvh, c.child & !LEAF_BIT, c.count)
-                        .next()
-                        .is_some();
-                (usize::from(c.count > 0), usize::from(surface))
             })
             .fold((0, 0), |(a, b), (c, d)| (a + c, b + d))
     }

@@ -39,6 +39,7 @@ pub use cone::{selects, Cones, RayCone};
 pub use layout::{Column, GpuLod, LOD_BIT};
 pub use trace::LodTwin;
 
+use crate::rbvh::Child;
 use crate::{Error, Result};
 
 /// How the coarse levels are made, and how eagerly rays choose them.
@@ -163,11 +164,11 @@ impl Lod {
             .iter()
             .map(|n| {
                 let mut n = *n;
-                if n.a_child & crate::bvh::LEAF_BIT == 0 {
-                    n.a_count = width(n.a_child);
+                if let Child::Inner(child) = Child::decode(n.a_child, n.a_count) {
+                    n.a_count = width(child);
                 }
-                if n.b_child & crate::bvh::LEAF_BIT == 0 {
-                    n.b_count = width(n.b_child);
+                if let Child::Inner(child) = Child::decode(n.b_child, n.b_count) {
+                    n.b_count = width(child);
                 }
                 n
             })

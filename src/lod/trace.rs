@@ -154,7 +154,7 @@ impl Rbvh {
 }
 
 /// The device's twin of a trace with level of detail ([`DeviceTwin`] with `lod`'s coarse nodes,
-/// read for read as `glsl/rbvh.glsl` with `RBVH_LOD` reads them). Made by [`Lod::device_twin`].
+/// read for read as `glsl/lod.glsl` reads them). Made by [`Lod::device_twin`].
 pub struct LodTwin<'a> {
     twin: DeviceTwin<'a>,
     lod: &'a Lod,

@@ -2,10 +2,8 @@
 //! leaves reuse [`GpuTriangle`]; height-field leaves are [`GpuHeightfield`] records; the atlas is
 //! an array of 32-bit texels ([`Texel`]) with a fixed row pitch.
 //!
-//! A child reference in a node is, with `LEAF_BIT` = bit 31 of `child`:
-//! * inner node: `child` = node index, `count` = 0;
-//! * triangle leaf: `child` = `LEAF_BIT | first triangle`, `count` = triangles (0 = absent child);
-//! * height-field leaf: `child` = `LEAF_BIT | leaf index`, `count` = [`HEIGHTFIELD_COUNT`].
+//! What a node's child reference names (inner node, triangle leaf, height-field leaf) is read in
+//! one place, [`super::child`].
 //!
 //! ## Leaf frame and texel grid
 //! A leaf is an orthographic projection along `axis_w` (the normalised area-weighted normal sum
@@ -66,9 +64,6 @@ pub const MARCH_SKIRT_TEXELS: f32 = 1.0;
 /// a tenth of a texel leaves it unchanged.
 pub const MARCH_DIAGONAL_SKIRT_TEXELS: f32 = 0.1;
 
-/// `count` of a child reference that is a height-field leaf.
-pub const HEIGHTFIELD_COUNT: u32 = u32::MAX;
-
 /// One height-field leaf. 64 bytes:
 ///
 /// | bytes | field |
@@ -82,7 +77,7 @@ pub const HEIGHTFIELD_COUNT: u32 = u32::MAX;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuHeightfield {
-    /// GLSL `RbvhLeaf.origin`: world-space origin of the leaf frame (`s = t = h = 0`).
+    /// GLSL `RbvhHeightfield.origin`: world-space origin of the leaf frame (`s = t = h = 0`).
     pub origin: [f32; 3],
     /// GLSL `atlas_base`: atlas index of texel (0, 0) of the tile.
     pub atlas_base: u32,

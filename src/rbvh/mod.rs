@@ -9,6 +9,8 @@
 //! * `atlas`: packing tiles into one atlas;
 //! * `bake`: the scene's base colour into the per-texel colour channel (packed as [`crate::rgba`]);
 //! * [`layout`]: the packed data the GPU reads;
+//! * [`child`]: what a node's child is (inner, absent, triangles, height field): the one decoder of
+//!   its encoding, where a new kind of leaf starts;
 //! * [`ranges`]: height ranges of the atlas's 8 × 8 blocks, for the device march's jumps;
 //! * `march`: the CPU reference caster on exactly that packed data, and its [`DeviceTwin`];
 //! * [`file`](mod@file): save and load, and the file format's tables (its older versions in
@@ -17,6 +19,7 @@
 mod atlas;
 mod bake;
 mod build;
+pub mod child;
 pub mod file;
 mod frame;
 pub mod layout;
@@ -28,7 +31,8 @@ mod splat;
 mod split;
 
 pub use build::{RbvhSource, CREASE_EDGE_TEXELS};
-pub use layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT};
+pub use child::{Child, HEIGHTFIELD_COUNT};
+pub use layout::{Atlas, GpuHeightfield, Texel};
 pub use march::DeviceTwin;
 pub use params::{
     level_name, RbvhParams, Refinement, Subdivision, TexelFormat, QUALITY_NAMES, SAMPLED_SUFFIX,
@@ -49,8 +53,9 @@ pub struct Rbvh {
     pub nodes: Vec<GpuNode>,
     /// Triangles of the triangle (hybrid) leaves, in leaf order.
     pub triangles: Vec<GpuTriangle>,
-    /// Height-field leaves.
-    pub leaves: Vec<GpuHeightfield>,
+    /// The height-field leaves' records, which a node's [`Child::Heightfield`] indexes (named
+    /// apart from the tree's leaves, which are triangle leaves too).
+    pub heightfields: Vec<GpuHeightfield>,
     /// Texels of all height-field tiles, addressed by [`GpuHeightfield::atlas_base`].
     pub atlas: Atlas,
     /// World box of the root's children: the leaves' boxes, dilated rims included, so it may
@@ -74,7 +79,7 @@ pub struct Rbvh {
 pub struct RbvhStats {
     /// Wall time of [`Rbvh::build`] in milliseconds (as recorded at build time for a loaded file).
     pub build_ms: f64,
-    /// Leaves that became height fields (= `leaves.len()`).
+    /// Leaves that became height fields (= `heightfields.len()`).
     pub heightfield_leaves: u32,
     /// Leaves of triangles, traced exactly: sets kept as triangles (hybrid leaves), and beside
     /// height fields the triangles their tiles leave uncovered (`raster/exposed.rs`).
@@ -92,7 +97,7 @@ impl Rbvh {
     /// Bytes of the node array and the height-field leaf records.
     pub fn tree_bytes(&self) -> u64 {
         (std::mem::size_of_val(self.nodes.as_slice())
-            + std::mem::size_of_val(self.leaves.as_slice())) as u64
+            + std::mem::size_of_val(self.heightfields.as_slice())) as u64
     }
 
     /// The atlas as the device holds it: the texels and the blocks' height ranges
@@ -180,7 +185,7 @@ impl Rbvh {
     /// Texels of the tiles with 8-bit heights (in the atlas's narrow band, [`Atlas::narrow_rows`]).
     pub fn narrow_texels(&self) -> u64 {
         let wide = self.atlas.wide_len() as u64;
-        self.leaves
+        self.heightfields
             .iter()
             .filter(|l| u64::from(l.atlas_base) >= wide)
             .map(|l| u64::from(l.res_u) * u64::from(l.res_v))

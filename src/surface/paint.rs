@@ -81,7 +81,7 @@ impl Rbvh {
     /// ([`Rbvh::colour_channel`]). Returns the number of texels painted.
     pub fn paint_cpu(&mut self, brushes: &[Brush]) -> u64 {
         let pitch = u64::from(self.atlas.pitch);
-        let leaves = self.leaves.clone();
+        let leaves = self.heightfields.clone();
         let texels = self.atlas.texels.clone();
         let colours = self.colour_channel();
         let mut painted = 0;

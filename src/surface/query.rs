@@ -22,7 +22,7 @@ use crate::structure::Structure;
 /// [`Rbvh::atlas`] (and in [`Rbvh::colours`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SurfaceLocation {
-    /// Index of the height-field leaf in [`Rbvh::leaves`] (the hit's `id` without `LEAF_BIT`).
+    /// Index of the height-field leaf in [`Rbvh::heightfields`] (the hit's `id` without `LEAF_BIT`).
     pub leaf: u32,
     /// Sample column along the leaf's `u`, `0..res_u`.
     pub i: u32,
@@ -55,7 +55,7 @@ impl Rbvh {
                 .filter_map(|t| t.part_leaf());
             self.leaf_beside(leaves, ray.origin() + ray.dir() * hit.t)?
         };
-        let leaf = self.leaves.get(leaf_index as usize)?;
+        let leaf = self.heightfields.get(leaf_index as usize)?;
         if leaf.res_u == 0 || leaf.res_v == 0 {
             return None;
         }
@@ -106,7 +106,7 @@ impl Rbvh {
     /// samples), first among equals: the leaf an exact part's hit at `point` stands beside.
     pub fn leaf_beside(&self, leaves: impl IntoIterator<Item = u32>, point: Vec3) -> Option<u32> {
         let beyond = |index: u32| {
-            let leaf = self.leaves.get(index as usize)?;
+            let leaf = self.heightfields.get(index as usize)?;
             let f = leaf.to_frame(point);
             let (u, v) = (leaf.res_u as f32, leaf.res_v as f32);
             Some((-f.x).max(f.x - u).max(-f.y).max(f.y - v).max(0.0))
@@ -129,7 +129,7 @@ impl Rbvh {
     pub fn filtered_colour(&self, ray: &Ray, hit: &Hit) -> Option<Vec4> {
         let colours = self.colours.as_ref()?;
         let loc = self.locate(ray, hit)?;
-        let leaf = self.leaves.get(loc.leaf as usize)?;
+        let leaf = self.heightfields.get(loc.leaf as usize)?;
         if leaf.res_u < 2 || leaf.res_v < 2 {
             return self.surface_colour(loc);
         }

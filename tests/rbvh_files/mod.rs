@@ -86,7 +86,7 @@ pub fn as_v12(rbvh: &Rbvh) -> Vec<u8> {
     for count in [
         rbvh.nodes.len(),
         rbvh.triangles.len(),
-        rbvh.leaves.len(),
+        rbvh.heightfields.len(),
         rbvh.atlas.texels.len(),
     ] {
         out.extend_from_slice(&(count as u64).to_le_bytes());

@@ -221,7 +221,7 @@ fn degenerate_and_adversarial_geometry_builds_and_traces() {
             scene.triangle_count(),
             bvh.depth,
             r.depth,
-            r.leaves.len(),
+            r.heightfields.len(),
             r.stats.triangle_leaves
         );
         let mut rays = rays_through(scene, 2000, k as u64 + 60);

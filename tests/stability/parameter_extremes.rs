@@ -202,7 +202,7 @@ fn parameter_extremes_build_valid_results_or_clear_errors() {
                 .count();
             println!(
                 "{name} {what}: {} leaves ({} triangle), {} texels; vs exact: hit/miss {mismatch}, leaks {leaks} of {}",
-                r.leaves.len(),
+                r.heightfields.len(),
                 r.stats.triangle_leaves,
                 r.stats.tile_texels,
                 rays.len()

@@ -16,7 +16,7 @@ fn leaf_point(l: &rbvh::rbvh::GpuHeightfield, s: f64, t: f64) -> DVec3 {
 /// at most about `cap`, evenly spread over all leaves.
 fn border_targets(r: &Rbvh, cap: usize) -> Vec<DVec3> {
     let mut out = Vec::new();
-    for l in &r.leaves {
+    for l in &r.heightfields {
         let (nu, nv) = (l.res_u as f64, l.res_v as f64);
         let mut st = Vec::new();
         let mut along = |n: f64, fixed: &[f64], swap: bool| {
@@ -59,9 +59,9 @@ fn plane_tiles_do_not_leak_at_seams_samples_or_grazing_angles() {
         },
     ] {
         let r = Arc::new(Rbvh::build(&plane, &params).unwrap());
-        assert!(r.leaves.len() > 8, "{} leaves", r.leaves.len());
-        let u = Vec3::from(r.leaves[0].axis_u).normalize();
-        let v = Vec3::from(r.leaves[0].axis_v).normalize();
+        assert!(r.heightfields.len() > 8, "{} leaves", r.heightfields.len());
+        let u = Vec3::from(r.heightfields[0].axis_u).normalize();
+        let v = Vec3::from(r.heightfields[0].axis_v).normalize();
         let azimuths = [u, v, (u + v).normalize(), (v - u).normalize(), -u];
         let mut rays = Vec::new();
         for (k, p) in border_targets(&r, 8000).into_iter().enumerate() {
@@ -93,7 +93,11 @@ fn plane_tiles_do_not_leak_at_seams_samples_or_grazing_angles() {
                 bad[0]
             );
         };
-        let level = format!("max_tile {}, {} leaves", params.max_tile, r.leaves.len());
+        let level = format!(
+            "max_tile {}, {} leaves",
+            params.max_tile,
+            r.heightfields.len()
+        );
         for (which, hits) in PATHS.iter().zip(rbvh_hits(&ctx, &r, &rays, Query::Closest)) {
             check(&format!("RBVH {level} {which}"), &hits, 2e-5);
         }
@@ -105,7 +109,7 @@ fn plane_tiles_do_not_leak_at_seams_samples_or_grazing_angles() {
         }
 
         // In the plane: no NaN, hits (if any) in the plane, marches bounded.
-        let cell_bound: u32 = r.leaves.iter().map(|l| 2 * (l.res_u + l.res_v)).sum();
+        let cell_bound: u32 = r.heightfields.iter().map(|l| 2 * (l.res_u + l.res_v)).sum();
         let mut in_plane = Vec::new();
         for k in 0..64 {
             let phi = 0.1 * k as f32;
@@ -150,7 +154,7 @@ fn flat_tiles_have_no_cracks_along_their_sample_grid() {
     let r = Arc::new(Rbvh::build(&plane, &q(2)).unwrap());
     let reach = 8.0 * r.texel_size;
     let mut rays = Vec::new();
-    for (n, l) in r.leaves.iter().enumerate() {
+    for (n, l) in r.heightfields.iter().enumerate() {
         let w = Vec3::from(l.axis_w);
         let (u, v) = (
             Vec3::from(l.axis_u).normalize(),

@@ -48,7 +48,7 @@ pub fn run(a: Args) -> Result<()> {
         a.out.display(),
         rbvh.nodes.len(),
         rbvh.triangles.len(),
-        rbvh.leaves.len(),
+        rbvh.heightfields.len(),
         rbvh.atlas.texels.len(),
         if rbvh.colours.is_some() {
             " and their colours"

@@ -174,11 +174,15 @@ mod tests {
                 ..crate::rbvh::RbvhParams::quality(2).unwrap()
             };
             let r = Rbvh::build(&square(1), &params).unwrap();
-            assert!(r.leaves.is_empty(), "{format:?}: {} leaves", r.leaves.len());
+            assert!(
+                r.heightfields.is_empty(),
+                "{format:?}: {} leaves",
+                r.heightfields.len()
+            );
             assert_eq!(r.triangles.len(), 2);
             assert!(r.triangles.iter().all(|t| t.part_leaf().is_none()));
             let r = Rbvh::build(&square(16), &params).unwrap();
-            assert!(!r.leaves.is_empty(), "{format:?}");
+            assert!(!r.heightfields.is_empty(), "{format:?}");
             assert!(r.triangles.is_empty(), "{format:?}: {}", r.triangles.len());
         }
     }

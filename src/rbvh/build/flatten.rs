@@ -4,9 +4,9 @@
 //! boxes, whichever the SAH finds cheaper ([`upper_tree`]).
 
 use super::{Builder, Input, Node};
-use crate::bvh::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
+use crate::bvh::{ChildRef, GpuNode, GpuTriangle, STACK_SIZE};
 use crate::geom::Aabb;
-use crate::rbvh::layout::HEIGHTFIELD_COUNT;
+use crate::rbvh::child::Child;
 use crate::rbvh::raster::Tile;
 use crate::{Error, Result};
 
@@ -55,7 +55,7 @@ pub(super) struct Flattened {
     /// ([`crate::bvh::tree_over`]).
     refs: Vec<ChildRef>,
     pub(super) triangles: Vec<GpuTriangle>,
-    pub(super) leaves: Vec<crate::rbvh::GpuHeightfield>,
+    pub(super) heightfields: Vec<crate::rbvh::GpuHeightfield>,
     pub(super) tiles: Vec<Tile>,
     pub(super) triangle_leaves: u32,
     /// The leaf of the first tile of the [`Node::Surface`] being flattened, which its parts'
@@ -73,7 +73,7 @@ impl Flattened {
         b: &Builder,
         order: &[u32],
     ) -> [ChildRef; 2] {
-        let first_leaf = self.leaves.len() as u32;
+        let first_leaf = self.heightfields.len() as u32;
         let l = self.flatten(&children[0], b, order);
         if matches!(node, Node::Surface(_)) {
             self.surface_leaves = first_leaf;
@@ -90,21 +90,13 @@ impl Flattened {
                 self.nodes.push(GpuNode::default());
                 let [l, r] = self.flatten_children(node, children, b, order);
                 self.nodes[index as usize] = GpuNode::new(l, r);
-                return ChildRef {
-                    bounds: l.bounds.union(r.bounds),
-                    child: index,
-                    count: 0,
-                };
+                return Child::Inner(index).with_bounds(l.bounds.union(r.bounds));
             }
             Node::Heightfield(tile) => {
-                let index = self.leaves.len() as u32;
-                self.leaves.push(tile.heightfield(0));
+                let index = self.heightfields.len() as u32;
+                self.heightfields.push(tile.heightfield(0));
                 self.tiles.push((**tile).clone());
-                ChildRef {
-                    bounds: tile.surface_bounds(),
-                    child: LEAF_BIT | index,
-                    count: HEIGHTFIELD_COUNT,
-                }
+                Child::Heightfield(index).with_bounds(tile.surface_bounds())
             }
             Node::Pieces(pieces) => {
                 let first = self.triangles.len() as u32;
@@ -124,11 +116,11 @@ impl Flattened {
                         },
                     }));
                 self.triangle_leaves += 1;
-                ChildRef {
-                    bounds,
-                    child: LEAF_BIT | first,
+                Child::Triangles {
+                    first,
                     count: pieces.len() as u32,
                 }
+                .with_bounds(bounds)
             }
             Node::Triangles { start, count } => {
                 let first = self.triangles.len() as u32;
@@ -143,11 +135,11 @@ impl Flattened {
                     self.triangles.push(GpuTriangle::new(t, i));
                 }
                 self.triangle_leaves += 1;
-                ChildRef {
-                    bounds,
-                    child: LEAF_BIT | first,
+                Child::Triangles {
+                    first,
                     count: *count,
                 }
+                .with_bounds(bounds)
             }
         };
         self.refs.push(leaf);

@@ -331,7 +331,7 @@ mod tests {
         for t in &r.triangles {
             let Some(leaf) = t.part_leaf() else { continue };
             parts += 1;
-            let leaf = r.leaves[leaf as usize];
+            let leaf = r.heightfields[leaf as usize];
             for q in t.vertices() {
                 assert!(over_tile(&leaf, q), "{q} beside {leaf:?}");
             }
@@ -361,7 +361,7 @@ mod tests {
             };
             let loc = r.locate(&ray, &hit).expect("a part's hit has a texel");
             assert!(
-                over_tile(&r.leaves[loc.leaf as usize], centre),
+                over_tile(&r.heightfields[loc.leaf as usize], centre),
                 "part of {} at {centre}: leaf {}",
                 t.prim,
                 loc.leaf

@@ -286,7 +286,7 @@ impl Rbvh {
         let packing = step(progress, "packing the atlas", 0, || {
             atlas::pack(&footprints)
         })?;
-        for (leaf, &base) in out.leaves.iter_mut().zip(&packing.bases) {
+        for (leaf, &base) in out.heightfields.iter_mut().zip(&packing.bases) {
             leaf.atlas_base = base;
         }
         let mut atlas = atlas::assemble(&out.tiles, &packing);
@@ -319,7 +319,7 @@ impl Rbvh {
         };
         let stats = RbvhStats {
             build_ms: prepared_ms + start.elapsed().as_secs_f64() * 1e3,
-            heightfield_leaves: out.leaves.len() as u32,
+            heightfield_leaves: out.heightfields.len() as u32,
             triangle_leaves: out.triangle_leaves,
             tile_texels: footprints
                 .iter()
@@ -334,7 +334,7 @@ impl Rbvh {
             params: *params,
             nodes,
             triangles: out.triangles,
-            leaves: out.leaves,
+            heightfields: out.heightfields,
             atlas,
             bounds,
             depth,

@@ -34,7 +34,7 @@
 //! | 168..172 | f32 | `params.exact_crease_deg` (0: none; nothing where `exact_when_cheaper` is 0) |
 //! | 172.. | `N` × 48 bytes | `nodes` ([`crate::bvh::GpuNode`], 12 words each) |
 //! | then | `T` × 48 bytes | `triangles` ([`crate::bvh::GpuTriangle`], 12 words each) |
-//! | then | `L` × 64 bytes | `leaves` ([`super::super::GpuHeightfield`], 16 words each) |
+//! | then | `L` × 64 bytes | `heightfields` ([`super::super::GpuHeightfield`], 16 words each) |
 //! | then | `X` × 4 bytes | `atlas.texels` ([`Texel`], one word each), row by row; height-only texels: `X` × 2 bytes, each texel's height code (u16) |
 //! | then | u64 | with a colour channel only: colour count `C`, which must equal `X` |
 //! | then | `C` × 4 bytes | with a colour channel only: `colours` (packed RGBA8, see [`crate::rgba`]), parallel to the texels |
@@ -69,7 +69,8 @@ use bytemuck::{Pod, Zeroable};
 use super::{check, flag, records, refinement, subdivision, Reader};
 use crate::bvh::{ChildRef, GpuNode, GpuTriangle};
 use crate::geom::Aabb;
-use crate::rbvh::layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT, LEAF_BIT};
+use crate::rbvh::child::Child;
+use crate::rbvh::layout::{Atlas, GpuHeightfield, Texel};
 use crate::rbvh::params::{RbvhParams, TexelFormat};
 use crate::rbvh::Rbvh;
 use crate::{Error, Result};
@@ -284,7 +285,7 @@ pub(super) fn read(bytes: &[u8], version: u32, path: &Path) -> Result<Rbvh> {
         records(node_bytes)
     };
     let triangles = records(take(n_triangles, sizes[1], "the triangles")?);
-    let leaves = records(take(n_leaves, sizes[2], "the leaves")?);
+    let heightfields = records(take(n_leaves, sizes[2], "the leaves")?);
     let texel_bytes = take(n_texels, sizes[3], "the texels")?;
     let texel_words: Vec<Texel> = match texels {
         TexelFormat::HeightNormal => records(texel_bytes),
@@ -303,7 +304,7 @@ pub(super) fn read(bytes: &[u8], version: u32, path: &Path) -> Result<Rbvh> {
         params,
         nodes,
         triangles,
-        leaves,
+        heightfields,
         atlas: Atlas {
             pitch,
             rows,
@@ -371,17 +372,17 @@ impl NodeV4 {
 /// margin of 1/1024 texel: more than 64 texels from its lowest sample to its highest) keeps its
 /// code, and a skirt may hang under it. Runs on a checked RBVH (indices and tiles in range).
 fn unmark(r: &mut Rbvh) {
-    let mut boxes = vec![r.bounds; r.leaves.len()];
+    let mut boxes = vec![r.bounds; r.heightfields.len()];
     for node in &r.nodes {
         for c in node.children() {
-            if c.child & LEAF_BIT != 0 && c.count == HEIGHTFIELD_COUNT {
-                boxes[(c.child & !LEAF_BIT) as usize] = c.bounds;
+            if let Child::Heightfield(index) = c.kind() {
+                boxes[index as usize] = c.bounds;
             }
         }
     }
     let atlas = &mut r.atlas;
     let pitch = atlas.pitch as usize;
-    for (leaf, b) in r.leaves.iter().zip(&boxes) {
+    for (leaf, b) in r.heightfields.iter().zip(&boxes) {
         let grid = leaf.grid();
         for j in 0..leaf.res_v {
             for i in 0..leaf.res_u {

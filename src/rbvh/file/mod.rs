@@ -44,7 +44,7 @@
 //! | `HEAD` | 1 | required | the structure, 68 bytes: `bounds` (6 × f32: min x, y, z, max x, y, z), `depth` (u32), `texel_size` (f32), `stats.build_ms` (f64), `stats.heightfield_leaves`, `stats.triangle_leaves` (u32 each), `stats.tile_texels` (u64), `atlas.pitch`, `atlas.rows`, `atlas.narrow_rows` (u32 each: the last are the rows whose heights are 8-bit codes) |
 //! | `NODE` | 1 | required | `nodes`, 48 bytes each ([`crate::bvh::GpuNode`]) |
 //! | `TRIS` | 1 | required | `triangles`, 48 bytes each ([`crate::bvh::GpuTriangle`]) |
-//! | `LEAF` | 1 | required | `leaves`, 64 bytes each ([`super::GpuHeightfield`]) |
+//! | `LEAF` | 1 | required | `heightfields`, 64 bytes each ([`super::GpuHeightfield`]) |
 //! | `TEXN` or `TEXH` | 1 | required | `atlas.texels` row by row, exactly one of the two: `TEXN` 4 bytes each (height code and normal, [`super::Texel`]), `TEXH` 2 bytes each (the height code, for `params.texels` = `Height`). The tag is the texel format: a new encoding is a new tag |
 //! | `COLR` | 1 | optional | with a colour channel only: `colours`, one packed RGBA8 word per texel (see [`crate::rgba`]); a height-only RBVH has none |
 //!
@@ -78,7 +78,7 @@
 //! there); no NaN in the parameters, the bounds, the texel size or the build time; enum tags and
 //! flags in range; every node's grid (a finite origin, exponents in range, reserved bits zero);
 //! every node's children (inner: a node index, with count 0; triangle leaf: a range within
-//! `triangles`; height-field leaf: an index into `leaves`); every leaf's tile inside the atlas
+//! `triangles`; height-field leaf: an index into `heightfields`); every leaf's tile inside the atlas
 //! with finite frame and a non-negative height scale; every triangle's scene index below 2³¹
 //! (hit ids with bit 31 set are height-field hits, `u32::MAX` a miss), and its flags 0 or an
 //! exact part of one of the leaves (`GpuTriangle::PART`), its padding 0. Every failure is an
@@ -92,7 +92,8 @@ use std::path::Path;
 
 use bytemuck::Pod;
 
-use super::layout::{tile_fits, Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT, LEAF_BIT};
+use super::child::Child;
+use super::layout::{tile_fits, Atlas, GpuHeightfield, Texel, LEAF_BIT};
 use super::params::{Refinement, Subdivision, TexelFormat};
 use super::{Rbvh, RbvhStats};
 use crate::bvh::GpuTriangle;
@@ -316,7 +317,7 @@ fn check(r: &Rbvh) -> std::result::Result<(), Bad> {
             })?;
         }
     }
-    for (index, leaf) in r.leaves.iter().enumerate() {
+    for (index, leaf) in r.heightfields.iter().enumerate() {
         check_leaf(leaf, &r.atlas).map_err(|why| {
             Bad::at(
                 Part::Leaves,
@@ -325,7 +326,7 @@ fn check(r: &Rbvh) -> std::result::Result<(), Bad> {
             )
         })?;
     }
-    check_triangles(&r.triangles, r.leaves.len())
+    check_triangles(&r.triangles, r.heightfields.len())
 }
 
 /// The atlas's shape: a power-of-two pitch, `pitch × rows` texels, narrow rows within the rows
@@ -410,34 +411,32 @@ fn check_triangles(triangles: &[GpuTriangle], leaves: usize) -> std::result::Res
     Ok(())
 }
 
-/// Checks one child reference against the layout rules (see [`super::layout`]).
+/// Checks one child reference against the layout rules (see [`super::child`]). An absent child's
+/// index is not read, by the device or here.
 fn check_child(child: u32, count: u32, r: &Rbvh) -> std::result::Result<(), String> {
-    let index = child & !LEAF_BIT;
-    if child & LEAF_BIT == 0 {
-        if count != 0 {
-            return Err(format!("inner node reference with count {count}, not 0"));
+    match Child::decode(child, count) {
+        Child::Inner(_) if count != 0 => {
+            Err(format!("inner node reference with count {count}, not 0"))
         }
-        if index as usize >= r.nodes.len() {
-            return Err(format!(
-                "node index {index} is out of range (there are {} nodes)",
-                r.nodes.len()
-            ));
+        Child::Inner(index) if index as usize >= r.nodes.len() => Err(format!(
+            "node index {index} is out of range (there are {} nodes)",
+            r.nodes.len()
+        )),
+        Child::Heightfield(index) if index as usize >= r.heightfields.len() => Err(format!(
+            "height-field leaf index {index} is out of range (there are {} leaves)",
+            r.heightfields.len()
+        )),
+        Child::Triangles { first, count }
+            if u64::from(first) + u64::from(count) > r.triangles.len() as u64 =>
+        {
+            Err(format!(
+                "triangles {first}..{} are out of range (there are {})",
+                u64::from(first) + u64::from(count),
+                r.triangles.len()
+            ))
         }
-    } else if count == HEIGHTFIELD_COUNT {
-        if index as usize >= r.leaves.len() {
-            return Err(format!(
-                "height-field leaf index {index} is out of range (there are {} leaves)",
-                r.leaves.len()
-            ));
-        }
-    } else if u64::from(index) + u64::from(count) > r.triangles.len() as u64 {
-        return Err(format!(
-            "triangles {index}..{} are out of range (there are {})",
-            u64::from(index) + u64::from(count),
-            r.triangles.len()
-        ));
+        Child::Inner(_) | Child::Absent | Child::Triangles { .. } | Child::Heightfield(_) => Ok(()),
     }
-    Ok(())
 }
 
 /// Checks that a leaf's frame is finite and its tile lies in the atlas.

@@ -199,8 +199,8 @@ pub(super) fn write(r: &Rbvh) -> Vec<u8> {
         ),
         (
             LEAVES,
-            std::mem::size_of_val(r.leaves.as_slice()),
-            Box::new(|out| put_records(out, &r.leaves)),
+            std::mem::size_of_val(r.heightfields.as_slice()),
+            Box::new(|out| put_records(out, &r.heightfields)),
         ),
         (texels.0, texel_bytes, texels.1),
     ];
@@ -514,7 +514,7 @@ pub(super) fn read(bytes: &[u8], path: &Path) -> Result<Rbvh> {
         params,
         nodes: records(array(NODES)?),
         triangles: records(array(TRIANGLES)?),
-        leaves: records(array(LEAVES)?),
+        heightfields: records(array(LEAVES)?),
         atlas: Atlas {
             pitch,
             rows,

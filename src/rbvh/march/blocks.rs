@@ -33,6 +33,21 @@ pub(super) struct Clearance {
     pub(super) skirt_h: f32,
 }
 
+impl Clearance {
+    /// Whether the ray, from `t_a` to `t_b`, passes wholly above or below the block of height
+    /// code range `range` (low code in the low half-word) by more than the margins: then none of
+    /// its cells can be hit. An empty block (no texel: the range is inverted) is passed by every
+    /// ray. `rbvh_block_clear` in `glsl/rbvh.glsl` is its twin.
+    fn clears(&self, range: u32, t_a: f32, t_b: f32) -> bool {
+        let (code_lo, code_hi) = (range & 0xFFFF, range >> 16);
+        let lo = code_lo as f32 * self.h_scale - self.slack - self.skirt_h;
+        let hi = code_hi as f32 * self.h_scale + self.slack;
+        let h_a = height_at(self.o_h, self.d_h, t_a);
+        let h_b = height_at(self.o_h, self.d_h, t_b);
+        code_lo > code_hi || h_a.max(h_b) < lo || h_a.min(h_b) > hi
+    }
+}
+
 /// What checking the block the walk is in did.
 pub(super) enum Jump {
     /// Nothing: the block was checked already, or the ray may hit in it.
@@ -125,14 +140,8 @@ impl<'a> Blocks<'a> {
             offset: 4 * (self.first_word + block),
             bytes: 4,
         });
-        let range = self.range(block);
-        let (code_lo, code_hi) = (range & 0xFFFF, range >> 16);
-        let lo = code_lo as f32 * clear.h_scale - clear.slack - clear.skirt_h;
-        let hi = code_hi as f32 * clear.h_scale + clear.slack;
-        let h_a = height_at(clear.o_h, clear.d_h, w.t_in);
-        let h_b = height_at(clear.o_h, clear.d_h, leave[0].min(leave[1]).min(t1));
-        // An empty block (no texel: the range is inverted) is passed by every ray.
-        let clears = code_lo > code_hi || h_a.max(h_b) < lo || h_a.min(h_b) > hi;
+        let t_b = leave[0].min(leave[1]).min(t1);
+        let clears = clear.clears(self.range(block), w.t_in, t_b);
         if !clears {
             Jump::Stay
         } else if t1 < leave[0].min(leave[1]) {

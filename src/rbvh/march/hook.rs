@@ -1,7 +1,7 @@
 //! The march's leaves in the one tree traversal of `crate::bvh` (`traverse.rs`), as its hook
 //! ([`RbvhLeafHook`]): a triangle leaf tested exactly, as the exact BVH tests its own, and a
 //! height-field leaf marched ([`super::walk`]), each when it comes up from the near-first order or
-//! the stack. Here a new kind of leaf would be told apart and tested.
+//! the stack. A new kind of leaf is told apart in [`crate::rbvh::child`] and tested here.
 
 use glam::Vec3;
 
@@ -10,7 +10,7 @@ use super::Walk;
 use crate::bvh::{BvhLeafHook, Leaves};
 use crate::geom::{Hit, Ray};
 use crate::probe::{Probe, TraceStats};
-use crate::rbvh::layout::{HEIGHTFIELD_COUNT, LEAF_BIT};
+use crate::rbvh::child::Child;
 use crate::rbvh::{Rbvh, TexelFormat};
 
 /// An RBVH's leaves for the shared traversal (`crate::bvh::traverse`): hybrid triangle leaves
@@ -88,17 +88,20 @@ impl<P: Probe> Leaves<P> for RbvhLeafHook<'_> {
         probe: &mut P,
     ) -> bool {
         let (ray, rbvh) = (self.ray, self.rbvh);
-        if count != HEIGHTFIELD_COUNT {
-            // A triangle leaf (hybrid RBVH): tested exactly.
-            let found = self.triangles.test(node, count, t_closest, stats, probe);
-            self.triangle_nearest |= found;
-            return found;
-        }
+        let index = match Child::decode(node, count) {
+            Child::Heightfield(index) => index,
+            // A triangle leaf (hybrid RBVH), or an absent one: tested exactly (the traversal
+            // hands the hook leaves only, so `Inner` never comes; as a leaf of no triangles it
+            // would find nothing).
+            Child::Triangles { .. } | Child::Absent | Child::Inner(_) => {
+                let found = self.triangles.test(node, count, t_closest, stats, probe);
+                self.triangle_nearest |= found;
+                return found;
+            }
+        };
         // A height-field leaf that came up from the near-first order or the stack.
         stats.counters.leaves += 1;
-        let Some((t, normal)) =
-            rbvh.march(node & !LEAF_BIT, ray, *t_closest, self.walk, stats, probe)
-        else {
+        let Some((t, normal)) = rbvh.march(index, ray, *t_closest, self.walk, stats, probe) else {
             return false;
         };
         *t_closest = t;

@@ -34,6 +34,7 @@
 //! = absent), node visits are capped by the node count, a march by the tile's cell count.
 //!
 //! ## Files
+//! [`leaf`]: one leaf's march as every step sees it (the ray in its frame, its texels);
 //! [`walk`]: steps 1–3, the march itself ([`blocks`]: the device's block jumps); [`cell`]: step
 //! 4, the cell test; [`skirt`]: the skirts under rims; [`normal`]: step 5, a hit's normal and the
 //! device's reads for it; [`hook`]: the leaves in the tree traversal. Here: the caster's entry
@@ -122,7 +123,7 @@ impl Rbvh {
     ///
     /// The hit `id` tells the two kinds of leaf apart: a triangle-leaf hit reports the scene
     /// triangle index (`prim`, below 2³¹); a height-field hit reports `LEAF_BIT | leaf index`
-    /// (bit 31 set; the index is into [`Rbvh::leaves`]). A height-field hit's normal is the stored
+    /// (bit 31 set; the index is into [`Rbvh::heightfields`]). A height-field hit's normal is the stored
     /// (world-space, dilated, octahedral-quantized) normal of the sample nearest the hit (with
     /// height-only texels, the normal of the cell triangle hit); a triangle's is its geometric
     /// normal as wound.
@@ -170,7 +171,8 @@ pub(super) mod tests {
     use crate::bvh::{ChildRef, GpuNode, GpuTriangle};
     use crate::geom::Aabb;
     use crate::probe::{Array, Read};
-    use crate::rbvh::layout::{Atlas, GpuHeightfield, Texel, HEIGHTFIELD_COUNT, LEAF_BIT};
+    use crate::rbvh::child::Child;
+    use crate::rbvh::layout::{Atlas, GpuHeightfield, Texel, LEAF_BIT};
     use crate::rbvh::{RbvhParams, RbvhStats};
 
     /// World size of one texel in the test leaves.
@@ -222,11 +224,7 @@ pub(super) mod tests {
     }
 
     pub(super) fn hf_child(l: &GpuHeightfield, index: u32) -> ChildRef {
-        ChildRef {
-            bounds: leaf_box(l),
-            child: LEAF_BIT | index,
-            count: HEIGHTFIELD_COUNT,
-        }
+        Child::Heightfield(index).with_bounds(leaf_box(l))
     }
 
     /// A tile of `res_u × res_v` texels (pitch `res_u`) from `f(i, j)`.
@@ -243,14 +241,14 @@ pub(super) mod tests {
     pub(super) fn rbvh(
         nodes: Vec<GpuNode>,
         triangles: Vec<GpuTriangle>,
-        leaves: Vec<GpuHeightfield>,
+        heightfields: Vec<GpuHeightfield>,
         atlas: Atlas,
     ) -> Rbvh {
         Rbvh {
             params: RbvhParams::quality(2).unwrap(),
             nodes,
             triangles,
-            leaves,
+            heightfields,
             atlas,
             bounds: Aabb::EMPTY,
             depth: 1,
@@ -332,7 +330,7 @@ pub(super) mod tests {
             reads,
             [
                 read(Array::Nodes, 0, 48),
-                read(Array::Leaves, 0, 64),
+                read(Array::Heightfields, 0, 64),
                 read(Array::Atlas, 4 * 64, 4),
                 read(Array::Atlas, 4 * 28, 4),
                 read(Array::Atlas, 4 * 29, 4),
@@ -358,17 +356,10 @@ pub(super) mod tests {
             ],
             7,
         );
-        let tri_leaf = ChildRef {
-            bounds: Aabb::from_points(tri.vertices()),
-            child: LEAF_BIT,
-            count: 1,
-        };
+        let tri_leaf =
+            Child::Triangles { first: 0, count: 1 }.with_bounds(Aabb::from_points(tri.vertices()));
         let node1 = GpuNode::new(hf_child(&l0, 0), hf_child(&l1, 1));
-        let inner = ChildRef {
-            bounds: leaf_box(&l0).union(leaf_box(&l1)),
-            child: 1,
-            count: 0,
-        };
+        let inner = Child::Inner(1).with_bounds(leaf_box(&l0).union(leaf_box(&l1)));
         let root = GpuNode::new(inner, tri_leaf);
         let mut texels = tile(8, 8, |_, _| Texel::new(0, Vec3::Y));
         texels.extend(tile(8, 8, |_, _| Texel::new(0, -Vec3::Y)));
@@ -429,7 +420,7 @@ pub(super) mod tests {
         assert_hit(&good, &ray, 9.0, LEAF_BIT);
         let with_leaf = |f: &dyn Fn(&mut GpuHeightfield)| {
             let mut r = good.clone();
-            f(&mut r.leaves[0]);
+            f(&mut r.heightfields[0]);
             r
         };
         let corrupt = [
@@ -444,7 +435,7 @@ pub(super) mod tests {
         ];
         for r in &corrupt {
             let (hit, stats) = r.closest_hit(&ray);
-            assert_eq!(hit, Hit::MISS, "{:?}", r.leaves[0]);
+            assert_eq!(hit, Hit::MISS, "{:?}", r.heightfields[0]);
             assert!(!stats.overflow);
         }
         let with_root = |a: ChildRef| {
@@ -457,11 +448,7 @@ pub(super) mod tests {
             ..ChildRef::ABSENT
         };
         let corrupt = [
-            with_root(ChildRef {
-                child: LEAF_BIT | 5,
-                count: HEIGHTFIELD_COUNT,
-                ..big
-            }),
+            with_root(Child::Heightfield(5).with_bounds(big.bounds)),
             with_root(ChildRef {
                 child: 99,
                 count: 0,

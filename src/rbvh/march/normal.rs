@@ -38,12 +38,12 @@ impl NormalReads {
     pub(super) fn facet_leaf_reads(leaf: u32, skirt: bool) -> impl Iterator<Item = Read> {
         let base = u64::from(leaf) * std::mem::size_of::<GpuHeightfield>() as u64;
         let frame = Read {
-            array: Array::Leaves,
+            array: Array::Heightfields,
             offset: base + 12,
             bytes: 52,
         };
         let origin = Read {
-            array: Array::Leaves,
+            array: Array::Heightfields,
             offset: base,
             bytes: 12,
         };

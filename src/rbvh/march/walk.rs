@@ -36,9 +36,9 @@ impl Rbvh {
         stats: &mut TraceStats,
         probe: &mut P,
     ) -> Option<(f32, HitNormal)> {
-        let leaf = self.leaves.get(leaf_index as usize)?;
+        let leaf = self.heightfields.get(leaf_index as usize)?;
         probe.read(element::<GpuHeightfield>(
-            Array::Leaves,
+            Array::Heightfields,
             leaf_index as usize,
         ));
         // A tile needs two samples along each side to have a cell at all.
@@ -165,7 +165,9 @@ impl Rbvh {
                     }
                 }
             }
-            // 4. The cell, and the skirts under its rims.
+            // 4. The cell, and the skirts under its rims. (The device first leaves out the rims
+            // a ray passes too high or too low to reach, `rbvh_rim_reach`: a filter that keeps
+            // its inner loop small and changes no hit, which the skirt tests here decide alone.)
             stats.counters.cells += 1;
             let [ci, cj] = w.cell;
             let t_out = w.t_out().min(t1);
@@ -279,7 +281,7 @@ mod tests {
         // (In the world, a tight node box decides for a ray in its face plane, as in the exact
         // BVH; the box here is loose, so that the march decides.)
         let mut loose = r.clone();
-        let l = loose.leaves[0];
+        let l = loose.heightfields[0];
         let mut child = hf_child(&l, 0);
         child.bounds.min -= Vec3::splat(0.1);
         child.bounds.max += Vec3::splat(0.1);
@@ -419,7 +421,7 @@ mod tests {
 
     /// Every triangle of every cell, by brute force: the nearest hit in frame space.
     fn brute_force(r: &Rbvh, ray: &Ray) -> Option<f32> {
-        let l = &r.leaves[0];
+        let l = &r.heightfields[0];
         let (u, v, w) = (
             Vec3::from(l.axis_u),
             Vec3::from(l.axis_v),
@@ -466,7 +468,7 @@ mod tests {
     #[test]
     fn march_agrees_with_brute_force_on_a_bumpy_tile() {
         let r = bumpy();
-        let l = r.leaves[0];
+        let l = r.heightfields[0];
         let mut hits = 0;
         let mut n = 0;
         for a in 0..12 {
@@ -507,7 +509,7 @@ mod tests {
         // from all around, axis-aligned directions included: where the walk and the triangle
         // test could disagree about which cell a hit is in.
         let r = bumpy();
-        let l = r.leaves[0];
+        let l = r.heightfields[0];
         let mut n = 0;
         let mut hits = 0;
         for j in 0..l.res_v {
