@@ -51,6 +51,32 @@ fn heightfield_leaf_count(r: &Rbvh) -> usize {
 }
 
 #[test]
+fn every_triangle_is_in_one_leaf_and_the_tree_groups_lone_ones() {
+    // The default scene's presets trace its cube and cone exactly, each triangle alone in its
+    // leaf as built; the tree built again over the leaves groups them as the exact BVH would.
+    let scene = Scene::builtin("default").unwrap();
+    let r = Rbvh::build(&scene, &RbvhParams::quality(2).unwrap()).unwrap();
+    let mut seen = vec![0u32; r.triangles.len()];
+    let mut grouped = 0;
+    for c in r.nodes.iter().flat_map(|n| n.children()) {
+        if let Child::Triangles { first, count } = c.kind() {
+            let leaf = first as usize..(first + count) as usize;
+            for k in leaf.clone() {
+                seen[k] += 1;
+            }
+            let lone = r.triangles[leaf].iter().all(|t| t.part_leaf().is_none());
+            grouped += usize::from(count > 1 && lone);
+        }
+    }
+    assert!(
+        seen.iter().all(|&n| n == 1),
+        "every triangle in exactly one leaf"
+    );
+    assert!(grouped > 100, "{grouped} leaves of several lone triangles");
+    assert!(r.stats.triangle_leaves < r.triangles.len() as u32 / 2);
+}
+
+#[test]
 fn plane_is_one_leaf_with_exact_heights() {
     let scene = Scene::builtin("plane").unwrap();
     let (point, normal, half_extent) = common::plane_oracle();

@@ -140,6 +140,7 @@ impl Bvh {
             prims: &prims,
             params,
             progress,
+            groupable: None,
         };
         let root = step(
             progress,
@@ -221,10 +222,21 @@ pub(super) fn pack(root: Option<&BuildNode>, parameter: &str) -> Result<(Vec<Gpu
     })
 }
 
-/// A tree over finished leaves: `leaves` are references to them with their boxes (absent ones
-/// are skipped), and each becomes one child of the tree's nodes, placed by this builder's binned
-/// SAH on their boxes (every set of two or more split, so no node holds several). The node array
-/// (depth-first, node 0 the root) and its depth, as [`pack`] gives them.
+/// What a tree over finished leaves places ([`tree_over`]).
+pub(crate) enum Placed {
+    /// A finished leaf (its reference and box): one child of the tree's nodes, as it is.
+    Leaf(ChildRef),
+    /// One triangle, by its box: the SAH may put it in a leaf with other triangles.
+    Triangle(Aabb),
+}
+
+/// A tree over finished leaves and loose triangles, `items`: each finished leaf (absent ones are
+/// skipped) becomes one
+/// child of the tree's nodes, and the triangles go into leaves of at most `max_group` of them,
+/// as this builder's binned SAH places and groups them (a set holding a finished leaf is always
+/// split). The node array (depth-first, node 0 the root), its depth, as [`pack`] gives them, and
+/// the triangles' items in the order their leaves refer to them: a triangle leaf is
+/// `LEAF_BIT | (base + first)`, `count` into that order placed from `base` on.
 ///
 /// The RBVH's upper tree where it is cheaper than the construction's own (issue "A tree that
 /// earns its leaves"; `crate::rbvh`'s `upper_tree`). 256 bins, the most [`BuildParams`] allows,
@@ -232,17 +244,35 @@ pub(super) fn pack(root: Option<&BuildNode>, parameter: &str) -> Result<(Vec<Gpu
 /// courtyard's walls beside a dragon's tiles) bin poorly into 16, and on the paper-scale scene
 /// at Q2 a primary ray went through 65 inner nodes of the 16-bin tree, 62 of a 64-bin one and 59
 /// of this one; binning stays linear in the leaves per level, a fraction of a second there.
-pub(crate) fn tree_over(leaves: &[ChildRef]) -> Result<(Vec<GpuNode>, u32)> {
-    let present: Vec<&ChildRef> = leaves.iter().filter(|l| !l.is_absent()).collect();
-    let prims: Vec<Prim> = present
+pub(crate) fn tree_over(
+    items: &[Placed],
+    max_group: usize,
+    base: u32,
+) -> Result<(Vec<GpuNode>, u32, Vec<u32>)> {
+    // Absent leaves hold nothing and have no box to place.
+    let present: Vec<u32> = (0..items.len() as u32)
+        .filter(|&i| !matches!(&items[i as usize], Placed::Leaf(leaf) if leaf.is_absent()))
+        .collect();
+    let items: Vec<&Placed> = present.iter().map(|&i| &items[i as usize]).collect();
+    let prims: Vec<Prim> = items
         .par_iter()
-        .map(|l| Prim {
-            bounds: l.bounds,
-            centroid: l.bounds.center(),
+        .map(|item| {
+            let bounds = match item {
+                Placed::Leaf(leaf) => leaf.bounds,
+                Placed::Triangle(bounds) => *bounds,
+            };
+            Prim {
+                bounds,
+                centroid: bounds.center(),
+            }
         })
         .collect();
+    let groupable: Vec<bool> = items
+        .iter()
+        .map(|item| matches!(item, Placed::Triangle(_)))
+        .collect();
     let params = BuildParams {
-        max_leaf: 1,
+        max_leaf: max_group.max(1),
         bins: 256,
         ..BuildParams::DEFAULT
     };
@@ -250,37 +280,70 @@ pub(crate) fn tree_over(leaves: &[ChildRef]) -> Result<(Vec<GpuNode>, u32)> {
         prims: &prims,
         params: &params,
         progress: &Quiet,
+        groupable: Some(&groupable),
     };
     let mut order: Vec<u32> = (0..prims.len() as u32).collect();
     let root = (!order.is_empty()).then(|| builder.build(&mut order, 0, 0));
-    pack_with(root.as_ref(), "scene", &|_, start, _| {
-        *present[order[start as usize] as usize]
-    })
+    // Where each place of the order starts among the triangles, which keep the order's.
+    let mut first = Vec::with_capacity(order.len());
+    let mut triangles = Vec::new();
+    for &i in &order {
+        first.push(triangles.len() as u32);
+        if groupable[i as usize] {
+            triangles.push(present[i as usize]);
+        }
+    }
+    let (nodes, depth) = pack_with(root.as_ref(), "scene", &|bounds, start, count| {
+        match items[order[start as usize] as usize] {
+            // Never grouped: a leaf of its own.
+            Placed::Leaf(leaf) => *leaf,
+            Placed::Triangle(_) => ChildRef {
+                bounds,
+                child: LEAF_BIT | (base + first[start as usize]),
+                count,
+            },
+        }
+    })?;
+    Ok((nodes, depth, triangles))
 }
 
 /// The surface-area cost of the tree `nodes` (node 0 the root): the areas of its inner nodes'
-/// boxes (the union of each node's children's boxes as decoded, which traversal tests) over the
-/// root's, the expected number of inner nodes a ray through the root's box visits when rays
-/// are spread evenly (Goldsmith & Salmon 1987; MacDonald & Booth 1990). The leaves' term is the
-/// same for every tree over the same leaves, so it is left out.
-pub(crate) fn sah_cost(nodes: &[GpuNode]) -> f64 {
-    let area = |n: &GpuNode| {
-        let [a, b] = n.children();
-        let union = [a, b]
+/// boxes (the union of each node's children's boxes as decoded, which traversal tests) and of
+/// its leaves' boxes, each leaf's weighted by `leaf_cost` (what testing it costs, in box tests),
+/// over the root's: what a ray through the root's box costs when rays are spread evenly
+/// (Goldsmith & Salmon 1987; MacDonald & Booth 1990). A term the same for every tree compared
+/// (a leaf each has) may be left out by a `leaf_cost` of 0.
+pub(crate) fn sah_cost(nodes: &[GpuNode], leaf_cost: &dyn Fn(&ChildRef) -> f64) -> f64 {
+    let union = |n: &GpuNode| {
+        n.children()
             .iter()
             .filter(|c| !c.is_absent())
-            .fold(Aabb::EMPTY, |u, c| u.union(c.bounds));
-        if union.is_empty() {
+            .fold(Aabb::EMPTY, |u, c| u.union(c.bounds))
+    };
+    let area = |b: Aabb| {
+        if b.is_empty() {
             0.0
         } else {
-            f64::from(union.area())
+            f64::from(b.area())
         }
     };
-    let root = nodes.first().map_or(0.0, area);
+    let root = nodes.first().map_or(0.0, |n| area(union(n)));
     if root <= 0.0 {
         return nodes.len() as f64;
     }
-    nodes.iter().map(area).sum::<f64>() / root
+    let cost: f64 = nodes
+        .iter()
+        .map(|n| {
+            let leaves: f64 = n
+                .children()
+                .iter()
+                .filter(|c| c.is_leaf() && !c.is_absent())
+                .map(|c| area(c.bounds) * leaf_cost(c))
+                .sum();
+            area(union(n)) + leaves
+        })
+        .sum();
+    cost / root
 }
 
 /// An error when a tree has more than [`MAX_NODES`] inner nodes, which its traversal stack
@@ -378,6 +441,8 @@ fn flatten(node: &BuildNode, nodes: &mut Vec<GpuNode>, leaf: &LeafRef) -> ChildR
 struct Builder<'a> {
     prims: &'a [Prim],
     params: &'a BuildParams,
+    /// Which prims may share a leaf; `None`: all (the exact BVH's triangles).
+    groupable: Option<&'a [bool]>,
     /// Told of every leaf's triangles as the leaf is made.
     progress: &'a dyn Progress,
 }
@@ -416,10 +481,14 @@ impl Builder<'_> {
         } else {
             None
         };
+        let groups = n <= self.params.max_leaf
+            && self
+                .groupable
+                .is_none_or(|g| order.iter().all(|&i| g[i as usize]));
         let mid = match split {
-            Some(s) if s.cost >= n as f32 && n <= self.params.max_leaf => return made_leaf(),
+            Some(s) if s.cost >= n as f32 && groups => return made_leaf(),
             Some(s) => partition(order, |i| s.bin_of(&self.prims[i as usize]) < s.bin),
-            None if n <= self.params.max_leaf => return made_leaf(),
+            None if groups => return made_leaf(),
             None => self.median_split(order, &centroids),
         };
         let (left, right) = order.split_at_mut(mid);
@@ -640,7 +709,9 @@ mod tests {
             })
             .collect();
         leaves.insert(17, ChildRef::ABSENT);
-        let (nodes, depth) = tree_over(&leaves).unwrap();
+        let placed: Vec<Placed> = leaves.iter().map(|&l| Placed::Leaf(l)).collect();
+        let (nodes, depth, triangles) = tree_over(&placed, 8, 0).unwrap();
+        assert!(triangles.is_empty());
         assert!(depth <= STACK_SIZE);
         let mut found = Vec::new();
         under(&nodes, 0, &mut found);
@@ -671,12 +742,70 @@ mod tests {
     #[test]
     fn a_tree_over_one_leaf_or_none_is_one_node() {
         let one = leaf(Vec3::ZERO, 1.0, 0);
-        let (nodes, depth) = tree_over(&[ChildRef::ABSENT, one]).unwrap();
+        let (nodes, depth, _) =
+            tree_over(&[Placed::Leaf(ChildRef::ABSENT), Placed::Leaf(one)], 8, 0).unwrap();
         assert_eq!((nodes.len(), depth), (1, 1));
         assert_eq!(nodes[0].children()[0].child, one.child);
         assert!(nodes[0].children()[1].is_absent());
-        let (nodes, _) = tree_over(&[]).unwrap();
+        let (nodes, _, _) = tree_over(&[], 8, 0).unwrap();
         assert_eq!(nodes.len(), 1);
         assert!(nodes[0].children().iter().all(ChildRef::is_absent));
+    }
+
+    #[test]
+    fn loose_triangles_share_leaves_and_finished_leaves_never_do() {
+        // Clusters of small triangles, each cluster beside a finished leaf, and an absent one.
+        let mut items = vec![Placed::Leaf(ChildRef::ABSENT)];
+        for c in 0..6u32 {
+            let at = Vec3::new(50.0 * c as f32, 0.0, 0.0);
+            items.push(Placed::Leaf(leaf(
+                at + Vec3::splat(5.0),
+                2.0,
+                LEAF_BIT - 1 - c,
+            )));
+            for k in 0..20u32 {
+                let p = at + Vec3::new((k % 5) as f32 * 0.3, (k / 5) as f32 * 0.3, 0.0);
+                items.push(Placed::Triangle(Aabb {
+                    min: p,
+                    max: p + Vec3::splat(0.2),
+                }));
+            }
+        }
+        let (nodes, depth, triangles) = tree_over(&items, 4, 0).unwrap();
+        assert!(depth <= STACK_SIZE);
+        // Every triangle once, in the order the leaves refer to.
+        let mut sorted = triangles.clone();
+        sorted.sort_unstable();
+        let expected: Vec<u32> = (0..items.len() as u32)
+            .filter(|&i| matches!(items[i as usize], Placed::Triangle(_)))
+            .collect();
+        assert_eq!(sorted, expected);
+        let mut found = Vec::new();
+        under(&nodes, 0, &mut found);
+        let (mut finished, mut covered, mut shared) = (0, vec![false; triangles.len()], 0);
+        for (c, decoded) in &found {
+            if c.child >= LEAF_BIT | (LEAF_BIT - 7) {
+                finished += 1;
+                assert_eq!(c.count, 3, "a finished leaf as it was");
+                continue;
+            }
+            let first = (c.child & !LEAF_BIT) as usize;
+            assert!((1..=4).contains(&c.count), "{c:?}");
+            shared += usize::from(c.count > 1);
+            for k in first..first + c.count as usize {
+                assert!(!covered[k], "triangle {k} in two leaves");
+                covered[k] = true;
+                let Placed::Triangle(b) = items[triangles[k] as usize] else {
+                    unreachable!("only triangles are listed")
+                };
+                assert!(decoded.min.cmple(b.min).all() && decoded.max.cmpge(b.max).all());
+            }
+        }
+        assert_eq!(finished, 6);
+        assert!(covered.iter().all(|&c| c));
+        assert!(
+            shared > 10,
+            "{shared} leaves of several triangles: the SAH grouped none"
+        );
     }
 }

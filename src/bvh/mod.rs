@@ -20,7 +20,7 @@ mod morton;
 mod traverse;
 mod validate;
 
-pub(crate) use build::{check_node_count, join_halves, partition, sah_cost, tree_over};
+pub(crate) use build::{check_node_count, join_halves, partition, sah_cost, tree_over, Placed};
 pub use build::{BuildParams, Bvh};
 pub use layout::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, MAX_NODES, STACK_SIZE};
 pub(crate) use morton::LinearBvh;
