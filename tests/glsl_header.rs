@@ -82,33 +82,39 @@ fn header_compiles_in_a_foreign_shader_with_its_own_bindings() {
     assert_eq!(r.bindings.get("EngineDepth"), Some(&(0, 0)));
 }
 
-/// The same engine shader tracing with level of detail, LOD buffers at its own bindings.
-const FOREIGN_LOD: &str = r#"
+/// An engine shader tracing with level of detail: `defines` pick where the headers' buffers live
+/// (none: their defaults), and its own depth buffer is at set `depth_set`, binding 0.
+fn lod_engine_shader(defines: &str, depth_set: u32) -> String {
+    format!(
+        r#"
 #version 460
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x = 32) in;
 
-#define RBVH_BVH_SET 1
-#define RBVH_LODS_BINDING 11
-#define RBVH_LOD_TEXELS_BINDING 12
+{defines}
 #include "lod.glsl"
 
-layout(std430, set = 0, binding = 0) writeonly buffer EngineDepth { float depth[]; };
-layout(push_constant) uniform EnginePush { RbvhSizes sizes; RbvhLodSizes lod_sizes; float spread; } push;
+layout(std430, set = {depth_set}, binding = 0) writeonly buffer EngineDepth {{ float depth[]; }};
+layout(push_constant) uniform EnginePush {{ RbvhSizes sizes; RbvhLodSizes lod_sizes; float spread; }} push;
 
-void main() {
+void main() {{
     Ray ray = Ray(vec3(gl_GlobalInvocationID.x, 0.0, -10.0), 0.0, vec3(0.0, 0.0, 1.0), 1e30);
     uint steps;
     bool overflow;
     Hit hit = rbvh_trace_rbvh_lod(ray, vec2(0.0, push.spread), false, push.sizes, push.lod_sizes,
                                   steps, overflow);
     depth[gl_GlobalInvocationID.x] = overflow ? -1.0 : hit.t;
+}}
+"#
+    )
 }
-"#;
 
 #[test]
 fn lod_header_compiles_in_a_foreign_shader_with_its_own_bindings() {
-    let r = spirv::reflect(&compile(FOREIGN_LOD).unwrap());
+    // The same engine shader as above, the LOD buffers at its own bindings too.
+    let defines =
+        "#define RBVH_BVH_SET 1\n#define RBVH_LODS_BINDING 11\n#define RBVH_LOD_TEXELS_BINDING 12";
+    let r = spirv::reflect(&compile(&lod_engine_shader(defines, 0)).unwrap());
     for (block, binding) in [
         ("RbvhBvhNodes", 0),
         ("RbvhAtlas", 3),
@@ -124,35 +130,14 @@ fn lod_header_compiles_in_a_foreign_shader_with_its_own_bindings() {
     }
 }
 
-/// An engine shader that picks no bindings, tracing with level of detail: every buffer of the
-/// headers at its default.
-const FOREIGN_DEFAULTS: &str = r#"
-#version 460
-#extension GL_GOOGLE_include_directive : require
-layout(local_size_x = 32) in;
-
-#include "lod.glsl"
-
-layout(std430, set = 1, binding = 0) writeonly buffer EngineDepth { float depth[]; };
-layout(push_constant) uniform EnginePush { RbvhSizes sizes; RbvhLodSizes lod_sizes; float spread; } push;
-
-void main() {
-    Ray ray = Ray(vec3(gl_GlobalInvocationID.x, 0.0, -10.0), 0.0, vec3(0.0, 0.0, 1.0), 1e30);
-    uint steps;
-    bool overflow;
-    Hit hit = rbvh_trace_rbvh_lod(ray, vec2(0.0, push.spread), false, push.sizes, push.lod_sizes,
-                                  steps, overflow);
-    depth[gl_GlobalInvocationID.x] = overflow ? -1.0 : hit.t;
-}
-"#;
-
 /// The defaults of `bvh.glsl`, `rbvh.glsl` and `lod.glsl` are the bindings of the library's own
 /// trace shaders (`glsl/bindings.glsl`, which those include first): the headers keep their own, so
 /// that an engine needs no other file, and this keeps the two one table.
 #[test]
 fn header_defaults_are_the_library_bindings() {
     use rbvh::gpu::bindings;
-    let r = spirv::reflect(&compile(FOREIGN_DEFAULTS).unwrap());
+    // An engine shader that picks no bindings: every buffer of the headers at its default.
+    let r = spirv::reflect(&compile(&lod_engine_shader("", 1)).unwrap());
     for (block, binding) in [
         ("RbvhBvhNodes", bindings::BVH_NODES),
         ("RbvhBvhTriangles", bindings::BVH_TRIS),

@@ -422,19 +422,8 @@ mod tests {
     /// Every triangle of every cell, by brute force: the nearest hit in frame space.
     fn brute_force(r: &Rbvh, ray: &Ray) -> Option<f32> {
         let l = &r.heightfields[0];
-        let (u, v, w) = (
-            Vec3::from(l.axis_u),
-            Vec3::from(l.axis_v),
-            Vec3::from(l.axis_w),
-        );
-        let rel = ray.origin() - Vec3::from(l.origin);
-        let d = ray.dir();
-        let frame = Ray::new(
-            Vec3::new(rel.dot(u), rel.dot(v), rel.dot(w)),
-            Vec3::new(d.dot(u), d.dot(v), d.dot(w)),
-            ray.tmin,
-            ray.tmax,
-        );
+        // The march's own frame, so that both test the same frame-space triangles.
+        let frame = frame_ray(l, ray, ray.tmax).expect("the test's rays are valid");
         let shear = RayShear::new(&frame);
         let vertex = |i: u32, j: u32| {
             let t = r.atlas.texels[(l.atlas_base + j * r.atlas.pitch + i) as usize];
