@@ -141,7 +141,6 @@ impl Bvh {
             params,
             progress,
             groupable: None,
-            cost: None,
         };
         let root = step(
             progress,
@@ -225,10 +224,8 @@ pub(super) fn pack(root: Option<&BuildNode>, parameter: &str) -> Result<(Vec<Gpu
 
 /// What a tree over finished leaves places ([`tree_over`]).
 pub(crate) enum Placed {
-    /// A finished leaf (its reference and box): one child of the tree's nodes, as it is. `cost`
-    /// is what testing it costs, in triangle tests: its triangles' count, or what a height field's
-    /// march costs; the SAH weighs the leaf by it.
-    Leaf { leaf: ChildRef, cost: u32 },
+    /// A finished leaf (its reference and box): one child of the tree's nodes, as it is.
+    Leaf(ChildRef),
     /// One triangle, by its box: the SAH may put it in a leaf with other triangles.
     Triangle(Aabb),
 }
@@ -254,14 +251,14 @@ pub(crate) fn tree_over(
 ) -> Result<(Vec<GpuNode>, u32, Vec<u32>)> {
     // Absent leaves hold nothing and have no box to place.
     let present: Vec<u32> = (0..items.len() as u32)
-        .filter(|&i| !matches!(&items[i as usize], Placed::Leaf { leaf, .. } if leaf.is_absent()))
+        .filter(|&i| !matches!(&items[i as usize], Placed::Leaf(leaf) if leaf.is_absent()))
         .collect();
     let items: Vec<&Placed> = present.iter().map(|&i| &items[i as usize]).collect();
     let prims: Vec<Prim> = items
         .par_iter()
         .map(|item| {
             let bounds = match item {
-                Placed::Leaf { leaf, .. } => leaf.bounds,
+                Placed::Leaf(leaf) => leaf.bounds,
                 Placed::Triangle(bounds) => *bounds,
             };
             Prim {
@@ -274,13 +271,6 @@ pub(crate) fn tree_over(
         .iter()
         .map(|item| matches!(item, Placed::Triangle(_)))
         .collect();
-    let cost: Vec<u32> = items
-        .iter()
-        .map(|item| match item {
-            Placed::Leaf { cost, .. } => (*cost).max(1),
-            Placed::Triangle(_) => 1,
-        })
-        .collect();
     let params = BuildParams {
         max_leaf: max_group.max(1),
         bins: 256,
@@ -291,7 +281,6 @@ pub(crate) fn tree_over(
         params: &params,
         progress: &Quiet,
         groupable: Some(&groupable),
-        cost: Some(&cost),
     };
     let mut order: Vec<u32> = (0..prims.len() as u32).collect();
     let root = (!order.is_empty()).then(|| builder.build(&mut order, 0, 0));
@@ -307,7 +296,7 @@ pub(crate) fn tree_over(
     let (nodes, depth) = pack_with(root.as_ref(), "scene", &|bounds, start, count| {
         match items[order[start as usize] as usize] {
             // Never grouped: a leaf of its own.
-            Placed::Leaf { leaf, .. } => *leaf,
+            Placed::Leaf(leaf) => *leaf,
             Placed::Triangle(_) => ChildRef {
                 bounds,
                 child: LEAF_BIT | (base + first[start as usize]),
@@ -454,9 +443,6 @@ struct Builder<'a> {
     params: &'a BuildParams,
     /// Which prims may share a leaf; `None`: all (the exact BVH's triangles).
     groupable: Option<&'a [bool]>,
-    /// What testing each prim costs, in triangle tests, which the SAH weighs its side by; `None`:
-    /// 1 each (the exact BVH's triangles).
-    cost: Option<&'a [u32]>,
     /// Told of every leaf's triangles as the leaf is made.
     progress: &'a dyn Progress,
 }
@@ -602,7 +588,7 @@ impl Builder<'_> {
         let add = |mut bins: Vec<Bin>, i: &u32| {
             let b = &mut bins[bin_of(*i)];
             b.bounds = b.bounds.union(self.prims[*i as usize].bounds);
-            b.count += self.cost.map_or(1, |c| c[*i as usize]);
+            b.count += 1;
             bins
         };
         let merge = |mut a: Vec<Bin>, b: Vec<Bin>| {
@@ -723,10 +709,7 @@ mod tests {
             })
             .collect();
         leaves.insert(17, ChildRef::ABSENT);
-        let placed: Vec<Placed> = leaves
-            .iter()
-            .map(|&l| Placed::Leaf { leaf: l, cost: 1 })
-            .collect();
+        let placed: Vec<Placed> = leaves.iter().map(|&l| Placed::Leaf(l)).collect();
         let (nodes, depth, triangles) = tree_over(&placed, 8, 0).unwrap();
         assert!(triangles.is_empty());
         assert!(depth <= STACK_SIZE);
@@ -756,55 +739,11 @@ mod tests {
         assert!(root.iter().any(|b| b.extent().x < 20.0), "{root:?}");
     }
 
-    /// Levels below the root at which leaf `child` sits.
-    fn level_of(nodes: &[GpuNode], index: u32, child: u32) -> Option<u32> {
-        nodes[index as usize].children().into_iter().find_map(|c| {
-            if c.is_absent() {
-                None
-            } else if c.is_leaf() {
-                (c.child == child).then_some(1)
-            } else {
-                level_of(nodes, c.child, child).map(|l| l + 1)
-            }
-        })
-    }
-
-    #[test]
-    fn a_leaf_that_costs_more_to_test_sits_nearer_the_root() {
-        // 64 leaves of one size in a row; the SAH weighs leaf 21 by its cost, so that a ray
-        // through the row reaches it through fewer nodes when it costs more to test.
-        let level = |cost: u32| {
-            let placed: Vec<Placed> = (0..64u32)
-                .map(|i| Placed::Leaf {
-                    leaf: leaf(Vec3::new(3.0 * i as f32, 0.0, 0.0), 1.0, 10 * i),
-                    cost: if i == 21 { cost } else { 1 },
-                })
-                .collect();
-            let (nodes, _, _) = tree_over(&placed, 8, 0).unwrap();
-            level_of(&nodes, 0, LEAF_BIT | 210).expect("leaf 21 is in the tree")
-        };
-        let (cheap, costly) = (level(1), level(64));
-        assert!(
-            costly < cheap,
-            "at level {costly} costing 64, {cheap} costing 1"
-        );
-    }
-
     #[test]
     fn a_tree_over_one_leaf_or_none_is_one_node() {
         let one = leaf(Vec3::ZERO, 1.0, 0);
-        let (nodes, depth, _) = tree_over(
-            &[
-                Placed::Leaf {
-                    leaf: ChildRef::ABSENT,
-                    cost: 1,
-                },
-                Placed::Leaf { leaf: one, cost: 1 },
-            ],
-            8,
-            0,
-        )
-        .unwrap();
+        let (nodes, depth, _) =
+            tree_over(&[Placed::Leaf(ChildRef::ABSENT), Placed::Leaf(one)], 8, 0).unwrap();
         assert_eq!((nodes.len(), depth), (1, 1));
         assert_eq!(nodes[0].children()[0].child, one.child);
         assert!(nodes[0].children()[1].is_absent());
@@ -816,16 +755,14 @@ mod tests {
     #[test]
     fn loose_triangles_share_leaves_and_finished_leaves_never_do() {
         // Clusters of small triangles, each cluster beside a finished leaf, and an absent one.
-        let mut items = vec![Placed::Leaf {
-            leaf: ChildRef::ABSENT,
-            cost: 1,
-        }];
+        let mut items = vec![Placed::Leaf(ChildRef::ABSENT)];
         for c in 0..6u32 {
             let at = Vec3::new(50.0 * c as f32, 0.0, 0.0);
-            items.push(Placed::Leaf {
-                leaf: leaf(at + Vec3::splat(5.0), 2.0, LEAF_BIT - 1 - c),
-                cost: 4,
-            });
+            items.push(Placed::Leaf(leaf(
+                at + Vec3::splat(5.0),
+                2.0,
+                LEAF_BIT - 1 - c,
+            )));
             for k in 0..20u32 {
                 let p = at + Vec3::new((k % 5) as f32 * 0.3, (k / 5) as f32 * 0.3, 0.0);
                 items.push(Placed::Triangle(Aabb {

@@ -15,12 +15,6 @@ use crate::{Error, Result};
 /// the nodes between them.
 const MAX_TRIANGLES_A_LEAF: usize = 8;
 
-/// What the tree built again over the leaves weighs a height-field leaf by, in triangle tests:
-/// about what a ray's march through it costs (its frame, its tile's box, and on average one to
-/// two cells of two triangles each, read from the atlas). Weighed as one triangle, leaves were
-/// kept together that a ray then had to enter one by one.
-const HEIGHTFIELD_TEST_COST: u32 = 10;
-
 /// The tree traversal runs over the leaves of `out`: the construction's own (`out.nodes`, of
 /// depth `root`'s), or one built again over the leaves' boxes by the exact BVH's SAH
 /// ([`crate::bvh::tree_over`]), whichever the SAH finds cheaper ([`crate::bvh::sah_cost`]),
@@ -60,18 +54,12 @@ pub(super) fn upper_tree(out: &mut Flattened, root: Option<&Node>) -> Result<(Ve
                 let range = first as usize..first as usize + count as usize;
                 kept.extend_from_slice(out.triangles.get(range).unwrap_or_default());
                 let child = Child::Triangles { first: at, count };
-                items.push(Placed::Leaf {
-                    leaf: child.with_bounds(leaf.bounds),
-                    cost: count,
-                });
+                items.push(Placed::Leaf(child.with_bounds(leaf.bounds)));
                 loose.push(u32::MAX);
             }
             Child::Absent => {}
             Child::Inner(_) | Child::Heightfield(_) => {
-                items.push(Placed::Leaf {
-                    leaf: *leaf,
-                    cost: HEIGHTFIELD_TEST_COST,
-                });
+                items.push(Placed::Leaf(*leaf));
                 loose.push(u32::MAX);
             }
         }
