@@ -32,54 +32,6 @@
 #define RBVH_STACK_SIZE 64
 const uint RBVH_LEAF_BIT = 0x80000000u;
 
-// Where the traversal (traverse.glsl) keeps the world ray and its counters through a leaf test.
-// With RBVH_SHARED_RAYS defined before the #include as the compute shader's workgroup size (its
-// invocations), in workgroup memory, a 48-byte slot an invocation: there they hold no register
-// through the height-field march, whose peak sets the RBVH tracers' registers (docs/speed.md,
-// "What holds the RBVH tracer's registers"). Each read comes after a barrier on workgroup memory,
-// without which the compiler forwards the value stored to the read and keeps it in registers
-// after all. Without RBVH_SHARED_RAYS (which any stage but compute must leave undefined) they
-// stay values: each function below then returns its argument.
-#ifdef RBVH_SHARED_RAYS
-struct RbvhKept {
-    Ray ray;
-    uvec4 counters;
-};
-shared RbvhKept rbvh_kept[RBVH_SHARED_RAYS];
-
-void rbvh_keep_ray(Ray ray) {
-    rbvh_kept[gl_LocalInvocationIndex].ray = ray;
-}
-
-Ray rbvh_kept_ray(Ray ray) {
-    memoryBarrierShared();
-    return rbvh_kept[gl_LocalInvocationIndex].ray;
-}
-
-void rbvh_keep_counters(uvec4 counters) {
-    rbvh_kept[gl_LocalInvocationIndex].counters = counters;
-}
-
-uvec4 rbvh_kept_counters(uvec4 counters) {
-    memoryBarrierShared();
-    return rbvh_kept[gl_LocalInvocationIndex].counters;
-}
-#else
-void rbvh_keep_ray(Ray ray) {
-}
-
-Ray rbvh_kept_ray(Ray ray) {
-    return ray;
-}
-
-void rbvh_keep_counters(uvec4 counters) {
-}
-
-uvec4 rbvh_kept_counters(uvec4 counters) {
-    return counters;
-}
-#endif
-
 // Aila & Laine (2009) node, both children's boxes quantized against the node's own box (Ylitie,
 // Karras & Laine 2017) in 48 bytes: GpuNode in src/bvh/layout.rs says how.
 struct BvhNode {

@@ -222,7 +222,7 @@ Hit rbvh_trace_rbvh_lod(Ray ray, vec2 cone, bool any_hit, RbvhSizes sz, RbvhLodS
                         out uint steps, out bool overflow) {
     RbvhLodLeafHook leaves = RbvhLodLeafHook(rbvh_leaf_hook(sz), lsz, cone);
     float t = rbvh_traverse_rbvh_lod(ray, any_hit, leaves, steps, overflow);
-    return rbvh_rbvh_hit(leaves.rbvh, t, rbvh_kept_ray(ray));
+    return rbvh_rbvh_hit(leaves.rbvh, t, ray);
 }
 
 #endif

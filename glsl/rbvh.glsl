@@ -878,7 +878,7 @@ Hit rbvh_rbvh_hit(RbvhLeafHook leaves, float t, Ray ray) {
 Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out bool overflow) {
     RbvhLeafHook leaves = rbvh_leaf_hook(sz);
     float t = rbvh_traverse_rbvh(ray, any_hit, leaves, steps, overflow);
-    return rbvh_rbvh_hit(leaves, t, rbvh_kept_ray(ray));
+    return rbvh_rbvh_hit(leaves, t, ray);
 }
 
 #endif

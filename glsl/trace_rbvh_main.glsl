@@ -9,9 +9,6 @@
 #include "bindings.glsl"
 
 layout(local_size_x = 64) in;
-// Each traversal keeps its ray and counters through the leaf tests in workgroup memory, a slot
-// an invocation (bvh.glsl).
-#define RBVH_SHARED_RAYS 64
 
 // Specialised true (src/gpu/tracer.rs, COUNT_CONSTANT_ID) for the pipeline that counts each ray's
 // work; the timed pipeline keeps it false, and the compiler drops the counting.

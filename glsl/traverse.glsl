@@ -20,9 +20,8 @@
 // It also uses, from bvh.glsl (included before it wherever it is instantiated: bvh.glsl,
 // rbvh.glsl, lod.glsl) and what that includes (common.glsl, intersect.glsl): Ray, BvhNode,
 // RBVH_BVH_NODE(i), rbvh_node_boxes, RBVH_LEAF_BIT, RBVH_INVALID, RBVH_STACK_SIZE,
-// rbvh_stack_entry, rbvh_stack_pop, rbvh_keep_ray, rbvh_kept_ray, rbvh_keep_counters,
-// rbvh_kept_counters, rbvh_ray_valid, rbvh_safe_inverse, rbvh_intersect_box, RBVH_COUNT_RESET and
-// RBVH_COUNT_ADD. Define the two names above and include it; then
+// rbvh_stack_entry, rbvh_stack_pop, rbvh_ray_valid, rbvh_safe_inverse, rbvh_intersect_box,
+// RBVH_COUNT_RESET and RBVH_COUNT_ADD. Define the two names above and include it; then
 // `float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint steps, out bool
 // overflow)` returns the nearest distance found (ray.tmax if none; the
 // hook tells whether it kept a hit). `steps` = nodes visited plus what the hook adds;
@@ -31,15 +30,15 @@
 //
 // "While-while" (Aila & Laine 2009): leaves take the same nearest-first/stack path as inner nodes;
 // the inner loop visits inner nodes only and leaves for the outer loop when it meets a leaf,
-// which the outer loop hands to the hook before its next round resumes the inner one. On SIMD
+// which the outer loop hands to the hook at the end of that round. On SIMD
 // hardware the leaf tests then run for all lanes that reached a leaf together, instead of beside
 // node visits in every iteration (about 1.4x faster on lavapipe for triangle leaves; inlined in
 // the per-child loop, the march's registers weighed on every node visit, 4x slower). Each round
 // tests one leaf, and a tree has one leaf more than it has inner nodes, which bounds the rounds.
-// What the traversal needs again after a leaf test is made anew each round (the ray's inverse,
-// the next node) or read back from where rbvh_keep_ray and rbvh_keep_counters keep it (bvh.glsl)
-// rather than carried through the test: a value live across the march holds a register through
-// it.
+// The leaf is tested at the end of the round that met it, and what the traversal needs again
+// after the test is made anew each round (the ray's inverse, the next node) rather than carried
+// through it: a value live across the march holds a register through it (docs/speed.md, "The
+// leaf tested where it is met").
 //
 // Ended early: lavapipe (llvmpipe) stops any shader loop once the loops of an invocation's SIMD
 // group have run LP_MAX_TGSI_LOOP_ITERATIONS (65535) iterations in all, silently, as if the loop
@@ -55,7 +54,6 @@
 // visits than nodes (only a cycle can make them) end the ray as an overflow.
 
 float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint steps, out bool overflow) {
-    rbvh_keep_ray(ray);
     steps = 0u;
     RBVH_COUNT_RESET();
     overflow = false;
@@ -76,10 +74,9 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
     bool finished = false;
     uint iter = 0u;
     for (uint round = 0u; round <= bound; ++round) {
-        Ray r = rbvh_kept_ray(ray);
         // Made anew each round rather than kept through the leaf test, where it would hold three
         // registers through the march (docs/speed.md, "What holds the RBVH tracer's registers").
-        vec3 inv_dir = rbvh_safe_inverse(r.dir);
+        vec3 inv_dir = rbvh_safe_inverse(ray.dir);
         // The reference to visit next: the root in the first round, else RBVH_INVALID (pop one).
         uint node = round == 0u ? 0u : RBVH_INVALID;
         uint count_of_node = 0u;
@@ -131,8 +128,8 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
                 rbvh_node_boxes(n, a_min, a_max, b_min, b_max);
                 float ta;
                 float tb;
-                bool ha = rbvh_intersect_box(a_min, a_max, r.origin, inv_dir, r.tmin, t_closest, ta);
-                bool hb = rbvh_intersect_box(b_min, b_max, r.origin, inv_dir, r.tmin, t_closest, tb);
+                bool ha = rbvh_intersect_box(a_min, a_max, ray.origin, inv_dir, ray.tmin, t_closest, ta);
+                bool hb = rbvh_intersect_box(b_min, b_max, ray.origin, inv_dir, ray.tmin, t_closest, tb);
                 // Nearest child first; b only goes first when strictly nearer.
                 bool b_first = ha && hb && tb < ta;
                 int k = 0;
@@ -169,15 +166,9 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
         if (pending == RBVH_INVALID || round == bound) {
             break;
         }
-        rbvh_keep_counters(uvec4(visits, iter, sp, steps));
         uint leaf_steps = 0u;
-        bool hit =
-            rbvh_test(leaves, rbvh_kept_ray(ray), any_hit, pending, pending_count, t_closest, leaf_steps, cut);
-        uvec4 counters = rbvh_kept_counters(uvec4(visits, iter, sp, steps));
-        visits = counters.x;
-        iter = counters.y;
-        sp = counters.z;
-        steps = counters.w + leaf_steps;
+        bool hit = rbvh_test(leaves, ray, any_hit, pending, pending_count, t_closest, leaf_steps, cut);
+        steps += leaf_steps;
         if (hit && any_hit) {
             finished = true;
             break;
