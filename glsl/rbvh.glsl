@@ -778,7 +778,7 @@ uint rbvh_node_count(RbvhLeafHook leaves) {
 }
 
 // One round per marched or tested leaf (a tree has at most one leaf more than it has inner nodes;
-// with level of detail, chosen nodes replace subtrees), plus the first.
+// with level of detail, chosen nodes replace subtrees), plus the last, which finds the stack empty.
 uint rbvh_round_bound(RbvhLeafHook leaves) {
     return leaves.sz.node_count + leaves.sz.heightfield_count + 1u;
 }

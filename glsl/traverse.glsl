@@ -16,7 +16,8 @@
 //     bool rbvh_test(inout RBVH_LEAVES leaves, Ray ray, bool any_hit, uint reference, uint count,
 //                    inout float t_closest, inout uint steps, inout bool cut)
 //         tests the leaf over [tmin, t_closest); on a hit lowers t_closest, keeps the hit and
-//         returns true. Sets `cut` where the device ended one of its loops early.
+//         returns true. Adds the leaf's steps to `steps` (0 when the leaf's test starts; the
+//         traversal adds them to its own). Sets `cut` where the device ended one of its loops early.
 // It also uses, from bvh.glsl (included before it wherever it is instantiated: bvh.glsl,
 // rbvh.glsl, lod.glsl) and what that includes (common.glsl, intersect.glsl): Ray, BvhNode,
 // RBVH_BVH_NODE(i), rbvh_node_boxes, RBVH_LEAF_BIT, RBVH_INVALID, RBVH_STACK_SIZE,
@@ -34,7 +35,8 @@
 // hardware the leaf tests then run for all lanes that reached a leaf together, instead of beside
 // node visits in every iteration (about 1.4x faster on lavapipe for triangle leaves; inlined in
 // the per-child loop, the march's registers weighed on every node visit, 4x slower). Each round
-// tests one leaf, and a tree has one leaf more than it has inner nodes, which bounds the rounds.
+// tests at most one leaf (the last none), and a tree has one leaf more than it has inner nodes,
+// which bounds the rounds.
 // The leaf is tested at the end of the round that met it, and what the traversal needs again
 // after the test is made anew each round (the ray's inverse, the next node) rather than carried
 // through it: a value live across the march holds a register through it (docs/speed.md, "The
