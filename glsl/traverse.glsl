@@ -16,8 +16,7 @@
 //     bool rbvh_test(inout RBVH_LEAVES leaves, Ray ray, bool any_hit, uint reference, uint count,
 //                    inout float t_closest, inout uint steps, inout bool cut)
 //         tests the leaf over [tmin, t_closest); on a hit lowers t_closest, keeps the hit and
-//         returns true. Adds the leaf's steps to `steps` (0 when the leaf's test starts; the
-//         traversal adds them to its own). Sets `cut` where the device ended one of its loops early.
+//         returns true. Sets `cut` where the device ended one of its loops early.
 // It also uses, from bvh.glsl (included before it wherever it is instantiated: bvh.glsl,
 // rbvh.glsl, lod.glsl) and what that includes (common.glsl, intersect.glsl): Ray, BvhNode,
 // RBVH_BVH_NODE(i), rbvh_node_boxes, RBVH_LEAF_BIT, RBVH_INVALID, RBVH_STACK_SIZE,
@@ -168,9 +167,7 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
         if (pending == RBVH_INVALID || round == bound) {
             break;
         }
-        uint leaf_steps = 0u;
-        bool hit = rbvh_test(leaves, ray, any_hit, pending, pending_count, t_closest, leaf_steps, cut);
-        steps += leaf_steps;
+        bool hit = rbvh_test(leaves, ray, any_hit, pending, pending_count, t_closest, steps, cut);
         if (hit && any_hit) {
             finished = true;
             break;
