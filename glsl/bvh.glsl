@@ -12,7 +12,11 @@
 // GL_EXT_buffer_reference and GL_EXT_buffer_reference_uvec2, with each array's address as a uvec2
 // expression: RBVH_BVH_NODES_ADDRESS, RBVH_BVH_TRIS_ADDRESS (and those of rbvh.glsl and lod.glsl).
 // The traversals read the arrays only through the accessor macros RBVH_BVH_NODE(i) and
-// RBVH_BVH_TRIANGLE(i), which hide the difference.
+// RBVH_BVH_TRIANGLE(i) (or RBVH_EXACT_WORD(i)), which hide the difference.
+// RBVH_INDEXED_TRIANGLES, which rbvh.glsl defines before including this file, makes the triangle
+// array an RBVH's: indexed (src/rbvh/triangles.rs), a 16-byte slot per triangle and then the
+// vertices it names, 12 bytes each, read by rbvh_bvh_triangle as the exact BVH's gathered ones.
+// So a shader traces either the exact BVH or an RBVH, as the two share these bindings anyway.
 #ifndef RBVH_BVH_GLSL
 #define RBVH_BVH_GLSL
 
@@ -61,7 +65,8 @@ void rbvh_node_boxes(BvhNode n, out vec3 a_min, out vec3 a_max, out vec3 b_min, 
     b_max = hi_b;
 }
 
-// 48 bytes: vertices gathered in leaf order, with the scene's triangle index.
+// 48 bytes: vertices gathered in leaf order, with the scene's triangle index (the exact BVH's
+// array; an RBVH's indexed one is read into it by rbvh_bvh_triangle).
 struct BvhTriangle {
     vec3 v0;
     uint prim;
@@ -75,21 +80,58 @@ struct BvhTriangle {
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer RbvhBvhNodesRef {
     BvhNode nodes[];
 };
+#define RBVH_BVH_NODE(i) RbvhBvhNodesRef(RBVH_BVH_NODES_ADDRESS).nodes[i]
+#ifdef RBVH_INDEXED_TRIANGLES
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer RbvhExactWordsRef {
+    uint words[];
+};
+#define RBVH_EXACT_WORD(i) RbvhExactWordsRef(RBVH_BVH_TRIS_ADDRESS).words[i]
+#else
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer RbvhBvhTrianglesRef {
     BvhTriangle triangles[];
 };
-#define RBVH_BVH_NODE(i) RbvhBvhNodesRef(RBVH_BVH_NODES_ADDRESS).nodes[i]
 #define RBVH_BVH_TRIANGLE(i) RbvhBvhTrianglesRef(RBVH_BVH_TRIS_ADDRESS).triangles[i]
+#endif
 #else
 layout(std430, set = RBVH_BVH_SET, binding = RBVH_BVH_NODES_BINDING) readonly buffer RbvhBvhNodes {
     BvhNode rbvh_bvh_nodes[];
 };
+#define RBVH_BVH_NODE(i) rbvh_bvh_nodes[i]
+#ifdef RBVH_INDEXED_TRIANGLES
+layout(std430, set = RBVH_BVH_SET, binding = RBVH_BVH_TRIS_BINDING) readonly buffer RbvhExactWords {
+    uint rbvh_exact_words[];
+};
+#define RBVH_EXACT_WORD(i) rbvh_exact_words[i]
+#else
 layout(std430, set = RBVH_BVH_SET, binding = RBVH_BVH_TRIS_BINDING) readonly buffer RbvhBvhTriangles {
     BvhTriangle rbvh_bvh_triangles[];
 };
-#define RBVH_BVH_NODE(i) rbvh_bvh_nodes[i]
 #define RBVH_BVH_TRIANGLE(i) rbvh_bvh_triangles[i]
 #endif
+#endif
+
+#ifdef RBVH_INDEXED_TRIANGLES
+// Vertex `v` of the indexed triangles, whose vertices start at word `base`.
+vec3 rbvh_exact_vertex(uint base, uint v) {
+    uint w = base + 3u * v;
+    return uintBitsToFloat(uvec3(RBVH_EXACT_WORD(w), RBVH_EXACT_WORD(w + 1u), RBVH_EXACT_WORD(w + 2u)));
+}
+#endif
+
+// The triangle in `slot` of an array of `tri_count`: gathered (the exact BVH's), or read through
+// its slot's vertex indices (RBVH_INDEXED_TRIANGLES: ExactTriangles's TriangleSlots twin in
+// src/rbvh/triangles.rs), its flags and padding then 0.
+BvhTriangle rbvh_bvh_triangle(uint slot, uint tri_count) {
+#ifdef RBVH_INDEXED_TRIANGLES
+    uint w = 4u * slot;
+    uvec4 r = uvec4(RBVH_EXACT_WORD(w), RBVH_EXACT_WORD(w + 1u), RBVH_EXACT_WORD(w + 2u), RBVH_EXACT_WORD(w + 3u));
+    uint base = 4u * tri_count;
+    return BvhTriangle(rbvh_exact_vertex(base, r.x), r.w, rbvh_exact_vertex(base, r.y), 0u,
+                       rbvh_exact_vertex(base, r.z), 0u);
+#else
+    return RBVH_BVH_TRIANGLE(slot);
+#endif
+}
 
 // The traversal stack's entry for `child`, the child of inner node `node` on side b (or a): an
 // inner child's reference as it is (with the level of detail's mark), and for a leaf
@@ -129,12 +171,13 @@ uint rbvh_slot_end(uint first, uint count, uint tri_count) {
     return count > tri_count - min(first, tri_count) ? tri_count : first + count;
 }
 
-// Tests the triangles in slots [first, end) over [tmin, t_closest) with the watertight test: the
-// leaves of the exact BVH and the RBVH's hybrid leaves alike (bvh::BvhLeafHook in
-// src/bvh/traverse.rs). On a hit, lowers t_closest, keeps the slot in `best_slot` and returns
-// true; with `any_hit` it stops at the first. `steps` counts the triangles tested.
-bool rbvh_test_triangles(RbvhShear sh, Ray ray, bool any_hit, uint first, uint end, inout float t_closest,
-                         inout uint best_slot, inout uint steps, inout bool cut) {
+// Tests the triangles in slots [first, end) of `tri_count` over [tmin, t_closest) with the
+// watertight test: the leaves of the exact BVH and the RBVH's hybrid leaves alike
+// (bvh::BvhLeafHook in src/bvh/traverse.rs). On a hit, lowers t_closest, keeps the slot in
+// `best_slot` and returns true; with `any_hit` it stops at the first. `steps` counts the
+// triangles tested.
+bool rbvh_test_triangles(RbvhShear sh, Ray ray, bool any_hit, uint first, uint end, uint tri_count,
+                         inout float t_closest, inout uint best_slot, inout uint steps, inout bool cut) {
     RBVH_COUNT_ADD(triangle_leaves, 1u);
     bool hit = false;
     bool stop = false;
@@ -142,7 +185,7 @@ bool rbvh_test_triangles(RbvhShear sh, Ray ray, bool any_hit, uint first, uint e
     for (; slot < end; ++slot) {
         steps += 1u;
         RBVH_COUNT_ADD(triangles, 1u);
-        BvhTriangle tri = RBVH_BVH_TRIANGLE(slot);
+        BvhTriangle tri = rbvh_bvh_triangle(slot, tri_count);
         float t = rbvh_intersect_triangle(sh, tri.v0, tri.v1, tri.v2, ray.tmin, t_closest);
         if (t >= 0.0) {
             t_closest = t;
@@ -188,7 +231,8 @@ bool rbvh_test(inout BvhLeafHook leaves, Ray ray, bool any_hit, uint reference, 
                inout float t_closest, inout uint steps, inout bool cut) {
     uint first = reference & ~RBVH_LEAF_BIT;
     uint end = rbvh_slot_end(first, count, leaves.sz.tri_count);
-    return rbvh_test_triangles(leaves.shear, ray, any_hit, first, end, t_closest, leaves.best_slot, steps, cut);
+    return rbvh_test_triangles(leaves.shear, ray, any_hit, first, end, leaves.sz.tri_count, t_closest,
+                               leaves.best_slot, steps, cut);
 }
 
 #define RBVH_TRAVERSE rbvh_traverse_bvh
@@ -205,7 +249,7 @@ Hit rbvh_trace_bvh(Ray ray, bool any_hit, BvhSizes sz, out uint steps, out bool 
     if (leaves.best_slot == RBVH_INVALID) {
         return rbvh_miss();
     }
-    BvhTriangle tri = RBVH_BVH_TRIANGLE(leaves.best_slot);
+    BvhTriangle tri = rbvh_bvh_triangle(leaves.best_slot, sz.tri_count);
     vec3 n = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
     return Hit(t, n.x, n.y, n.z, tri.prim, 0u, 0u, 0u);
 }

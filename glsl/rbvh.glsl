@@ -18,6 +18,12 @@
 #ifndef RBVH_RBVH_GLSL
 #define RBVH_RBVH_GLSL
 
+// The RBVH's triangle array is indexed (bvh.glsl): included first, bvh.glsl would have declared
+// the exact BVH's instead.
+#ifdef RBVH_BVH_GLSL
+#error "include rbvh.glsl (or lod.glsl) before bvh.glsl, or without it: it includes bvh.glsl for the RBVH's arrays"
+#endif
+#define RBVH_INDEXED_TRIANGLES
 #include "bvh.glsl"
 #include "grid.glsl"
 
@@ -814,8 +820,8 @@ bool rbvh_test(inout RbvhLeafHook leaves, Ray ray, bool any_hit, uint reference,
         uint first = reference & ~RBVH_LEAF_BIT;
         // The shear is made per leaf rather than kept across the loops: see RbvhFrameRay.
         hit = rbvh_test_triangles(rbvh_shear(ray), ray, any_hit, first,
-                                  rbvh_slot_end(first, count, leaves.sz.tri_count), t_closest, leaves.best,
-                                  steps, cut);
+                                  rbvh_slot_end(first, count, leaves.sz.tri_count), leaves.sz.tri_count,
+                                  t_closest, leaves.best, steps, cut);
     } else {
         RBVH_COUNT_ADD(leaves, 1u);
         uint cells;
@@ -859,7 +865,7 @@ Hit rbvh_rbvh_hit(RbvhLeafHook leaves, float t, Ray ray) {
     if (id == RBVH_INVALID) {
         return rbvh_miss();
     } else if ((id & RBVH_LEAF_BIT) == 0u) {
-        BvhTriangle tri = RBVH_BVH_TRIANGLE(id);
+        BvhTriangle tri = rbvh_bvh_triangle(id, leaves.sz.tri_count);
         id = tri.prim;
         nrm = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
     } else if (RBVH_HEIGHT_ONLY) {

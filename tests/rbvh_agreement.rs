@@ -140,7 +140,7 @@ fn hand_made(
     Rbvh {
         params: RbvhParams::quality(2).unwrap(),
         nodes,
-        triangles,
+        triangles: rbvh::rbvh::ExactTriangles::new(triangles),
         heightfields,
         atlas,
         bounds: rbvh::geom::Aabb::from_points([glam::Vec3::splat(-10.0), glam::Vec3::splat(80.0)]),

@@ -11,8 +11,8 @@ use rbvh::bvh::{GpuNode, GpuTriangle, LEAF_BIT};
 use rbvh::geom::Aabb;
 use rbvh::rbvh::file::{section_table, REQUIRED};
 use rbvh::rbvh::{
-    Atlas, Child, GpuHeightfield, Rbvh, RbvhParams, RbvhStats, Refinement, Subdivision, Texel,
-    TexelFormat,
+    Atlas, Child, ExactTriangles, GpuHeightfield, Rbvh, RbvhParams, RbvhStats, Refinement,
+    Subdivision, Texel, TexelFormat,
 };
 use rbvh::Error;
 
@@ -77,7 +77,7 @@ fn sample() -> Rbvh {
             ..RbvhParams::quality(3).unwrap()
         },
         nodes,
-        triangles,
+        triangles: ExactTriangles::new(triangles),
         heightfields,
         atlas: Atlas {
             pitch: 8,
@@ -204,7 +204,9 @@ fn odd_float_values_survive_bit_for_bit() {
     let mut r = sample();
     r.bounds = Aabb::EMPTY;
     r.stats.build_ms = -0.0;
-    r.triangles[0].v0 = [f32::from_bits(0x7fc0_1234), -0.0, f32::MIN_POSITIVE];
+    edit_triangle(&mut r, 0, |t| {
+        t.v0 = [f32::from_bits(0x7fc0_1234), -0.0, f32::MIN_POSITIVE]
+    });
     let back = Rbvh::from_bytes(&r.to_bytes(), Path::new("odd.rbvh")).unwrap();
     assert_eq!(back.to_bytes(), r.to_bytes());
     assert_eq!(back.bounds, Aabb::EMPTY);
@@ -670,16 +672,16 @@ fn inconsistent_contents_are_rejected_with_the_reason() {
     (r.atlas.pitch, r.atlas.rows) = (12, 6);
     check(r, "the atlas pitch is 12 texels, not a power of two");
     let mut r = sample();
-    r.triangles[1].flags = GpuTriangle::part_flags(2, false);
+    edit_triangle(&mut r, 1, |t| t.flags = GpuTriangle::part_flags(2, false));
     check(
         r,
         "triangle 1 has flags 0x9 and padding 0x0: neither 0 nor an exact part of one of the 2",
     );
     let mut r = sample();
-    r.triangles[0].flags = GpuTriangle::BARE;
+    edit_triangle(&mut r, 0, |t| t.flags = GpuTriangle::BARE);
     check(r, "triangle 0 has flags 0x2");
     let mut r = sample();
-    r.triangles[0].pad2 = 1;
+    edit_triangle(&mut r, 0, |t| t.pad2 = 1);
     check(r, "triangle 0 has flags 0x0 and padding 0x1");
     let mut r = sample();
     r.params.texels_per_diagonal = f32::NAN;
@@ -1054,7 +1056,7 @@ fn broken_section_tables_are_refused_naming_the_section() {
         &["section NODE (table entry 2) at byte 360: node 1, child b: height-field leaf index"],
     );
     let mut r = sample();
-    r.triangles[1].pad2 = 1;
+    edit_triangle(&mut r, 1, |t| t.pad2 = 1);
     refused(
         &r.to_bytes(),
         &["section TRIS (table entry 3) at byte 456: triangle 1"],
@@ -1160,4 +1162,11 @@ fn an_empty_section_may_be_listed_after_the_one_at_its_offset() {
     assert_eq!(table[leaf].offset, table[leaf + 1].offset);
     let loaded = Rbvh::from_bytes(&file, path).unwrap();
     assert_eq!(loaded.to_bytes(), bytes);
+}
+
+/// `r` with its triangle `i` changed by `edit` (the indexed form made again from it).
+fn edit_triangle(r: &mut Rbvh, i: usize, edit: impl FnOnce(&mut GpuTriangle)) {
+    let mut triangles = r.triangles.to_vec();
+    edit(&mut triangles[i]);
+    r.triangles = ExactTriangles::new(triangles);
 }

@@ -24,4 +24,4 @@ pub(crate) use build::{check_node_count, join_halves, partition, sah_cost, tree_
 pub use build::{BuildParams, Bvh};
 pub use layout::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, MAX_NODES, STACK_SIZE};
 pub(crate) use morton::LinearBvh;
-pub(crate) use traverse::{traverse, BvhLeafHook, Leaves};
+pub(crate) use traverse::{traverse, BvhLeafHook, Leaves, TriangleSlots};

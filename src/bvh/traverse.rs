@@ -12,6 +12,7 @@
 //! children, and more node visits than nodes (only a cycle can make them) end the ray as an
 //! overflow.
 
+use glam::Vec3;
 use rayon::prelude::*;
 
 use super::layout::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
@@ -182,12 +183,35 @@ impl StackEntry {
     }
 }
 
+/// Where triangle leaves read their triangles from, as the device reads them: the exact BVH's
+/// gathered 48-byte triangles, or an RBVH's indexed ones (`crate::rbvh::ExactTriangles`).
+pub(crate) trait TriangleSlots {
+    /// Slots in the array (leaf reads are clamped to them, as on the device).
+    fn slots(&self) -> usize;
+
+    /// The vertices (winding kept) and scene index of the triangle in `slot`, reporting the
+    /// device's reads of it to `probe`.
+    fn read<P: Probe>(&self, slot: usize, probe: &mut P) -> ([Vec3; 3], u32);
+}
+
+/// One 48-byte read a triangle (`RBVH_BVH_TRIANGLE` in `glsl/bvh.glsl`).
+impl TriangleSlots for [GpuTriangle] {
+    fn slots(&self) -> usize {
+        self.len()
+    }
+
+    fn read<P: Probe>(&self, slot: usize, probe: &mut P) -> ([Vec3; 3], u32) {
+        probe.read(element::<GpuTriangle>(Array::Triangles, slot));
+        (self[slot].vertices(), self[slot].prim)
+    }
+}
+
 /// Triangle leaves, tested with the watertight test: the exact BVH's leaves, and an RBVH's hybrid
 /// ones. Keeps the slot (leaf order) and distance of the nearest hit. Named as its GLSL twin in
 /// `glsl/bvh.glsl` is, as the RBVH's (`RbvhLeafHook`) and level of detail's (`RbvhLodLeafHook`)
 /// hooks are.
-pub(crate) struct BvhLeafHook<'a> {
-    triangles: &'a [GpuTriangle],
+pub(crate) struct BvhLeafHook<'a, T: TriangleSlots + ?Sized> {
+    triangles: &'a T,
     shear: RayShear,
     tmin: f32,
     /// Stop at the first hit, in the leaf as in the tree.
@@ -195,10 +219,10 @@ pub(crate) struct BvhLeafHook<'a> {
     best: Option<(usize, f32)>,
 }
 
-impl<'a> BvhLeafHook<'a> {
+impl<'a, T: TriangleSlots + ?Sized> BvhLeafHook<'a, T> {
     /// The leaves over `triangles` (in leaf order) for `ray`; with `any_hit`, a leaf stops at its
     /// first hit.
-    pub(crate) fn new(triangles: &'a [GpuTriangle], ray: &Ray, any_hit: bool) -> Self {
+    pub(crate) fn new(triangles: &'a T, ray: &Ray, any_hit: bool) -> Self {
         BvhLeafHook {
             triangles,
             shear: RayShear::new(ray),
@@ -209,21 +233,21 @@ impl<'a> BvhLeafHook<'a> {
     }
 
     /// The nearest hit kept, if any. The device reads its triangle once more, after its loops,
-    /// for the hit's id and normal: that read goes to `probe`.
+    /// for the hit's id and normal (`normalize((v1 − v0) × (v2 − v0))`, as
+    /// [`GpuTriangle::normal`]): those reads go to `probe`.
     pub(crate) fn hit<P: Probe>(&self, probe: &mut P) -> Option<Hit> {
         let (slot, t) = self.best?;
-        probe.read(element::<GpuTriangle>(Array::Triangles, slot));
-        let tri = &self.triangles[slot];
+        let ([a, b, c], prim) = self.triangles.read(slot, probe);
         Some(Hit {
             t,
-            normal: tri.normal().to_array(),
-            id: tri.prim,
+            normal: (b - a).cross(c - a).normalize_or_zero().to_array(),
+            id: prim,
             reserved: [0; 3],
         })
     }
 }
 
-impl<P: Probe> Leaves<P> for BvhLeafHook<'_> {
+impl<P: Probe, T: TriangleSlots + ?Sized> Leaves<P> for BvhLeafHook<'_, T> {
     fn test(
         &mut self,
         reference: u32,
@@ -235,13 +259,12 @@ impl<P: Probe> Leaves<P> for BvhLeafHook<'_> {
         let first = (reference & !LEAF_BIT) as usize;
         let end = first
             .saturating_add(count as usize)
-            .min(self.triangles.len());
+            .min(self.triangles.slots());
         stats.counters.triangle_leaves += 1;
         let mut found = false;
         for slot in first..end {
             stats.counters.triangles += 1;
-            probe.read(element::<GpuTriangle>(Array::Triangles, slot));
-            let [a, b, c] = self.triangles[slot].vertices();
+            let ([a, b, c], _) = self.triangles.read(slot, probe);
             if let Some(t) = intersect_triangle(&self.shear, a, b, c, self.tmin, *t_closest) {
                 *t_closest = t;
                 self.best = Some((slot, t));
@@ -285,7 +308,7 @@ impl Bvh {
     }
 
     fn traverse<P: Probe>(&self, ray: &Ray, any_hit: bool, probe: &mut P) -> (Hit, TraceStats) {
-        let mut leaves = BvhLeafHook::new(&self.triangles, ray, any_hit);
+        let mut leaves = BvhLeafHook::new(self.triangles.as_slice(), ray, any_hit);
         let stats = traverse(&self.nodes, ray, any_hit, &mut leaves, probe);
         (leaves.hit(probe).unwrap_or(Hit::MISS), stats)
     }

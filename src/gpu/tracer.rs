@@ -325,7 +325,10 @@ fn rbvh_parts<'a>(rbvh: &'a Rbvh, atlas_words: &'a [u32]) -> Result<(TraceParams
     count("atlas words (texels and block ranges)", atlas_words.len())?;
     let arrays = [
         ("RBVH nodes", bytemuck::cast_slice(&rbvh.nodes)),
-        ("RBVH triangles", bytemuck::cast_slice(&rbvh.triangles)),
+        (
+            "RBVH triangles",
+            bytemuck::cast_slice(rbvh.triangles.device_words()),
+        ),
         (
             "RBVH height-field leaves",
             bytemuck::cast_slice(&rbvh.heightfields),

@@ -29,6 +29,7 @@ pub mod ranges;
 pub(crate) mod raster;
 mod splat;
 mod split;
+pub mod triangles;
 
 pub use build::{RbvhSource, CREASE_EDGE_TEXELS};
 pub use child::{Child, HEIGHTFIELD_COUNT};
@@ -38,8 +39,9 @@ pub use params::{
     level_name, RbvhParams, Refinement, Subdivision, TexelFormat, QUALITY_NAMES, SAMPLED_SUFFIX,
 };
 pub use raster::CREST_TEXELS;
+pub use triangles::{ExactTriangles, GpuIndexedTriangle};
 
-use crate::bvh::{GpuNode, GpuTriangle};
+use crate::bvh::GpuNode;
 use crate::geom::Aabb;
 use crate::scene::Scene;
 use crate::{Error, Result};
@@ -51,8 +53,9 @@ pub struct Rbvh {
     pub params: RbvhParams,
     /// Node 0 is the root.
     pub nodes: Vec<GpuNode>,
-    /// Triangles of the triangle (hybrid) leaves, in leaf order.
-    pub triangles: Vec<GpuTriangle>,
+    /// Triangles of the triangle leaves (hybrid leaves and exact parts), in leaf order: gathered
+    /// for the host, indexed for the device ([`ExactTriangles`]).
+    pub triangles: ExactTriangles,
     /// The height-field leaves' records, which a node's [`Child::Heightfield`] indexes (named
     /// apart from the tree's leaves, which are triangle leaves too).
     pub heightfields: Vec<GpuHeightfield>,
@@ -112,16 +115,17 @@ impl Rbvh {
         self.atlas.device_words(self.params.texels)
     }
 
-    /// Bytes of the triangle-leaf triangles: hybrid leaves' and exact parts' together.
+    /// Device bytes of the triangle-leaf triangles, indexed ([`ExactTriangles::device_bytes`]):
+    /// hybrid leaves' and exact parts' together.
     pub fn triangle_bytes(&self) -> u64 {
-        std::mem::size_of_val(self.triangles.as_slice()) as u64
+        self.triangles.device_bytes()
     }
 
-    /// Bytes of the exact parts beside height fields ([`GpuTriangle::PART`]), of
-    /// [`Rbvh::triangle_bytes`]: the rest are hybrid leaves, sets too small to be height fields.
+    /// Of [`Rbvh::triangle_bytes`], those of the exact parts beside height fields
+    /// ([`GpuTriangle::PART`]; [`ExactTriangles::part_bytes`]): the rest are hybrid leaves, sets
+    /// too small to be height fields.
     pub fn part_bytes(&self) -> u64 {
-        let parts = self.triangles.iter().filter(|t| t.part_leaf().is_some());
-        (parts.count() * std::mem::size_of::<GpuTriangle>()) as u64
+        self.triangles.part_bytes()
     }
 
     /// Bytes of the optional colour channel (0 without one). Not part of [`Rbvh::total_bytes`],

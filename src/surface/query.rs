@@ -91,7 +91,7 @@ impl Rbvh {
     /// several tiles of a surface left parts in each.
     pub fn part_leaves(&self) -> HashMap<u32, Vec<u32>> {
         let mut map: HashMap<u32, Vec<u32>> = HashMap::new();
-        for t in &self.triangles {
+        for t in self.triangles.iter() {
             if let Some(leaf) = t.part_leaf() {
                 let leaves = map.entry(t.prim).or_default();
                 if !leaves.contains(&leaf) {

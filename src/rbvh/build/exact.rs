@@ -10,10 +10,13 @@ use crate::bvh::GpuTriangle;
 use crate::rbvh::raster::Tile;
 use crate::rbvh::TexelFormat;
 
-/// What a triangle traced exactly costs: its 48 bytes ([`GpuTriangle`]) and, alone in its leaf,
-/// the 48-byte node above it. A triangle whose area covers at least the texels these bytes buy
-/// (24 with normals, 48 height-only) is traced exactly instead of sampled
-/// ([`Builder::exact_by_size`]).
+/// What a triangle traced exactly costs: its 48 bytes gathered ([`GpuTriangle`]) and, alone in
+/// its leaf, the 48-byte node above it. A triangle whose area covers at least the texels these
+/// bytes buy (24 with normals, 48 height-only) is traced exactly instead of sampled
+/// ([`Builder::exact_by_size`]). The device has held the triangles indexed since
+/// `crate::rbvh::ExactTriangles` (16 bytes a slot and 12 a distinct vertex); the rule still
+/// counts them gathered, as it was tuned and measured (docs/paper-scale.md, "Exact triangles
+/// indexed"), so indexing changed no structure.
 pub(super) const EXACT_TRIANGLE_BYTES: f32 = 96.0;
 
 /// The least longest edge, in texels of its object, of a triangle that
@@ -87,7 +90,7 @@ impl Builder<'_> {
 
 /// The device bytes of a height field of `tiles` beside `parts` exact parts: each tile's texels
 /// (one byte less for 8-bit heights), its 64-byte leaf record and a 48-byte node over it, and
-/// each part's 48-byte triangle.
+/// each part's triangle at its 48 bytes gathered (as [`EXACT_TRIANGLE_BYTES`] counts it).
 pub(super) fn sampled_bytes(tiles: &[Tile], parts: usize, format: TexelFormat) -> f32 {
     let tiles: u64 = tiles
         .iter()

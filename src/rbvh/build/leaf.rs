@@ -330,7 +330,7 @@ mod tests {
         let scene = Scene::builtin("default").unwrap();
         let r = Rbvh::build(&scene, &sampled(2)).unwrap();
         let mut parts = 0;
-        for t in &r.triangles {
+        for t in r.triangles.iter() {
             let Some(leaf) = t.part_leaf() else { continue };
             parts += 1;
             let leaf = r.heightfields[leaf as usize];

@@ -65,7 +65,7 @@ use super::layout::Texel;
 use super::raster::Tile;
 use super::splat::Splat;
 use super::split::SplitPrim;
-use super::{Rbvh, RbvhParams, RbvhStats, TexelFormat};
+use super::{ExactTriangles, Rbvh, RbvhParams, RbvhStats, TexelFormat};
 use crate::bvh::{ChildRef, GpuNode, GpuTriangle, LinearBvh};
 use crate::geom::Aabb;
 use crate::progress::{step, Progress, Quiet};
@@ -333,7 +333,7 @@ impl Rbvh {
         Ok(Rbvh {
             params: *params,
             nodes,
-            triangles: out.triangles,
+            triangles: ExactTriangles::new(out.triangles),
             heightfields: out.heightfields,
             atlas,
             bounds,

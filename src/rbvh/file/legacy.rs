@@ -72,7 +72,7 @@ use crate::geom::Aabb;
 use crate::rbvh::child::Child;
 use crate::rbvh::layout::{Atlas, GpuHeightfield, Texel};
 use crate::rbvh::params::{RbvhParams, TexelFormat};
-use crate::rbvh::Rbvh;
+use crate::rbvh::{ExactTriangles, Rbvh};
 use crate::{Error, Result};
 
 /// Bytes before the arrays in version 12.
@@ -303,7 +303,7 @@ pub(super) fn read(bytes: &[u8], version: u32, path: &Path) -> Result<Rbvh> {
     let mut rbvh = Rbvh {
         params,
         nodes,
-        triangles,
+        triangles: ExactTriangles::new(triangles),
         heightfields,
         atlas: Atlas {
             pitch,

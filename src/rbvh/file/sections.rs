@@ -11,7 +11,7 @@ use super::{
 use crate::bvh::{GpuNode, GpuTriangle};
 use crate::rbvh::layout::{Atlas, GpuHeightfield, Texel};
 use crate::rbvh::params::{RbvhParams, TexelFormat};
-use crate::rbvh::Rbvh;
+use crate::rbvh::{ExactTriangles, Rbvh};
 use crate::{Error, Result};
 
 /// Where the section table starts: after the magic, the version and the section count.
@@ -194,8 +194,8 @@ pub(super) fn write(r: &Rbvh) -> Vec<u8> {
         ),
         (
             TRIANGLES,
-            std::mem::size_of_val(r.triangles.as_slice()),
-            Box::new(|out| put_records(out, &r.triangles)),
+            std::mem::size_of_val(r.triangles.gathered()),
+            Box::new(|out| put_records(out, r.triangles.gathered())),
         ),
         (
             LEAVES,
@@ -513,7 +513,7 @@ pub(super) fn read(bytes: &[u8], path: &Path) -> Result<Rbvh> {
     let rbvh = Rbvh {
         params,
         nodes: records(array(NODES)?),
-        triangles: records(array(TRIANGLES)?),
+        triangles: ExactTriangles::new(records(array(TRIANGLES)?)),
         heightfields: records(array(LEAVES)?),
         atlas: Atlas {
             pitch,

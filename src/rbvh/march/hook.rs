@@ -11,7 +11,7 @@ use crate::bvh::{BvhLeafHook, Leaves};
 use crate::geom::{Hit, Ray};
 use crate::probe::{Probe, TraceStats};
 use crate::rbvh::child::Child;
-use crate::rbvh::{Rbvh, TexelFormat};
+use crate::rbvh::{ExactTriangles, Rbvh, TexelFormat};
 
 /// An RBVH's leaves for the shared traversal (`crate::bvh::traverse`): hybrid triangle leaves
 /// tested exactly, height fields marched. Level of detail wraps it (`crate::lod`'s `RbvhLodLeafHook`),
@@ -20,7 +20,7 @@ pub(crate) struct RbvhLeafHook<'a> {
     rbvh: &'a Rbvh,
     ray: &'a Ray,
     /// The hybrid triangle leaves, tested as the exact BVH tests its own.
-    triangles: BvhLeafHook<'a>,
+    triangles: BvhLeafHook<'a, ExactTriangles>,
     walk: Walk<'a>,
     /// The nearest hit on a height field (or a coarse node): the best unless a triangle's is
     /// nearer.

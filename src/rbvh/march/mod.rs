@@ -173,6 +173,7 @@ pub(super) mod tests {
     use crate::probe::{Array, Read};
     use crate::rbvh::child::Child;
     use crate::rbvh::layout::{Atlas, GpuHeightfield, Texel, LEAF_BIT};
+    use crate::rbvh::ExactTriangles;
     use crate::rbvh::{RbvhParams, RbvhStats};
 
     /// World size of one texel in the test leaves.
@@ -247,7 +248,7 @@ pub(super) mod tests {
         Rbvh {
             params: RbvhParams::quality(2).unwrap(),
             nodes,
-            triangles,
+            triangles: ExactTriangles::new(triangles),
             heightfields,
             atlas,
             bounds: Aabb::EMPTY,
