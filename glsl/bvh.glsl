@@ -12,10 +12,10 @@
 // GL_EXT_buffer_reference and GL_EXT_buffer_reference_uvec2, with each array's address as a uvec2
 // expression: RBVH_BVH_NODES_ADDRESS, RBVH_BVH_TRIS_ADDRESS (and those of rbvh.glsl and lod.glsl).
 // The traversals read the arrays only through the accessor macros RBVH_BVH_NODE(i) and
-// RBVH_BVH_TRIANGLE(i) (or RBVH_EXACT_WORD(i)), which hide the difference.
+// RBVH_BVH_TRIANGLE(i) (or RBVH_EXACT_QUAD(i)), which hide the difference.
 // RBVH_INDEXED_TRIANGLES, which rbvh.glsl defines before including this file, makes the triangle
 // array an RBVH's: indexed (src/rbvh/triangles.rs), a 16-byte slot per triangle and then the
-// vertices it names, 12 bytes each, read by rbvh_bvh_triangle as the exact BVH's gathered ones.
+// vertices they name, 16 bytes each, read by rbvh_bvh_triangle as the exact BVH's gathered ones.
 // So a shader traces either the exact BVH or an RBVH, as the two share these bindings anyway.
 #ifndef RBVH_BVH_GLSL
 #define RBVH_BVH_GLSL
@@ -82,10 +82,10 @@ layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer Rb
 };
 #define RBVH_BVH_NODE(i) RbvhBvhNodesRef(RBVH_BVH_NODES_ADDRESS).nodes[i]
 #ifdef RBVH_INDEXED_TRIANGLES
-layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer RbvhExactWordsRef {
-    uint words[];
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer RbvhExactQuadsRef {
+    uvec4 quads[];
 };
-#define RBVH_EXACT_WORD(i) RbvhExactWordsRef(RBVH_BVH_TRIS_ADDRESS).words[i]
+#define RBVH_EXACT_QUAD(i) RbvhExactQuadsRef(RBVH_BVH_TRIS_ADDRESS).quads[i]
 #else
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer RbvhBvhTrianglesRef {
     BvhTriangle triangles[];
@@ -98,10 +98,10 @@ layout(std430, set = RBVH_BVH_SET, binding = RBVH_BVH_NODES_BINDING) readonly bu
 };
 #define RBVH_BVH_NODE(i) rbvh_bvh_nodes[i]
 #ifdef RBVH_INDEXED_TRIANGLES
-layout(std430, set = RBVH_BVH_SET, binding = RBVH_BVH_TRIS_BINDING) readonly buffer RbvhExactWords {
-    uint rbvh_exact_words[];
+layout(std430, set = RBVH_BVH_SET, binding = RBVH_BVH_TRIS_BINDING) readonly buffer RbvhExactQuads {
+    uvec4 rbvh_exact_quads[];
 };
-#define RBVH_EXACT_WORD(i) rbvh_exact_words[i]
+#define RBVH_EXACT_QUAD(i) rbvh_exact_quads[i]
 #else
 layout(std430, set = RBVH_BVH_SET, binding = RBVH_BVH_TRIS_BINDING) readonly buffer RbvhBvhTriangles {
     BvhTriangle rbvh_bvh_triangles[];
@@ -111,10 +111,9 @@ layout(std430, set = RBVH_BVH_SET, binding = RBVH_BVH_TRIS_BINDING) readonly buf
 #endif
 
 #ifdef RBVH_INDEXED_TRIANGLES
-// Vertex `v` of the indexed triangles, whose vertices start at word `base`.
+// Vertex `v` of the indexed triangles, whose vertices start at element `base` (GpuVertex).
 vec3 rbvh_exact_vertex(uint base, uint v) {
-    uint w = base + 3u * v;
-    return uintBitsToFloat(uvec3(RBVH_EXACT_WORD(w), RBVH_EXACT_WORD(w + 1u), RBVH_EXACT_WORD(w + 2u)));
+    return uintBitsToFloat(RBVH_EXACT_QUAD(base + v).xyz);
 }
 #endif
 
@@ -123,9 +122,8 @@ vec3 rbvh_exact_vertex(uint base, uint v) {
 // src/rbvh/triangles.rs), its flags and padding then 0.
 BvhTriangle rbvh_bvh_triangle(uint slot, uint tri_count) {
 #ifdef RBVH_INDEXED_TRIANGLES
-    uint w = 4u * slot;
-    uvec4 r = uvec4(RBVH_EXACT_WORD(w), RBVH_EXACT_WORD(w + 1u), RBVH_EXACT_WORD(w + 2u), RBVH_EXACT_WORD(w + 3u));
-    uint base = 4u * tri_count;
+    uvec4 r = RBVH_EXACT_QUAD(slot);
+    uint base = tri_count;
     return BvhTriangle(rbvh_exact_vertex(base, r.x), r.w, rbvh_exact_vertex(base, r.y), 0u,
                        rbvh_exact_vertex(base, r.z), 0u);
 #else

@@ -104,7 +104,7 @@ pub enum Array {
     /// Inner nodes (`GpuNode`, 48 bytes each).
     Nodes = 0,
     /// Triangles of triangle leaves: the exact BVH's (`GpuTriangle`, 48 bytes each), an RBVH's
-    /// indexed (`rbvh::ExactTriangles`: 16-byte slots, then 12-byte vertices).
+    /// indexed (`rbvh::ExactTriangles`: 16-byte slots, then 16-byte vertices).
     Triangles = 1,
     /// Height-field leaf records (`GpuHeightfield`, 64 bytes each).
     Heightfields = 2,

@@ -68,7 +68,7 @@ fn header_compiles_in_a_foreign_shader_with_its_own_bindings() {
     let r = spirv::reflect(&words);
     for (block, binding) in [
         ("RbvhBvhNodes", 5),
-        ("RbvhExactWords", 6),
+        ("RbvhExactQuads", 6),
         ("RbvhHeightfields", 7),
         ("RbvhAtlas", 8),
     ] {
@@ -140,7 +140,7 @@ fn header_defaults_are_the_library_bindings() {
     let r = spirv::reflect(&compile(&lod_engine_shader("", 1)).unwrap());
     for (block, binding) in [
         ("RbvhBvhNodes", bindings::BVH_NODES),
-        ("RbvhExactWords", bindings::BVH_TRIS),
+        ("RbvhExactQuads", bindings::BVH_TRIS),
         ("RbvhHeightfields", bindings::HEIGHTFIELDS),
         ("RbvhAtlas", bindings::ATLAS),
         ("RbvhLods", bindings::LODS),

@@ -39,7 +39,7 @@ pub use params::{
     level_name, RbvhParams, Refinement, Subdivision, TexelFormat, QUALITY_NAMES, SAMPLED_SUFFIX,
 };
 pub use raster::CREST_TEXELS;
-pub use triangles::{ExactTriangles, GpuIndexedTriangle};
+pub use triangles::{ExactTriangles, GpuIndexedTriangle, GpuVertex};
 
 use crate::bvh::GpuNode;
 use crate::geom::Aabb;

@@ -5,12 +5,13 @@
 //!   the part flags. The builder, the file and everything on the host that asks which leaf a
 //!   part stands beside read this form (through `Deref` to `[GpuTriangle]`).
 //! * **indexed**, as the device holds them: a 16-byte [`GpuIndexedTriangle`] per slot (its three
-//!   vertex indices and its scene triangle index), then every distinct vertex once, 12 bytes
-//!   each, in the order the slots first name them, so that a leaf's vertices lie together.
+//!   vertex indices and its scene triangle index), then every distinct vertex once, a 16-byte
+//!   [`GpuVertex`], in the order the slots first name them, so that a leaf's vertices lie
+//!   together. Four aligned 16-byte reads a triangle, one more than gathered.
 //!
-//! At the paper's scale the exact parts are most of an RBVH's bytes, and they are patches of a
-//! scan's surface whose neighbours share vertices: at Q2 on `scenes/paper-scale.toml`, 479,124
-//! triangles name 354,971 distinct vertices, 24.9 bytes a triangle indexed against 48 gathered.
+//! At the paper's scale the exact triangles were most of an RBVH's bytes, and they are patches of
+//! a scan's surface whose neighbours share vertices: at Q2 on `scenes/paper-scale.toml`, 479,124
+//! triangles name 354,971 distinct vertices, 27.9 bytes a triangle indexed against 48 gathered.
 //! The vertices are the scene's own floats, bit for bit, so indexing changes no hit: the device
 //! and the CPU twin ([`TriangleSlots`]) read the same values as the gathered form holds, and
 //! triangles that share an edge share its vertices exactly, as the watertight test needs.
@@ -22,31 +23,46 @@ use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
 use crate::bvh::{GpuTriangle, TriangleSlots};
-use crate::probe::{element, Array, Probe, Read};
+use crate::probe::{element, Array, Probe};
 
-/// One slot of the device's indexed triangles (GLSL `rbvh_exact_triangle` in `glsl/bvh.glsl`):
-/// the indices of its vertices `v0, v1, v2` (winding kept) in the vertices after the slots, and
-/// the scene's index of the triangle, returned as the hit `id`. 16 bytes.
+/// One slot of the device's indexed triangles (GLSL `rbvh_bvh_triangle` in `glsl/bvh.glsl`):
+/// the indices of its vertices `v0, v1, v2` (winding kept) among the vertices after the slots, and
+/// the scene's index of the triangle, returned as the hit `id`. 16 bytes, one aligned read.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
 pub struct GpuIndexedTriangle {
-    /// GLSL words 0–2 of the slot: vertex indices.
+    /// GLSL `.xyz` of the slot's `uvec4`: vertex indices.
     pub vertices: [u32; 3],
-    /// GLSL word 3: the triangle's index in the scene.
+    /// GLSL `.w`: the triangle's index in the scene.
     pub prim: u32,
 }
 const _: () = assert!(std::mem::size_of::<GpuIndexedTriangle>() == 16);
 
-/// Bytes of one vertex on the device: three floats, unpadded.
-pub const VERTEX_BYTES: u64 = 12;
+/// One distinct vertex of the device's indexed triangles: its position, padded to 16 bytes so that
+/// it is one aligned read (packed at 12 bytes, the array was 10% smaller at the paper's scale and
+/// its three scalar reads made lavapipe's RBVH tracer 8–12% slower on primary rays, where 16-byte
+/// reads cost 1–3%: docs/paper-scale.md, "Exact triangles indexed").
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuVertex {
+    /// GLSL `.xyz` of the vertex's `uvec4`, as float bits: the scene's vertex, bit for bit.
+    pub position: [f32; 3],
+    /// GLSL `.w`: 0.
+    pub pad: u32,
+}
+const _: () = assert!(std::mem::size_of::<GpuVertex>() == 16);
+
+/// Bytes of one vertex on the device ([`GpuVertex`]).
+pub const VERTEX_BYTES: u64 = std::mem::size_of::<GpuVertex>() as u64;
 
 /// The RBVH's exact triangles, gathered for the host and indexed for the device (module docs).
 /// Built once from the gathered triangles; neither form can change without the other.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ExactTriangles {
     gathered: Vec<GpuTriangle>,
-    /// The device's array: a [`GpuIndexedTriangle`] per slot, then the vertices.
-    words: Vec<u32>,
+    /// The device's array, 16 bytes an element: a [`GpuIndexedTriangle`] per slot, then the
+    /// [`GpuVertex`]es.
+    quads: Vec<[u32; 4]>,
 }
 
 impl ExactTriangles {
@@ -54,25 +70,28 @@ impl ExactTriangles {
     /// numbered in the order the slots first name it.
     pub fn new(gathered: Vec<GpuTriangle>) -> ExactTriangles {
         let mut index: HashMap<[u32; 3], u32> = HashMap::with_capacity(gathered.len());
-        let mut vertices: Vec<[f32; 3]> = Vec::new();
-        let indexed: Vec<GpuIndexedTriangle> = gathered
+        let mut vertices: Vec<[u32; 4]> = Vec::new();
+        let mut quads: Vec<[u32; 4]> = gathered
             .iter()
             .map(|t| {
                 let mut at = |v: [f32; 3]| {
-                    *index.entry(v.map(f32::to_bits)).or_insert_with(|| {
-                        vertices.push(v);
+                    let bits = v.map(f32::to_bits);
+                    *index.entry(bits).or_insert_with(|| {
+                        vertices.push(bytemuck::cast(GpuVertex {
+                            position: v,
+                            pad: 0,
+                        }));
                         (vertices.len() - 1) as u32
                     })
                 };
-                GpuIndexedTriangle {
+                bytemuck::cast(GpuIndexedTriangle {
                     vertices: [at(t.v0), at(t.v1), at(t.v2)],
                     prim: t.prim,
-                }
+                })
             })
             .collect();
-        let mut words: Vec<u32> = bytemuck::cast_slice(&indexed).to_vec();
-        words.extend_from_slice(bytemuck::cast_slice(&vertices));
-        ExactTriangles { gathered, words }
+        quads.extend(vertices);
+        ExactTriangles { gathered, quads }
     }
 
     /// The gathered form, with the part flags (also what `Deref` gives).
@@ -82,27 +101,23 @@ impl ExactTriangles {
 
     /// The device's slots, one per triangle in leaf order.
     pub fn indexed(&self) -> &[GpuIndexedTriangle] {
-        bytemuck::cast_slice(&self.words[..self.slot_words()])
+        bytemuck::cast_slice(&self.quads[..self.gathered.len()])
     }
 
     /// The distinct vertices the slots index.
-    pub fn vertices(&self) -> &[[f32; 3]] {
-        bytemuck::cast_slice(&self.words[self.slot_words()..])
+    pub fn vertices(&self) -> &[GpuVertex] {
+        bytemuck::cast_slice(&self.quads[self.gathered.len()..])
     }
 
-    /// The device's array: the slots, then the vertices (the shaders find the vertices after
-    /// `4 × tri_count` words).
+    /// The device's array: the slots, then the vertices (the shaders find vertex `v` at element
+    /// `tri_count + v`).
     pub fn device_words(&self) -> &[u32] {
-        &self.words
+        bytemuck::cast_slice(&self.quads)
     }
 
     /// Bytes of the device's array ([`ExactTriangles::device_words`]).
     pub fn device_bytes(&self) -> u64 {
-        std::mem::size_of_val(self.words.as_slice()) as u64
-    }
-
-    fn slot_words(&self) -> usize {
-        4 * self.gathered.len()
+        std::mem::size_of_val(self.quads.as_slice()) as u64
     }
 
     /// Of [`ExactTriangles::device_bytes`], those of the exact parts beside height fields
@@ -153,14 +168,10 @@ impl TriangleSlots for ExactTriangles {
     fn read<P: Probe>(&self, slot: usize, probe: &mut P) -> ([Vec3; 3], u32) {
         probe.read(element::<GpuIndexedTriangle>(Array::Triangles, slot));
         let record = self.indexed()[slot];
-        let base = 4 * self.slot_words() as u64;
         let vertices = record.vertices.map(|v| {
-            probe.read(Read {
-                array: Array::Triangles,
-                offset: base + u64::from(v) * VERTEX_BYTES,
-                bytes: VERTEX_BYTES as u32,
-            });
-            Vec3::from(self.vertices()[v as usize])
+            let at = self.gathered.len() + v as usize;
+            probe.read(element::<GpuVertex>(Array::Triangles, at));
+            Vec3::from(self.vertices()[v as usize].position)
         });
         (vertices, record.prim)
     }
@@ -187,12 +198,14 @@ mod tests {
         let mut part = tri([a, c, d], 7);
         part.flags = GpuTriangle::part_flags(3, false);
         let exact = ExactTriangles::new(vec![tri([a, b, c], 5), part]);
-        assert_eq!(exact.vertices(), &[a, b, c, d]);
+        let positions: Vec<[f32; 3]> = exact.vertices().iter().map(|v| v.position).collect();
+        assert_eq!(positions, [a, b, c, d]);
+        assert!(exact.vertices().iter().all(|v| v.pad == 0));
         assert_eq!(exact.indexed()[1].vertices, [0, 2, 3]);
-        assert_eq!(exact.device_bytes(), 2 * 16 + 4 * 12);
+        assert_eq!(exact.device_bytes(), 2 * 16 + 4 * 16);
         assert_eq!(exact.device_words().len() as u64 * 4, exact.device_bytes());
         // The part's slot and the one vertex it names first (d).
-        assert_eq!(exact.part_bytes(), 16 + 12);
+        assert_eq!(exact.part_bytes(), 16 + 16);
         for (slot, t) in exact.gathered().iter().enumerate() {
             let mut reads = Vec::new();
             let (v, prim) = exact.read(slot, &mut reads);
@@ -201,15 +214,18 @@ mod tests {
                 t.vertices().map(|v| v.to_array().map(f32::to_bits))
             );
             assert_eq!(prim, t.prim);
-            assert_eq!(reads.len(), 4);
+            // The slot, then its vertices after both slots, each 16 bytes at its own offset.
+            let indexed = exact.indexed()[slot]
+                .vertices
+                .map(|v| 16 * (2 + u64::from(v)));
+            let offsets: Vec<u64> = reads.iter().map(|r| r.offset).collect();
             assert_eq!(
-                reads[0],
-                Read {
-                    array: Array::Triangles,
-                    offset: 16 * slot as u64,
-                    bytes: 16
-                }
+                offsets,
+                [16 * slot as u64, indexed[0], indexed[1], indexed[2]]
             );
+            assert!(reads
+                .iter()
+                .all(|r| r.array == Array::Triangles && r.bytes == 16));
         }
         // -0.0 and 0.0 are different bits: kept apart, so no vertex moves.
         let signed = ExactTriangles::new(vec![tri([a, b, c], 0), tri([[-0.0, 0.0, 0.0], b, c], 1)]);

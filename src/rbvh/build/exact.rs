@@ -14,7 +14,7 @@ use crate::rbvh::TexelFormat;
 /// its leaf, the 48-byte node above it. A triangle whose area covers at least the texels these
 /// bytes buy (24 with normals, 48 height-only) is traced exactly instead of sampled
 /// ([`Builder::exact_by_size`]). The device has held the triangles indexed since
-/// `crate::rbvh::ExactTriangles` (16 bytes a slot and 12 a distinct vertex); the rule still
+/// `crate::rbvh::ExactTriangles` (16 bytes a slot and 16 a distinct vertex); the rule still
 /// counts them gathered, as it was tuned and measured (docs/paper-scale.md, "Exact triangles
 /// indexed"), so indexing changed no structure.
 pub(super) const EXACT_TRIANGLE_BYTES: f32 = 96.0;
