@@ -39,7 +39,7 @@ pub struct GpuIndexedTriangle {
 const _: () = assert!(std::mem::size_of::<GpuIndexedTriangle>() == 16);
 
 /// One distinct vertex of the device's indexed triangles: its position, padded to 16 bytes so that
-/// it is one aligned read (packed at 12 bytes, the array was 10% smaller at the paper's scale and
+/// it is one aligned read (packed at 12 bytes, the array was 11% smaller at the paper's scale and
 /// its three scalar reads made lavapipe's RBVH tracer 8–12% slower on primary rays, where 16-byte
 /// reads cost 1–3%: docs/paper-scale.md, "Exact triangles indexed").
 #[repr(C)]
