@@ -14,9 +14,12 @@
 // The traversals read the arrays only through the accessor macros RBVH_BVH_NODE(i) and
 // RBVH_BVH_TRIANGLE(i) (or RBVH_EXACT_QUAD(i)), which hide the difference.
 // RBVH_INDEXED_TRIANGLES, which rbvh.glsl defines before including this file, makes the triangle
-// array an RBVH's: indexed (src/rbvh/triangles.rs), a 16-byte slot per triangle and then the
-// vertices they name, 16 bytes each, read by rbvh_bvh_triangle as the exact BVH's gathered ones.
-// So a shader traces either the exact BVH or an RBVH, as the two share these bindings anyway.
+// array an RBVH's: indexed (src/rbvh/triangles.rs), ExactTriangles::device_words() as uvec4s, a
+// slot per triangle (.xyz its vertices' indices, .w its scene index), then the vertices (.xyz,
+// float bits): vertex v is element tri_count + v, where tri_count counts the slots, not the
+// elements. rbvh_bvh_triangle reads a triangle of either array as a BvhTriangle. So a shader
+// traces either the exact BVH or an RBVH (rbvh_trace_bvh is then not defined), as the two share
+// these bindings anyway.
 #ifndef RBVH_BVH_GLSL
 #define RBVH_BVH_GLSL
 
@@ -201,6 +204,8 @@ bool rbvh_test_triangles(RbvhShear sh, Ray ray, bool any_hit, uint first, uint e
     return hit;
 }
 
+// The exact BVH's traversal: not with RBVH_INDEXED_TRIANGLES, whose triangle array is an RBVH's.
+#ifndef RBVH_INDEXED_TRIANGLES
 // The exact BVH's leaf hook for traverse.glsl: its triangles, with the ray's shear made once.
 struct BvhLeafHook {
     BvhSizes sz;
@@ -251,5 +256,7 @@ Hit rbvh_trace_bvh(Ray ray, bool any_hit, BvhSizes sz, out uint steps, out bool 
     vec3 n = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
     return Hit(t, n.x, n.y, n.z, tri.prim, 0u, 0u, 0u);
 }
+
+#endif  // RBVH_INDEXED_TRIANGLES
 
 #endif

@@ -3,7 +3,9 @@
 // src/rbvh/layout.rs. Includes bvh.glsl for the node and triangle buffers.
 //
 // The includer chooses where the buffers live by defining, before the #include:
-//   RBVH_BVH_SET, RBVH_BVH_NODES_BINDING, RBVH_BVH_TRIS_BINDING   (see bvh.glsl)
+//   RBVH_BVH_SET, RBVH_BVH_NODES_BINDING, RBVH_BVH_TRIS_BINDING   (see bvh.glsl; the triangle
+//                              buffer holds ExactTriangles::device_words(), indexed, and
+//                              RbvhSizes.tri_count counts its slots)
 //   RBVH_HEIGHTFIELDS_BINDING  binding of the height-field leaves' records
 //   RBVH_ATLAS_BINDING         binding of the texel atlas
 // or, with RBVH_DEVICE_ADDRESS (see bvh.glsl), RBVH_HEIGHTFIELDS_ADDRESS and RBVH_ATLAS_ADDRESS.

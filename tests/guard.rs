@@ -17,9 +17,10 @@ use rbvh::scene::Scene;
 /// beside height fields, which took the paper-scale scene's memory) at most a twelfth of each,
 /// all its exact triangles (with the room's walls and floor, traced exactly where that is
 /// cheaper) at most a fifth, each preset at most `1 / LEAST_SAVING[level]` of the exact BVH, and
-/// each finer preset larger than the coarser one. Measured: parts 0.030–0.061 MB (1–6%), exact
-/// triangles 0.155–0.176 MB (5–17%), the structures 30.0, 22.0, 15.3, 10.5 and 9.4 times smaller
-/// than the exact BVH's 30.38 MB (26.4, 15.8, 10.1, 5.9 and 4.0 with every triangle sampled).
+/// each finer preset larger than the coarser one. Measured (the exact triangles indexed, since
+/// 683d5f4): parts 0.028–0.054 MB (1–6%), exact triangles 0.100–0.113 MB (4–13%), the structures
+/// 33.9, 23.9, 16.2, 11.0 and 9.8 times smaller than the exact BVH's 30.38 MB (29.9, 18.7, 11.5,
+/// 6.9 and 4.7 with every triangle sampled).
 #[test]
 fn every_preset_of_the_hall_is_small_and_mostly_height_fields() {
     const LEAST_SAVING: [f64; 5] = [25.0, 18.0, 12.0, 8.0, 7.0];

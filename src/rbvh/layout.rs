@@ -1,5 +1,6 @@
 //! GPU layout of the RBVH: the tree reuses the exact BVH's 48-byte node ([`GpuNode`]); triangle
-//! leaves reuse [`GpuTriangle`]; height-field leaves are [`GpuHeightfield`] records; the atlas is
+//! leaves' triangles are indexed ([`crate::rbvh::ExactTriangles`], made from [`GpuTriangle`]s);
+//! height-field leaves are [`GpuHeightfield`] records; the atlas is
 //! an array of 32-bit texels ([`Texel`]) with a fixed row pitch.
 //!
 //! What a node's child reference names (inner node, triangle leaf, height-field leaf) is read in

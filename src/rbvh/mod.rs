@@ -122,7 +122,7 @@ impl Rbvh {
     }
 
     /// Of [`Rbvh::triangle_bytes`], those of the exact parts beside height fields
-    /// ([`GpuTriangle::PART`]; [`ExactTriangles::part_bytes`]): the rest are hybrid leaves, sets
+    /// ([`GpuTriangle::PART`](crate::bvh::GpuTriangle::PART); [`ExactTriangles::part_bytes`]): the rest are hybrid leaves, sets
     /// too small to be height fields.
     pub fn part_bytes(&self) -> u64 {
         self.triangles.part_bytes()

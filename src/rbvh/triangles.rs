@@ -13,7 +13,7 @@
 //! a scan's surface whose neighbours share vertices: at Q2 on `scenes/paper-scale.toml`, 479,124
 //! triangles name 354,971 distinct vertices, 27.9 bytes a triangle indexed against 48 gathered.
 //! The vertices are the scene's own floats, bit for bit, so indexing changes no hit: the device
-//! and the CPU twin ([`TriangleSlots`]) read the same values as the gathered form holds, and
+//! and the CPU twin (`crate::bvh::TriangleSlots`) read the same values as the gathered form holds, and
 //! triangles that share an edge share its vertices exactly, as the watertight test needs.
 
 use std::collections::HashMap;
@@ -41,7 +41,7 @@ const _: () = assert!(std::mem::size_of::<GpuIndexedTriangle>() == 16);
 /// One distinct vertex of the device's indexed triangles: its position, padded to 16 bytes so that
 /// it is one aligned read (packed at 12 bytes, the array was 11% smaller at the paper's scale and
 /// its three scalar reads made lavapipe's RBVH tracer 8–12% slower on primary rays, where 16-byte
-/// reads cost 1–3%: docs/paper-scale.md, "Exact triangles indexed").
+/// reads cost 1–3% on the small scenes: docs/paper-scale.md, "Exact triangles indexed").
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuVertex {
@@ -56,7 +56,9 @@ const _: () = assert!(std::mem::size_of::<GpuVertex>() == 16);
 pub const VERTEX_BYTES: u64 = std::mem::size_of::<GpuVertex>() as u64;
 
 /// The RBVH's exact triangles, gathered for the host and indexed for the device (module docs).
-/// Built once from the gathered triangles; neither form can change without the other.
+/// Built once from the gathered triangles; neither form can change without the other. Upload
+/// [`ExactTriangles::device_words`]: the `Deref` to the gathered slice is for the host, and
+/// those bytes are not what the shaders read.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ExactTriangles {
     gathered: Vec<GpuTriangle>,
