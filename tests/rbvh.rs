@@ -64,7 +64,9 @@ fn every_triangle_is_in_one_leaf_and_the_tree_groups_lone_ones() {
             for k in leaf.clone() {
                 seen[k] += 1;
             }
-            let lone = r.triangles[leaf].iter().all(|t| t.part_leaf().is_none());
+            let lone = r.triangles.gathered()[leaf]
+                .iter()
+                .all(|t| t.part_leaf().is_none());
             grouped += usize::from(count > 1 && lone);
         }
     }

@@ -1166,7 +1166,7 @@ fn an_empty_section_may_be_listed_after_the_one_at_its_offset() {
 
 /// `r` with its triangle `i` changed by `edit` (the indexed form made again from it).
 fn edit_triangle(r: &mut Rbvh, i: usize, edit: impl FnOnce(&mut GpuTriangle)) {
-    let mut triangles = r.triangles.to_vec();
+    let mut triangles = r.triangles.gathered().to_vec();
     edit(&mut triangles[i]);
     r.triangles = ExactTriangles::new(triangles);
 }

@@ -232,7 +232,11 @@ fn leaf_triangles(rbvh: &Rbvh, first: u32, count: u32) -> impl Iterator<Item = &
     let end = first
         .saturating_add(count as usize)
         .min(rbvh.triangles.len());
-    let all = rbvh.triangles.get(first..end).unwrap_or_default();
+    let all = rbvh
+        .triangles
+        .gathered()
+        .get(first..end)
+        .unwrap_or_default();
     all.iter()
         .filter(|t| t.flags & GpuTriangle::PART == 0 || t.flags & GpuTriangle::BARE != 0)
 }

@@ -3,7 +3,7 @@
 //!
 //! * **gathered** ([`GpuTriangle`], 48 bytes each): the vertices copied into each triangle, with
 //!   the part flags. The builder, the file and everything on the host that asks which leaf a
-//!   part stands beside read this form (through `Deref` to `[GpuTriangle]`).
+//!   part stands beside read this form ([`ExactTriangles::gathered`], `iter`, indexing).
 //! * **indexed**, as the device holds them: a 16-byte [`GpuIndexedTriangle`] per slot (its three
 //!   vertex indices and its scene triangle index), then every distinct vertex once, a 16-byte
 //!   [`GpuVertex`], in the order the slots first name them, so that a leaf's vertices lie
@@ -17,7 +17,6 @@
 //! triangles that share an edge share its vertices exactly, as the watertight test needs.
 
 use std::collections::HashMap;
-use std::ops::Deref;
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
@@ -56,9 +55,9 @@ const _: () = assert!(std::mem::size_of::<GpuVertex>() == 16);
 pub const VERTEX_BYTES: u64 = std::mem::size_of::<GpuVertex>() as u64;
 
 /// The RBVH's exact triangles, gathered for the host and indexed for the device (module docs).
-/// Built once from the gathered triangles; neither form can change without the other. Upload
-/// [`ExactTriangles::device_words`]: the `Deref` to the gathered slice is for the host, and
-/// those bytes are not what the shaders read.
+/// Built once from the gathered triangles; neither form can change without the other. It does not
+/// deref to a slice, so that the gathered bytes cannot be uploaded by mistake: the device's are
+/// [`ExactTriangles::device_words`].
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ExactTriangles {
     gathered: Vec<GpuTriangle>,
@@ -96,9 +95,24 @@ impl ExactTriangles {
         ExactTriangles { gathered, quads }
     }
 
-    /// The gathered form, with the part flags (also what `Deref` gives).
+    /// The gathered form, with the part flags: the host's (not what the shaders read).
     pub fn gathered(&self) -> &[GpuTriangle] {
         &self.gathered
+    }
+
+    /// Triangles (slots), in leaf order.
+    pub fn len(&self) -> usize {
+        self.gathered.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.gathered.is_empty()
+    }
+
+    /// The gathered triangles in leaf order.
+    pub fn iter(&self) -> std::slice::Iter<'_, GpuTriangle> {
+        self.gathered.iter()
     }
 
     /// The device's slots, one per triangle in leaf order.
@@ -144,11 +158,12 @@ impl ExactTriangles {
     }
 }
 
-impl Deref for ExactTriangles {
-    type Target = [GpuTriangle];
+/// The gathered triangle in `slot`.
+impl std::ops::Index<usize> for ExactTriangles {
+    type Output = GpuTriangle;
 
-    fn deref(&self) -> &[GpuTriangle] {
-        &self.gathered
+    fn index(&self, slot: usize) -> &GpuTriangle {
+        &self.gathered[slot]
     }
 }
 

@@ -326,7 +326,7 @@ fn check(r: &Rbvh) -> std::result::Result<(), Bad> {
             )
         })?;
     }
-    check_triangles(&r.triangles, r.heightfields.len())
+    check_triangles(r.triangles.gathered(), r.heightfields.len())
 }
 
 /// The atlas's shape: a power-of-two pitch, `pitch × rows` texels, narrow rows within the rows
