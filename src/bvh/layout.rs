@@ -334,7 +334,12 @@ impl GpuTriangle {
     /// The unit geometric normal as wound, `normalize((v1 − v0) × (v2 − v0))`; zero for a
     /// degenerate triangle (which the watertight test never reports as hit).
     pub fn normal(&self) -> Vec3 {
-        let [a, b, c] = self.vertices();
+        Self::normal_of(self.vertices())
+    }
+
+    /// [`GpuTriangle::normal`] of vertices `[v0, v1, v2]` however they are stored (an RBVH's
+    /// indexed triangles, `crate::rbvh::ExactTriangles`, too).
+    pub fn normal_of([a, b, c]: [Vec3; 3]) -> Vec3 {
         (b - a).cross(c - a).normalize_or_zero()
     }
 }

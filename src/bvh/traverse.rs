@@ -233,14 +233,13 @@ impl<'a, T: TriangleSlots + ?Sized> BvhLeafHook<'a, T> {
     }
 
     /// The nearest hit kept, if any. The device reads its triangle once more, after its loops,
-    /// for the hit's id and normal (`normalize((v1 − v0) × (v2 − v0))`, as
-    /// [`GpuTriangle::normal`]): those reads go to `probe`.
+    /// for the hit's id and normal ([`GpuTriangle::normal_of`]): those reads go to `probe`.
     pub(crate) fn hit<P: Probe>(&self, probe: &mut P) -> Option<Hit> {
         let (slot, t) = self.best?;
-        let ([a, b, c], prim) = self.triangles.read(slot, probe);
+        let (vertices, prim) = self.triangles.read(slot, probe);
         Some(Hit {
             t,
-            normal: (b - a).cross(c - a).normalize_or_zero().to_array(),
+            normal: GpuTriangle::normal_of(vertices).to_array(),
             id: prim,
             reserved: [0; 3],
         })
