@@ -37,6 +37,36 @@
 
 // Must equal bvh::STACK_SIZE; tests/glsl_header.rs checks it on the device.
 #define RBVH_STACK_SIZE 64
+// The traversal's memory (traverse.glsl): its stack of (word, distance) entries, then the words a
+// ray's loops read too rarely to hold a register for: the world ray (four entries), which only
+// each round's start and the hit need again after a leaf's march; the nearest hit's normal source
+// (RbvhLeafHook, read once the ray is done); the level-of-detail cone (lod.glsl, read where an inner
+// child is entered). They share the stack's array on purpose: the stack's pushes write it at
+// indices no compiler resolves, so a word stored there is read back from memory (scratch on AMD,
+// local memory on NVIDIA, cached) instead of held in a register through every march, where each
+// value live costs occupancy on wide SIMD (docs/speed.md, "Words kept beside the stack"). A global,
+// so that a hook reaches it; a ray's trace writes its words before it reads them, and a shader
+// that traces several rays traces them one after another.
+#define RBVH_STACK_RAY RBVH_STACK_SIZE
+#define RBVH_STACK_HIT (RBVH_STACK_SIZE + 4)
+#define RBVH_STACK_CONE (RBVH_STACK_SIZE + 5)
+uvec2 rbvh_stack[RBVH_STACK_SIZE + 6];
+
+void rbvh_keep_ray(Ray ray) {
+    rbvh_stack[RBVH_STACK_RAY] = floatBitsToUint(ray.origin.xy);
+    rbvh_stack[RBVH_STACK_RAY + 1] = floatBitsToUint(vec2(ray.origin.z, ray.tmin));
+    rbvh_stack[RBVH_STACK_RAY + 2] = floatBitsToUint(ray.dir.xy);
+    rbvh_stack[RBVH_STACK_RAY + 3] = floatBitsToUint(vec2(ray.dir.z, ray.tmax));
+}
+
+// The ray rbvh_keep_ray kept, bit for bit.
+Ray rbvh_kept_ray() {
+    vec2 o = uintBitsToFloat(rbvh_stack[RBVH_STACK_RAY]);
+    vec2 oz_tmin = uintBitsToFloat(rbvh_stack[RBVH_STACK_RAY + 1]);
+    vec2 d = uintBitsToFloat(rbvh_stack[RBVH_STACK_RAY + 2]);
+    vec2 dz_tmax = uintBitsToFloat(rbvh_stack[RBVH_STACK_RAY + 3]);
+    return Ray(vec3(o, oz_tmin.x), oz_tmin.y, vec3(d, dz_tmax.x), dz_tmax.y);
+}
 const uint RBVH_LEAF_BIT = 0x80000000u;
 
 // Aila & Laine (2009) node, both children's boxes quantized against the node's own box (Ylitie,

@@ -170,10 +170,12 @@ float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inou
 // whose coarse representation the ray's cone selects at the child's box entry is pushed as
 // LOD_BIT | node and its columns are marched when it comes up, instead of descending; such hits
 // report id = LEAF_BIT | LOD_BIT | node. The RBVH's own leaves go to its hook.
+// The ray's cone, (width, spread) (RayCone in src/lod/cone.rs), is kept in rbvh_stack's
+// RBVH_STACK_CONE and read where an inner child is entered, not held in registers through the
+// marches.
 struct RbvhLodLeafHook {
     RbvhLeafHook rbvh;
     RbvhLodSizes lsz;
-    vec2 cone;  // the ray's (width, spread): see RayCone in src/lod/cone.rs
 };
 
 uint rbvh_node_count(RbvhLodLeafHook leaves) {
@@ -191,7 +193,8 @@ bool rbvh_is_leaf(RbvhLodLeafHook leaves, uint reference) {
 // The LOD trace's tree carries an inner child's column width in its `count`
 // (Lod::annotated_nodes), so choosing needs no further read.
 uint rbvh_enter(RbvhLodLeafHook leaves, uint child, uint count, float t_entry) {
-    return rbvh_lod_selects(uintBitsToFloat(count), leaves.cone, t_entry) ? child | RBVH_LOD_BIT : child;
+    vec2 cone = uintBitsToFloat(rbvh_stack[RBVH_STACK_CONE]);
+    return rbvh_lod_selects(uintBitsToFloat(count), cone, t_entry) ? child | RBVH_LOD_BIT : child;
 }
 
 bool rbvh_test(inout RbvhLodLeafHook leaves, Ray ray, bool any_hit, uint reference, uint count,
@@ -220,9 +223,10 @@ bool rbvh_test(inout RbvhLodLeafHook leaves, Ray ray, bool any_hit, uint referen
 // with the hook above.
 Hit rbvh_trace_rbvh_lod(Ray ray, vec2 cone, bool any_hit, RbvhSizes sz, RbvhLodSizes lsz,
                         out uint steps, out bool overflow) {
-    RbvhLodLeafHook leaves = RbvhLodLeafHook(rbvh_leaf_hook(sz), lsz, cone);
+    RbvhLodLeafHook leaves = RbvhLodLeafHook(rbvh_leaf_hook(sz), lsz);
+    rbvh_stack[RBVH_STACK_CONE] = floatBitsToUint(cone);
     float t = rbvh_traverse_rbvh_lod(ray, any_hit, leaves, steps, overflow);
-    return rbvh_rbvh_hit(leaves.rbvh, t, ray);
+    return rbvh_rbvh_hit(leaves.rbvh, t, rbvh_kept_ray());
 }
 
 #endif

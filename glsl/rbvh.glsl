@@ -765,20 +765,20 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
 // The RBVH's leaf hook for traverse.glsl: height fields marched, hybrid triangle leaves tested as
 // the exact BVH's (RbvhLeafHook in src/rbvh/march/hook.rs). It keeps the nearest hit in one word, `best`:
 // a triangle's slot (below LEAF_BIT: slots are fewer than 2^31), or the id of a height field (or,
-// with level of detail, a chosen node), LEAF_BIT set, with where its normal comes from; RBVH_INVALID
-// while none. Its id and normal are read and decoded once, after the loops (rbvh_rbvh_hit), so
-// that the SIMD loops do not carry them.
+// with level of detail, a chosen node), LEAF_BIT set; RBVH_INVALID while none. Where a height
+// field's hit takes its normal from (the twin's `best_normal`) is kept in rbvh_stack's
+// RBVH_STACK_HIT, not in a register through every later march: a height field's hit, its cell's c00
+// at atlas index x and, in y, rbvh_cell_normal_choice (RBVH_HEIGHT_ONLY: the triangle or skirt hit;
+// see rbvh_march); a level-of-detail hit, its normal texel in x and 0 in y. The hit's id and
+// normal are read and decoded once, after the loops (rbvh_rbvh_hit), so that the SIMD loops do not
+// carry them.
 struct RbvhLeafHook {
     RbvhSizes sz;
     uint best;
-    // A height field's hit: its cell's c00 at atlas index x and, in y, rbvh_cell_normal_choice
-    // (RBVH_HEIGHT_ONLY: the triangle or skirt hit; see rbvh_march); a level-of-detail hit: its
-    // normal texel in x and 0 in y.
-    uvec2 best_normal;
 };
 
 RbvhLeafHook rbvh_leaf_hook(RbvhSizes sz) {
-    return RbvhLeafHook(sz, RBVH_INVALID, uvec2(RBVH_HOLE_CODE, 0u));
+    return RbvhLeafHook(sz, RBVH_INVALID);
 }
 
 uint rbvh_node_count(RbvhLeafHook leaves) {
@@ -810,7 +810,7 @@ bool rbvh_keep_march(inout RbvhLeafHook leaves, float t, uint walked, uint id, u
     if (hit) {
         t_closest = t;
         leaves.best = id;
-        leaves.best_normal = normal;
+        rbvh_stack[RBVH_STACK_HIT] = normal;
     }
     return hit;
 }
@@ -871,10 +871,10 @@ Hit rbvh_rbvh_hit(RbvhLeafHook leaves, float t, Ray ray) {
         id = tri.prim;
         nrm = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
     } else if (RBVH_HEIGHT_ONLY) {
-        nrm = rbvh_height_field_facet(leaves.sz, id & ~RBVH_LEAF_BIT, leaves.best_normal.x, leaves.best_normal.y, ray,
-                                      t);
+        uvec2 b = rbvh_stack[RBVH_STACK_HIT];
+        nrm = rbvh_height_field_facet(leaves.sz, id & ~RBVH_LEAF_BIT, b.x, b.y, ray, t);
     } else {
-        uvec2 b = leaves.best_normal;
+        uvec2 b = rbvh_stack[RBVH_STACK_HIT];
         uint texel = b.y == 0u ? b.x : rbvh_normal_texel(leaves.sz, b.x, b.y, ray.dir);
         nrm = rbvh_decode_normal(texel);
     }
@@ -886,7 +886,7 @@ Hit rbvh_rbvh_hit(RbvhLeafHook leaves, float t, Ray ray) {
 Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out bool overflow) {
     RbvhLeafHook leaves = rbvh_leaf_hook(sz);
     float t = rbvh_traverse_rbvh(ray, any_hit, leaves, steps, overflow);
-    return rbvh_rbvh_hit(leaves, t, ray);
+    return rbvh_rbvh_hit(leaves, t, rbvh_kept_ray());
 }
 
 #endif

@@ -19,8 +19,8 @@
 //         returns true. Sets `cut` where the device ended one of its loops early.
 // It also uses, from bvh.glsl (included before it wherever it is instantiated: bvh.glsl,
 // rbvh.glsl, lod.glsl) and what that includes (common.glsl, intersect.glsl): Ray, BvhNode,
-// RBVH_BVH_NODE(i), rbvh_node_boxes, RBVH_LEAF_BIT, RBVH_INVALID, RBVH_STACK_SIZE,
-// rbvh_stack_entry, rbvh_stack_pop, rbvh_ray_valid, rbvh_safe_inverse, rbvh_intersect_box,
+// RBVH_BVH_NODE(i), rbvh_node_boxes, RBVH_LEAF_BIT, RBVH_INVALID, RBVH_STACK_SIZE, rbvh_stack,
+// rbvh_keep_ray, rbvh_kept_ray, rbvh_stack_entry, rbvh_stack_pop, rbvh_ray_valid, rbvh_safe_inverse, rbvh_intersect_box,
 // RBVH_COUNT_RESET and RBVH_COUNT_ADD. Define the two names above and include it; then
 // `float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint steps, out bool
 // overflow)` returns the nearest distance found (ray.tmax if none; the
@@ -59,15 +59,16 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
     RBVH_COUNT_RESET();
     overflow = false;
     float t_closest = ray.tmax;
+    // Read back at each round's start, and by the caller for the hit (see rbvh_stack).
+    rbvh_keep_ray(ray);
     if (!rbvh_ray_valid(ray)) {
         return t_closest;
     }
     uint node_count = rbvh_node_count(leaves);
     uint bound = rbvh_round_bound(leaves);
-    // One stack of (entry, distance) pairs: rbvh_stack_entry's word and the distance at which the
+    // The stack's entries in rbvh_stack: rbvh_stack_entry's word and the distance at which the
     // child's box was entered, so that an entry whose box now lies beyond the nearest hit is
     // dropped when popped instead of visited or marched.
-    uvec2 stack[RBVH_STACK_SIZE];
     uint sp = 0u;
     uint visits = 0u;
     // Loops the device ended early flag `overflow` too.
@@ -75,8 +76,10 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
     bool finished = false;
     uint iter = 0u;
     for (uint round = 0u; round <= bound; ++round) {
-        // Made anew each round rather than kept through the leaf test, where it would hold three
-        // registers through the march (docs/speed.md, "What holds the RBVH tracer's registers").
+        // Read back and made anew each round rather than kept through the leaf test, where each
+        // would hold registers through the march (docs/speed.md, "What holds the RBVH tracer's
+        // registers", "Words kept beside the stack").
+        ray = rbvh_kept_ray();
         vec3 inv_dir = rbvh_safe_inverse(ray.dir);
         // The reference to visit next: the root in the first round, else RBVH_INVALID (pop one).
         uint node = round == 0u ? 0u : RBVH_INVALID;
@@ -90,8 +93,8 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
                 bool popped = false;
                 for (; sp > 0u;) {
                     sp -= 1u;
-                    if (uintBitsToFloat(stack[sp].y) <= t_closest) {
-                        rbvh_stack_pop(stack[sp].x, node, count_of_node);
+                    if (uintBitsToFloat(rbvh_stack[sp].y) <= t_closest) {
+                        rbvh_stack_pop(rbvh_stack[sp].x, node, count_of_node);
                         popped = true;
                         break;
                     }
@@ -150,7 +153,7 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
                         next = child;
                         next_count = count;
                     } else if (sp < RBVH_STACK_SIZE) {
-                        stack[sp] = uvec2(rbvh_stack_entry(child, node, use_b), floatBitsToUint(t_entry));
+                        rbvh_stack[sp] = uvec2(rbvh_stack_entry(child, node, use_b), floatBitsToUint(t_entry));
                         sp += 1u;
                     } else {
                         overflow = true;

@@ -102,22 +102,22 @@ fn every_pipeline_compiles_on_the_null_device_and_reports_its_registers() {
     // Bounds a regression would cross, with the reference's driver (issue "Faster than the
     // exact BVH on a GPU"): the exact tracer's stack stays out of its registers (at most 56
     // VGPRs, 48 at bc95e65, nothing spilled; 184 when its two stacks sat in registers), and no
-    // RBVH tracer goes back above what it took once the leaf was tested in the round that meets
-    // it, or spills (64, level of detail 72, each 8 more counting, since c82964f: docs/speed.md,
-    // "The leaf tested where it is met"; 72 at bc95e65; 96–128 with 37–77 SGPRs spilled before
-    // values the walk inlined stopped being carried from leaf to leaf).
+    // RBVH tracer goes back above what it took once the world ray, the hit's normal source and
+    // the level-of-detail cone were kept beside the stack, or spills (56, with or without level
+    // of detail, 8 more counting: docs/speed.md, "Words kept beside the stack"; 64 and 72 since
+    // c82964f, "The leaf tested where it is met"; 72 at bc95e65; 96–128 with 37–77 SGPRs spilled
+    // before values the walk inlined stopped being carried from leaf to leaf).
     let number = |p: &rbvh::gpu::CompiledPipeline, column: usize| {
         column_value(&p.statistics, COLUMNS[column].1)
             .map_or(0, |v| v.to_string().parse::<u64>().unwrap_or(u64::MAX))
     };
     let rbvh_bound = |p: &rbvh::gpu::CompiledPipeline| {
-        let lod = if p.shader == "trace_rbvh_lod" { 8 } else { 0 };
         let counting = if p.pipeline.contains("counting") {
             8
         } else {
             0
         };
-        64 + lod + counting
+        56 + counting
     };
     for p in &pipelines {
         let (vgprs, spilled) = (number(p, 0), number(p, 2) + number(p, 3));
