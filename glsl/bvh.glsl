@@ -37,16 +37,18 @@
 
 // Must equal bvh::STACK_SIZE; tests/glsl_header.rs checks it on the device.
 #define RBVH_STACK_SIZE 64
-// The traversal's memory (traverse.glsl): its stack of (word, distance) entries, then the words a
-// ray's loops read too rarely to hold a register for: the world ray (four entries), which only
-// each round's start and the hit need again after a leaf's march; the nearest hit's normal source
-// (RbvhLeafHook, read once the ray is done); the level-of-detail cone (lod.glsl, read where an inner
-// child is entered). They share the stack's array on purpose: the stack's pushes write it at
-// indices no compiler resolves, so a word stored there is read back from memory (scratch on AMD,
-// local memory on NVIDIA, cached) instead of held in a register through every march, where each
-// value live costs occupancy on wide SIMD (docs/speed.md, "Words kept beside the stack"). A global,
-// so that a hook reaches it; a ray's trace writes its words before it reads them, and a shader
-// that traces several rays traces them one after another.
+// The traversal's memory (traverse.glsl): its stack of (word, distance) entries, then the words an
+// RBVH ray's loops read too rarely to hold a register for: the world ray (four entries,
+// RBVH_KEEPS_RAY), which only each round's start and the hit need again after a leaf's march;
+// the nearest hit's normal source (RbvhLeafHook, read once the ray is done); the level-of-detail
+// cone (lod.glsl, read where an inner child is entered). They share the stack's array on
+// purpose: the stack's pushes write it at indices the compilers measured do not resolve (a
+// compiler that proved them below RBVH_STACK_SIZE could forward the words; the hits would be the
+// same), so a word stored there is read back from memory (scratch on AMD, local memory on NVIDIA,
+// cached) instead of held in a register through every march, where each value live costs
+// occupancy on wide SIMD (docs/speed.md, "Words kept beside the stack"). A global, so that a hook
+// reaches it; a ray's trace writes its words before it reads them, and a shader that traces
+// several rays traces them one after another.
 #define RBVH_STACK_RAY RBVH_STACK_SIZE
 #define RBVH_STACK_HIT (RBVH_STACK_SIZE + 4)
 #define RBVH_STACK_CONE (RBVH_STACK_SIZE + 5)

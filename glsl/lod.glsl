@@ -215,9 +215,11 @@ bool rbvh_test(inout RbvhLodLeafHook leaves, Ray ray, bool any_hit, uint referen
 
 #define RBVH_TRAVERSE rbvh_traverse_rbvh_lod
 #define RBVH_LEAVES RbvhLodLeafHook
+#define RBVH_KEEPS_RAY
 #include "traverse.glsl"
 #undef RBVH_TRAVERSE
 #undef RBVH_LEAVES
+#undef RBVH_KEEPS_RAY
 
 // The RBVH traced with level of detail for a ray whose cone is `cone`: as rbvh_trace_rbvh, but
 // with the hook above.

@@ -766,8 +766,8 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
 // the exact BVH's (RbvhLeafHook in src/rbvh/march/hook.rs). It keeps the nearest hit in one word, `best`:
 // a triangle's slot (below LEAF_BIT: slots are fewer than 2^31), or the id of a height field (or,
 // with level of detail, a chosen node), LEAF_BIT set; RBVH_INVALID while none. Where a height
-// field's hit takes its normal from (the twin's `best_normal`) is kept in rbvh_stack's
-// RBVH_STACK_HIT, not in a register through every later march: a height field's hit, its cell's c00
+// field's hit takes its normal from is kept in rbvh_stack's RBVH_STACK_HIT (written with `best`,
+// read only when `best` is a height field's), not in a register through every later march: a height field's hit, its cell's c00
 // at atlas index x and, in y, rbvh_cell_normal_choice (RBVH_HEIGHT_ONLY: the triangle or skirt hit;
 // see rbvh_march); a level-of-detail hit, its normal texel in x and 0 in y. The hit's id and
 // normal are read and decoded once, after the loops (rbvh_rbvh_hit), so that the SIMD loops do not
@@ -836,9 +836,11 @@ bool rbvh_test(inout RbvhLeafHook leaves, Ray ray, bool any_hit, uint reference,
 
 #define RBVH_TRAVERSE rbvh_traverse_rbvh
 #define RBVH_LEAVES RbvhLeafHook
+#define RBVH_KEEPS_RAY
 #include "traverse.glsl"
 #undef RBVH_TRAVERSE
 #undef RBVH_LEAVES
+#undef RBVH_KEEPS_RAY
 
 // The world normal of a height-only RBVH's hit at t along `ray` in leaf `li`, whose cell's c00 is
 // at atlas index `k00` and `kind` is what rbvh_march hit (1 + triangle, or 3: a skirt): the facet

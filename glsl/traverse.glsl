@@ -17,6 +17,11 @@
 //                    inout float t_closest, inout uint steps, inout bool cut)
 //         tests the leaf over [tmin, t_closest); on a hit lowers t_closest, keeps the hit and
 //         returns true. Sets `cut` where the device ended one of its loops early.
+// and, optionally, RBVH_KEEPS_RAY: the traversal then keeps the world ray in rbvh_stack and reads
+// it back at each round's start rather than holding it in registers through the leaf tests
+// (the RBVH's marches, where that costs occupancy; the exact BVH's triangle tests hold few
+// registers, so its tracer keeps the ray where it is); the caller reads the ray back with
+// rbvh_kept_ray() after the traversal.
 // It also uses, from bvh.glsl (included before it wherever it is instantiated: bvh.glsl,
 // rbvh.glsl, lod.glsl) and what that includes (common.glsl, intersect.glsl): Ray, BvhNode,
 // RBVH_BVH_NODE(i), rbvh_node_boxes, RBVH_LEAF_BIT, RBVH_INVALID, RBVH_STACK_SIZE, rbvh_stack,
@@ -37,9 +42,10 @@
 // tests at most one leaf (the last none), and a tree has one leaf more than it has inner nodes,
 // which bounds the rounds.
 // The leaf is tested at the end of the round that met it, and what the traversal needs again
-// after the test is made anew each round (the ray's inverse, the next node) rather than carried
-// through it: a value live across the march holds a register through it (docs/speed.md, "The
-// leaf tested where it is met").
+// after the test is made anew each round (the ray's inverse, the next node, with RBVH_KEEPS_RAY
+// the ray itself, read back from rbvh_stack) rather than carried through it: a value live across
+// the march holds a register through it (docs/speed.md, "The leaf tested where it is met",
+// "Words kept beside the stack").
 //
 // Ended early: lavapipe (llvmpipe) stops any shader loop once the loops of an invocation's SIMD
 // group have run LP_MAX_TGSI_LOOP_ITERATIONS (65535) iterations in all, silently, as if the loop
@@ -59,8 +65,9 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
     RBVH_COUNT_RESET();
     overflow = false;
     float t_closest = ray.tmax;
-    // Read back at each round's start, and by the caller for the hit (see rbvh_stack).
+#ifdef RBVH_KEEPS_RAY
     rbvh_keep_ray(ray);
+#endif
     if (!rbvh_ray_valid(ray)) {
         return t_closest;
     }
@@ -79,7 +86,9 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
         // Read back and made anew each round rather than kept through the leaf test, where each
         // would hold registers through the march (docs/speed.md, "What holds the RBVH tracer's
         // registers", "Words kept beside the stack").
+#ifdef RBVH_KEEPS_RAY
         ray = rbvh_kept_ray();
+#endif
         vec3 inv_dir = rbvh_safe_inverse(ray.dir);
         // The reference to visit next: the root in the first round, else RBVH_INVALID (pop one).
         uint node = round == 0u ? 0u : RBVH_INVALID;

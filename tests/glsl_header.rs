@@ -304,3 +304,128 @@ fn shared_constants_are_the_rust_ones_in_the_compiled_shader() {
         .collect();
     assert!(wrong.is_empty(), "constants differ: {wrong:#?}");
 }
+
+/// An engine's shader that traces two rays one after another in one invocation: a closest hit of
+/// its own ray, then an any hit of another invocation's. The headers keep a ray's words beside
+/// the traversal stack in one private global array (`rbvh_stack`: the world ray, where a height
+/// field's hit takes its normal from), so the second trace must not see the first one's.
+const TWO_RAYS: &str = r#"
+#version 460
+#extension GL_GOOGLE_include_directive : require
+layout(local_size_x = 64) in;
+#include "rbvh.glsl"
+
+layout(std430, set = 0, binding = 4) readonly buffer EngineRays { Ray rays[]; };
+layout(std430, set = 0, binding = 5) writeonly buffer EngineHits { Hit hits[]; };
+layout(push_constant) uniform EnginePush { RbvhSizes sizes; uint count; uint other; } push;
+
+void main() {
+    uint i = gl_GlobalInvocationID.x;
+    if (i >= push.count) {
+        return;
+    }
+    uint steps;
+    bool overflow;
+    Hit first = rbvh_trace_rbvh(rays[i], false, push.sizes, steps, overflow);
+    Hit second = rbvh_trace_rbvh(rays[(i + push.other) % push.count], true, push.sizes, steps, overflow);
+    hits[2u * i] = first;
+    hits[2u * i + 1u] = second;
+}
+"#;
+
+#[test]
+fn one_invocation_traces_rays_one_after_another_as_each_alone() {
+    use rbvh::geom::{Hit, Ray};
+    use rbvh::gpu::{ComputePipeline, Query, Tracer};
+    use rbvh::rbvh::{Rbvh, RbvhParams};
+    use rbvh::scene::Scene;
+    use rbvh::structure::Structure;
+    use std::sync::Arc;
+
+    let ctx = common::context();
+    let scene = Scene::builtin("default").unwrap();
+    let r = Arc::new(Rbvh::build(&scene, &RbvhParams::quality(2).unwrap()).unwrap());
+    assert!(
+        !r.heightfields.is_empty() && !r.triangles.is_empty(),
+        "height fields and exact triangles both traced"
+    );
+    let mut rays: Vec<Ray> = scene.camera_or_framed(1.0).primary_rays(48, 48);
+    rays.extend(common::random_rays(&scene, 2000, &mut common::Rng::new(7)));
+    let count = rays.len() as u32;
+    let other = count / 2 + 1;
+
+    let tracer = Tracer::new(&ctx, &Structure::from(r.clone())).unwrap();
+    let closest = tracer.trace(&rays, Query::Closest).unwrap().hits;
+    let any = tracer.trace(&rays, Query::Any).unwrap().hits;
+
+    let words = compile(TWO_RAYS).unwrap();
+    let pipeline = ComputePipeline::new(
+        &ctx,
+        "two rays an invocation",
+        bytemuck::cast_slice(&words),
+        &[0, 1, 2, 3, 4, 5],
+        32,
+    )
+    .unwrap();
+    let nodes = ctx.upload_storage("nodes", &r.nodes).unwrap();
+    let tris = ctx
+        .upload_storage("triangles", r.triangles.device_words())
+        .unwrap();
+    let heightfields = ctx
+        .upload_storage("height fields", &r.heightfields)
+        .unwrap();
+    let atlas = ctx.upload_storage("atlas", &r.atlas_words()).unwrap();
+    let ray_buffer = ctx.upload_storage("rays", &rays).unwrap();
+    let mut hit_buffer = ctx
+        .zeroed_storage(
+            "hits",
+            2 * std::mem::size_of::<Hit>() as u64 * u64::from(count),
+        )
+        .unwrap();
+    let push: [u32; 8] = [
+        r.nodes.len() as u32,
+        r.triangles.len() as u32,
+        r.heightfields.len() as u32,
+        r.atlas.pitch,
+        r.atlas.texels.len() as u32,
+        r.atlas.wide_len() as u32,
+        count,
+        other,
+    ];
+    pipeline
+        .run(
+            &[
+                (nodes.raw(), 0),
+                (tris.raw(), 0),
+                (heightfields.raw(), 0),
+                (atlas.raw(), 0),
+                (ray_buffer.raw(), 0),
+                (hit_buffer.raw(), 0),
+            ],
+            count,
+            |_| bytemuck::cast_slice(&push).to_vec(),
+        )
+        .unwrap();
+    let got: Vec<Hit> = ctx.read(&mut hit_buffer).unwrap();
+    let heightfield_hits = closest
+        .iter()
+        .filter(|h| h.id != u32::MAX && h.id & rbvh::bvh::LEAF_BIT != 0)
+        .count();
+    assert!(
+        heightfield_hits > 100,
+        "{heightfield_hits} height-field hits"
+    );
+    for i in 0..count as usize {
+        let j = (i + other as usize) % count as usize;
+        assert_eq!(
+            got[2 * i],
+            closest[i],
+            "closest hit of ray {i}, traced first"
+        );
+        assert_eq!(
+            got[2 * i + 1],
+            any[j],
+            "any hit of ray {j}, traced second by {i}"
+        );
+    }
+}
