@@ -135,6 +135,27 @@ fn every_pipeline_compiles_on_the_null_device_and_reports_its_registers() {
             _ => {}
         }
     }
+    // The ratio: every RBVH trace pipeline that timed runs use (the counting ones only
+    // count) takes at most 1.25 times the exact tracer's registers, reached the same way (56
+    // against 48 since d8d2c94; 1.33 times before).
+    let timed = |p: &&rbvh::gpu::CompiledPipeline| !p.pipeline.contains("counting");
+    for p in pipelines.iter().filter(timed) {
+        if !matches!(p.shader, "trace_rbvh" | "trace_rbvh_lod") {
+            continue;
+        }
+        let exact = pipelines
+            .iter()
+            .filter(timed)
+            .find(|e| e.shader == "trace_exact" && e.reach == p.reach)
+            .expect("an exact tracer reached the same way");
+        assert!(
+            4 * number(p, 0) <= 5 * number(exact, 0),
+            "{}: {} VGPRs against the exact tracer's {}",
+            p.pipeline,
+            number(p, 0),
+            number(exact, 0)
+        );
+    }
     // The reference results file holds this commit's statistics wherever this Mesa made it.
     let recorded: Vec<(String, Vec<String>)> = file["pipelines"]
         .as_array()
