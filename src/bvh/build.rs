@@ -141,6 +141,7 @@ impl Bvh {
             params,
             progress,
             groupable: None,
+            sweep: false,
         };
         let root = step(
             progress,
@@ -239,11 +240,14 @@ pub(crate) enum Placed {
 /// `LEAF_BIT | (base + first)`, `count` into that order placed from `base` on.
 ///
 /// The RBVH's upper tree where it is cheaper than the construction's own (issue "A tree that
-/// earns its leaves"; `crate::rbvh`'s `upper_tree`). 256 bins, the most [`BuildParams`] allows,
-/// rather than the exact BVH's 16: a few hundred thousand leaves of very different sizes (a
-/// courtyard's walls beside a dragon's tiles) bin poorly into 16, and on the paper-scale scene
-/// at Q2 a primary ray went through 65 inner nodes of the 16-bin tree, 62 of a 64-bin one and 59
-/// of this one; binning stays linear in the leaves per level, a fraction of a second there.
+/// earns its leaves"; `crate::rbvh`'s `upper_tree`). Its SAH weighs every place between the
+/// items sorted by centroid (`Builder::sweep_split`), not bins as the exact BVH's does: a few
+/// hundred thousand leaves of very different sizes (a courtyard's walls beside a dragon's
+/// tiles) bin poorly. On the paper-scale scene at Q2 a primary ray went through 65 inner nodes
+/// of a 16-bin tree, 62 of a 64-bin one and 59 of a 256-bin one (before the exact parts); at
+/// 1b3db26 63.4 of the 256-bin tree and 60.5 of the sweep's, the exact BVH 60.7
+/// (docs/speed.md, "A tree over the leaves by sweep"). Sorting at every node costs
+/// O(n log² n) in all, a fraction of a second for those leaves.
 pub(crate) fn tree_over(
     items: &[Placed],
     max_group: usize,
@@ -273,7 +277,6 @@ pub(crate) fn tree_over(
         .collect();
     let params = BuildParams {
         max_leaf: max_group.max(1),
-        bins: 256,
         ..BuildParams::DEFAULT
     };
     let builder = Builder {
@@ -281,6 +284,7 @@ pub(crate) fn tree_over(
         params: &params,
         progress: &Quiet,
         groupable: Some(&groupable),
+        sweep: true,
     };
     let mut order: Vec<u32> = (0..prims.len() as u32).collect();
     let root = (!order.is_empty()).then(|| builder.build(&mut order, 0, 0));
@@ -445,6 +449,9 @@ struct Builder<'a> {
     groupable: Option<&'a [bool]>,
     /// Told of every leaf's triangles as the leaf is made.
     progress: &'a dyn Progress,
+    /// Whether the SAH weighs every place between the prims sorted by centroid rather than
+    /// binned ones (`Builder::sweep_split`).
+    sweep: bool,
 }
 
 #[derive(Clone, Copy)]
@@ -476,18 +483,28 @@ impl Builder<'_> {
         if n == 1 {
             return made_leaf();
         }
-        let split = if depth < self.params.median_below_depth {
-            self.sah_split(order, &bounds, &centroids)
-        } else {
-            None
-        };
         let groups = n <= self.params.max_leaf
             && self
                 .groupable
                 .is_none_or(|g| order.iter().all(|&i| g[i as usize]));
-        let mid = match split {
-            Some(s) if s.cost >= n as f32 && groups => return made_leaf(),
-            Some(s) => partition(order, |i| s.bin_of(&self.prims[i as usize]) < s.bin),
+        let mid = if depth >= self.params.median_below_depth {
+            None
+        } else if self.sweep {
+            match self.sweep_split(order, &bounds) {
+                Some((cost, _)) if cost >= n as f32 && groups => return made_leaf(),
+                split => split.map(|(_, mid)| mid),
+            }
+        } else {
+            match self.sah_split(order, &bounds, &centroids) {
+                Some(s) if s.cost >= n as f32 && groups => return made_leaf(),
+                Some(s) => Some(partition(order, |i| {
+                    s.bin_of(&self.prims[i as usize]) < s.bin
+                })),
+                None => None,
+            }
+        };
+        let mid = match mid {
+            Some(mid) => mid,
             None if groups => return made_leaf(),
             None => self.median_split(order, &centroids),
         };
@@ -577,6 +594,49 @@ impl Builder<'_> {
             }
         }
         best
+    }
+
+    /// The cheapest SAH split with every place between the prims, sorted by centroid along each
+    /// axis (ties by index), a candidate: its cost and where its right side starts, `order`
+    /// left sorted along the chosen axis. Sorting makes it O(n log n) a node where binning is
+    /// O(n), which suits a tree over a few hundred thousand leaves (`tree_over`), not the
+    /// exact BVH's millions of triangles.
+    fn sweep_split(&self, order: &mut [u32], bounds: &Aabb) -> Option<(f32, usize)> {
+        let n = order.len();
+        let scale = 1.0 / bounds.area().max(f32::MIN_POSITIVE);
+        let mut best: Option<(f32, usize, Vec<u32>)> = None;
+        let mut right_area = vec![0.0f32; n];
+        for axis in 0..3 {
+            let mut sorted = order.to_vec();
+            sorted.sort_unstable_by(|&a, &b| {
+                let ca = self.prims[a as usize].centroid[axis];
+                let cb = self.prims[b as usize].centroid[axis];
+                ca.total_cmp(&cb).then(a.cmp(&b))
+            });
+            let mut acc = Aabb::EMPTY;
+            for k in (1..n).rev() {
+                acc = acc.union(self.prims[sorted[k] as usize].bounds);
+                right_area[k] = acc.area();
+            }
+            let mut left = Aabb::EMPTY;
+            let mut axis_best: Option<(f32, usize)> = None;
+            for k in 1..n {
+                left = left.union(self.prims[sorted[k - 1] as usize].bounds);
+                let cost = self.params.traversal_cost
+                    + (left.area() * k as f32 + right_area[k] * (n - k) as f32) * scale;
+                if axis_best.is_none_or(|(c, _)| cost < c) {
+                    axis_best = Some((cost, k));
+                }
+            }
+            if let Some((cost, k)) = axis_best {
+                if best.as_ref().is_none_or(|(c, _, _)| cost < *c) {
+                    best = Some((cost, k, sorted));
+                }
+            }
+        }
+        let (cost, mid, sorted) = best?;
+        order.copy_from_slice(&sorted);
+        Some((cost, mid))
     }
 
     fn fill_bins(
