@@ -234,8 +234,8 @@ pub(crate) enum Placed {
 /// A tree over finished leaves and loose triangles, `items`: each finished leaf (absent ones are
 /// skipped) becomes one
 /// child of the tree's nodes, and the triangles go into leaves of at most `max_group` of them,
-/// as this builder's binned SAH places and groups them (a set holding a finished leaf is always
-/// split). The node array (depth-first, node 0 the root), its depth, as [`pack`] gives them, and
+/// as this builder's SAH, sweeping rather than binning, places and groups them (a set holding a
+/// finished leaf is always split). The node array (depth-first, node 0 the root), its depth, as [`pack`] gives them, and
 /// the triangles' items in the order their leaves refer to them: a triangle leaf is
 /// `LEAF_BIT | (base + first)`, `count` into that order placed from `base` on.
 ///

@@ -1,7 +1,7 @@
 //! Packing the construction's tree depth-first into the device's node array ([`Flattened`]),
 //! its leaves' records, triangles and tiles, and choosing the tree a ray traverses over the
-//! leaves: the construction's own, or the exact BVH's SAH tree built again over the leaves'
-//! boxes, whichever the SAH finds cheaper ([`upper_tree`]).
+//! leaves: the construction's own, or an SAH tree built again over the leaves' boxes (the exact
+//! BVH's builder, sweeping rather than binning), whichever the SAH finds cheaper ([`upper_tree`]).
 
 use super::{Builder, Input, Node};
 use crate::bvh::{ChildRef, GpuNode, GpuTriangle, Placed, STACK_SIZE};
@@ -16,8 +16,8 @@ use crate::{Error, Result};
 const MAX_TRIANGLES_A_LEAF: usize = 8;
 
 /// The tree traversal runs over the leaves of `out`: the construction's own (`out.nodes`, of
-/// depth `root`'s), or one built again over the leaves' boxes by the exact BVH's SAH
-/// ([`crate::bvh::tree_over`]), whichever the SAH finds cheaper ([`crate::bvh::sah_cost`]),
+/// depth `root`'s), or one built again over the leaves' boxes by the exact BVH's builder with a
+/// full-sweep SAH ([`crate::bvh::tree_over`]), whichever the SAH finds cheaper ([`crate::bvh::sah_cost`]),
 /// the construction's on a tie.
 ///
 /// The construction splits until a set is one height field: its splits serve the refinement

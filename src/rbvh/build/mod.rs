@@ -34,7 +34,8 @@
 //! splatted regardless (a forced leaf), its error bounded by its size.
 //!
 //! The tree a ray traverses over the leaves is the construction's own or one built again over the
-//! leaves' boxes by the exact BVH's SAH, whichever the SAH finds cheaper (`upper_tree`).
+//! leaves' boxes by a full-sweep SAH (the exact BVH's builder), whichever the SAH finds cheaper
+//! (`upper_tree`).
 //!
 //! Parallel with `rayon::join` over subtrees; every per-node computation is sequential and ordered,
 //! so the output is byte-identical for any thread count.
