@@ -25,8 +25,8 @@
 // It also uses, from bvh.glsl (included before it wherever it is instantiated: bvh.glsl,
 // rbvh.glsl, lod.glsl) and what that includes (common.glsl, intersect.glsl): Ray, BvhNode,
 // RBVH_BVH_NODE(i), rbvh_node_boxes, RBVH_LEAF_BIT, RBVH_INVALID, RBVH_STACK_SIZE, rbvh_stack,
-// rbvh_keep_ray, rbvh_kept_ray, rbvh_stack_entry, rbvh_stack_pop, rbvh_ray_valid, rbvh_safe_inverse, rbvh_intersect_box,
-// RBVH_COUNT_RESET and RBVH_COUNT_ADD. Define the two names above and include it; then
+// rbvh_keep_ray, rbvh_kept_ray, rbvh_stack_entry, rbvh_stack_pop, rbvh_ray_valid,
+// rbvh_safe_inverse, rbvh_intersect_box, RBVH_COUNT_RESET and RBVH_COUNT_ADD. Define the two names above and include it; then
 // `float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint steps, out bool
 // overflow)` returns the nearest distance found (ray.tmax if none; the
 // hook tells whether it kept a hit). `steps` = nodes visited plus what the hook adds;
