@@ -141,7 +141,6 @@ impl Bvh {
             params,
             progress,
             groupable: None,
-            sweep: false,
         };
         let root = step(
             progress,
@@ -246,8 +245,8 @@ pub(crate) enum Placed {
 /// tiles) bin poorly. On the paper-scale scene at Q2 a primary ray went through 65 inner nodes
 /// of a 16-bin tree, 62 of a 64-bin one and 59 of a 256-bin one (before the exact parts); at
 /// 1b3db26 63.4 of the 256-bin tree and 60.5 of the sweep's, the exact BVH 60.7
-/// (docs/speed.md, "A tree over the leaves by sweep"). Sorting at every node costs
-/// O(n log² n) in all, a fraction of a second for those leaves.
+/// (docs/speed.md, "A tree over the leaves by sweep"). The items are sorted along each axis
+/// once, and each split partitions the three orders (`Builder::build_sorted`): O(n log n).
 pub(crate) fn tree_over(
     items: &[Placed],
     max_group: usize,
@@ -284,10 +283,16 @@ pub(crate) fn tree_over(
         params: &params,
         progress: &Quiet,
         groupable: Some(&groupable),
-        sweep: true,
     };
     let mut order: Vec<u32> = (0..prims.len() as u32).collect();
-    let root = (!order.is_empty()).then(|| builder.build(&mut order, 0, 0));
+    let [mut y, mut z] = [1, 2].map(|axis| {
+        let mut by_axis = order.clone();
+        by_axis.par_sort_unstable_by(builder.centroid_order(axis));
+        by_axis
+    });
+    order.par_sort_unstable_by(builder.centroid_order(0));
+    let root =
+        (!order.is_empty()).then(|| builder.build_sorted([&mut order, &mut y, &mut z], 0, 0));
     // Where each place of the order starts among the triangles, which keep the order's.
     let mut first = Vec::with_capacity(order.len());
     let mut triangles = Vec::new();
@@ -449,9 +454,6 @@ struct Builder<'a> {
     groupable: Option<&'a [bool]>,
     /// Told of every leaf's triangles as the leaf is made.
     progress: &'a dyn Progress,
-    /// Whether the SAH weighs every place between the prims sorted by centroid rather than
-    /// binned ones (`Builder::sweep_split`).
-    sweep: bool,
 }
 
 #[derive(Clone, Copy)]
@@ -487,24 +489,14 @@ impl Builder<'_> {
             && self
                 .groupable
                 .is_none_or(|g| order.iter().all(|&i| g[i as usize]));
-        let mid = if depth >= self.params.median_below_depth {
-            None
-        } else if self.sweep {
-            match self.sweep_split(order, &bounds) {
-                Some((cost, _)) if cost >= n as f32 && groups => return made_leaf(),
-                split => split.map(|(_, mid)| mid),
-            }
+        let split = if depth < self.params.median_below_depth {
+            self.sah_split(order, &bounds, &centroids)
         } else {
-            match self.sah_split(order, &bounds, &centroids) {
-                Some(s) if s.cost >= n as f32 && groups => return made_leaf(),
-                Some(s) => Some(partition(order, |i| {
-                    s.bin_of(&self.prims[i as usize]) < s.bin
-                })),
-                None => None,
-            }
+            None
         };
-        let mid = match mid {
-            Some(mid) => mid,
+        let mid = match split {
+            Some(s) if s.cost >= n as f32 && groups => return made_leaf(),
+            Some(s) => partition(order, |i| s.bin_of(&self.prims[i as usize]) < s.bin),
             None if groups => return made_leaf(),
             None => self.median_split(order, &centroids),
         };
@@ -596,47 +588,100 @@ impl Builder<'_> {
         best
     }
 
-    /// The cheapest SAH split with every place between the prims, sorted by centroid along each
-    /// axis (ties by index), a candidate: its cost and where its right side starts, `order`
-    /// left sorted along the chosen axis. Sorting makes it O(n log n) a node where binning is
-    /// O(n), which suits a tree over a few hundred thousand leaves (`tree_over`), not the
-    /// exact BVH's millions of triangles.
-    fn sweep_split(&self, order: &mut [u32], bounds: &Aabb) -> Option<(f32, usize)> {
-        let n = order.len();
-        let scale = 1.0 / bounds.area().max(f32::MIN_POSITIVE);
-        let mut best: Option<(f32, usize, Vec<u32>)> = None;
-        let mut right_area = vec![0.0f32; n];
-        for axis in 0..3 {
-            let mut sorted = order.to_vec();
-            sorted.sort_unstable_by(|&a, &b| {
-                let ca = self.prims[a as usize].centroid[axis];
-                let cb = self.prims[b as usize].centroid[axis];
-                ca.total_cmp(&cb).then(a.cmp(&b))
+    /// [`Builder::build`] with a full-sweep SAH: every place between the node's prims sorted by
+    /// centroid along each axis is a candidate. `sorted` holds the node's prims three times, each
+    /// sorted along one axis by [`Builder::centroid_order`]; a split partitions all three stably,
+    /// so that no level sorts again (O(n log n) in all, where sorting at every node would be
+    /// O(n log² n)). `sorted[0]` becomes the order the leaves refer to. For a tree over a few
+    /// hundred thousand leaves (`tree_over`), whose boxes bin poorly; the exact BVH's millions
+    /// of triangles keep binning.
+    fn build_sorted(&self, sorted: [&mut [u32]; 3], offset: u32, depth: u32) -> BuildNode {
+        let (bounds, centroids) = self.bounds_of(sorted[0]);
+        let n = sorted[0].len();
+        let leaf = BuildNode::Leaf {
+            bounds,
+            start: offset,
+            count: n as u32,
+        };
+        let made_leaf = || {
+            self.progress.advance(n as u64);
+            leaf
+        };
+        if n == 1 {
+            return made_leaf();
+        }
+        let groups = n <= self.params.max_leaf
+            && self
+                .groupable
+                .is_none_or(|g| sorted[0].iter().all(|&i| g[i as usize]));
+        let split = if depth < self.params.median_below_depth {
+            self.sweep(&sorted, &bounds)
+        } else {
+            None
+        };
+        // The left side: the first `mid` prims along `axis`. As median_split: the object median
+        // along the centroids' longest axis.
+        let (axis, mid) = match split {
+            Some((cost, _, _)) if cost >= n as f32 && groups => return made_leaf(),
+            Some((_, axis, mid)) => (axis, mid),
+            None if groups => return made_leaf(),
+            None => (centroids.largest_axis(), n / 2),
+        };
+        let first_right = sorted[axis][mid];
+        let [x, y, z] = sorted;
+        let [x, y, z] = [x, y, z].map(|order| {
+            let (left, right): (Vec<u32>, Vec<u32>) = order.iter().partition(|&&i| {
+                self.centroid_order(axis)(&i, &first_right) == std::cmp::Ordering::Less
             });
+            order[..left.len()].copy_from_slice(&left);
+            order[left.len()..].copy_from_slice(&right);
+            order.split_at_mut(mid)
+        });
+        let (a, b) = join_halves(
+            n >= PARALLEL_THRESHOLD,
+            || self.build_sorted([x.0, y.0, z.0], offset, depth + 1),
+            || self.build_sorted([x.1, y.1, z.1], offset + mid as u32, depth + 1),
+        );
+        BuildNode::Inner {
+            bounds,
+            children: Box::new([a, b]),
+        }
+    }
+
+    /// How [`Builder::build_sorted`] orders prims along `axis`: by centroid, ties by index.
+    fn centroid_order(&self, axis: usize) -> impl Fn(&u32, &u32) -> std::cmp::Ordering + '_ {
+        move |&a, &b| {
+            let ca = self.prims[a as usize].centroid[axis];
+            let cb = self.prims[b as usize].centroid[axis];
+            ca.total_cmp(&cb).then(a.cmp(&b))
+        }
+    }
+
+    /// The cheapest SAH split of a node whose prims `sorted` holds as
+    /// [`Builder::build_sorted`] does: its cost, axis and where its right side starts along
+    /// that axis; the first axis and place on a tie.
+    fn sweep(&self, sorted: &[&mut [u32]; 3], bounds: &Aabb) -> Option<(f32, usize, usize)> {
+        let n = sorted[0].len();
+        let scale = 1.0 / bounds.area().max(f32::MIN_POSITIVE);
+        let mut best: Option<(f32, usize, usize)> = None;
+        let mut right_area = vec![0.0f32; n];
+        for (axis, order) in sorted.iter().enumerate() {
             let mut acc = Aabb::EMPTY;
             for k in (1..n).rev() {
-                acc = acc.union(self.prims[sorted[k] as usize].bounds);
+                acc = acc.union(self.prims[order[k] as usize].bounds);
                 right_area[k] = acc.area();
             }
             let mut left = Aabb::EMPTY;
-            let mut axis_best: Option<(f32, usize)> = None;
             for k in 1..n {
-                left = left.union(self.prims[sorted[k - 1] as usize].bounds);
+                left = left.union(self.prims[order[k - 1] as usize].bounds);
                 let cost = self.params.traversal_cost
                     + (left.area() * k as f32 + right_area[k] * (n - k) as f32) * scale;
-                if axis_best.is_none_or(|(c, _)| cost < c) {
-                    axis_best = Some((cost, k));
-                }
-            }
-            if let Some((cost, k)) = axis_best {
-                if best.as_ref().is_none_or(|(c, _, _)| cost < *c) {
-                    best = Some((cost, k, sorted));
+                if best.is_none_or(|(c, _, _)| cost < c) {
+                    best = Some((cost, axis, k));
                 }
             }
         }
-        let (cost, mid, sorted) = best?;
-        order.copy_from_slice(&sorted);
-        Some((cost, mid))
+        best
     }
 
     fn fill_bins(
