@@ -473,22 +473,11 @@ impl Builder<'_> {
     fn build(&self, order: &mut [u32], offset: u32, depth: u32) -> BuildNode {
         let (bounds, centroids) = self.bounds_of(order);
         let n = order.len();
-        let leaf = BuildNode::Leaf {
-            bounds,
-            start: offset,
-            count: n as u32,
-        };
-        let made_leaf = || {
-            self.progress.advance(n as u64);
-            leaf
-        };
+        let made_leaf = || self.leaf(bounds, offset, n);
         if n == 1 {
             return made_leaf();
         }
-        let groups = n <= self.params.max_leaf
-            && self
-                .groupable
-                .is_none_or(|g| order.iter().all(|&i| g[i as usize]));
+        let groups = self.may_group(order);
         let split = if depth < self.params.median_below_depth {
             self.sah_split(order, &bounds, &centroids)
         } else {
@@ -510,6 +499,25 @@ impl Builder<'_> {
             bounds,
             children: Box::new([a, b]),
         }
+    }
+
+    /// A leaf of the `n` prims of the order from `offset` on, whose box is `bounds`, told to the
+    /// progress as it is made.
+    fn leaf(&self, bounds: Aabb, offset: u32, n: usize) -> BuildNode {
+        self.progress.advance(n as u64);
+        BuildNode::Leaf {
+            bounds,
+            start: offset,
+            count: n as u32,
+        }
+    }
+
+    /// Whether the prims of `order` may share one leaf: few enough, and each one that may.
+    fn may_group(&self, order: &[u32]) -> bool {
+        order.len() <= self.params.max_leaf
+            && self
+                .groupable
+                .is_none_or(|g| order.iter().all(|&i| g[i as usize]))
     }
 
     /// Bounds of the triangles and of their centroids; a parallel, exact reduction for big sets.
@@ -598,22 +606,11 @@ impl Builder<'_> {
     fn build_sorted(&self, sorted: [&mut [u32]; 3], offset: u32, depth: u32) -> BuildNode {
         let (bounds, centroids) = self.bounds_of(sorted[0]);
         let n = sorted[0].len();
-        let leaf = BuildNode::Leaf {
-            bounds,
-            start: offset,
-            count: n as u32,
-        };
-        let made_leaf = || {
-            self.progress.advance(n as u64);
-            leaf
-        };
+        let made_leaf = || self.leaf(bounds, offset, n);
         if n == 1 {
             return made_leaf();
         }
-        let groups = n <= self.params.max_leaf
-            && self
-                .groupable
-                .is_none_or(|g| sorted[0].iter().all(|&i| g[i as usize]));
+        let groups = self.may_group(sorted[0]);
         let split = if depth < self.params.median_below_depth {
             self.sweep(&sorted, &bounds)
         } else {
