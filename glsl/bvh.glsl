@@ -42,7 +42,7 @@
 // RBVH_KEEPS_RAY), which only each round's start and the hit need again after a leaf's march;
 // the nearest hit's normal source (RbvhLeafHook, read once the ray is done); the level-of-detail
 // cone (lod.glsl, read where an inner child is entered). They share the stack's array on
-// purpose: the stack's pushes write it at indices the compilers measured do not resolve (a
+// purpose: the stack's pushes write it at indices the compiler measured (ACO) does not resolve (a
 // compiler that proved them below RBVH_STACK_SIZE could forward the words; the hits would be the
 // same), so a word stored there is read back from memory (scratch on AMD, local memory on NVIDIA,
 // cached) instead of held in a register through every march, where each value live costs

@@ -767,9 +767,10 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
 // a triangle's slot (below LEAF_BIT: slots are fewer than 2^31), or the id of a height field (or,
 // with level of detail, a chosen node), LEAF_BIT set; RBVH_INVALID while none. Where a height
 // field's hit takes its normal from is kept in rbvh_stack's RBVH_STACK_HIT (written with `best`,
-// read only when `best` is a height field's), not in a register through every later march: a height field's hit, its cell's c00
-// at atlas index x and, in y, rbvh_cell_normal_choice (RBVH_HEIGHT_ONLY: the triangle or skirt hit;
-// see rbvh_march); a level-of-detail hit, its normal texel in x and 0 in y. The hit's id and
+// read only when `best` is a height field's), not in a register through every later march: a
+// height field's hit, its cell's c00 at atlas index x and, in y, rbvh_cell_normal_choice
+// (RBVH_HEIGHT_ONLY: the triangle or skirt hit; see rbvh_march); a level-of-detail hit, its
+// normal texel in x and 0 in y. The hit's id and
 // normal are read and decoded once, after the loops (rbvh_rbvh_hit), so that the SIMD loops do not
 // carry them.
 struct RbvhLeafHook {

@@ -234,13 +234,13 @@ pub(crate) enum Placed {
 /// skipped) becomes one
 /// child of the tree's nodes, and the triangles go into leaves of at most `max_group` of them,
 /// as this builder's SAH, sweeping rather than binning, places and groups them (a set holding a
-/// finished leaf is always split). The node array (depth-first, node 0 the root), its depth, as [`pack`] gives them, and
-/// the triangles' items in the order their leaves refer to them: a triangle leaf is
+/// finished leaf is always split). The node array (depth-first, node 0 the root), its depth, as
+/// [`pack`] gives them, and the triangles' items in the order their leaves refer to them: a triangle leaf is
 /// `LEAF_BIT | (base + first)`, `count` into that order placed from `base` on.
 ///
 /// The RBVH's upper tree where it is cheaper than the construction's own (issue "A tree that
 /// earns its leaves"; `crate::rbvh`'s `upper_tree`). Its SAH weighs every place between the
-/// items sorted by centroid (`Builder::sweep_split`), not bins as the exact BVH's does: a few
+/// items sorted by centroid (`Builder::build_sorted`), not bins as the exact BVH's does: a few
 /// hundred thousand leaves of very different sizes (a courtyard's walls beside a dragon's
 /// tiles) bin poorly. On the paper-scale scene at Q2 a primary ray went through 65 inner nodes
 /// of a 16-bin tree, 62 of a 64-bin one and 59 of a 256-bin one (before the exact parts); at
