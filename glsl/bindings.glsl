@@ -8,8 +8,8 @@
 #ifndef RBVH_BINDINGS_GLSL
 #define RBVH_BINDINGS_GLSL
 
-// The trace shaders (trace_exact, trace_rbvh, trace_rbvh_lod): one numbering for the three, each
-// binding what it reads. Their *_bda twins read the structure's arrays through device addresses
+// The trace shaders (trace_exact, trace_exact_instances, trace_rbvh, trace_rbvh_lod): one
+// numbering for them all, each binding what it reads. Their *_bda twins read the structure's arrays through device addresses
 // instead, and bind only the per-trace buffers and the cones.
 #define RBVH_BVH_NODES_BINDING 0     // The tree's nodes (bvh.glsl).
 #define RBVH_BVH_TRIS_BINDING 1      // The triangles of triangle leaves (bvh.glsl).
@@ -22,6 +22,7 @@
 #define RBVH_LODS_BINDING 8          // The level of detail's per-node records (lod.glsl).
 #define RBVH_LOD_TEXELS_BINDING 9    // The level of detail's column words (lod.glsl).
 #define RBVH_CONES_BINDING 10        // The rays' cones (trace_rbvh_main.glsl, with RBVH_LOD).
+#define RBVH_BVH_INSTANCES_BINDING 11  // The instances of a two-level BVH (bvh.glsl, RBVH_INSTANCES).
 
 // The paint shader (paint_main.glsl); paint_bda binds the brushes alone.
 #define RBVH_PAINT_ATLAS_BINDING 0    // The atlas words, as the trace shaders read them.

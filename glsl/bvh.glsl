@@ -5,12 +5,17 @@
 //   RBVH_BVH_SET            descriptor set              (default 0)
 //   RBVH_BVH_NODES_BINDING  binding of the node buffer
 //   RBVH_BVH_TRIS_BINDING   binding of the triangles
+//   RBVH_BVH_INSTANCES_BINDING  binding of the instances, with RBVH_INSTANCES (below)
 // (the bindings' defaults below are those of the library's own shaders, glsl/bindings.glsl, as
 // tests/glsl_header.rs checks; so are rbvh.glsl's and lod.glsl's)
 // or, to read every array through buffer device addresses instead of bindings (for arrays over
 // maxStorageBufferRange; src/gpu/addressing.rs), RBVH_DEVICE_ADDRESS, having enabled
 // GL_EXT_buffer_reference and GL_EXT_buffer_reference_uvec2, with each array's address as a uvec2
-// expression: RBVH_BVH_NODES_ADDRESS, RBVH_BVH_TRIS_ADDRESS (and those of rbvh.glsl and lod.glsl).
+// expression: RBVH_BVH_NODES_ADDRESS, RBVH_BVH_TRIS_ADDRESS, with RBVH_INSTANCES
+// RBVH_BVH_INSTANCES_ADDRESS (and those of rbvh.glsl and lod.glsl).
+// RBVH_INSTANCES makes the exact BVH two-level (src/bvh/instanced.rs): a top level over instances
+// whose leaves (count RBVH_INSTANCE_LEAF) enter a mesh's tree in the same node array, the ray
+// taken into the mesh's space by the instance's record; rbvh_trace_instances traces it.
 // The traversals read the arrays only through the accessor macros RBVH_BVH_NODE(i) and
 // RBVH_BVH_TRIANGLE(i) (or RBVH_EXACT_QUAD(i)), which hide the difference.
 // RBVH_INDEXED_TRIANGLES, which rbvh.glsl defines before including this file, makes the triangle
@@ -33,6 +38,9 @@
 #endif
 #ifndef RBVH_BVH_TRIS_BINDING
 #define RBVH_BVH_TRIS_BINDING 1
+#endif
+#ifndef RBVH_BVH_INSTANCES_BINDING
+#define RBVH_BVH_INSTANCES_BINDING 11
 #endif
 
 // Must equal bvh::STACK_SIZE; tests/glsl_header.rs checks it on the device.
@@ -288,6 +296,150 @@ Hit rbvh_trace_bvh(Ray ray, bool any_hit, BvhSizes sz, out uint steps, out bool 
     vec3 n = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
     return Hit(t, n.x, n.y, n.z, tri.prim, 0u, 0u, 0u);
 }
+
+#ifdef RBVH_INSTANCES
+#ifdef RBVH_KEEPS_RAY
+#error "RBVH_INSTANCES: the two-level traversal keeps the world ray beside the stack itself"
+#endif
+
+// The count of a top-level leaf (bvh::INSTANCE_LEAF): its reference is LEAF_BIT | instance.
+const uint RBVH_INSTANCE_LEAF = 0xFFFFFFFFu;
+
+// One instance (GpuInstance in src/bvh/layout.rs), 64 bytes: world to mesh space by rows (p'_i =
+// dot(row_i.xyz, p) + row_i.w), the root node of its mesh's tree, the mesh.
+struct BvhInstance {
+    vec4 world_to_mesh[3];
+    uint root;
+    uint mesh;
+    uint pad0;
+    uint pad1;
+};
+
+#ifdef RBVH_DEVICE_ADDRESS
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer RbvhBvhInstancesRef {
+    BvhInstance instances[];
+};
+#define RBVH_BVH_INSTANCE(i) RbvhBvhInstancesRef(RBVH_BVH_INSTANCES_ADDRESS).instances[i]
+#else
+layout(std430, set = RBVH_BVH_SET, binding = RBVH_BVH_INSTANCES_BINDING) readonly buffer RbvhBvhInstances {
+    BvhInstance rbvh_bvh_instances[];
+};
+#define RBVH_BVH_INSTANCE(i) rbvh_bvh_instances[i]
+#endif
+
+// `ray` in instance `inst`'s mesh space (GpuInstance::ray_into): the direction transformed, not
+// normalized, so a hit's t is the same along both; tmin and tmax kept.
+Ray rbvh_ray_into(BvhInstance inst, Ray ray) {
+    vec3 o = vec3(dot(inst.world_to_mesh[0].xyz, ray.origin), dot(inst.world_to_mesh[1].xyz, ray.origin),
+                  dot(inst.world_to_mesh[2].xyz, ray.origin))
+             + vec3(inst.world_to_mesh[0].w, inst.world_to_mesh[1].w, inst.world_to_mesh[2].w);
+    vec3 d = vec3(dot(inst.world_to_mesh[0].xyz, ray.dir), dot(inst.world_to_mesh[1].xyz, ray.dir),
+                  dot(inst.world_to_mesh[2].xyz, ray.dir));
+    return Ray(o, ray.tmin, d, ray.tmax);
+}
+
+// Sizes the two-level traversal needs to bound its reads.
+struct BvhInstanceSizes {
+    uint node_count;
+    uint tri_count;
+    uint instance_count;
+};
+
+// The two-level exact BVH's hook (InstanceHook in src/bvh/instanced.rs): top-level leaves enter
+// instances, the meshes' leaves are triangle leaves tested in the mesh's space.
+struct BvhInstanceHook {
+    BvhInstanceSizes sz;
+    RbvhShear shear;
+    uint best_slot;      // the nearest hit's triangle slot, RBVH_INVALID while none
+    uint best_instance;  // its instance
+    uint entered;        // the instance the ray is in, RBVH_INVALID at the top level
+};
+
+uint rbvh_node_count(BvhInstanceHook leaves) {
+    return leaves.sz.node_count;
+}
+
+// The top level's rounds and each instance's (2 · nodes + 2 at most, as for one tree), at most
+// 2^32 − 2 so that the loops' counters cannot wrap.
+uint rbvh_round_bound(BvhInstanceHook leaves) {
+    uint per_tree = 2u * min(leaves.sz.node_count, 0x7FFFFFFEu) + 2u;
+    uint trees = min(leaves.sz.instance_count, 0xFFFFFFFEu) + 1u;
+    return trees > 0xFFFFFFFEu / per_tree ? 0xFFFFFFFEu : trees * per_tree;
+}
+
+bool rbvh_is_leaf(BvhInstanceHook leaves, uint reference) {
+    return (reference & RBVH_LEAF_BIT) != 0u;
+}
+
+uint rbvh_enter(BvhInstanceHook leaves, uint child, uint count, float t_entry) {
+    return child;
+}
+
+// Enters the instance leaf `reference` names (count RBVH_INSTANCE_LEAF): `ray` becomes the ray in
+// its mesh's space, `root` its mesh's root. False for every other leaf.
+bool rbvh_enter_instance(inout BvhInstanceHook leaves, uint reference, uint count, inout Ray ray,
+                         out uint root) {
+    root = RBVH_INVALID;
+    uint k = reference & ~RBVH_LEAF_BIT;
+    if (count != RBVH_INSTANCE_LEAF || k >= leaves.sz.instance_count) {
+        return false;
+    }
+    BvhInstance inst = RBVH_BVH_INSTANCE(k);
+    ray = rbvh_ray_into(inst, ray);
+    leaves.shear = rbvh_shear(ray);
+    leaves.entered = k;
+    root = inst.root;
+    return true;
+}
+
+// Leaves the instance entered last: `ray` is the world's again (kept beside the stack).
+void rbvh_exit_instance(inout BvhInstanceHook leaves, inout Ray ray) {
+    ray = rbvh_kept_ray();
+    leaves.shear = rbvh_shear(ray);
+    leaves.entered = RBVH_INVALID;
+}
+
+bool rbvh_test(inout BvhInstanceHook leaves, Ray ray, bool any_hit, uint reference, uint count,
+               inout float t_closest, inout uint steps, inout bool cut) {
+    // Triangles are the meshes': tested inside an instance only.
+    if (leaves.entered == RBVH_INVALID || count == RBVH_INSTANCE_LEAF) {
+        return false;
+    }
+    uint first = reference & ~RBVH_LEAF_BIT;
+    uint end = rbvh_slot_end(first, count, leaves.sz.tri_count);
+    bool hit = rbvh_test_triangles(leaves.shear, ray, any_hit, first, end, leaves.sz.tri_count,
+                                   t_closest, leaves.best_slot, steps, cut);
+    if (hit) {
+        leaves.best_instance = leaves.entered;
+    }
+    return hit;
+}
+
+#define RBVH_TRAVERSE rbvh_traverse_instances
+#define RBVH_LEAVES BvhInstanceHook
+#define RBVH_TRAVERSE_INSTANCES
+#include "traverse.glsl"
+#undef RBVH_TRAVERSE
+#undef RBVH_LEAVES
+#undef RBVH_TRAVERSE_INSTANCES
+
+// The two-level exact BVH's closest (or, with `any_hit`, any) hit: its instance in `instance_id`,
+// its mesh's triangle in `id`, the normal taken to world space by the instance (the transpose of
+// world_to_mesh: GpuInstance::normal_out).
+Hit rbvh_trace_instances(Ray ray, bool any_hit, BvhInstanceSizes sz, out uint steps, out bool overflow) {
+    BvhInstanceHook leaves = BvhInstanceHook(sz, rbvh_shear(ray), RBVH_INVALID, RBVH_INVALID, RBVH_INVALID);
+    float t = rbvh_traverse_instances(ray, any_hit, leaves, steps, overflow);
+    if (leaves.best_slot == RBVH_INVALID) {
+        return rbvh_miss();
+    }
+    BvhTriangle tri = rbvh_bvh_triangle(leaves.best_slot, sz.tri_count);
+    vec3 n = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
+    BvhInstance inst = RBVH_BVH_INSTANCE(leaves.best_instance);
+    vec3 w = normalize(inst.world_to_mesh[0].xyz * n.x + inst.world_to_mesh[1].xyz * n.y
+                       + inst.world_to_mesh[2].xyz * n.z);
+    return Hit(t, w.x, w.y, w.z, tri.prim, leaves.best_instance, 0u, 0u);
+}
+#endif  // RBVH_INSTANCES
 
 #endif  // RBVH_INDEXED_TRIANGLES
 

@@ -16,7 +16,7 @@ struct Hit {
     float ny;
     float nz;
     uint id;        // primitive index, 0xFFFFFFFF on a miss
-    uint reserved0;
+    uint instance_id;  // the instance hit (src/scene/instances.rs); 0 without instances, on a miss
     uint reserved1;
     uint reserved2;
 };

@@ -1,7 +1,8 @@
-// The body of trace_exact.comp and trace_exact_bda.comp (which defines RBVH_DEVICE_ADDRESS): one
-// invocation per ray through the exact BVH. Bindings (bindings.glsl): nodes and triangles (read
-// through the device addresses in the push constants instead in the _bda twin), rays, hits,
-// status, counters.
+// The body of trace_exact.comp and trace_exact_bda.comp (which defines RBVH_DEVICE_ADDRESS), and
+// of trace_exact_instances.comp and its _bda twin (which define RBVH_INSTANCES: the two-level
+// exact BVH): one invocation per ray through the exact BVH. Bindings (bindings.glsl): nodes and
+// triangles, with RBVH_INSTANCES the instances (read through the device addresses in the push
+// constants instead in the _bda twins), rays, hits, status, counters.
 #ifndef RBVH_TRACE_EXACT_MAIN_GLSL
 #define RBVH_TRACE_EXACT_MAIN_GLSL
 
@@ -25,7 +26,12 @@ void main() {
     }
     uint steps;
     bool overflow;
+#ifdef RBVH_INSTANCES
+    Hit h = rbvh_trace_instances(rays[i], (pc.flags & 1u) != 0u,
+                                 BvhInstanceSizes(pc.node_count, pc.tri_count, pc.instance_count), steps, overflow);
+#else
     Hit h = rbvh_trace_bvh(rays[i], (pc.flags & 1u) != 0u, BvhSizes(pc.node_count, pc.tri_count), steps, overflow);
+#endif
     rbvh_trace_store(i, h, overflow);
 }
 

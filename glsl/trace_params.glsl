@@ -1,7 +1,8 @@
 // The push constants of every trace shader (src/gpu/tracer.rs, TraceParams; tests/layout.rs
 // checks that both sides agree). With RBVH_DEVICE_ADDRESS it also names, for the headers, where
 // each structure array lives: `addresses` in binding order — nodes, triangles, height fields,
-// atlas, LOD records, LOD columns (the exact BVH uses the first two).
+// atlas, LOD records, LOD columns, instances (the exact BVH uses the first two, the two-level one
+// those and the last).
 #ifndef RBVH_TRACE_PARAMS_GLSL
 #define RBVH_TRACE_PARAMS_GLSL
 
@@ -17,8 +18,8 @@ layout(push_constant) uniform Params {
     uint atlas_wide_len;  // atlas texels before the narrow band (atlas.glsl)
     uint lod_node_count;  // LOD records (0 without LOD)
     uint lod_texel_len;   // LOD column words
-    uint reserved;        // zero: keeps `addresses` 8-byte aligned
-    uvec2 addresses[6];   // device addresses (low, high word); zero where arrays are bound
+    uint instance_count;  // instances of a two-level BVH (0 without)
+    uvec2 addresses[7];   // device addresses (low, high word); zero where arrays are bound
 } pc;
 
 #ifdef RBVH_DEVICE_ADDRESS
@@ -28,6 +29,7 @@ layout(push_constant) uniform Params {
 #define RBVH_ATLAS_ADDRESS pc.addresses[3]
 #define RBVH_LODS_ADDRESS pc.addresses[4]
 #define RBVH_LOD_TEXELS_ADDRESS pc.addresses[5]
+#define RBVH_BVH_INSTANCES_ADDRESS pc.addresses[6]
 #endif
 
 #endif

@@ -22,6 +22,18 @@
 // (the RBVH's marches, where that costs occupancy; the exact BVH's triangle tests hold few
 // registers, so its tracer keeps the ray where it is); the caller reads the ray back with
 // rbvh_kept_ray() after the traversal.
+// With RBVH_TRAVERSE_INSTANCES (bvh.glsl's two-level exact BVH; not with RBVH_KEEPS_RAY), two
+// levels in one loop, as crate::bvh::traverse: the hook also has
+//     bool rbvh_enter_instance(inout RBVH_LEAVES leaves, uint reference, uint count, inout Ray ray,
+//                              out uint root)
+//         whether leaf `reference` is an instance; if so, `ray` becomes the ray in its mesh's
+//         space and `root` its mesh's root, where the next round starts
+//     void rbvh_exit_instance(inout RBVH_LEAVES leaves, inout Ray ray)
+//         the world ray back (the traversal keeps it with rbvh_keep_ray)
+// and the traversal pushes an instance's end (distance -inf, RBVH_INSTANCE_END, which no nearest
+// hit drops) when it enters one, and leaves the instance when it pops that entry. Distances are
+// the same along both rays (the direction is transformed, not normalized). Visits are bounded per
+// level: a mesh placed twice may be visited twice.
 // It also uses, from bvh.glsl (included before it wherever it is instantiated: bvh.glsl,
 // rbvh.glsl, lod.glsl) and what that includes (common.glsl, intersect.glsl): Ray, BvhNode,
 // RBVH_BVH_NODE(i), rbvh_node_boxes, RBVH_LEAF_BIT, RBVH_INVALID, RBVH_STACK_SIZE, rbvh_stack,
@@ -73,6 +85,16 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
     }
     uint node_count = rbvh_node_count(leaves);
     uint bound = rbvh_round_bound(leaves);
+#ifdef RBVH_TRAVERSE_INSTANCES
+    rbvh_keep_ray(ray);
+    // The instance's end on the stack: floatBitsToUint(-inf).
+    const uint RBVH_INSTANCE_END = 0xFF800000u;
+    bool inside = false;
+    // The top level's visits while the ray is in an instance.
+    uint top_visits = 0u;
+    // Where the next round starts: the root, then an instance's root after it is entered.
+    uint start = 0u;
+#endif
     // The stack's entries in rbvh_stack: rbvh_stack_entry's word and the distance at which the
     // child's box was entered, so that an entry whose box now lies beyond the nearest hit is
     // dropped when popped instead of visited or marched.
@@ -91,7 +113,12 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
 #endif
         vec3 inv_dir = rbvh_safe_inverse(ray.dir);
         // The reference to visit next: the root in the first round, else RBVH_INVALID (pop one).
+#ifdef RBVH_TRAVERSE_INSTANCES
+        uint node = start;
+        start = RBVH_INVALID;
+#else
         uint node = round == 0u ? 0u : RBVH_INVALID;
+#endif
         uint count_of_node = 0u;
         // The leaf the inner loop leaves for the hook; RBVH_INVALID while none.
         uint pending = RBVH_INVALID;
@@ -102,6 +129,15 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
                 bool popped = false;
                 for (; sp > 0u;) {
                     sp -= 1u;
+#ifdef RBVH_TRAVERSE_INSTANCES
+                    if (rbvh_stack[sp].y == RBVH_INSTANCE_END) {
+                        rbvh_exit_instance(leaves, ray);
+                        inv_dir = rbvh_safe_inverse(ray.dir);
+                        inside = false;
+                        visits = top_visits;
+                        continue;
+                    }
+#endif
                     if (uintBitsToFloat(rbvh_stack[sp].y) <= t_closest) {
                         rbvh_stack_pop(rbvh_stack[sp].x, node, count_of_node);
                         popped = true;
@@ -179,6 +215,23 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
         if (pending == RBVH_INVALID || round == bound) {
             break;
         }
+#ifdef RBVH_TRAVERSE_INSTANCES
+        uint root;
+        if (!inside && rbvh_enter_instance(leaves, pending, pending_count, ray, root)) {
+            if (sp < RBVH_STACK_SIZE) {
+                rbvh_stack[sp] = uvec2(0u, RBVH_INSTANCE_END);
+                sp += 1u;
+                inside = true;
+                top_visits = visits;
+                visits = 0u;
+                start = root;
+            } else {
+                rbvh_exit_instance(leaves, ray);
+                overflow = true;
+            }
+            continue;
+        }
+#endif
         bool hit = rbvh_test(leaves, ray, any_hit, pending, pending_count, t_closest, steps, cut);
         if (hit && any_hit) {
             finished = true;

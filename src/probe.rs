@@ -114,17 +114,23 @@ pub enum Array {
     LodRecords = 4,
     /// Level-of-detail column words (4 bytes each).
     LodColumns = 5,
+    /// Instances of a two-level structure (`GpuInstance`, 64 bytes each).
+    Instances = 6,
 }
 
 impl Array {
+    /// How many arrays there are.
+    pub const COUNT: usize = 7;
+
     /// Every array, in binding order.
-    pub const ALL: [Array; 6] = [
+    pub const ALL: [Array; Array::COUNT] = [
         Array::Nodes,
         Array::Triangles,
         Array::Heightfields,
         Array::Atlas,
         Array::LodRecords,
         Array::LodColumns,
+        Array::Instances,
     ];
 }
 

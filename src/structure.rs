@@ -11,7 +11,7 @@ use std::sync::Arc;
 
 use serde::Serialize;
 
-use crate::bvh::{BuildParams, Bvh};
+use crate::bvh::{BuildParams, Bvh, InstancedBvh};
 use crate::geom::{Hit, Ray};
 use crate::lod::{Cones, Lod, LodParams};
 use crate::progress::{Progress, Quiet};
@@ -20,7 +20,7 @@ use crate::scene::Scene;
 use crate::Result;
 
 /// Which structure, without it: the `method` of benchmark records (`"exact"`, `"rbvh"`,
-/// `"rbvh-lod"`) and what [`Structure::kind`] says.
+/// `"rbvh-lod"`, `"exact-instanced"`) and what [`Structure::kind`] says.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Kind {
@@ -31,16 +31,27 @@ pub enum Kind {
     /// An RBVH traced with its levels of detail ([`crate::lod`]).
     #[serde(rename = "rbvh-lod")]
     RbvhLod,
+    /// The exact BVH of a scene with instances, in two levels ([`InstancedBvh`]).
+    #[serde(rename = "exact-instanced")]
+    ExactInstanced,
 }
 
 impl Kind {
-    /// `"exact"`, `"rbvh"` or `"rbvh-lod"`, as records and file names write it.
+    /// `"exact"`, `"rbvh"`, `"rbvh-lod"` or `"exact-instanced"`, as records and file names
+    /// write it.
     pub fn name(self) -> &'static str {
         match self {
             Kind::Exact => "exact",
             Kind::Rbvh => "rbvh",
             Kind::RbvhLod => "rbvh-lod",
+            Kind::ExactInstanced => "exact-instanced",
         }
+    }
+
+    /// Whether it traces triangles exactly (the exact BVH, flat or in two levels): no march,
+    /// no texels, no level of detail.
+    pub fn is_exact(self) -> bool {
+        matches!(self, Kind::Exact | Kind::ExactInstanced)
     }
 }
 
@@ -125,6 +136,15 @@ pub enum Structure {
     Rbvh(Arc<Rbvh>),
     /// An RBVH with its levels of detail (built for it), traced with one cone per ray.
     RbvhLod(Arc<Rbvh>, Box<Lod>),
+    /// The exact BVH of a scene with instances: a tree per mesh, a top level over the
+    /// instances ([`InstancedBvh`]).
+    ExactInstanced(InstancedBvh),
+}
+
+impl From<InstancedBvh> for Structure {
+    fn from(bvh: InstancedBvh) -> Self {
+        Structure::ExactInstanced(bvh)
+    }
 }
 
 impl From<Bvh> for Structure {
@@ -190,7 +210,7 @@ impl Structure {
     /// measurement of both needs. Fails for the exact BVH, which has none.
     pub fn with_levels(&self, params: &LodParams) -> Result<Structure> {
         let rbvh = match self {
-            Structure::Exact(_) => {
+            Structure::Exact(_) | Structure::ExactInstanced(_) => {
                 return Err(crate::Error::param(
                     "lod",
                     "levels of detail are built for an RBVH, not the exact BVH".to_string(),
@@ -212,6 +232,16 @@ impl Structure {
                 total: bvh.tree_bytes() + bvh.triangle_bytes(),
                 ..Memory::default()
             },
+            // The instances' records are traversal data: they count with the tree.
+            Structure::ExactInstanced(bvh) => {
+                let tree = bvh.tree_bytes() + bvh.instance_bytes();
+                Memory {
+                    tree,
+                    triangles: bvh.triangle_bytes(),
+                    total: tree + bvh.triangle_bytes(),
+                    ..Memory::default()
+                }
+            }
             Structure::Rbvh(rbvh) | Structure::RbvhLod(rbvh, _) => {
                 let lod = self.lod().map_or(0, Lod::bytes);
                 Memory {
@@ -231,6 +261,7 @@ impl Structure {
     pub fn build_ms(&self) -> f64 {
         match self {
             Structure::Exact(bvh) => bvh.build_ms,
+            Structure::ExactInstanced(bvh) => bvh.build_ms,
             Structure::Rbvh(rbvh) => rbvh.stats.build_ms,
             Structure::RbvhLod(rbvh, lod) => rbvh.stats.build_ms + lod.stats.build_ms,
         }
@@ -252,7 +283,7 @@ impl Structure {
     /// The RBVH traced, if any (for the colour of its hits, its texel size).
     pub fn rbvh(&self) -> Option<&Rbvh> {
         match self {
-            Structure::Exact(_) => None,
+            Structure::Exact(_) | Structure::ExactInstanced(_) => None,
             Structure::Rbvh(rbvh) | Structure::RbvhLod(rbvh, _) => Some(rbvh),
         }
     }
@@ -261,7 +292,7 @@ impl Structure {
     /// when it is shared with another structure.
     pub fn rbvh_mut(&mut self) -> Option<&mut Rbvh> {
         match self {
-            Structure::Exact(_) => None,
+            Structure::Exact(_) | Structure::ExactInstanced(_) => None,
             Structure::Rbvh(rbvh) | Structure::RbvhLod(rbvh, _) => Some(Arc::make_mut(rbvh)),
         }
     }
@@ -274,21 +305,24 @@ impl Structure {
         }
     }
 
-    /// Which of the three it is.
+    /// Which of the four it is.
     pub fn kind(&self) -> Kind {
         match self {
             Structure::Exact(_) => Kind::Exact,
             Structure::Rbvh(_) => Kind::Rbvh,
             Structure::RbvhLod(..) => Kind::RbvhLod,
+            Structure::ExactInstanced(_) => Kind::ExactInstanced,
         }
     }
 
-    /// "exact BVH", "RBVH" or "RBVH with levels of detail": for messages.
+    /// "exact BVH", "RBVH", "RBVH with levels of detail" or "two-level exact BVH": for
+    /// messages.
     pub fn label(&self) -> &'static str {
         match self {
             Structure::Exact(_) => "exact BVH",
             Structure::Rbvh(_) => "RBVH",
             Structure::RbvhLod(..) => "RBVH with levels of detail",
+            Structure::ExactInstanced(_) => "two-level exact BVH",
         }
     }
 
@@ -303,6 +337,7 @@ impl Structure {
     ) -> Result<Vec<Hit>> {
         Ok(match self {
             Structure::Exact(bvh) => bvh.trace_cpu(rays, any_hit),
+            Structure::ExactInstanced(bvh) => bvh.trace_cpu(rays, any_hit),
             Structure::Rbvh(rbvh) => rbvh.trace_cpu(rays, any_hit),
             Structure::RbvhLod(rbvh, lod) => rbvh.trace_cpu_lod(lod, rays, cones, any_hit)?,
         })

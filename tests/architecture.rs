@@ -205,7 +205,10 @@ fn module_graph(dir: &Path) -> BTreeMap<String, BTreeSet<String>> {
         }
         let names = names.trim_start_matches('{').trim_end_matches('}');
         for name in names.split(',') {
-            let name = name.split_whitespace().last().unwrap_or("");
+            // A group's trailing comma leaves an empty name: nothing is exported by it.
+            let Some(name) = name.split_whitespace().last() else {
+                continue;
+            };
             exported.insert(name.to_string(), child.to_string());
         }
     }

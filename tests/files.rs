@@ -46,14 +46,16 @@ fn some_hits() -> Vec<Hit> {
             t: 2.5,
             normal: [0.0, 1.0, -0.0],
             id: 7,
-            reserved: [0; 3],
+            instance: 0,
+            reserved: [0; 2],
         },
         Hit::MISS,
         Hit {
             t: -0.0,
             normal: [f32::from_bits(0x7fc0_0042), 0.6, 0.8],
             id: 0x0102_0304,
-            reserved: [1, u32::MAX, 0xdead_beef],
+            instance: 1,
+            reserved: [u32::MAX, 0xdead_beef],
         },
     ]
 }
@@ -120,7 +122,8 @@ fn hit_layout_is_little_endian_in_documented_order() {
         t: 1.5,
         normal: [0.0, 0.0, 1.0],
         id: 0x0102_0304,
-        reserved: [5, 6, 7],
+        instance: 5,
+        reserved: [6, 7],
     };
     let mut bytes = Vec::new();
     for f in [1.5f32, 0.0, 0.0, 1.0] {
@@ -220,7 +223,8 @@ fn exr_has_colour_depth_and_normal_channels() {
         t: 3.25,
         normal: [0.0, 0.6, -0.8],
         id: 4,
-        reserved: [0; 3],
+        instance: 0,
+        reserved: [0; 2],
     };
     let hits = vec![hit, Hit::MISS];
     let image = Image {
@@ -304,7 +308,8 @@ fn shading_lights_front_and_back_faces_alike() {
         t: 5.0,
         normal: [0.0, 1.0, 0.0],
         id: 0,
-        reserved: [0; 3],
+        instance: 0,
+        reserved: [0; 2],
     };
     let away = Hit {
         normal: [0.0, -1.0, 0.0],

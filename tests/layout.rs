@@ -5,7 +5,7 @@
 
 use std::mem::{offset_of, size_of};
 
-use rbvh::bvh::{GpuNode, GpuTriangle};
+use rbvh::bvh::{GpuInstance, GpuNode, GpuTriangle};
 use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{shaders, spirv};
 use rbvh::probe::RayCounters;
@@ -49,6 +49,28 @@ fn bvh_node_layout_matches() {
             ("pad", offset_of!(GpuNode, pad)),
         ],
     );
+}
+
+#[test]
+fn bvh_instance_layout_matches() {
+    for spv in [
+        shaders::TRACE_EXACT_INSTANCES,
+        shaders::TRACE_EXACT_INSTANCES_BDA,
+    ] {
+        let r = spirv::reflect(&shaders::words(spv).unwrap());
+        check(
+            &r,
+            "BvhInstance",
+            size_of::<GpuInstance>(),
+            &[
+                ("world_to_mesh", offset_of!(GpuInstance, world_to_mesh)),
+                ("root", offset_of!(GpuInstance, root)),
+                ("mesh", offset_of!(GpuInstance, mesh)),
+                ("pad0", offset_of!(GpuInstance, pad)),
+                ("pad1", offset_of!(GpuInstance, pad) + 4),
+            ],
+        );
+    }
 }
 
 #[test]
@@ -118,9 +140,9 @@ fn ray_and_hit_layouts_match() {
             ("ny", offset_of!(Hit, normal) + 4),
             ("nz", offset_of!(Hit, normal) + 8),
             ("id", offset_of!(Hit, id)),
-            ("reserved0", offset_of!(Hit, reserved)),
-            ("reserved1", offset_of!(Hit, reserved) + 4),
-            ("reserved2", offset_of!(Hit, reserved) + 8),
+            ("instance_id", offset_of!(Hit, instance)),
+            ("reserved1", offset_of!(Hit, reserved)),
+            ("reserved2", offset_of!(Hit, reserved) + 4),
         ],
     );
 }
@@ -178,12 +200,14 @@ fn push_constants_match_in_every_trace_shader() {
         ("atlas_wide_len", offset_of!(P, atlas_wide_len)),
         ("lod_node_count", offset_of!(P, lod_node_count)),
         ("lod_texel_len", offset_of!(P, lod_texel_len)),
-        ("reserved", offset_of!(P, reserved)),
+        ("instance_count", offset_of!(P, instance_count)),
         ("addresses", offset_of!(P, addresses)),
     ];
-    assert_eq!(size_of::<P>(), offset_of!(P, addresses) + 6 * 8);
+    assert_eq!(size_of::<P>(), offset_of!(P, addresses) + 7 * 8);
     for spv in [
         shaders::TRACE_EXACT,
+        shaders::TRACE_EXACT_INSTANCES,
+        shaders::TRACE_EXACT_INSTANCES_BDA,
         shaders::TRACE_RBVH,
         shaders::TRACE_RBVH_LOD,
         shaders::TRACE_EXACT_BDA,

@@ -27,7 +27,8 @@ fn hit(t: f32) -> Hit {
         t,
         normal: [0.0, 0.0, 1.0],
         id: 0,
-        reserved: [0; 3],
+        instance: 0,
+        reserved: [0; 2],
     }
 }
 

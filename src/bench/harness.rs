@@ -45,7 +45,7 @@ use crate::geom::{Hit, Ray};
 use crate::gpu::{Context, Query, Timing, Traced, Tracer};
 use crate::lod::{Cones, Lod, RayCone};
 use crate::output::{self, Image};
-use crate::probe::{MeanCounters, Read, TraceStats};
+use crate::probe::{Array, MeanCounters, Read, TraceStats};
 use crate::progress::{Progress, Quiet};
 use crate::rays::{self, RayType, Secondary, DEFAULT_LIGHT};
 use crate::rbvh::{Rbvh, RbvhParams, RbvhSource, TexelFormat};
@@ -488,7 +488,7 @@ impl<'a> SceneBench<'a> {
                 Structure::Rbvh(r) => {
                     Some(steps::rbvh_steps(r, &m.rays, any, c.tracer.block_jumps()))
                 }
-                Structure::RbvhLod(..) => None,
+                Structure::RbvhLod(..) | Structure::ExactInstanced(_) => None,
             };
             counted.push((MeanCounters::of(&device), traffic, steps));
         }
@@ -559,7 +559,7 @@ impl<'a> SceneBench<'a> {
                 invalid_reason: invalid,
                 timing_source: m.source,
                 passes: m.passes[i],
-                block_jumps: (c.method() != Kind::Exact).then(|| c.tracer.block_jumps()),
+                block_jumps: (!c.method().is_exact()).then(|| c.tracer.block_jumps()),
                 counters: counted[i].0,
                 traffic: counted[i].1.clone(),
                 steps: counted[i].2,
@@ -596,11 +596,24 @@ impl<'a> SceneBench<'a> {
                 r.atlas_bytes(),
                 lod_bytes[0],
                 lod_bytes[1],
+                0,
             ]
         };
-        let (arrays, trace): ([u64; 6], TwinTrace) = match &c.structure {
+        let (arrays, trace): ([u64; Array::COUNT], TwinTrace) = match &c.structure {
             Structure::Exact(b) => (
-                [b.tree_bytes(), b.triangle_bytes(), 0, 0, 0, 0],
+                [b.tree_bytes(), b.triangle_bytes(), 0, 0, 0, 0, 0],
+                Box::new(move |k, reads| b.trace_probed(&m.rays[k], any, reads).1),
+            ),
+            Structure::ExactInstanced(b) => (
+                [
+                    b.tree_bytes(),
+                    b.triangle_bytes(),
+                    0,
+                    0,
+                    0,
+                    0,
+                    b.instance_bytes(),
+                ],
                 Box::new(move |k, reads| b.trace_probed(&m.rays[k], any, reads).1),
             ),
             Structure::Rbvh(r) => {

@@ -184,6 +184,7 @@ pub fn write_charts(dir: &Path, records: &[Record]) -> Result<Vec<PathBuf>> {
                 let level = r.level_label();
                 let name = match r.method {
                     Kind::Exact => "exact".to_string(),
+                    Kind::ExactInstanced => "exact, two levels".to_string(),
                     Kind::Rbvh => level,
                     Kind::RbvhLod => format!("{level} LOD"),
                 };

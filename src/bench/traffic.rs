@@ -121,8 +121,8 @@ pub struct CacheTraffic {
 /// cache at once; [`TrafficModel::report`] gives the figures. See the module documentation for
 /// the model.
 pub struct TrafficModel {
-    array_bytes: [u64; 6],
-    bases: [u64; 6],
+    array_bytes: [u64; Array::COUNT],
+    bases: [u64; Array::COUNT],
     line_bytes: u32,
     line_shift: u32,
     /// Recency-stack id of each line of the address space (address >> `line_shift`), [`NIL`] for
@@ -150,7 +150,11 @@ impl TrafficModel {
     ///
     /// Errors when `line` is not a power of two, when a cache holds less than one line, or when
     /// the arrays are too large to model (more than 2³² − 1 lines).
-    pub fn new(array_bytes: [u64; 6], caches: &[u64], line: u32) -> Result<TrafficModel> {
+    pub fn new(
+        array_bytes: [u64; Array::COUNT],
+        caches: &[u64],
+        line: u32,
+    ) -> Result<TrafficModel> {
         if !line.is_power_of_two() {
             return Err(Error::param(
                 "line",
@@ -329,8 +333,8 @@ pub fn tile_order(width: u32, height: u32, tile: u32) -> Vec<u32> {
 
 /// The base address of each array ([`Array::ALL`] order) and the end of the last one: arrays one
 /// after the other, each base aligned up to [`ARRAY_ALIGN`]. `None` on overflow.
-fn layout(array_bytes: &[u64; 6]) -> Option<([u64; 6], u64)> {
-    let mut bases = [0; 6];
+fn layout(array_bytes: &[u64; Array::COUNT]) -> Option<([u64; Array::COUNT], u64)> {
+    let mut bases = [0; Array::COUNT];
     let mut end = 0u64;
     for array in Array::ALL {
         let base = end.checked_next_multiple_of(ARRAY_ALIGN)?;
@@ -497,7 +501,7 @@ mod tests {
     use super::*;
 
     /// Arrays of 1 MiB nodes and 1 MiB atlas words, the others absent.
-    const ARRAYS: [u64; 6] = [1 << 20, 0, 0, 1 << 20, 0, 0];
+    const ARRAYS: [u64; Array::COUNT] = [1 << 20, 0, 0, 1 << 20, 0, 0, 0];
 
     fn node(index: u64) -> Read {
         Read {
@@ -592,10 +596,10 @@ mod tests {
 
     #[test]
     fn arrays_do_not_alias() {
-        let arrays = [100, 5000, 0, 10, 0, 1];
+        let arrays = [100, 5000, 0, 10, 0, 1, 64];
         let (bases, end) = layout(&arrays).unwrap();
-        assert_eq!(bases, [0, 4096, 12288, 12288, 16384, 16384]);
-        assert_eq!(end, 16385);
+        assert_eq!(bases, [0, 4096, 12288, 12288, 16384, 16384, 20480]);
+        assert_eq!(end, 20544);
         assert!(bases.iter().all(|b| b % ARRAY_ALIGN == 0));
         let mut model = TrafficModel::new(arrays, &[lines(16)], DRAM_LINE).unwrap();
         let same_offset = [
@@ -707,7 +711,7 @@ mod tests {
         assert!(TrafficModel::new(ARRAYS, &CACHE_SIZES, 96).is_err());
         assert!(TrafficModel::new(ARRAYS, &CACHE_SIZES, 0).is_err());
         assert!(TrafficModel::new(ARRAYS, &[64], DRAM_LINE).is_err());
-        assert!(TrafficModel::new([u64::MAX, 1, 0, 0, 0, 0], &[], DRAM_LINE).is_err());
+        assert!(TrafficModel::new([u64::MAX, 1, 0, 0, 0, 0, 0], &[], DRAM_LINE).is_err());
         // A cache larger than the structure is fine: it holds everything.
         let mut model = TrafficModel::new(ARRAYS, &[u64::MAX], DRAM_LINE).unwrap();
         model.ray(&[node(0), node(2), node(0)]).unwrap();

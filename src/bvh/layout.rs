@@ -2,9 +2,9 @@
 //! against the compiled SPIR-V.
 
 use bytemuck::{Pod, Zeroable};
-use glam::Vec3;
+use glam::{Mat3, Mat4, Vec3, Vec4};
 
-use crate::geom::Aabb;
+use crate::geom::{Aabb, Ray};
 
 /// Entries of the traversal stack, in GLSL and in the CPU reference. Nearest-first traversal
 /// pushes at most one entry per level, so a tree of depth ≤ `STACK_SIZE` cannot overflow it; the
@@ -19,6 +19,10 @@ pub const MAX_NODES: usize = 1 << 30;
 
 /// Marks a child reference as a leaf: `child = LEAF_BIT | first_triangle`, `count` triangles.
 pub const LEAF_BIT: u32 = 0x8000_0000;
+
+/// The `count` of a top-level leaf of a two-level structure: `child = LEAF_BIT | instance`
+/// ([`GpuInstance`]); no triangle leaf holds this many.
+pub const INSTANCE_LEAF: u32 = u32::MAX;
 
 /// An inner node holding both children's boxes (Aila & Laine 2009), quantized against the node's
 /// own box as compressed wide BVHs do (Ylitie, Karras & Laine, "Efficient Incoherent Ray Traversal
@@ -475,5 +479,67 @@ mod tests {
         let mut reserved = good;
         reserved.pad = 1;
         assert!(reserved.malformation().unwrap().contains("reserved"));
+    }
+}
+
+/// One instance of a two-level structure ([`InstancedBvh`](super::InstancedBvh)): what a ray
+/// needs to enter it. 64 bytes.
+///
+/// | bytes | field |
+/// |---|---|
+/// | 0..48 | `world_to_mesh`: rows 0..3 of the inverse of the instance's transform |
+/// | 48..52, 52..56, 56..64 | `root`, `mesh`, `pad` |
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuInstance {
+    /// World to mesh space, the affine inverse of the instance's transform by rows: `p'_i =
+    /// dot(row_i.xyz, p) + row_i.w`. Rays are taken into the mesh's space by it and normals out
+    /// by its transpose.
+    pub world_to_mesh: [[f32; 4]; 3],
+    /// Node index of the root of the instance's mesh's tree.
+    pub root: u32,
+    /// The mesh the instance places ([`crate::scene::Instance::mesh`]).
+    pub mesh: u32,
+    /// Keeps the record four 16-byte words; always 0.
+    pub pad: [u32; 2],
+}
+const _: () = assert!(std::mem::size_of::<GpuInstance>() == 64);
+
+impl GpuInstance {
+    /// The record of an instance placed by `transform` (affine and invertible: see
+    /// [`crate::scene::transform_fault`]) whose mesh's tree starts at node `root`.
+    pub fn new(transform: Mat4, root: u32, mesh: u32) -> GpuInstance {
+        let inverse = transform.inverse();
+        GpuInstance {
+            world_to_mesh: [0, 1, 2].map(|i| inverse.row(i).to_array()),
+            root,
+            mesh,
+            pad: [0; 2],
+        }
+    }
+
+    fn rows(&self) -> [Vec4; 3] {
+        self.world_to_mesh.map(Vec4::from_array)
+    }
+
+    /// The linear part of [`GpuInstance::world_to_mesh`].
+    fn linear(&self) -> Mat3 {
+        let [x, y, z] = self.rows().map(|r| r.truncate());
+        Mat3::from_cols(x, y, z).transpose()
+    }
+
+    /// `ray` in the instance's mesh space: origin and direction transformed, the direction not
+    /// normalized, so that a hit's `t` is the same along both, and `tmin`, `tmax` kept.
+    pub fn ray_into(&self, ray: &Ray) -> Ray {
+        let o = ray.origin();
+        let origin = Vec3::from_array(self.rows().map(|r| r.truncate().dot(o) + r.w));
+        Ray::new(origin, self.linear() * ray.dir(), ray.tmin, ray.tmax)
+    }
+
+    /// A normal of the mesh's space in world space: the inverse transpose of the transform,
+    /// normalized; for a mirroring transform it points as the flat copy's (whose winding
+    /// [`crate::scene::Scene::append`] reverses) does.
+    pub fn normal_out(&self, normal: Vec3) -> Vec3 {
+        (self.linear().transpose() * normal).normalize_or_zero()
     }
 }

@@ -13,8 +13,11 @@
 //!   in `crate::rbvh`), operation for operation the same as `glsl/traverse.glsl` (whose hooks
 //!   `glsl/bvh.glsl`, `glsl/rbvh.glsl` and `glsl/lod.glsl` define), on the same packed data;
 //!   with it the exact BVH's CPU reference tracer.
+//! * `instanced`: the exact BVH of a scene with instances, in two levels (a tree per mesh, a
+//!   top level over the instances) traced by the same traversal.
 
 mod build;
+mod instanced;
 pub mod layout;
 mod morton;
 mod traverse;
@@ -22,6 +25,9 @@ mod validate;
 
 pub(crate) use build::{check_node_count, join_halves, partition, sah_cost, tree_over, Placed};
 pub use build::{BuildParams, Bvh};
-pub use layout::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, MAX_NODES, STACK_SIZE};
+pub use instanced::{BottomLevel, InstancedBvh};
+pub use layout::{
+    ChildRef, GpuInstance, GpuNode, GpuTriangle, INSTANCE_LEAF, LEAF_BIT, MAX_NODES, STACK_SIZE,
+};
 pub(crate) use morton::LinearBvh;
 pub(crate) use traverse::{traverse, BvhLeafHook, Leaves, TriangleSlots};

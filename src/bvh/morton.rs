@@ -98,7 +98,8 @@ impl<'s> LinearBvh<'s> {
                 t,
                 normal: (b - a).cross(c - a).normalize_or_zero().to_array(),
                 id: prim,
-                reserved: [0; 3],
+                instance: 0,
+                reserved: [0; 2],
             }
         })
     }

@@ -35,6 +35,24 @@ pub(crate) trait Leaves<P: Probe> {
         child
     }
 
+    /// Enters the instance that leaf `reference` with `count` names, if it names one (a top-level
+    /// leaf of a two-level structure, [`INSTANCE_LEAF`](super::INSTANCE_LEAF)): the hook takes the ray into the
+    /// instance's mesh space and returns that ray (the same `t` along it) and the root node of
+    /// the mesh's tree, where the traversal goes on, on the same stack, until it pops the
+    /// instance's end and calls [`Leaves::exit_instance`]. `None` for every other leaf (handed to
+    /// [`Leaves::test`]), and always in structures without instances.
+    fn enter_instance(
+        &mut self,
+        _reference: u32,
+        _count: u32,
+        _probe: &mut P,
+    ) -> Option<(Ray, u32)> {
+        None
+    }
+
+    /// Leaves the instance entered last: the ray is the world's again.
+    fn exit_instance(&mut self) {}
+
     /// Tests leaf `reference` (with its child `count`) for the ray's interval `[tmin,
     /// *t_closest)`: on a hit, lowers `*t_closest`, keeps the hit and returns true.
     fn test(
@@ -51,6 +69,15 @@ pub(crate) trait Leaves<P: Probe> {
 /// hit; with `any_hit`, stops at the first leaf that reports one. Counts inner nodes and reports
 /// each node read to `probe`, as the shaders read them. Invalid rays ([`Ray::is_valid`]) visit
 /// nothing.
+///
+/// Two levels, one loop: where [`Leaves::enter_instance`] takes a leaf as an instance, the
+/// traversal pushes the instance's end (an entry at distance −∞, which no nearest hit drops),
+/// goes on from the mesh's root with the ray in the mesh's space, and takes the world ray back
+/// when it pops that entry. Distances are the same along both rays (the direction is
+/// transformed, not normalized), so the nearest hit bounds both levels. The stack holds the top
+/// level's entries, the end and the mesh's: [`InstancedBvh`](super::InstancedBvh) keeps their
+/// depths together within it. Visits are bounded per level: a mesh placed twice may be visited
+/// twice.
 pub(crate) fn traverse<P: Probe, L: Leaves<P>>(
     nodes: &[GpuNode],
     ray: &Ray,
@@ -62,9 +89,12 @@ pub(crate) fn traverse<P: Probe, L: Leaves<P>>(
     if !ray.is_valid() {
         return stats;
     }
-    let origin = ray.origin();
-    let inv_dir = safe_inverse(ray.dir());
+    let mut origin = ray.origin();
+    let mut inv_dir = safe_inverse(ray.dir());
     let mut t_closest = ray.tmax;
+    // Inner nodes visited in the top level, and in the instance entered last (if any).
+    let mut visits = [0usize; 2];
+    let mut inside = false;
     // One stack of (entry, distance) pairs, as in traverse.glsl: [`StackEntry`]'s word and the
     // distance at which the child's box was entered, so that an entry whose box now lies beyond
     // the nearest hit is dropped when popped instead of visited or marched.
@@ -79,6 +109,13 @@ pub(crate) fn traverse<P: Probe, L: Leaves<P>>(
                 while sp > 0 {
                     sp -= 1;
                     let (word, t_entry) = stack[sp];
+                    if t_entry == INSTANCE_END {
+                        leaves.exit_instance();
+                        origin = ray.origin();
+                        inv_dir = safe_inverse(ray.dir());
+                        inside = false;
+                        continue;
+                    }
                     if t_entry <= t_closest {
                         popped = Some(StackEntry(word).resolve(nodes, probe));
                         break;
@@ -92,16 +129,36 @@ pub(crate) fn traverse<P: Probe, L: Leaves<P>>(
         };
         entry = None;
         if leaves.is_leaf(reference) {
-            if leaves.test(reference, count, &mut t_closest, &mut stats, probe) && any_hit {
+            let instance = match inside {
+                false => leaves.enter_instance(reference, count, probe),
+                // An instance inside an instance: only corrupt data makes one; it holds nothing.
+                true => None,
+            };
+            if let Some((mesh_ray, root)) = instance {
+                if sp < STACK_SIZE as usize {
+                    stack[sp] = (0, INSTANCE_END);
+                    sp += 1;
+                    origin = mesh_ray.origin();
+                    inv_dir = safe_inverse(mesh_ray.dir());
+                    inside = true;
+                    visits[1] = 0;
+                    entry = Some((root, 0));
+                } else {
+                    leaves.exit_instance();
+                    stats.overflow = true;
+                }
+            } else if leaves.test(reference, count, &mut t_closest, &mut stats, probe) && any_hit {
                 return stats;
             }
         } else if let Some(node) = nodes.get(reference as usize) {
-            // In a tree every node is entered at most once per ray; more visits than nodes can
-            // only come from a cycle in corrupt data.
-            if stats.counters.nodes as usize >= nodes.len() {
+            // In a tree every node is entered at most once per ray (per instance entered); more
+            // visits than nodes can only come from a cycle in corrupt data.
+            let level = &mut visits[usize::from(inside)];
+            if *level >= nodes.len() {
                 stats.overflow = true;
                 break;
             }
+            *level += 1;
             stats.counters.nodes += 1;
             probe.read(element::<GpuNode>(Array::Nodes, reference as usize));
             let children = node.children();
@@ -136,6 +193,10 @@ pub(crate) fn traverse<P: Probe, L: Leaves<P>>(
     }
     stats
 }
+
+/// The distance of the stack entry that ends an instance: below every box's entry distance (at
+/// least the ray's `tmin`, at least 0), so no nearest hit drops it.
+const INSTANCE_END: f32 = f32::NEG_INFINITY;
 
 /// A traversal stack entry's word (`rbvh_stack_entry` in `glsl/bvh.glsl`): an inner child's
 /// reference as [`Leaves::enter`] made it, or, for a leaf, [`LEAF_BIT`] | parent node << 1 | side,
@@ -232,6 +293,13 @@ impl<'a, T: TriangleSlots + ?Sized> BvhLeafHook<'a, T> {
         }
     }
 
+    /// Tests triangles against `ray` from here on: the ray in an instance's mesh space, or the
+    /// world's again. The nearest hit kept stays.
+    pub(crate) fn aim(&mut self, ray: &Ray) {
+        self.shear = RayShear::new(ray);
+        self.tmin = ray.tmin;
+    }
+
     /// The nearest hit kept, if any. The device reads its triangle once more, after its loops,
     /// for the hit's id and normal ([`GpuTriangle::normal_of`]): those reads go to `probe`.
     pub(crate) fn hit<P: Probe>(&self, probe: &mut P) -> Option<Hit> {
@@ -241,7 +309,8 @@ impl<'a, T: TriangleSlots + ?Sized> BvhLeafHook<'a, T> {
             t,
             normal: GpuTriangle::normal_of(vertices).to_array(),
             id: prim,
-            reserved: [0; 3],
+            instance: 0,
+            reserved: [0; 2],
         })
     }
 }

@@ -54,8 +54,8 @@ impl Ray {
 }
 
 /// A hit: `t` (+inf on a miss), the unit geometric normal in world space (as wound: not flipped
-/// towards the ray), the primitive `id` (`u32::MAX` on a miss) and three reserved words (zero).
-/// 32 bytes; the hit file record and the GPU's `Hit`.
+/// towards the ray), the primitive `id` (`u32::MAX` on a miss), the `instance` hit and two
+/// reserved words (zero). 32 bytes; the hit file record and the GPU's `Hit`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct Hit {
@@ -67,8 +67,12 @@ pub struct Hit {
     /// bit 31 ([`LEAF_BIT`](crate::bvh::LEAF_BIT)) over the leaf index, coarse level-of-detail
     /// hits also [`LOD_BIT`](crate::lod::LOD_BIT) over the node index.
     pub id: u32,
-    /// Padding to 32 bytes; always zero (GLSL `reserved0..2`).
-    pub reserved: [u32; 3],
+    /// The instance hit (GLSL `instance_id`), whose mesh `id` indexes
+    /// ([`InstancedScene`](crate::scene::InstancedScene)); 0 in a structure without instances (a
+    /// flat scene is its only instance) and on a miss.
+    pub instance: u32,
+    /// Padding to 32 bytes; always zero (GLSL `reserved1`, `reserved2`).
+    pub reserved: [u32; 2],
 }
 const _: () = assert!(std::mem::size_of::<Hit>() == 32);
 
@@ -78,7 +82,8 @@ impl Hit {
         t: f32::INFINITY,
         normal: [0.0; 3],
         id: u32::MAX,
-        reserved: [0; 3],
+        instance: 0,
+        reserved: [0; 2],
     };
 
     /// True unless `id` is the miss id `u32::MAX`.

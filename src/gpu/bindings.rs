@@ -17,10 +17,11 @@ include!(concat!(env!("OUT_DIR"), "/bindings.rs"));
 pub(crate) fn trace(kind: Kind, reach: Reach) -> Vec<u32> {
     let structure: &[u32] = match kind {
         Kind::Exact => &[BVH_NODES, BVH_TRIS],
+        Kind::ExactInstanced => &[BVH_NODES, BVH_TRIS, BVH_INSTANCES],
         Kind::Rbvh | Kind::RbvhLod => &[BVH_NODES, BVH_TRIS, HEIGHTFIELDS, ATLAS],
     };
     let lod: &[u32] = match kind {
-        Kind::Exact | Kind::Rbvh => &[],
+        Kind::Exact | Kind::ExactInstanced | Kind::Rbvh => &[],
         Kind::RbvhLod => &[LODS, LOD_TEXELS],
     };
     let bound = reach == Reach::Bindings;

@@ -10,7 +10,7 @@ use crate::rbvh::TexelFormat;
 use crate::structure::Kind;
 use crate::Result;
 
-/// Compiles every pipeline the library has on `ctx`'s device — the trace shaders of the three
+/// Compiles every pipeline the library has on `ctx`'s device — the trace shaders of the four
 /// structures (both texel formats of the RBVH, block jumps on and off, timed and counting), the
 /// painter, each reading its arrays through bindings and, where the context has device addresses,
 /// through them — and returns what the driver made of each. Allocates and submits nothing, so it
@@ -23,20 +23,20 @@ pub fn compile_every_pipeline(ctx: &Context) -> Result<Vec<CompiledPipeline>> {
     let default_jumps = !ctx.limits().cpu;
     let mut compiled = Vec::new();
     for &reach in &reaches {
-        for kind in [Kind::Exact, Kind::Rbvh, Kind::RbvhLod] {
+        for kind in [Kind::Exact, Kind::ExactInstanced, Kind::Rbvh, Kind::RbvhLod] {
             let texel_formats: &[TexelFormat] = if kind == Kind::Rbvh {
                 &[TexelFormat::HeightNormal, TexelFormat::Height]
             } else {
                 &[TexelFormat::HeightNormal]
             };
-            let jump_choices: &[bool] = if kind == Kind::Exact {
+            let jump_choices: &[bool] = if kind.is_exact() {
                 &[false]
             } else {
                 &[default_jumps, !default_jumps]
             };
             for &texels in texel_formats {
                 for &jumps in jump_choices {
-                    let default = kind == Kind::Exact || jumps == default_jumps;
+                    let default = kind.is_exact() || jumps == default_jumps;
                     // Counting pipelines with the default jumps only, as the bench counts.
                     let countings: &[bool] = if default { &[false, true] } else { &[false] };
                     for &counting in countings {

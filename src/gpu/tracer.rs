@@ -21,7 +21,7 @@ use super::bindings;
 use super::compiled::{variant_name, CompiledPipeline};
 use super::pipeline::DescriptorSet;
 use super::{shaders, Buffer, ComputePipeline, Context, Reach, Timing};
-use crate::bvh::{Bvh, STACK_SIZE};
+use crate::bvh::{Bvh, InstancedBvh, STACK_SIZE};
 use crate::geom::{Hit, Ray};
 use crate::lod::{Cones, Lod};
 use crate::probe::RayCounters;
@@ -50,8 +50,9 @@ pub struct Traced {
     pub timing: Timing,
 }
 
-/// Push constants of the trace shaders (`glsl/trace_params.glsl`, 96 bytes); the exact one ignores
-/// the sizes after `tri_count`, the plain RBVH one the LOD sizes.
+/// Push constants of the trace shaders (`glsl/trace_params.glsl`, 104 bytes); the exact one
+/// ignores the sizes after `tri_count`, the plain RBVH one the LOD sizes, all but the two-level
+/// exact one `instance_count`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct TraceParams {
@@ -81,13 +82,14 @@ pub struct TraceParams {
     pub lod_node_count: u32,
     /// LOD column words.
     pub lod_texel_len: u32,
-    /// GLSL `reserved`: zero, so that `addresses` are 8-byte aligned.
-    pub reserved: u32,
+    /// GLSL `instance_count`: instances of a two-level exact BVH; 0 for the others.
+    pub instance_count: u32,
     /// Device addresses of the structure's arrays in binding order (nodes, triangles, height
-    /// fields, atlas, LOD records, LOD columns), read by the `_bda` shaders; zero where arrays are bound.
-    pub addresses: [u64; 6],
+    /// fields, atlas, LOD records, LOD columns, instances), read by the `_bda` shaders; zero
+    /// where arrays are bound or absent.
+    pub addresses: [u64; 7],
 }
-const _: () = assert!(std::mem::size_of::<TraceParams>() == 96);
+const _: () = assert!(std::mem::size_of::<TraceParams>() == 104);
 
 const FLAG_ANY_HIT: u32 = 1;
 
@@ -110,6 +112,7 @@ const HEIGHT_ONLY_CONSTANT_ID: u32 = 2;
 pub(crate) fn shader_name(kind: Kind) -> &'static str {
     match kind {
         Kind::Exact => "trace_exact",
+        Kind::ExactInstanced => "trace_exact_instances",
         Kind::Rbvh => "trace_rbvh",
         Kind::RbvhLod => "trace_rbvh_lod",
     }
@@ -120,6 +123,8 @@ pub(crate) fn shader_spirv(kind: Kind, reach: Reach) -> &'static [u8] {
     match (kind, reach) {
         (Kind::Exact, Reach::Bindings) => shaders::TRACE_EXACT,
         (Kind::Exact, Reach::DeviceAddresses) => shaders::TRACE_EXACT_BDA,
+        (Kind::ExactInstanced, Reach::Bindings) => shaders::TRACE_EXACT_INSTANCES,
+        (Kind::ExactInstanced, Reach::DeviceAddresses) => shaders::TRACE_EXACT_INSTANCES_BDA,
         (Kind::Rbvh, Reach::Bindings) => shaders::TRACE_RBVH,
         (Kind::Rbvh, Reach::DeviceAddresses) => shaders::TRACE_RBVH_BDA,
         (Kind::RbvhLod, Reach::Bindings) => shaders::TRACE_RBVH_LOD,
@@ -137,7 +142,7 @@ pub(crate) fn specialization(
     counting: bool,
 ) -> Vec<(&'static str, u32, u32)> {
     let mut constants = vec![("rbvh_count", COUNT_CONSTANT_ID, u32::from(counting))];
-    if kind != Kind::Exact {
+    if !kind.is_exact() {
         constants.push((
             "rbvh_block_jumps",
             JUMPS_CONSTANT_ID,
@@ -252,6 +257,10 @@ fn with_parts<T>(
             let (sizes, arrays) = exact_parts(bvh)?;
             f(shader, sizes, &arrays)
         }
+        Structure::ExactInstanced(bvh) => {
+            let (sizes, arrays) = instanced_parts(bvh)?;
+            f(shader, sizes, &arrays)
+        }
         Structure::Rbvh(rbvh) => {
             check_depth("rbvh", rbvh.depth)?;
             let words = rbvh.atlas_words();
@@ -278,6 +287,27 @@ fn exact_parts(bvh: &Bvh) -> Result<(TraceParams, Arrays<'_, 2>)> {
     let arrays = [
         ("BVH nodes", bytemuck::cast_slice(&bvh.nodes)),
         ("BVH triangles", bytemuck::cast_slice(&bvh.triangles)),
+    ];
+    Ok((sizes, arrays))
+}
+
+/// The shader sizes and the arrays (name, bytes) of a two-level exact BVH, in binding order. Its
+/// builder keeps both levels' depths together within the stack
+/// ([`InstancedBvh`](crate::bvh::InstancedBvh)); a changed one is checked here again.
+fn instanced_parts(bvh: &InstancedBvh) -> Result<(TraceParams, Arrays<'_, 3>)> {
+    let deepest = bvh.meshes.iter().map(|m| m.depth).max().unwrap_or(0);
+    check_depth("bvh", bvh.top_depth + 1 + deepest)?;
+    let count = |what: &str, n: usize| count32("bvh", what, n);
+    let sizes = TraceParams {
+        node_count: count("nodes", bvh.nodes.len())?,
+        tri_count: count("triangles", bvh.triangles.len())?,
+        instance_count: count("instances", bvh.instances.len())?,
+        ..TraceParams::default()
+    };
+    let arrays = [
+        ("BVH nodes (two levels)", bytemuck::cast_slice(&bvh.nodes)),
+        ("BVH triangles", bytemuck::cast_slice(&bvh.triangles)),
+        ("BVH instances", bytemuck::cast_slice(&bvh.instances)),
     ];
     Ok((sizes, arrays))
 }
@@ -438,7 +468,7 @@ impl Tracer {
             shader_name(self.shader.0),
             self.reach,
             &constants,
-            self.block_jumps != self.ctx.limits().cpu || self.shader.0 == Kind::Exact,
+            self.block_jumps != self.ctx.limits().cpu || self.shader.0.is_exact(),
         )
     }
 
@@ -449,7 +479,7 @@ impl Tracer {
         if on == self.block_jumps {
             return Ok(());
         }
-        if self.shader.0 == Kind::Exact {
+        if self.shader.0.is_exact() {
             return Err(Error::param(
                 "block_jumps",
                 "the exact BVH has no march to jump in",
@@ -627,8 +657,8 @@ impl Tracer {
         mut sizes: TraceParams,
     ) -> Result<Self> {
         if reach == Reach::DeviceAddresses {
-            for (slot, buffer) in sizes.addresses.iter_mut().zip(&structure) {
-                *slot = buffer.device_address().ok_or_else(|| {
+            for (&slot, buffer) in address_slots(shader.0).iter().zip(&structure) {
+                sizes.addresses[slot] = buffer.device_address().ok_or_else(|| {
                     Error::NoDevice(format!("{}: no device address", buffer.name()))
                 })?;
             }
@@ -645,7 +675,7 @@ impl Tracer {
         } else {
             None
         };
-        let block_jumps = kind != Kind::Exact && !ctx.limits().cpu;
+        let block_jumps = !kind.is_exact() && !ctx.limits().cpu;
         let pipeline = make_pipeline(ctx, shader, reach, &spirv, block_jumps, false)?;
         Ok(Tracer {
             ctx: ctx.clone(),
@@ -928,6 +958,16 @@ impl Tracer {
 }
 
 /// Our trees never exceed the traversal stack; a hand-made or corrupt one is refused up front.
+/// Where in [`TraceParams::addresses`] each of `kind`'s arrays goes, in their binding order.
+fn address_slots(kind: Kind) -> &'static [usize] {
+    match kind {
+        Kind::Exact => &[0, 1],
+        Kind::ExactInstanced => &[0, 1, 6],
+        Kind::Rbvh => &[0, 1, 2, 3],
+        Kind::RbvhLod => &[0, 1, 2, 3, 4, 5],
+    }
+}
+
 fn check_depth(what: &str, depth: u32) -> Result<()> {
     if depth > STACK_SIZE {
         return Err(Error::param(

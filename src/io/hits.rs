@@ -1,5 +1,5 @@
-//! The hit file: one [`Hit`] per 32-byte record, `t nx ny nz` as little-endian `f32`, then `id`
-//! and three reserved words as little-endian `u32`.
+//! The hit file: one [`Hit`] per 32-byte record, `t nx ny nz` as little-endian `f32`, then `id`,
+//! `instance` and two reserved words as little-endian `u32`.
 
 use std::path::Path;
 
@@ -15,14 +15,15 @@ impl Record for Hit {
             t: f(w[0]),
             normal: [f(w[1]), f(w[2]), f(w[3])],
             id: w[4],
-            reserved: [w[5], w[6], w[7]],
+            instance: w[5],
+            reserved: [w[6], w[7]],
         }
     }
 
     fn to_words(&self) -> Words {
         let [nx, ny, nz] = self.normal.map(f32::to_bits);
-        let [r0, r1, r2] = self.reserved;
-        [self.t.to_bits(), nx, ny, nz, self.id, r0, r1, r2]
+        let [r1, r2] = self.reserved;
+        [self.t.to_bits(), nx, ny, nz, self.id, self.instance, r1, r2]
     }
 }
 

@@ -58,6 +58,7 @@ impl Method {
     pub fn file_tag(&self) -> String {
         match self.kind {
             Kind::Exact => "exact".into(),
+            Kind::ExactInstanced => "exact_instanced".into(),
             Kind::Rbvh => format!("rbvh_q{}", self.level),
             Kind::RbvhLod => format!("rbvh_lod_q{}", self.level),
         }
@@ -65,7 +66,7 @@ impl Method {
 
     /// The RBVH preset the method traces, if any.
     pub fn level(&self) -> Option<u32> {
-        (self.kind != Kind::Exact).then_some(self.level)
+        (!self.kind.is_exact()).then_some(self.level)
     }
 }
 
@@ -73,6 +74,7 @@ impl fmt::Display for Method {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self.kind {
             Kind::Exact => f.write_str("exact"),
+            Kind::ExactInstanced => f.write_str("exact, two levels"),
             Kind::Rbvh => write!(f, "RBVH Q{}", self.level),
             Kind::RbvhLod => write!(f, "RBVH Q{} with LOD", self.level),
         }
@@ -138,7 +140,8 @@ impl Method {
     /// `rbvh-lod`.
     pub fn recipe(self) -> Result<Recipe> {
         Ok(match self.kind {
-            Kind::Exact => Recipe::Exact,
+            // A two-level structure takes the exact recipe for each mesh's tree.
+            Kind::Exact | Kind::ExactInstanced => Recipe::Exact,
             Kind::Rbvh => Recipe::Rbvh(RbvhParams::quality(self.level)?),
             Kind::RbvhLod => {
                 Recipe::RbvhLod(RbvhParams::quality(self.level)?, LodParams::default())

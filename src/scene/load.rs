@@ -4,7 +4,7 @@ use std::path::Path;
 
 use super::mesh_file::{load_mesh_file, FileType};
 use super::regular_file::regular_file;
-use super::{builtin, scene_file, Scene};
+use super::{builtin, scene_file, InstancedScene, Scene};
 use crate::progress::{step, Progress, Quiet};
 use crate::{Error, Result};
 
@@ -24,7 +24,11 @@ impl Scene {
     pub fn load_observed(spec: &str, progress: &dyn Progress) -> Result<Scene> {
         match resolve(spec)? {
             None => Scene::builtin(spec),
-            Some((path, FileType::SceneFile)) => scene_file::load(path, progress),
+            Some((path, FileType::SceneFile)) => {
+                let scene = scene_file::load(path, progress)?.into_flat();
+                scene.validate()?;
+                Ok(scene)
+            }
             Some((path, FileType::Obj | FileType::Gltf | FileType::Points)) => {
                 step(progress, &format!("loading {}", path.display()), 0, || {
                     load_mesh_file(path)
@@ -52,6 +56,23 @@ impl Scene {
         })?;
         scene.validate()?;
         Ok(scene)
+    }
+}
+
+impl InstancedScene {
+    /// Loads `spec` as [`Scene::load`] does, keeping a scene file's instances
+    /// ([`InstancedScene`]); a mesh file or a built-in scene is one mesh placed once
+    /// ([`InstancedScene::single`]).
+    pub fn load(spec: &str) -> Result<InstancedScene> {
+        InstancedScene::load_observed(spec, &Quiet)
+    }
+
+    /// [`InstancedScene::load`], reporting to `progress` the meshes of a scene file as they load.
+    pub fn load_observed(spec: &str, progress: &dyn Progress) -> Result<InstancedScene> {
+        match resolve(spec)? {
+            Some((path, FileType::SceneFile)) => scene_file::load(path, progress),
+            _ => Scene::load_observed(spec, progress).map(InstancedScene::single),
+        }
     }
 }
 

@@ -1,6 +1,7 @@
 //! Scenes: the triangles every later stage traces, where they come from, and how to look at them.
 //!
-//! A [`Scene`] is a flat triangle list with a per-triangle object id. It is loaded from an OBJ
+//! A [`Scene`] is a flat triangle list with a per-triangle object id; an [`InstancedScene`]
+//! holds meshes once and places them by instances, for two-level structures. It is loaded from an OBJ
 //! file, a glTF/GLB file or a TOML scene file (which arranges meshes and adds a camera and a
 //! light), or built procedurally ([`builtin`]) so that tests and benchmarks need no files.
 //! Every loader validates before returning, so later stages may assume finite vertices and
@@ -13,6 +14,7 @@
 pub mod builtin;
 mod camera;
 mod gltf;
+mod instances;
 mod light;
 mod load;
 pub mod material;
@@ -27,6 +29,8 @@ pub mod texture;
 mod topology;
 
 pub use camera::{Camera, CameraFault, DEFAULT_VFOV_DEG};
+pub use instances::{transform_fault, transformed_box, Instance, InstancedScene};
+pub use instances::{MAX_INSTANCES, MIN_RELATIVE_DETERMINANT};
 pub use light::Light;
 pub use material::{Material, SurfaceMaterials, NO_MATERIAL};
 pub use mesh::{ObjectSurface, Scene};

@@ -1,5 +1,7 @@
 //! TOML scene files: meshes (built-in or from files) placed by transforms, plus an optional
-//! camera and light, so that a reproducible view of a model is one small text file.
+//! camera and light, so that a reproducible view of a model is one small text file. A `[[mesh]]`
+//! is copied into the scene where it is placed; an `[[instance]]` places a mesh held once
+//! ([`InstancedScene`]), which a two-level structure traces without copying it.
 //!
 //! Unknown keys are errors (a typo must not be silently ignored), and every error names the
 //! file and the line of the offending value; the format is described in `scenes/README.md`.
@@ -13,6 +15,7 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use super::camera::DEFAULT_VFOV_DEG;
+use super::instances::{transform_fault, Instance, InstancedScene};
 use super::mesh_file::{check_mesh_file, load_mesh_file};
 use super::{Camera, CameraFault, Light, Scene};
 use crate::progress::{step, Progress};
@@ -26,6 +29,8 @@ struct SceneFile {
     light: Option<Spanned<LightEntry>>,
     #[serde(default)]
     mesh: Vec<Spanned<MeshEntry>>,
+    #[serde(default)]
+    instance: Vec<Spanned<MeshEntry>>,
 }
 
 #[derive(Deserialize)]
@@ -61,18 +66,19 @@ enum ScaleEntry {
     PerAxis([f32; 3]),
 }
 
-/// The text of the scene file at `path`, and the file parsed from it (with at least one mesh).
+/// The text of the scene file at `path`, and the file parsed from it (with at least one mesh or
+/// instance).
 fn parse(path: &Path) -> Result<(String, SceneFile)> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
     let file: SceneFile = toml::from_str(&text).map_err(|e| {
         let line = e.span().map(|s| line_of(&text, s.start));
         Error::parse(path, line, e.message())
     })?;
-    if file.mesh.is_empty() {
+    if file.mesh.is_empty() && file.instance.is_empty() {
         return Err(Error::parse(
             path,
             None,
-            "no meshes: a scene file needs at least one [[mesh]] table",
+            "no meshes: a scene file needs at least one [[mesh]] or [[instance]] table",
         ));
     }
     Ok((text, file))
@@ -86,7 +92,7 @@ pub(super) fn check(path: &Path) -> Result<()> {
     file.camera.map(|c| source.camera(&c)).transpose()?;
     file.light.map(|l| source.light(&l)).transpose()?;
     let dir = path.parent().unwrap_or(Path::new(""));
-    for entry in &file.mesh {
+    for entry in file.mesh.iter().chain(&file.instance) {
         source.transform(entry.get_ref())?;
         source.mesh_exists(entry, dir)?;
     }
@@ -96,17 +102,29 @@ pub(super) fn check(path: &Path) -> Result<()> {
 /// Loads the scene file at `path`. Mesh paths are relative to the file's directory.
 ///
 /// A mesh named by several entries (the same built-in name, or the same path as written) is
-/// read once and placed as often as it is named: a scene of 25 copies of a dragon parses one.
-pub(super) fn load(path: &Path, progress: &dyn Progress) -> Result<Scene> {
+/// read once: a scene of 25 copies of a dragon parses one. The `[[mesh]]` entries are copied
+/// into one mesh placed where it is (mesh 0, unnamed, so that its objects keep their names'
+/// prefixes as written), and each `[[instance]]` places the mesh it names, held once; flattened
+/// ([`InstancedScene::into_flat`]), the scene has the `[[mesh]]` entries' triangles first, then each
+/// instance's in the file's order.
+pub(super) fn load(path: &Path, progress: &dyn Progress) -> Result<InstancedScene> {
     let (text, file) = parse(path)?;
     let source = Source { path, text: &text };
-    let mut scene = Scene::new(path.display().to_string());
-    scene.camera = file.camera.map(|c| source.camera(&c)).transpose()?;
-    scene.light = file.light.map(|l| source.light(&l)).transpose()?;
+    let mut scene = InstancedScene {
+        name: file
+            .name
+            .clone()
+            .unwrap_or_else(|| path.display().to_string()),
+        camera: file.camera.map(|c| source.camera(&c)).transpose()?,
+        light: file.light.map(|l| source.light(&l)).transpose()?,
+        ..InstancedScene::default()
+    };
     let dir = path.parent().unwrap_or(Path::new(""));
     let what = format!("loading the meshes of {}", path.display());
-    step(progress, &what, file.mesh.len() as u64, || {
+    let entries = (file.mesh.len() + file.instance.len()) as u64;
+    step(progress, &what, entries, || {
         let mut loaded: HashMap<(bool, &str), Scene> = HashMap::new();
+        let mut copied = Scene::new("");
         for entry in &file.mesh {
             let transform = source.transform(entry.get_ref())?;
             let named = source.mesh_ref(entry)?;
@@ -114,8 +132,8 @@ pub(super) fn load(path: &Path, progress: &dyn Progress) -> Result<Scene> {
                 Entry::Occupied(known) => known.into_mut(),
                 Entry::Vacant(new) => new.insert(source.mesh(named, dir)?),
             };
-            if (scene.points.is_some() && mesh.triangle_count() > 0)
-                || (scene.triangle_count() > 0 && mesh.points.is_some())
+            if (copied.points.is_some() && mesh.triangle_count() > 0)
+                || (copied.triangle_count() > 0 && mesh.points.is_some())
             {
                 return Err(source.error(
                     entry.span(),
@@ -123,15 +141,47 @@ pub(super) fn load(path: &Path, progress: &dyn Progress) -> Result<Scene> {
                      or the other, so a scene file places point clouds or meshes, not both",
                 ));
             }
-            scene.append(mesh, transform);
+            copied.append(mesh, transform);
+            progress.advance(1);
+        }
+        if !file.mesh.is_empty() {
+            scene.meshes.push(copied);
+            scene.instances.push(Instance {
+                mesh: 0,
+                transform: Mat4::IDENTITY,
+            });
+        }
+        let mut mesh_of: HashMap<(bool, &str), u32> = HashMap::new();
+        for entry in &file.instance {
+            let transform = source.transform(entry.get_ref())?;
+            if let Some(fault) = transform_fault(&transform) {
+                return Err(source.error(entry.span(), fault));
+            }
+            let named = source.mesh_ref(entry)?;
+            let mesh = match mesh_of.entry(named.key()) {
+                Entry::Occupied(known) => *known.get(),
+                Entry::Vacant(new) => {
+                    let mesh = match loaded.remove(&named.key()) {
+                        Some(mesh) => mesh,
+                        None => source.mesh(named, dir)?,
+                    };
+                    if mesh.points.is_some() {
+                        return Err(source.error(
+                            entry.span(),
+                            "an [[instance]] places a triangle mesh, and this is a point cloud: \
+                             place it with [[mesh]]",
+                        ));
+                    }
+                    scene.meshes.push(mesh);
+                    *new.insert((scene.meshes.len() - 1) as u32)
+                }
+            };
+            scene.instances.push(Instance { mesh, transform });
             progress.advance(1);
         }
         Ok::<(), Error>(())
     })?;
     scene.validate()?;
-    if let Some(name) = file.name {
-        scene.name = name;
-    }
     Ok(scene)
 }
 

@@ -591,6 +591,19 @@ fn prepare_on(c: &Common, camera: Option<Camera>, device: bool) -> Result<Prepar
                 bvh.tree_bytes(),
                 bvh.triangle_bytes()
             ),
+            Structure::ExactInstanced(bvh) => eprintln!(
+                "two-level exact BVH: {} instances of {} meshes, {} nodes (top level {}, depth {}), \
+                 built in {:.1} ms, {} + {} + {} bytes (tree + triangles + instances)",
+                bvh.instances.len(),
+                bvh.meshes.len(),
+                bvh.nodes.len(),
+                bvh.top_nodes,
+                bvh.top_depth,
+                bvh.build_ms,
+                bvh.tree_bytes(),
+                bvh.triangle_bytes(),
+                bvh.instance_bytes()
+            ),
             Structure::Rbvh(r) | Structure::RbvhLod(r, _) => eprintln!(
                 "RBVH: {} nodes, {} height-field + {} triangle leaves, depth {}, {}, {} bytes (tree {}, atlas {}, triangles {})",
                 r.nodes.len(),

@@ -359,7 +359,8 @@ mod tests {
                 t: 1.0,
                 normal: t.normal().to_array(),
                 id: t.prim,
-                reserved: [0; 3],
+                instance: 0,
+                reserved: [0; 2],
             };
             let loc = r.locate(&ray, &hit).expect("a part's hit has a texel");
             assert!(

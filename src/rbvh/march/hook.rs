@@ -43,7 +43,8 @@ impl<'a> RbvhLeafHook<'a> {
             t,
             normal: normal.to_array(),
             id,
-            reserved: [0; 3],
+            instance: 0,
+            reserved: [0; 2],
         };
         self.triangle_nearest = false;
         self.normal_reads = NormalReads::default();

@@ -1,0 +1,324 @@
+//! Scenes that place meshes by instances: each mesh held once in its own space, placed any number
+//! of times by a transform (issue "Instances"), as engines place them, glTF nodes that share a
+//! mesh do, and Vulkan's acceleration structures split them (a top level over bottom levels).
+//!
+//! An [`InstancedScene`] is what a two-level structure is built from
+//! ([`InstancedBvh`](crate::bvh::InstancedBvh): one bottom level per mesh, a top level over the
+//! instances' boxes). Every stage that traces a flat triangle list takes
+//! [`InstancedScene::into_flat`]: the same scene with each instance's mesh copied in place, which is
+//! also the referee an instanced trace is checked against.
+
+use glam::{Mat4, Vec3, Vec4};
+
+use super::{Camera, Light, Scene};
+use crate::geom::Aabb;
+use crate::{Error, Result};
+
+/// Instances a scene may hold: a top-level leaf names one by 31 bits, and the traversal's node
+/// visits per ray stay countable in 32 bits.
+pub const MAX_INSTANCES: usize = 1 << 24;
+
+/// The smallest `|det|` of a transform's linear part, relative to the cube of its largest column,
+/// that [`InstancedScene::validate`] accepts: below it the inverse that takes rays into the mesh's
+/// space loses most of float32's digits (a scale of 1e-4 along one axis against 1 along the
+/// others is 1e-8).
+pub const MIN_RELATIVE_DETERMINANT: f32 = 1e-9;
+
+/// One placement of a mesh: `transform` takes the mesh's space to the scene's.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Instance {
+    /// Index into [`InstancedScene::meshes`].
+    pub mesh: u32,
+    /// Mesh space to world space: affine (last row `0 0 0 1`), finite and invertible once
+    /// [`InstancedScene::validate`] has passed; a mirroring transform (negative determinant) is
+    /// allowed and traced as the mirrored copy [`Scene::append`] makes.
+    pub transform: Mat4,
+}
+
+/// Meshes in their own spaces and the instances that place them, with the camera and light of
+/// the scene file.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct InstancedScene {
+    /// The file name or built-in name (or a scene file's `name`), used in messages.
+    pub name: String,
+    /// Each mesh once, in its own space; its `name` prefixes its objects' names when flattened.
+    pub meshes: Vec<Scene>,
+    /// The placements, in the order the scene lists them (the flat scene's order).
+    pub instances: Vec<Instance>,
+    /// The camera a scene file asked for.
+    pub camera: Option<Camera>,
+    /// The light a scene file asked for.
+    pub light: Option<Light>,
+}
+
+impl InstancedScene {
+    /// `scene` as one mesh placed once, where it is: how a mesh file or a built-in scene enters
+    /// a two-level structure.
+    pub fn single(scene: Scene) -> InstancedScene {
+        InstancedScene {
+            name: scene.name.clone(),
+            camera: scene.camera,
+            light: scene.light,
+            meshes: vec![scene],
+            instances: vec![Instance {
+                mesh: 0,
+                transform: Mat4::IDENTITY,
+            }],
+        }
+    }
+
+    /// Triangles as placed: each instance counts its mesh's triangles.
+    pub fn placed_triangle_count(&self) -> usize {
+        self.instances
+            .iter()
+            .filter_map(|i| self.meshes.get(i.mesh as usize))
+            .map(Scene::triangle_count)
+            .sum()
+    }
+
+    /// Triangles stored: each mesh once.
+    pub fn stored_triangle_count(&self) -> usize {
+        self.meshes.iter().map(Scene::triangle_count).sum()
+    }
+
+    /// The world box of each instance: its mesh's box transformed (the box of the transformed
+    /// corners, which holds every transformed vertex).
+    pub fn instance_bounds(&self) -> Vec<Aabb> {
+        let mesh_bounds: Vec<Aabb> = self.meshes.iter().map(Scene::bounds).collect();
+        self.instances
+            .iter()
+            .map(|i| match mesh_bounds.get(i.mesh as usize) {
+                Some(b) => transformed_box(*b, i.transform),
+                None => Aabb::EMPTY,
+            })
+            .collect()
+    }
+
+    /// The box of every instance.
+    pub fn bounds(&self) -> Aabb {
+        self.instance_bounds()
+            .into_iter()
+            .fold(Aabb::EMPTY, Aabb::union)
+    }
+
+    /// Checks what a two-level build relies on: each mesh valid ([`Scene::validate`]), at most
+    /// [`MAX_INSTANCES`]
+    /// instances, each naming a mesh that exists with a transform that is affine, finite and
+    /// invertible ([`MIN_RELATIVE_DETERMINANT`]). The error names the scene and the instance.
+    pub fn validate(&self) -> Result<()> {
+        let invalid = |message: String| Error::InvalidGeometry {
+            source_name: self.name.clone(),
+            message,
+        };
+        for mesh in &self.meshes {
+            mesh.validate()?;
+        }
+        if self.instances.len() > MAX_INSTANCES {
+            return Err(invalid(format!(
+                "{} instances, more than the {MAX_INSTANCES} a top-level tree can name",
+                self.instances.len()
+            )));
+        }
+        for (k, instance) in self.instances.iter().enumerate() {
+            if instance.mesh as usize >= self.meshes.len() {
+                return Err(invalid(format!(
+                    "instance {k} places mesh {}, but there are only {} meshes",
+                    instance.mesh,
+                    self.meshes.len()
+                )));
+            }
+            transform_fault(&instance.transform).map_or(Ok(()), |fault| {
+                Err(invalid(format!("instance {k}: {fault}")))
+            })?;
+        }
+        Ok(())
+    }
+
+    /// The flat scene: every instance's mesh copied in place ([`Scene::append`], so mirrors keep
+    /// their winding and object names their mesh's prefix), with this scene's name, camera and
+    /// light. What every stage without instances traces, and the referee of the instanced trace.
+    /// A first instance that places an unnamed mesh (a scene file's `[[mesh]]` entries) where
+    /// it is, and alone, is moved rather than copied: a flat scene file costs no second copy.
+    pub fn into_flat(mut self) -> Scene {
+        let movable = self.instances.first().is_some_and(|first| {
+            first.transform == Mat4::IDENTITY
+                && self
+                    .meshes
+                    .get(first.mesh as usize)
+                    .is_some_and(|m| m.name.is_empty())
+                && self.instances[1..].iter().all(|i| i.mesh != first.mesh)
+        });
+        let (mut flat, rest) = if movable {
+            let first = self.instances[0].mesh as usize;
+            (
+                std::mem::take(&mut self.meshes[first]),
+                &self.instances[1..],
+            )
+        } else {
+            (Scene::default(), &self.instances[..])
+        };
+        for instance in rest {
+            if let Some(mesh) = self.meshes.get(instance.mesh as usize) {
+                flat.append(mesh, instance.transform);
+            }
+        }
+        flat.name = self.name;
+        flat.camera = self.camera;
+        flat.light = self.light;
+        flat
+    }
+}
+
+/// What is wrong with `m` as an instance's transform, if anything: an entry that is not finite,
+/// a last row other than `0 0 0 1` (a projection, not a placement), or a linear part too close to
+/// singular to take rays into the mesh's space ([`MIN_RELATIVE_DETERMINANT`]).
+pub fn transform_fault(m: &Mat4) -> Option<String> {
+    if !m.is_finite() {
+        return Some(format!(
+            "the transform has entries that are not finite: {m}"
+        ));
+    }
+    if m.row(3) != Vec4::W {
+        return Some(format!(
+            "the transform's last row is {}, not 0 0 0 1: only affine placements are instances",
+            m.row(3)
+        ));
+    }
+    let linear = glam::Mat3::from_mat4(*m);
+    let largest = [linear.x_axis, linear.y_axis, linear.z_axis]
+        .iter()
+        .map(|c| c.length())
+        .fold(0.0f32, f32::max);
+    let det = linear.determinant();
+    // Written so that a determinant that overflowed to NaN is refused too.
+    let invertible = det.abs() > MIN_RELATIVE_DETERMINANT * largest.powi(3);
+    if !invertible {
+        return Some(format!(
+            "the transform is not invertible (determinant {det:e} of a linear part whose longest \
+             axis is {largest}): it flattens the mesh"
+        ));
+    }
+    None
+}
+
+/// The box of `b`'s eight corners under `m`: it holds every point of `b` transformed, since an
+/// affine map takes the box to a parallelepiped whose corners are those eight.
+pub fn transformed_box(b: Aabb, m: Mat4) -> Aabb {
+    if b.is_empty() {
+        return Aabb::EMPTY;
+    }
+    (0..8).fold(Aabb::EMPTY, |acc, k| {
+        let corner = Vec3::new(
+            if k & 1 == 0 { b.min.x } else { b.max.x },
+            if k & 2 == 0 { b.min.y } else { b.max.y },
+            if k & 4 == 0 { b.min.z } else { b.max.z },
+        );
+        acc.grow(m.transform_point3(corner))
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn triangle_mesh(name: &str) -> Scene {
+        let mut mesh = Scene::new(name);
+        mesh.push_object("t", &[Vec3::ZERO, Vec3::X, Vec3::Y], &[[0, 1, 2]]);
+        mesh
+    }
+
+    fn two_instances() -> InstancedScene {
+        InstancedScene {
+            name: "two".into(),
+            meshes: vec![triangle_mesh("m")],
+            instances: vec![
+                Instance {
+                    mesh: 0,
+                    transform: Mat4::from_translation(Vec3::Z),
+                },
+                Instance {
+                    mesh: 0,
+                    transform: Mat4::from_scale(Vec3::new(-2.0, 1.0, 1.0)),
+                },
+            ],
+            ..InstancedScene::default()
+        }
+    }
+
+    #[test]
+    fn flattening_copies_each_instance_as_append_does() {
+        let scene = two_instances();
+        scene.validate().unwrap();
+        let flat = scene.clone().into_flat();
+        let mut expected = Scene::new("two");
+        expected.append(&scene.meshes[0], scene.instances[0].transform);
+        expected.append(&scene.meshes[0], scene.instances[1].transform);
+        assert_eq!(flat, expected);
+        assert_eq!(scene.placed_triangle_count(), 2);
+        assert_eq!(scene.stored_triangle_count(), 1);
+        assert_eq!(scene.bounds(), flat.bounds());
+
+        // An unnamed mesh placed where it is, once, first: moved, and the same as copied.
+        let mut copied = scene.clone();
+        copied.meshes.insert(0, triangle_mesh(""));
+        copied.instances.iter_mut().for_each(|i| i.mesh += 1);
+        copied.instances.insert(
+            0,
+            Instance {
+                mesh: 0,
+                transform: Mat4::IDENTITY,
+            },
+        );
+        let mut expected = Scene::new("two");
+        expected.append(&triangle_mesh(""), Mat4::IDENTITY);
+        expected.append(&scene.meshes[0], scene.instances[0].transform);
+        expected.append(&scene.meshes[0], scene.instances[1].transform);
+        assert_eq!(copied.into_flat(), expected);
+    }
+
+    #[test]
+    fn bad_instances_are_named() {
+        let mut scene = two_instances();
+        scene.instances[1].mesh = 3;
+        let e = scene.validate().unwrap_err().to_string();
+        assert!(e.contains("instance 1 places mesh 3"), "{e}");
+
+        for (bad, what) in [
+            (Mat4::from_scale(Vec3::new(1.0, 0.0, 1.0)), "not invertible"),
+            (
+                Mat4::from_scale(Vec3::new(1.0, 1e-5, 1e-5)),
+                "not invertible",
+            ),
+            (
+                Mat4::from_translation(Vec3::new(f32::NAN, 0.0, 0.0)),
+                "not finite",
+            ),
+            (Mat4::from_scale(Vec3::splat(f32::INFINITY)), "not finite"),
+            (
+                Mat4::from_cols(Vec4::X, Vec4::Y, Vec4::Z, Vec4::new(0.0, 0.0, -1.0, 0.0)),
+                "affine",
+            ),
+        ] {
+            let mut scene = two_instances();
+            scene.instances[0].transform = bad;
+            let e = scene.validate().unwrap_err().to_string();
+            assert!(e.contains("instance 0") && e.contains(what), "{what}: {e}");
+        }
+    }
+
+    #[test]
+    fn transformed_boxes_hold_their_transformed_corners() {
+        let b = Aabb::from_points([Vec3::ZERO, Vec3::new(1.0, 2.0, 3.0)]);
+        let m = Mat4::from_rotation_y(0.7) * Mat4::from_scale(Vec3::new(-1.0, 2.0, 0.5));
+        let t = transformed_box(b, m);
+        for p in [
+            Vec3::ZERO,
+            Vec3::new(1.0, 2.0, 3.0),
+            Vec3::new(0.5, 1.0, 1.5),
+        ] {
+            let q = m.transform_point3(p);
+            assert!(t.min.cmple(q + 1e-5).all() && t.max.cmpge(q - 1e-5).all());
+        }
+        assert!(transformed_box(Aabb::EMPTY, m).is_empty());
+    }
+}
