@@ -346,10 +346,12 @@ struct BvhInstanceSizes {
 };
 
 // The two-level exact BVH's hook (InstanceHook in src/bvh/instanced.rs): top-level leaves enter
-// instances, the meshes' leaves are triangle leaves tested in the mesh's space.
+// instances, the meshes' leaves are triangle leaves tested in the mesh's space. The ray's shear is
+// made where a leaf is tested, from the ray of the level the traversal is in, rather than kept
+// in the hook: 56 VGPRs instead of 72 on RADV (docs/speed.md, "The two-level exact tracer's
+// registers"); the same shear as the CPU's, which makes it once per level.
 struct BvhInstanceHook {
     BvhInstanceSizes sz;
-    RbvhShear shear;
     uint best_slot;      // the nearest hit's triangle slot, RBVH_INVALID while none
     uint best_instance;  // its instance
     uint entered;        // the instance the ray is in, RBVH_INVALID at the top level
@@ -386,7 +388,6 @@ bool rbvh_enter_instance(inout BvhInstanceHook leaves, uint reference, uint coun
     }
     BvhInstance inst = RBVH_BVH_INSTANCE(k);
     ray = rbvh_ray_into(inst, ray);
-    leaves.shear = rbvh_shear(ray);
     leaves.entered = k;
     root = inst.root;
     return true;
@@ -395,7 +396,6 @@ bool rbvh_enter_instance(inout BvhInstanceHook leaves, uint reference, uint coun
 // Leaves the instance entered last: `ray` is the world's again (kept beside the stack).
 void rbvh_exit_instance(inout BvhInstanceHook leaves, inout Ray ray) {
     ray = rbvh_kept_ray();
-    leaves.shear = rbvh_shear(ray);
     leaves.entered = RBVH_INVALID;
 }
 
@@ -407,7 +407,7 @@ bool rbvh_test(inout BvhInstanceHook leaves, Ray ray, bool any_hit, uint referen
     }
     uint first = reference & ~RBVH_LEAF_BIT;
     uint end = rbvh_slot_end(first, count, leaves.sz.tri_count);
-    bool hit = rbvh_test_triangles(leaves.shear, ray, any_hit, first, end, leaves.sz.tri_count,
+    bool hit = rbvh_test_triangles(rbvh_shear(ray), ray, any_hit, first, end, leaves.sz.tri_count,
                                    t_closest, leaves.best_slot, steps, cut);
     if (hit) {
         leaves.best_instance = leaves.entered;
@@ -427,7 +427,7 @@ bool rbvh_test(inout BvhInstanceHook leaves, Ray ray, bool any_hit, uint referen
 // its mesh's triangle in `id`, the normal taken to world space by the instance (the transpose of
 // world_to_mesh: GpuInstance::normal_out).
 Hit rbvh_trace_instances(Ray ray, bool any_hit, BvhInstanceSizes sz, out uint steps, out bool overflow) {
-    BvhInstanceHook leaves = BvhInstanceHook(sz, rbvh_shear(ray), RBVH_INVALID, RBVH_INVALID, RBVH_INVALID);
+    BvhInstanceHook leaves = BvhInstanceHook(sz, RBVH_INVALID, RBVH_INVALID, RBVH_INVALID);
     float t = rbvh_traverse_instances(ray, any_hit, leaves, steps, overflow);
     if (leaves.best_slot == RBVH_INVALID) {
         return rbvh_miss();

@@ -94,6 +94,8 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
     uint top_visits = 0u;
     // Where the next round starts: the root, then an instance's root after it is entered.
     uint start = 0u;
+    // Whether the inner loop popped an instance's end, which the next round's start takes back.
+    bool leaving = false;
 #endif
     // The stack's entries in rbvh_stack: rbvh_stack_entry's word and the distance at which the
     // child's box was entered, so that an entry whose box now lies beyond the nearest hit is
@@ -110,6 +112,16 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
         // registers", "Words kept beside the stack").
 #ifdef RBVH_KEEPS_RAY
         ray = rbvh_kept_ray();
+#endif
+#ifdef RBVH_TRAVERSE_INSTANCES
+        // An instance's end popped in the last round: the world ray back, here rather than in
+        // the inner loop, where the hook's new shear would be made beside every node's values.
+        if (leaving) {
+            rbvh_exit_instance(leaves, ray);
+            inside = false;
+            visits = top_visits;
+            leaving = false;
+        }
 #endif
         vec3 inv_dir = rbvh_safe_inverse(ray.dir);
         // The reference to visit next: the root in the first round, else RBVH_INVALID (pop one).
@@ -131,11 +143,8 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
                     sp -= 1u;
 #ifdef RBVH_TRAVERSE_INSTANCES
                     if (rbvh_stack[sp].y == RBVH_INSTANCE_END) {
-                        rbvh_exit_instance(leaves, ray);
-                        inv_dir = rbvh_safe_inverse(ray.dir);
-                        inside = false;
-                        visits = top_visits;
-                        continue;
+                        leaving = true;
+                        break;
                     }
 #endif
                     if (uintBitsToFloat(rbvh_stack[sp].y) <= t_closest) {
@@ -145,6 +154,11 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
                     }
                 }
                 if (!popped) {
+#ifdef RBVH_TRAVERSE_INSTANCES
+                    if (leaving) {
+                        break;
+                    }
+#endif
                     if (sp > 0u) {
                         cut = true;
                     } else {
@@ -212,6 +226,11 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
             count_of_node = next_count;
         }
         // A leaf met in the last round is left untested: the bound ran out.
+#ifdef RBVH_TRAVERSE_INSTANCES
+        if (leaving && round < bound) {
+            continue;
+        }
+#endif
         if (pending == RBVH_INVALID || round == bound) {
             break;
         }

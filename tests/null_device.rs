@@ -134,10 +134,11 @@ fn every_pipeline_compiles_on_the_null_device_and_reports_its_registers() {
                 "{}: {vgprs} VGPRs, {spilled} spilled",
                 p.pipeline
             ),
-            // The two-level tracer, as first written (80 at its first commit: the instance's
-            // state and the ray that changes level live through the walk).
+            // The two-level tracer: 56 (8 more counting) once its shear is made where a leaf is
+            // tested and the world ray taken back at a round's start (80 as first written:
+            // docs/speed.md, "The two-level exact tracer's registers").
             "trace_exact_instances" => assert!(
-                vgprs <= 80 && spilled == 0,
+                vgprs <= rbvh_bound(p) && spilled == 0,
                 "{}: {vgprs} VGPRs, {spilled} spilled",
                 p.pipeline
             ),
