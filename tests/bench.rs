@@ -732,3 +732,52 @@ fn the_cli_writes_json_and_csv_and_rejects_unknown_ray_types() {
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("bounce"));
 }
+
+/// A scene with instances is measured flat and in two levels: the two-level exact BVH's records
+/// (method `exact-instanced`) follow the exact BVH's in every ray type, hit what it hits (its hits
+/// compared as the flat scene's triangles), store each mesh once, and are valid.
+#[test]
+fn a_scene_with_instances_is_measured_in_two_levels_beside_the_flat_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("placed.toml");
+    std::fs::write(
+        &path,
+        "[[mesh]]\nbuiltin = \"plane\"\n\
+         [[instance]]\nbuiltin = \"bumpy-sphere\"\ntranslate = [0.5, 0.3, 0.0]\nscale = 0.4\n\
+         [[instance]]\nbuiltin = \"bumpy-sphere\"\ntranslate = [-0.5, 0.3, 0.0]\nrotate = [0.0, 60.0, 0.0]\nscale = [-0.3, 0.4, 0.3]\n",
+    )
+    .unwrap();
+    let mut config = BenchConfig::new(
+        vec![path.to_str().unwrap().into()],
+        Device::Existing(common::context()),
+    );
+    config.levels = vec![q(2)];
+    config.width = 48;
+    config.height = 32;
+    config.runs = 1;
+    config.seam_rays = 0;
+    config.ray_types = vec![RayType::Primary, RayType::Shadow];
+    let report = bench::run(&config).unwrap();
+    assert_eq!(report.results.len(), 2 * 3);
+    for chunk in report.results.chunks(3) {
+        let (flat, two) = (&chunk[0], &chunk[1]);
+        assert_eq!(
+            (flat.method, two.method),
+            (Kind::Exact, Kind::ExactInstanced)
+        );
+        assert_eq!(chunk[2].method, Kind::Rbvh);
+        assert!(two.valid, "{:?}", two.invalid_reason);
+        assert_eq!(two.triangles, flat.triangles, "triangles as placed");
+        assert!(
+            two.memory_bytes.triangles * 3 < flat.memory_bytes.triangles * 2,
+            "the bumpy sphere stored once: {} against {} bytes",
+            two.memory_bytes.triangles,
+            flat.memory_bytes.triangles
+        );
+        let errors = two.error.as_ref().expect("errors against the exact BVH");
+        assert_eq!(errors.miss_mismatch_rate, 0.0, "{errors:?}");
+        if let Some(t) = errors.t_err_p99 {
+            assert!(t < 1e-5, "{errors:?}");
+        }
+    }
+}

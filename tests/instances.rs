@@ -48,26 +48,12 @@ fn placed() -> InstancedScene {
     }
 }
 
-/// Per instance, the index of its first triangle in the flat scene.
-fn flat_bases(scene: &InstancedScene) -> Vec<u32> {
-    let mut base = 0;
-    scene
-        .instances
-        .iter()
-        .map(|i| {
-            let b = base;
-            base += scene.meshes[i.mesh as usize].triangle_count() as u32;
-            b
-        })
-        .collect()
-}
-
 /// Compares the two-level hits with the flat exact BVH's on `rays`: the same triangle (the flat
 /// index of the instance's triangle), `t` to 1e-4 relative or 1e-5 of the scene's diagonal,
 /// normals to 1e-3, and hit/miss
 /// disagreements (a ray through a shared edge, decided in two spaces) at most `max_rate`.
 fn compare(scene: &InstancedScene, two: &InstancedBvh, flat: &Bvh, rays: &[Ray], any: bool) {
-    let bases = flat_bases(scene);
+    let bases = scene.flat_bases();
     let diagonal = scene.bounds().diagonal();
     let (mut disagree, mut other_triangle) = (0usize, 0usize);
     for (i, ray) in rays.iter().enumerate() {

@@ -40,7 +40,7 @@ use super::steps;
 use super::traffic::{self, TrafficModel, CACHE_SIZES, DRAM_LINE};
 use super::validate;
 use super::{BenchConfig, Device};
-use crate::bvh::Bvh;
+use crate::bvh::{Bvh, InstancedBvh};
 use crate::geom::{Hit, Ray};
 use crate::gpu::{Context, Query, Timing, Traced, Tracer};
 use crate::lod::{Cones, Lod, RayCone};
@@ -49,7 +49,7 @@ use crate::probe::{Array, MeanCounters, Read, TraceStats};
 use crate::progress::{Progress, Quiet};
 use crate::rays::{self, RayType, Secondary, DEFAULT_LIGHT};
 use crate::rbvh::{Rbvh, RbvhParams, RbvhSource, TexelFormat};
-use crate::scene::Scene;
+use crate::scene::{InstancedScene, Scene};
 use crate::structure::{Kind, Recipe, Structure};
 use crate::{Error, Result};
 
@@ -108,10 +108,21 @@ pub fn run_observed(
     let measurements = config.scenes.len() * config.ray_types.len();
     let mut measurement = 0;
     for spec in &config.scenes {
-        let mut scene = {
+        let placed = {
             observe(Event::Progress(format!("{spec}: loading")));
-            Scene::load_observed(spec, progress)?
+            InstancedScene::load_observed(spec, progress)?
         };
+        // A scene with instances is measured flat and in two levels.
+        let two_level = if placed.instances.len() > 1 {
+            observe(Event::Progress(format!(
+                "{spec}: building the two-level exact BVH"
+            )));
+            Some((InstancedBvh::build(&placed)?, placed.flat_bases()))
+        } else {
+            None
+        };
+        let mut scene = placed.into_flat();
+        scene.validate()?;
         if scene.triangle_count() == 0 && scene.points.is_some() {
             return Err(Error::param(
                 "scenes",
@@ -130,7 +141,7 @@ pub fn run_observed(
             // Every row says that its RBVHs are of points, not of the triangles.
             scene.name = format!("{} ({label})", scene.name);
         }
-        let mut bench = SceneBench::new(&ctx, config, scene, observe, progress)?;
+        let mut bench = SceneBench::new(&ctx, config, scene, two_level, observe, progress)?;
         for c in &bench.candidates {
             let compiled = c.tracer.compiled();
             if !report
@@ -173,6 +184,10 @@ struct Candidate {
     tracer: Tracer,
     /// Leaks through the seams (plain RBVHs, when asked for).
     seams: Option<SeamRecord>,
+    /// For a two-level structure, per instance the index of its first triangle in the flat
+    /// scene: its hits name their mesh's triangle and instance, and are compared as the flat
+    /// scene's triangle.
+    flat_ids: Option<Vec<u32>>,
 }
 
 /// Ray `k` of a batch traced by a CPU twin, its reads pushed to the vector.
@@ -192,10 +207,11 @@ impl Candidate {
         }
     }
 
-    /// "exact", "q2", "q2h" (height-only), "q2_lod", "custom": for file names.
+    /// "exact", "exact-instanced", "q2", "q2h" (height-only), "q2_lod", "custom": for file
+    /// names.
     fn file_stem(&self) -> String {
         match &self.params {
-            None => "exact".into(),
+            None => self.method().name().into(),
             Some(params) if self.method() == Kind::RbvhLod => {
                 format!("{}_lod", params.level_label().to_ascii_lowercase())
             }
@@ -206,7 +222,14 @@ impl Candidate {
     /// Traces `rays` with their footprints (read by a level-of-detail candidate); `counters`
     /// through the counting pipeline.
     fn trace(&self, rays: &[Ray], cones: Cones, query: Query, counters: bool) -> Result<Traced> {
-        self.tracer.trace_with(rays, cones, query, counters)
+        let mut traced = self.tracer.trace_with(rays, cones, query, counters)?;
+        if let Some(bases) = &self.flat_ids {
+            for hit in traced.hits.iter_mut().filter(|h| h.is_hit()) {
+                let base = bases.get(hit.instance as usize).copied().unwrap_or(0);
+                hit.id = base.saturating_add(hit.id);
+            }
+        }
+        Ok(traced)
     }
 
     /// Traces `rays` `passes` times back to back, for timing ([`Tracer::trace_repeated`]).
@@ -249,11 +272,14 @@ struct Measured {
 }
 
 impl<'a> SceneBench<'a> {
-    /// Builds and uploads every structure and traces the exact primary hits.
+    /// Builds and uploads every structure and traces the exact primary hits. `two_level`, for a
+    /// scene with instances, is its two-level exact BVH (with per instance its first triangle in
+    /// `scene`, the scene flattened): measured beside the flat one, as method `exact-instanced`.
     fn new(
         ctx: &Context,
         config: &'a BenchConfig,
         scene: Scene,
+        two_level: Option<(InstancedBvh, Vec<u32>)>,
         observe: &mut dyn FnMut(Event),
         progress: &dyn Progress,
     ) -> Result<SceneBench<'a>> {
@@ -282,7 +308,18 @@ impl<'a> SceneBench<'a> {
             structure,
             params: None,
             seams: None,
+            flat_ids: None,
         }];
+        if let Some((two_level, flat_ids)) = two_level {
+            let structure = Structure::from(two_level);
+            candidates.push(Candidate {
+                tracer: Tracer::new_observed(ctx, &structure, progress)?,
+                structure,
+                params: None,
+                seams: None,
+                flat_ids: Some(flat_ids),
+            });
+        }
         // Secondary rays leave the exact surface by at least the coarsest RBVH's texel: an RBVH
         // surface may lie up to a fraction of a texel off the exact one, and a ray starting
         // closer would meet its own surface. One offset for all, so all trace identical rays.
@@ -351,6 +388,7 @@ impl<'a> SceneBench<'a> {
                     structure,
                     params: Some(params),
                     seams,
+                    flat_ids: None,
                 });
             }
         }

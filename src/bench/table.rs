@@ -9,10 +9,11 @@ use std::fmt::Write;
 use super::record::{BenchReport, Record};
 use super::steps::StepsRecord;
 
-/// Columns that lead every table after the scene's, naming the record: header, width, and
-/// whether values are left-aligned (names) rather than right-aligned (numbers).
+/// Columns that lead every table after the scene's, naming the record: header, width (the method
+/// column fits `exact-instanced`), and whether values are left-aligned (names) rather than
+/// right-aligned (numbers).
 const LEAD: [(&str, usize, bool); 3] = [
-    ("method", 8, true),
+    ("method", 15, true),
     ("level", 7, true),
     ("ray type", 8, true),
 ];

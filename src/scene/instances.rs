@@ -81,6 +81,25 @@ impl InstancedScene {
         self.meshes.iter().map(Scene::triangle_count).sum()
     }
 
+    /// Per instance, the index of its first triangle in the flat scene ([`InstancedScene::into_flat`]
+    /// places them one after another, in order): how a flat triangle index is made from an
+    /// instance and its mesh's triangle.
+    pub fn flat_bases(&self) -> Vec<u32> {
+        let mut base = 0u32;
+        self.instances
+            .iter()
+            .map(|i| {
+                let first = base;
+                let n = self
+                    .meshes
+                    .get(i.mesh as usize)
+                    .map_or(0, Scene::triangle_count);
+                base = base.saturating_add(u32::try_from(n).unwrap_or(u32::MAX));
+                first
+            })
+            .collect()
+    }
+
     /// The world box of each instance: its mesh's box transformed (the box of the transformed
     /// corners, which holds every transformed vertex).
     pub fn instance_bounds(&self) -> Vec<Aabb> {
