@@ -855,3 +855,33 @@ fn scene_files_place_point_clouds_but_not_beside_meshes() {
         "{e}"
     );
 }
+
+/// Nodes that draw one mesh are instances of it: the mesh read once in its own space, placed by
+/// each node's world transform (a mirroring one too); flattened, the scene the flat loader reads.
+#[test]
+fn gltf_nodes_sharing_a_mesh_are_its_instances() {
+    let dir = tempfile::tempdir().unwrap();
+    write(dir.path(), "data.bin", gltf_bin());
+    let mirror = r#", { "name": "mirror", "scale": [1, 1, -1], "mesh": 0 }"#;
+    let json = gltf_json(
+        r#"{ "uri": "data.bin", "byteLength": 56 }"#,
+        mirror,
+        "[0, 2, 3]",
+    );
+    let path = write(dir.path(), "shared.gltf", json);
+    let spec = path.to_str().unwrap();
+    let placed = rbvh::scene::InstancedScene::load(spec).unwrap();
+    assert_eq!(placed.meshes.len(), 1, "the mesh read once");
+    assert_eq!(placed.meshes[0].triangle_count(), 3);
+    assert_eq!(placed.instances.len(), 3, "drawn by three nodes");
+    assert!(placed.instances.iter().all(|i| i.mesh == 0));
+    assert!(placed.instances[2].transform.determinant() < 0.0);
+    let flat = placed.into_flat();
+    let expected = load(&path).unwrap();
+    assert_eq!(flat.object_names, expected.object_names);
+    assert_eq!(flat.triangles, expected.triangles);
+    for (a, b) in flat.positions.iter().zip(&expected.positions) {
+        assert_close(*a, *b, 1e-6);
+    }
+    assert_eq!(flat.positions.len(), expected.positions.len());
+}

@@ -23,6 +23,7 @@ use ::gltf::mesh::{Mode, Semantic};
 use ::gltf::{Accessor, Document, Node, Primitive};
 use glam::{Mat4, Vec2, Vec3, Vec4};
 
+use super::instances::{Instance, InstancedScene};
 use super::material::{Material, NO_MATERIAL};
 use super::texture::{Texture, Wrap};
 use super::{ObjectSurface, Scene};
@@ -32,6 +33,79 @@ use crate::{Error, Result};
 /// default scene (or in all scenes when none is the default), with node transforms applied.
 /// Each primitive instance becomes an object named `mesh/primN`.
 pub(super) fn load(path: &Path) -> Result<Scene> {
+    let (document, buffers, base) = open(path)?;
+    let fail = |message: String| Error::parse(path, None, message);
+    let mut scene = Scene::new(path.display().to_string());
+    let mut materials = Materials {
+        path,
+        base: &base,
+        buffers: &buffers,
+        ids: HashMap::new(),
+        images: HashMap::new(),
+    };
+    for (node, transform) in mesh_instances(&document).map_err(fail)? {
+        let Some(mesh) = node.mesh() else { continue };
+        push_mesh(&mut scene, &mesh, transform, &mut materials)?;
+    }
+    scene.validate()?;
+    Ok(scene)
+}
+
+/// As [`load`], keeping the nodes that share a mesh as instances of it (issue "Instances"): each
+/// mesh a node draws is read once, in its own space (unnamed, so that flattened its objects keep
+/// their `mesh/primN` names), and each such node places it with its world transform. Flattened
+/// ([`InstancedScene::into_flat`]) it is what [`load`] reads, but for the materials, which each
+/// mesh holds its own copy of.
+pub(super) fn load_instanced(path: &Path) -> Result<InstancedScene> {
+    let (document, buffers, base) = open(path)?;
+    let fail = |message: String| Error::parse(path, None, message);
+    let mut scene = InstancedScene {
+        name: path.display().to_string(),
+        ..InstancedScene::default()
+    };
+    let mut materials = Materials {
+        path,
+        base: &base,
+        buffers: &buffers,
+        ids: HashMap::new(),
+        images: HashMap::new(),
+    };
+    // glTF mesh index → the scene's mesh, or None for one with nothing to trace.
+    let mut mesh_of: HashMap<usize, Option<u32>> = HashMap::new();
+    for (node, transform) in mesh_instances(&document).map_err(fail)? {
+        let Some(mesh) = node.mesh() else { continue };
+        let index = match mesh_of.get(&mesh.index()) {
+            Some(&index) => index,
+            None => {
+                let mut own = Scene::new("");
+                // Material ids are the mesh's own table's; decoded images stay shared.
+                materials.ids.clear();
+                push_mesh(&mut own, &mesh, Mat4::IDENTITY, &mut materials)?;
+                let index = (own.triangle_count() > 0).then(|| {
+                    scene.meshes.push(own);
+                    (scene.meshes.len() - 1) as u32
+                });
+                mesh_of.insert(mesh.index(), index);
+                index
+            }
+        };
+        if let Some(mesh) = index {
+            scene.instances.push(Instance { mesh, transform });
+        }
+    }
+    if scene.instances.is_empty() {
+        return Err(fail(
+            "no triangles: nothing in the file can be traced (no faces, or only points and lines)"
+                .to_string(),
+        ));
+    }
+    scene.validate()?;
+    Ok(scene)
+}
+
+/// The document of the glTF or GLB file at `path`, checked, its buffers loaded, and the folder
+/// its relative URIs start from.
+fn open(path: &Path) -> Result<(Document, Vec<Data>, std::path::PathBuf)> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     // gltf 1.4 subtracts the 12-byte header from the GLB's declared length unchecked (a panic in
     // debug builds, a misleading error in release ones): a shorter length is refused here.
@@ -84,91 +158,93 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
             format!("cannot load the buffer data it refers to: {e}"),
         )
     })?;
+    let base = base.to_path_buf();
+    Ok((document, buffers, base))
+}
 
-    let mut scene = Scene::new(path.display().to_string());
-    let mut materials = Materials {
-        path,
-        base,
-        buffers: &buffers,
-        ids: HashMap::new(),
-        images: HashMap::new(),
-    };
-    for (node, transform) in mesh_instances(&document).map_err(fail)? {
-        let Some(mesh) = node.mesh() else { continue };
-        let mesh_name = mesh
-            .name()
-            .map_or_else(|| format!("mesh{}", mesh.index()), str::to_owned);
-        for primitive in mesh.primitives() {
-            let object = format!("{mesh_name}/prim{}", primitive.index());
-            let Some((positions, triangles)) = read_primitive(&primitive, &buffers)
-                .map_err(|e| fail(format!("mesh {object:?}: {e}")))?
-            else {
-                continue;
-            };
-            if triangles.is_empty() {
-                continue;
-            }
-            // A mirroring transform flips orientation; glTF asks loaders to reverse the winding.
-            let mirror = transform.determinant() < 0.0;
-            let positions: Vec<Vec3> = positions
-                .iter()
-                .map(|&p| transform.transform_point3(p))
-                .collect();
-            let material = primitive.material();
-            let vertex_colours = read_colours(&primitive, positions.len(), &buffers)
-                .map_err(|e| fail(format!("mesh {object:?}: {e}")))?;
-            if material.index().is_none() && vertex_colours.is_none() {
-                let triangles: Vec<[u32; 3]> = triangles
-                    .into_iter()
-                    .map(|[a, b, c]| if mirror { [a, c, b] } else { [a, b, c] })
-                    .collect();
-                scene.push_object(object, &positions, &triangles);
-                continue;
-            }
-            let id = materials.id(&mut scene, &material)?;
-            let uvs = match material.pbr_metallic_roughness().base_color_texture() {
-                Some(info) => {
-                    let transform = info.texture_transform().map(|t| UvTransform {
-                        offset: Vec2::from(t.offset()),
-                        rotation: t.rotation(),
-                        scale: Vec2::from(t.scale()),
-                    });
-                    let set = info
-                        .texture_transform()
-                        .and_then(|t| t.tex_coord())
-                        .unwrap_or(info.tex_coord());
-                    let uvs = read_texcoords(&primitive, set, positions.len(), &buffers)
-                        .map_err(|e| fail(format!("mesh {object:?}: {e}")))?;
-                    match transform {
-                        Some(t) => uvs.into_iter().map(|uv| t.apply(uv)).collect(),
-                        None => uvs,
-                    }
-                }
-                None => vec![Vec2::ZERO; positions.len()],
-            };
-            let (triangles, uv_of_triangle): (Vec<[u32; 3]>, Vec<[Vec2; 3]>) = triangles
-                .into_iter()
-                .map(|[a, b, c]| {
-                    let t = if mirror { [a, c, b] } else { [a, b, c] };
-                    (t, t.map(|v| uvs[v as usize]))
-                })
-                .unzip();
-            let colour_of_triangle = vertex_colours.map(|colours| {
-                triangles
-                    .iter()
-                    .map(|t| t.map(|v| colours[v as usize]))
-                    .collect()
-            });
-            let surface = ObjectSurface {
-                material_of_triangle: vec![id; triangles.len()],
-                uv_of_triangle,
-                colour_of_triangle,
-            };
-            scene.push_textured_object(object, &positions, &triangles, surface);
+/// Adds `mesh`'s triangle primitives to `scene`, placed by `transform`: each an object named
+/// `mesh/primN`, with its material and texture coordinates where it has them.
+fn push_mesh(
+    scene: &mut Scene,
+    mesh: &::gltf::Mesh,
+    transform: Mat4,
+    materials: &mut Materials,
+) -> Result<()> {
+    let path = materials.path;
+    let fail = |message: String| Error::parse(path, None, message);
+    let buffers = materials.buffers;
+    let mesh_name = mesh
+        .name()
+        .map_or_else(|| format!("mesh{}", mesh.index()), str::to_owned);
+    for primitive in mesh.primitives() {
+        let object = format!("{mesh_name}/prim{}", primitive.index());
+        let Some((positions, triangles)) = read_primitive(&primitive, buffers)
+            .map_err(|e| fail(format!("mesh {object:?}: {e}")))?
+        else {
+            continue;
+        };
+        if triangles.is_empty() {
+            continue;
         }
+        // A mirroring transform flips orientation; glTF asks loaders to reverse the winding.
+        let mirror = transform.determinant() < 0.0;
+        let positions: Vec<Vec3> = positions
+            .iter()
+            .map(|&p| transform.transform_point3(p))
+            .collect();
+        let material = primitive.material();
+        let vertex_colours = read_colours(&primitive, positions.len(), buffers)
+            .map_err(|e| fail(format!("mesh {object:?}: {e}")))?;
+        if material.index().is_none() && vertex_colours.is_none() {
+            let triangles: Vec<[u32; 3]> = triangles
+                .into_iter()
+                .map(|[a, b, c]| if mirror { [a, c, b] } else { [a, b, c] })
+                .collect();
+            scene.push_object(object, &positions, &triangles);
+            continue;
+        }
+        let id = materials.id(scene, &material)?;
+        let uvs = match material.pbr_metallic_roughness().base_color_texture() {
+            Some(info) => {
+                let transform = info.texture_transform().map(|t| UvTransform {
+                    offset: Vec2::from(t.offset()),
+                    rotation: t.rotation(),
+                    scale: Vec2::from(t.scale()),
+                });
+                let set = info
+                    .texture_transform()
+                    .and_then(|t| t.tex_coord())
+                    .unwrap_or(info.tex_coord());
+                let uvs = read_texcoords(&primitive, set, positions.len(), buffers)
+                    .map_err(|e| fail(format!("mesh {object:?}: {e}")))?;
+                match transform {
+                    Some(t) => uvs.into_iter().map(|uv| t.apply(uv)).collect(),
+                    None => uvs,
+                }
+            }
+            None => vec![Vec2::ZERO; positions.len()],
+        };
+        let (triangles, uv_of_triangle): (Vec<[u32; 3]>, Vec<[Vec2; 3]>) = triangles
+            .into_iter()
+            .map(|[a, b, c]| {
+                let t = if mirror { [a, c, b] } else { [a, b, c] };
+                (t, t.map(|v| uvs[v as usize]))
+            })
+            .unzip();
+        let colour_of_triangle = vertex_colours.map(|colours| {
+            triangles
+                .iter()
+                .map(|t| t.map(|v| colours[v as usize]))
+                .collect()
+        });
+        let surface = ObjectSurface {
+            material_of_triangle: vec![id; triangles.len()],
+            uv_of_triangle,
+            colour_of_triangle,
+        };
+        scene.push_textured_object(object, &positions, &triangles, surface);
     }
-    scene.validate()?;
-    Ok(scene)
+    Ok(())
 }
 
 /// The file's materials as scene materials, each added once, its image decoded once.

@@ -2,9 +2,9 @@
 
 use std::path::Path;
 
-use super::mesh_file::{load_mesh_file, FileType};
+use super::mesh_file::{check_mesh_file, load_mesh_file, FileType};
 use super::regular_file::regular_file;
-use super::{builtin, scene_file, InstancedScene, Scene};
+use super::{builtin, gltf, scene_file, InstancedScene, Scene};
 use crate::progress::{step, Progress, Quiet};
 use crate::{Error, Result};
 
@@ -60,9 +60,9 @@ impl Scene {
 }
 
 impl InstancedScene {
-    /// Loads `spec` as [`Scene::load`] does, keeping a scene file's instances
-    /// ([`InstancedScene`]); a mesh file or a built-in scene is one mesh placed once
-    /// ([`InstancedScene::single`]).
+    /// Loads `spec` as [`Scene::load`] does, keeping a scene file's instances and a glTF file's
+    /// nodes that share a mesh ([`InstancedScene`]); any other mesh file or built-in scene is one
+    /// mesh placed once ([`InstancedScene::single`]).
     pub fn load(spec: &str) -> Result<InstancedScene> {
         InstancedScene::load_observed(spec, &Quiet)
     }
@@ -71,6 +71,12 @@ impl InstancedScene {
     pub fn load_observed(spec: &str, progress: &dyn Progress) -> Result<InstancedScene> {
         match resolve(spec)? {
             Some((path, FileType::SceneFile)) => scene_file::load(path, progress),
+            Some((path, FileType::Gltf)) => {
+                step(progress, &format!("loading {}", path.display()), 0, || {
+                    check_mesh_file(path)?;
+                    gltf::load_instanced(path)
+                })
+            }
             _ => Scene::load_observed(spec, progress).map(InstancedScene::single),
         }
     }
