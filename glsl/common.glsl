@@ -21,7 +21,7 @@ struct Hit {
     uint reserved2;
 };
 
-// One ray's work (src/probe.rs, RayCounters; 32 bytes, tests/layout.rs checks the order): counted
+// One ray's work (src/probe.rs, RayCounters; 40 bytes, tests/layout.rs checks the order): counted
 // by the traversals only where the includer defines RBVH_COUNT as a true condition before the
 // #include (the trace shaders define it as a specialization constant, so that their timed runs
 // compile the counting away); other includers pay nothing. The traversal (traverse.glsl) resets
@@ -35,13 +35,15 @@ struct RbvhCounters {
     uint jumps;            // block jumps (src/rbvh/ranges.rs)
     uint triangle_leaves;  // triangle leaves tested
     uint triangles;        // triangles tested in them
+    uint instances;        // instances entered (a two-level BVH's top-level leaves)
+    uint top_nodes;        // of `nodes`, those of a two-level BVH's top level
 };
 #ifndef RBVH_COUNT
 #define RBVH_COUNT false
 #endif
 RbvhCounters rbvh_counters;
 #define RBVH_COUNT_ADD(field, n) if (RBVH_COUNT) { rbvh_counters.field += (n); }
-#define RBVH_COUNT_RESET() if (RBVH_COUNT) { rbvh_counters = RbvhCounters(0u, 0u, 0u, 0u, 0u, 0u, 0u, 0u); }
+#define RBVH_COUNT_RESET() if (RBVH_COUNT) { rbvh_counters = RbvhCounters(0u, 0u, 0u, 0u, 0u, 0u, 0u, 0u, 0u, 0u); }
 
 const uint RBVH_INVALID = 0xFFFFFFFFu;
 #define RBVH_INF uintBitsToFloat(0x7F800000u)

@@ -1,6 +1,6 @@
 // The per-trace buffers of every trace shader, at the bindings bindings.glsl gives them (which the
 // includer includes): rays, hits, the count of rays whose traversal overflowed, and per-ray
-// counters (RbvhCounters, 8 words a ray; written only by the counting specialization, RBVH_COUNT,
+// counters (RbvhCounters, 10 words a ray; written only by the counting specialization, RBVH_COUNT,
 // else the binding may hold a 4-byte dummy).
 #ifndef RBVH_TRACE_IO_GLSL
 #define RBVH_TRACE_IO_GLSL

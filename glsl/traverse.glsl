@@ -183,6 +183,9 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
                 visits += 1u;
                 steps += 1u;
                 RBVH_COUNT_ADD(nodes, 1u);
+#ifdef RBVH_TRAVERSE_INSTANCES
+                RBVH_COUNT_ADD(top_nodes, inside ? 0u : 1u);
+#endif
                 BvhNode n = RBVH_BVH_NODE(node);
                 vec3 a_min;
                 vec3 a_max;
@@ -238,6 +241,7 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
         uint root;
         if (!inside && rbvh_enter_instance(leaves, pending, pending_count, ray, root)) {
             if (sp < RBVH_STACK_SIZE) {
+                RBVH_COUNT_ADD(instances, 1u);
                 rbvh_stack[sp] = uvec2(0u, RBVH_INSTANCE_END);
                 sp += 1u;
                 inside = true;

@@ -100,12 +100,12 @@ pub mod surface;
 pub use error::{Error, Result};
 
 // The types most users need, at the crate root (their modules hold the rest).
-pub use bvh::Bvh;
+pub use bvh::{Bvh, InstancedBvh};
 pub use geom::{Aabb, Hit, Ray};
 pub use gpu::{Context, ContextOptions, External, Query, Tracer};
 pub use lod::{Lod, LodParams, RayCone};
 pub use rbvh::{Rbvh, RbvhParams};
-pub use scene::{Camera, Scene};
+pub use scene::{Camera, Instance, InstancedScene, Scene};
 pub use structure::Structure;
 
 // The crates whose types appear in the public API (`gpu::External` holds `ash` handles and a

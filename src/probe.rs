@@ -12,7 +12,7 @@ use bytemuck::{Pod, Zeroable};
 
 /// One ray's work, counted the same way by the device (`RbvhCounters` in `glsl/common.glsl`) and
 /// by the CPU twins (`Bvh::closest_hit`, `Rbvh::closest_hit`), so the two can be compared ray by
-/// ray. 32 bytes, 8 words in this order (`tests/layout.rs` checks the GLSL struct).
+/// ray. 40 bytes, 10 words in this order (`tests/layout.rs` checks the GLSL struct).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
 pub struct RayCounters {
@@ -32,8 +32,13 @@ pub struct RayCounters {
     pub triangle_leaves: u32,
     /// Triangles tested in triangle leaves (height-field cells count in `cells`).
     pub triangles: u32,
+    /// Instances entered (a two-level structure's top-level leaves; 0 in every other).
+    pub instances: u32,
+    /// Of `nodes`, those of a two-level structure's top level (0 in every other): the rest were
+    /// visited in the instances' meshes.
+    pub top_nodes: u32,
 }
-const _: () = assert!(std::mem::size_of::<RayCounters>() == 32);
+const _: () = assert!(std::mem::size_of::<RayCounters>() == 40);
 
 impl RayCounters {
     /// The heat map's "steps": inner nodes + triangles tested + cells visited.
@@ -63,6 +68,13 @@ pub struct MeanCounters {
     pub triangle_leaves: f64,
     /// Triangles tested in triangle leaves per ray ([`RayCounters::triangles`]).
     pub triangles: f64,
+    /// Instances entered per ray ([`RayCounters::instances`]; absent from records made before
+    /// two-level structures, read as 0).
+    #[serde(default)]
+    pub instances: f64,
+    /// Top-level inner nodes visited per ray ([`RayCounters::top_nodes`]; as `instances`).
+    #[serde(default)]
+    pub top_nodes: f64,
     /// Mean steps ([`RayCounters::steps`]) over the mean of the longest in each group of 8
     /// consecutive rays: how busy an 8-wide SIMD group (lavapipe's, on AVX2) stays when every lane
     /// waits for its slowest. 1 when all rays of a group cost alike.
@@ -93,6 +105,8 @@ impl MeanCounters {
             jumps: mean(|c| c.jumps),
             triangle_leaves: mean(|c| c.triangle_leaves),
             triangles: mean(|c| c.triangles),
+            instances: mean(|c| c.instances),
+            top_nodes: mean(|c| c.top_nodes),
             simd8_utilisation: if total > 0.0 { busy / total } else { 1.0 },
         }
     }

@@ -68,6 +68,18 @@ fn compare(scene: &InstancedScene, two: &InstancedBvh, flat: &Bvh, rays: &[Ray],
             flat.closest_hit(ray)
         };
         assert!(!stats.overflow, "ray {i} overflowed");
+        // Counted per level: the top level's nodes among all, an instance entered per mesh
+        // tree walked, and a hit only inside one.
+        let c = stats.counters;
+        assert!(
+            c.top_nodes <= c.nodes && c.top_nodes <= two.top_nodes,
+            "ray {i}: {c:?}"
+        );
+        assert!(
+            c.instances <= scene.instances.len() as u32,
+            "ray {i}: {c:?}"
+        );
+        assert!(!h.is_hit() || c.instances >= 1, "ray {i}: {c:?}");
         if h.is_hit() != f.is_hit() {
             disagree += 1;
             continue;
@@ -425,4 +437,59 @@ fn the_device_traces_two_levels_as_the_cpu_does() {
             );
         }
     }
+}
+
+/// Moving instances on the device rewrites the top level and the instance records alone: the
+/// moved tracer's hits are a fresh upload's, bit for bit, and the CPU's. Another structure, or a
+/// two-level BVH of other sizes, is refused by name.
+#[test]
+fn moving_instances_on_the_device_uploads_the_top_level_alone() {
+    use rbvh::gpu::{Query, Tracer};
+    use rbvh::structure::Structure;
+
+    let scene = placed();
+    let mut two = InstancedBvh::build(&scene).unwrap();
+    let ctx = common::context();
+    let mut tracer = Tracer::new(&ctx, &Structure::from(two.clone())).unwrap();
+    let rays = random_rays(&scene.clone().into_flat(), 3_000, &mut Rng::new(9));
+    let before = tracer.trace(&rays, Query::Closest).unwrap().hits;
+    let moved: Vec<Mat4> = scene
+        .instances
+        .iter()
+        .enumerate()
+        .map(|(k, i)| Mat4::from_rotation_y(0.2 * k as f32) * i.transform)
+        .collect();
+    two.set_transforms(&moved).unwrap();
+    tracer.update_instances(&two).unwrap();
+    let after = tracer.trace(&rays, Query::Closest).unwrap().hits;
+    let fresh = Tracer::new(&ctx, &Structure::from(two.clone()))
+        .unwrap()
+        .trace(&rays, Query::Closest)
+        .unwrap()
+        .hits;
+    assert_eq!(after, fresh);
+    assert_ne!(after, before, "the instances moved");
+    for (i, (ray, hit)) in rays.iter().zip(&after).enumerate() {
+        let (cpu, _) = two.closest_hit(ray);
+        assert_eq!(
+            (hit.is_hit(), hit.instance, hit.id),
+            (cpu.is_hit(), cpu.instance, cpu.id),
+            "ray {i}"
+        );
+    }
+
+    let e = tracer.update_instances(
+        &InstancedBvh::build(&InstancedScene::single(Scene::builtin("cube").unwrap())).unwrap(),
+    );
+    assert!(e
+        .unwrap_err()
+        .to_string()
+        .contains("not the uploaded structure"));
+    let mut flat = Tracer::new(
+        &ctx,
+        &Structure::from(Bvh::build(&Scene::builtin("cube").unwrap()).unwrap()),
+    )
+    .unwrap();
+    let e = flat.update_instances(&two).unwrap_err().to_string();
+    assert!(e.contains("not a two-level exact BVH"), "{e}");
 }

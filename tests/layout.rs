@@ -102,10 +102,14 @@ fn counter_layout_matches_in_every_trace_shader() {
         ("jumps", offset_of!(RayCounters, jumps)),
         ("triangle_leaves", offset_of!(RayCounters, triangle_leaves)),
         ("triangles", offset_of!(RayCounters, triangles)),
+        ("instances", offset_of!(RayCounters, instances)),
+        ("top_nodes", offset_of!(RayCounters, top_nodes)),
     ];
     for spirv_bytes in [
         shaders::TRACE_EXACT,
         shaders::TRACE_EXACT_BDA,
+        shaders::TRACE_EXACT_INSTANCES,
+        shaders::TRACE_EXACT_INSTANCES_BDA,
         shaders::TRACE_RBVH,
         shaders::TRACE_RBVH_BDA,
         shaders::TRACE_RBVH_LOD,

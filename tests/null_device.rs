@@ -119,8 +119,10 @@ fn every_pipeline_compiles_on_the_null_device_and_reports_its_registers() {
             .map_or(0, |v| v.to_string().parse::<u64>().unwrap_or(u64::MAX))
     };
     let rbvh_bound = |p: &rbvh::gpu::CompiledPipeline| {
+        // The counting pipelines (untimed) took 64 until the counters grew from 8 words to 10
+        // for the two-level structures (72 since; the timed ones did not move).
         let counting = if p.pipeline.contains("counting") {
-            8
+            16
         } else {
             0
         };

@@ -344,13 +344,18 @@ fn text(v: &Value) -> String {
     }
 }
 
-/// A record's level as the bench tables write it: `exact`, `Q2`, `Q2h` (height-only), `Q2s`
+/// A record's level as the bench tables write it: `exact`, `exact, two levels` (a scene's with
+/// instances, method `exact-instanced`), `Q2`, `Q2h` (height-only), `Q2s`
 /// (every triangle a height field can hold sampled, `exact_when_cheaper` false), `Q2 LOD`.
 /// Records made before `exact_when_cheaper` existed have no such field and no `s`: they were
 /// the presets of their commit, which the table's caption names.
 fn level(record: &Value) -> String {
     let Some(q) = record["quality"].as_str() else {
-        return "exact".into();
+        // The exact BVH, or a scene's with instances in two levels (`exact-instanced`).
+        return match record["method"].as_str() {
+            Some("exact-instanced") => "exact, two levels".into(),
+            _ => "exact".into(),
+        };
     };
     let name = crate::rbvh::level_name(
         q,
@@ -1002,6 +1007,10 @@ mod tests {
             assert_eq!(level(&record(params, method)), name);
         }
         assert_eq!(level(&serde_json::json!({"method": "exact"})), "exact");
+        assert_eq!(
+            level(&serde_json::json!({"method": "exact-instanced"})),
+            "exact, two levels"
+        );
     }
 
     /// A transcription names its raw records where they were kept, else says none was; a `raw`

@@ -44,7 +44,7 @@
 //! | `timing_source` | `"gpu_timestamps"` \| `"wall"` | GPU timestamp queries, or host wall time (submit to fence) when the device cannot time |
 //! | `passes` | int | trace passes per timed run, back to back in one submission (as many as make a run last `min_run_ms`); `mrays_per_s` is per pass |
 //! | `block_jumps` | bool \| null | whether the march jumped over blocks ([`crate::gpu::Tracer::block_jumps`]); null for exact |
-//! | `counters` | object | per-ray means of the device's counters ([`crate::probe::MeanCounters`]: `nodes`, `leaves`, `walks`, `cells`, `cells_tested`, `jumps`, `triangle_leaves`, `triangles`, `simd8_utilisation`) |
+//! | `counters` | object | per-ray means of the device's counters ([`crate::probe::MeanCounters`]: `nodes`, `leaves`, `walks`, `cells`, `cells_tested`, `jumps`, `triangle_leaves`, `triangles`, `instances`, `top_nodes`, `simd8_utilisation`) |
 //! | `traffic` | object \| null | with `--traffic`: `twin_counters` (the CPU twin's, same keys), `counter_mismatch_rate`, and `traffic` (the cache model's figures, [`super::traffic::Traffic`]); else null |
 //! | `steps` | object \| null | with `--steps`, for exact and plain RBVH records: where a ray's steps go ([`super::steps::StepsRecord`]: `nodes_by_depth` (inner nodes per ray at tree levels 0–7, 8–15, 16–23, 24–31, 32 on), `node_depth_mean`, the height-field leaves handed to the march by what came of them (`leaves_tile_missed`, `leaves_no_surface`, `leaves_behind`, `leaves_nearest`), `boxes_at_hit`); else null |
 //!

@@ -355,6 +355,10 @@ impl<P: Probe> Leaves<P> for InstanceHook<'_> {
         self.entered = None;
     }
 
+    fn has_instances(&self) -> bool {
+        true
+    }
+
     fn test(
         &mut self,
         reference: u32,

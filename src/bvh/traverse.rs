@@ -53,6 +53,12 @@ pub(crate) trait Leaves<P: Probe> {
     /// Leaves the instance entered last: the ray is the world's again.
     fn exit_instance(&mut self) {}
 
+    /// Whether the structure has a top level over instances, whose inner nodes are counted as
+    /// such ([`crate::probe::RayCounters::top_nodes`]); false by default.
+    fn has_instances(&self) -> bool {
+        false
+    }
+
     /// Tests leaf `reference` (with its child `count`) for the ray's interval `[tmin,
     /// *t_closest)`: on a hit, lowers `*t_closest`, keeps the hit and returns true.
     fn test(
@@ -136,6 +142,7 @@ pub(crate) fn traverse<P: Probe, L: Leaves<P>>(
             };
             if let Some((mesh_ray, root)) = instance {
                 if sp < STACK_SIZE as usize {
+                    stats.counters.instances += 1;
                     stack[sp] = (0, INSTANCE_END);
                     sp += 1;
                     origin = mesh_ray.origin();
@@ -160,6 +167,9 @@ pub(crate) fn traverse<P: Probe, L: Leaves<P>>(
             }
             *level += 1;
             stats.counters.nodes += 1;
+            if !inside {
+                stats.counters.top_nodes += u32::from(leaves.has_instances());
+            }
             probe.read(element::<GpuNode>(Array::Nodes, reference as usize));
             let children = node.children();
             let enter = |c: &ChildRef| c.bounds.intersect(origin, inv_dir, ray.tmin, t_closest);

@@ -241,11 +241,38 @@ impl Context {
         let usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_DST;
         let mut buffer =
             self.create_buffer(name, bytes.len() as u64, usage, MemoryLocation::GpuOnly)?;
+        let staging = self.write_recorded(&mut buffer, bytes, cmd)?;
+        Ok((buffer, staging))
+    }
+
+    /// Writes `bytes` at the start of `buffer` (made with `TRANSFER_DST` usage) for an embedded
+    /// context that never submits: directly where its memory is host-visible, otherwise through a
+    /// staging buffer whose copy is *recorded* into `cmd` (in the recording state). The staging
+    /// buffer is returned and must live until `cmd` has executed; the caller orders the copy
+    /// after the buffer's last readers and before its next ones. More bytes than the buffer
+    /// holds are an error.
+    pub fn write_recorded(
+        &self,
+        buffer: &mut Buffer,
+        bytes: &[u8],
+        cmd: vk::CommandBuffer,
+    ) -> Result<Option<Buffer>> {
+        if bytes.len() as u64 > buffer.size {
+            return Err(Error::param(
+                "write",
+                format!(
+                    "{} bytes do not fit the {}-byte buffer {}",
+                    bytes.len(),
+                    buffer.size,
+                    buffer.name
+                ),
+            ));
+        }
         if let Some(dst) = buffer.host_slice_mut() {
             dst[..bytes.len()].copy_from_slice(bytes);
-            return Ok((buffer, None));
+            return Ok(None);
         }
-        let staging_name = format!("staging for {name}");
+        let staging_name = format!("staging for {}", buffer.name);
         let mut staging = self.create_buffer(
             &staging_name,
             bytes.len().max(4) as u64,
@@ -265,7 +292,7 @@ impl Context {
                     .cmd_copy_buffer(cmd, staging.raw, buffer.raw, &region)
             };
         }
-        Ok((buffer, Some(staging)))
+        Ok(Some(staging))
     }
 
     /// A host-visible storage buffer of `size` bytes, zero-filled from the host (no submission):

@@ -552,6 +552,98 @@ impl Tracer {
         self.staging.clear();
     }
 
+    /// Moves the instances of an uploaded two-level exact BVH: writes `bvh`'s top level and
+    /// instance records (the uploaded structure after [`InstancedBvh::set_transforms`]) over the
+    /// device's, and leaves the meshes' trees where they are (issue "Instances": build the
+    /// bottom levels once, move instances, rebuild and upload the top level alone). Submits and
+    /// waits. Fails for any other structure, and for a `bvh` whose arrays are not the uploaded
+    /// ones' sizes (another scene).
+    pub fn update_instances(&mut self, bvh: &InstancedBvh) -> Result<()> {
+        let (top, instances) = self.instance_update(bvh)?;
+        let ctx = self.ctx.clone();
+        ctx.write(self.structure_mut(0)?, top)?;
+        ctx.write(self.structure_mut(2)?, instances)?;
+        Ok(())
+    }
+
+    /// [`Tracer::update_instances`] for an engine's command buffer `cmd` (recording): records a
+    /// barrier after the compute reads of the old placement, the copies from staging buffers
+    /// (kept until [`Tracer::release_staging`]) and a barrier that makes them visible to compute
+    /// shaders. Where the structure's memory is host-visible it is written at once instead: call
+    /// it when no submitted trace still reads the structure.
+    pub fn update_instances_recorded(
+        &mut self,
+        bvh: &InstancedBvh,
+        cmd: vk::CommandBuffer,
+    ) -> Result<()> {
+        let (top, instances) = self.instance_update(bvh)?;
+        let ctx = self.ctx.clone();
+        let barrier = [vk::MemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::SHADER_READ)
+            .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)];
+        // SAFETY: `cmd` is recording (the caller's contract).
+        unsafe {
+            ctx.device().cmd_pipeline_barrier(
+                cmd,
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::DependencyFlags::empty(),
+                &barrier,
+                &[],
+                &[],
+            )
+        };
+        for (k, bytes) in [(0, top), (2, instances)] {
+            let staging = ctx.write_recorded(self.structure_mut(k)?, bytes, cmd)?;
+            self.staging.extend(staging);
+        }
+        ctx.record_transfer_to_compute(cmd);
+        Ok(())
+    }
+
+    /// The bytes an instance update writes (the top level's nodes, the instance records), once
+    /// this tracer is checked to hold a two-level BVH of `bvh`'s sizes.
+    fn instance_update<'b>(&self, bvh: &'b InstancedBvh) -> Result<(&'b [u8], &'b [u8])> {
+        if self.shader.0 != Kind::ExactInstanced {
+            return Err(Error::param(
+                "instances",
+                format!(
+                    "this tracer traces {} structure, not a two-level exact BVH",
+                    self.shader.0.name()
+                ),
+            ));
+        }
+        let uploaded = (
+            self.sizes.node_count as usize,
+            self.sizes.tri_count as usize,
+            self.sizes.instance_count as usize,
+        );
+        let given = (bvh.nodes.len(), bvh.triangles.len(), bvh.instances.len());
+        if given != uploaded {
+            return Err(Error::param(
+                "instances",
+                format!(
+                    "(nodes, triangles, instances) {given:?} are not the uploaded structure's                      {uploaded:?}: upload another scene with Tracer::new"
+                ),
+            ));
+        }
+        let top = bvh.nodes.get(..bvh.top_nodes as usize).ok_or_else(|| {
+            Error::param("instances", "the top level has more nodes than the tree")
+        })?;
+        Ok((
+            bytemuck::cast_slice(top),
+            bytemuck::cast_slice(&bvh.instances),
+        ))
+    }
+
+    /// The structure's array `k`, to write: not shared with a painter (only an RBVH's atlas is).
+    fn structure_mut(&mut self, k: usize) -> Result<&mut Buffer> {
+        self.structure
+            .get_mut(k)
+            .and_then(Arc::get_mut)
+            .ok_or_else(|| Error::param("instances", format!("structure array {k} is shared")))
+    }
+
     /// Binds engine-owned buffers for [`Tracer::record`]: `count` rays (32 bytes each, the
     /// [`Ray`] layout) read from `rays`, `count` hits (the [`Hit`] layout) written to `hits`.
     pub fn bind(&self, rays: BufferView, hits: BufferView, count: u32) -> Result<TraceBinding> {
