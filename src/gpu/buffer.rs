@@ -257,17 +257,7 @@ impl Context {
         bytes: &[u8],
         cmd: vk::CommandBuffer,
     ) -> Result<Option<Buffer>> {
-        if bytes.len() as u64 > buffer.size {
-            return Err(Error::param(
-                "write",
-                format!(
-                    "{} bytes do not fit the {}-byte buffer {}",
-                    bytes.len(),
-                    buffer.size,
-                    buffer.name
-                ),
-            ));
-        }
+        fits(buffer, bytes)?;
         if let Some(dst) = buffer.host_slice_mut() {
             dst[..bytes.len()].copy_from_slice(bytes);
             return Ok(None);
@@ -336,17 +326,7 @@ impl Context {
         bytes: &[u8],
         progress: &dyn Progress,
     ) -> Result<()> {
-        if bytes.len() as u64 > buffer.size {
-            return Err(Error::param(
-                "write",
-                format!(
-                    "{} bytes do not fit the {}-byte buffer {}",
-                    bytes.len(),
-                    buffer.size,
-                    buffer.name
-                ),
-            ));
-        }
+        fits(buffer, bytes)?;
         if bytes.is_empty() {
             return Ok(());
         }
@@ -411,4 +391,20 @@ impl Context {
         out_bytes.copy_from_slice(&src[..len]);
         Ok(out)
     }
+}
+
+/// An error unless `bytes` fit `buffer` from its start.
+fn fits(buffer: &Buffer, bytes: &[u8]) -> Result<()> {
+    if bytes.len() as u64 > buffer.size {
+        return Err(Error::param(
+            "write",
+            format!(
+                "{} bytes do not fit the {}-byte buffer {}",
+                bytes.len(),
+                buffer.size,
+                buffer.name
+            ),
+        ));
+    }
+    Ok(())
 }

@@ -36,13 +36,7 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
     let (document, buffers, base) = open(path)?;
     let fail = |message: String| Error::parse(path, None, message);
     let mut scene = Scene::new(path.display().to_string());
-    let mut materials = Materials {
-        path,
-        base: &base,
-        buffers: &buffers,
-        ids: HashMap::new(),
-        images: HashMap::new(),
-    };
+    let mut materials = Materials::new(path, &base, &buffers);
     for (node, transform) in mesh_instances(&document).map_err(fail)? {
         let Some(mesh) = node.mesh() else { continue };
         push_mesh(&mut scene, &mesh, transform, &mut materials)?;
@@ -63,13 +57,7 @@ pub(super) fn load_instanced(path: &Path) -> Result<InstancedScene> {
         name: path.display().to_string(),
         ..InstancedScene::default()
     };
-    let mut materials = Materials {
-        path,
-        base: &base,
-        buffers: &buffers,
-        ids: HashMap::new(),
-        images: HashMap::new(),
-    };
+    let mut materials = Materials::new(path, &base, &buffers);
     // glTF mesh index → the scene's mesh, or None for one with nothing to trace.
     let mut mesh_of: HashMap<usize, Option<u32>> = HashMap::new();
     for (node, transform) in mesh_instances(&document).map_err(fail)? {
@@ -258,7 +246,18 @@ struct Materials<'a> {
     images: HashMap<usize, Arc<Texture>>,
 }
 
-impl Materials<'_> {
+impl<'a> Materials<'a> {
+    /// None added yet, for the file at `path` whose relative URIs start at `base`.
+    fn new(path: &'a Path, base: &'a Path, buffers: &'a [Data]) -> Materials<'a> {
+        Materials {
+            path,
+            base,
+            buffers,
+            ids: HashMap::new(),
+            images: HashMap::new(),
+        }
+    }
+
     /// The scene id of `material` (which has an index), adding it on first use.
     fn id(&mut self, scene: &mut Scene, material: &::gltf::Material) -> Result<u32> {
         let Some(index) = material.index() else {
