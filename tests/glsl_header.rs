@@ -155,6 +155,59 @@ fn header_defaults_are_the_library_bindings() {
     }
 }
 
+/// An engine shader tracing a two-level exact BVH (`bvh.glsl` with `RBVH_INSTANCES`): `defines`
+/// pick where its three buffers live (none: their defaults).
+fn instanced_engine_shader(defines: &str) -> String {
+    format!(
+        r#"
+#version 460
+#extension GL_GOOGLE_include_directive : require
+layout(local_size_x = 32) in;
+
+#define RBVH_INSTANCES 1
+{defines}
+#include "bvh.glsl"
+
+layout(std430, set = 3, binding = 0) writeonly buffer EngineHits {{ Hit engine_hits[]; }};
+layout(push_constant) uniform EnginePush {{ BvhInstanceSizes sizes; }} push;
+
+void main() {{
+    Ray ray = Ray(vec3(gl_GlobalInvocationID.x, 0.0, -10.0), 0.0, vec3(0.0, 0.0, 1.0), 1e30);
+    uint steps;
+    bool overflow;
+    engine_hits[gl_GlobalInvocationID.x] = rbvh_trace_instances(ray, false, push.sizes, steps, overflow);
+}}
+"#
+    )
+}
+
+#[test]
+fn instanced_header_compiles_in_a_foreign_shader_with_its_own_bindings_or_the_defaults() {
+    use rbvh::gpu::bindings;
+    let defines = "#define RBVH_BVH_SET 1\n#define RBVH_BVH_NODES_BINDING 4\n\
+                   #define RBVH_BVH_TRIS_BINDING 5\n#define RBVH_BVH_INSTANCES_BINDING 6";
+    let own = spirv::reflect(&compile(&instanced_engine_shader(defines)).unwrap());
+    let defaults = spirv::reflect(&compile(&instanced_engine_shader("")).unwrap());
+    for (block, binding, default) in [
+        ("RbvhBvhNodes", 4, bindings::BVH_NODES),
+        ("RbvhBvhTriangles", 5, bindings::BVH_TRIS),
+        ("RbvhBvhInstances", 6, bindings::BVH_INSTANCES),
+    ] {
+        assert_eq!(
+            own.bindings.get(block),
+            Some(&(1, binding)),
+            "{:?}",
+            own.bindings
+        );
+        assert_eq!(
+            defaults.bindings.get(block),
+            Some(&(0, default)),
+            "{:?}",
+            defaults.bindings
+        );
+    }
+}
+
 /// The engine shader reading the RBVH and its LOD through buffer device addresses it passes in its
 /// own push constants: no RBVH binding is left in the SPIR-V.
 const FOREIGN_ADDRESSED: &str = r#"
