@@ -15,31 +15,16 @@ use std::time::Instant;
 use glam::Mat4;
 use rayon::prelude::*;
 
-use super::build::{tree_over, Placed};
-use super::layout::{ChildRef, GpuInstance, GpuNode, GpuTriangle, INSTANCE_LEAF, LEAF_BIT};
-use super::traverse::{traverse, BvhLeafHook, Leaves};
-use super::{BuildParams, Bvh, STACK_SIZE};
+use super::layout::{GpuInstance, GpuNode, GpuTriangle, LEAF_BIT};
+use super::top_level::{
+    check_transforms, index, place, top_node_count, Aim, BottomLevel, InstanceHook,
+};
+use super::traverse::{traverse, BvhLeafHook, TriangleSlots};
+use super::{BuildParams, Bvh};
 use crate::geom::{Aabb, Hit, Ray};
-use crate::probe::{element, Array, Probe, TraceStats};
-use crate::scene::{transform_fault, transformed_box, InstancedScene};
-use crate::{Error, Result};
-
-/// Where one mesh's tree lies in the two-level arrays.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct BottomLevel {
-    /// Its root: the first of its nodes.
-    pub root: u32,
-    /// Its nodes.
-    pub nodes: u32,
-    /// Its first triangle.
-    pub first_triangle: u32,
-    /// Its triangles.
-    pub triangles: u32,
-    /// Inner nodes on its longest root-to-leaf path.
-    pub depth: u32,
-    /// Its box, in the mesh's space.
-    pub bounds: Aabb,
-}
+use crate::probe::{Probe, TraceStats};
+use crate::scene::InstancedScene;
+use crate::Result;
 
 /// A two-level exact BVH in its GPU layout.
 #[derive(Clone, Debug, PartialEq)]
@@ -84,10 +69,12 @@ impl InstancedBvh {
             .collect::<Result<Vec<Bvh>>>()?;
         let transforms: Vec<Mat4> = scene.instances.iter().map(|i| i.transform).collect();
         let mesh_of: Vec<u32> = scene.instances.iter().map(|i| i.mesh).collect();
-        let top_nodes = top_node_count(&trees, &mesh_of);
-        let mut nodes = vec![GpuNode::default(); top_nodes as usize];
+        let mut nodes = Vec::new();
         let mut triangles = Vec::new();
         let mut meshes = Vec::with_capacity(trees.len());
+        let bottoms: Vec<BottomLevel> = trees.iter().map(|t| bottom(t, 0, 0)).collect();
+        let top_nodes = top_node_count(&bottoms, &mesh_of);
+        nodes.resize(top_nodes as usize, GpuNode::default());
         for tree in trees {
             let node_base = index(nodes.len(), "nodes")?;
             let triangle_base = index(triangles.len(), "triangles")?;
@@ -97,14 +84,7 @@ impl InstancedBvh {
                     .map(|n| relocated(n, node_base, triangle_base)),
             );
             triangles.extend_from_slice(&tree.triangles);
-            meshes.push(BottomLevel {
-                root: node_base,
-                nodes: tree.nodes.len() as u32,
-                first_triangle: triangle_base,
-                triangles: tree.triangles.len() as u32,
-                depth: tree.depth,
-                bounds: tree.bounds,
-            });
+            meshes.push(bottom(&tree, node_base, triangle_base));
         }
         index(nodes.len(), "nodes")?;
         index(triangles.len(), "triangles")?;
@@ -130,21 +110,7 @@ impl InstancedBvh {
     /// [`Error::InvalidParameter`], and the structure is left as it was.
     pub fn set_transforms(&mut self, transforms: &[Mat4]) -> Result<()> {
         let start = Instant::now();
-        if transforms.len() != self.instances.len() {
-            return Err(Error::param(
-                "transforms",
-                format!(
-                    "{} transforms for {} instances",
-                    transforms.len(),
-                    self.instances.len()
-                ),
-            ));
-        }
-        for (k, m) in transforms.iter().enumerate() {
-            if let Some(fault) = transform_fault(m) {
-                return Err(Error::param("transforms", format!("instance {k}: {fault}")));
-            }
-        }
+        check_transforms(transforms, self.instances.len())?;
         let mesh_of: Vec<u32> = self.instances.iter().map(|i| i.mesh).collect();
         self.place(transforms, &mesh_of)?;
         self.build_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -154,63 +120,11 @@ impl InstancedBvh {
     /// Builds the top level over instances of meshes `mesh_of` at `transforms` (checked), into
     /// `nodes[..top_nodes]`, and the instance records; on an error nothing changes.
     fn place(&mut self, transforms: &[Mat4], mesh_of: &[u32]) -> Result<()> {
-        let items: Vec<Placed> = transforms
-            .par_iter()
-            .zip(mesh_of)
-            .enumerate()
-            .map(|(k, (&m, &mesh))| {
-                let bounds = transformed_box(self.meshes[mesh as usize].bounds, m);
-                match bounds.is_empty() {
-                    // A mesh without triangles: nothing to enter.
-                    true => Placed::Leaf(ChildRef::ABSENT),
-                    false => Placed::Leaf(ChildRef {
-                        bounds,
-                        child: LEAF_BIT | k as u32,
-                        count: INSTANCE_LEAF,
-                    }),
-                }
-            })
-            .collect();
-        let (top, top_depth, _) = tree_over(&items, 1, 0)?;
-        if top.len() != self.top_nodes as usize {
-            return Err(Error::param(
-                "transforms",
-                format!(
-                    "the top level has {} nodes where {} were set aside",
-                    top.len(),
-                    self.top_nodes
-                ),
-            ));
-        }
-        let deepest = mesh_of
-            .iter()
-            .map(|&m| self.meshes[m as usize].depth)
-            .max()
-            .unwrap_or(0);
-        // The top level's entries, the instance's end, the mesh's entries.
-        if top_depth + 1 + deepest > STACK_SIZE {
-            return Err(Error::param(
-                "scene",
-                format!(
-                    "the top level (depth {top_depth}) and the deepest mesh's tree (depth \
-                     {deepest}) together exceed the {STACK_SIZE}-entry traversal stack"
-                ),
-            ));
-        }
-        self.nodes[..top.len()].copy_from_slice(&top);
-        self.top_depth = top_depth;
-        self.instances = transforms
-            .iter()
-            .zip(mesh_of)
-            .map(|(&m, &mesh)| GpuInstance::new(m, self.meshes[mesh as usize].root, mesh))
-            .collect();
-        self.bounds = items
-            .iter()
-            .filter_map(|item| match item {
-                Placed::Leaf(leaf) if !leaf.is_absent() => Some(leaf.bounds),
-                _ => None,
-            })
-            .fold(Aabb::EMPTY, Aabb::union);
+        let top = place(&self.meshes, transforms, mesh_of, self.top_nodes)?;
+        self.nodes[..top.nodes.len()].copy_from_slice(&top.nodes);
+        self.top_depth = top.depth;
+        self.instances = top.instances;
+        self.bounds = top.bounds;
         Ok(())
     }
 
@@ -259,40 +173,28 @@ impl InstancedBvh {
     }
 
     fn traverse<P: Probe>(&self, ray: &Ray, any_hit: bool, probe: &mut P) -> (Hit, TraceStats) {
-        let mut leaves = InstanceHook {
-            triangles: BvhLeafHook::new(self.triangles.as_slice(), ray, any_hit),
-            instances: &self.instances,
-            world: *ray,
-            entered: None,
-            best: None,
-        };
+        let triangles = BvhLeafHook::new(self.triangles.as_slice(), ray, any_hit);
+        let mut leaves = InstanceHook::new(triangles, &self.instances, ray);
         let stats = traverse(&self.nodes, ray, any_hit, &mut leaves, probe);
-        (leaves.hit(probe).unwrap_or(Hit::MISS), stats)
+        let hit = leaves.finish(probe, |t, p| t.hit(p).unwrap_or(Hit::MISS));
+        (hit, stats)
     }
 }
 
-/// Nodes of the top level over instances of meshes `mesh_of`: one leaf per instance whose mesh
-/// has triangles, so a binary tree of that many leaves (one node, with one or no leaf, for fewer
-/// than two). The same for every placement, which is what lets the top level be rebuilt in place.
-fn top_node_count(trees: &[Bvh], mesh_of: &[u32]) -> u32 {
-    let leaves = mesh_of
-        .iter()
-        .filter(|&&m| !trees[m as usize].triangles.is_empty())
-        .count();
-    leaves.saturating_sub(1).max(1) as u32
-}
-
-/// `n` as a 32-bit index of the two-level arrays, or an error naming `what` outgrew them.
-fn index(n: usize, what: &str) -> Result<u32> {
-    u32::try_from(n)
-        .ok()
-        .filter(|&i| i < LEAF_BIT)
-        .ok_or_else(|| {
-            Error::param(
-                "scene",
-                format!("the meshes' {what} ({n}) outgrow the 31-bit indices of a two-level BVH"),
-            )
-        })
+/// Where `tree` lies placed at `node_base` among the nodes and `triangle_base` among the
+/// triangles.
+fn bottom(tree: &Bvh, node_base: u32, triangle_base: u32) -> BottomLevel {
+    BottomLevel {
+        root: node_base,
+        nodes: tree.nodes.len() as u32,
+        first_triangle: triangle_base,
+        triangles: tree.triangles.len() as u32,
+        depth: tree.depth,
+        bounds: match tree.triangles.is_empty() {
+            true => Aabb::EMPTY,
+            false => tree.bounds,
+        },
+    }
 }
 
 /// `node` of a mesh's tree placed at `node_base` among the nodes and `triangle_base` among the
@@ -310,75 +212,8 @@ fn relocated(node: &GpuNode, node_base: u32, triangle_base: u32) -> GpuNode {
     }
 }
 
-/// The exact two-level hook: the top level's leaves enter instances, the meshes' leaves are
-/// triangle leaves ([`BvhLeafHook`]) tested in the mesh's space.
-struct InstanceHook<'a> {
-    triangles: BvhLeafHook<'a, [GpuTriangle]>,
-    instances: &'a [GpuInstance],
-    world: Ray,
-    /// The instance the ray is in, if any.
-    entered: Option<u32>,
-    /// The instance of the nearest hit kept.
-    best: Option<u32>,
-}
-
-impl InstanceHook<'_> {
-    /// The nearest hit kept: its triangle read once more as the device does, its normal taken to
-    /// world space by its instance.
-    fn hit<P: Probe>(&self, probe: &mut P) -> Option<Hit> {
-        let mut hit = self.triangles.hit(probe)?;
-        let instance = self.best?;
-        probe.read(element::<GpuInstance>(Array::Instances, instance as usize));
-        let n = self.instances[instance as usize].normal_out(hit.normal());
-        hit.normal = n.to_array();
-        hit.instance = instance;
-        Some(hit)
-    }
-}
-
-impl<P: Probe> Leaves<P> for InstanceHook<'_> {
-    fn enter_instance(&mut self, reference: u32, count: u32, probe: &mut P) -> Option<(Ray, u32)> {
-        if count != INSTANCE_LEAF {
-            return None;
-        }
-        let k = reference & !LEAF_BIT;
-        let instance = self.instances.get(k as usize)?;
-        probe.read(element::<GpuInstance>(Array::Instances, k as usize));
-        let ray = instance.ray_into(&self.world);
-        self.triangles.aim(&ray);
-        self.entered = Some(k);
-        Some((ray, instance.root))
-    }
-
-    fn exit_instance(&mut self) {
-        self.triangles.aim(&self.world);
-        self.entered = None;
-    }
-
-    fn has_instances(&self) -> bool {
-        true
-    }
-
-    fn test(
-        &mut self,
-        reference: u32,
-        count: u32,
-        t_closest: &mut f32,
-        stats: &mut TraceStats,
-        probe: &mut P,
-    ) -> bool {
-        // Triangles are the meshes': tested inside an instance only (an instance leaf met inside
-        // one, or one naming no instance, holds nothing).
-        let Some(k) = self.entered else { return false };
-        if count == INSTANCE_LEAF {
-            return false;
-        }
-        let found = self
-            .triangles
-            .test(reference, count, t_closest, stats, probe);
-        if found {
-            self.best = Some(k);
-        }
-        found
+impl<T: TriangleSlots + ?Sized> Aim for BvhLeafHook<'_, T> {
+    fn aim(&mut self, ray: &Ray) {
+        BvhLeafHook::aim(self, ray);
     }
 }

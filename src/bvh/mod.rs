@@ -20,14 +20,17 @@ mod build;
 mod instanced;
 pub mod layout;
 mod morton;
+mod top_level;
 mod traverse;
 mod validate;
 
 pub(crate) use build::{check_node_count, join_halves, partition, sah_cost, tree_over, Placed};
 pub use build::{BuildParams, Bvh};
-pub use instanced::{BottomLevel, InstancedBvh};
+pub use instanced::InstancedBvh;
 pub use layout::{
     ChildRef, GpuInstance, GpuNode, GpuTriangle, INSTANCE_LEAF, LEAF_BIT, MAX_NODES, STACK_SIZE,
 };
 pub(crate) use morton::LinearBvh;
+pub use top_level::BottomLevel;
+pub(crate) use top_level::{check_transforms, index, place, top_node_count, Aim, InstanceHook};
 pub(crate) use traverse::{traverse, BvhLeafHook, Leaves, TriangleSlots};

@@ -12,6 +12,7 @@
 //! * [`child`]: what a node's child is (inner, absent, triangles, height field): the one decoder of
 //!   its encoding, where a new kind of leaf starts;
 //! * [`ranges`]: height ranges of the atlas's 8 × 8 blocks, for the device march's jumps;
+//! * `instanced`: the RBVH of a scene with instances, in two levels ([`InstancedRbvh`]);
 //! * `march`: the CPU reference caster on exactly that packed data, and its [`DeviceTwin`];
 //! * [`file`](mod@file): save and load, and the file format's tables (its older versions in
 //!   `file::legacy`).
@@ -22,6 +23,7 @@ mod build;
 pub mod child;
 pub mod file;
 mod frame;
+mod instanced;
 pub mod layout;
 pub(crate) mod march;
 pub mod params;
@@ -33,6 +35,7 @@ pub mod triangles;
 
 pub use build::{RbvhSource, CREASE_EDGE_TEXELS};
 pub use child::{Child, HEIGHTFIELD_COUNT};
+pub use instanced::InstancedRbvh;
 pub use layout::{Atlas, GpuHeightfield, Texel};
 pub use march::DeviceTwin;
 pub use params::{

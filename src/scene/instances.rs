@@ -9,6 +9,7 @@
 //! also the referee an instanced trace is checked against.
 
 use glam::{Mat4, Vec3, Vec4};
+use rayon::prelude::*;
 
 use super::{Camera, Light, Scene};
 use crate::geom::Aabb;
@@ -118,6 +119,47 @@ impl InstancedScene {
         self.instance_bounds()
             .into_iter()
             .fold(Aabb::EMPTY, Aabb::union)
+    }
+
+    /// The box of every placed vertex that a triangle uses (and of every placed point cloud's
+    /// box): [`Scene::bounds`] of [`InstancedScene::into_flat`] bit for bit where there are no
+    /// points, each vertex placed as [`Scene::append`] places it, without making the flat scene.
+    /// What a two-level RBVH's texel is taken from, so that it is the flat scene's
+    /// (`crate::rbvh::InstancedRbvh`).
+    pub fn placed_bounds(&self) -> Aabb {
+        let used: Vec<Vec<Vec3>> = self
+            .meshes
+            .iter()
+            .map(|mesh| {
+                let mut seen = vec![false; mesh.positions.len()];
+                for &i in mesh.triangles.iter().flatten() {
+                    if let Some(s) = seen.get_mut(i as usize) {
+                        *s = true;
+                    }
+                }
+                mesh.positions
+                    .iter()
+                    .zip(seen)
+                    .filter_map(|(&p, s)| s.then_some(p))
+                    .collect()
+            })
+            .collect();
+        self.instances
+            .par_iter()
+            .map(|instance| {
+                let m = instance.transform;
+                let Some(mesh) = self.meshes.get(instance.mesh as usize) else {
+                    return Aabb::EMPTY;
+                };
+                let points = match &mesh.points {
+                    Some(cloud) => transformed_box(cloud.bounds(), m),
+                    None => Aabb::EMPTY,
+                };
+                used[instance.mesh as usize]
+                    .iter()
+                    .fold(points, |b, &p| b.grow(m.transform_point3(p)))
+            })
+            .reduce(|| Aabb::EMPTY, Aabb::union)
     }
 
     /// Checks what a two-level build relies on: each mesh valid ([`Scene::validate`]), at most

@@ -170,15 +170,28 @@ impl Rbvh {
         progress: &dyn Progress,
     ) -> Result<Rbvh> {
         params.validate()?;
-        let start = Instant::now();
-        let scene = source.scene;
-        let bounds = scene.bounds();
-        let diagonal = bounds.diagonal();
+        let diagonal = source.scene.bounds().diagonal();
         let texel = if diagonal > 0.0 {
             diagonal / params.texels_per_diagonal
         } else {
             1.0
         };
+        Rbvh::build_at(source, params, texel, progress)
+    }
+
+    /// [`Rbvh::build_from`] with the scene's texel given rather than taken from its diagonal: a
+    /// mesh of a scene with instances is built in its own space at the texel its placements ask
+    /// for ([`crate::rbvh::InstancedRbvh`]). Objects' own rates
+    /// ([`RbvhParams::object_rate`]) are relative to their own boxes, so they are the same in
+    /// any space. `params` must be valid.
+    pub(crate) fn build_at(
+        source: &RbvhSource,
+        params: &RbvhParams,
+        texel: f32,
+        progress: &dyn Progress,
+    ) -> Result<Rbvh> {
+        let start = Instant::now();
+        let scene = source.scene;
         let (input, elements) = match source.input() {
             input @ Input::Points(_) => (input, "points"),
             input @ Input::Triangles(_) => (input, "triangles"),

@@ -18,7 +18,9 @@ use crate::rbvh::{ExactTriangles, Rbvh, TexelFormat};
 /// recording the hits of the coarse nodes it marches here ([`RbvhLeafHook::record`]).
 pub(crate) struct RbvhLeafHook<'a> {
     rbvh: &'a Rbvh,
-    ray: &'a Ray,
+    /// The ray of the level traversed: the world's, or in a two-level RBVH the ray in the mesh
+    /// space of the instance entered ([`RbvhLeafHook::aim`]).
+    ray: Ray,
     /// The hybrid triangle leaves, tested as the exact BVH tests its own.
     triangles: BvhLeafHook<'a, ExactTriangles>,
     walk: Walk<'a>,
@@ -32,9 +34,16 @@ pub(crate) struct RbvhLeafHook<'a> {
 }
 
 impl<'a> RbvhLeafHook<'a> {
-    /// The ray traced.
-    pub(crate) fn ray(&self) -> &'a Ray {
-        self.ray
+    /// The ray traced, in the space of the level traversed.
+    pub(crate) fn ray(&self) -> &Ray {
+        &self.ray
+    }
+
+    /// Marches and tests leaves along `ray` from here on: the ray in an instance's mesh space,
+    /// or the world's again. The nearest hit kept stays.
+    pub(crate) fn aim(&mut self, ray: &Ray) {
+        self.ray = *ray;
+        self.triangles.aim(ray);
     }
 
     /// Keeps a hit at `t` with `normal` and `id` found by a hook around these leaves.
@@ -88,7 +97,7 @@ impl<P: Probe> Leaves<P> for RbvhLeafHook<'_> {
         stats: &mut TraceStats,
         probe: &mut P,
     ) -> bool {
-        let (ray, rbvh) = (self.ray, self.rbvh);
+        let (ray, rbvh) = (&self.ray, self.rbvh);
         let index = match Child::decode(node, count) {
             Child::Heightfield(index) => index,
             // A triangle leaf (hybrid RBVH), or an absent one: tested exactly (the traversal
@@ -126,13 +135,13 @@ impl Rbvh {
     /// This RBVH's leaves for `ray`, walking cells as `walk` says.
     pub(crate) fn leaf_hook<'a>(
         &'a self,
-        ray: &'a Ray,
+        ray: &Ray,
         any_hit: bool,
         walk: Walk<'a>,
     ) -> RbvhLeafHook<'a> {
         RbvhLeafHook {
             rbvh: self,
-            ray,
+            ray: *ray,
             triangles: BvhLeafHook::new(&self.triangles, ray, any_hit),
             walk,
             best: Hit::MISS,

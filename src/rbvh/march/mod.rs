@@ -54,6 +54,7 @@ pub(crate) use hook::RbvhLeafHook;
 
 use super::ranges::block_ranges;
 use super::Rbvh;
+use crate::bvh::GpuInstance;
 use crate::geom::{Hit, Ray};
 use crate::probe::{Probe, TraceStats};
 
@@ -78,11 +79,25 @@ pub(crate) enum Walk<'a> {
 /// holds the texels, then the block ranges). Made by [`Rbvh::device_twin`]; with level of detail, `crate::lod::LodTwin`.
 pub struct DeviceTwin<'a> {
     rbvh: &'a Rbvh,
+    /// The instances of a two-level RBVH (`crate::rbvh::InstancedRbvh`), whose arrays `rbvh`
+    /// holds; empty for one RBVH.
+    instances: &'a [GpuInstance],
     ranges: Vec<u32>,
     block_jumps: bool,
 }
 
 impl<'a> DeviceTwin<'a> {
+    /// The twin of `rbvh`'s trace, with block jumps on; of a two-level RBVH's where `instances`
+    /// are its instances (`rbvh` its arrays).
+    pub(crate) fn new(rbvh: &'a Rbvh, instances: &'a [GpuInstance]) -> Self {
+        DeviceTwin {
+            rbvh,
+            instances,
+            ranges: block_ranges(&rbvh.atlas),
+            block_jumps: true,
+        }
+    }
+
     /// The twin of a device trace with block jumps on (the default) or off
     /// ([`crate::gpu::Tracer::block_jumps`]): off, it walks every cell, as the CPU reference does.
     pub fn with_block_jumps(self, on: bool) -> Self {
@@ -95,6 +110,16 @@ impl<'a> DeviceTwin<'a> {
     /// Traces one ray (closest hit, or any hit) as the device does, reporting its reads to
     /// `probe`.
     pub fn trace<P: Probe>(&self, ray: &Ray, any_hit: bool, probe: &mut P) -> (Hit, TraceStats) {
+        if !self.instances.is_empty() {
+            return crate::rbvh::instanced::trace(
+                self.rbvh,
+                self.instances,
+                ray,
+                any_hit,
+                self.walk(),
+                probe,
+            );
+        }
         self.rbvh.traverse_with(
             self.rbvh.leaf_hook(ray, any_hit, self.walk()),
             ray,
@@ -139,11 +164,7 @@ impl Rbvh {
 
     /// The device's twin ([`DeviceTwin`]); with level of detail, `Lod::device_twin`.
     pub fn device_twin(&self) -> DeviceTwin<'_> {
-        DeviceTwin {
-            rbvh: self,
-            ranges: block_ranges(&self.atlas),
-            block_jumps: true,
-        }
+        DeviceTwin::new(self, &[])
     }
 
     /// Traces many rays in parallel with `rayon`; hits in ray order.

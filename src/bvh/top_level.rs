@@ -1,0 +1,254 @@
+//! The top level of a two-level structure (issue "Instances"), the same for every bottom level
+//! (the exact BVH's trees, [`super::InstancedBvh`]; an RBVH's, `crate::rbvh::InstancedRbvh`):
+//! where each mesh's tree lies ([`BottomLevel`]), the tree over the instances' world boxes
+//! ([`place`]), and the traversal's hook that enters an instance by taking the ray into its
+//! mesh's space ([`InstanceHook`], around the bottom level's own leaves).
+//!
+//! A top-level leaf is `LEAF_BIT | instance` with the count [`INSTANCE_LEAF`]; it is told from a
+//! mesh's leaves by the level the traversal is in, not by its words (an RBVH's height-field leaf
+//! has the same count), since the top level holds instances only and a mesh's tree none.
+
+use glam::Mat4;
+use rayon::prelude::*;
+
+use super::build::{tree_over, Placed};
+use super::layout::{ChildRef, GpuInstance, GpuNode, INSTANCE_LEAF, LEAF_BIT};
+use super::traverse::Leaves;
+use super::STACK_SIZE;
+use crate::geom::{Aabb, Hit, Ray};
+use crate::probe::{element, Array, Probe, TraceStats};
+use crate::scene::{transform_fault, transformed_box};
+use crate::{Error, Result};
+
+/// Where one mesh's tree lies in the two-level arrays.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BottomLevel {
+    /// Its root: the first of its nodes.
+    pub root: u32,
+    /// Its nodes.
+    pub nodes: u32,
+    /// Its first triangle (for an RBVH, its first exact triangle's slot).
+    pub first_triangle: u32,
+    /// Its triangles (for an RBVH, those traced exactly).
+    pub triangles: u32,
+    /// Inner nodes on its longest root-to-leaf path.
+    pub depth: u32,
+    /// Its box, in the mesh's space; empty for a mesh with nothing to enter.
+    pub bounds: Aabb,
+}
+
+/// A top level built by [`place`]: its nodes (node 0 its root) and what they place.
+pub(crate) struct TopLevel {
+    pub(crate) nodes: Vec<GpuNode>,
+    /// Inner nodes on its longest root-to-leaf path.
+    pub(crate) depth: u32,
+    /// Per instance, its record.
+    pub(crate) instances: Vec<GpuInstance>,
+    /// The box of every instance, world space.
+    pub(crate) bounds: Aabb,
+}
+
+/// Nodes of the top level over instances of meshes `mesh_of`: one leaf per instance whose mesh
+/// has something to enter, so a binary tree of that many leaves (one node, with one or no leaf,
+/// for fewer than two). The same for every placement, which is what lets the top level be
+/// rebuilt in place.
+pub(crate) fn top_node_count(meshes: &[BottomLevel], mesh_of: &[u32]) -> u32 {
+    let leaves = mesh_of
+        .iter()
+        .filter(|&&m| !meshes[m as usize].bounds.is_empty())
+        .count();
+    leaves.saturating_sub(1).max(1) as u32
+}
+
+/// Checks new transforms for `instances` instances: one each, each affine, finite and
+/// invertible ([`transform_fault`]); the error names the instance.
+pub(crate) fn check_transforms(transforms: &[Mat4], instances: usize) -> Result<()> {
+    if transforms.len() != instances {
+        return Err(Error::param(
+            "transforms",
+            format!("{} transforms for {instances} instances", transforms.len()),
+        ));
+    }
+    for (k, m) in transforms.iter().enumerate() {
+        if let Some(fault) = transform_fault(m) {
+            return Err(Error::param("transforms", format!("instance {k}: {fault}")));
+        }
+    }
+    Ok(())
+}
+
+/// The top level over instances of meshes `mesh_of` (lying as `meshes` say) at `transforms`:
+/// `top_nodes` nodes ([`top_node_count`]), or an [`Error::InvalidParameter`] where the tree
+/// came out otherwise or the two levels together are deeper than the traversal stack.
+pub(crate) fn place(
+    meshes: &[BottomLevel],
+    transforms: &[Mat4],
+    mesh_of: &[u32],
+    top_nodes: u32,
+) -> Result<TopLevel> {
+    let items: Vec<Placed> = transforms
+        .par_iter()
+        .zip(mesh_of)
+        .enumerate()
+        .map(|(k, (&m, &mesh))| {
+            let bounds = transformed_box(meshes[mesh as usize].bounds, m);
+            match bounds.is_empty() {
+                // A mesh with nothing in it: nothing to enter.
+                true => Placed::Leaf(ChildRef::ABSENT),
+                false => Placed::Leaf(ChildRef {
+                    bounds,
+                    child: LEAF_BIT | k as u32,
+                    count: INSTANCE_LEAF,
+                }),
+            }
+        })
+        .collect();
+    let (nodes, depth, _) = tree_over(&items, 1, 0)?;
+    if nodes.len() != top_nodes as usize {
+        return Err(Error::param(
+            "transforms",
+            format!(
+                "the top level has {} nodes where {top_nodes} were set aside",
+                nodes.len()
+            ),
+        ));
+    }
+    let deepest = mesh_of
+        .iter()
+        .map(|&m| meshes[m as usize].depth)
+        .max()
+        .unwrap_or(0);
+    // The top level's entries, the instance's end, the mesh's entries.
+    if depth + 1 + deepest > STACK_SIZE {
+        return Err(Error::param(
+            "scene",
+            format!(
+                "the top level (depth {depth}) and the deepest mesh's tree (depth {deepest}) \
+                 together exceed the {STACK_SIZE}-entry traversal stack"
+            ),
+        ));
+    }
+    let instances = transforms
+        .iter()
+        .zip(mesh_of)
+        .map(|(&m, &mesh)| GpuInstance::new(m, meshes[mesh as usize].root, mesh))
+        .collect();
+    let bounds = items
+        .iter()
+        .filter_map(|item| match item {
+            Placed::Leaf(leaf) if !leaf.is_absent() => Some(leaf.bounds),
+            _ => None,
+        })
+        .fold(Aabb::EMPTY, Aabb::union);
+    Ok(TopLevel {
+        nodes,
+        depth,
+        instances,
+        bounds,
+    })
+}
+
+/// `n` as a 32-bit index of the two-level arrays, or an error naming `what` outgrew them.
+pub(crate) fn index(n: usize, what: &str) -> Result<u32> {
+    u32::try_from(n)
+        .ok()
+        .filter(|&i| i < LEAF_BIT)
+        .ok_or_else(|| {
+            Error::param(
+                "scene",
+                format!(
+                    "the meshes' {what} ({n}) outgrow the 31-bit indices of a two-level structure"
+                ),
+            )
+        })
+}
+
+/// A bottom level's leaves, which can be aimed along another ray: the ray in an instance's mesh
+/// space, or the world's again, keeping the nearest hit found.
+pub(crate) trait Aim {
+    fn aim(&mut self, ray: &Ray);
+}
+
+/// The two-level hook around a bottom level's `leaves`: the top level's leaves enter instances,
+/// the meshes' leaves are `leaves`' own, tested in the mesh's space.
+pub(crate) struct InstanceHook<'a, L> {
+    leaves: L,
+    instances: &'a [GpuInstance],
+    world: Ray,
+    /// The instance the ray is in, if any.
+    entered: Option<u32>,
+    /// The instance of the nearest hit kept.
+    best: Option<u32>,
+}
+
+impl<'a, L> InstanceHook<'a, L> {
+    /// `leaves` (aimed along the world `ray`) under a top level over `instances`.
+    pub(crate) fn new(leaves: L, instances: &'a [GpuInstance], ray: &Ray) -> Self {
+        InstanceHook {
+            leaves,
+            instances,
+            world: *ray,
+            entered: None,
+            best: None,
+        }
+    }
+
+    /// The nearest hit: what the bottom level's leaves kept (`hit` finishes them, reading what
+    /// the device reads once the ray is done), named by its instance, its normal taken to world
+    /// space. The read of the instance goes to `probe`, as the device makes it.
+    pub(crate) fn finish<P: Probe>(self, probe: &mut P, hit: impl FnOnce(L, &mut P) -> Hit) -> Hit {
+        let hit = hit(self.leaves, probe);
+        let Some(k) = self.best.filter(|_| hit.is_hit()) else {
+            return Hit::MISS;
+        };
+        probe.read(element::<GpuInstance>(Array::Instances, k as usize));
+        let n = self.instances[k as usize].normal_out(hit.normal());
+        Hit {
+            normal: n.to_array(),
+            instance: k,
+            ..hit
+        }
+    }
+}
+
+impl<P: Probe, L: Leaves<P> + Aim> Leaves<P> for InstanceHook<'_, L> {
+    fn enter_instance(&mut self, reference: u32, count: u32, probe: &mut P) -> Option<(Ray, u32)> {
+        if count != INSTANCE_LEAF {
+            return None;
+        }
+        let k = reference & !LEAF_BIT;
+        let instance = self.instances.get(k as usize)?;
+        probe.read(element::<GpuInstance>(Array::Instances, k as usize));
+        let ray = instance.ray_into(&self.world);
+        self.leaves.aim(&ray);
+        self.entered = Some(k);
+        Some((ray, instance.root))
+    }
+
+    fn exit_instance(&mut self) {
+        self.leaves.aim(&self.world);
+        self.entered = None;
+    }
+
+    fn has_instances(&self) -> bool {
+        true
+    }
+
+    fn test(
+        &mut self,
+        reference: u32,
+        count: u32,
+        t_closest: &mut f32,
+        stats: &mut TraceStats,
+        probe: &mut P,
+    ) -> bool {
+        // A mesh's leaves are tested inside an instance only (a top-level leaf that names no
+        // instance holds nothing).
+        let Some(k) = self.entered else { return false };
+        let found = self.leaves.test(reference, count, t_closest, stats, probe);
+        if found {
+            self.best = Some(k);
+        }
+        found
+    }
+}
