@@ -13,9 +13,10 @@
 // GL_EXT_buffer_reference and GL_EXT_buffer_reference_uvec2, with each array's address as a uvec2
 // expression: RBVH_BVH_NODES_ADDRESS, RBVH_BVH_TRIS_ADDRESS, with RBVH_INSTANCES
 // RBVH_BVH_INSTANCES_ADDRESS (and those of rbvh.glsl and lod.glsl).
-// RBVH_INSTANCES makes the exact BVH two-level (src/bvh/instanced.rs): a top level over instances
+// RBVH_INSTANCES makes the structure two-level (src/bvh/top_level.rs): a top level over instances
 // whose leaves (count RBVH_INSTANCE_LEAF) enter a mesh's tree in the same node array, the ray
-// taken into the mesh's space by the instance's record; rbvh_trace_instances traces it.
+// taken into the mesh's space by the instance's record; rbvh_trace_instances traces the exact
+// BVH's (src/bvh/instanced.rs), rbvh.glsl's rbvh_trace_rbvh_instances the RBVH's.
 // The traversals read the arrays only through the accessor macros RBVH_BVH_NODE(i) and
 // RBVH_BVH_TRIANGLE(i) (or RBVH_EXACT_QUAD(i)), which hide the difference.
 // RBVH_INDEXED_TRIANGLES, which rbvh.glsl defines before including this file, makes the triangle
@@ -57,26 +58,51 @@
 // occupancy on wide SIMD (docs/speed.md, "Words kept beside the stack"). A global, so that a hook
 // reaches it; a ray's trace writes its words before it reads them, and a shader that traces
 // several rays traces them one after another.
+// With RBVH_INSTANCES, four more: the world ray of a two-level trace, which the ray of the level
+// traversed (RBVH_STACK_RAY) leaves for an instance's mesh space.
 #define RBVH_STACK_RAY RBVH_STACK_SIZE
 #define RBVH_STACK_HIT (RBVH_STACK_SIZE + 4)
 #define RBVH_STACK_CONE (RBVH_STACK_SIZE + 5)
+#ifdef RBVH_INSTANCES
+#define RBVH_STACK_WORLD (RBVH_STACK_SIZE + 6)
+uvec2 rbvh_stack[RBVH_STACK_SIZE + 10];
+#else
 uvec2 rbvh_stack[RBVH_STACK_SIZE + 6];
+#endif
 
-void rbvh_keep_ray(Ray ray) {
-    rbvh_stack[RBVH_STACK_RAY] = floatBitsToUint(ray.origin.xy);
-    rbvh_stack[RBVH_STACK_RAY + 1] = floatBitsToUint(vec2(ray.origin.z, ray.tmin));
-    rbvh_stack[RBVH_STACK_RAY + 2] = floatBitsToUint(ray.dir.xy);
-    rbvh_stack[RBVH_STACK_RAY + 3] = floatBitsToUint(vec2(ray.dir.z, ray.tmax));
+void rbvh_keep_ray_at(uint at, Ray ray) {
+    rbvh_stack[at] = floatBitsToUint(ray.origin.xy);
+    rbvh_stack[at + 1u] = floatBitsToUint(vec2(ray.origin.z, ray.tmin));
+    rbvh_stack[at + 2u] = floatBitsToUint(ray.dir.xy);
+    rbvh_stack[at + 3u] = floatBitsToUint(vec2(ray.dir.z, ray.tmax));
 }
 
-// The ray rbvh_keep_ray kept, bit for bit.
-Ray rbvh_kept_ray() {
-    vec2 o = uintBitsToFloat(rbvh_stack[RBVH_STACK_RAY]);
-    vec2 oz_tmin = uintBitsToFloat(rbvh_stack[RBVH_STACK_RAY + 1]);
-    vec2 d = uintBitsToFloat(rbvh_stack[RBVH_STACK_RAY + 2]);
-    vec2 dz_tmax = uintBitsToFloat(rbvh_stack[RBVH_STACK_RAY + 3]);
+// The ray rbvh_keep_ray_at kept at `at`, bit for bit.
+Ray rbvh_kept_ray_at(uint at) {
+    vec2 o = uintBitsToFloat(rbvh_stack[at]);
+    vec2 oz_tmin = uintBitsToFloat(rbvh_stack[at + 1u]);
+    vec2 d = uintBitsToFloat(rbvh_stack[at + 2u]);
+    vec2 dz_tmax = uintBitsToFloat(rbvh_stack[at + 3u]);
     return Ray(vec3(o, oz_tmin.x), oz_tmin.y, vec3(d, dz_tmax.x), dz_tmax.y);
 }
+
+void rbvh_keep_ray(Ray ray) {
+    rbvh_keep_ray_at(RBVH_STACK_RAY, ray);
+}
+
+Ray rbvh_kept_ray() {
+    return rbvh_kept_ray_at(RBVH_STACK_RAY);
+}
+
+#ifdef RBVH_INSTANCES
+void rbvh_keep_world_ray(Ray ray) {
+    rbvh_keep_ray_at(RBVH_STACK_WORLD, ray);
+}
+
+Ray rbvh_kept_world_ray() {
+    return rbvh_kept_ray_at(RBVH_STACK_WORLD);
+}
+#endif
 const uint RBVH_LEAF_BIT = 0x80000000u;
 
 // Aila & Laine (2009) node, both children's boxes quantized against the node's own box (Ylitie,
@@ -244,6 +270,52 @@ bool rbvh_test_triangles(RbvhShear sh, Ray ray, bool any_hit, uint first, uint e
     return hit;
 }
 
+// Instances (RBVH_INSTANCES): what both two-level structures share, the exact BVH's (below) and
+// the RBVH's (rbvh.glsl).
+#ifdef RBVH_INSTANCES
+// The count of a top-level leaf (bvh::INSTANCE_LEAF): its reference is LEAF_BIT | instance.
+const uint RBVH_INSTANCE_LEAF = 0xFFFFFFFFu;
+
+// One instance (GpuInstance in src/bvh/layout.rs), 64 bytes: world to mesh space by rows (p'_i =
+// dot(row_i.xyz, p) + row_i.w), the root node of its mesh's tree, the mesh.
+struct BvhInstance {
+    vec4 world_to_mesh[3];
+    uint root;
+    uint mesh;
+    uint pad0;
+    uint pad1;
+};
+
+#ifdef RBVH_DEVICE_ADDRESS
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer RbvhBvhInstancesRef {
+    BvhInstance instances[];
+};
+#define RBVH_BVH_INSTANCE(i) RbvhBvhInstancesRef(RBVH_BVH_INSTANCES_ADDRESS).instances[i]
+#else
+layout(std430, set = RBVH_BVH_SET, binding = RBVH_BVH_INSTANCES_BINDING) readonly buffer RbvhBvhInstances {
+    BvhInstance rbvh_bvh_instances[];
+};
+#define RBVH_BVH_INSTANCE(i) rbvh_bvh_instances[i]
+#endif
+
+// `ray` in instance `inst`'s mesh space (GpuInstance::ray_into): the direction transformed, not
+// normalized, so a hit's t is the same along both; tmin and tmax kept.
+Ray rbvh_ray_into(BvhInstance inst, Ray ray) {
+    vec3 o = vec3(dot(inst.world_to_mesh[0].xyz, ray.origin), dot(inst.world_to_mesh[1].xyz, ray.origin),
+                  dot(inst.world_to_mesh[2].xyz, ray.origin))
+             + vec3(inst.world_to_mesh[0].w, inst.world_to_mesh[1].w, inst.world_to_mesh[2].w);
+    vec3 d = vec3(dot(inst.world_to_mesh[0].xyz, ray.dir), dot(inst.world_to_mesh[1].xyz, ray.dir),
+                  dot(inst.world_to_mesh[2].xyz, ray.dir));
+    return Ray(o, ray.tmin, d, ray.tmax);
+}
+
+// The normal `n` of a hit in instance `inst`'s mesh space, in world space (GpuInstance::normal_out):
+// by the transpose of world_to_mesh.
+vec3 rbvh_normal_out(BvhInstance inst, vec3 n) {
+    return normalize(inst.world_to_mesh[0].xyz * n.x + inst.world_to_mesh[1].xyz * n.y + inst.world_to_mesh[2].xyz * n.z);
+}
+#endif  // RBVH_INSTANCES
+
 // The exact BVH's traversal: not with RBVH_INDEXED_TRIANGLES, whose triangle array is an RBVH's.
 #ifndef RBVH_INDEXED_TRIANGLES
 // The exact BVH's leaf hook for traverse.glsl: its triangles, with the ray's shear made once.
@@ -298,46 +370,6 @@ Hit rbvh_trace_bvh(Ray ray, bool any_hit, BvhSizes sz, out uint steps, out bool 
 }
 
 #ifdef RBVH_INSTANCES
-#ifdef RBVH_KEEPS_RAY
-#error "RBVH_INSTANCES: the two-level traversal keeps the world ray beside the stack itself"
-#endif
-
-// The count of a top-level leaf (bvh::INSTANCE_LEAF): its reference is LEAF_BIT | instance.
-const uint RBVH_INSTANCE_LEAF = 0xFFFFFFFFu;
-
-// One instance (GpuInstance in src/bvh/layout.rs), 64 bytes: world to mesh space by rows (p'_i =
-// dot(row_i.xyz, p) + row_i.w), the root node of its mesh's tree, the mesh.
-struct BvhInstance {
-    vec4 world_to_mesh[3];
-    uint root;
-    uint mesh;
-    uint pad0;
-    uint pad1;
-};
-
-#ifdef RBVH_DEVICE_ADDRESS
-layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer RbvhBvhInstancesRef {
-    BvhInstance instances[];
-};
-#define RBVH_BVH_INSTANCE(i) RbvhBvhInstancesRef(RBVH_BVH_INSTANCES_ADDRESS).instances[i]
-#else
-layout(std430, set = RBVH_BVH_SET, binding = RBVH_BVH_INSTANCES_BINDING) readonly buffer RbvhBvhInstances {
-    BvhInstance rbvh_bvh_instances[];
-};
-#define RBVH_BVH_INSTANCE(i) rbvh_bvh_instances[i]
-#endif
-
-// `ray` in instance `inst`'s mesh space (GpuInstance::ray_into): the direction transformed, not
-// normalized, so a hit's t is the same along both; tmin and tmax kept.
-Ray rbvh_ray_into(BvhInstance inst, Ray ray) {
-    vec3 o = vec3(dot(inst.world_to_mesh[0].xyz, ray.origin), dot(inst.world_to_mesh[1].xyz, ray.origin),
-                  dot(inst.world_to_mesh[2].xyz, ray.origin))
-             + vec3(inst.world_to_mesh[0].w, inst.world_to_mesh[1].w, inst.world_to_mesh[2].w);
-    vec3 d = vec3(dot(inst.world_to_mesh[0].xyz, ray.dir), dot(inst.world_to_mesh[1].xyz, ray.dir),
-                  dot(inst.world_to_mesh[2].xyz, ray.dir));
-    return Ray(o, ray.tmin, d, ray.tmax);
-}
-
 // Sizes the two-level traversal needs to bound its reads.
 struct BvhInstanceSizes {
     uint node_count;
@@ -395,14 +427,14 @@ bool rbvh_enter_instance(inout BvhInstanceHook leaves, uint reference, uint coun
 
 // Leaves the instance entered last: `ray` is the world's again (kept beside the stack).
 void rbvh_exit_instance(inout BvhInstanceHook leaves, inout Ray ray) {
-    ray = rbvh_kept_ray();
+    ray = rbvh_kept_world_ray();
     leaves.entered = RBVH_INVALID;
 }
 
 bool rbvh_test(inout BvhInstanceHook leaves, Ray ray, bool any_hit, uint reference, uint count,
                inout float t_closest, inout uint steps, inout bool cut) {
     // Triangles are the meshes': tested inside an instance only.
-    if (leaves.entered == RBVH_INVALID || count == RBVH_INSTANCE_LEAF) {
+    if (leaves.entered == RBVH_INVALID) {
         return false;
     }
     uint first = reference & ~RBVH_LEAF_BIT;
@@ -434,9 +466,7 @@ Hit rbvh_trace_instances(Ray ray, bool any_hit, BvhInstanceSizes sz, out uint st
     }
     BvhTriangle tri = rbvh_bvh_triangle(leaves.best_slot, sz.tri_count);
     vec3 n = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
-    BvhInstance inst = RBVH_BVH_INSTANCE(leaves.best_instance);
-    vec3 w = normalize(inst.world_to_mesh[0].xyz * n.x + inst.world_to_mesh[1].xyz * n.y
-                       + inst.world_to_mesh[2].xyz * n.z);
+    vec3 w = rbvh_normal_out(RBVH_BVH_INSTANCE(leaves.best_instance), n);
     return Hit(t, w.x, w.y, w.z, tri.prim, leaves.best_instance, 0u, 0u);
 }
 #endif  // RBVH_INSTANCES

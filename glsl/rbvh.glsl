@@ -892,4 +892,94 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
     return rbvh_rbvh_hit(leaves, t, rbvh_kept_ray());
 }
 
+#ifdef RBVH_INSTANCES
+// The two-level RBVH's hook (src/rbvh/instanced.rs, InstanceHook around RbvhLeafHook): top-level
+// leaves enter instances (bvh.glsl's records), the meshes' leaves are the RBVH's own, marched and
+// tested in the mesh's space. A top-level leaf and a height field share their count
+// (RBVH_INSTANCE_LEAF = RBVH_HEIGHTFIELD_COUNT): the level the ray is in tells them apart.
+struct RbvhInstanceHook {
+    RbvhLeafHook inner;
+    uint instance_count;
+    uint entered;        // the instance the ray is in, RBVH_INVALID at the top level
+    uint best_instance;  // the instance of the nearest hit
+};
+
+uint rbvh_node_count(RbvhInstanceHook leaves) {
+    return leaves.inner.sz.node_count;
+}
+
+// The top level's rounds and each instance's (its leaves and nodes, as for one RBVH), at most
+// 2^32 − 2 so that the loops' counters cannot wrap.
+uint rbvh_round_bound(RbvhInstanceHook leaves) {
+    uint per_tree = min(rbvh_round_bound(leaves.inner), 0xFFFFFFFEu);
+    uint trees = min(leaves.instance_count, 0xFFFFFFFEu) + 1u;
+    return trees > 0xFFFFFFFEu / per_tree ? 0xFFFFFFFEu : trees * per_tree;
+}
+
+bool rbvh_is_leaf(RbvhInstanceHook leaves, uint reference) {
+    return (reference & RBVH_LEAF_BIT) != 0u;
+}
+
+uint rbvh_enter(RbvhInstanceHook leaves, uint child, uint count, float t_entry) {
+    return child;
+}
+
+bool rbvh_enter_instance(inout RbvhInstanceHook leaves, uint reference, uint count, inout Ray ray, out uint root) {
+    root = RBVH_INVALID;
+    uint k = reference & ~RBVH_LEAF_BIT;
+    if (count != RBVH_INSTANCE_LEAF || k >= leaves.instance_count) {
+        return false;
+    }
+    BvhInstance inst = RBVH_BVH_INSTANCE(k);
+    ray = rbvh_ray_into(inst, ray);
+    leaves.entered = k;
+    root = inst.root;
+    return true;
+}
+
+void rbvh_exit_instance(inout RbvhInstanceHook leaves, inout Ray ray) {
+    ray = rbvh_kept_world_ray();
+    leaves.entered = RBVH_INVALID;
+}
+
+bool rbvh_test(inout RbvhInstanceHook leaves, Ray ray, bool any_hit, uint reference, uint count,
+               inout float t_closest, inout uint steps, inout bool cut) {
+    // The meshes' leaves are tested inside an instance only.
+    if (leaves.entered == RBVH_INVALID) {
+        return false;
+    }
+    bool hit = rbvh_test(leaves.inner, ray, any_hit, reference, count, t_closest, steps, cut);
+    if (hit) {
+        leaves.best_instance = leaves.entered;
+    }
+    return hit;
+}
+
+#define RBVH_TRAVERSE rbvh_traverse_rbvh_instances
+#define RBVH_LEAVES RbvhInstanceHook
+#define RBVH_KEEPS_RAY
+#define RBVH_TRAVERSE_INSTANCES
+#include "traverse.glsl"
+#undef RBVH_TRAVERSE
+#undef RBVH_LEAVES
+#undef RBVH_KEEPS_RAY
+#undef RBVH_TRAVERSE_INSTANCES
+
+// The two-level RBVH's closest (or, with `any_hit`, any) hit: its instance in `instance_id`, ids
+// as rbvh_trace_rbvh's (a height field's among every mesh's records), the normal made in the
+// mesh's space from the ray taken there again, then taken to world space by the instance.
+Hit rbvh_trace_rbvh_instances(Ray ray, bool any_hit, RbvhSizes sz, uint instance_count, out uint steps,
+                              out bool overflow) {
+    RbvhInstanceHook leaves = RbvhInstanceHook(rbvh_leaf_hook(sz), instance_count, RBVH_INVALID, RBVH_INVALID);
+    float t = rbvh_traverse_rbvh_instances(ray, any_hit, leaves, steps, overflow);
+    if (leaves.inner.best == RBVH_INVALID) {
+        return rbvh_miss();
+    }
+    BvhInstance inst = RBVH_BVH_INSTANCE(leaves.best_instance);
+    Hit h = rbvh_rbvh_hit(leaves.inner, t, rbvh_ray_into(inst, rbvh_kept_world_ray()));
+    vec3 n = rbvh_normal_out(inst, vec3(h.nx, h.ny, h.nz));
+    return Hit(h.t, n.x, n.y, n.z, h.id, leaves.best_instance, 0u, 0u);
+}
+#endif  // RBVH_INSTANCES
+
 #endif

@@ -1,8 +1,10 @@
-// The body of trace_rbvh.comp and trace_rbvh_lod.comp (which defines RBVH_LOD), and of their
+// The body of trace_rbvh.comp, trace_rbvh_lod.comp (which defines RBVH_LOD) and
+// trace_rbvh_instances.comp (which defines RBVH_INSTANCES: the two-level RBVH), and of their
 // *_bda twins (which define RBVH_DEVICE_ADDRESS): one invocation per ray. Bindings (bindings.glsl):
 // the RBVH's four arrays, rays, hits, status, counters; with RBVH_LOD also the LOD records and
-// columns (see lod.glsl) and the per-ray cones. The *_bda twins read the structure's arrays (the
-// RBVH's four, the LOD's two) through the device addresses in the push constants instead.
+// columns (see lod.glsl) and the per-ray cones; with RBVH_INSTANCES the instances. The *_bda twins
+// read the structure's arrays (the RBVH's four, the LOD's two, the instances) through the device
+// addresses in the push constants instead.
 #ifndef RBVH_TRACE_RBVH_MAIN_GLSL
 #define RBVH_TRACE_RBVH_MAIN_GLSL
 
@@ -48,6 +50,8 @@ void main() {
 #ifdef RBVH_LOD
     RbvhLodSizes lsz = RbvhLodSizes(pc.lod_node_count, pc.lod_texel_len);
     Hit h = rbvh_trace_rbvh_lod(rays[i], cones[i], (pc.flags & 1u) != 0u, sz, lsz, steps, overflow);
+#elif defined(RBVH_INSTANCES)
+    Hit h = rbvh_trace_rbvh_instances(rays[i], (pc.flags & 1u) != 0u, sz, pc.instance_count, steps, overflow);
 #else
     Hit h = rbvh_trace_rbvh(rays[i], (pc.flags & 1u) != 0u, sz, steps, overflow);
 #endif

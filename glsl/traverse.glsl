@@ -22,14 +22,15 @@
 // (the RBVH's marches, where that costs occupancy; the exact BVH's triangle tests hold few
 // registers, so its tracer keeps the ray where it is); the caller reads the ray back with
 // rbvh_kept_ray() after the traversal.
-// With RBVH_TRAVERSE_INSTANCES (bvh.glsl's two-level exact BVH; not with RBVH_KEEPS_RAY), two
-// levels in one loop, as crate::bvh::traverse: the hook also has
+// With RBVH_TRAVERSE_INSTANCES (the two-level structures: bvh.glsl's exact BVH, rbvh.glsl's RBVH),
+// two levels in one loop, as crate::bvh::traverse: the hook also has
 //     bool rbvh_enter_instance(inout RBVH_LEAVES leaves, uint reference, uint count, inout Ray ray,
 //                              out uint root)
 //         whether leaf `reference` is an instance; if so, `ray` becomes the ray in its mesh's
 //         space and `root` its mesh's root, where the next round starts
 //     void rbvh_exit_instance(inout RBVH_LEAVES leaves, inout Ray ray)
-//         the world ray back (the traversal keeps it with rbvh_keep_ray)
+//         the world ray back (the traversal keeps it with rbvh_keep_world_ray; with
+//         RBVH_KEEPS_RAY, rbvh_stack's ray is the level's: the mesh ray while in an instance)
 // and the traversal pushes an instance's end (distance -inf, RBVH_INSTANCE_END, which no nearest
 // hit drops) when it enters one, and leaves the instance when it pops that entry. Distances are
 // the same along both rays (the direction is transformed, not normalized). Visits are bounded per
@@ -37,7 +38,7 @@
 // It also uses, from bvh.glsl (included before it wherever it is instantiated: bvh.glsl,
 // rbvh.glsl, lod.glsl) and what that includes (common.glsl, intersect.glsl): Ray, BvhNode,
 // RBVH_BVH_NODE(i), rbvh_node_boxes, RBVH_LEAF_BIT, RBVH_INVALID, RBVH_STACK_SIZE, rbvh_stack,
-// rbvh_keep_ray, rbvh_kept_ray, rbvh_stack_entry, rbvh_stack_pop, rbvh_ray_valid,
+// rbvh_keep_ray, rbvh_kept_ray, with instances rbvh_keep_world_ray, rbvh_stack_entry, rbvh_stack_pop, rbvh_ray_valid,
 // rbvh_safe_inverse, rbvh_intersect_box, RBVH_COUNT_RESET and RBVH_COUNT_ADD. Define the two names above and include it; then
 // `float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint steps, out bool
 // overflow)` returns the nearest distance found (ray.tmax if none; the
@@ -86,7 +87,7 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
     uint node_count = rbvh_node_count(leaves);
     uint bound = rbvh_round_bound(leaves);
 #ifdef RBVH_TRAVERSE_INSTANCES
-    rbvh_keep_ray(ray);
+    rbvh_keep_world_ray(ray);
     // The instance's end on the stack: floatBitsToUint(-inf).
     const uint RBVH_INSTANCE_END = 0xFF800000u;
     bool inside = false;
@@ -118,6 +119,9 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
         // the inner loop, where the hook's new shear would be made beside every node's values.
         if (leaving) {
             rbvh_exit_instance(leaves, ray);
+#ifdef RBVH_KEEPS_RAY
+            rbvh_keep_ray(ray);
+#endif
             inside = false;
             visits = top_visits;
             leaving = false;
@@ -240,6 +244,9 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
 #ifdef RBVH_TRAVERSE_INSTANCES
         uint root;
         if (!inside && rbvh_enter_instance(leaves, pending, pending_count, ray, root)) {
+#ifdef RBVH_KEEPS_RAY
+            rbvh_keep_ray(ray);
+#endif
             if (sp < RBVH_STACK_SIZE) {
                 RBVH_COUNT_ADD(instances, 1u);
                 rbvh_stack[sp] = uvec2(0u, RBVH_INSTANCE_END);
@@ -250,6 +257,9 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
                 start = root;
             } else {
                 rbvh_exit_instance(leaves, ray);
+#ifdef RBVH_KEEPS_RAY
+                rbvh_keep_ray(ray);
+#endif
                 overflow = true;
             }
             continue;

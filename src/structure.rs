@@ -15,12 +15,13 @@ use crate::bvh::{BuildParams, Bvh, InstancedBvh};
 use crate::geom::{Hit, Ray};
 use crate::lod::{Cones, Lod, LodParams};
 use crate::progress::{Progress, Quiet};
+use crate::rbvh::InstancedRbvh;
 use crate::rbvh::{Rbvh, RbvhParams, RbvhSource};
 use crate::scene::Scene;
 use crate::Result;
 
 /// Which structure, without it: the `method` of benchmark records (`"exact"`, `"rbvh"`,
-/// `"rbvh-lod"`, `"exact-instanced"`) and what [`Structure::kind`] says.
+/// `"rbvh-lod"`, `"exact-instanced"`, `"rbvh-instanced"`) and what [`Structure::kind`] says.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Kind {
@@ -34,17 +35,21 @@ pub enum Kind {
     /// The exact BVH of a scene with instances, in two levels ([`InstancedBvh`]).
     #[serde(rename = "exact-instanced")]
     ExactInstanced,
+    /// The RBVH of a scene with instances, in two levels ([`InstancedRbvh`]).
+    #[serde(rename = "rbvh-instanced")]
+    RbvhInstanced,
 }
 
 impl Kind {
-    /// `"exact"`, `"rbvh"`, `"rbvh-lod"` or `"exact-instanced"`, as records and file names
-    /// write it.
+    /// `"exact"`, `"rbvh"`, `"rbvh-lod"`, `"exact-instanced"` or `"rbvh-instanced"`, as records
+    /// and file names write it.
     pub fn name(self) -> &'static str {
         match self {
             Kind::Exact => "exact",
             Kind::Rbvh => "rbvh",
             Kind::RbvhLod => "rbvh-lod",
             Kind::ExactInstanced => "exact-instanced",
+            Kind::RbvhInstanced => "rbvh-instanced",
         }
     }
 
@@ -139,6 +144,15 @@ pub enum Structure {
     /// The exact BVH of a scene with instances: a tree per mesh, a top level over the
     /// instances ([`InstancedBvh`]).
     ExactInstanced(InstancedBvh),
+    /// The RBVH of a scene with instances: an RBVH per mesh in its own space, a top level over
+    /// the instances ([`InstancedRbvh`]).
+    RbvhInstanced(InstancedRbvh),
+}
+
+impl From<InstancedRbvh> for Structure {
+    fn from(rbvh: InstancedRbvh) -> Self {
+        Structure::RbvhInstanced(rbvh)
+    }
 }
 
 impl From<InstancedBvh> for Structure {
@@ -209,15 +223,22 @@ impl Structure {
     /// The same RBVH (shared, not copied) traced with levels of detail built by `params`: what a
     /// measurement of both needs. Fails for the exact BVH, which has none.
     pub fn with_levels(&self, params: &LodParams) -> Result<Structure> {
-        let rbvh = match self {
-            Structure::Exact(_) | Structure::ExactInstanced(_) => {
-                return Err(crate::Error::param(
+        let rbvh =
+            match self {
+                Structure::Exact(_) | Structure::ExactInstanced(_) => {
+                    return Err(crate::Error::param(
+                        "lod",
+                        "levels of detail are built for an RBVH, not the exact BVH".to_string(),
+                    ))
+                }
+                Structure::RbvhInstanced(_) => return Err(crate::Error::param(
                     "lod",
-                    "levels of detail are built for an RBVH, not the exact BVH".to_string(),
-                ))
-            }
-            Structure::Rbvh(rbvh) | Structure::RbvhLod(rbvh, _) => rbvh,
-        };
+                    "levels of detail are built for a flat RBVH, not over instances (trace the \
+                     flat scene for them)"
+                        .to_string(),
+                )),
+                Structure::Rbvh(rbvh) | Structure::RbvhLod(rbvh, _) => rbvh,
+            };
         let lod = Lod::build(rbvh, params)?;
         Ok(Structure::RbvhLod(Arc::clone(rbvh), Box::new(lod)))
     }
@@ -242,6 +263,18 @@ impl Structure {
                     ..Memory::default()
                 }
             }
+            Structure::RbvhInstanced(two) => {
+                let rbvh = two.parts();
+                let tree = rbvh.tree_bytes() + two.instance_bytes();
+                Memory {
+                    tree,
+                    atlas: rbvh.atlas_bytes(),
+                    triangles: rbvh.triangle_bytes(),
+                    total: tree + rbvh.atlas_bytes() + rbvh.triangle_bytes(),
+                    texels: rbvh.stats.tile_texels,
+                    narrow_texels: rbvh.narrow_texels(),
+                }
+            }
             Structure::Rbvh(rbvh) | Structure::RbvhLod(rbvh, _) => {
                 let lod = self.lod().map_or(0, Lod::bytes);
                 Memory {
@@ -262,6 +295,7 @@ impl Structure {
         match self {
             Structure::Exact(bvh) => bvh.build_ms,
             Structure::ExactInstanced(bvh) => bvh.build_ms,
+            Structure::RbvhInstanced(two) => two.stats().build_ms,
             Structure::Rbvh(rbvh) => rbvh.stats.build_ms,
             Structure::RbvhLod(rbvh, lod) => rbvh.stats.build_ms + lod.stats.build_ms,
         }
@@ -280,10 +314,13 @@ impl Structure {
         }
     }
 
-    /// The RBVH traced, if any (for the colour of its hits, its texel size).
+    /// The RBVH traced, if any (for the colour of its hits, its texel size): not one over
+    /// instances, whose arrays are no RBVH to trace alone.
     pub fn rbvh(&self) -> Option<&Rbvh> {
         match self {
-            Structure::Exact(_) | Structure::ExactInstanced(_) => None,
+            Structure::Exact(_) | Structure::ExactInstanced(_) | Structure::RbvhInstanced(_) => {
+                None
+            }
             Structure::Rbvh(rbvh) | Structure::RbvhLod(rbvh, _) => Some(rbvh),
         }
     }
@@ -292,7 +329,9 @@ impl Structure {
     /// when it is shared with another structure.
     pub fn rbvh_mut(&mut self) -> Option<&mut Rbvh> {
         match self {
-            Structure::Exact(_) | Structure::ExactInstanced(_) => None,
+            Structure::Exact(_) | Structure::ExactInstanced(_) | Structure::RbvhInstanced(_) => {
+                None
+            }
             Structure::Rbvh(rbvh) | Structure::RbvhLod(rbvh, _) => Some(Arc::make_mut(rbvh)),
         }
     }
@@ -312,17 +351,19 @@ impl Structure {
             Structure::Rbvh(_) => Kind::Rbvh,
             Structure::RbvhLod(..) => Kind::RbvhLod,
             Structure::ExactInstanced(_) => Kind::ExactInstanced,
+            Structure::RbvhInstanced(_) => Kind::RbvhInstanced,
         }
     }
 
-    /// "exact BVH", "RBVH", "RBVH with levels of detail" or "two-level exact BVH": for
-    /// messages.
+    /// "exact BVH", "RBVH", "RBVH with levels of detail", "two-level exact BVH" or "two-level
+    /// RBVH": for messages.
     pub fn label(&self) -> &'static str {
         match self {
             Structure::Exact(_) => "exact BVH",
             Structure::Rbvh(_) => "RBVH",
             Structure::RbvhLod(..) => "RBVH with levels of detail",
             Structure::ExactInstanced(_) => "two-level exact BVH",
+            Structure::RbvhInstanced(_) => "two-level RBVH",
         }
     }
 
@@ -338,6 +379,7 @@ impl Structure {
         Ok(match self {
             Structure::Exact(bvh) => bvh.trace_cpu(rays, any_hit),
             Structure::ExactInstanced(bvh) => bvh.trace_cpu(rays, any_hit),
+            Structure::RbvhInstanced(two) => two.trace_cpu(rays, any_hit),
             Structure::Rbvh(rbvh) => rbvh.trace_cpu(rays, any_hit),
             Structure::RbvhLod(rbvh, lod) => rbvh.trace_cpu_lod(lod, rays, cones, any_hit)?,
         })

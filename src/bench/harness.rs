@@ -526,7 +526,9 @@ impl<'a> SceneBench<'a> {
                 Structure::Rbvh(r) => {
                     Some(steps::rbvh_steps(r, &m.rays, any, c.tracer.block_jumps()))
                 }
-                Structure::RbvhLod(..) | Structure::ExactInstanced(_) => None,
+                Structure::RbvhLod(..)
+                | Structure::ExactInstanced(_)
+                | Structure::RbvhInstanced(_) => None,
             };
             counted.push((MeanCounters::of(&device), traffic, steps));
         }
@@ -659,6 +661,16 @@ impl<'a> SceneBench<'a> {
                 let twin = &plain_twin;
                 (
                     rbvh_arrays(r, None),
+                    Box::new(move |k, reads| twin.trace(&m.rays[k], any, reads).1),
+                )
+            }
+            Structure::RbvhInstanced(two) => {
+                plain_twin = two.device_twin().with_block_jumps(c.tracer.block_jumps());
+                let twin = &plain_twin;
+                let mut arrays = rbvh_arrays(two.parts(), None);
+                arrays[Array::Instances as usize] = two.instance_bytes();
+                (
+                    arrays,
                     Box::new(move |k, reads| twin.trace(&m.rays[k], any, reads).1),
                 )
             }

@@ -187,6 +187,7 @@ pub fn write_charts(dir: &Path, records: &[Record]) -> Result<Vec<PathBuf>> {
                     Kind::ExactInstanced => "exact, two levels".to_string(),
                     Kind::Rbvh => level,
                     Kind::RbvhLod => format!("{level} LOD"),
+                    Kind::RbvhInstanced => format!("{level}, two levels"),
                 };
                 Some(Line {
                     label: format!(

@@ -19,9 +19,10 @@ pub(crate) fn trace(kind: Kind, reach: Reach) -> Vec<u32> {
         Kind::Exact => &[BVH_NODES, BVH_TRIS],
         Kind::ExactInstanced => &[BVH_NODES, BVH_TRIS, BVH_INSTANCES],
         Kind::Rbvh | Kind::RbvhLod => &[BVH_NODES, BVH_TRIS, HEIGHTFIELDS, ATLAS],
+        Kind::RbvhInstanced => &[BVH_NODES, BVH_TRIS, HEIGHTFIELDS, ATLAS, BVH_INSTANCES],
     };
     let lod: &[u32] = match kind {
-        Kind::Exact | Kind::ExactInstanced | Kind::Rbvh => &[],
+        Kind::Exact | Kind::ExactInstanced | Kind::Rbvh | Kind::RbvhInstanced => &[],
         Kind::RbvhLod => &[LODS, LOD_TEXELS],
     };
     let bound = reach == Reach::Bindings;

@@ -26,4 +26,6 @@ pub use painter::{PaintParams, PaintRecording, PaintStats, Painter, MAX_BRUSHES_
 pub use pipeline::{ComputePipeline, DescriptorSet};
 pub use statistics::{ShaderStatistic, StatisticValue};
 pub use submit::Timing;
-pub use tracer::{BufferView, Query, TraceBinding, TraceParams, Traced, Tracer, OBSERVED_BATCH};
+pub use tracer::{
+    BufferView, Placement, Query, TraceBinding, TraceParams, Traced, Tracer, OBSERVED_BATCH,
+};

@@ -21,11 +21,12 @@ use super::bindings;
 use super::compiled::{variant_name, CompiledPipeline};
 use super::pipeline::DescriptorSet;
 use super::{shaders, Buffer, ComputePipeline, Context, Reach, Timing};
-use crate::bvh::{Bvh, InstancedBvh, STACK_SIZE};
+use crate::bvh::{Bvh, GpuInstance, GpuNode, InstancedBvh, STACK_SIZE};
 use crate::geom::{Hit, Ray};
 use crate::lod::{Cones, Lod};
 use crate::probe::RayCounters;
 use crate::progress::{step, Progress, Quiet};
+use crate::rbvh::InstancedRbvh;
 use crate::rbvh::{Rbvh, TexelFormat};
 use crate::structure::{Kind, Structure};
 use crate::{Error, Result};
@@ -113,6 +114,7 @@ pub(crate) fn shader_name(kind: Kind) -> &'static str {
     match kind {
         Kind::Exact => "trace_exact",
         Kind::ExactInstanced => "trace_exact_instances",
+        Kind::RbvhInstanced => "trace_rbvh_instances",
         Kind::Rbvh => "trace_rbvh",
         Kind::RbvhLod => "trace_rbvh_lod",
     }
@@ -129,13 +131,15 @@ pub(crate) fn shader_spirv(kind: Kind, reach: Reach) -> &'static [u8] {
         (Kind::Rbvh, Reach::DeviceAddresses) => shaders::TRACE_RBVH_BDA,
         (Kind::RbvhLod, Reach::Bindings) => shaders::TRACE_RBVH_LOD,
         (Kind::RbvhLod, Reach::DeviceAddresses) => shaders::TRACE_RBVH_LOD_BDA,
+        (Kind::RbvhInstanced, Reach::Bindings) => shaders::TRACE_RBVH_INSTANCES,
+        (Kind::RbvhInstanced, Reach::DeviceAddresses) => shaders::TRACE_RBVH_INSTANCES_BDA,
     }
 }
 
 /// The specialization constants of `kind`'s trace shader as (GLSL name, `constant_id`, value):
 /// `rbvh_count` to `counting` (the pipeline that counts each ray's work; the timed one compiles
 /// the counting away), for the RBVH kinds `rbvh_block_jumps` to `block_jumps`, and for a plain
-/// RBVH `rbvh_height_only` to its texel format `texels`.
+/// RBVH (flat or in two levels) `rbvh_height_only` to its texel format `texels`.
 pub(crate) fn specialization(
     (kind, texels): (Kind, TexelFormat),
     block_jumps: bool,
@@ -149,7 +153,7 @@ pub(crate) fn specialization(
             u32::from(block_jumps),
         ));
     }
-    if kind == Kind::Rbvh {
+    if matches!(kind, Kind::Rbvh | Kind::RbvhInstanced) {
         constants.push((
             "rbvh_height_only",
             HEIGHT_ONLY_CONSTANT_ID,
@@ -247,9 +251,12 @@ fn with_parts<T>(
     structure: &Structure,
     f: impl FnOnce((Kind, TexelFormat), TraceParams, &[(&str, &[u8])]) -> Result<T>,
 ) -> Result<T> {
-    let texels = structure
-        .rbvh()
-        .map_or(TexelFormat::default(), |rbvh| rbvh.params.texels);
+    let texels = match structure {
+        Structure::RbvhInstanced(two) => two.params().texels,
+        _ => structure
+            .rbvh()
+            .map_or(TexelFormat::default(), |rbvh| rbvh.params.texels),
+    };
     let shader = (structure.kind(), texels);
     match structure {
         Structure::Exact(bvh) => {
@@ -266,6 +273,19 @@ fn with_parts<T>(
             let words = rbvh.atlas_words();
             let (sizes, arrays) = rbvh_parts(rbvh, &words)?;
             f(shader, sizes, &arrays)
+        }
+        Structure::RbvhInstanced(two) => {
+            let rbvh = two.parts();
+            check_depth("rbvh", rbvh.depth)?;
+            let words = rbvh.atlas_words();
+            let (mut sizes, [nodes, tris, heightfields, atlas]) = rbvh_parts(rbvh, &words)?;
+            sizes.instance_count = count32("rbvh", "instances", two.instances.len())?;
+            let instances = ("RBVH instances", bytemuck::cast_slice(&two.instances));
+            f(
+                shader,
+                sizes,
+                &[nodes, tris, heightfields, atlas, instances],
+            )
         }
         Structure::RbvhLod(rbvh, lod) => {
             check_depth("rbvh", rbvh.depth)?;
@@ -370,6 +390,51 @@ fn rbvh_parts<'a>(rbvh: &'a Rbvh, atlas_words: &'a [u32]) -> Result<(TraceParams
 
 /// Named byte arrays of a structure, in binding order.
 type Arrays<'a, const N: usize> = [(&'static str, &'a [u8]); N];
+
+/// What [`Tracer::update_instances`] writes of a two-level structure, and what it checks the
+/// uploaded one against: made from an [`InstancedBvh`] or an [`InstancedRbvh`].
+pub struct Placement<'a> {
+    kind: Kind,
+    /// The structure's name, for messages.
+    label: &'static str,
+    /// Both levels' nodes (the top level's first).
+    nodes: &'a [GpuNode],
+    top_nodes: u32,
+    /// The triangle slots the shader was given.
+    triangles: usize,
+    instances: &'a [GpuInstance],
+    /// Which of the structure's arrays holds the instances.
+    instances_array: usize,
+}
+
+impl<'a> From<&'a InstancedBvh> for Placement<'a> {
+    fn from(bvh: &'a InstancedBvh) -> Self {
+        Placement {
+            kind: Kind::ExactInstanced,
+            label: "two-level exact BVH",
+            nodes: &bvh.nodes,
+            top_nodes: bvh.top_nodes,
+            triangles: bvh.triangles.len(),
+            instances: &bvh.instances,
+            instances_array: 2,
+        }
+    }
+}
+
+impl<'a> From<&'a InstancedRbvh> for Placement<'a> {
+    fn from(two: &'a InstancedRbvh) -> Self {
+        let rbvh = two.parts();
+        Placement {
+            kind: Kind::RbvhInstanced,
+            label: "two-level RBVH",
+            nodes: &rbvh.nodes,
+            top_nodes: two.top_nodes,
+            triangles: rbvh.triangles.len(),
+            instances: &two.instances,
+            instances_array: 4,
+        }
+    }
+}
 
 /// The shader sizes and the arrays (name, bytes) of an RBVH traced with levels of detail: the
 /// RBVH's, with `nodes` ([`Lod::annotated_nodes`]) for its nodes, then the LOD records and columns.
@@ -552,17 +617,18 @@ impl Tracer {
         self.staging.clear();
     }
 
-    /// Moves the instances of an uploaded two-level exact BVH: writes `bvh`'s top level and
-    /// instance records (the uploaded structure after [`InstancedBvh::set_transforms`]) over the
-    /// device's, and leaves the meshes' trees where they are (issue "Instances": build the
-    /// bottom levels once, move instances, rebuild and upload the top level alone). Submits and
-    /// waits. Fails for any other structure, and for a `bvh` whose arrays are not the uploaded
-    /// ones' sizes (another scene).
-    pub fn update_instances(&mut self, bvh: &InstancedBvh) -> Result<()> {
-        let (top, instances) = self.instance_update(bvh)?;
+    /// Moves the instances of an uploaded two-level structure: writes `placed`'s top level and
+    /// instance records (the uploaded [`InstancedBvh`] or [`InstancedRbvh`] after its
+    /// `set_transforms`) over the device's, and leaves the meshes' trees where they are (issue
+    /// "Instances": build the bottom levels once, move instances, rebuild and upload the top
+    /// level alone). Submits and waits. Fails for any other structure, and for a structure whose
+    /// arrays are not the uploaded ones' sizes (another scene).
+    pub fn update_instances<'b>(&mut self, placed: impl Into<Placement<'b>>) -> Result<()> {
+        let placed = placed.into();
+        let (top, instances) = self.instance_update(&placed)?;
         let ctx = self.ctx.clone();
         ctx.write(self.structure_mut(0)?, top)?;
-        ctx.write(self.structure_mut(2)?, instances)?;
+        ctx.write(self.structure_mut(placed.instances_array)?, instances)?;
         Ok(())
     }
 
@@ -571,12 +637,13 @@ impl Tracer {
     /// (kept until [`Tracer::release_staging`]) and a barrier that makes them visible to compute
     /// shaders. Where the structure's memory is host-visible it is written at once instead: call
     /// it when no submitted trace still reads the structure.
-    pub fn update_instances_recorded(
+    pub fn update_instances_recorded<'b>(
         &mut self,
-        bvh: &InstancedBvh,
+        placed: impl Into<Placement<'b>>,
         cmd: vk::CommandBuffer,
     ) -> Result<()> {
-        let (top, instances) = self.instance_update(bvh)?;
+        let placed = placed.into();
+        let (top, instances) = self.instance_update(&placed)?;
         let ctx = self.ctx.clone();
         let barrier = [vk::MemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::SHADER_READ)
@@ -593,7 +660,7 @@ impl Tracer {
                 &[],
             )
         };
-        for (k, bytes) in [(0, top), (2, instances)] {
+        for (k, bytes) in [(0, top), (placed.instances_array, instances)] {
             let staging = ctx.write_recorded(self.structure_mut(k)?, bytes, cmd)?;
             self.staging.extend(staging);
         }
@@ -602,14 +669,15 @@ impl Tracer {
     }
 
     /// The bytes an instance update writes (the top level's nodes, the instance records), once
-    /// this tracer is checked to hold a two-level BVH of `bvh`'s sizes.
-    fn instance_update<'b>(&self, bvh: &'b InstancedBvh) -> Result<(&'b [u8], &'b [u8])> {
-        if self.shader.0 != Kind::ExactInstanced {
+    /// this tracer is checked to hold a two-level structure of `placed`'s kind and sizes.
+    fn instance_update<'b>(&self, placed: &Placement<'b>) -> Result<(&'b [u8], &'b [u8])> {
+        if self.shader.0 != placed.kind {
             return Err(Error::param(
                 "instances",
                 format!(
-                    "this tracer traces {} structure, not a two-level exact BVH",
-                    self.shader.0.name()
+                    "this tracer traces {} structure, not a {}",
+                    self.shader.0.name(),
+                    placed.label
                 ),
             ));
         }
@@ -618,21 +686,25 @@ impl Tracer {
             self.sizes.tri_count as usize,
             self.sizes.instance_count as usize,
         );
-        let given = (bvh.nodes.len(), bvh.triangles.len(), bvh.instances.len());
+        let given = (placed.nodes.len(), placed.triangles, placed.instances.len());
         if given != uploaded {
             return Err(Error::param(
                 "instances",
                 format!(
-                    "(nodes, triangles, instances) {given:?} are not the uploaded structure's                      {uploaded:?}: upload another scene with Tracer::new"
+                    "(nodes, triangles, instances) {given:?} are not the uploaded structure's \
+                     {uploaded:?}: upload another scene with Tracer::new"
                 ),
             ));
         }
-        let top = bvh.nodes.get(..bvh.top_nodes as usize).ok_or_else(|| {
-            Error::param("instances", "the top level has more nodes than the tree")
-        })?;
+        let top = placed
+            .nodes
+            .get(..placed.top_nodes as usize)
+            .ok_or_else(|| {
+                Error::param("instances", "the top level has more nodes than the tree")
+            })?;
         Ok((
             bytemuck::cast_slice(top),
-            bytemuck::cast_slice(&bvh.instances),
+            bytemuck::cast_slice(placed.instances),
         ))
     }
 
@@ -1049,7 +1121,6 @@ impl Tracer {
     }
 }
 
-/// Our trees never exceed the traversal stack; a hand-made or corrupt one is refused up front.
 /// Where in [`TraceParams::addresses`] each of `kind`'s arrays goes, in their binding order.
 fn address_slots(kind: Kind) -> &'static [usize] {
     match kind {
@@ -1057,9 +1128,11 @@ fn address_slots(kind: Kind) -> &'static [usize] {
         Kind::ExactInstanced => &[0, 1, 6],
         Kind::Rbvh => &[0, 1, 2, 3],
         Kind::RbvhLod => &[0, 1, 2, 3, 4, 5],
+        Kind::RbvhInstanced => &[0, 1, 2, 3, 6],
     }
 }
 
+/// Our trees never exceed the traversal stack; a hand-made or corrupt one is refused up front.
 fn check_depth(what: &str, depth: u32) -> Result<()> {
     if depth > STACK_SIZE {
         return Err(Error::param(

@@ -182,6 +182,11 @@ impl InstancedRbvh {
         self.tree_bytes() + self.atlas_bytes() + self.triangle_bytes() + self.instance_bytes()
     }
 
+    /// The arrays the device reads (the instances apart): every mesh's RBVH in one.
+    pub(crate) fn parts(&self) -> &Rbvh {
+        &self.rbvh
+    }
+
     /// Closest hit of one ray, or [`Hit::MISS`]: ids as [`Rbvh::closest_hit`]'s (a triangle's is
     /// its index in its mesh, a height field's its record among every mesh's), the instance in
     /// [`Hit::instance`], the normal in world space.

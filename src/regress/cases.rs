@@ -61,6 +61,7 @@ impl Method {
             Kind::ExactInstanced => "exact_instanced".into(),
             Kind::Rbvh => format!("rbvh_q{}", self.level),
             Kind::RbvhLod => format!("rbvh_lod_q{}", self.level),
+            Kind::RbvhInstanced => format!("rbvh_instanced_q{}", self.level),
         }
     }
 
@@ -77,6 +78,7 @@ impl fmt::Display for Method {
             Kind::ExactInstanced => f.write_str("exact, two levels"),
             Kind::Rbvh => write!(f, "RBVH Q{}", self.level),
             Kind::RbvhLod => write!(f, "RBVH Q{} with LOD", self.level),
+            Kind::RbvhInstanced => write!(f, "RBVH Q{} in two levels", self.level),
         }
     }
 }
@@ -142,7 +144,7 @@ impl Method {
         Ok(match self.kind {
             // A two-level structure takes the exact recipe for each mesh's tree.
             Kind::Exact | Kind::ExactInstanced => Recipe::Exact,
-            Kind::Rbvh => Recipe::Rbvh(RbvhParams::quality(self.level)?),
+            Kind::Rbvh | Kind::RbvhInstanced => Recipe::Rbvh(RbvhParams::quality(self.level)?),
             Kind::RbvhLod => {
                 Recipe::RbvhLod(RbvhParams::quality(self.level)?, LodParams::default())
             }

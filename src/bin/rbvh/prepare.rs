@@ -604,6 +604,23 @@ fn prepare_on(c: &Common, camera: Option<Camera>, device: bool) -> Result<Prepar
                 bvh.triangle_bytes(),
                 bvh.instance_bytes()
             ),
+            Structure::RbvhInstanced(two) => eprintln!(
+                "two-level RBVH: {} instances of {} meshes, top level {} nodes (depth {}), {} \
+                 height-field + {} triangle leaves, built in {:.1} ms, {} bytes (tree {}, atlas {}, \
+                 triangles {}, instances {})",
+                two.instances.len(),
+                two.meshes.len(),
+                two.top_nodes,
+                two.top_depth,
+                two.stats().heightfield_leaves,
+                two.stats().triangle_leaves,
+                two.stats().build_ms,
+                two.total_bytes(),
+                two.tree_bytes(),
+                two.atlas_bytes(),
+                two.triangle_bytes(),
+                two.instance_bytes()
+            ),
             Structure::Rbvh(r) | Structure::RbvhLod(r, _) => eprintln!(
                 "RBVH: {} nodes, {} height-field + {} triangle leaves, depth {}, {}, {} bytes (tree {}, atlas {}, triangles {})",
                 r.nodes.len(),

@@ -1,0 +1,186 @@
+//! The RBVH of a scene with instances, in two levels (issue "Instances"): each mesh rasterized
+//! once in its own space, traced through the top level the exact BVH's two levels have too. The
+//! device traces it as its CPU twin does, ray for ray; the two-level exact BVH is its referee;
+//! moving instances rebuilds and uploads the top level alone. (That its hits are, bit for bit,
+//! those of each mesh's RBVH traced alone is a unit test of `src/rbvh/instanced.rs`.)
+
+mod common;
+
+use common::{random_rays, Rng};
+use glam::{Mat4, Quat, Vec3};
+use rbvh::bvh::InstancedBvh;
+use rbvh::geom::Ray;
+use rbvh::gpu::{Addressing, Query, Tracer};
+use rbvh::lod::{Cones, LodParams};
+use rbvh::rbvh::{InstancedRbvh, RbvhParams, TexelFormat};
+use rbvh::scene::{Instance, InstancedScene, Scene};
+use rbvh::structure::Structure;
+
+/// Two built-in meshes placed nine times: turned, scaled unevenly and at several sizes (a mesh's
+/// texel is its largest placement's), one mirrored, overlapping.
+fn placed() -> InstancedScene {
+    let meshes: Vec<Scene> = ["bumpy-sphere", "torus"]
+        .iter()
+        .map(|name| Scene::builtin(name).unwrap())
+        .collect();
+    let instances = (0..9u32)
+        .map(|k| {
+            let turn = Quat::from_euler(glam::EulerRot::XYZ, 0.5 * k as f32, 0.8 * k as f32, 0.3);
+            let mirror = if k == 4 { -1.0 } else { 1.0 };
+            let scale = Vec3::new(mirror * (0.4 + 0.15 * k as f32), 0.6, 0.5 + 0.05 * k as f32);
+            let at = Vec3::new(
+                (k % 3) as f32 * 1.1 - 1.1,
+                (k / 3) as f32 * 0.9 - 0.9,
+                0.15 * k as f32,
+            );
+            Instance {
+                mesh: k % 2,
+                transform: Mat4::from_scale_rotation_translation(scale, turn, at),
+            }
+        })
+        .collect();
+    InstancedScene {
+        name: "placed".into(),
+        meshes,
+        instances,
+        ..InstancedScene::default()
+    }
+}
+
+fn rays(scene: &InstancedScene, n: usize, seed: u64) -> Vec<Ray> {
+    let flat = scene.clone().into_flat();
+    let mut rays = random_rays(&flat, n, &mut Rng::new(seed));
+    rays.extend(flat.camera_or_framed(1.0).primary_rays(40, 40));
+    rays
+}
+
+/// The device traces the two-level RBVH as its twin does, ray for ray: the same hits (instance,
+/// id, `t` to 1e-5 relative, normal) and the same counters, closest and any hit, with both texel
+/// formats, through bindings and device addresses (under the validation layers where installed).
+#[test]
+fn the_device_traces_the_two_level_rbvh_as_its_twin_does() {
+    let scene = placed();
+    let rays = rays(&scene, 4_000, 5);
+    for (level, texels) in [(2, TexelFormat::HeightNormal), (1, TexelFormat::Height)] {
+        let params = RbvhParams {
+            texels,
+            ..RbvhParams::quality(level).unwrap()
+        };
+        let two = InstancedRbvh::build(&scene, &params).unwrap();
+        assert!(two.stats().heightfield_leaves > 0);
+        let structure = Structure::from(two.clone());
+        for addressing in [Addressing::Bindings, Addressing::DeviceAddress] {
+            let ctx = common::context_with(addressing);
+            let tracer = Tracer::new(&ctx, &structure).unwrap();
+            let twin = two.device_twin().with_block_jumps(tracer.block_jumps());
+            for query in [Query::Closest, Query::Any] {
+                let any = query == Query::Any;
+                let traced = tracer.trace_with(&rays, Cones::None, query, true).unwrap();
+                let counters = traced.counters.unwrap();
+                let mut hits = 0;
+                for (i, ray) in rays.iter().enumerate() {
+                    let (cpu, stats) = twin.trace(ray, any, &mut ());
+                    let gpu = traced.hits[i];
+                    let at = format!("Q{level} {addressing:?} {query:?} ray {i}");
+                    assert_eq!(gpu.is_hit(), cpu.is_hit(), "{at}");
+                    assert_eq!(counters[i], stats.counters, "{at}: counters");
+                    if any || !gpu.is_hit() {
+                        continue;
+                    }
+                    hits += 1;
+                    assert_eq!((gpu.instance, gpu.id), (cpu.instance, cpu.id), "{at}");
+                    assert!(
+                        (gpu.t - cpu.t).abs() <= 1e-5 * cpu.t,
+                        "{at}: t {} vs {}",
+                        gpu.t,
+                        cpu.t
+                    );
+                    assert!(gpu.normal().dot(cpu.normal()) > 0.9999, "{at}: normals");
+                }
+                assert!(any || hits * 4 > rays.len(), "{hits} hits");
+            }
+        }
+    }
+}
+
+/// The two-level exact BVH referees the two-level RBVH as the exact BVH referees a flat one:
+/// the same rays hit, at distances within a few texels of the instance's mesh, at Q2.
+#[test]
+fn the_two_level_exact_bvh_referees_the_two_level_rbvh() {
+    let scene = placed();
+    let rays = rays(&scene, 6_000, 17);
+    let exact = InstancedBvh::build(&scene).unwrap();
+    let two = InstancedRbvh::build(&scene, &RbvhParams::quality(2).unwrap()).unwrap();
+    let (mut both, mut disagree, mut far) = (0usize, 0usize, 0usize);
+    for ray in &rays {
+        let (e, _) = exact.closest_hit(ray);
+        let (r, stats) = two.closest_hit(ray);
+        assert!(!stats.overflow);
+        if e.is_hit() != r.is_hit() {
+            disagree += 1;
+            continue;
+        }
+        if !e.is_hit() {
+            continue;
+        }
+        both += 1;
+        // The texel of the mesh hit, in world units along the ray: its mesh texel times the
+        // largest stretch of the instance (a bound on how far one texel reaches in the world).
+        let instance = &scene.instances[e.instance as usize];
+        let m = glam::Mat3::from_mat4(instance.transform);
+        let stretch = [m.x_axis, m.y_axis, m.z_axis]
+            .iter()
+            .map(|c| c.length())
+            .fold(0.0f32, f32::max);
+        let texel = two.mesh_texels[instance.mesh as usize] * stretch;
+        if (r.t - e.t).abs() * ray.dir().length() > 4.0 * texel {
+            far += 1;
+        }
+    }
+    assert!(both * 3 > rays.len(), "{both} hits");
+    assert!(
+        disagree * 50 <= rays.len(),
+        "{disagree} hit/miss disagreements of {}",
+        rays.len()
+    );
+    assert!(far * 50 <= both, "{far} of {both} hits beyond 4 texels");
+}
+
+/// Moving instances rewrites the device's top level and instance records alone: the hits are a
+/// fresh upload's bit for bit. A two-level RBVH is not a two-level exact BVH to move, and has no
+/// levels of detail.
+#[test]
+fn moving_rbvh_instances_uploads_the_top_level_alone() {
+    let scene = placed();
+    let mut two = InstancedRbvh::build(&scene, &RbvhParams::quality(1).unwrap()).unwrap();
+    let ctx = common::context();
+    let mut tracer = Tracer::new(&ctx, &Structure::from(two.clone())).unwrap();
+    let rays = rays(&scene, 2_000, 3);
+    let before = tracer.trace(&rays, Query::Closest).unwrap().hits;
+    let moved: Vec<Mat4> = scene
+        .instances
+        .iter()
+        .enumerate()
+        .map(|(k, i)| Mat4::from_translation(Vec3::new(0.0, 0.05 * k as f32, 0.0)) * i.transform)
+        .collect();
+    two.set_transforms(&moved).unwrap();
+    tracer.update_instances(&two).unwrap();
+    let after = tracer.trace(&rays, Query::Closest).unwrap().hits;
+    let fresh = Tracer::new(&ctx, &Structure::from(two.clone()))
+        .unwrap()
+        .trace(&rays, Query::Closest)
+        .unwrap()
+        .hits;
+    assert_eq!(after, fresh);
+    assert_ne!(after, before, "the instances moved");
+
+    let exact = InstancedBvh::build(&scene).unwrap();
+    let e = tracer.update_instances(&exact).unwrap_err().to_string();
+    assert!(e.contains("not a two-level exact BVH"), "{e}");
+    let e = Structure::from(two)
+        .with_levels(&LodParams::default())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("not over instances"), "{e}");
+}
