@@ -146,12 +146,12 @@ pub enum Structure {
     ExactInstanced(InstancedBvh),
     /// The RBVH of a scene with instances: an RBVH per mesh in its own space, a top level over
     /// the instances ([`InstancedRbvh`]).
-    RbvhInstanced(InstancedRbvh),
+    RbvhInstanced(Box<InstancedRbvh>),
 }
 
 impl From<InstancedRbvh> for Structure {
     fn from(rbvh: InstancedRbvh) -> Self {
-        Structure::RbvhInstanced(rbvh)
+        Structure::RbvhInstanced(Box::new(rbvh))
     }
 }
 

@@ -735,7 +735,9 @@ fn the_cli_writes_json_and_csv_and_rejects_unknown_ray_types() {
 
 /// A scene with instances is measured flat and in two levels: the two-level exact BVH's records
 /// (method `exact-instanced`) follow the exact BVH's in every ray type, hit what it hits (its hits
-/// compared as the flat scene's triangles), store each mesh once, and are valid.
+/// compared as the flat scene's triangles), store each mesh once, and are valid; the two-level
+/// RBVH's (`rbvh-instanced`) follow the flat RBVH's at the same level, store each mesh's tiles
+/// once, and err as little as the flat one.
 #[test]
 fn a_scene_with_instances_is_measured_in_two_levels_beside_the_flat_one() {
     let dir = tempfile::tempdir().unwrap();
@@ -758,14 +760,33 @@ fn a_scene_with_instances_is_measured_in_two_levels_beside_the_flat_one() {
     config.seam_rays = 0;
     config.ray_types = vec![RayType::Primary, RayType::Shadow];
     let report = bench::run(&config).unwrap();
-    assert_eq!(report.results.len(), 2 * 3);
-    for chunk in report.results.chunks(3) {
+    assert_eq!(report.results.len(), 2 * 4);
+    for chunk in report.results.chunks(4) {
         let (flat, two) = (&chunk[0], &chunk[1]);
         assert_eq!(
             (flat.method, two.method),
             (Kind::Exact, Kind::ExactInstanced)
         );
-        assert_eq!(chunk[2].method, Kind::Rbvh);
+        let (rbvh, rbvh_two) = (&chunk[2], &chunk[3]);
+        assert_eq!(
+            (rbvh.method, rbvh_two.method),
+            (Kind::Rbvh, Kind::RbvhInstanced)
+        );
+        assert_eq!(rbvh_two.quality, rbvh.quality);
+        assert!(
+            rbvh_two.memory_bytes.texels * 4 < rbvh.memory_bytes.texels * 3,
+            "the bumpy sphere rasterized once: {} against {} texels",
+            rbvh_two.memory_bytes.texels,
+            rbvh.memory_bytes.texels
+        );
+        let (e, e_two) = (
+            rbvh.error.as_ref().unwrap(),
+            rbvh_two.error.as_ref().unwrap(),
+        );
+        assert!(
+            e_two.miss_mismatch_rate <= 2.0 * e.miss_mismatch_rate + 0.01,
+            "{e_two:?} against the flat {e:?}"
+        );
         assert!(two.valid, "{:?}", two.invalid_reason);
         assert_eq!(two.triangles, flat.triangles, "triangles as placed");
         assert!(

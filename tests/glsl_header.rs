@@ -155,9 +155,22 @@ fn header_defaults_are_the_library_bindings() {
     }
 }
 
-/// An engine shader tracing a two-level exact BVH (`bvh.glsl` with `RBVH_INSTANCES`): `defines`
-/// pick where its three buffers live (none: their defaults).
-fn instanced_engine_shader(defines: &str) -> String {
+/// An engine shader tracing a two-level structure (`RBVH_INSTANCES`): the exact BVH's
+/// (`bvh.glsl`) or, with `rbvh`, the RBVH's (`rbvh.glsl`); `defines` pick where its buffers live
+/// (none: their defaults).
+fn instanced_engine_shader(defines: &str, rbvh: bool) -> String {
+    let (header, push, call) = match rbvh {
+        false => (
+            "bvh.glsl",
+            "BvhInstanceSizes sizes;",
+            "rbvh_trace_instances(ray, false, push.sizes, steps, overflow)",
+        ),
+        true => (
+            "rbvh.glsl",
+            "RbvhSizes sizes; uint instance_count;",
+            "rbvh_trace_rbvh_instances(ray, false, push.sizes, push.instance_count, steps, overflow)",
+        ),
+    };
     format!(
         r#"
 #version 460
@@ -166,45 +179,56 @@ layout(local_size_x = 32) in;
 
 #define RBVH_INSTANCES 1
 {defines}
-#include "bvh.glsl"
+#include "{header}"
 
 layout(std430, set = 3, binding = 0) writeonly buffer EngineHits {{ Hit engine_hits[]; }};
-layout(push_constant) uniform EnginePush {{ BvhInstanceSizes sizes; }} push;
+layout(push_constant) uniform EnginePush {{ {push} }} push;
 
 void main() {{
     Ray ray = Ray(vec3(gl_GlobalInvocationID.x, 0.0, -10.0), 0.0, vec3(0.0, 0.0, 1.0), 1e30);
     uint steps;
     bool overflow;
-    engine_hits[gl_GlobalInvocationID.x] = rbvh_trace_instances(ray, false, push.sizes, steps, overflow);
+    engine_hits[gl_GlobalInvocationID.x] = {call};
 }}
 "#
     )
 }
 
 #[test]
-fn instanced_header_compiles_in_a_foreign_shader_with_its_own_bindings_or_the_defaults() {
+fn instanced_headers_compile_in_a_foreign_shader_with_its_own_bindings_or_the_defaults() {
     use rbvh::gpu::bindings;
     let defines = "#define RBVH_BVH_SET 1\n#define RBVH_BVH_NODES_BINDING 4\n\
-                   #define RBVH_BVH_TRIS_BINDING 5\n#define RBVH_BVH_INSTANCES_BINDING 6";
-    let own = spirv::reflect(&compile(&instanced_engine_shader(defines)).unwrap());
-    let defaults = spirv::reflect(&compile(&instanced_engine_shader("")).unwrap());
-    for (block, binding, default) in [
-        ("RbvhBvhNodes", 4, bindings::BVH_NODES),
-        ("RbvhBvhTriangles", 5, bindings::BVH_TRIS),
-        ("RbvhBvhInstances", 6, bindings::BVH_INSTANCES),
-    ] {
-        assert_eq!(
-            own.bindings.get(block),
-            Some(&(1, binding)),
-            "{:?}",
-            own.bindings
-        );
-        assert_eq!(
-            defaults.bindings.get(block),
-            Some(&(0, default)),
-            "{:?}",
-            defaults.bindings
-        );
+                   #define RBVH_BVH_TRIS_BINDING 5\n#define RBVH_BVH_INSTANCES_BINDING 6\n\
+                   #define RBVH_HEIGHTFIELDS_BINDING 7\n#define RBVH_ATLAS_BINDING 8";
+    for rbvh in [false, true] {
+        let own = spirv::reflect(&compile(&instanced_engine_shader(defines, rbvh)).unwrap());
+        let defaults = spirv::reflect(&compile(&instanced_engine_shader("", rbvh)).unwrap());
+        let mut blocks = vec![
+            ("RbvhBvhNodes", 4, bindings::BVH_NODES),
+            ("RbvhBvhInstances", 6, bindings::BVH_INSTANCES),
+        ];
+        match rbvh {
+            false => blocks.push(("RbvhBvhTriangles", 5, bindings::BVH_TRIS)),
+            true => blocks.extend([
+                ("RbvhExactQuads", 5, bindings::BVH_TRIS),
+                ("RbvhHeightfields", 7, bindings::HEIGHTFIELDS),
+                ("RbvhAtlas", 8, bindings::ATLAS),
+            ]),
+        }
+        for (block, binding, default) in blocks {
+            assert_eq!(
+                own.bindings.get(block),
+                Some(&(1, binding)),
+                "{block}: {:?}",
+                own.bindings
+            );
+            assert_eq!(
+                defaults.bindings.get(block),
+                Some(&(0, default)),
+                "{block}: {:?}",
+                defaults.bindings
+            );
+        }
     }
 }
 

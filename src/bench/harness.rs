@@ -40,7 +40,7 @@ use super::steps;
 use super::traffic::{self, TrafficModel, CACHE_SIZES, DRAM_LINE};
 use super::validate;
 use super::{BenchConfig, Device};
-use crate::bvh::{Bvh, InstancedBvh};
+use crate::bvh::{Bvh, InstancedBvh, LEAF_BIT};
 use crate::geom::{Hit, Ray};
 use crate::gpu::{Context, Query, Timing, Traced, Tracer};
 use crate::lod::{Cones, Lod, RayCone};
@@ -48,7 +48,7 @@ use crate::output::{self, Image};
 use crate::probe::{Array, MeanCounters, Read, TraceStats};
 use crate::progress::{Progress, Quiet};
 use crate::rays::{self, RayType, Secondary, DEFAULT_LIGHT};
-use crate::rbvh::{Rbvh, RbvhParams, RbvhSource, TexelFormat};
+use crate::rbvh::{InstancedRbvh, Rbvh, RbvhParams, RbvhSource, TexelFormat};
 use crate::scene::{InstancedScene, Scene};
 use crate::structure::{Kind, Recipe, Structure};
 use crate::{Error, Result};
@@ -112,15 +112,9 @@ pub fn run_observed(
             observe(Event::Progress(format!("{spec}: loading")));
             InstancedScene::load_observed(spec, progress)?
         };
-        // A scene with instances is measured flat and in two levels.
-        let two_level = if placed.instances.len() > 1 {
-            observe(Event::Progress(format!(
-                "{spec}: building the two-level exact BVH"
-            )));
-            Some((InstancedBvh::build(&placed)?, placed.flat_bases()))
-        } else {
-            None
-        };
+        // A scene with instances is measured flat and in two levels: its meshes are kept (held
+        // once, a fraction of the flat scene) for the two-level builds.
+        let two_level = (placed.instances.len() > 1).then(|| placed.clone());
         let mut scene = placed.into_flat();
         scene.validate()?;
         if scene.triangle_count() == 0 && scene.points.is_some() {
@@ -207,13 +201,16 @@ impl Candidate {
         }
     }
 
-    /// "exact", "exact-instanced", "q2", "q2h" (height-only), "q2_lod", "custom": for file
-    /// names.
+    /// "exact", "exact-instanced", "q2", "q2h" (height-only), "q2_lod", "q2_instanced",
+    /// "custom": for file names.
     fn file_stem(&self) -> String {
         match &self.params {
             None => self.method().name().into(),
             Some(params) if self.method() == Kind::RbvhLod => {
                 format!("{}_lod", params.level_label().to_ascii_lowercase())
+            }
+            Some(params) if self.method() == Kind::RbvhInstanced => {
+                format!("{}_instanced", params.level_label().to_ascii_lowercase())
             }
             Some(params) => params.level_label().to_ascii_lowercase(),
         }
@@ -224,7 +221,12 @@ impl Candidate {
     fn trace(&self, rays: &[Ray], cones: Cones, query: Query, counters: bool) -> Result<Traced> {
         let mut traced = self.tracer.trace_with(rays, cones, query, counters)?;
         if let Some(bases) = &self.flat_ids {
-            for hit in traced.hits.iter_mut().filter(|h| h.is_hit()) {
+            // A triangle's id is its mesh's; a height field's (LEAF_BIT set) names no triangle.
+            for hit in traced
+                .hits
+                .iter_mut()
+                .filter(|h| h.is_hit() && h.id & LEAF_BIT == 0)
+            {
                 let base = bases.get(hit.instance as usize).copied().unwrap_or(0);
                 hit.id = base.saturating_add(hit.id);
             }
@@ -273,13 +275,14 @@ struct Measured {
 
 impl<'a> SceneBench<'a> {
     /// Builds and uploads every structure and traces the exact primary hits. `two_level`, for a
-    /// scene with instances, is its two-level exact BVH (with per instance its first triangle in
-    /// `scene`, the scene flattened): measured beside the flat one, as method `exact-instanced`.
+    /// scene with instances (`scene` is it flattened), is measured beside the flat structures in
+    /// two levels too: the exact BVH as method `exact-instanced`, each RBVH as `rbvh-instanced`
+    /// at the same parameters.
     fn new(
         ctx: &Context,
         config: &'a BenchConfig,
         scene: Scene,
-        two_level: Option<(InstancedBvh, Vec<u32>)>,
+        two_level: Option<InstancedScene>,
         observe: &mut dyn FnMut(Event),
         progress: &dyn Progress,
     ) -> Result<SceneBench<'a>> {
@@ -310,14 +313,19 @@ impl<'a> SceneBench<'a> {
             seams: None,
             flat_ids: None,
         }];
-        if let Some((two_level, flat_ids)) = two_level {
-            let structure = Structure::from(two_level);
+        let flat_ids = two_level.as_ref().map(InstancedScene::flat_bases);
+        if let Some(placed) = &two_level {
+            observe(Event::Progress(format!(
+                "{}: building the two-level exact BVH",
+                scene.name
+            )));
+            let structure = Structure::from(InstancedBvh::build(placed)?);
             candidates.push(Candidate {
                 tracer: Tracer::new_observed(ctx, &structure, progress)?,
                 structure,
                 params: None,
                 seams: None,
-                flat_ids: Some(flat_ids),
+                flat_ids: flat_ids.clone(),
             });
         }
         // Secondary rays leave the exact surface by at least the coarsest RBVH's texel: an RBVH
@@ -378,8 +386,28 @@ impl<'a> SceneBench<'a> {
                 }
                 None => None,
             };
+            let instanced = match &two_level {
+                Some(placed) if config.plain => {
+                    observe(Event::Progress(format!(
+                        "{}: building the two-level RBVH {}",
+                        scene.name,
+                        params.level_label()
+                    )));
+                    let two = InstancedRbvh::build_observed(placed, &params, progress)?;
+                    Some((Structure::from(two), None))
+                }
+                _ => None,
+            };
             let plain = config.plain.then_some((structure, seams));
-            for (structure, seams) in plain.into_iter().chain(lod.map(|l| (l, None))) {
+            for (structure, seams) in plain
+                .into_iter()
+                .chain(lod.map(|l| (l, None)))
+                .chain(instanced)
+            {
+                let flat_ids = match structure.kind() {
+                    Kind::RbvhInstanced => flat_ids.clone(),
+                    _ => None,
+                };
                 candidates.push(Candidate {
                     tracer: with_jumps(
                         Tracer::new_observed(ctx, &structure, progress)?,
@@ -388,7 +416,7 @@ impl<'a> SceneBench<'a> {
                     structure,
                     params: Some(params),
                     seams,
-                    flat_ids: None,
+                    flat_ids,
                 });
             }
         }

@@ -30,14 +30,13 @@ use glam::{Mat3, Mat4};
 use super::atlas::{self, Footprint};
 use super::child::Child;
 use super::layout::Texel;
-use super::march::{RbvhLeafHook, Walk};
+use super::march::{trace_instanced, Walk};
 use super::{Atlas, ExactTriangles, GpuHeightfield, Rbvh, RbvhParams, RbvhSource, RbvhStats};
 use crate::bvh::{
-    check_transforms, index, place, top_node_count, traverse, Aim, BottomLevel, GpuInstance,
-    GpuNode, GpuTriangle, InstanceHook,
+    check_transforms, index, place, top_node_count, BottomLevel, GpuInstance, GpuNode, GpuTriangle,
 };
 use crate::geom::{Aabb, Hit, Ray};
-use crate::probe::{Probe, TraceStats};
+use crate::probe::TraceStats;
 use crate::progress::{Progress, Quiet};
 use crate::scene::InstancedScene;
 use crate::Result;
@@ -191,7 +190,7 @@ impl InstancedRbvh {
     /// its index in its mesh, a height field's its record among every mesh's), the instance in
     /// [`Hit::instance`], the normal in world space.
     pub fn closest_hit(&self, ray: &Ray) -> (Hit, TraceStats) {
-        trace(
+        trace_instanced(
             &self.rbvh,
             &self.instances,
             ray,
@@ -203,7 +202,7 @@ impl InstancedRbvh {
 
     /// Whether anything is hit in `[tmin, tmax)`: the hit returned is *some* hit, not the closest.
     pub fn any_hit(&self, ray: &Ray) -> (Hit, TraceStats) {
-        trace(&self.rbvh, &self.instances, ray, true, Walk::Plain, &mut ())
+        trace_instanced(&self.rbvh, &self.instances, ray, true, Walk::Plain, &mut ())
     }
 
     /// The device's twin ([`super::DeviceTwin`]), read for read, instances included.
@@ -220,7 +219,7 @@ impl InstancedRbvh {
     }
 
     fn trace_one(&self, ray: &Ray, any_hit: bool) -> Hit {
-        trace(
+        trace_instanced(
             &self.rbvh,
             &self.instances,
             ray,
@@ -229,26 +228,6 @@ impl InstancedRbvh {
             &mut (),
         )
         .0
-    }
-}
-
-/// One ray through the two-level arrays `rbvh` over `instances`, walking leaves as `walk` says.
-pub(crate) fn trace<P: Probe>(
-    rbvh: &Rbvh,
-    instances: &[GpuInstance],
-    ray: &Ray,
-    any_hit: bool,
-    walk: Walk,
-    probe: &mut P,
-) -> (Hit, TraceStats) {
-    let mut leaves = InstanceHook::new(rbvh.leaf_hook(ray, any_hit, walk), instances, ray);
-    let stats = traverse(&rbvh.nodes, ray, any_hit, &mut leaves, probe);
-    (leaves.finish(probe, RbvhLeafHook::finish), stats)
-}
-
-impl Aim for RbvhLeafHook<'_> {
-    fn aim(&mut self, ray: &Ray) {
-        RbvhLeafHook::aim(self, ray);
     }
 }
 

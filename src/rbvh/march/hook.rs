@@ -7,7 +7,7 @@ use glam::Vec3;
 
 use super::normal::NormalReads;
 use super::Walk;
-use crate::bvh::{BvhLeafHook, Leaves};
+use crate::bvh::{traverse, Aim, BvhLeafHook, GpuInstance, InstanceHook, Leaves};
 use crate::geom::{Hit, Ray};
 use crate::probe::{Probe, TraceStats};
 use crate::rbvh::child::Child;
@@ -165,4 +165,26 @@ impl Rbvh {
         let stats = crate::bvh::traverse(&self.nodes, ray, any_hit, &mut leaves, probe);
         (leaves.into().finish(probe), stats)
     }
+}
+
+impl Aim for RbvhLeafHook<'_> {
+    fn aim(&mut self, ray: &Ray) {
+        RbvhLeafHook::aim(self, ray);
+    }
+}
+
+/// One ray through the arrays `rbvh` of a two-level RBVH (`crate::rbvh::InstancedRbvh`) over
+/// `instances`: the top level's leaves enter instances ([`InstanceHook`]), inside which the
+/// RBVH's own leaves are marched and tested, walking cells as `walk` says.
+pub(crate) fn trace_instanced<P: Probe>(
+    rbvh: &Rbvh,
+    instances: &[GpuInstance],
+    ray: &Ray,
+    any_hit: bool,
+    walk: Walk,
+    probe: &mut P,
+) -> (Hit, TraceStats) {
+    let mut leaves = InstanceHook::new(rbvh.leaf_hook(ray, any_hit, walk), instances, ray);
+    let stats = traverse(&rbvh.nodes, ray, any_hit, &mut leaves, probe);
+    (leaves.finish(probe, RbvhLeafHook::finish), stats)
 }

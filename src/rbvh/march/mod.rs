@@ -50,7 +50,7 @@ mod walk;
 
 use rayon::prelude::*;
 
-pub(crate) use hook::RbvhLeafHook;
+pub(crate) use hook::{trace_instanced, RbvhLeafHook};
 
 use super::ranges::block_ranges;
 use super::Rbvh;
@@ -111,14 +111,7 @@ impl<'a> DeviceTwin<'a> {
     /// `probe`.
     pub fn trace<P: Probe>(&self, ray: &Ray, any_hit: bool, probe: &mut P) -> (Hit, TraceStats) {
         if !self.instances.is_empty() {
-            return crate::rbvh::instanced::trace(
-                self.rbvh,
-                self.instances,
-                ray,
-                any_hit,
-                self.walk(),
-                probe,
-            );
+            return trace_instanced(self.rbvh, self.instances, ray, any_hit, self.walk(), probe);
         }
         self.rbvh.traverse_with(
             self.rbvh.leaf_hook(ray, any_hit, self.walk()),
