@@ -58,14 +58,17 @@
 // occupancy on wide SIMD (docs/speed.md, "Words kept beside the stack"). A global, so that a hook
 // reaches it; a ray's trace writes its words before it reads them, and a shader that traces
 // several rays traces them one after another.
-// With RBVH_INSTANCES, four more: the world ray of a two-level trace, which the ray of the level
-// traversed (RBVH_STACK_RAY) leaves for an instance's mesh space.
+// With RBVH_INSTANCES, five more: the world ray of a two-level trace, which the ray of the level
+// traversed (RBVH_STACK_RAY) leaves for an instance's mesh space, and the instance the ray is in
+// and the nearest hit's (the two-level RBVH's hook, read where a leaf is tested and once the ray
+// is done).
 #define RBVH_STACK_RAY RBVH_STACK_SIZE
 #define RBVH_STACK_HIT (RBVH_STACK_SIZE + 4)
 #define RBVH_STACK_CONE (RBVH_STACK_SIZE + 5)
 #ifdef RBVH_INSTANCES
 #define RBVH_STACK_WORLD (RBVH_STACK_SIZE + 6)
-uvec2 rbvh_stack[RBVH_STACK_SIZE + 10];
+#define RBVH_STACK_INSTANCE (RBVH_STACK_SIZE + 10)
+uvec2 rbvh_stack[RBVH_STACK_SIZE + 11];
 #else
 uvec2 rbvh_stack[RBVH_STACK_SIZE + 6];
 #endif

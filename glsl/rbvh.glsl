@@ -897,11 +897,11 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
 // leaves enter instances (bvh.glsl's records), the meshes' leaves are the RBVH's own, marched and
 // tested in the mesh's space. A top-level leaf and a height field share their count
 // (RBVH_INSTANCE_LEAF = RBVH_HEIGHTFIELD_COUNT): the level the ray is in tells them apart.
+// The instance the ray is in (x, RBVH_INVALID at the top level) and the nearest hit's (y) are kept
+// in rbvh_stack's RBVH_STACK_INSTANCE, not in registers through every march.
 struct RbvhInstanceHook {
     RbvhLeafHook inner;
     uint instance_count;
-    uint entered;        // the instance the ray is in, RBVH_INVALID at the top level
-    uint best_instance;  // the instance of the nearest hit
 };
 
 uint rbvh_node_count(RbvhInstanceHook leaves) {
@@ -932,25 +932,25 @@ bool rbvh_enter_instance(inout RbvhInstanceHook leaves, uint reference, uint cou
     }
     BvhInstance inst = RBVH_BVH_INSTANCE(k);
     ray = rbvh_ray_into(inst, ray);
-    leaves.entered = k;
+    rbvh_stack[RBVH_STACK_INSTANCE].x = k;
     root = inst.root;
     return true;
 }
 
 void rbvh_exit_instance(inout RbvhInstanceHook leaves, inout Ray ray) {
     ray = rbvh_kept_world_ray();
-    leaves.entered = RBVH_INVALID;
+    rbvh_stack[RBVH_STACK_INSTANCE].x = RBVH_INVALID;
 }
 
 bool rbvh_test(inout RbvhInstanceHook leaves, Ray ray, bool any_hit, uint reference, uint count,
                inout float t_closest, inout uint steps, inout bool cut) {
     // The meshes' leaves are tested inside an instance only.
-    if (leaves.entered == RBVH_INVALID) {
+    if (rbvh_stack[RBVH_STACK_INSTANCE].x == RBVH_INVALID) {
         return false;
     }
     bool hit = rbvh_test(leaves.inner, ray, any_hit, reference, count, t_closest, steps, cut);
     if (hit) {
-        leaves.best_instance = leaves.entered;
+        rbvh_stack[RBVH_STACK_INSTANCE].y = rbvh_stack[RBVH_STACK_INSTANCE].x;
     }
     return hit;
 }
@@ -970,15 +970,17 @@ bool rbvh_test(inout RbvhInstanceHook leaves, Ray ray, bool any_hit, uint refere
 // mesh's space from the ray taken there again, then taken to world space by the instance.
 Hit rbvh_trace_rbvh_instances(Ray ray, bool any_hit, RbvhSizes sz, uint instance_count, out uint steps,
                               out bool overflow) {
-    RbvhInstanceHook leaves = RbvhInstanceHook(rbvh_leaf_hook(sz), instance_count, RBVH_INVALID, RBVH_INVALID);
+    RbvhInstanceHook leaves = RbvhInstanceHook(rbvh_leaf_hook(sz), instance_count);
+    rbvh_stack[RBVH_STACK_INSTANCE] = uvec2(RBVH_INVALID, RBVH_INVALID);
     float t = rbvh_traverse_rbvh_instances(ray, any_hit, leaves, steps, overflow);
     if (leaves.inner.best == RBVH_INVALID) {
         return rbvh_miss();
     }
-    BvhInstance inst = RBVH_BVH_INSTANCE(leaves.best_instance);
+    uint k = rbvh_stack[RBVH_STACK_INSTANCE].y;
+    BvhInstance inst = RBVH_BVH_INSTANCE(k);
     Hit h = rbvh_rbvh_hit(leaves.inner, t, rbvh_ray_into(inst, rbvh_kept_world_ray()));
     vec3 n = rbvh_normal_out(inst, vec3(h.nx, h.ny, h.nz));
-    return Hit(h.t, n.x, n.y, n.z, h.id, leaves.best_instance, 0u, 0u);
+    return Hit(h.t, n.x, n.y, n.z, h.id, k, 0u, 0u);
 }
 #endif  // RBVH_INSTANCES
 

@@ -32,7 +32,8 @@
 //         the world ray back (the traversal keeps it with rbvh_keep_world_ray; with
 //         RBVH_KEEPS_RAY, rbvh_stack's ray is the level's: the mesh ray while in an instance)
 // and the traversal pushes an instance's end (distance -inf, RBVH_INSTANCE_END, which no nearest
-// hit drops) when it enters one, and leaves the instance when it pops that entry. Distances are
+// hit drops; its word the top level's visits so far) when it enters one, and leaves the instance
+// when it pops that entry. Distances are
 // the same along both rays (the direction is transformed, not normalized). Visits are bounded per
 // level: a mesh placed twice may be visited twice.
 // It also uses, from bvh.glsl (included before it wherever it is instantiated: bvh.glsl,
@@ -91,8 +92,6 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
     // The instance's end on the stack: floatBitsToUint(-inf).
     const uint RBVH_INSTANCE_END = 0xFF800000u;
     bool inside = false;
-    // The top level's visits while the ray is in an instance.
-    uint top_visits = 0u;
     // Where the next round starts: the root, then an instance's root after it is entered.
     uint start = 0u;
     // Whether the inner loop popped an instance's end, which the next round's start takes back.
@@ -123,7 +122,9 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
             rbvh_keep_ray(ray);
 #endif
             inside = false;
-            visits = top_visits;
+            // The top level's visits, kept in the instance's end entry (still at sp) rather than
+            // in a register through the instance's marches.
+            visits = rbvh_stack[sp].x;
             leaving = false;
         }
 #endif
@@ -249,10 +250,9 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
 #endif
             if (sp < RBVH_STACK_SIZE) {
                 RBVH_COUNT_ADD(instances, 1u);
-                rbvh_stack[sp] = uvec2(0u, RBVH_INSTANCE_END);
+                rbvh_stack[sp] = uvec2(visits, RBVH_INSTANCE_END);
                 sp += 1u;
                 inside = true;
-                top_visits = visits;
                 visits = 0u;
                 start = root;
             } else {

@@ -493,3 +493,22 @@ fn moving_instances_on_the_device_uploads_the_top_level_alone() {
     let e = flat.update_instances(&two).unwrap_err().to_string();
     assert!(e.contains("not a two-level exact BVH"), "{e}");
 }
+
+/// "grove-instanced" holds the blob once and places it 400 times; flattened, it is "grove"'s
+/// triangles at "grove"'s places, bit for bit (grove stays flat: its level of detail is measured
+/// on it).
+#[test]
+fn the_instanced_grove_flattened_is_the_grove() {
+    let placed = InstancedScene::load("grove-instanced").unwrap();
+    assert_eq!((placed.meshes.len(), placed.instances.len()), (2, 401));
+    assert!(placed.stored_triangle_count() * 100 < placed.placed_triangle_count());
+    let flat = placed.into_flat();
+    let grove = Scene::load("grove").unwrap();
+    assert_eq!(flat.positions, grove.positions);
+    assert_eq!(flat.triangles, grove.triangles);
+    assert_eq!(flat.camera, grove.camera);
+    assert_eq!(
+        Scene::load("grove-instanced").unwrap().positions,
+        grove.positions
+    );
+}

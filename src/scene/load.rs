@@ -61,8 +61,9 @@ impl Scene {
 
 impl InstancedScene {
     /// Loads `spec` as [`Scene::load`] does, keeping a scene file's instances and a glTF file's
-    /// nodes that share a mesh ([`InstancedScene`]); any other mesh file or built-in scene is one
-    /// mesh placed once ([`InstancedScene::single`]).
+    /// nodes that share a mesh ([`InstancedScene`]) and the instances of a built-in scene that
+    /// has them ("grove-instanced"); any other mesh file or built-in scene is one mesh placed
+    /// once ([`InstancedScene::single`]).
     pub fn load(spec: &str) -> Result<InstancedScene> {
         InstancedScene::load_observed(spec, &Quiet)
     }
@@ -77,6 +78,13 @@ impl InstancedScene {
                     gltf::load_instanced(path)
                 })
             }
+            None => match builtin::build_instanced(spec) {
+                Some(placed) => {
+                    placed.validate()?;
+                    Ok(placed)
+                }
+                None => Scene::builtin(spec).map(InstancedScene::single),
+            },
             _ => Scene::load_observed(spec, progress).map(InstancedScene::single),
         }
     }

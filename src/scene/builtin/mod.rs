@@ -12,7 +12,7 @@ use glam::{DVec3, Mat4, Quat, Vec3};
 pub use analytic::Analytic;
 use shapes::Shape;
 
-use super::Scene;
+use super::{Instance, InstancedScene, Scene};
 
 /// The built-in scene names, in the order help texts list them.
 pub const NAMES: &[&str] = &[
@@ -26,6 +26,7 @@ pub const NAMES: &[&str] = &[
     "bumpy-sphere",
     "blob",
     "grove",
+    "grove-instanced",
     "hall",
 ];
 
@@ -57,7 +58,16 @@ pub fn analytic(name: &str) -> Option<Analytic> {
     }
 }
 
-/// Builds built-in scene `name`, or `None` when there is no such scene.
+/// The built-in scenes that place a mesh held once ([`InstancedScene`]): "grove-instanced".
+pub(super) fn build_instanced(name: &str) -> Option<InstancedScene> {
+    match name {
+        "grove-instanced" => Some(grove_instanced()),
+        _ => None,
+    }
+}
+
+/// Builds built-in scene `name`, or `None` when there is no such scene (one with instances
+/// flattened).
 pub(super) fn build(name: &str) -> Option<Scene> {
     let parts: Vec<(&str, Shape)> = match name {
         "default" => showcase(),
@@ -70,6 +80,7 @@ pub(super) fn build(name: &str) -> Option<Scene> {
         "bumpy-sphere" => vec![("bumpy-sphere", bumpy_sphere())],
         "blob" => vec![("blob", blob())],
         "grove" => return Some(grove()),
+        "grove-instanced" => return Some(grove_instanced().into_flat()),
         "hall" => return Some(hall()),
         _ => return None,
     };
@@ -124,9 +135,51 @@ const GROVE_SPACING: f32 = 3.0;
 /// The level-of-detail scene: a grove of 400 blobs (1280 triangles each, about 510k in all) in a
 /// 10 × 40 grid on a ground plane, jittered and turned, seen from one end at eye height, so that
 /// the same mesh appears at every distance from a few units to 120 and distant copies crowd the
-/// upper half of the image. Its camera looks along the grove.
+/// upper half of the image. Its camera looks along the grove. Flat, each blob copied in place: its
+/// level of detail is measured on it ([`grove_instanced`] holds the blob once).
 fn grove() -> Scene {
+    let (ground, blob, placements) = grove_parts();
     let mut scene = Scene::new("grove");
+    scene.push_object("ground", &ground.positions, &ground.triangles);
+    let mut copy = Scene::new("");
+    copy.push_object("blob", &blob.positions, &blob.triangles);
+    for (name, transform) in placements {
+        copy.name = name;
+        scene.append(&copy, transform);
+    }
+    scene.camera = Some(grove_camera());
+    scene
+}
+
+/// "grove-instanced": the grove with the blob held once and placed 400 times (issue "Instances");
+/// flattened, the same triangles at the same places as "grove".
+pub(super) fn grove_instanced() -> InstancedScene {
+    let (ground, blob, placements) = grove_parts();
+    let mut ground_mesh = Scene::new("");
+    ground_mesh.push_object("ground", &ground.positions, &ground.triangles);
+    let mut blob_mesh = Scene::new("blob");
+    blob_mesh.push_object("blob", &blob.positions, &blob.triangles);
+    let mut instances = vec![Instance {
+        mesh: 0,
+        transform: Mat4::IDENTITY,
+    }];
+    instances.extend(
+        placements
+            .into_iter()
+            .map(|(_, transform)| Instance { mesh: 1, transform }),
+    );
+    InstancedScene {
+        name: "grove-instanced".into(),
+        meshes: vec![ground_mesh, blob_mesh],
+        instances,
+        camera: Some(grove_camera()),
+        light: None,
+    }
+}
+
+/// The grove's ground (placed), its blob (in its own space) and where each copy of the blob goes,
+/// named by its row and column.
+fn grove_parts() -> (Shape, Shape, Vec<(String, Mat4)>) {
     let (width, depth) = (
         GROVE_ACROSS as f32 * GROVE_SPACING,
         GROVE_ALONG as f32 * GROVE_SPACING,
@@ -136,11 +189,9 @@ fn grove() -> Scene {
         Quat::IDENTITY,
         Vec3::new(0.0, 0.0, -0.5 * depth + GROVE_SPACING),
     ));
-    scene.push_object("ground", &ground.positions, &ground.triangles);
     let blob = shapes::displaced_sphere(3, blob_radius)
         .transformed(Mat4::from_scale(Vec3::new(1.1, 0.9, 0.8)));
-    let mut copy = Scene::new("");
-    copy.push_object("blob", &blob.positions, &blob.triangles);
+    let mut placements = Vec::with_capacity(GROVE_ALONG * GROVE_ACROSS);
     for row in 0..GROVE_ALONG {
         for col in 0..GROVE_ACROSS {
             // A fixed hash of the cell, for jitter and turn: deterministic, no RNG needed.
@@ -151,21 +202,24 @@ fn grove() -> Scene {
                 0.72,
                 -(row as f32 + unit(8)) * GROVE_SPACING,
             );
-            copy.name = format!("r{row}c{col}");
             let turn = Quat::from_rotation_y(unit(16) * std::f32::consts::TAU);
-            scene.append(
-                &copy,
+            placements.push((
+                format!("r{row}c{col}"),
                 Mat4::from_scale_rotation_translation(Vec3::splat(0.8), turn, at),
-            );
+            ));
         }
     }
-    scene.camera = Some(super::Camera {
+    (ground, blob, placements)
+}
+
+/// The grove's camera: at one end, at eye height, looking along it.
+fn grove_camera() -> super::Camera {
+    super::Camera {
         eye: Vec3::new(0.0, 2.2, 8.0),
         target: Vec3::new(0.0, 0.0, -60.0),
         up: Vec3::Y,
         vfov_deg: 50.0,
-    });
-    scene
+    }
 }
 
 /// Side of the "hall"'s square floor and height of its walls.
