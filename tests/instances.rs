@@ -512,3 +512,23 @@ fn the_instanced_grove_flattened_is_the_grove() {
         grove.positions
     );
 }
+
+/// A scene of instances too large to copy in place is refused before it is flattened, by name,
+/// with its triangles and the memory it would take; one that fits, or where the memory is not
+/// known, is flattened.
+#[test]
+fn flattening_is_refused_where_it_would_not_fit_in_memory() {
+    let scene = placed();
+    let needed = scene.placed_triangle_count() as u64 * rbvh::scene::FLAT_BYTES_PER_TRIANGLE;
+    assert!(scene.check_flat_fits(None).is_ok());
+    assert!(scene.check_flat_fits(Some(needed)).is_ok());
+    let e = scene
+        .check_flat_fits(Some(needed - 1))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("placed") && e.contains(&scene.placed_triangle_count().to_string()),
+        "{e}"
+    );
+    assert!(e.contains("two levels"), "{e}");
+}

@@ -115,6 +115,7 @@ pub fn run_observed(
         // A scene with instances is measured flat and in two levels: its meshes are kept (held
         // once, a fraction of the flat scene) for the two-level builds.
         let two_level = (placed.instances.len() > 1).then(|| placed.clone());
+        placed.check_flat_fits(provenance::available_memory())?;
         let mut scene = placed.into_flat();
         scene.validate()?;
         if scene.triangle_count() == 0 && scene.points.is_some() {

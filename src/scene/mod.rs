@@ -30,7 +30,7 @@ mod topology;
 
 pub use camera::{Camera, CameraFault, DEFAULT_VFOV_DEG};
 pub use instances::{transform_fault, transformed_box, Instance, InstancedScene};
-pub use instances::{MAX_INSTANCES, MIN_RELATIVE_DETERMINANT};
+pub use instances::{FLAT_BYTES_PER_TRIANGLE, MAX_INSTANCES, MIN_RELATIVE_DETERMINANT};
 pub use light::Light;
 pub use material::{Material, SurfaceMaterials, NO_MATERIAL};
 pub use mesh::{ObjectSurface, Scene};

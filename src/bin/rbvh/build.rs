@@ -47,6 +47,12 @@ pub fn run(a: Args) -> Result<()> {
     if table && placed.instances.len() > 1 {
         two_levels(&placed, &levels)?;
     }
+    if let Err(e) = placed.check_flat_fits(rbvh::bench::provenance::available_memory()) {
+        // A scene held only in two levels: its lines above are the table.
+        anyhow::ensure!(table, "{e}");
+        eprintln!("no flat structures: {e}");
+        return Ok(());
+    }
     let mut scene = placed.into_flat();
     scene
         .validate()

@@ -17,7 +17,7 @@ use rbvh::lod::{Cones, LodParams};
 use rbvh::points::MIN_POINTS;
 use rbvh::probe::{MeanCounters, RayCounters};
 use rbvh::rbvh::{Rbvh, RbvhParams, TexelFormat};
-use rbvh::scene::{Camera, PointSource, Scene, DEFAULT_VFOV_DEG};
+use rbvh::scene::{Camera, InstancedScene, PointSource, Scene, DEFAULT_VFOV_DEG};
 use rbvh::structure::Recipe;
 
 /// Options shared by the commands that trace through one structure (`render`, `trace`, `compare`,
@@ -482,6 +482,26 @@ pub fn flag_error(e: rbvh::Error) -> anyhow::Error {
 
 /// The scene, its structure and the device, as `c` says; `camera` (from [`CameraArgs`]) replaces
 /// the scene's camera when given.
+/// `spec` loaded as [`Scene::load_observed`] loads it, flattened: a scene file's instances
+/// flattened once they are known to fit in host memory
+/// ([`InstancedScene::check_flat_fits`]), where a scene of instances too large to copy in place
+/// (`scenes/dragons-1000.toml`) is refused by name rather than killed by the system part way.
+pub fn load_flat(spec: &str, progress: &dyn rbvh::progress::Progress) -> Result<Scene> {
+    let scene_file = std::path::Path::new(spec)
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("toml"));
+    if !scene_file {
+        return Scene::load_observed(spec, progress).map_err(flag_error);
+    }
+    let placed = InstancedScene::load_observed(spec, progress).map_err(flag_error)?;
+    placed
+        .check_flat_fits(rbvh::bench::provenance::available_memory())
+        .map_err(flag_error)?;
+    let scene = placed.into_flat();
+    scene.validate().map_err(flag_error)?;
+    Ok(scene)
+}
+
 pub fn prepare(c: &Common, camera: Option<Camera>) -> Result<Prepared> {
     prepare_on(c, camera, true)
 }
@@ -493,10 +513,8 @@ pub fn prepare_cpu(c: &Common) -> Result<Prepared> {
 
 fn prepare_on(c: &Common, camera: Option<Camera>, device: bool) -> Result<Prepared> {
     let t = Instant::now();
-    let mut scene = step("loading scene", |bar| {
-        Scene::load_observed(&c.source.scene, bar)
-    })
-    .with_context(|| format!("loading scene {:?}", c.source.scene))?;
+    let mut scene = step("loading scene", |bar| load_flat(&c.source.scene, bar))
+        .with_context(|| format!("loading scene {:?}", c.source.scene))?;
     let method = c.structures.method()?;
     // Every parameter before the scene is loaded and anything built (which may take minutes).
     if c.source.rbvh.is_none() {
