@@ -346,7 +346,8 @@ fn text(v: &Value) -> String {
 
 /// A record's level as the bench tables write it: `exact`, `exact, two levels` (a scene's with
 /// instances, method `exact-instanced`), `Q2`, `Q2h` (height-only), `Q2s`
-/// (every triangle a height field can hold sampled, `exact_when_cheaper` false), `Q2 LOD`.
+/// (every triangle a height field can hold sampled, `exact_when_cheaper` false), `Q2 LOD`,
+/// `Q2, two levels` (`rbvh-instanced`).
 /// Records made before `exact_when_cheaper` existed have no such field and no `s`: they were
 /// the presets of their commit, which the table's caption names.
 fn level(record: &Value) -> String {
@@ -362,10 +363,10 @@ fn level(record: &Value) -> String {
         record["params"]["texels"].as_str() == Some("height"),
         record["params"]["exact_when_cheaper"].as_bool() == Some(false),
     );
-    if record["method"].as_str() == Some("rbvh-lod") {
-        format!("{name} LOD")
-    } else {
-        name
+    match record["method"].as_str() {
+        Some("rbvh-lod") => format!("{name} LOD"),
+        Some("rbvh-instanced") => format!("{name}, two levels"),
+        _ => name,
     }
 }
 
@@ -1001,6 +1002,11 @@ mod tests {
                 serde_json::json!({"texels": "height", "exact_when_cheaper": false}),
                 "rbvh-lod",
                 "Q2hs LOD",
+            ),
+            (
+                serde_json::json!({"texels": "height"}),
+                "rbvh-instanced",
+                "Q2h, two levels",
             ),
         ];
         for (params, method, name) in cases {

@@ -12,8 +12,9 @@
 //! scene's in any space. What it costs is measured in `docs/paper-scale.md` ("The same scene with
 //! instances"): the dragons placed at scales 9 to 13 all take the scale-13 dragon's texel.
 //!
-//! **Painting** writes texels of the one tile a mesh's surface has: every instance of the mesh
-//! shows it.
+//! **Painting** is not offered for it yet (the painter takes a flat RBVH): it would write texels
+//! of the one tile a mesh's surface has, which every instance of the mesh shows, so a colour of
+//! one instance alone needs that instance's mesh copied.
 //!
 //! **Level of detail** is not built over instances: a coarse node would stand for one placement
 //! of a mesh, and the columns of its grid are world-sized; the flat scene keeps it.
