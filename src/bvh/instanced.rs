@@ -56,8 +56,8 @@ impl InstancedBvh {
     }
 
     /// Builds each mesh's tree with `params` ([`Bvh::build_with`], whose errors it returns) and
-    /// the top level over the instances. Fails with [`Error::InvalidGeometry`] from
-    /// [`InstancedScene::validate`], and with [`Error::InvalidParameter`] where the arrays
+    /// the top level over the instances. Fails with [`crate::Error::InvalidGeometry`] from
+    /// [`InstancedScene::validate`], and with [`crate::Error::InvalidParameter`] where the arrays
     /// outgrow 32-bit indices or the two levels together are deeper than the traversal stack.
     pub fn build_with(scene: &InstancedScene, params: &BuildParams) -> Result<InstancedBvh> {
         let start = Instant::now();
@@ -105,9 +105,9 @@ impl InstancedBvh {
 
     /// Moves every instance to its new transform (one per instance, in the scene's order) and
     /// rebuilds the top level alone: the meshes' trees are not touched. A transform that is not
-    /// affine, finite and invertible ([`transform_fault`]), a count that is not the instances',
+    /// affine, finite and invertible ([`crate::scene::transform_fault`]), a count that is not the instances',
     /// or a top level that no longer fits the stack beside the meshes' trees is an
-    /// [`Error::InvalidParameter`], and the structure is left as it was.
+    /// [`crate::Error::InvalidParameter`], and the structure is left as it was.
     pub fn set_transforms(&mut self, transforms: &[Mat4]) -> Result<()> {
         let start = Instant::now();
         check_transforms(transforms, self.instances.len())?;
