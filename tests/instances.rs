@@ -461,14 +461,7 @@ fn moving_instances_on_the_device_uploads_the_top_level_alone() {
         .collect();
     two.set_transforms(&moved).unwrap();
     tracer.update_instances(&two).unwrap();
-    let after = tracer.trace(&rays, Query::Closest).unwrap().hits;
-    let fresh = Tracer::new(&ctx, &Structure::from(two.clone()))
-        .unwrap()
-        .trace(&rays, Query::Closest)
-        .unwrap()
-        .hits;
-    assert_eq!(after, fresh);
-    assert_ne!(after, before, "the instances moved");
+    let after = common::moved_as_fresh(&ctx, &tracer, Structure::from(two.clone()), &rays, &before);
     for (i, (ray, hit)) in rays.iter().zip(&after).enumerate() {
         let (cpu, _) = two.closest_hit(ray);
         assert_eq!(

@@ -165,14 +165,7 @@ fn moving_rbvh_instances_uploads_the_top_level_alone() {
         .collect();
     two.set_transforms(&moved).unwrap();
     tracer.update_instances(&two).unwrap();
-    let after = tracer.trace(&rays, Query::Closest).unwrap().hits;
-    let fresh = Tracer::new(&ctx, &Structure::from(two.clone()))
-        .unwrap()
-        .trace(&rays, Query::Closest)
-        .unwrap()
-        .hits;
-    assert_eq!(after, fresh);
-    assert_ne!(after, before, "the instances moved");
+    common::moved_as_fresh(&ctx, &tracer, Structure::from(two.clone()), &rays, &before);
 
     let exact = InstancedBvh::build(&scene).unwrap();
     let e = tracer.update_instances(&exact).unwrap_err().to_string();

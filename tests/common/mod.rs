@@ -189,3 +189,25 @@ pub fn radv_or_skip() -> bool {
     eprintln!("skipped: {reason}");
     false
 }
+
+/// The hits of `rays` through `tracer` once it has moved its instances (`update_instances`): a
+/// fresh upload of `moved` (the same structure after `set_transforms`) hits the same, bit for
+/// bit, and not what the tracer hit before (`before`).
+pub fn moved_as_fresh(
+    ctx: &Context,
+    tracer: &rbvh::gpu::Tracer,
+    moved: rbvh::structure::Structure,
+    rays: &[rbvh::geom::Ray],
+    before: &[rbvh::geom::Hit],
+) -> Vec<rbvh::geom::Hit> {
+    use rbvh::gpu::{Query, Tracer};
+    let after = tracer.trace(rays, Query::Closest).unwrap().hits;
+    let fresh = Tracer::new(ctx, &moved)
+        .unwrap()
+        .trace(rays, Query::Closest)
+        .unwrap()
+        .hits;
+    assert_eq!(after, fresh);
+    assert_ne!(after, before, "the instances moved");
+    after
+}
