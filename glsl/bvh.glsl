@@ -47,8 +47,8 @@
 // Must equal bvh::STACK_SIZE; tests/glsl_header.rs checks it on the device.
 #define RBVH_STACK_SIZE 64
 // The traversal's memory (traverse.glsl): its stack of (word, distance) entries, then the words an
-// RBVH ray's loops read too rarely to hold a register for: the world ray (four entries,
-// RBVH_KEEPS_RAY), which only each round's start and the hit need again after a leaf's march;
+// RBVH ray's loops read too rarely to hold a register for: the ray (four entries, RBVH_KEEPS_RAY;
+// in a two-level trace the ray of the level traversed), which only each round's start and the hit need again after a leaf's march;
 // the nearest hit's normal source (RbvhLeafHook, read once the ray is done); the level-of-detail
 // cone (lod.glsl, read where an inner child is entered). They share the stack's array on
 // purpose: the stack's pushes write it at indices the compiler measured (ACO) does not resolve (a
@@ -380,7 +380,7 @@ struct BvhInstanceSizes {
     uint instance_count;
 };
 
-// The two-level exact BVH's hook (InstanceHook in src/bvh/instanced.rs): top-level leaves enter
+// The two-level exact BVH's hook (InstanceHook in src/bvh/top_level.rs around BvhLeafHook): top-level leaves enter
 // instances, the meshes' leaves are triangle leaves tested in the mesh's space. The ray's shear is
 // made where a leaf is tested, from the ray of the level the traversal is in, rather than kept
 // in the hook: 56 VGPRs instead of 72 on RADV (docs/speed.md, "The two-level exact tracer's

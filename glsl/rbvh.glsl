@@ -893,7 +893,8 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
 }
 
 #ifdef RBVH_INSTANCES
-// The two-level RBVH's hook (src/rbvh/instanced.rs, InstanceHook around RbvhLeafHook): top-level
+// The two-level RBVH's hook (trace_instanced in src/rbvh/march/hook.rs: src/bvh/top_level.rs's
+// InstanceHook around RbvhLeafHook): top-level
 // leaves enter instances (bvh.glsl's records), the meshes' leaves are the RBVH's own, marched and
 // tested in the mesh's space. A top-level leaf and a height field share their count
 // (RBVH_INSTANCE_LEAF = RBVH_HEIGHTFIELD_COUNT): the level the ray is in tells them apart.

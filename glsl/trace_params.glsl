@@ -1,8 +1,8 @@
 // The push constants of every trace shader (src/gpu/tracer.rs, TraceParams; tests/layout.rs
 // checks that both sides agree). With RBVH_DEVICE_ADDRESS it also names, for the headers, where
 // each structure array lives: `addresses` in binding order — nodes, triangles, height fields,
-// atlas, LOD records, LOD columns, instances (the exact BVH uses the first two, the two-level one
-// those and the last).
+// atlas, LOD records, LOD columns, instances (the exact BVH uses the first two, the two-level exact
+// BVH those and the last, the two-level RBVH the first four and the last).
 #ifndef RBVH_TRACE_PARAMS_GLSL
 #define RBVH_TRACE_PARAMS_GLSL
 

@@ -17,8 +17,8 @@
 //                    inout float t_closest, inout uint steps, inout bool cut)
 //         tests the leaf over [tmin, t_closest); on a hit lowers t_closest, keeps the hit and
 //         returns true. Sets `cut` where the device ended one of its loops early.
-// and, optionally, RBVH_KEEPS_RAY: the traversal then keeps the world ray in rbvh_stack and reads
-// it back at each round's start rather than holding it in registers through the leaf tests
+// and, optionally, RBVH_KEEPS_RAY: the traversal then keeps the ray (the world's, or with
+// instances the ray of the level traversed) in rbvh_stack and reads it back at each round's start rather than holding it in registers through the leaf tests
 // (the RBVH's marches, where that costs occupancy; the exact BVH's triangle tests hold few
 // registers, so its tracer keeps the ray where it is); the caller reads the ray back with
 // rbvh_kept_ray() after the traversal.

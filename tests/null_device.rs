@@ -153,7 +153,14 @@ fn every_pipeline_compiles_on_the_null_device_and_reports_its_registers() {
             // The two-level RBVH tracer: 72 as first written (8 more counting), the flat one's 56
             // and the two levels' words (docs/speed.md, "The two-level RBVH tracer's registers").
             "trace_rbvh_instances" => assert!(
-                vgprs <= rbvh_bound(p) + 16 && spilled == 0,
+                vgprs
+                    <= rbvh_bound(p) + 16
+                        - if p.pipeline.contains("counting") {
+                            8
+                        } else {
+                            0
+                        }
+                    && spilled == 0,
                 "{}: {vgprs} VGPRs, {spilled} spilled",
                 p.pipeline
             ),

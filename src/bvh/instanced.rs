@@ -3,10 +3,10 @@
 //! whose leaves enter a mesh's tree with the ray taken into its space, the split of Vulkan's
 //! top and bottom acceleration structures, of Embree's instances and of tinybvh's TLAS.
 //!
-//! One node array and one traversal serve both levels ([`traverse`]'s instance hook): the top
-//! level's nodes come first (node 0 its root), then each mesh's tree, its child references
-//! offset to where it lies; a top-level leaf is `LEAF_BIT | instance` with the count
-//! [`INSTANCE_LEAF`]. Moving instances rebuilds the top level only
+//! One node array and one traversal serve both levels ([`traverse`] with the instance hook of
+//! `top_level.rs`, which the two-level RBVH shares): the top level's nodes come first (node 0 its
+//! root), then each mesh's tree, its child references offset to where it lies; a top-level leaf
+//! is `LEAF_BIT | instance` with the count [`INSTANCE_LEAF`](super::INSTANCE_LEAF). Moving instances rebuilds the top level only
 //! ([`InstancedBvh::set_transforms`]): its node count depends only on how many instances there
 //! are, so the meshes' trees stay where they are.
 
@@ -58,7 +58,7 @@ impl InstancedBvh {
     /// Builds each mesh's tree with `params` ([`Bvh::build_with`], whose errors it returns) and
     /// the top level over the instances. Fails with [`crate::Error::InvalidGeometry`] from
     /// [`InstancedScene::validate`], and with [`crate::Error::InvalidParameter`] where the arrays
-    /// outgrow 32-bit indices or the two levels together are deeper than the traversal stack.
+    /// outgrow 31-bit indices or the two levels together are deeper than the traversal stack.
     pub fn build_with(scene: &InstancedScene, params: &BuildParams) -> Result<InstancedBvh> {
         let start = Instant::now();
         scene.validate()?;

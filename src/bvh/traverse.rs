@@ -137,7 +137,8 @@ pub(crate) fn traverse<P: Probe, L: Leaves<P>>(
         if leaves.is_leaf(reference) {
             let instance = match inside {
                 false => leaves.enter_instance(reference, count, probe),
-                // An instance inside an instance: only corrupt data makes one; it holds nothing.
+                // Inside an instance a leaf is the mesh's, tested (an RBVH's height field has the
+                // count of an instance leaf).
                 true => None,
             };
             if let Some((mesh_ray, root)) = instance {

@@ -10,8 +10,9 @@ use crate::rbvh::TexelFormat;
 use crate::structure::Kind;
 use crate::Result;
 
-/// Compiles every pipeline the library has on `ctx`'s device — the trace shaders of the four
-/// structures (both texel formats of the RBVH, block jumps on and off, timed and counting), the
+/// Compiles every pipeline the library has on `ctx`'s device — the trace shaders of the five
+/// structures (both texel formats of the RBVH, flat and in two levels, block jumps on and off,
+/// timed and counting), the
 /// painter, each reading its arrays through bindings and, where the context has device addresses,
 /// through them — and returns what the driver made of each. Allocates and submits nothing, so it
 /// runs on a device that only compiles.

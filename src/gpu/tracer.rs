@@ -53,7 +53,7 @@ pub struct Traced {
 
 /// Push constants of the trace shaders (`glsl/trace_params.glsl`, 104 bytes); the exact one
 /// ignores the sizes after `tri_count`, the plain RBVH one the LOD sizes, all but the two-level
-/// exact one `instance_count`.
+/// ones `instance_count`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct TraceParams {
@@ -83,7 +83,8 @@ pub struct TraceParams {
     pub lod_node_count: u32,
     /// LOD column words.
     pub lod_texel_len: u32,
-    /// GLSL `instance_count`: instances of a two-level exact BVH; 0 for the others.
+    /// GLSL `instance_count`: instances of a two-level structure (exact BVH or RBVH); 0 for the
+    /// others.
     pub instance_count: u32,
     /// Device addresses of the structure's arrays in binding order (nodes, triangles, height
     /// fields, atlas, LOD records, LOD columns, instances), read by the `_bda` shaders; zero

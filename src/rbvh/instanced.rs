@@ -5,12 +5,13 @@
 //!
 //! **The rate of a mesh placed at several scales.** The flat scene's texel is its diagonal over
 //! `texels_per_diagonal` ([`InstancedScene::placed_bounds`]: the box of the placed vertices, the
-//! flat scene's own). An instance stretches its mesh by up to the longest axis of its transform's
-//! linear part, so a mesh is rasterized at that texel over its largest stretch: its largest
+//! flat scene's own). An instance stretches its mesh by at most its transform's largest stretch
+//! ([`stretch`]: the longest axis of the linear part where its axes are orthogonal, a rotation and
+//! scales, else a bound above it), so a mesh is rasterized at that texel over its largest stretch: its largest
 //! placement then has the flat scene's world texel, and smaller ones a finer one (never a coarser
 //! one), stored once. Objects' own rates are relative to their own boxes, so they are the flat
-//! scene's in any space. What it costs is measured in `docs/paper-scale.md` ("The same scene with
-//! instances"): the dragons placed at scales 9 to 13 all take the scale-13 dragon's texel.
+//! scene's in any space. What it costs is measured in `docs/paper-scale.md` ("The RBVH in two
+//! levels"): the dragons placed at scales 9 to 13 all take the scale-13 dragon's texel.
 //!
 //! **Painting** is not offered for it yet (the painter takes a flat RBVH): it would write texels
 //! of the one tile a mesh's surface has, which every instance of the mesh shows, so a colour of
@@ -238,19 +239,33 @@ impl InstancedRbvh {
 fn mesh_texels(scene: &InstancedScene, texel: f32) -> Vec<f32> {
     let mut stretch = vec![0.0f32; scene.meshes.len()];
     for instance in &scene.instances {
-        let linear = Mat3::from_mat4(instance.transform);
-        let longest = [linear.x_axis, linear.y_axis, linear.z_axis]
-            .iter()
-            .map(|c| c.length())
-            .fold(0.0f32, f32::max);
         if let Some(s) = stretch.get_mut(instance.mesh as usize) {
-            *s = s.max(longest);
+            *s = s.max(self::stretch(instance.transform));
         }
     }
     stretch
         .into_iter()
         .map(|s| if s > 0.0 { texel / s } else { 0.0 })
         .collect()
+}
+
+/// How far `m` stretches a mesh at most (the largest singular value of its linear part, or a bound
+/// above it): the longest axis where the axes are orthogonal (a rotation and scales, which every
+/// scene file's `translate · rotate · scale` is), else the Frobenius norm (a glTF node's parent's
+/// uneven scale under a child's rotation shears), which is never below it.
+pub(crate) fn stretch(m: Mat4) -> f32 {
+    let linear = Mat3::from_mat4(m);
+    let axes = [linear.x_axis, linear.y_axis, linear.z_axis];
+    let longest = axes.iter().map(|c| c.length()).fold(0.0f32, f32::max);
+    let square = longest * longest;
+    let orthogonal = [(0, 1), (0, 2), (1, 2)]
+        .iter()
+        .all(|&(a, b)| axes[a].dot(axes[b]).abs() <= 1e-5 * square);
+    if orthogonal {
+        longest
+    } else {
+        axes.iter().map(|c| c.length_squared()).sum::<f32>().sqrt()
+    }
 }
 
 /// The meshes' RBVHs (`None`: a mesh not placed) in one set of arrays, room left before them
@@ -550,13 +565,7 @@ mod tests {
         let mut scene = placed();
         scene.instances[1].transform = Mat4::from_scale(Vec3::new(0.5, 3.0, 1.0));
         let texels = mesh_texels(&scene, 0.1);
-        let longest = |k: usize| {
-            let m = Mat3::from_mat4(scene.instances[k].transform);
-            [m.x_axis, m.y_axis, m.z_axis]
-                .iter()
-                .map(|c| c.length())
-                .fold(0.0f32, f32::max)
-        };
+        let longest = |k: usize| stretch(scene.instances[k].transform);
         let of = |mesh: u32| {
             (0..scene.instances.len())
                 .filter(|&k| scene.instances[k].mesh == mesh)
@@ -566,5 +575,28 @@ mod tests {
         assert_eq!(texels[1], 0.1 / 3.0f32.max(of(1)));
         assert_eq!(texels[0], 0.1 / of(0));
         assert_eq!(texels[2], 0.0);
+    }
+
+    /// A transform's stretch is its longest axis where the axes are orthogonal, and never below
+    /// its largest singular value where they are not (a shear).
+    #[test]
+    fn a_stretch_bounds_what_a_transform_does_to_lengths() {
+        let trs = Mat4::from_scale_rotation_translation(
+            Vec3::new(0.5, 3.0, 2.0),
+            Quat::from_rotation_y(0.7),
+            Vec3::ONE,
+        );
+        assert!((stretch(trs) - 3.0).abs() < 1e-5);
+        let shear = Mat4::from_cols_array(&[
+            1.0, 0.0, 0.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
+        ]);
+        // The largest singular value of [[1, 2], [0, 1]] is 1 + sqrt(2).
+        let largest = 1.0 + 2.0f32.sqrt();
+        assert!(stretch(shear) >= largest, "{}", stretch(shear));
+        for k in 0..64 {
+            let a = k as f32 * 0.1;
+            let d = Vec3::new(a.cos(), a.sin(), 0.3 * a).normalize();
+            assert!(shear.transform_vector3(d).length() <= stretch(shear) * (1.0 + 1e-6));
+        }
     }
 }

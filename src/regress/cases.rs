@@ -142,7 +142,8 @@ impl Method {
     /// `rbvh-lod`.
     pub fn recipe(self) -> Result<Recipe> {
         Ok(match self.kind {
-            // A two-level structure takes the exact recipe for each mesh's tree.
+            // A two-level structure takes its flat twin's recipe for each mesh's tree (the image
+            // regression traces scenes flattened: no case names a two-level method).
             Kind::Exact | Kind::ExactInstanced => Recipe::Exact,
             Kind::Rbvh | Kind::RbvhInstanced => Recipe::Rbvh(RbvhParams::quality(self.level)?),
             Kind::RbvhLod => {

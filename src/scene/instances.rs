@@ -3,8 +3,8 @@
 //! mesh do, and Vulkan's acceleration structures split them (a top level over bottom levels).
 //!
 //! An [`InstancedScene`] is what a two-level structure is built from
-//! ([`InstancedBvh`](crate::bvh::InstancedBvh): one bottom level per mesh, a top level over the
-//! instances' boxes). Every stage that traces a flat triangle list takes
+//! ([`InstancedBvh`](crate::bvh::InstancedBvh), [`InstancedRbvh`](crate::rbvh::InstancedRbvh):
+//! one bottom level per mesh, a top level over the instances' boxes). Every stage that traces a flat triangle list takes
 //! [`InstancedScene::into_flat`]: the same scene with each instance's mesh copied in place, which is
 //! also the referee an instanced trace is checked against.
 

@@ -14,8 +14,10 @@ use crate::prepare::{context_options, flag_error, Given, Method, PointsArg, Stru
 #[command(mut_arg("quality", |a| a.default_value("all")))]
 #[command(mut_arg("method", |a| a.default_value("exact,rbvh").help(
     "Structures to measure, comma-separated: `exact` (the exact triangle BVH: always measured, \
-     it is the referee of every other; for a scene file with [[instance]] tables its two-level \
-     exact BVH, `exact-instanced`, is measured beside it), `rbvh` (every --quality level in every --texels format), \
+     it is the referee of every other; for a scene with instances (a scene file's [[instance]] \
+     tables, a glTF's nodes sharing a mesh, `grove-instanced`) its two-level exact BVH, \
+     `exact-instanced`, is measured beside it), `rbvh` (every --quality level in every --texels \
+     format; for a scene with instances each level in two levels too, `rbvh-instanced`), \
      `rbvh-lod` (each level with normals traced with level of detail: primary rays with their \
      pixel's cone, secondary rays with its spread from their origin)"
 )))]

@@ -480,8 +480,6 @@ pub fn flag_error(e: rbvh::Error) -> anyhow::Error {
     e.into()
 }
 
-/// The scene, its structure and the device, as `c` says; `camera` (from [`CameraArgs`]) replaces
-/// the scene's camera when given.
 /// `spec` loaded as [`Scene::load_observed`] loads it, flattened: a scene file's instances
 /// flattened once they are known to fit in host memory
 /// ([`InstancedScene::check_flat_fits`]), where a scene of instances too large to copy in place
@@ -502,6 +500,8 @@ pub fn load_flat(spec: &str, progress: &dyn rbvh::progress::Progress) -> Result<
     Ok(scene)
 }
 
+/// The scene, its structure and the device, as `c` says; `camera` (from [`CameraArgs`]) replaces
+/// the scene's camera when given.
 pub fn prepare(c: &Common, camera: Option<Camera>) -> Result<Prepared> {
     prepare_on(c, camera, true)
 }
