@@ -194,15 +194,52 @@ impl Context {
     /// Records into `cmd` (in the recording state) a barrier that makes transfer writes (recorded
     /// uploads) visible to compute shaders, which read and write what was uploaded.
     pub fn record_transfer_to_compute(&self, cmd: vk::CommandBuffer) {
+        self.record_barrier(
+            cmd,
+            (
+                vk::PipelineStageFlags::TRANSFER,
+                vk::AccessFlags::TRANSFER_WRITE,
+            ),
+            (
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
+            ),
+        );
+    }
+
+    /// Records into `cmd` (recording) a barrier that makes the compute shaders' reads recorded
+    /// before it finish before transfers recorded after it write: what rewriting a buffer that
+    /// earlier traces read needs (`Tracer::update_instances_recorded`).
+    pub fn record_compute_to_transfer(&self, cmd: vk::CommandBuffer) {
+        self.record_barrier(
+            cmd,
+            (
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::AccessFlags::SHADER_READ,
+            ),
+            (
+                vk::PipelineStageFlags::TRANSFER,
+                vk::AccessFlags::TRANSFER_WRITE,
+            ),
+        );
+    }
+
+    /// One global memory barrier from `(stage, access)` `before` to `after`, recorded into `cmd`.
+    fn record_barrier(
+        &self,
+        cmd: vk::CommandBuffer,
+        before: (vk::PipelineStageFlags, vk::AccessFlags),
+        after: (vk::PipelineStageFlags, vk::AccessFlags),
+    ) {
         let barrier = [vk::MemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-            .dst_access_mask(vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE)];
-        // SAFETY: `cmd` is recording (the caller's contract).
+            .src_access_mask(before.1)
+            .dst_access_mask(after.1)];
+        // SAFETY: `cmd` is recording (the callers' contract).
         unsafe {
             self.device().cmd_pipeline_barrier(
                 cmd,
-                vk::PipelineStageFlags::TRANSFER,
-                vk::PipelineStageFlags::COMPUTE_SHADER,
+                before.0,
+                after.0,
                 vk::DependencyFlags::empty(),
                 &barrier,
                 &[],

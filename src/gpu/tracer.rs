@@ -646,21 +646,7 @@ impl Tracer {
         let placed = placed.into();
         let (top, instances) = self.instance_update(&placed)?;
         let ctx = self.ctx.clone();
-        let barrier = [vk::MemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::SHADER_READ)
-            .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)];
-        // SAFETY: `cmd` is recording (the caller's contract).
-        unsafe {
-            ctx.device().cmd_pipeline_barrier(
-                cmd,
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::PipelineStageFlags::TRANSFER,
-                vk::DependencyFlags::empty(),
-                &barrier,
-                &[],
-                &[],
-            )
-        };
+        ctx.record_compute_to_transfer(cmd);
         for (k, bytes) in [(0, top), (placed.instances_array, instances)] {
             let staging = ctx.write_recorded(self.structure_mut(k)?, bytes, cmd)?;
             self.staging.extend(staging);
