@@ -17,7 +17,7 @@ use crate::lod::{Cones, Lod, LodParams};
 use crate::progress::{Progress, Quiet};
 use crate::rbvh::InstancedRbvh;
 use crate::rbvh::{Rbvh, RbvhParams, RbvhSource};
-use crate::scene::Scene;
+use crate::scene::{InstancedScene, Scene};
 use crate::Result;
 
 /// Which structure, without it: the `method` of benchmark records (`"exact"`, `"rbvh"`,
@@ -220,25 +220,38 @@ impl Structure {
         }
     }
 
+    /// Builds what `recipe` says in two levels for a scene of instances: one bottom level per
+    /// mesh and a top level over the placements ([`InstancedBvh`], [`InstancedRbvh`]), the
+    /// meshes never copied. Levels of detail are refused, as [`Structure::with_levels`] refuses
+    /// them over instances.
+    pub fn build_instanced(
+        scene: &InstancedScene,
+        recipe: &Recipe,
+        progress: &dyn Progress,
+    ) -> Result<Structure> {
+        recipe.validate()?;
+        match recipe {
+            Recipe::Exact => Ok(InstancedBvh::build(scene)?.into()),
+            Recipe::Rbvh(params) => {
+                Ok(InstancedRbvh::build_observed(scene, params, progress)?.into())
+            }
+            Recipe::RbvhLod(..) => Err(no_levels_over_instances()),
+        }
+    }
+
     /// The same RBVH (shared, not copied) traced with levels of detail built by `params`: what a
     /// measurement of both needs. Fails for the exact BVH, which has none.
     pub fn with_levels(&self, params: &LodParams) -> Result<Structure> {
-        let rbvh =
-            match self {
-                Structure::Exact(_) | Structure::ExactInstanced(_) => {
-                    return Err(crate::Error::param(
-                        "lod",
-                        "levels of detail are built for an RBVH, not the exact BVH".to_string(),
-                    ))
-                }
-                Structure::RbvhInstanced(_) => return Err(crate::Error::param(
+        let rbvh = match self {
+            Structure::Exact(_) | Structure::ExactInstanced(_) => {
+                return Err(crate::Error::param(
                     "lod",
-                    "levels of detail are built for a flat RBVH, not over instances (trace the \
-                     flat scene for them)"
-                        .to_string(),
-                )),
-                Structure::Rbvh(rbvh) | Structure::RbvhLod(rbvh, _) => rbvh,
-            };
+                    "levels of detail are built for an RBVH, not the exact BVH".to_string(),
+                ))
+            }
+            Structure::RbvhInstanced(_) => return Err(no_levels_over_instances()),
+            Structure::Rbvh(rbvh) | Structure::RbvhLod(rbvh, _) => rbvh,
+        };
         let lod = Lod::build(rbvh, params)?;
         Ok(Structure::RbvhLod(Arc::clone(rbvh), Box::new(lod)))
     }
@@ -325,6 +338,25 @@ impl Structure {
         }
     }
 
+    /// The parameters of the RBVH traced, flat or in two levels; none for the exact BVH.
+    pub fn rbvh_params(&self) -> Option<&RbvhParams> {
+        match self {
+            Structure::RbvhInstanced(two) => Some(two.params()),
+            _ => self.rbvh().map(|r| &r.params),
+        }
+    }
+
+    /// The world texel of the RBVH traced, flat or in two levels (there the flat scene's, which
+    /// no instance's texel exceeds: `crate::rbvh::InstancedRbvh`'s rate rule): how far a
+    /// secondary ray leaves its surface, since an RBVH surface may lie a fraction of a texel off
+    /// the exact one. None for the exact BVH.
+    pub fn texel_size(&self) -> Option<f32> {
+        match self {
+            Structure::RbvhInstanced(two) => Some(two.texel_size()),
+            _ => self.rbvh().map(|r| r.texel_size),
+        }
+    }
+
     /// The RBVH traced, if any, to change (painting its colour channel, say); a copy of it
     /// when it is shared with another structure.
     pub fn rbvh_mut(&mut self) -> Option<&mut Rbvh> {
@@ -384,6 +416,17 @@ impl Structure {
             Structure::RbvhLod(rbvh, lod) => rbvh.trace_cpu_lod(lod, rays, cones, any_hit)?,
         })
     }
+}
+
+/// Why levels of detail are not built over instances: a coarse node would stand for one
+/// placement of a mesh, with world-sized columns (`crate::rbvh::InstancedRbvh`'s module).
+fn no_levels_over_instances() -> crate::Error {
+    crate::Error::param(
+        "lod",
+        "levels of detail are built for a flat RBVH, not over instances (trace the flat scene \
+         for them)"
+            .to_string(),
+    )
 }
 
 #[cfg(test)]

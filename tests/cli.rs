@@ -1714,3 +1714,67 @@ fn compare_puts_the_exact_bvh_and_an_rbvh_side_by_side() {
         );
     }
 }
+
+/// A scene that places a mesh more than once is traced in two levels by default, and renders as
+/// its flat copy does (the exact path bit for bit); `--instances` chooses, and what only a flat
+/// scene has (levels of detail, painting) refuses two levels by name.
+#[test]
+fn scenes_of_instances_render_in_two_levels() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = |name: &str| dir.path().join(name);
+    let render = |out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            "--scene",
+            "grove-instanced",
+            "--width",
+            "64",
+            "--height",
+            "48",
+            "--stats",
+            "--out",
+            arg(out),
+        ];
+        args.extend_from_slice(extra);
+        let out = rbvh(&args);
+        let stderr = String::from_utf8_lossy(&out.stderr).to_string();
+        assert!(out.status.success(), "{extra:?}: {stderr}");
+        stderr
+    };
+    let two = render(&png("two.png"), &[]);
+    assert!(
+        two.contains("401 instances of 2 meshes") && two.contains("two-level exact BVH:"),
+        "{two}"
+    );
+    let flat = render(&png("flat.png"), &["--instances", "flat"]);
+    assert!(!flat.contains("two-level"), "{flat}");
+    assert_eq!(
+        image::open(png("two.png")).unwrap().to_rgba8(),
+        image::open(png("flat.png")).unwrap().to_rgba8()
+    );
+    let rbvh_two = render(&png("rbvh.png"), &["--method", "rbvh"]);
+    assert!(
+        rbvh_two.contains("two-level RBVH:")
+            && rbvh_two.contains("two-level exact BVH on the same rays"),
+        "{rbvh_two}"
+    );
+    // Levels of detail are flat: auto gives them the flat scene, two-level is refused.
+    render(&png("lod.png"), &["--method", "rbvh-lod"]);
+    let refused = png("refused.png");
+    for args in [
+        &["render", "--method", "rbvh-lod"][..],
+        &["paint", "--method", "rbvh", "--strokes", "none.json"][..],
+    ] {
+        let mut args = args.to_vec();
+        args.extend(["--scene", "grove-instanced", "--instances", "two-level"]);
+        args.extend(["--out", arg(&refused)]);
+        let out = rbvh(&args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?}");
+        assert!(
+            stderr.contains("--instances two-level"),
+            "{args:?}: {stderr}"
+        );
+        assert!(!refused.exists());
+    }
+}

@@ -13,7 +13,7 @@ use rbvh::geom::Ray;
 use rbvh::gpu::{Query, Tracer};
 use rbvh::rbvh::{Rbvh, RbvhParams};
 use rbvh::scene::Scene;
-use rbvh::structure::Structure;
+use rbvh::structure::{Recipe, Structure};
 use rbvh::surface::hit_albedo;
 use rbvh::Error;
 use std::sync::Arc;
@@ -631,4 +631,63 @@ fn baked_colours_average_a_texture_finer_than_the_atlas() {
     let worst = greys.iter().map(|g| (g - 0.5).abs()).fold(0.0, f32::max);
     assert!((mean - 0.5).abs() < 0.01, "mean {mean}");
     assert!(worst < 0.05, "a texel {worst} away from mid grey");
+}
+
+/// A textured mesh placed three times (moved, turned and shrunk, mirrored) colours hits of both
+/// two-level structures as its flat copy colours the flat structures' hits: each hit's colour is
+/// looked up in its instance's mesh, in the mesh's own space (`SceneView::hit_mesh`).
+#[test]
+fn instances_colour_their_hits_as_the_flat_copy_does() {
+    use rbvh::scene::{InstancedScene, SceneView};
+    let dir = tempfile::tempdir().unwrap();
+    write_checker(&dir.path().join("checker.png"));
+    let obj = textured_obj(dir.path(), "map_Kd checker.png");
+    let toml = write(
+        dir.path(),
+        "placed.toml",
+        &format!(
+            "[[instance]]\npath = {obj:?}\ntranslate = [-3.0, 0.0, 0.0]\n\n\
+             [[instance]]\npath = {obj:?}\nrotate = [0.0, 0.0, 90.0]\nscale = 0.75\n\n\
+             [[instance]]\npath = {obj:?}\ntranslate = [3.0, 0.0, 0.0]\nscale = [-1.0, 1.0, 1.0]\n"
+        ),
+    );
+    let placed = InstancedScene::load(toml.to_str().unwrap()).unwrap();
+    assert!(placed.repeats_a_mesh());
+    let flat = placed.clone().into_flat();
+    let mut rays = Vec::new();
+    for i in 0..48 {
+        for j in 0..12 {
+            rays.push(down_ray(-4.2 + i as f32 * 0.175, -1.1 + j as f32 * 0.2));
+        }
+    }
+    let flat_of = |recipe: &Recipe| Structure::build(&flat, recipe).unwrap();
+    let two_of = |recipe: &Recipe| {
+        Structure::build_instanced(&placed, recipe, &rbvh::progress::Quiet).unwrap()
+    };
+    for recipe in [
+        Recipe::Exact,
+        Recipe::Rbvh(RbvhParams::quality(4).unwrap()),
+        Recipe::Rbvh(common::sampled_preset(4)),
+    ] {
+        let (flat_structure, two) = (flat_of(&recipe), two_of(&recipe));
+        let flat_hits = flat_structure
+            .trace_cpu(&rays, rbvh::lod::Cones::None, false)
+            .unwrap();
+        let two_hits = two.trace_cpu(&rays, rbvh::lod::Cones::None, false).unwrap();
+        let want = hit_albedo(&flat, &flat_structure, &rays, &flat_hits).unwrap();
+        let got = hit_albedo(SceneView::from(&placed), &two, &rays, &two_hits).unwrap();
+        let mut coloured = 0;
+        for (k, (g, w)) in got.iter().zip(&want).enumerate() {
+            if flat_hits[k].is_hit() != two_hits[k].is_hit() {
+                continue;
+            }
+            coloured += usize::from(flat_hits[k].is_hit());
+            assert!(
+                (*g - *w).abs().max_element() < 0.05,
+                "{}, ray {k}: {g} in two levels, {w} flat",
+                two.label()
+            );
+        }
+        assert!(coloured > 100, "{}: {coloured} rays hit", two.label());
+    }
 }

@@ -77,6 +77,17 @@ impl InstancedScene {
             .sum()
     }
 
+    /// Whether some mesh is placed more than once: what instances save over a flat copy.
+    pub fn repeats_a_mesh(&self) -> bool {
+        let mut placed = vec![false; self.meshes.len()];
+        self.instances
+            .iter()
+            .any(|i| match placed.get_mut(i.mesh as usize) {
+                Some(seen) => std::mem::replace(seen, true),
+                None => false,
+            })
+    }
+
     /// Triangles stored: each mesh once.
     pub fn stored_triangle_count(&self) -> usize {
         self.meshes.iter().map(Scene::triangle_count).sum()

@@ -27,6 +27,7 @@ mod sample;
 mod scene_file;
 pub mod texture;
 mod topology;
+mod view;
 
 pub use camera::{Camera, CameraFault, DEFAULT_VFOV_DEG};
 pub use instances::{transform_fault, transformed_box, Instance, InstancedScene};
@@ -38,3 +39,4 @@ pub use mipmap::MipChain;
 pub use sample::{PointSource, SCAN_MATCH};
 pub use texture::{Texture, Wrap};
 pub use topology::{creases, open_boundary, topology, Topology};
+pub use view::SceneView;

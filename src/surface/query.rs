@@ -9,13 +9,13 @@ use std::collections::HashMap;
 use glam::{Vec3, Vec4};
 use rayon::prelude::*;
 
-use crate::bvh::LEAF_BIT;
+use crate::bvh::{GpuTriangle, LEAF_BIT};
 use crate::geom::{Hit, Ray};
 use crate::lod::LOD_BIT;
 use crate::rbvh::layout::Texel;
 use crate::rbvh::Rbvh;
 use crate::rgba;
-use crate::scene::Scene;
+use crate::scene::SceneView;
 use crate::structure::Structure;
 
 /// A texel of a height-field leaf: sample `(i, j)` of leaf `leaf`, at `atlas_index` in
@@ -90,16 +90,7 @@ impl Rbvh {
     /// parts' scene triangle index (a hit's `id`): more than one where a triangle crossing
     /// several tiles of a surface left parts in each.
     pub fn part_leaves(&self) -> HashMap<u32, Vec<u32>> {
-        let mut map: HashMap<u32, Vec<u32>> = HashMap::new();
-        for t in self.triangles.iter() {
-            if let Some(leaf) = t.part_leaf() {
-                let leaves = map.entry(t.prim).or_default();
-                if !leaves.contains(&leaf) {
-                    leaves.push(leaf);
-                }
-            }
-        }
-        map
+        part_leaves_of(self.triangles.iter())
     }
 
     /// Of `leaves`, the one whose tile `point` lies over, or nearest to (in texels beyond its
@@ -211,48 +202,91 @@ pub fn blank_colours(texels: &[Texel]) -> Vec<u32> {
 /// hit (`LEAF_BIT`) the RBVH's colours filtered at the hit ([`Rbvh::filtered_colour`]), and so
 /// does a hit on an exact part beside a height field (its colours are the RBVH's surface data,
 /// painted strokes included); any other hit is a scene triangle, coloured by its material at the
-/// hit point's barycentrics.
-pub fn hit_albedo(
-    scene: &Scene,
+/// hit point's barycentrics. In a scene of instances each hit is looked up in its instance's mesh
+/// ([`SceneView::hit_mesh`]): a two-level RBVH's leaves and colours, and a mesh's triangles, lie
+/// in the mesh's own space.
+pub fn hit_albedo<'a>(
+    scene: impl Into<SceneView<'a>>,
     structure: &Structure,
     rays: &[Ray],
     hits: &[Hit],
 ) -> Option<Vec<Vec3>> {
-    let channel = structure.rbvh().filter(|r| r.colours.is_some());
+    let scene = scene.into();
+    // A two-level RBVH's arrays hold every mesh's leaves and colours, in the meshes' spaces.
+    let surfaces = match structure {
+        Structure::RbvhInstanced(two) => Some(two.parts()),
+        _ => structure.rbvh(),
+    };
+    let channel = surfaces.filter(|r| r.colours.is_some());
     let lod = structure.lod();
-    if scene.surface.is_none() && channel.is_none() {
+    if !scene.has_surface() && channel.is_none() {
         return None;
     }
-    let parts = channel.map(Rbvh::part_leaves).unwrap_or_default();
+    let parts = channel.map(|r| part_leaves_by_mesh(r, structure));
     let albedo = rays
         .par_iter()
         .zip(hits)
         .map(|(ray, hit)| {
-            if !hit.is_hit() {
+            // The hit in its mesh's space, where its leaves and triangles lie.
+            let Some((mesh_index, mesh, ray)) = scene.hit_mesh(ray, hit) else {
                 return Vec3::ONE;
-            }
+            };
             let point = ray.origin() + ray.dir() * hit.t;
             let coarse = LEAF_BIT | LOD_BIT;
             let colour = if hit.id & coarse == coarse {
                 lod.and_then(|l| l.colour_at(hit.id & !coarse, point))
                     .map(rgba::unpack)
             } else if hit.id & LEAF_BIT != 0 {
-                channel.and_then(|r| r.filtered_colour(ray, hit))
-            } else if let Some((r, leaves)) = channel.zip(parts.get(&hit.id)) {
+                channel.and_then(|r| r.filtered_colour(&ray, hit))
+            } else if let Some((r, leaves)) =
+                channel.zip(parts.as_ref().and_then(|p| p.get(mesh_index)?.get(&hit.id)))
+            {
                 r.leaf_beside(leaves.iter().copied(), point)
                     .and_then(|leaf| {
                         let beside = Hit {
                             id: LEAF_BIT | leaf,
                             ..*hit
                         };
-                        r.filtered_colour(ray, &beside)
+                        r.filtered_colour(&ray, &beside)
                     })
-                    .or_else(|| scene.colour_at(hit.id as usize, point))
+                    .or_else(|| mesh.colour_at(hit.id as usize, point))
             } else {
-                scene.colour_at(hit.id as usize, point)
+                mesh.colour_at(hit.id as usize, point)
             };
             colour.map_or(Vec3::ONE, |c| c.truncate())
         })
         .collect();
     Some(albedo)
+}
+
+/// The leaves that the exact parts among `triangles` stand beside, by their triangle index
+/// ([`Rbvh::part_leaves`]).
+fn part_leaves_of<'t>(triangles: impl Iterator<Item = &'t GpuTriangle>) -> HashMap<u32, Vec<u32>> {
+    let mut map: HashMap<u32, Vec<u32>> = HashMap::new();
+    for t in triangles {
+        if let Some(leaf) = t.part_leaf() {
+            let leaves = map.entry(t.prim).or_default();
+            if !leaves.contains(&leaf) {
+                leaves.push(leaf);
+            }
+        }
+    }
+    map
+}
+
+/// [`Rbvh::part_leaves`] per mesh: one map for a flat RBVH; for a two-level one (whose exact
+/// triangles lie mesh after mesh, each naming its own mesh's triangle) one per mesh, so that
+/// the same triangle index of two meshes finds its own mesh's leaves.
+fn part_leaves_by_mesh(r: &Rbvh, structure: &Structure) -> Vec<HashMap<u32, Vec<u32>>> {
+    match structure {
+        Structure::RbvhInstanced(two) => two
+            .meshes
+            .iter()
+            .map(|m| {
+                let first = m.first_triangle as usize;
+                part_leaves_of(r.triangles.iter().skip(first).take(m.triangles as usize))
+            })
+            .collect(),
+        _ => vec![r.part_leaves()],
+    }
 }

@@ -14,9 +14,8 @@ use rbvh::gpu::{Query, Tracer};
 use rbvh::ibl::{self, Environment, Frame, Rendered, Settings};
 use rbvh::lod::{Cones, RayCone};
 use rbvh::output;
-use rbvh::structure::{Recipe, Structure};
 
-use crate::prepare::{prepare, CameraArgs, Common, Given, Method};
+use crate::prepare::{prepare, CameraArgs, Common, Given, Loaded, Method};
 use crate::progress::step;
 use crate::render::{ibl_albedo, load_environment, progressive, sky_of};
 
@@ -100,21 +99,20 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     let env = load_environment(a.env.as_ref())?;
     let p = prepare(&a.common, a.camera.camera()?)?;
     ensure!(
-        p.scene.triangle_count() > 0,
+        p.scene().triangle_count() > 0,
         "{} is a point cloud: there are no triangles for an exact BVH to compare its RBVH with",
-        p.scene.name
+        p.scene().name()
     );
-    let rbvh = p.structure.rbvh().context("compare needs an RBVH")?;
-    let exact_structure = step("building BVH", |bar| {
-        Structure::build_observed(&p.scene, &Recipe::Exact, bar)
-    })?;
+    let params = p.structure.rbvh_params().context("compare needs an RBVH")?;
+    let texel = p.structure.texel_size().context("compare needs an RBVH")?;
+    let exact_structure = step("building BVH", |bar| p.build_exact(bar))?;
     let exact_bytes = exact_structure.memory().total;
     let rbvh_bytes = p.structure.memory().total;
     let exact = Tracer::new(p.ctx()?, &exact_structure).context("uploading the exact BVH")?;
     let approx = step("uploading", |bar| p.tracer(bar))?;
 
     let (width, height) = (a.width, a.height);
-    let camera = p.scene.camera_or_framed(width as f32 / height as f32);
+    let camera = p.scene().camera_or_framed(width as f32 / height as f32);
     let rays = camera.primary_rays(width, height);
     let cone = RayCone::pixel(&camera, height);
     let (exact_hits, rbvh_hits) = step("tracing", |_| -> Result<_> {
@@ -131,16 +129,16 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     exact.trace(&warm, Query::Any)?;
     approx.trace_with(&warm, Cones::Same(cone), Query::Any, false)?;
 
-    let env = env.unwrap_or_else(|| Environment::Sky(sky_of(p.scene.light.as_ref())));
+    let env = env.unwrap_or_else(|| Environment::Sky(sky_of(p.scene().light())));
     let settings = Settings {
         samples: a.samples,
         seed: a.seed,
-        diagonal: p.scene.bounds().diagonal(),
+        diagonal: p.scene().bounds().diagonal(),
         surface_offset: 0.0,
         cone: Some(cone),
     };
-    let exact_albedo = ibl_albedo(&p.scene, &exact_structure, &rays, &exact_hits);
-    let rbvh_albedo = ibl_albedo(&p.scene, &p.structure, &rays, &rbvh_hits);
+    let exact_albedo = ibl_albedo(p.scene(), &exact_structure, &rays, &exact_hits);
+    let rbvh_albedo = ibl_albedo(p.scene(), &p.structure, &rays, &rbvh_hits);
     let exact_frame = Frame {
         width,
         height,
@@ -156,7 +154,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     // The RBVH's rays leave its surface a texel further out, since it may lie a fraction of a
     // texel off the exact one (as `render --shading ibl` does).
     let rbvh_settings = Settings {
-        surface_offset: rbvh.texel_size,
+        surface_offset: texel,
         ..settings
     };
     // Pass by pass, alternating which goes first, so that both are timed under the same
@@ -184,8 +182,8 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     output::write_png(&a.out, &picture)?;
 
     let level = match p.structure.lod() {
-        Some(_) => format!("{} with LOD", rbvh.params.level_label()),
-        None => rbvh.params.level_label(),
+        Some(_) => format!("{} with LOD", params.level_label()),
+        None => params.level_label(),
     };
     let (exact_speed, timer) = mrays(&reference);
     let (rbvh_speed, _) = mrays(&rendered);
@@ -193,15 +191,23 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         Some(path) => format!("lit by {}", path.display()),
         None => "lit by the procedural sky".to_string(),
     };
-    let points = match p.scene.point_count() {
+    let points = match p.scene().point_count() {
         0 => String::new(),
         n => format!(" (the RBVH's from {n} points)"),
     };
+    let layout = match &p.loaded {
+        Loaded::Instanced(placed) => format!(
+            " as placed, both traced in two levels ({} instances of {} meshes)",
+            placed.instances.len(),
+            placed.meshes.len()
+        ),
+        Loaded::Flat(_) => String::new(),
+    };
     println!(
-        "{}: {} triangles{points}, {width}x{height} per picture, {lit}, {} visibility rays per \
-         pixel (shadows and ambient occlusion), seed {}; device {} ({})",
-        p.scene.name,
-        p.scene.triangle_count(),
+        "{}: {} triangles{layout}{points}, {width}x{height} per picture, {lit}, {} visibility \
+         rays per pixel (shadows and ambient occlusion), seed {}; device {} ({})",
+        p.scene().name(),
+        p.scene().triangle_count(),
         a.samples,
         a.seed,
         p.ctx()?.device_name(),

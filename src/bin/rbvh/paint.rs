@@ -13,7 +13,7 @@ use rbvh::surface::{strokes, Brush};
 use rbvh::{output, preview};
 
 use crate::prepare::{
-    check_image_size, prepare, CameraArgs, Common, Given, Method, Prepared, TexelsArg,
+    check_image_size, prepare, CameraArgs, Common, Given, Instances, Method, Prepared, TexelsArg,
 };
 use crate::progress::step;
 
@@ -85,6 +85,11 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         "--texels height: a height-only RBVH keeps no colours to paint (paint takes normals, the \
          default)"
     );
+    anyhow::ensure!(
+        a.common.source.instances != Instances::TwoLevel,
+        "--instances two-level: paint paints a flat RBVH (a mesh's texels held once would paint \
+         every instance of it); give --instances flat or auto"
+    );
     let dabs = strokes::load(&a.strokes)?;
     // Painting writes the RBVH's texels: no other structure, no coarse levels of detail (which
     // have none to paint), and every triangle a height field can hold sampled (`--sample-all`),
@@ -92,8 +97,9 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     // `--rbvh` is painted as it was built.
     let mut common = a.common.clone();
     common.structures.quality.sample_all = true;
+    common.source.instances = Instances::Flat;
     let mut p = prepare(&common, a.camera.camera()?)?;
-    let camera = p.scene.camera_or_framed(a.width as f32 / a.height as f32);
+    let camera = p.scene().camera_or_framed(a.width as f32 / a.height as f32);
     let tracer = Tracer::new(p.ctx()?, &p.structure).context("uploading the RBVH")?;
 
     let (rays, hits) = if a.before.is_some() || a.after.is_some() {
@@ -120,7 +126,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         })
         .collect();
     let stroke_hits = tracer.trace(&stroke_rays, Query::Closest)?.hits;
-    let diagonal = p.scene.bounds().diagonal();
+    let diagonal = p.scene().bounds().diagonal();
     let brushes: Vec<Brush> = dabs
         .iter()
         .zip(&stroke_rays)
@@ -190,7 +196,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
 
 /// The before or after picture: the preview shading of `hits` with the RBVH's colours.
 fn write_render(path: &Path, p: &Prepared, rays: &[Ray], hits: &[Hit], a: &Args) -> Result<()> {
-    let image = preview::shade(&p.scene, &p.structure, rays, hits, a.width, a.height)?;
+    let image = preview::shade(p.scene(), &p.structure, rays, hits, a.width, a.height)?;
     output::write_png(path, &image)?;
     eprintln!("wrote {}", path.display());
     Ok(())

@@ -9,7 +9,6 @@ use anyhow::{Context as _, Result};
 use crate::progress::step;
 use clap::{Args, ValueEnum};
 use rbvh::bench::provenance::Provenance;
-use rbvh::bvh::Bvh;
 use rbvh::geom::{Hit, Ray};
 use rbvh::glam::Vec3;
 use rbvh::gpu::{Addressing, Context, ContextOptions, Query, Reach, Traced, Tracer, Validation};
@@ -17,7 +16,7 @@ use rbvh::lod::{Cones, LodParams};
 use rbvh::points::MIN_POINTS;
 use rbvh::probe::{MeanCounters, RayCounters};
 use rbvh::rbvh::{Rbvh, RbvhParams, TexelFormat};
-use rbvh::scene::{Camera, InstancedScene, PointSource, Scene, DEFAULT_VFOV_DEG};
+use rbvh::scene::{Camera, InstancedScene, PointSource, Scene, SceneView, DEFAULT_VFOV_DEG};
 use rbvh::structure::Recipe;
 
 /// Options shared by the commands that trace through one structure (`render`, `trace`, `compare`,
@@ -157,6 +156,13 @@ pub struct Source {
     /// parameters are refused with it).
     #[arg(long)]
     pub rbvh: Option<PathBuf>,
+    /// How a scene whose meshes are placed by instances (a scene file, a glTF file, a built-in
+    /// such as grove-instanced) is traced: `two-level` (each mesh held once, a top level over its
+    /// placements), `flat` (every placement copied in place), or `auto`: two levels where the
+    /// scene places a mesh more than once and the method traces them (exact, rbvh), else flat
+    /// (levels of detail, --points and a saved --rbvh are flat).
+    #[arg(long, value_enum, default_value_t = Instances::Auto)]
+    pub instances: Instances,
     /// Vulkan device to use: any part of its name (default: $RBVH_DEVICE, else the best GPU, else lavapipe).
     #[arg(long)]
     pub device: Option<String>,
@@ -373,10 +379,40 @@ impl Method {
     }
 }
 
+/// `--instances`: how a scene of instances is traced.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Instances {
+    /// Two levels where the scene places a mesh more than once and the method traces them.
+    Auto,
+    /// Every placement copied in place: one flat triangle list.
+    Flat,
+    /// Each mesh held once, a top level over its placements.
+    TwoLevel,
+}
+
+/// The scene as loaded: flat, or its meshes and placements kept for a two-level structure. One
+/// per command, so the variants' sizes do not matter.
+#[allow(clippy::large_enum_variant)]
+pub enum Loaded {
+    Flat(Scene),
+    Instanced(InstancedScene),
+}
+
+impl Loaded {
+    /// What shading, framing and messages read of it.
+    pub fn view(&self) -> SceneView<'_> {
+        match self {
+            Loaded::Flat(scene) => SceneView::Flat(scene),
+            Loaded::Instanced(placed) => SceneView::Instanced(placed),
+        }
+    }
+}
+
 use rbvh::structure::Structure;
 
 pub struct Prepared {
-    pub scene: Scene,
+    /// The scene, flat or placed by instances (then traced in two levels).
+    pub loaded: Loaded,
     /// With `--method rbvh-lod`, the RBVH with its levels of detail.
     pub structure: Structure,
     /// The Vulkan device; none for a CPU trace ([`prepare_cpu`]).
@@ -384,6 +420,22 @@ pub struct Prepared {
 }
 
 impl Prepared {
+    /// The scene traced, flat or placed by instances.
+    pub fn scene(&self) -> SceneView<'_> {
+        self.loaded.view()
+    }
+
+    /// The exact BVH of the same scene, laid out as the structure traced is (flat, or in two
+    /// levels): the referee of an RBVH's picture and speed.
+    pub fn build_exact(&self, progress: &dyn rbvh::progress::Progress) -> Result<Structure> {
+        Ok(match &self.loaded {
+            Loaded::Flat(scene) => Structure::build_observed(scene, &Recipe::Exact, progress)?,
+            Loaded::Instanced(placed) => {
+                Structure::build_instanced(placed, &Recipe::Exact, progress)?
+            }
+        })
+    }
+
     /// The Vulkan device the structure is traced on.
     pub fn ctx(&self) -> Result<&Context> {
         self.ctx
@@ -491,7 +543,59 @@ pub fn load_flat(spec: &str, progress: &dyn rbvh::progress::Progress) -> Result<
     if !scene_file {
         return Scene::load_observed(spec, progress).map_err(flag_error);
     }
+    flatten(InstancedScene::load_observed(spec, progress).map_err(flag_error)?)
+}
+
+/// The scene `c` names, kept in instances or flattened as `--instances` says ([`Instances`]):
+/// a scene that may place meshes (a scene file, a glTF file, a built-in scene) is loaded with
+/// its instances, and kept so where it places a mesh more than once (or two levels are asked
+/// for) and the method traces two levels; anything else is loaded flat ([`load_flat`]).
+fn load(c: &Common, progress: &dyn rbvh::progress::Progress) -> Result<Loaded> {
+    let spec = c.source.scene.as_str();
+    let flat_for = if c.structures.method()? == Method::RbvhLod {
+        Some("--method rbvh-lod (levels of detail are built over a flat RBVH)")
+    } else if c.source.points.points.is_some() {
+        Some("--points (the RBVH of points sampled from, or scanned of, the flat scene)")
+    } else if c.source.rbvh.is_some() {
+        Some("--rbvh (a saved RBVH holds one flat scene)")
+    } else {
+        None
+    };
+    match (c.source.instances, flat_for) {
+        (Instances::TwoLevel, Some(why)) => anyhow::bail!(
+            "--instances two-level: {why} traces the scene flat; give --instances flat or auto"
+        ),
+        (Instances::Flat, _) | (Instances::Auto, Some(_)) => {
+            return Ok(Loaded::Flat(load_flat(spec, progress)?))
+        }
+        _ => {}
+    }
+    let extension = std::path::Path::new(spec)
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    let may_place = match extension.as_deref() {
+        Some("toml" | "gltf" | "glb") => true,
+        Some(_) => false,
+        None => Scene::check(spec).is_ok() && !spec.contains(['/', '\\']),
+    };
+    if !may_place && c.source.instances == Instances::Auto {
+        return Ok(Loaded::Flat(load_flat(spec, progress)?));
+    }
     let placed = InstancedScene::load_observed(spec, progress).map_err(flag_error)?;
+    if c.source.instances == Instances::TwoLevel || placed.repeats_a_mesh() {
+        placed.validate().map_err(flag_error)?;
+        return Ok(Loaded::Instanced(placed));
+    }
+    Ok(Loaded::Flat(match extension.as_deref() {
+        Some("toml") => flatten(placed)?,
+        // A glTF file or built-in scene is loaded flat by its own loader, as without instances.
+        _ => load_flat(spec, progress)?,
+    }))
+}
+
+/// `placed` flattened once it is known to fit in host memory
+/// ([`InstancedScene::check_flat_fits`]), and checked.
+fn flatten(placed: InstancedScene) -> Result<Scene> {
     placed
         .check_flat_fits(rbvh::bench::provenance::available_memory())
         .map_err(flag_error)?;
@@ -513,8 +617,6 @@ pub fn prepare_cpu(c: &Common) -> Result<Prepared> {
 
 fn prepare_on(c: &Common, camera: Option<Camera>, device: bool) -> Result<Prepared> {
     let t = Instant::now();
-    let mut scene = step("loading scene", |bar| load_flat(&c.source.scene, bar))
-        .with_context(|| format!("loading scene {:?}", c.source.scene))?;
     let method = c.structures.method()?;
     // Every parameter before the scene is loaded and anything built (which may take minutes).
     if c.source.rbvh.is_none() {
@@ -522,6 +624,12 @@ fn prepare_on(c: &Common, camera: Option<Camera>, device: bool) -> Result<Prepar
     } else if method == Method::RbvhLod {
         c.structures.lod.params().validate().map_err(flag_error)?;
     }
+    let loaded = step("loading scene", |bar| load(c, bar))
+        .with_context(|| format!("loading scene {:?}", c.source.scene))?;
+    let mut scene = match loaded {
+        Loaded::Flat(scene) => scene,
+        Loaded::Instanced(placed) => return prepare_instanced(c, placed, camera, device, t),
+    };
     anyhow::ensure!(
         c.source.points.points.is_none() || method != Method::Exact || c.source.rbvh.is_some(),
         "--points builds the RBVH from points: add --method rbvh (the exact BVH traces the triangles)"
@@ -587,12 +695,7 @@ fn prepare_on(c: &Common, camera: Option<Camera>, device: bool) -> Result<Prepar
     } else {
         structure
     };
-    let ctx = if device {
-        let options = context_options(c.source.device.as_deref(), c.source.validate)?;
-        Some(Context::new(&options).context("creating the Vulkan device")?)
-    } else {
-        None
-    };
+    let ctx = open_device(c, device)?;
     if c.source.stats {
         eprintln!(
             "scene {}: {} triangles, {} points, loaded in {load_ms:.1} ms",
@@ -600,7 +703,73 @@ fn prepare_on(c: &Common, camera: Option<Camera>, device: bool) -> Result<Prepar
             scene.triangle_count(),
             scene.point_count()
         );
-        match &structure {
+        report_structure(c, &structure, structure_ms, ctx.as_ref());
+    }
+    Ok(Prepared {
+        loaded: Loaded::Flat(scene),
+        structure,
+        ctx,
+    })
+}
+
+/// [`prepare`] of a scene kept in instances: its two-level structure.
+fn prepare_instanced(
+    c: &Common,
+    mut placed: InstancedScene,
+    camera: Option<Camera>,
+    device: bool,
+    loading: Instant,
+) -> Result<Prepared> {
+    if camera.is_some() {
+        placed.camera = camera;
+    }
+    let load_ms = loading.elapsed().as_secs_f64() * 1e3;
+    let t = Instant::now();
+    let recipe = c.structures.recipe()?;
+    let what = match recipe {
+        Recipe::Exact => "building the two-level BVH",
+        _ => "building the two-level RBVH",
+    };
+    let structure = step(what, |bar| {
+        Structure::build_instanced(&placed, &recipe, bar).map_err(flag_error)
+    })?;
+    let structure_ms = t.elapsed().as_secs_f64() * 1e3;
+    let ctx = open_device(c, device)?;
+    if c.source.stats {
+        eprintln!(
+            "scene {}: {} instances of {} meshes, {} triangles as placed ({} held), loaded in \
+             {load_ms:.1} ms",
+            placed.name,
+            placed.instances.len(),
+            placed.meshes.len(),
+            placed.placed_triangle_count(),
+            placed.stored_triangle_count()
+        );
+        report_structure(c, &structure, structure_ms, ctx.as_ref());
+    }
+    Ok(Prepared {
+        loaded: Loaded::Instanced(placed),
+        structure,
+        ctx,
+    })
+}
+
+/// The Vulkan device `c` names, when the command traces on one.
+fn open_device(c: &Common, device: bool) -> Result<Option<Context>> {
+    if !device {
+        return Ok(None);
+    }
+    let options = context_options(c.source.device.as_deref(), c.source.validate)?;
+    Ok(Some(
+        Context::new(&options).context("creating the Vulkan device")?,
+    ))
+}
+
+/// `--stats` of the structure built or loaded in `structure_ms`: its nodes, leaves and bytes,
+/// its levels of detail, and the host and device it runs on.
+fn report_structure(c: &Common, structure: &Structure, structure_ms: f64, ctx: Option<&Context>) {
+    {
+        match structure {
             Structure::Exact(bvh) => eprintln!(
                 "exact BVH: {} nodes, depth {}, built in {:.1} ms, {} + {} bytes (tree + triangles)",
                 bvh.nodes.len(),
@@ -669,15 +838,10 @@ fn prepare_on(c: &Common, camera: Option<Camera>, device: bool) -> Result<Prepar
             );
         }
         // The line the bench prints above its tables: host, device, driver, commit and date.
-        if let Some(ctx) = &ctx {
+        if let Some(ctx) = ctx {
             eprintln!("{}", Provenance::of(ctx).line());
         }
     }
-    Ok(Prepared {
-        scene,
-        structure,
-        ctx,
-    })
 }
 
 /// `--stats` after a trace: GPU MRays/s, the CPU reference's on the same rays and their ratio;
@@ -722,20 +886,23 @@ pub fn report_throughput(
             );
         }
     }
-    if p.structure.rbvh().is_some() && p.scene.triangle_count() == 0 {
+    let approximate = !p.structure.kind().is_exact();
+    if approximate && p.scene().triangle_count() == 0 {
         eprintln!("no exact BVH to compare with: the scene is a point cloud, without triangles");
-    } else if p.structure.rbvh().is_some() {
-        let exact = Tracer::new(p.ctx()?, &Structure::from(Bvh::build(&p.scene)?))?;
+    } else if approximate {
+        let structure = p.build_exact(&rbvh::progress::Quiet)?;
+        let label = structure.label();
+        let exact = Tracer::new(p.ctx()?, &structure)?;
         let timed = exact.trace(rays, query)?;
         if let Some(exact_ms) = timed.timing.gpu_ms {
             eprintln!(
-                "exact BVH on the same rays: GPU {exact_ms:.2} ms = {:.2} MRays/s; RBVH speedup {:.2}x",
+                "{label} on the same rays: GPU {exact_ms:.2} ms = {:.2} MRays/s; RBVH speedup {:.2}x",
                 mrays(exact_ms),
                 exact_ms / gpu_ms
             );
         }
         if let Some(c) = exact.trace_with(rays, Cones::None, query, true)?.counters {
-            report_counters("exact BVH", &c);
+            report_counters(label, &c);
         }
     }
     Ok(())

@@ -17,8 +17,8 @@ use rbvh::lod::{Cones, RayCone};
 use rbvh::output::{self, Image};
 use rbvh::preview;
 use rbvh::probe::RayCounters;
-use rbvh::scene::{Light, Scene};
-use rbvh::structure::{Recipe, Structure};
+use rbvh::scene::{Light, SceneView};
+use rbvh::structure::Structure;
 use rbvh::surface::hit_albedo;
 
 use crate::prepare::{
@@ -136,7 +136,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     // Read the environment before the (possibly long) build, so a bad file fails at once.
     let env = load_environment(a.env.as_ref())?;
     let p = prepare(&a.common, a.camera.camera()?)?;
-    let camera = p.scene.camera_or_framed(a.width as f32 / a.height as f32);
+    let camera = p.scene().camera_or_framed(a.width as f32 / a.height as f32);
     let rays = camera.primary_rays(a.width, a.height);
     let tracer = step("uploading", |bar| p.tracer(bar))?;
     let cone = RayCone::pixel(&camera, a.height);
@@ -161,7 +161,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     }
     let image = match a.shading {
         Shading::Lambert => preview::shade(
-            &p.scene,
+            p.scene(),
             &p.structure,
             &rays,
             &traced.hits,
@@ -170,7 +170,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         )?,
         Shading::Normals => output::shade_normals(&rays, &traced.hits, a.width, a.height)?,
         Shading::Ibl => {
-            let env = env.unwrap_or_else(|| Environment::Sky(sky_of(p.scene.light.as_ref())));
+            let env = env.unwrap_or_else(|| Environment::Sky(sky_of(p.scene().light())));
             render_ibl(&a, &p, &tracer, &rays, &traced.hits, &env, cone)?
         }
     };
@@ -199,7 +199,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
 /// The IBL albedo per pixel: the neutral grey ([`ibl::GREY`]) times the surfaces' base colour
 /// where the scene or RBVH has one, as the Lambert preview shades.
 pub(crate) fn ibl_albedo(
-    scene: &Scene,
+    scene: SceneView,
     structure: &Structure,
     rays: &[Ray],
     hits: &[Hit],
@@ -239,14 +239,14 @@ fn render_ibl(
     env: &Environment,
     cone: RayCone,
 ) -> Result<Image> {
-    let rbvh = p.structure.rbvh();
-    let surface_offset = rbvh.map_or(0.0, |r| r.texel_size);
+    let texel = p.structure.texel_size();
+    let surface_offset = texel.unwrap_or(0.0);
     // The surfaces' base colour where the scene or RBVH has one, else the neutral grey.
-    let albedo = ibl_albedo(&p.scene, &p.structure, rays, hits);
+    let albedo = ibl_albedo(p.scene(), &p.structure, rays, hits);
     let settings = Settings {
         samples: a.samples(),
         seed: a.seed.unwrap_or(0),
-        diagonal: p.scene.bounds().diagonal(),
+        diagonal: p.scene().bounds().diagonal(),
         surface_offset,
         cone: Some(cone),
     };
@@ -263,7 +263,7 @@ fn render_ibl(
     })?;
     if a.common.source.stats {
         report_ibl("this render", &rendered);
-        if rbvh.is_some() {
+        if texel.is_some() {
             compare_with_exact(p, env, &frame, &settings, &rendered)?;
         }
     }
@@ -280,18 +280,16 @@ fn compare_with_exact(
     settings: &Settings,
     rendered: &ibl::Rendered,
 ) -> Result<()> {
-    if p.scene.triangle_count() == 0 {
+    if p.scene().triangle_count() == 0 {
         eprintln!("no exact BVH to compare with: the scene is a point cloud, without triangles");
         return Ok(());
     }
     let t = Instant::now();
-    let structure = step("building BVH", |_| {
-        Structure::build(&p.scene, &Recipe::Exact)
-    })?;
+    let structure = step("building BVH", |bar| p.build_exact(bar))?;
     let exact = Tracer::new(p.ctx()?, &structure).context("uploading the exact BVH")?;
     let setup_ms = t.elapsed().as_secs_f64() * 1e3;
     let exact_hits = exact.trace(frame.rays, Query::Closest)?.hits;
-    let exact_albedo = ibl_albedo(&p.scene, &structure, frame.rays, &exact_hits);
+    let exact_albedo = ibl_albedo(p.scene(), &structure, frame.rays, &exact_hits);
     let exact_frame = Frame {
         hits: &exact_hits,
         albedo: &exact_albedo,
