@@ -17,7 +17,7 @@ use rbvh::geom::Hit;
 use rbvh::gpu::Query;
 use rbvh::rays::{generate, offset_origin, Secondary, DEFAULT_LIGHT};
 use rbvh::rbvh::RbvhParams;
-use rbvh::scene::{Light, Scene};
+use rbvh::scene::{Instances, Light, PointSource, Scene};
 use rbvh::structure::Kind;
 
 fn small_config(plot: Option<&Path>) -> BenchConfig {
@@ -741,24 +741,7 @@ fn the_cli_writes_json_and_csv_and_rejects_unknown_ray_types() {
 #[test]
 fn a_scene_with_instances_is_measured_in_two_levels_beside_the_flat_one() {
     let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("placed.toml");
-    std::fs::write(
-        &path,
-        "[[mesh]]\nbuiltin = \"plane\"\n\
-         [[instance]]\nbuiltin = \"bumpy-sphere\"\ntranslate = [0.5, 0.3, 0.0]\nscale = 0.4\n\
-         [[instance]]\nbuiltin = \"bumpy-sphere\"\ntranslate = [-0.5, 0.3, 0.0]\nrotate = [0.0, 60.0, 0.0]\nscale = [-0.3, 0.4, 0.3]\n",
-    )
-    .unwrap();
-    let mut config = BenchConfig::new(
-        vec![path.to_str().unwrap().into()],
-        Device::Existing(common::context()),
-    );
-    config.levels = vec![q(2)];
-    config.width = 48;
-    config.height = 32;
-    config.runs = 1;
-    config.seam_rays = 0;
-    config.ray_types = vec![RayType::Primary, RayType::Shadow];
+    let config = placed_bench(dir.path());
     let report = bench::run(&config).unwrap();
     assert_eq!(report.results.len(), 2 * 4);
     for chunk in report.results.chunks(4) {
@@ -799,6 +782,87 @@ fn a_scene_with_instances_is_measured_in_two_levels_beside_the_flat_one() {
         assert_eq!(errors.miss_mismatch_rate, 0.0, "{errors:?}");
         if let Some(t) = errors.t_err_p99 {
             assert!(t < 1e-5, "{errors:?}");
+        }
+    }
+}
+
+/// The bench of a plane and a bumpy sphere placed twice (once mirrored), written under `dir`:
+/// Q2, primary and shadow rays, a small image.
+fn placed_bench(dir: &Path) -> BenchConfig {
+    let path = dir.join("placed.toml");
+    std::fs::write(
+        &path,
+        "[[mesh]]\nbuiltin = \"plane\"\n\
+         [[instance]]\nbuiltin = \"bumpy-sphere\"\ntranslate = [0.5, 0.3, 0.0]\nscale = 0.4\n\
+         [[instance]]\nbuiltin = \"bumpy-sphere\"\ntranslate = [-0.5, 0.3, 0.0]\nrotate = [0.0, 60.0, 0.0]\nscale = [-0.3, 0.4, 0.3]\n",
+    )
+    .unwrap();
+    let mut config = BenchConfig::new(
+        vec![path.to_str().unwrap().into()],
+        Device::Existing(common::context()),
+    );
+    config.levels = vec![q(2)];
+    config.width = 48;
+    config.height = 32;
+    config.runs = 1;
+    config.seam_rays = 0;
+    config.ray_types = vec![RayType::Primary, RayType::Shadow];
+    config
+}
+
+/// Measured in two levels alone (as a scene too large to flatten is, `scenes/dragons-1000.toml`),
+/// the two-level exact BVH is the referee, checked against its CPU twin, and the two-level RBVH
+/// errs against it as it errs against the flat exact BVH beside the flat scene: the two referees
+/// hit alike. Errors relative to each object are measured on the object as its instance places
+/// it. Points and levels of detail, built over the flat scene, are refused.
+#[test]
+fn a_scene_measured_in_two_levels_alone_is_refereed_by_the_two_level_exact_bvh() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut config = placed_bench(dir.path());
+    let both = bench::run(&config).unwrap();
+    config.instances = Instances::TwoLevel;
+    let alone = bench::run(&config).unwrap();
+    assert_eq!(alone.results.len(), 2 * 2);
+    for (chunk, beside) in alone.results.chunks(2).zip(both.results.chunks(4)) {
+        let (exact, rbvh) = (&chunk[0], &chunk[1]);
+        assert_eq!(
+            (exact.method, rbvh.method),
+            (Kind::ExactInstanced, Kind::RbvhInstanced)
+        );
+        assert!(exact.valid, "{:?}", exact.invalid_reason);
+        assert!(exact.error.is_none(), "the referee has no error record");
+        assert_eq!(exact.triangles, beside[0].triangles, "triangles as placed");
+        assert_eq!(rbvh.memory_bytes, beside[3].memory_bytes);
+        let (e, e_beside) = (
+            rbvh.error.as_ref().unwrap(),
+            beside[3].error.as_ref().unwrap(),
+        );
+        assert_eq!(e.miss_mismatch_rate, e_beside.miss_mismatch_rate);
+        for (a, b) in [
+            (e.t_err_p99, e_beside.t_err_p99),
+            (e.t_err_object_p99, e_beside.t_err_object_p99),
+        ] {
+            let (a, b) = (a.unwrap_or(0.0), b.unwrap_or(0.0));
+            assert!(
+                (a - b).abs() <= 0.05 * b.max(1e-6),
+                "{e:?} against {e_beside:?}"
+            );
+        }
+        if rbvh.ray_type == RayType::Primary {
+            assert!(e.t_err_object_p99.is_some(), "{e:?}");
+        }
+    }
+    for (points, plain, field) in [
+        (Some(PointSource::Sampled(1000)), true, "points"),
+        (None, false, "plain"),
+    ] {
+        let mut refused = config.clone();
+        refused.points = points;
+        refused.plain = plain;
+        refused.lod = Some(rbvh::lod::LodParams::default());
+        match bench::run(&refused) {
+            Err(rbvh::Error::InvalidParameter { name, .. }) => assert_eq!(name, field),
+            other => panic!("{field}: {:?}", other.map(|r| r.results.len())),
         }
     }
 }

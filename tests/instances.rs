@@ -338,9 +338,15 @@ builtin = "cube"
     assert_eq!(flat.positions, expected.positions);
     assert_eq!(flat.object_names, expected.object_names);
     assert_eq!(flat, expected);
+    // What is measured against, found without flattening: the boxes as placed, bit for bit.
+    assert_eq!(scene.placed_bounds(), flat.bounds());
+    let boxes: Vec<_> = scene.placed_object_bounds().into_iter().flatten().collect();
+    assert_eq!(boxes, flat.object_bounds());
+    assert!(scene.repeats_a_mesh());
     // A mesh or built-in scene alone is one mesh placed once.
     let one = InstancedScene::load("cube").unwrap();
     assert_eq!((one.meshes.len(), one.instances.len()), (1, 1));
+    assert!(!one.repeats_a_mesh());
 }
 
 #[test]

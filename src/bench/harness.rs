@@ -41,6 +41,7 @@ use super::traffic::{self, TrafficModel, CACHE_SIZES, DRAM_LINE};
 use super::validate;
 use super::{BenchConfig, Device};
 use crate::bvh::{Bvh, InstancedBvh, LEAF_BIT};
+use crate::geom::Aabb;
 use crate::geom::{Hit, Ray};
 use crate::gpu::{Context, Query, Timing, Traced, Tracer};
 use crate::lod::{Cones, Lod, RayCone};
@@ -49,7 +50,7 @@ use crate::probe::{Array, MeanCounters, Read, TraceStats};
 use crate::progress::{Progress, Quiet};
 use crate::rays::{self, RayType, Secondary, DEFAULT_LIGHT};
 use crate::rbvh::{InstancedRbvh, Rbvh, RbvhParams, RbvhSource, TexelFormat};
-use crate::scene::{InstancedScene, Scene};
+use crate::scene::{InstancedScene, Instances, Scene, SceneView};
 use crate::structure::{Kind, Recipe, Structure};
 use crate::{Error, Result};
 
@@ -113,10 +114,43 @@ pub fn run_observed(
             InstancedScene::load_observed(spec, progress)?
         };
         // A scene with instances is measured flat and in two levels: its meshes are kept (held
-        // once, a fraction of the flat scene) for the two-level builds.
-        let two_level = (placed.instances.len() > 1).then(|| placed.clone());
-        placed.check_flat_fits(provenance::available_memory())?;
-        let mut scene = placed.into_flat();
+        // once, a fraction of the flat scene) for the two-level builds. One too large to
+        // flatten is measured in two levels alone, refereed by its two-level exact BVH, as
+        // every scene is when asked for two levels alone.
+        let two_level = match config.instances {
+            Instances::Flat => None,
+            Instances::TwoLevel => Some(placed.clone()),
+            Instances::Auto => (placed.instances.len() > 1).then(|| placed.clone()),
+        };
+        let fits = match config.instances {
+            Instances::TwoLevel => None,
+            _ => Some(placed.check_flat_fits(provenance::available_memory())),
+        };
+        let mut scene = match fits {
+            Some(Ok(())) => placed.into_flat(),
+            Some(Err(too_large)) if two_level.is_none() || config.points.is_some() => {
+                return Err(too_large)
+            }
+            too_large => {
+                if let Some(Err(too_large)) = too_large {
+                    observe(Event::Warning(format!(
+                        "{too_large}; measured in two levels alone, refereed by the two-level \
+                         exact BVH"
+                    )));
+                }
+                let bench = SceneBench::new(&ctx, config, None, two_level, observe, progress)?;
+                measure_scene(
+                    &mut report,
+                    bench,
+                    config,
+                    observe,
+                    &mut plot_dirs,
+                    &mut measurement,
+                    measurements,
+                )?;
+                continue;
+            }
+        };
         scene.validate()?;
         if scene.triangle_count() == 0 && scene.points.is_some() {
             return Err(Error::param(
@@ -136,7 +170,32 @@ pub fn run_observed(
             // Every row says that its RBVHs are of points, not of the triangles.
             scene.name = format!("{} ({label})", scene.name);
         }
-        let mut bench = SceneBench::new(&ctx, config, scene, two_level, observe, progress)?;
+        let bench = SceneBench::new(&ctx, config, Some(scene), two_level, observe, progress)?;
+        measure_scene(
+            &mut report,
+            bench,
+            config,
+            observe,
+            &mut plot_dirs,
+            &mut measurement,
+            measurements,
+        )?;
+    }
+    Ok(report)
+}
+
+/// Measures `bench` on every ray type of `config` and adds its records, shaders and plots to
+/// `report`; `measurement` counts the measurements done of `measurements`.
+fn measure_scene(
+    report: &mut BenchReport,
+    mut bench: SceneBench,
+    config: &BenchConfig,
+    observe: &mut dyn FnMut(Event),
+    plot_dirs: &mut HashSet<String>,
+    measurement: &mut usize,
+    measurements: usize,
+) -> Result<()> {
+    {
         for c in &bench.candidates {
             let compiled = c.tracer.compiled();
             if !report
@@ -151,7 +210,8 @@ pub fn run_observed(
             }
         }
         for &ray_type in &config.ray_types {
-            measurement += 1;
+            *measurement += 1;
+            let measurement = *measurement;
             let mut numbered = |event| {
                 observe(match event {
                     Event::Progress(what) => {
@@ -163,12 +223,12 @@ pub fn run_observed(
             bench.measure(ray_type, &mut numbered)?;
         }
         if let Some(dir) = &config.plot_dir {
-            let dir = dir.join(plot::scene_dir_name(&bench.scene.name, &mut plot_dirs));
+            let dir = dir.join(plot::scene_dir_name(bench.view().name(), plot_dirs));
             report.written.extend(bench.write_plots(dir)?);
         }
         report.results.extend(bench.records);
     }
-    Ok(report)
+    Ok(())
 }
 
 /// A structure under test, uploaded. Its host copy is what its CPU twin traces.
@@ -244,10 +304,14 @@ impl Candidate {
 /// One scene's structures, rays and records.
 struct SceneBench<'a> {
     config: &'a BenchConfig,
-    scene: Scene,
+    /// The scene flattened; none for one too large to flatten, measured in two levels alone.
+    flat: Option<Scene>,
+    /// The scene's meshes and instances, for its two-level candidates; none for a scene without
+    /// instances.
+    placed: Option<InstancedScene>,
     diagonal: f32,
-    /// Per scene object, its box diagonal: what `t_err_object` measures against.
-    object_diagonals: Vec<f32>,
+    /// Per object, its box: what `t_err_object` measures against.
+    objects: ObjectBoxes,
     /// The exact BVH first: its host copy is also the CPU reference tracer that referees its
     /// GPU hits.
     candidates: Vec<Candidate>,
@@ -282,43 +346,53 @@ impl<'a> SceneBench<'a> {
     fn new(
         ctx: &Context,
         config: &'a BenchConfig,
-        scene: Scene,
+        flat: Option<Scene>,
         two_level: Option<InstancedScene>,
         observe: &mut dyn FnMut(Event),
         progress: &dyn Progress,
     ) -> Result<SceneBench<'a>> {
-        let diagonal = scene.bounds().diagonal();
-        if scene.triangle_count() == 0 || !(diagonal.is_finite() && diagonal > 0.0) {
+        let view = match (&flat, &two_level) {
+            (Some(scene), _) => SceneView::Flat(scene),
+            (None, Some(placed)) => SceneView::Instanced(placed),
+            (None, None) => return Err(Error::param("scene", "no scene to measure".to_string())),
+        };
+        let name = view.name();
+        let diagonal = view.bounds().diagonal();
+        if view.triangle_count() == 0 || !(diagonal.is_finite() && diagonal > 0.0) {
             return Err(Error::param(
                 "scene",
                 format!(
-                    "{}: {} triangles and a bounding-box diagonal of {diagonal}; errors are \
+                    "{name}: {} triangles and a bounding-box diagonal of {diagonal}; errors are \
                      measured relative to the diagonal, so it needs an extent",
-                    scene.name,
-                    scene.triangle_count()
+                    view.triangle_count()
                 ),
             ));
         }
-        if let Some(warning) = scene.precision_warning() {
+        if let Some(warning) = flat.as_ref().and_then(Scene::precision_warning) {
             observe(Event::Warning(warning));
         }
-        observe(Event::Progress(format!(
-            "{}: building the exact BVH",
-            scene.name
-        )));
-        let structure = Structure::build_observed(&scene, &Recipe::Exact, progress)?;
-        let mut candidates = vec![Candidate {
-            tracer: Tracer::new_observed(ctx, &structure, progress)?,
-            structure,
-            params: None,
-            seams: None,
-            flat_ids: None,
-        }];
-        let flat_ids = two_level.as_ref().map(InstancedScene::flat_bases);
+        // The referee first: the flat exact BVH, or the two-level one of a scene measured in
+        // two levels alone. A two-level candidate's triangle hits are renamed as the flat
+        // scene's where the referee is flat.
+        let flat_ids = two_level
+            .as_ref()
+            .filter(|_| flat.is_some())
+            .map(InstancedScene::flat_bases);
+        let mut candidates = Vec::new();
+        if let Some(scene) = &flat {
+            observe(Event::Progress(format!("{name}: building the exact BVH")));
+            let structure = Structure::build_observed(scene, &Recipe::Exact, progress)?;
+            candidates.push(Candidate {
+                tracer: Tracer::new_observed(ctx, &structure, progress)?,
+                structure,
+                params: None,
+                seams: None,
+                flat_ids: None,
+            });
+        }
         if let Some(placed) = &two_level {
             observe(Event::Progress(format!(
-                "{}: building the two-level exact BVH",
-                scene.name
+                "{name}: building the two-level exact BVH"
             )));
             let structure = Structure::from(InstancedBvh::build(placed)?);
             candidates.push(Candidate {
@@ -347,64 +421,61 @@ impl<'a> SceneBench<'a> {
         let mut closed: Option<Vec<bool>> = None;
         for (k, (level, texels)) in builds.into_iter().enumerate() {
             let params = RbvhParams { texels, ..*level };
-            observe(Event::Progress(format!(
-                "{}: building RBVH {}",
-                scene.name,
-                params.level_label()
-            )));
-            let source = match shared.take() {
-                Some(source) => source,
-                None => RbvhSource::new(&scene)?,
-            };
-            let structure = Structure::build_from(&source, &Recipe::Rbvh(params), progress)?;
-            if k < last_build {
-                shared = Some(source);
-            }
-            let rbvh = structure.rbvh().expect("an RBVH recipe builds an RBVH");
-            surface_offset = surface_offset.max(rbvh.texel_size);
-            let exact = candidates[0]
-                .structure
-                .bvh()
-                .filter(|_| config.plain && config.seam_rays > 0);
-            let seams = exact.and_then(|exact| {
+            let mut flat_levels = Vec::new();
+            if let Some(scene) = &flat {
                 observe(Event::Progress(format!(
-                    "{}: {} rays at the seams of RBVH {}",
-                    scene.name,
-                    config.seam_rays,
+                    "{name}: building RBVH {}",
                     params.level_label()
                 )));
-                let closed = closed.get_or_insert_with(|| closed_triangles(&scene));
-                seam_leaks(exact, closed, rbvh, config.seam_rays, config.seed)
-            });
-            let lod = match config.lod.filter(|_| texels == TexelFormat::HeightNormal) {
-                Some(lod_params) => {
-                    observe(Event::Progress(format!(
-                        "{}: building levels of detail of {}",
-                        scene.name,
-                        params.quality_name()
-                    )));
-                    Some(structure.with_levels(&lod_params)?)
+                let source = match shared.take() {
+                    Some(source) => source,
+                    None => RbvhSource::new(scene)?,
+                };
+                let structure = Structure::build_from(&source, &Recipe::Rbvh(params), progress)?;
+                if k < last_build {
+                    shared = Some(source);
                 }
-                None => None,
-            };
+                let rbvh = structure.rbvh().expect("an RBVH recipe builds an RBVH");
+                surface_offset = surface_offset.max(rbvh.texel_size);
+                let exact = candidates[0]
+                    .structure
+                    .bvh()
+                    .filter(|_| config.plain && config.seam_rays > 0);
+                let seams = exact.and_then(|exact| {
+                    observe(Event::Progress(format!(
+                        "{name}: {} rays at the seams of RBVH {}",
+                        config.seam_rays,
+                        params.level_label()
+                    )));
+                    let closed = closed.get_or_insert_with(|| closed_triangles(scene));
+                    seam_leaks(exact, closed, rbvh, config.seam_rays, config.seed)
+                });
+                let lod = match config.lod.filter(|_| texels == TexelFormat::HeightNormal) {
+                    Some(lod_params) => {
+                        observe(Event::Progress(format!(
+                            "{name}: building levels of detail of {}",
+                            params.quality_name()
+                        )));
+                        Some(structure.with_levels(&lod_params)?)
+                    }
+                    None => None,
+                };
+                flat_levels.extend(config.plain.then_some((structure, seams)));
+                flat_levels.extend(lod.map(|l| (l, None)));
+            }
             let instanced = match &two_level {
                 Some(placed) if config.plain => {
                     observe(Event::Progress(format!(
-                        "{}: building the two-level RBVH {}",
-                        scene.name,
+                        "{name}: building the two-level RBVH {}",
                         params.level_label()
                     )));
                     let two = InstancedRbvh::build_observed(placed, &params, progress)?;
+                    surface_offset = surface_offset.max(two.texel_size());
                     Some((Structure::from(two), None))
                 }
                 _ => None,
             };
-            let plain = config.plain.then_some((structure, seams));
-            for (structure, seams) in plain
-                .into_iter()
-                .chain(lod.map(|l| (l, None)))
-                .chain(instanced)
-            {
+            for (structure, seams) in flat_levels.into_iter().chain(instanced) {
                 let flat_ids = match structure.kind() {
                     Kind::RbvhInstanced => flat_ids.clone(),
                     _ => None,
@@ -422,25 +493,31 @@ impl<'a> SceneBench<'a> {
             }
         }
         let (width, height) = (config.width, config.height);
-        let camera = scene.camera_or_framed(width as f32 / height as f32);
+        let camera = view.camera_or_framed(width as f32 / height as f32);
         let primary = camera.primary_rays(width, height);
         let pixel_cone = RayCone::pixel(&camera, height);
         let exact_primary = candidates[0].tracer.trace(&primary, Query::Closest)?.hits;
         let secondary = Secondary {
             diagonal,
             surface_offset,
-            light: scene.light.unwrap_or(DEFAULT_LIGHT),
+            light: view.light().copied().unwrap_or(DEFAULT_LIGHT),
             ao_radius: config.ao_radius,
             seed: config.seed,
         };
+        let objects = match (&flat, &two_level) {
+            (Some(scene), _) => ObjectBoxes::Flat(scene.object_bounds()),
+            (None, placed) => ObjectBoxes::Placed(
+                placed
+                    .as_ref()
+                    .map(InstancedScene::placed_object_bounds)
+                    .unwrap_or_default(),
+            ),
+        };
         Ok(SceneBench {
             config,
-            object_diagonals: scene
-                .object_bounds()
-                .iter()
-                .map(|b| if b.is_empty() { f32::NAN } else { b.diagonal() })
-                .collect(),
-            scene,
+            objects,
+            flat,
+            placed: two_level,
             diagonal,
             candidates,
             primary,
@@ -452,9 +529,18 @@ impl<'a> SceneBench<'a> {
         })
     }
 
+    /// The scene measured: flat, or in instances where it is measured in two levels alone.
+    fn view(&self) -> SceneView<'_> {
+        match (&self.flat, &self.placed) {
+            (Some(scene), _) => SceneView::Flat(scene),
+            (None, Some(placed)) => SceneView::Instanced(placed),
+            (None, None) => unreachable!("SceneBench::new refuses a bench without a scene"),
+        }
+    }
+
     /// Measures every candidate on the rays of `ray_type` and appends their records.
     fn measure(&mut self, ray_type: RayType, observe: &mut dyn FnMut(Event)) -> Result<()> {
-        let name = self.scene.name.clone();
+        let name = self.view().name().to_string();
         let rays = rays::generate(
             ray_type,
             &self.primary,
@@ -500,7 +586,7 @@ impl<'a> SceneBench<'a> {
                         hits,
                         self.config.width,
                         self.config.height,
-                        self.scene.light.as_ref(),
+                        self.view().light(),
                     )?;
                     Ok((image, hits.clone()))
                 })
@@ -593,9 +679,9 @@ impl<'a> SceneBench<'a> {
             };
             if let Some(reason) = &invalid {
                 let referee = if i == 0 {
-                    "the CPU reference tracer"
+                    "the CPU reference tracer".to_string()
                 } else {
-                    "the exact BVH"
+                    format!("the {}", self.candidates[0].structure.label())
                 };
                 observe(Event::Warning(format!(
                     "INVALID: {} on {name}, {} rays, against {referee}: {reason}. Wrong here, not \
@@ -607,8 +693,8 @@ impl<'a> SceneBench<'a> {
             let exact = &self.candidates[0];
             self.records.push(Record {
                 scene: name.clone(),
-                triangles: self.scene.triangle_count() as u64,
-                points: self.scene.point_count() as u64,
+                triangles: self.view().triangle_count() as u64,
+                points: self.view().point_count() as u64,
                 method: c.method(),
                 quality: c.params.map(|params| params.quality_name().to_string()),
                 params: c.params.map(|params| Params::from(&params)),
@@ -807,12 +893,27 @@ impl<'a> SceneBench<'a> {
     }
 
     fn hit_errors(&self, m: &Measured, reference: &[Hit], test: &[Hit]) -> Result<HitErrors> {
-        let object = |h: &Hit| {
-            let triangle = usize::try_from(h.id).ok()?;
-            let o = *self.scene.object_of_triangle.get(triangle)?;
-            self.object_diagonals.get(o as usize).copied()
-        };
+        let object = |h: &Hit| self.object_diagonal(h);
         metrics::hit_errors(&m.rays, reference, test, self.diagonal, &object, m.query)
+    }
+
+    /// The box diagonal of the object `h` (a referee's hit) lies on, world space: of the flat
+    /// scene's object, or of the object of the instance's mesh as the instance places it.
+    fn object_diagonal(&self, h: &Hit) -> Option<f32> {
+        let triangle = usize::try_from(h.id).ok()?;
+        let b = match (&self.objects, self.view()) {
+            (ObjectBoxes::Flat(boxes), SceneView::Flat(scene)) => {
+                *boxes.get(*scene.object_of_triangle.get(triangle)? as usize)?
+            }
+            (ObjectBoxes::Placed(placed_boxes), SceneView::Instanced(placed)) => {
+                let instance = placed.instances.get(h.instance as usize)?;
+                let mesh = placed.meshes.get(instance.mesh as usize)?;
+                let o = *mesh.object_of_triangle.get(triangle)?;
+                *placed_boxes.get(h.instance as usize)?.get(o as usize)?
+            }
+            _ => return None,
+        };
+        (!b.is_empty()).then(|| b.diagonal())
     }
 
     /// Writes into `dir` the exact render (`exact.png`), each level's render and error image
@@ -844,6 +945,12 @@ impl<'a> SceneBench<'a> {
         written.extend(plot::write_charts(&dir, &self.records)?);
         Ok(written)
     }
+}
+
+/// Per object, its box: the flat scene's objects, or per instance its mesh's objects as placed.
+enum ObjectBoxes {
+    Flat(Vec<Aabb>),
+    Placed(Vec<Vec<Aabb>>),
 }
 
 /// `count` rays aimed at `rbvh`'s seams ([`Rbvh::seam_rays`]), traced by the CPU twins of the

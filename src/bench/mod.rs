@@ -54,7 +54,7 @@ use crate::gpu::ContextOptions;
 use crate::lod::LodParams;
 use crate::points::MIN_POINTS;
 use crate::rbvh::{RbvhParams, TexelFormat};
-use crate::scene::PointSource;
+use crate::scene::{Instances, PointSource};
 use crate::{Error, Result};
 
 /// Where the benchmark's Vulkan device comes from.
@@ -130,6 +130,10 @@ pub struct BenchConfig {
     /// the exact BVH stays on the triangles: the referee of point-built RBVHs. None: RBVHs of the
     /// triangles.
     pub points: Option<PointSource>,
+    /// How a scene with instances is measured ([`Instances`]): flat and in two levels (`Auto`,
+    /// two levels alone where flattening would not fit in memory), flat alone, or in two levels
+    /// alone (refereed by the two-level exact BVH).
+    pub instances: Instances,
 }
 
 /// Longest timed run that may be asked for: ten seconds a run is already far past any need.
@@ -162,6 +166,7 @@ impl BenchConfig {
             texels: vec![TexelFormat::HeightNormal],
             block_jumps: None,
             points: None,
+            instances: Instances::Auto,
         }
     }
 
@@ -219,6 +224,24 @@ impl BenchConfig {
                 return Err(Error::param(
                     "points",
                     format!("{count} point(s) to sample: give at least {MIN_POINTS}"),
+                ));
+            }
+        }
+        if self.instances == Instances::TwoLevel {
+            if self.points.is_some() {
+                return Err(Error::param(
+                    "points",
+                    "an RBVH of points is built over the flat scene: not with instances in two \
+                     levels alone"
+                        .to_string(),
+                ));
+            }
+            if !self.plain {
+                return Err(Error::param(
+                    "plain",
+                    "levels of detail are built over a flat RBVH: in two levels alone, measure \
+                     the plain levels"
+                        .to_string(),
                 ));
             }
         }

@@ -39,4 +39,4 @@ pub use mipmap::MipChain;
 pub use sample::{PointSource, SCAN_MATCH};
 pub use texture::{Texture, Wrap};
 pub use topology::{creases, open_boundary, topology, Topology};
-pub use view::SceneView;
+pub use view::{Instances, SceneView};

@@ -8,6 +8,22 @@ use glam::Vec3;
 use super::{Camera, InstancedScene, Light, Scene};
 use crate::geom::{Aabb, Hit, Ray};
 
+/// How a scene whose meshes are placed by instances is traced (the CLI's `--instances`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Instances {
+    /// As the scene asks: a command traces two levels where the scene places a mesh more than
+    /// once, else flat; the bench measures a scene with instances both ways, and in two levels
+    /// alone where its flat copy would not fit in memory
+    /// ([`InstancedScene::check_flat_fits`]).
+    #[default]
+    Auto,
+    /// Every placement copied in place: one triangle list.
+    Flat,
+    /// Each mesh held once, a top level over its placements (a scene without instances is one
+    /// mesh placed once).
+    TwoLevel,
+}
+
 /// A flat scene or a scene of instances, borrowed.
 #[derive(Clone, Copy, Debug)]
 pub enum SceneView<'a> {

@@ -8,7 +8,9 @@ use anyhow::{Context as _, Result};
 use rbvh::bench::{self, BenchConfig, Device, Event, RayType};
 use rbvh::scene::PointSource;
 
-use crate::prepare::{context_options, flag_error, Given, Method, PointsArg, Structures};
+use crate::prepare::{
+    context_options, flag_error, Given, InstancesArg, Method, PointsArg, Structures,
+};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("quality", |a| a.default_value("all")))]
@@ -29,6 +31,12 @@ pub struct Args {
     structures: Structures,
     #[command(flatten)]
     points: PointsArg,
+    /// How a scene with instances is measured: `auto` (flat and in two levels, and in two levels
+    /// alone, refereed by the two-level exact BVH, where the flat copy would not fit the host's
+    /// memory), `flat` (flat alone), `two-level` (in two levels alone; not with --points or
+    /// rbvh-lod alone).
+    #[arg(long, value_enum, default_value_t = InstancesArg::Auto)]
+    instances: InstancesArg,
     /// Ray types to trace, comma-separated: primary, ao, shadow, diffuse.
     #[arg(
         long,
@@ -177,6 +185,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     config.seam_rays = a.seam_rays;
     config.block_jumps = a.block_jumps;
     config.points = a.points.points.clone();
+    config.instances = a.instances.into();
 
     let bar = Bar::new("benchmark");
     let result = bench::run_observed(

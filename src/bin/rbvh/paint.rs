@@ -13,7 +13,7 @@ use rbvh::surface::{strokes, Brush};
 use rbvh::{output, preview};
 
 use crate::prepare::{
-    check_image_size, prepare, CameraArgs, Common, Given, Instances, Method, Prepared, TexelsArg,
+    check_image_size, prepare, CameraArgs, Common, Given, InstancesArg, Method, Prepared, TexelsArg,
 };
 use crate::progress::step;
 
@@ -86,7 +86,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
          default)"
     );
     anyhow::ensure!(
-        a.common.source.instances != Instances::TwoLevel,
+        a.common.source.instances != InstancesArg::TwoLevel,
         "--instances two-level: paint paints a flat RBVH (a mesh's texels held once would paint \
          every instance of it); give --instances flat or auto"
     );
@@ -97,7 +97,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     // `--rbvh` is painted as it was built.
     let mut common = a.common.clone();
     common.structures.quality.sample_all = true;
-    common.source.instances = Instances::Flat;
+    common.source.instances = InstancesArg::Flat;
     let mut p = prepare(&common, a.camera.camera()?)?;
     let camera = p.scene().camera_or_framed(a.width as f32 / a.height as f32);
     let tracer = Tracer::new(p.ctx()?, &p.structure).context("uploading the RBVH")?;

@@ -16,7 +16,9 @@ use rbvh::lod::{Cones, LodParams};
 use rbvh::points::MIN_POINTS;
 use rbvh::probe::{MeanCounters, RayCounters};
 use rbvh::rbvh::{Rbvh, RbvhParams, TexelFormat};
-use rbvh::scene::{Camera, InstancedScene, PointSource, Scene, SceneView, DEFAULT_VFOV_DEG};
+use rbvh::scene::{
+    Camera, InstancedScene, Instances, PointSource, Scene, SceneView, DEFAULT_VFOV_DEG,
+};
 use rbvh::structure::Recipe;
 
 /// Options shared by the commands that trace through one structure (`render`, `trace`, `compare`,
@@ -161,8 +163,8 @@ pub struct Source {
     /// placements), `flat` (every placement copied in place), or `auto`: two levels where the
     /// scene places a mesh more than once and the method traces them (exact, rbvh), else flat
     /// (levels of detail, --points and a saved --rbvh are flat).
-    #[arg(long, value_enum, default_value_t = Instances::Auto)]
-    pub instances: Instances,
+    #[arg(long, value_enum, default_value_t = InstancesArg::Auto)]
+    pub instances: InstancesArg,
     /// Vulkan device to use: any part of its name (default: $RBVH_DEVICE, else the best GPU, else lavapipe).
     #[arg(long)]
     pub device: Option<String>,
@@ -379,15 +381,25 @@ impl Method {
     }
 }
 
-/// `--instances`: how a scene of instances is traced.
+/// `--instances`: how a scene of instances is traced ([`Instances`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum Instances {
+pub enum InstancesArg {
     /// Two levels where the scene places a mesh more than once and the method traces them.
     Auto,
     /// Every placement copied in place: one flat triangle list.
     Flat,
     /// Each mesh held once, a top level over its placements.
     TwoLevel,
+}
+
+impl From<InstancesArg> for Instances {
+    fn from(a: InstancesArg) -> Instances {
+        match a {
+            InstancesArg::Auto => Instances::Auto,
+            InstancesArg::Flat => Instances::Flat,
+            InstancesArg::TwoLevel => Instances::TwoLevel,
+        }
+    }
 }
 
 /// The scene as loaded: flat, or its meshes and placements kept for a two-level structure. One
@@ -561,7 +573,8 @@ fn load(c: &Common, progress: &dyn rbvh::progress::Progress) -> Result<Loaded> {
     } else {
         None
     };
-    match (c.source.instances, flat_for) {
+    let instances = Instances::from(c.source.instances);
+    match (instances, flat_for) {
         (Instances::TwoLevel, Some(why)) => anyhow::bail!(
             "--instances two-level: {why} traces the scene flat; give --instances flat or auto"
         ),
@@ -578,11 +591,11 @@ fn load(c: &Common, progress: &dyn rbvh::progress::Progress) -> Result<Loaded> {
         Some(_) => false,
         None => Scene::check(spec).is_ok() && !spec.contains(['/', '\\']),
     };
-    if !may_place && c.source.instances == Instances::Auto {
+    if !may_place && instances == Instances::Auto {
         return Ok(Loaded::Flat(load_flat(spec, progress)?));
     }
     let placed = InstancedScene::load_observed(spec, progress).map_err(flag_error)?;
-    if c.source.instances == Instances::TwoLevel || placed.repeats_a_mesh() {
+    if instances == Instances::TwoLevel || placed.repeats_a_mesh() {
         placed.validate().map_err(flag_error)?;
         return Ok(Loaded::Instanced(placed));
     }
