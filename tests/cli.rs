@@ -1758,6 +1758,27 @@ fn scenes_of_instances_render_in_two_levels() {
             && rbvh_two.contains("two-level exact BVH on the same rays"),
         "{rbvh_two}"
     );
+    // Saved, the two-level RBVH (every mesh once, and its placements) renders as built; a flat
+    // scene refuses it.
+    let file = dir.path().join("grove.rbvh");
+    let out = rbvh(&["build", "--scene", "grove-instanced", "--out", arg(&file)]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success() && stderr.contains("a two-level RBVH: 2 meshes, 401 instances"),
+        "{stderr}"
+    );
+    let loaded = render(&png("loaded.png"), &["--rbvh", arg(&file)]);
+    assert!(loaded.contains("two-level RBVH:"), "{loaded}");
+    assert_eq!(
+        image::open(png("loaded.png")).unwrap().to_rgba8(),
+        image::open(png("rbvh.png")).unwrap().to_rgba8()
+    );
+    let out = rbvh(&["render", "--scene", "grove", "--rbvh", arg(&file)]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("built for another scene"),
+        "{stderr}"
+    );
     // Levels of detail are flat: auto gives them the flat scene, two-level is refused.
     render(&png("lod.png"), &["--method", "rbvh-lod"]);
     let refused = png("refused.png");

@@ -177,3 +177,118 @@ fn moving_rbvh_instances_uploads_the_top_level_alone() {
         .to_string();
     assert!(e.contains("not over instances"), "{e}");
 }
+
+/// A two-level RBVH saved and loaded is the one built (its top level built again on load, the
+/// same), and saving it again gives the same bytes; a flat reader refuses it and the two-level
+/// reader a flat file, by name. Checked against a scene, the file takes the scene's placements
+/// (moved instances trace as a fresh build's) and refuses another scene's meshes or instances.
+#[test]
+fn two_level_rbvh_files_hold_every_mesh_and_instance() {
+    let scene = placed();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("placed.rbvh");
+    for texels in [TexelFormat::HeightNormal, TexelFormat::Height] {
+        let params = RbvhParams {
+            texels,
+            ..RbvhParams::quality(2).unwrap()
+        };
+        let built = InstancedRbvh::build(&scene, &params).unwrap();
+        built.save(&path).unwrap();
+        let loaded = InstancedRbvh::load(&path).unwrap();
+        assert_eq!(loaded, built, "{texels:?}");
+        assert_eq!(loaded.to_bytes(), std::fs::read(&path).unwrap());
+        let flat = rbvh::rbvh::Rbvh::load(&path).unwrap_err().to_string();
+        assert!(
+            flat.contains("a two-level RBVH (2 meshes, 9 instances"),
+            "{flat}"
+        );
+    }
+    let flat_file = dir.path().join("flat.rbvh");
+    let flat = scene.clone().into_flat();
+    rbvh::rbvh::Rbvh::build(&flat, &RbvhParams::quality(0).unwrap())
+        .unwrap()
+        .save(&flat_file)
+        .unwrap();
+    let e = InstancedRbvh::load(&flat_file).unwrap_err().to_string();
+    assert!(e.contains("a flat RBVH (no sections MESH and PLAC)"), "{e}");
+
+    // The scene's own placements, moved: the file follows them.
+    let mut loaded = InstancedRbvh::load(&path).unwrap();
+    let mut moved = scene.clone();
+    for (k, instance) in moved.instances.iter_mut().enumerate() {
+        instance.transform =
+            Mat4::from_translation(Vec3::new(0.0, 0.3 * k as f32, 0.0)) * instance.transform;
+    }
+    loaded.check_built_from(&moved).unwrap();
+    let mut fresh = InstancedRbvh::build(&scene, loaded.params()).unwrap();
+    fresh
+        .set_transforms(
+            &moved
+                .instances
+                .iter()
+                .map(|i| i.transform)
+                .collect::<Vec<_>>(),
+        )
+        .unwrap();
+    let probe = rays(&moved, 500, 11);
+    assert_eq!(
+        loaded.trace_cpu(&probe, false),
+        fresh.trace_cpu(&probe, false)
+    );
+
+    // Another scene: fewer instances, another mesh in an instance, another mesh's shape.
+    let mut fewer = scene.clone();
+    fewer.instances.pop();
+    let mut other_mesh = scene.clone();
+    other_mesh.instances[0].mesh = 1;
+    let mut other_shape = scene.clone();
+    other_shape.meshes[1] = Scene::builtin("cube").unwrap();
+    for (what, other) in [
+        ("instances", fewer),
+        ("places mesh", other_mesh),
+        ("mesh 1's box", other_shape),
+    ] {
+        let mut loaded = InstancedRbvh::load(&path).unwrap();
+        let e = loaded.check_built_from(&other).unwrap_err().to_string();
+        assert!(
+            e.contains("built for another scene") && e.contains(what),
+            "{what}: {e}"
+        );
+    }
+}
+
+/// A two-level RBVH's file that lies about its meshes or placements is refused, naming the
+/// section: a mesh's tree outside the nodes, an instance of a mesh that does not exist, a
+/// transform that is not invertible, a mesh's node that names the top level.
+#[test]
+fn corrupt_two_level_rbvh_files_are_refused_by_section() {
+    let scene = placed();
+    let built = InstancedRbvh::build(&scene, &RbvhParams::quality(1).unwrap()).unwrap();
+    let bytes = built.to_bytes();
+    let table = rbvh::rbvh::file::section_table(&bytes, std::path::Path::new("x")).unwrap();
+    let at = |tag: &[u8; 4]| table.iter().find(|s| &s.tag == tag).unwrap().offset as usize;
+    let (meshes, placements, nodes) = (at(b"MESH"), at(b"PLAC"), at(b"NODE"));
+    let top = built.top_nodes as usize;
+    let node_bytes = std::mem::size_of::<rbvh::bvh::GpuNode>();
+    let a_child = std::mem::offset_of!(rbvh::bvh::GpuNode, a_child);
+    // Per case, the section named and the words written (byte offset, value).
+    let cases: [(&str, Vec<(usize, u32)>); 4] = [
+        ("MESH", vec![(meshes, u32::MAX - 4)]),
+        ("PLAC", vec![(placements, 7)]),
+        ("PLAC", (1..13).map(|k| (placements + 4 * k, 0)).collect()),
+        ("NODE", vec![(nodes + node_bytes * top + a_child, 0)]),
+    ];
+    for (k, (section, words)) in cases.iter().enumerate() {
+        let mut bad = bytes.clone();
+        for &(at, x) in words {
+            bad[at..at + 4].copy_from_slice(&x.to_le_bytes());
+        }
+        let e = InstancedRbvh::from_bytes(&bad, std::path::Path::new("bad.rbvh"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("bad.rbvh") && e.contains(&format!("section {section}")),
+            "case {k}: {e}"
+        );
+    }
+}

@@ -52,6 +52,9 @@ pub struct InstancedRbvh {
     pub(crate) rbvh: Rbvh,
     /// Per instance of the scene, its record.
     pub instances: Vec<GpuInstance>,
+    /// Per instance, the transform it is placed by (mesh space to world), as last set: what a
+    /// file stores ([`InstancedRbvh::save`]), since the records hold its inverse.
+    pub transforms: Vec<Mat4>,
     /// Per mesh of the scene, where its tree lies (its triangles: its exact ones).
     pub meshes: Vec<BottomLevel>,
     /// Per mesh, its texel in its own space; 0 for a mesh no instance places (it has no tree).
@@ -100,16 +103,32 @@ impl InstancedRbvh {
         let mesh_of: Vec<u32> = scene.instances.iter().map(|i| i.mesh).collect();
         let transforms: Vec<Mat4> = scene.instances.iter().map(|i| i.transform).collect();
         let (rbvh, meshes) = merge(&parts, &mesh_of, params, texel)?;
+        let mut two = InstancedRbvh::placed(rbvh, meshes, mesh_texels, &mesh_of, &transforms)?;
+        two.rbvh.stats.build_ms = start.elapsed().as_secs_f64() * 1e3;
+        Ok(two)
+    }
+
+    /// The meshes' merged arrays `rbvh` (its first [`top_node_count`] nodes set aside for the
+    /// top level), lying as `meshes` say, under a top level built here over instances of meshes
+    /// `mesh_of` at `transforms`: what a build merges and what a file holds
+    /// ([`InstancedRbvh::load`]). Fails as [`InstancedRbvh::set_transforms`] does.
+    pub(crate) fn placed(
+        rbvh: Rbvh,
+        meshes: Vec<BottomLevel>,
+        mesh_texels: Vec<f32>,
+        mesh_of: &[u32],
+        transforms: &[Mat4],
+    ) -> Result<InstancedRbvh> {
         let mut two = InstancedRbvh {
-            top_nodes: top_node_count(&meshes, &mesh_of),
+            top_nodes: top_node_count(&meshes, mesh_of),
             rbvh,
             instances: Vec::new(),
+            transforms: Vec::new(),
             meshes,
             mesh_texels,
             top_depth: 0,
         };
-        two.place(&transforms, &mesh_of)?;
-        two.rbvh.stats.build_ms = start.elapsed().as_secs_f64() * 1e3;
+        two.place(transforms, mesh_of)?;
         Ok(two)
     }
 
@@ -134,6 +153,7 @@ impl InstancedRbvh {
         self.rbvh.bounds = top.bounds;
         self.top_depth = top.depth;
         self.instances = top.instances;
+        self.transforms = transforms.to_vec();
         Ok(())
     }
 

@@ -9,9 +9,9 @@ use rayon::prelude::*;
 use rbvh::bvh::{BuildParams, Bvh, InstancedBvh};
 use rbvh::probe::TraceStats;
 use rbvh::rbvh::{InstancedRbvh, Rbvh, RbvhParams, RbvhSource, Subdivision};
-use rbvh::scene::{InstancedScene, Scene};
+use rbvh::scene::{InstancedScene, Instances, Scene};
 
-use crate::prepare::{flag_error, PointsArg, Quality};
+use crate::prepare::{flag_error, InstancesArg, PointsArg, Quality};
 use crate::progress::step;
 
 #[derive(clap::Args, Debug)]
@@ -24,9 +24,16 @@ pub struct Args {
     #[command(flatten)]
     quality: Quality,
     /// Save the built RBVH to this file (load it with --rbvh on render, trace, paint and compare);
-    /// one level in one texel format. Prints no table unless --stats.
+    /// one level in one texel format. Prints no table unless --stats. A scene of instances is
+    /// saved as --instances says: its two-level RBVH (every mesh once, and its placements), or
+    /// flattened.
     #[arg(long, short)]
     out: Option<PathBuf>,
+    /// With --out: which RBVH of a scene of instances is saved: `two-level`, `flat`, or `auto`
+    /// (two levels where the scene places a mesh more than once or is too large to flatten, as
+    /// render traces it).
+    #[arg(long, value_enum, default_value_t = InstancesArg::Auto, requires = "out")]
+    instances: InstancesArg,
     /// With --out: print the accounting table too (without --out it is what the command prints).
     #[arg(long, requires = "out")]
     stats: bool,
@@ -44,12 +51,33 @@ pub fn run(a: Args) -> Result<()> {
     .with_context(|| format!("loading scene {:?}", a.scene))?;
     let table = a.stats || a.out.is_none();
     let levels = a.quality.levels()?;
-    if table && placed.instances.len() > 1 {
-        two_levels(&placed, &levels)?;
+    let fits = placed.check_flat_fits(rbvh::bench::provenance::available_memory());
+    let two_level_out = a.out.is_some()
+        && match Instances::from(a.instances) {
+            Instances::TwoLevel => true,
+            Instances::Flat => false,
+            Instances::Auto => placed.repeats_a_mesh() || fits.is_err(),
+        };
+    if two_level_out {
+        anyhow::ensure!(
+            a.points.points.is_none(),
+            "--points builds a flat RBVH of points: give --instances flat"
+        );
+        anyhow::ensure!(
+            levels.len() == 1,
+            "--out saves one level: give a single --quality and a single --texels"
+        );
+        return two_levels(&placed, &levels, table, a.out.as_deref());
     }
-    if let Err(e) = placed.check_flat_fits(rbvh::bench::provenance::available_memory()) {
+    if table && placed.instances.len() > 1 {
+        two_levels(&placed, &levels, true, None)?;
+    }
+    if let Err(e) = fits {
         // A scene held only in two levels: its lines above are the table.
-        anyhow::ensure!(a.out.is_none(), "{e}; --out saves a flat RBVH");
+        anyhow::ensure!(
+            a.out.is_none(),
+            "{e}; --out with --instances flat saves a flat RBVH"
+        );
         eprintln!("no flat structures: {e}");
         return Ok(());
     }
@@ -174,10 +202,61 @@ pub fn run(a: Args) -> Result<()> {
 }
 
 /// The two-level structures of a scene with instances (a tree per mesh, a top level over the
-/// instances): the exact BVH's, and the RBVH's at each of `levels`: what they store and cost
-/// beside the flat structures the table goes on to build from the scene flattened (issue
-/// "Instances").
-fn two_levels(placed: &InstancedScene, levels: &[RbvhParams]) -> Result<()> {
+/// instances): the exact BVH's, and the RBVH's at each of `levels`: with `print`, what they
+/// store and cost beside the flat structures the table goes on to build from the scene
+/// flattened (issue "Instances"); with `out`, the (one) two-level RBVH saved there.
+fn two_levels(
+    placed: &InstancedScene,
+    levels: &[RbvhParams],
+    print: bool,
+    out: Option<&std::path::Path>,
+) -> Result<()> {
+    let mut exact_bytes = 0;
+    if print {
+        exact_bytes = two_level_exact(placed)?;
+    }
+    for params in levels {
+        let name = params.level_label();
+        let r = step(&format!("building the two-level RBVH {name}"), |bar| {
+            params.validate().map_err(flag_error)?;
+            InstancedRbvh::build_observed(placed, params, bar).map_err(flag_error)
+        })?;
+        if print {
+            let texels: Vec<String> = r.mesh_texels.iter().map(|t| format!("{t:.3e}")).collect();
+            println!(
+                "{name:>7} two-level RBVH: mesh texels [{}] (world {:.3e}), {} height-field + {} \
+                 triangle leaves, {:.2} MB (tree {:.2} + atlas {:.2} + triangles {:.2} + instances \
+                 {:.3}), {:.1}x smaller than the two-level exact BVH, built in {:.0} ms; peak host \
+                 memory so far {}",
+                texels.join(", "),
+                r.texel_size(),
+                r.stats().heightfield_leaves,
+                r.stats().triangle_leaves,
+                mb(r.total_bytes()),
+                mb(r.tree_bytes()),
+                mb(r.atlas_bytes()),
+                mb(r.triangle_bytes()),
+                mb(r.instance_bytes()),
+                exact_bytes as f64 / r.total_bytes().max(1) as f64,
+                r.stats().build_ms,
+                peak_host_mb()
+            );
+        }
+        if let Some(path) = out {
+            r.save(path)?;
+            eprintln!(
+                "wrote {} (a two-level RBVH: {} meshes, {} instances)",
+                path.display(),
+                r.meshes.len(),
+                r.instances.len()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Builds the two-level exact BVH of `placed` and prints its line; its device bytes.
+fn two_level_exact(placed: &InstancedScene) -> Result<u64> {
     let two = step("building the two-level exact BVH", |_| {
         InstancedBvh::build(placed).map_err(flag_error)
     })?;
@@ -200,34 +279,7 @@ fn two_levels(placed: &InstancedScene, levels: &[RbvhParams]) -> Result<()> {
         two.build_ms,
         peak_host_mb()
     );
-    let exact_bytes = two.tree_bytes() + two.triangle_bytes() + two.instance_bytes();
-    for params in levels {
-        let name = params.level_label();
-        let r = step(&format!("building the two-level RBVH {name}"), |bar| {
-            params.validate().map_err(flag_error)?;
-            InstancedRbvh::build_observed(placed, params, bar).map_err(flag_error)
-        })?;
-        let texels: Vec<String> = r.mesh_texels.iter().map(|t| format!("{t:.3e}")).collect();
-        println!(
-            "{name:>7} two-level RBVH: mesh texels [{}] (world {:.3e}), {} height-field + {} \
-             triangle leaves, {:.2} MB (tree {:.2} + atlas {:.2} + triangles {:.2} + instances \
-             {:.3}), {:.1}x smaller than the two-level exact BVH, built in {:.0} ms; peak host \
-             memory so far {}",
-            texels.join(", "),
-            r.texel_size(),
-            r.stats().heightfield_leaves,
-            r.stats().triangle_leaves,
-            mb(r.total_bytes()),
-            mb(r.tree_bytes()),
-            mb(r.atlas_bytes()),
-            mb(r.triangle_bytes()),
-            mb(r.instance_bytes()),
-            exact_bytes as f64 / r.total_bytes().max(1) as f64,
-            r.stats().build_ms,
-            peak_host_mb()
-        );
-    }
-    Ok(())
+    Ok(two.tree_bytes() + two.triangle_bytes() + two.instance_bytes())
 }
 
 /// Build time and tracing cost of each subdivision strategy at `params`' level, on primary rays

@@ -15,7 +15,7 @@ use rbvh::gpu::{Addressing, Context, ContextOptions, Query, Reach, Traced, Trace
 use rbvh::lod::{Cones, LodParams};
 use rbvh::points::MIN_POINTS;
 use rbvh::probe::{MeanCounters, RayCounters};
-use rbvh::rbvh::{Rbvh, RbvhParams, TexelFormat};
+use rbvh::rbvh::{InstancedRbvh, Rbvh, RbvhParams, TexelFormat};
 use rbvh::scene::{
     Camera, InstancedScene, Instances, PointSource, Scene, SceneView, DEFAULT_VFOV_DEG,
 };
@@ -564,12 +564,29 @@ pub fn load_flat(spec: &str, progress: &dyn rbvh::progress::Progress) -> Result<
 /// for) and the method traces two levels; anything else is loaded flat ([`load_flat`]).
 fn load(c: &Common, progress: &dyn rbvh::progress::Progress) -> Result<Loaded> {
     let spec = c.source.scene.as_str();
+    // A saved two-level RBVH is traced with the scene of instances it was built from.
+    if let Some(path) = c.source.rbvh.as_ref().filter(|path| two_level_file(path)) {
+        anyhow::ensure!(
+            Instances::from(c.source.instances) != Instances::Flat,
+            "--instances flat: {} holds a two-level RBVH, traced over the scene's instances",
+            path.display()
+        );
+        anyhow::ensure!(
+            c.structures.method()? != Method::RbvhLod,
+            "--method rbvh-lod: levels of detail are built over a flat RBVH, and {} holds a \
+             two-level one",
+            path.display()
+        );
+        let placed = InstancedScene::load_observed(spec, progress).map_err(flag_error)?;
+        placed.validate().map_err(flag_error)?;
+        return Ok(Loaded::Instanced(placed));
+    }
     let flat_for = if c.structures.method()? == Method::RbvhLod {
         Some("--method rbvh-lod (levels of detail are built over a flat RBVH)")
     } else if c.source.points.points.is_some() {
         Some("--points (the RBVH of points sampled from, or scanned of, the flat scene)")
     } else if c.source.rbvh.is_some() {
-        Some("--rbvh (a saved RBVH holds one flat scene)")
+        Some("--rbvh with a flat RBVH's file")
     } else {
         None
     };
@@ -604,6 +621,12 @@ fn load(c: &Common, progress: &dyn rbvh::progress::Progress) -> Result<Loaded> {
         // A glTF file or built-in scene is loaded flat by its own loader, as without instances.
         _ => load_flat(spec, progress)?,
     }))
+}
+
+/// Whether the RBVH file at `path` holds a two-level RBVH; false where it cannot be read (its
+/// loader then says why).
+fn two_level_file(path: &std::path::Path) -> bool {
+    std::fs::read(path).is_ok_and(|bytes| rbvh::rbvh::file::holds_instances(&bytes))
 }
 
 /// `placed` flattened once it is known to fit in host memory
@@ -738,14 +761,26 @@ fn prepare_instanced(
     }
     let load_ms = loading.elapsed().as_secs_f64() * 1e3;
     let t = Instant::now();
-    let recipe = c.structures.recipe()?;
-    let what = match recipe {
-        Recipe::Exact => "building the two-level BVH",
-        _ => "building the two-level RBVH",
+    let structure = match &c.source.rbvh {
+        Some(path) => {
+            let mut two = step("loading RBVH", |_| InstancedRbvh::load(path))
+                .with_context(|| format!("loading RBVH {}", path.display()))?;
+            two.check_built_from(&placed).with_context(|| {
+                format!("RBVH {} with scene {:?}", path.display(), c.source.scene)
+            })?;
+            Structure::from(two)
+        }
+        None => {
+            let recipe = c.structures.recipe()?;
+            let what = match recipe {
+                Recipe::Exact => "building the two-level BVH",
+                _ => "building the two-level RBVH",
+            };
+            step(what, |bar| {
+                Structure::build_instanced(&placed, &recipe, bar).map_err(flag_error)
+            })?
+        }
     };
-    let structure = step(what, |bar| {
-        Structure::build_instanced(&placed, &recipe, bar).map_err(flag_error)
-    })?;
     let structure_ms = t.elapsed().as_secs_f64() * 1e3;
     let ctx = open_device(c, device)?;
     if c.source.stats {

@@ -317,7 +317,7 @@ pub(super) fn read(bytes: &[u8], version: u32, path: &Path) -> Result<Rbvh> {
         stats,
         colours,
     };
-    check(&rbvh).map_err(|bad| err(bad.message))?;
+    check(&rbvh, 0).map_err(|bad| err(bad.message))?;
     if version < 6 {
         unmark(&mut rbvh);
     }

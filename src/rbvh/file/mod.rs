@@ -2,8 +2,10 @@
 //! build (minutes for a large scene) is done once and traced many times.
 //!
 //! The file is a table of typed, versioned sections (format version 13), so that what is still to
-//! come (texel encodings, instances' many meshes) adds a section, or a version of one, instead of
-//! a version of the whole file, and a reader skips what it may ignore and refuses what it may not.
+//! come (texel encodings) adds a section, or a version of one, instead of a version of the whole
+//! file, and a reader skips what it may ignore and refuses what it may not. A two-level RBVH's
+//! file (every mesh and its instances) is this file with two required sections more, `MESH` and
+//! `PLAC` (`instanced.rs`), so that a flat reader refuses it by name.
 //! Files of versions 1–12 (a fixed header, then the arrays) load through `legacy`, upgraded in
 //! memory; `rbvh upgrade` rewrites one as version 13. Their colour channels may be painted, and
 //! paint cannot be rebuilt from the scene, so every old file stays readable.
@@ -84,6 +86,7 @@
 //! exact part of one of the leaves (`GpuTriangle::PART`), its padding 0. Every failure is an
 //! [`Error::Parse`] naming the file, and in a sectioned file the section and its bytes.
 
+mod instanced;
 mod legacy;
 mod sections;
 
@@ -102,6 +105,14 @@ use crate::io::write_atomically;
 use crate::{Error, Result};
 
 pub use sections::{section_table, Section, REQUIRED};
+
+/// Whether an RBVH file's bytes hold a two-level RBVH (sections `MESH` and `PLAC`, read by
+/// [`crate::rbvh::InstancedRbvh::load`]) rather than a flat one ([`Rbvh::load`]); false for
+/// bytes that are no sectioned RBVH file, which either loader then refuses by name.
+pub fn holds_instances(bytes: &[u8]) -> bool {
+    section_table(bytes, Path::new(""))
+        .is_ok_and(|table| table.iter().any(|s| s.tag == sections::MESHES))
+}
 
 /// The first eight bytes of every RBVH file.
 const MAGIC: [u8; 8] = *b"RBVHv\0\0\0";
@@ -137,7 +148,7 @@ impl Rbvh {
 
     /// The bytes [`Rbvh::save`] writes: always [`VERSION`].
     pub fn to_bytes(&self) -> Vec<u8> {
-        sections::write(self)
+        sections::write(self, Vec::new())
     }
 
     /// Whether the file carries the colour channel: a height-only RBVH has none (the builder
@@ -224,8 +235,10 @@ impl Bad {
 }
 
 /// Checks a parsed RBVH against everything a tracer relies on (the module docs' list, less what
-/// the file's framing already guarantees), whatever version it was read from.
-fn check(r: &Rbvh) -> std::result::Result<(), Bad> {
+/// the file's framing already guarantees), whatever version it was read from. Its first
+/// `top_nodes` nodes are a two-level RBVH's top level, built on load rather than read (0 for a
+/// flat RBVH): they are not checked, and no other node may name one of them.
+fn check(r: &Rbvh, top_nodes: usize) -> std::result::Result<(), Bad> {
     let p = &r.params;
     let floats = [
         ("params.texels_per_diagonal", p.texels_per_diagonal),
@@ -299,7 +312,7 @@ fn check(r: &Rbvh) -> std::result::Result<(), Bad> {
     }
     check_atlas(&r.atlas)?;
 
-    for (index, node) in r.nodes.iter().enumerate() {
+    for (index, node) in r.nodes.iter().enumerate().skip(top_nodes) {
         if let Some(why) = node.malformation() {
             return Err(Bad::at(Part::Nodes, index, format!("node {index}: {why}")));
         }
@@ -308,7 +321,7 @@ fn check(r: &Rbvh) -> std::result::Result<(), Bad> {
             ('b', node.b_child, node.b_count),
         ];
         for (name, child, count) in children {
-            check_child(child, count, r).map_err(|why| {
+            check_child(child, count, r, top_nodes).map_err(|why| {
                 Bad::at(
                     Part::Nodes,
                     index,
@@ -413,8 +426,17 @@ fn check_triangles(triangles: &[GpuTriangle], leaves: usize) -> std::result::Res
 
 /// Checks one child reference against the layout rules (see [`super::child`]). An absent child's
 /// index is not read, by the device or here.
-fn check_child(child: u32, count: u32, r: &Rbvh) -> std::result::Result<(), String> {
+fn check_child(
+    child: u32,
+    count: u32,
+    r: &Rbvh,
+    top_nodes: usize,
+) -> std::result::Result<(), String> {
     match Child::decode(child, count) {
+        Child::Inner(index) if (index as usize) < top_nodes => Err(format!(
+            "node index {index} lies in the top level (nodes 0..{top_nodes}), which a mesh's \
+             tree cannot enter"
+        )),
         Child::Inner(_) if count != 0 => {
             Err(format!("inner node reference with count {count}, not 0"))
         }

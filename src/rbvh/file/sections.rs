@@ -85,6 +85,16 @@ const TEXELS_HEIGHT_NORMAL: [u8; 4] = *b"TEXN";
 /// Texels of height alone, one 16-bit code each.
 const TEXELS_HEIGHT: [u8; 4] = *b"TEXH";
 const COLOURS: [u8; 4] = *b"COLR";
+/// A two-level RBVH's meshes: where each mesh's tree and triangles lie in the arrays.
+pub(super) const MESHES: [u8; 4] = *b"MESH";
+/// A two-level RBVH's instances: each one's mesh and transform.
+pub(super) const PLACEMENTS: [u8; 4] = *b"PLAC";
+/// Bytes of a `MESH` record: `root`, `nodes`, `first_triangle`, `triangles`, `depth` (u32 each),
+/// the mesh's texel (f32), its bounds (6 × f32).
+pub(super) const MESH_BYTES: usize = 48;
+/// Bytes of a `PLAC` record: the mesh (u32), then the transform's first three rows (12 × f32;
+/// the last row is `0 0 0 1`).
+pub(super) const PLACEMENT_BYTES: usize = 52;
 
 /// The version of `PARM` this build writes: 7, for the fields of the module docs' table.
 const PARAMS_VERSION: u32 = 7;
@@ -95,7 +105,7 @@ const PARAMS_WORDS: [usize; PARAMS_VERSION as usize] = [7, 8, 9, 10, 11, 12, 13]
 const HEAD_BYTES: usize = 68;
 
 /// Every section this build knows, in the order it writes them.
-const KNOWN: [Known; 8] = [
+const KNOWN: [Known; 10] = [
     Known {
         tag: PARAMS,
         versions: 1..PARAMS_VERSION + 1,
@@ -144,6 +154,18 @@ const KNOWN: [Known; 8] = [
         required: false,
         record: 4,
     },
+    Known {
+        tag: MESHES,
+        versions: 1..2,
+        required: true,
+        record: MESH_BYTES,
+    },
+    Known {
+        tag: PLACEMENTS,
+        versions: 1..2,
+        required: true,
+        record: PLACEMENT_BYTES,
+    },
 ];
 
 /// The index in [`KNOWN`] of `tag`.
@@ -160,10 +182,11 @@ fn aligned(x: u64) -> u64 {
 }
 
 /// Writes one section's content.
-type Put<'a> = Box<dyn Fn(&mut Vec<u8>) + 'a>;
+pub(super) type Put<'a> = Box<dyn Fn(&mut Vec<u8>) + 'a>;
 
-/// The bytes of `r` as a version 13 file.
-pub(super) fn write(r: &Rbvh) -> Vec<u8> {
+/// The bytes of `r` as a version 13 file, with the sections of `extra` (tag, length, content:
+/// a two-level RBVH's meshes and placements) after its own.
+pub(super) fn write<'a>(r: &'a Rbvh, extra: Vec<([u8; 4], usize, Put<'a>)>) -> Vec<u8> {
     let texels: ([u8; 4], Put) = match r.params.texels {
         TexelFormat::HeightNormal => (
             TEXELS_HEIGHT_NORMAL,
@@ -211,6 +234,7 @@ pub(super) fn write(r: &Rbvh) -> Vec<u8> {
             Box::new(|out| put_records(out, colours)),
         ));
     }
+    sections.extend(extra);
 
     let table_end = (TABLE_AT + ENTRY_BYTES * sections.len()) as u64;
     let mut offset = aligned(table_end);
@@ -389,8 +413,86 @@ pub fn section_table(bytes: &[u8], name_for_errors: &Path) -> Result<Vec<Section
     Ok(table)
 }
 
-/// Parses a version 13 file (its magic and version already checked).
+/// Parses a version 13 file of a flat RBVH (its magic and version already checked); a file of
+/// a two-level RBVH is refused, naming what reads it.
 pub(super) fn read(bytes: &[u8], path: &Path) -> Result<Rbvh> {
+    let parsed = parse(bytes, path)?;
+    if let (Some(meshes), Some(placements)) = (parsed.meshes, parsed.placements) {
+        return Err(Error::parse(
+            path,
+            None,
+            format!(
+                "a two-level RBVH ({} meshes, {} instances: sections MESH and PLAC), not a flat \
+                 one: load it with InstancedRbvh::load, or trace it with the scene of instances \
+                 it was built from",
+                meshes.len() / MESH_BYTES,
+                placements.len() / PLACEMENT_BYTES
+            ),
+        ));
+    }
+    parsed.checked(0)
+}
+
+/// A version 13 file's sections read into an RBVH not checked yet ([`Parsed::checked`]), with
+/// a two-level RBVH's meshes and placements as their bytes.
+pub(super) struct Parsed<'a> {
+    rbvh: Rbvh,
+    found: [Option<(usize, Section)>; KNOWN.len()],
+    path: &'a Path,
+    /// `MESH`'s bytes, if the file has it.
+    pub(super) meshes: Option<&'a [u8]>,
+    /// `PLAC`'s bytes, if the file has it.
+    pub(super) placements: Option<&'a [u8]>,
+}
+
+impl Parsed<'_> {
+    /// The RBVH read, not checked yet.
+    pub(super) fn rbvh(&self) -> &Rbvh {
+        &self.rbvh
+    }
+
+    /// An error naming the file and the section `tag` (read by now), for what is wrong in it.
+    pub(super) fn error_in(&self, tag: [u8; 4], message: String) -> Error {
+        let (entry, s) = found_of(&self.found, tag);
+        Error::parse(self.path, None, format!("{}: {message}", s.place(entry)))
+    }
+
+    /// The RBVH, checked as the module docs list (its first `top_nodes` nodes, a two-level
+    /// RBVH's top level built on load, skipped), every failure naming its section and bytes.
+    pub(super) fn checked(self, top_nodes: usize) -> Result<Rbvh> {
+        let (found, path) = (self.found, self.path);
+        let err = |message: String| Error::parse(path, None, message);
+        check(&self.rbvh, top_nodes).map_err(|bad| {
+            let (entry, s) = match bad.part {
+                Part::Params => found_of(&found, PARAMS),
+                Part::Head => found_of(&found, HEAD),
+                Part::Nodes => found_of(&found, NODES),
+                Part::Triangles => found_of(&found, TRIANGLES),
+                Part::Leaves => found_of(&found, LEAVES),
+                Part::Texels => found[known(TEXELS_HEIGHT_NORMAL)]
+                    .or(found[known(TEXELS_HEIGHT)])
+                    .expect("a texel section read"),
+            };
+            let place = match bad.record {
+                Some(index) => {
+                    let record = KNOWN[known(s.tag)].record as u64;
+                    format!(
+                        "section {} (table entry {entry}) at byte {}",
+                        s.name(),
+                        s.offset + record * index as u64
+                    )
+                }
+                None => s.place(entry),
+            };
+            err(format!("{place}: {}", bad.message))
+        })?;
+        Ok(self.rbvh)
+    }
+}
+
+/// Reads a version 13 file's sections (its magic and version already checked) into a
+/// [`Parsed`]: every framing check made, the contents not yet checked.
+pub(super) fn parse<'a>(bytes: &'a [u8], path: &'a Path) -> Result<Parsed<'a>> {
     let err = |message: String| Error::parse(path, None, message);
     let table = section_table(bytes, path)?;
     // The entry and section of each known tag present.
@@ -510,6 +612,17 @@ pub(super) fn read(bytes: &[u8], path: &Path) -> Result<Rbvh> {
         Some((_, s)) => Some(records(&bytes[s.bytes()])),
         None => None,
     };
+    let (meshes, placements) = match (section(MESHES), section(PLACEMENTS)) {
+        (Some(m), Some(p)) => (Some(&bytes[m.1.bytes()]), Some(&bytes[p.1.bytes()])),
+        (None, None) => (None, None),
+        _ => {
+            return Err(err(format!(
+                "a two-level RBVH has both sections MESH and PLAC, a flat one neither; the \
+                 file's sections are {}",
+                names(&table)
+            )))
+        }
+    };
     let rbvh = Rbvh {
         params,
         nodes: records(array(NODES)?),
@@ -527,32 +640,16 @@ pub(super) fn read(bytes: &[u8], path: &Path) -> Result<Rbvh> {
         stats,
         colours,
     };
-    check(&rbvh).map_err(|bad| {
-        let (entry, s) = match bad.part {
-            Part::Params => (params_entry, params_section),
-            Part::Head => (head_entry, head),
-            Part::Nodes => found_of(&found, NODES),
-            Part::Triangles => found_of(&found, TRIANGLES),
-            Part::Leaves => found_of(&found, LEAVES),
-            Part::Texels => texel_section,
-        };
-        let place = match bad.record {
-            Some(index) => {
-                let record = KNOWN[known(s.tag)].record as u64;
-                format!(
-                    "section {} (table entry {entry}) at byte {}",
-                    s.name(),
-                    s.offset + record * index as u64
-                )
-            }
-            None => s.place(entry),
-        };
-        err(format!("{place}: {}", bad.message))
-    })?;
-    Ok(rbvh)
+    Ok(Parsed {
+        rbvh,
+        found,
+        path,
+        meshes,
+        placements,
+    })
 }
 
-/// The entry and section of a known tag that [`read`] found (every array's is, by then).
+/// The entry and section of a known tag that [`parse`] found (every array's is, by then).
 fn found_of(found: &[Option<(usize, Section)>], tag: [u8; 4]) -> (usize, Section) {
     found[known(tag)].expect("a section read")
 }
