@@ -357,6 +357,18 @@ impl Structure {
         }
     }
 
+    /// How far a secondary ray leaving `hit` starts off its surface beyond the rounding offset
+    /// ([`crate::rays::offset_origin`]): one texel of the RBVH's surface there, which may lie a
+    /// fraction of a texel off the exact one; for a two-level RBVH the hit instance's own texel
+    /// ([`InstancedRbvh::instance_texel`]), so that it scales with each instance; 0 for the
+    /// exact BVH.
+    pub fn surface_offset(&self, hit: &Hit) -> f32 {
+        match self {
+            Structure::RbvhInstanced(two) => two.instance_texel(hit.instance),
+            _ => self.texel_size().unwrap_or(0.0),
+        }
+    }
+
     /// The RBVH traced, if any, to change (painting its colour channel, say); a copy of it
     /// when it is shared with another structure.
     pub fn rbvh_mut(&mut self) -> Option<&mut Rbvh> {

@@ -69,6 +69,7 @@ fn render_rays(
         rays,
         hits: &hits,
         albedo: &albedo,
+        offsets: None,
     };
     let settings = Settings {
         samples,
@@ -311,6 +312,7 @@ fn side_by_side_renders_are_the_renders_alone() {
         rays: &rays,
         hits,
         albedo: &albedo,
+        offsets: None,
     };
     let (exact_frame, rbvh_frame) = (frame(&exact_hits), frame(&rbvh_hits));
     let settings = |s: &Uploaded| Settings {
@@ -492,6 +494,7 @@ fn bad_render_parameters_are_refused() {
         rays: &rays,
         hits: &hits,
         albedo: &albedo,
+        offsets: None,
     };
     let good = Settings {
         samples: 1,
@@ -560,5 +563,24 @@ fn bad_render_parameters_are_refused() {
         },
         &good,
         "albedo",
+    );
+    // Offsets per pixel: one each, finite and non-negative.
+    let mut offsets = vec![0.01f32; albedo.len()];
+    fails(
+        &Frame {
+            offsets: Some(&offsets[1..]),
+            ..frame
+        },
+        &good,
+        "offsets",
+    );
+    offsets[2] = -1.0;
+    fails(
+        &Frame {
+            offsets: Some(&offsets),
+            ..frame
+        },
+        &good,
+        "surface offset",
     );
 }

@@ -292,3 +292,28 @@ fn corrupt_two_level_rbvh_files_are_refused_by_section() {
         );
     }
 }
+
+/// A secondary ray leaves a two-level RBVH's surface by the hit instance's own texel: the
+/// largest placement's is the flat scene's texel, a smaller one's smaller by its scale.
+#[test]
+fn surface_offsets_scale_with_each_instance() {
+    let scene = placed();
+    let two = InstancedRbvh::build(&scene, &RbvhParams::quality(2).unwrap()).unwrap();
+    let structure = Structure::from(two.clone());
+    let offsets: Vec<f32> = (0..scene.instances.len() as u32)
+        .map(|k| {
+            structure.surface_offset(&rbvh::geom::Hit {
+                instance: k,
+                ..rbvh::geom::Hit::MISS
+            })
+        })
+        .collect();
+    let largest = offsets.iter().copied().fold(0.0f32, f32::max);
+    assert!(
+        (largest - two.texel_size()).abs() <= 1e-6 * two.texel_size(),
+        "{offsets:?}"
+    );
+    // Instance 0 places the bumpy sphere at its smallest: its longest axis 0.6, instance 8's 1.6.
+    assert!(offsets[0] < 0.5 * offsets[8], "{offsets:?}");
+    assert!(offsets.iter().all(|&o| o > 0.0 && o <= two.texel_size()));
+}

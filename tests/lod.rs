@@ -428,6 +428,7 @@ fn ibl_visibility_rays_trace_with_level_of_detail() {
             rays: &rays,
             hits,
             albedo: &albedo,
+            offsets: None,
         };
         let settings = Settings {
             samples: 4,
@@ -490,6 +491,7 @@ fn ibl_visibility_rays_trace_with_level_of_detail() {
         rays: &rays,
         hits: &plain_hits,
         albedo: &albedo,
+        offsets: None,
     };
     let settings = Settings {
         samples: 1,

@@ -23,7 +23,7 @@
 //! let tracer = Tracer::new(&ctx, &Structure::from(Bvh::build(&scene)?))?;
 //! let hits = tracer.trace(&rays, Query::Closest)?.hits;
 //! let albedo = vec![Vec3::splat(ibl::GREY); rays.len()];
-//! let frame = Frame { width, height, rays: &rays, hits: &hits, albedo: &albedo };
+//! let frame = Frame { width, height, rays: &rays, hits: &hits, albedo: &albedo, offsets: None };
 //! let settings = Settings { samples: 16, seed: 1, diagonal: scene.bounds().diagonal(), surface_offset: 0.0, cone: None };
 //! let rendered = ibl::render(&tracer, &frame, &Environment::Sky(Sky::default()), &settings, |_| {})?;
 //! assert_eq!(rendered.image.pixels.len(), rays.len());

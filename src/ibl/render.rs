@@ -43,6 +43,10 @@ pub struct Frame<'a> {
     pub hits: &'a [Hit],
     /// Linear RGB albedo ρ per pixel, finite and non-negative (1 reflects all light).
     pub albedo: &'a [Vec3],
+    /// Per pixel, the extra origin offset of its visibility rays, replacing
+    /// [`Settings::surface_offset`] where given: a two-level RBVH's is each hit instance's texel
+    /// ([`crate::structure::Structure::surface_offset`]). Finite and non-negative.
+    pub offsets: Option<&'a [f32]>,
 }
 
 /// How to sample.
@@ -205,8 +209,10 @@ impl Accumulation {
                     // A degenerate normal: face the camera, so the pixel is still lit sensibly.
                     normal = -ray.dir().normalize_or_zero();
                 }
-                let origin =
-                    offset_origin(point, normal, settings.diagonal, settings.surface_offset);
+                let offset = frame
+                    .offsets
+                    .map_or(settings.surface_offset, |offsets| offsets[pixel]);
+                let origin = offset_origin(point, normal, settings.diagonal, offset);
                 (pixel as u64, origin, normal)
             })
             .collect();
@@ -319,11 +325,27 @@ fn check(frame: &Frame, settings: &Settings) -> Result<()> {
             ),
         ));
     }
+    if let Some(offsets) = frame.offsets {
+        if let Some((k, x)) = offsets
+            .iter()
+            .enumerate()
+            .find(|(_, x)| !(x.is_finite() && **x >= 0.0))
+        {
+            return Err(Error::param(
+                "surface offset",
+                format!("pixel {k}'s offset {x} is not a non-negative finite distance"),
+            ));
+        }
+    }
+    let offsets = frame.offsets.map(|o| ("offsets", o.len()));
     for (what, len) in [
         ("rays", frame.rays.len()),
         ("hits", frame.hits.len()),
         ("albedo", frame.albedo.len()),
-    ] {
+    ]
+    .into_iter()
+    .chain(offsets)
+    {
         if len as u64 != pixels {
             return Err(Error::param(
                 what,

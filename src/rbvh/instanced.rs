@@ -178,6 +178,26 @@ impl InstancedRbvh {
         self.rbvh.texel_size
     }
 
+    /// The world texel of instance `k` (a hit's [`Hit::instance`]): its mesh's texel times the
+    /// instance's [`stretch`], at most [`InstancedRbvh::texel_size`] (the rate rule) and smaller
+    /// for a smaller placement. What a secondary ray leaving that instance's surface is offset
+    /// by, so that it scales with the instance; the flat scene's texel for an instance that does
+    /// not exist.
+    pub fn instance_texel(&self, k: u32) -> f32 {
+        let (Some(instance), Some(m)) = (
+            self.instances.get(k as usize),
+            self.transforms.get(k as usize),
+        ) else {
+            return self.texel_size();
+        };
+        let mesh_texel = self
+            .mesh_texels
+            .get(instance.mesh as usize)
+            .copied()
+            .unwrap_or(0.0);
+        (mesh_texel * stretch(*m)).min(self.texel_size())
+    }
+
     /// Nodes (both levels) and height-field records: [`Rbvh::tree_bytes`].
     pub fn tree_bytes(&self) -> u64 {
         self.rbvh.tree_bytes()

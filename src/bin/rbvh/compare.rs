@@ -17,7 +17,7 @@ use rbvh::output;
 
 use crate::prepare::{prepare, CameraArgs, Common, Given, Loaded, Method};
 use crate::progress::step;
-use crate::render::{ibl_albedo, load_environment, progressive, sky_of};
+use crate::render::{ibl_albedo, instance_offsets, load_environment, progressive, sky_of};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("scene", |a| a.help(
@@ -145,10 +145,13 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         rays: &rays,
         hits: &exact_hits,
         albedo: &exact_albedo,
+        offsets: None,
     };
+    let offsets = instance_offsets(&p.structure, &rbvh_hits);
     let rbvh_frame = Frame {
         hits: &rbvh_hits,
         albedo: &rbvh_albedo,
+        offsets: offsets.as_deref(),
         ..exact_frame
     };
     // The RBVH's rays leave its surface a texel further out, since it may lie a fraction of a

@@ -18,7 +18,7 @@ use rbvh::output::{self, Image};
 use rbvh::preview;
 use rbvh::probe::RayCounters;
 use rbvh::scene::{Light, SceneView};
-use rbvh::structure::Structure;
+use rbvh::structure::{Kind, Structure};
 use rbvh::surface::hit_albedo;
 
 use crate::prepare::{
@@ -211,8 +211,14 @@ pub(crate) fn ibl_albedo(
     }
 }
 
-/// The procedural sky with its sun where the scene's directional light comes from, else where
-/// the default light does.
+/// For a two-level RBVH, per pixel the offset its visibility rays leave the surface by: the hit
+/// instance's texel ([`Structure::surface_offset`]), which scales with the instance; none for
+/// any other structure, whose one offset is the settings'.
+pub(crate) fn instance_offsets(structure: &Structure, hits: &[Hit]) -> Option<Vec<f32>> {
+    (structure.kind() == Kind::RbvhInstanced)
+        .then(|| hits.iter().map(|h| structure.surface_offset(h)).collect())
+}
+
 /// The environment map of `--env`, if given, with an error naming the file.
 pub(crate) fn load_environment(path: Option<&PathBuf>) -> Result<Option<Environment>> {
     path.map(|path| {
@@ -222,6 +228,8 @@ pub(crate) fn load_environment(path: Option<&PathBuf>) -> Result<Option<Environm
     .transpose()
 }
 
+/// The procedural sky with its sun where the scene's directional light comes from, else where
+/// the default light does.
 pub(crate) fn sky_of(light: Option<&Light>) -> Sky {
     match light {
         Some(Light::Directional { direction }) => Sky::towards(-*direction),
@@ -250,12 +258,14 @@ fn render_ibl(
         surface_offset,
         cone: Some(cone),
     };
+    let offsets = instance_offsets(&p.structure, hits);
     let frame = Frame {
         width: a.width,
         height: a.height,
         rays,
         hits,
         albedo: &albedo,
+        offsets: offsets.as_deref(),
     };
     let label = format!("IBL ({})", p.structure.label());
     let rendered = progressive(&label, a.samples(), |on_pass| {
@@ -293,6 +303,7 @@ fn compare_with_exact(
     let exact_frame = Frame {
         hits: &exact_hits,
         albedo: &exact_albedo,
+        offsets: None,
         ..*frame
     };
     let exact_settings = Settings {
