@@ -84,18 +84,7 @@ pub fn iso8601(time: SystemTime) -> String {
     humantime::format_rfc3339_seconds(time.clamp(UNIX_EPOCH, last)).to_string()
 }
 
-/// Host memory available now (Linux's `MemAvailable`), in bytes; None where the system does not
-/// say. What a scene with instances is checked against before it is flattened
-/// ([`crate::scene::InstancedScene::check_flat_fits`]).
-pub fn available_memory() -> Option<u64> {
-    std::fs::read_to_string("/proc/meminfo")
-        .ok()?
-        .lines()
-        .find_map(|l| l.strip_prefix("MemAvailable:"))
-        .and_then(|v| v.trim().strip_suffix("kB"))
-        .and_then(|kb| kb.trim().parse::<u64>().ok())
-        .map(|kb| kb * 1024)
-}
+pub use crate::scene::available_memory;
 
 /// The commit measured: `RBVH_COMMIT` where set (a binary run outside its repository, as on a GPU
 /// machine that was handed a copy of the tree), else `git rev-parse HEAD` in the current

@@ -275,6 +275,16 @@ impl InstancedScene {
         Ok(())
     }
 
+    /// [`InstancedScene::into_flat`], validated, once [`InstancedScene::check_flat_fits`] passes
+    /// against this host's [`available_memory`]: what every loader of a flat scene from a scene
+    /// file takes, so that a scene too large to flatten is refused by name before it is copied.
+    pub fn into_flat_checked(self) -> Result<Scene> {
+        self.check_flat_fits(available_memory())?;
+        let scene = self.into_flat();
+        scene.validate()?;
+        Ok(scene)
+    }
+
     /// The flat scene: every instance's mesh copied in place ([`Scene::append`], so mirrors keep
     /// their winding and object names their mesh's prefix), with this scene's name, camera and
     /// light. What every stage without instances traces, and the referee of the instanced trace.
@@ -308,6 +318,19 @@ impl InstancedScene {
         flat.light = self.light;
         flat
     }
+}
+
+/// Host memory available now (Linux's `MemAvailable`), in bytes; None where the system does not
+/// say. What a scene with instances is checked against before it is flattened
+/// ([`InstancedScene::check_flat_fits`]).
+pub fn available_memory() -> Option<u64> {
+    std::fs::read_to_string("/proc/meminfo")
+        .ok()?
+        .lines()
+        .find_map(|l| l.strip_prefix("MemAvailable:"))
+        .and_then(|v| v.trim().strip_suffix("kB"))
+        .and_then(|kb| kb.trim().parse::<u64>().ok())
+        .map(|kb| kb * 1024)
 }
 
 /// Host bytes per triangle as placed that flattening a scene and building its flat exact BVH

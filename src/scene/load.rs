@@ -25,9 +25,7 @@ impl Scene {
         match resolve(spec)? {
             None => Scene::builtin(spec),
             Some((path, FileType::SceneFile)) => {
-                let scene = scene_file::load(path, progress)?.into_flat();
-                scene.validate()?;
-                Ok(scene)
+                scene_file::load(path, progress)?.into_flat_checked()
             }
             Some((path, FileType::Obj | FileType::Gltf | FileType::Points)) => {
                 step(progress, &format!("loading {}", path.display()), 0, || {

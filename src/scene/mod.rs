@@ -30,7 +30,7 @@ mod topology;
 mod view;
 
 pub use camera::{Camera, CameraFault, DEFAULT_VFOV_DEG};
-pub use instances::{transform_fault, transformed_box, Instance, InstancedScene};
+pub use instances::{available_memory, transform_fault, transformed_box, Instance, InstancedScene};
 pub use instances::{FLAT_BYTES_PER_TRIANGLE, MAX_INSTANCES, MIN_RELATIVE_DETERMINANT};
 pub use light::Light;
 pub use material::{Material, SurfaceMaterials, NO_MATERIAL};

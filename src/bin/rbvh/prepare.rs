@@ -544,18 +544,12 @@ pub fn flag_error(e: rbvh::Error) -> anyhow::Error {
     e.into()
 }
 
-/// `spec` loaded as [`Scene::load_observed`] loads it, flattened: a scene file's instances
-/// flattened once they are known to fit in host memory
-/// ([`InstancedScene::check_flat_fits`]), where a scene of instances too large to copy in place
-/// (`scenes/dragons-1000.toml`) is refused by name rather than killed by the system part way.
+/// `spec` loaded flat, as [`Scene::load_observed`] loads it: a scene file's instances flattened
+/// once they are known to fit in host memory ([`InstancedScene::into_flat_checked`]), so that a
+/// scene of instances too large to copy in place (`scenes/dragons-1000.toml`) is refused by name
+/// rather than killed by the system part way.
 pub fn load_flat(spec: &str, progress: &dyn rbvh::progress::Progress) -> Result<Scene> {
-    let scene_file = std::path::Path::new(spec)
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("toml"));
-    if !scene_file {
-        return Scene::load_observed(spec, progress).map_err(flag_error);
-    }
-    flatten(InstancedScene::load_observed(spec, progress).map_err(flag_error)?)
+    Scene::load_observed(spec, progress).map_err(flag_error)
 }
 
 /// The scene `c` names, kept in instances or flattened as `--instances` says ([`Instances`]):
@@ -632,12 +626,7 @@ fn two_level_file(path: &std::path::Path) -> bool {
 /// `placed` flattened once it is known to fit in host memory
 /// ([`InstancedScene::check_flat_fits`]), and checked.
 fn flatten(placed: InstancedScene) -> Result<Scene> {
-    placed
-        .check_flat_fits(rbvh::bench::provenance::available_memory())
-        .map_err(flag_error)?;
-    let scene = placed.into_flat();
-    scene.validate().map_err(flag_error)?;
-    Ok(scene)
+    placed.into_flat_checked().map_err(flag_error)
 }
 
 /// The scene, its structure and the device, as `c` says; `camera` (from [`CameraArgs`]) replaces
