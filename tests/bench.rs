@@ -741,7 +741,8 @@ fn the_cli_writes_json_and_csv_and_rejects_unknown_ray_types() {
 #[test]
 fn a_scene_with_instances_is_measured_in_two_levels_beside_the_flat_one() {
     let dir = tempfile::tempdir().unwrap();
-    let config = placed_bench(dir.path());
+    let mut config = placed_bench(dir.path());
+    config.seam_rays = 4000;
     let report = bench::run(&config).unwrap();
     assert_eq!(report.results.len(), 2 * 4);
     for chunk in report.results.chunks(4) {
@@ -756,6 +757,13 @@ fn a_scene_with_instances_is_measured_in_two_levels_beside_the_flat_one() {
             (Kind::Rbvh, Kind::RbvhInstanced)
         );
         assert_eq!(rbvh_two.quality, rbvh.quality);
+        // Seam rays aimed at each mesh's RBVH in its own space: none through a closed solid,
+        // as with the flat RBVH.
+        for (what, r) in [("flat", rbvh), ("two levels", rbvh_two)] {
+            let seams = r.seams.expect(what);
+            assert!(seams.rays > 3000, "{what}: {seams:?}");
+            assert_eq!(seams.through, 0, "{what}: {seams:?}");
+        }
         assert!(
             rbvh_two.memory_bytes.texels * 4 < rbvh.memory_bytes.texels * 3,
             "the bumpy sphere rasterized once: {} against {} texels",

@@ -444,7 +444,10 @@ fn shipped_scene_files_load() {
             "{}",
             path.display()
         );
-        if placed.check_flat_fits(rbvh::scene::available_memory()).is_err() {
+        if placed
+            .check_flat_fits(rbvh::scene::available_memory())
+            .is_err()
+        {
             let e = load(&path).unwrap_err().to_string();
             assert!(e.contains("traced in two levels only"), "{e}");
         } else {

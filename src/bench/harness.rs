@@ -471,7 +471,17 @@ impl<'a> SceneBench<'a> {
                     )));
                     let two = InstancedRbvh::build_observed(placed, &params, progress)?;
                     surface_offset = surface_offset.max(two.texel_size());
-                    Some((Structure::from(two), None))
+                    let seams = match config.seam_rays {
+                        0 => None,
+                        count => {
+                            observe(Event::Progress(format!(
+                                "{name}: {count} rays at the seams of the two-level RBVH {}",
+                                params.level_label()
+                            )));
+                            instanced_seam_leaks(placed, &two, &params, count, config.seed)?
+                        }
+                    };
+                    Some((Structure::from(two), seams))
                 }
                 _ => None,
             };
@@ -979,6 +989,54 @@ fn seam_leaks(
         leaks: leaks.leaks as u64,
         through: leaks.through as u64,
     })
+}
+
+/// The seam leaks of a two-level RBVH: of each placed mesh's RBVH, built alone in the mesh's
+/// space at its texel (bit for bit the two-level RBVH's bottom level, `InstancedRbvh`'s unit
+/// test), with `count` rays shared among the meshes by their height-field leaves and refereed by
+/// the mesh's exact BVH ([`seam_leaks`]). A leak is a property of the mesh's surface in its own
+/// space, the same in every instance (a mirrored one too: the flat copy's reversed winding is
+/// the mesh's own), so the seam rays scale with each instance as its texels do. None where no
+/// mesh has a height field.
+fn instanced_seam_leaks(
+    placed: &InstancedScene,
+    two: &InstancedRbvh,
+    params: &RbvhParams,
+    count: usize,
+    seed: u64,
+) -> Result<Option<SeamRecord>> {
+    let mut built = Vec::new();
+    for (mesh, &texel) in placed.meshes.iter().zip(&two.mesh_texels) {
+        if texel > 0.0 {
+            let rbvh = Rbvh::build_at(&RbvhSource::new(mesh)?, params, texel, &Quiet)?;
+            built.push((mesh, rbvh));
+        }
+    }
+    let leaves: u64 = built
+        .iter()
+        .map(|(_, r)| u64::from(r.stats.heightfield_leaves))
+        .sum();
+    let mut total: Option<SeamRecord> = None;
+    for (k, (mesh, rbvh)) in built.iter().enumerate() {
+        let share = (count as u64 * u64::from(rbvh.stats.heightfield_leaves)) / leaves.max(1);
+        if share == 0 {
+            continue;
+        }
+        let exact = Bvh::build(mesh)?;
+        let closed = closed_triangles(mesh);
+        let mesh_seed = seed ^ (k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        if let Some(r) = seam_leaks(&exact, &closed, rbvh, share as usize, mesh_seed) {
+            let t = total.get_or_insert(SeamRecord {
+                rays: 0,
+                leaks: 0,
+                through: 0,
+            });
+            t.rays += r.rays;
+            t.leaks += r.leaks;
+            t.through += r.through;
+        }
+    }
+    Ok(total)
 }
 
 /// Most trace passes in one timed run: on lavapipe a pass takes milliseconds, on a large GPU tens
