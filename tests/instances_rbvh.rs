@@ -258,8 +258,9 @@ fn two_level_rbvh_files_hold_every_mesh_and_instance() {
 }
 
 /// A two-level RBVH's file that lies about its meshes or placements is refused, naming the
-/// section: a mesh's tree outside the nodes, an instance of a mesh that does not exist, a
-/// transform that is not invertible, a mesh's node that names the top level.
+/// section: a mesh's tree outside the nodes, a tree deeper than the stack, a box without a
+/// tree, an instance of a mesh that does not exist, a transform that is not invertible, a
+/// mesh's node that names the top level.
 #[test]
 fn corrupt_two_level_rbvh_files_are_refused_by_section() {
     let scene = placed();
@@ -272,8 +273,11 @@ fn corrupt_two_level_rbvh_files_are_refused_by_section() {
     let node_bytes = std::mem::size_of::<rbvh::bvh::GpuNode>();
     let a_child = std::mem::offset_of!(rbvh::bvh::GpuNode, a_child);
     // Per case, the section named and the words written (byte offset, value).
-    let cases: [(&str, Vec<(usize, u32)>); 4] = [
+    let cases: [(&str, Vec<(usize, u32)>); 6] = [
         ("MESH", vec![(meshes, u32::MAX - 4)]),
+        // A depth past the stack; no tree under a box (the root then unchecked).
+        ("MESH", vec![(meshes + 16, u32::MAX)]),
+        ("MESH", vec![(meshes, 0), (meshes + 4, 0)]),
         ("PLAC", vec![(placements, 7)]),
         ("PLAC", (1..13).map(|k| (placements + 4 * k, 0)).collect()),
         ("NODE", vec![(nodes + node_bytes * top + a_child, 0)]),
@@ -315,5 +319,20 @@ fn surface_offsets_scale_with_each_instance() {
     );
     // Instance 0 places the bumpy sphere at its smallest: its longest axis 0.6, instance 8's 1.6.
     assert!(offsets[0] < 0.5 * offsets[8], "{offsets:?}");
-    assert!(offsets.iter().all(|&o| o > 0.0 && o <= two.texel_size()));
+    assert!(offsets
+        .iter()
+        .all(|&o| o > 0.0 && o <= two.texel_size() * (1.0 + 1e-6)));
+    // Moved to a larger scale than it was built at, an instance's texel grows with it.
+    let mut moved = two.clone();
+    let mut transforms = moved.transforms.clone();
+    transforms[8] *= Mat4::from_scale(Vec3::splat(3.0));
+    moved.set_transforms(&transforms).unwrap();
+    let grown = Structure::from(moved).surface_offset(&rbvh::geom::Hit {
+        instance: 8,
+        ..rbvh::geom::Hit::MISS
+    });
+    assert!(
+        (grown - 3.0 * offsets[8]).abs() <= 1e-5 * grown,
+        "{grown} vs {offsets:?}"
+    );
 }

@@ -371,6 +371,12 @@ impl<'a> SceneBench<'a> {
         if let Some(warning) = flat.as_ref().and_then(Scene::precision_warning) {
             observe(Event::Warning(warning));
         }
+        if flat.is_none() && config.lod.is_some() {
+            observe(Event::Warning(format!(
+                "{name}: levels of detail are built over a flat RBVH; measured in two levels \
+                 alone, no rbvh-lod level is measured"
+            )));
+        }
         // The referee first: the flat exact BVH, or the two-level one of a scene measured in
         // two levels alone. A two-level candidate's triangle hits are renamed as the flat
         // scene's where the referee is flat.

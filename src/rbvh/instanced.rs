@@ -17,6 +17,13 @@
 //! of the one tile a mesh's surface has, which every instance of the mesh shows, so a colour of
 //! one instance alone needs that instance's mesh copied.
 //!
+//! **Files**: [`InstancedRbvh::save`] writes every mesh's arrays once and the placements
+//! (`file/instanced.rs`); [`InstancedRbvh::load`] builds the top level again, and
+//! [`InstancedRbvh::check_built_from`] takes a scene's placements.
+//!
+//! **Offsets**: a secondary ray leaves an instance's surface by that instance's own texel
+//! ([`InstancedRbvh::instance_texel`]), so that texel-sized quantities scale with each instance.
+//!
 //! **Level of detail** is not built over instances: a coarse node would stand for one placement
 //! of a mesh, and the columns of its grid are world-sized; the flat scene keeps it.
 //!
@@ -179,10 +186,11 @@ impl InstancedRbvh {
     }
 
     /// The world texel of instance `k` (a hit's [`Hit::instance`]): its mesh's texel times the
-    /// instance's [`stretch`], at most [`InstancedRbvh::texel_size`] (the rate rule) and smaller
-    /// for a smaller placement. What a secondary ray leaving that instance's surface is offset
-    /// by, so that it scales with the instance; the flat scene's texel for an instance that does
-    /// not exist.
+    /// instance's [`stretch`]: at most [`InstancedRbvh::texel_size`] as built (the rate rule),
+    /// smaller for a smaller placement, larger for one moved to a larger scale since
+    /// ([`InstancedRbvh::set_transforms`] keeps the meshes' texels). What a secondary ray leaving
+    /// that instance's surface is offset by, so that it scales with the instance; the flat
+    /// scene's texel for an instance that does not exist.
     pub fn instance_texel(&self, k: u32) -> f32 {
         let (Some(instance), Some(m)) = (
             self.instances.get(k as usize),
@@ -195,7 +203,7 @@ impl InstancedRbvh {
             .get(instance.mesh as usize)
             .copied()
             .unwrap_or(0.0);
-        (mesh_texel * stretch(*m)).min(self.texel_size())
+        mesh_texel * stretch(*m)
     }
 
     /// Nodes (both levels) and height-field records: [`Rbvh::tree_bytes`].

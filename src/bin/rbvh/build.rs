@@ -23,7 +23,8 @@ pub struct Args {
     points: PointsArg,
     #[command(flatten)]
     quality: Quality,
-    /// Save the built RBVH to this file (load it with --rbvh on render, trace, paint and compare);
+    /// Save the built RBVH to this file (load it with --rbvh on render, trace, compare, and paint
+    /// for a flat one);
     /// one level in one texel format. Prints no table unless --stats. A scene of instances is
     /// saved as --instances says: its two-level RBVH (every mesh once, and its placements), or
     /// flattened.

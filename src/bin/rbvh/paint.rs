@@ -13,7 +13,8 @@ use rbvh::surface::{strokes, Brush};
 use rbvh::{output, preview};
 
 use crate::prepare::{
-    check_image_size, prepare, CameraArgs, Common, Given, InstancesArg, Method, Prepared, TexelsArg,
+    check_image_size, prepare, two_level_file, CameraArgs, Common, Given, InstancesArg, Method,
+    Prepared, TexelsArg,
 };
 use crate::progress::step;
 
@@ -90,6 +91,14 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         "--instances two-level: paint paints a flat RBVH (a mesh's texels held once would paint \
          every instance of it); give --instances flat or auto"
     );
+    if let Some(path) = &a.common.source.rbvh {
+        anyhow::ensure!(
+            !two_level_file(path)?,
+            "--rbvh {}: a two-level RBVH (each mesh's texels held once, shown by every instance \
+             of it); paint paints a flat RBVH: build one with rbvh build --instances flat --out",
+            path.display()
+        );
+    }
     let dabs = strokes::load(&a.strokes)?;
     // Painting writes the RBVH's texels: no other structure, no coarse levels of detail (which
     // have none to paint), and every triangle a height field can hold sampled (`--sample-all`),

@@ -162,7 +162,8 @@ pub struct Source {
     /// such as grove-instanced) is traced: `two-level` (each mesh held once, a top level over its
     /// placements), `flat` (every placement copied in place), or `auto`: two levels where the
     /// scene places a mesh more than once and the method traces them (exact, rbvh), else flat
-    /// (levels of detail, --points and a saved --rbvh are flat).
+    /// (levels of detail, --points and a flat RBVH's --rbvh are flat; a two-level RBVH's file is
+    /// traced in two levels). In two levels a hit's id is a triangle of its instance's mesh.
     #[arg(long, value_enum, default_value_t = InstancesArg::Auto)]
     pub instances: InstancesArg,
     /// Vulkan device to use: any part of its name (default: $RBVH_DEVICE, else the best GPU, else lavapipe).
@@ -559,7 +560,17 @@ pub fn load_flat(spec: &str, progress: &dyn rbvh::progress::Progress) -> Result<
 fn load(c: &Common, progress: &dyn rbvh::progress::Progress) -> Result<Loaded> {
     let spec = c.source.scene.as_str();
     // A saved two-level RBVH is traced with the scene of instances it was built from.
-    if let Some(path) = c.source.rbvh.as_ref().filter(|path| two_level_file(path)) {
+    let two_level_rbvh = match &c.source.rbvh {
+        Some(path) => two_level_file(path)?.then_some(path),
+        None => None,
+    };
+    if let Some(path) = two_level_rbvh {
+        anyhow::ensure!(
+            c.source.points.points.is_none(),
+            "--points: {} holds a two-level RBVH of the scene's triangles; an RBVH of points is \
+             flat (build one with rbvh build --points ... --out)",
+            path.display()
+        );
         anyhow::ensure!(
             Instances::from(c.source.instances) != Instances::Flat,
             "--instances flat: {} holds a two-level RBVH, traced over the scene's instances",
@@ -617,10 +628,11 @@ fn load(c: &Common, progress: &dyn rbvh::progress::Progress) -> Result<Loaded> {
     }))
 }
 
-/// Whether the RBVH file at `path` holds a two-level RBVH; false where it cannot be read (its
-/// loader then says why).
-fn two_level_file(path: &std::path::Path) -> bool {
-    std::fs::read(path).is_ok_and(|bytes| rbvh::rbvh::file::holds_instances(&bytes))
+/// Whether the RBVH file at `path` holds a two-level RBVH (false for bytes that are no RBVH
+/// file, which its loader then refuses by name); an error naming it where it cannot be read.
+pub fn two_level_file(path: &std::path::Path) -> Result<bool> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading RBVH {}", path.display()))?;
+    Ok(rbvh::rbvh::file::holds_instances(&bytes))
 }
 
 /// `placed` flattened once it is known to fit in host memory

@@ -22,7 +22,7 @@ use glam::{Mat4, Vec4};
 
 use super::sections::{self, parse, Put, MESHES, MESH_BYTES, PLACEMENTS, PLACEMENT_BYTES};
 use super::{file_version, put_f32, put_u32, Reader, VERSION};
-use crate::bvh::{check_transforms, top_node_count, BottomLevel};
+use crate::bvh::{check_transforms, top_node_count, BottomLevel, STACK_SIZE};
 use crate::geom::Aabb;
 use crate::io::write_atomically;
 use crate::rbvh::params::TexelFormat;
@@ -176,15 +176,19 @@ impl InstancedRbvh {
         }
         for (k, (built, mesh)) in self.meshes.iter().zip(&scene.meshes).enumerate() {
             let placed = self.instances.iter().any(|i| i.mesh as usize == k);
-            if placed && !mesh.bounds().is_empty() {
-                let (b, e) = (built.bounds, mesh.bounds());
+            let (b, e) = (built.bounds, mesh.bounds());
+            if placed && !(b.is_empty() && e.is_empty()) {
+                if b.is_empty() != e.is_empty() {
+                    return fail(format!(
+                        "its mesh {k}'s box and the scene's are not both empty"
+                    ));
+                }
                 let apart = (b.min - e.min)
                     .abs()
                     .max((b.max - e.max).abs())
                     .max_element();
                 let tolerance = crate::rbvh::SCENE_MATCH_TEXELS * self.mesh_texels[k].max(0.0)
                     + 1e-5 * e.diagonal();
-                // NaN (an empty box on one side only) fails too.
                 if apart.is_nan() || apart > tolerance {
                     return fail(format!(
                         "its mesh {k}'s box is {:?}..{:?}, the scene's {:?}..{:?} ({apart} apart)",
@@ -294,16 +298,32 @@ fn check_meshes(
                 u64::from(m.first_triangle) + u64::from(m.triangles)
             ));
         }
-        if !(texel.is_finite() && texel >= 0.0) {
+        if !(texel.is_finite() && texel >= 0.0) || (m.nodes > 0 && texel == 0.0) {
             return Err(format!(
-                "mesh {k}'s texel is {texel}, not a finite size of at least 0"
+                "mesh {k}'s texel is {texel}: a finite size of at least 0, and above 0 for a \
+                 mesh with a tree"
+            ));
+        }
+        if m.depth > STACK_SIZE {
+            return Err(format!(
+                "mesh {k}'s tree is {} deep, deeper than the {STACK_SIZE}-entry traversal stack",
+                m.depth
             ));
         }
         if m.bounds.min.is_nan() || m.bounds.max.is_nan() {
             return Err(format!("mesh {k}'s bounds contain NaN"));
         }
-        if m.nodes > 0 && m.bounds.is_empty() {
-            return Err(format!("mesh {k} has a tree but an empty box"));
+        // A mesh without a tree has nothing to enter: its box must be empty, or the top level
+        // would place it and its instances would enter an unchecked root.
+        match (m.nodes > 0, m.bounds.is_empty()) {
+            (true, true) => return Err(format!("mesh {k} has a tree but an empty box")),
+            (false, false) => {
+                return Err(format!("mesh {k} has no tree but the box {:?}", m.bounds))
+            }
+            (true, false) if !(m.bounds.min.is_finite() && m.bounds.max.is_finite()) => {
+                return Err(format!("mesh {k}'s box {:?} is not finite", m.bounds))
+            }
+            _ => {}
         }
     }
     Ok(())

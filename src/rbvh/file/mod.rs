@@ -84,7 +84,9 @@
 //! with finite frame and a non-negative height scale; every triangle's scene index below 2³¹
 //! (hit ids with bit 31 set are height-field hits, `u32::MAX` a miss), and its flags 0 or an
 //! exact part of one of the leaves (`GpuTriangle::PART`), its padding 0. Every failure is an
-//! [`Error::Parse`] naming the file, and in a sectioned file the section and its bytes.
+//! [`Error::Parse`] naming the file, and in a sectioned file the section and its bytes. A
+//! two-level RBVH's file gets these checks on every mesh's nodes and its own on the meshes and
+//! placements (`instanced.rs`).
 
 mod instanced;
 mod legacy;
