@@ -126,76 +126,21 @@ pub fn run_observed(
             Instances::TwoLevel => None,
             _ => Some(placed.check_flat_fits(provenance::available_memory())),
         };
-        let mut scene = match fits {
-            Some(Ok(())) => placed.into_flat(),
+        let flat = match fits {
+            Some(Ok(())) => Some(flat_scene(placed, config, spec, observe)?),
             Some(Err(too_large)) if two_level.is_none() || config.points.is_some() => {
                 return Err(too_large)
             }
-            too_large => {
-                if let Some(Err(too_large)) = too_large {
-                    observe(Event::Warning(format!(
-                        "{too_large}; measured in two levels alone, refereed by the two-level \
-                         exact BVH"
-                    )));
-                }
-                let bench = SceneBench::new(&ctx, config, None, two_level, observe, progress)?;
-                measure_scene(
-                    &mut report,
-                    bench,
-                    config,
-                    observe,
-                    &mut plot_dirs,
-                    &mut measurement,
-                    measurements,
-                )?;
-                continue;
+            Some(Err(too_large)) => {
+                observe(Event::Warning(format!(
+                    "{too_large}; measured in two levels alone, refereed by the two-level exact \
+                     BVH"
+                )));
+                None
             }
+            None => None,
         };
-        scene.validate()?;
-        if scene.triangle_count() == 0 && scene.points.is_some() {
-            return Err(Error::param(
-                "scenes",
-                format!(
-                    "{} is a point cloud: the bench referees RBVHs against the exact BVH of \
-                     triangles, so give the mesh as the scene and the scan as its points \
-                     (rbvh bench --scene MESH --points SCAN)",
-                    scene.name
-                ),
-            ));
-        }
-        if let Some(source) = &config.points {
-            let label = source.label();
-            observe(Event::Progress(format!("{spec}: {label}")));
-            scene.add_points(source, config.seed)?;
-            // Every row says that its RBVHs are of points, not of the triangles.
-            scene.name = format!("{} ({label})", scene.name);
-        }
-        let bench = SceneBench::new(&ctx, config, Some(scene), two_level, observe, progress)?;
-        measure_scene(
-            &mut report,
-            bench,
-            config,
-            observe,
-            &mut plot_dirs,
-            &mut measurement,
-            measurements,
-        )?;
-    }
-    Ok(report)
-}
-
-/// Measures `bench` on every ray type of `config` and adds its records, shaders and plots to
-/// `report`; `measurement` counts the measurements done of `measurements`.
-fn measure_scene(
-    report: &mut BenchReport,
-    mut bench: SceneBench,
-    config: &BenchConfig,
-    observe: &mut dyn FnMut(Event),
-    plot_dirs: &mut HashSet<String>,
-    measurement: &mut usize,
-    measurements: usize,
-) -> Result<()> {
-    {
+        let mut bench = SceneBench::new(&ctx, config, flat, two_level, observe, progress)?;
         for c in &bench.candidates {
             let compiled = c.tracer.compiled();
             if !report
@@ -210,8 +155,7 @@ fn measure_scene(
             }
         }
         for &ray_type in &config.ray_types {
-            *measurement += 1;
-            let measurement = *measurement;
+            measurement += 1;
             let mut numbered = |event| {
                 observe(match event {
                     Event::Progress(what) => {
@@ -223,12 +167,44 @@ fn measure_scene(
             bench.measure(ray_type, &mut numbered)?;
         }
         if let Some(dir) = &config.plot_dir {
-            let dir = dir.join(plot::scene_dir_name(bench.view().name(), plot_dirs));
+            let dir = dir.join(plot::scene_dir_name(bench.view().name(), &mut plot_dirs));
             report.written.extend(bench.write_plots(dir)?);
         }
         report.results.extend(bench.records);
     }
-    Ok(())
+    Ok(report)
+}
+
+/// `placed` flattened (known to fit in memory) and checked, with `config`'s points added: the
+/// scene its flat structures are built from. A point cloud without triangles is refused, since
+/// the exact BVH of triangles referees every RBVH.
+fn flat_scene(
+    placed: InstancedScene,
+    config: &BenchConfig,
+    spec: &str,
+    observe: &mut dyn FnMut(Event),
+) -> Result<Scene> {
+    let mut scene = placed.into_flat();
+    scene.validate()?;
+    if scene.triangle_count() == 0 && scene.points.is_some() {
+        return Err(Error::param(
+            "scenes",
+            format!(
+                "{} is a point cloud: the bench referees RBVHs against the exact BVH of \
+                 triangles, so give the mesh as the scene and the scan as its points \
+                 (rbvh bench --scene MESH --points SCAN)",
+                scene.name
+            ),
+        ));
+    }
+    if let Some(source) = &config.points {
+        let label = source.label();
+        observe(Event::Progress(format!("{spec}: {label}")));
+        scene.add_points(source, config.seed)?;
+        // Every row says that its RBVHs are of points, not of the triangles.
+        scene.name = format!("{} ({label})", scene.name);
+    }
+    Ok(scene)
 }
 
 /// A structure under test, uploaded. Its host copy is what its CPU twin traces.
