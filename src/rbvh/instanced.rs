@@ -186,7 +186,7 @@ impl InstancedRbvh {
     }
 
     /// The world texel of instance `k` (a hit's [`Hit::instance`]): its mesh's texel times the
-    /// instance's [`stretch`]: at most [`InstancedRbvh::texel_size`] as built (the rate rule),
+    /// instance's stretch (`stretch`): at most [`InstancedRbvh::texel_size`] as built (the rate rule),
     /// smaller for a smaller placement, larger for one moved to a larger scale since
     /// ([`InstancedRbvh::set_transforms`] keeps the meshes' texels). What a secondary ray leaving
     /// that instance's surface is offset by, so that it scales with the instance; the flat
