@@ -120,7 +120,13 @@ impl InstancedBvh {
     /// Builds the top level over instances of meshes `mesh_of` at `transforms` (checked), into
     /// `nodes[..top_nodes]`, and the instance records; on an error nothing changes.
     fn place(&mut self, transforms: &[Mat4], mesh_of: &[u32]) -> Result<()> {
-        let top = place(&self.meshes, transforms, mesh_of, self.top_nodes)?;
+        let top = place(
+            &self.meshes,
+            &self.nodes,
+            transforms,
+            mesh_of,
+            self.top_nodes,
+        )?;
         self.nodes[..top.nodes.len()].copy_from_slice(&top.nodes);
         self.top_depth = top.depth;
         self.instances = top.instances;

@@ -153,7 +153,13 @@ impl InstancedRbvh {
     }
 
     fn place(&mut self, transforms: &[Mat4], mesh_of: &[u32]) -> Result<()> {
-        let top = place(&self.meshes, transforms, mesh_of, self.top_nodes)?;
+        let top = place(
+            &self.meshes,
+            &self.rbvh.nodes,
+            transforms,
+            mesh_of,
+            self.top_nodes,
+        )?;
         let deepest = self.meshes.iter().map(|m| m.depth).max().unwrap_or(0);
         self.rbvh.nodes[..top.nodes.len()].copy_from_slice(&top.nodes);
         self.rbvh.depth = top.depth + 1 + deepest;
