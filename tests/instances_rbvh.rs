@@ -181,7 +181,8 @@ fn moving_rbvh_instances_uploads_the_top_level_alone() {
 /// A two-level RBVH saved and loaded is the one built (its top level built again on load, the
 /// same), and saving it again gives the same bytes; a flat reader refuses it and the two-level
 /// reader a flat file, by name. Checked against a scene, the file takes the scene's placements
-/// (moved instances trace as a fresh build's) and refuses another scene's meshes or instances.
+/// (moved instances trace as a fresh build's) and refuses another scene's meshes or instances;
+/// a file's table tells which loader it takes.
 #[test]
 fn two_level_rbvh_files_hold_every_mesh_and_instance() {
     let scene = placed();
@@ -211,6 +212,20 @@ fn two_level_rbvh_files_hold_every_mesh_and_instance() {
         .unwrap();
     let e = InstancedRbvh::load(&flat_file).unwrap_err().to_string();
     assert!(e.contains("a flat RBVH (no sections MESH and PLAC)"), "{e}");
+
+    // Which loader a file takes, from its table alone; other bytes are neither's (its loader
+    // names the fault), a missing file an error.
+    use rbvh::rbvh::file::holds_instances;
+    assert!(holds_instances(&path).unwrap());
+    assert!(!holds_instances(&flat_file).unwrap());
+    let bytes = std::fs::read(&path).unwrap();
+    for (name, cut) in [("short.rbvh", 20), ("head.rbvh", 10), ("none.rbvh", 0)] {
+        let short = dir.path().join(name);
+        std::fs::write(&short, &bytes[..cut]).unwrap();
+        assert!(!holds_instances(&short).unwrap(), "{name}");
+    }
+    let missing = holds_instances(&dir.path().join("missing.rbvh")).unwrap_err();
+    assert!(missing.to_string().contains("missing.rbvh"), "{missing}");
 
     // The scene's own placements, moved: the file follows them.
     let mut loaded = InstancedRbvh::load(&path).unwrap();

@@ -628,11 +628,12 @@ fn load(c: &Common, progress: &dyn rbvh::progress::Progress) -> Result<Loaded> {
     }))
 }
 
-/// Whether the RBVH file at `path` holds a two-level RBVH (false for bytes that are no RBVH
-/// file, which its loader then refuses by name); an error naming it where it cannot be read.
+/// Whether the RBVH file at `path` holds a two-level RBVH, from its section table alone
+/// ([`rbvh::rbvh::file::holds_instances`]: false for bytes that are no RBVH file, which its
+/// loader then refuses by name); an error naming it where it cannot be read.
 pub fn two_level_file(path: &std::path::Path) -> Result<bool> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading RBVH {}", path.display()))?;
-    Ok(rbvh::rbvh::file::holds_instances(&bytes))
+    rbvh::rbvh::file::holds_instances(path)
+        .with_context(|| format!("reading RBVH {}", path.display()))
 }
 
 /// `placed` flattened once it is known to fit in host memory

@@ -108,12 +108,32 @@ use crate::{Error, Result};
 
 pub use sections::{section_table, Section, REQUIRED};
 
-/// Whether an RBVH file's bytes hold a two-level RBVH (sections `MESH` and `PLAC`, read by
-/// [`crate::rbvh::InstancedRbvh::load`]) rather than a flat one ([`Rbvh::load`]); false for
-/// bytes that are no sectioned RBVH file, which either loader then refuses by name.
-pub fn holds_instances(bytes: &[u8]) -> bool {
-    section_table(bytes, Path::new(""))
-        .is_ok_and(|table| table.iter().any(|s| s.tag == sections::MESHES))
+/// Whether the RBVH file at `path` holds a two-level RBVH (sections `MESH` and `PLAC`, read by
+/// [`crate::rbvh::InstancedRbvh::load`]) rather than a flat one ([`Rbvh::load`]), from its
+/// header and section table alone (16 bytes and 28 a section), so that a command picks the
+/// loader without reading the file twice. False for a file that is no sectioned RBVH file (an
+/// earlier version, other bytes, a broken table), which either loader then refuses by name; an
+/// [`Error::Io`] where it cannot be opened or read.
+pub fn holds_instances(path: &Path) -> Result<bool> {
+    use std::io::Read;
+    let mut file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut head = Vec::with_capacity(sections::TABLE_AT);
+    (&mut file)
+        .take(sections::TABLE_AT as u64)
+        .read_to_end(&mut head)
+        .map_err(|e| Error::io(path, e))?;
+    if head.len() < sections::TABLE_AT || file_version(&head, path).ok() != Some(VERSION) {
+        return Ok(false);
+    }
+    let count = u32::from_le_bytes([head[12], head[13], head[14], head[15]]);
+    // At most what the file holds, whatever the count says.
+    let mut table = Vec::new();
+    file.take(u64::from(count) * sections::ENTRY_BYTES as u64)
+        .read_to_end(&mut table)
+        .map_err(|e| Error::io(path, e))?;
+    Ok(table
+        .chunks_exact(sections::ENTRY_BYTES)
+        .any(|entry| entry[..4] == sections::MESHES))
 }
 
 /// The first eight bytes of every RBVH file.

@@ -15,9 +15,9 @@ use crate::rbvh::{ExactTriangles, Rbvh};
 use crate::{Error, Result};
 
 /// Where the section table starts: after the magic, the version and the section count.
-const TABLE_AT: usize = 16;
+pub(super) const TABLE_AT: usize = 16;
 /// Bytes of one table entry: tag, version, flags, offset (u64), length (u64).
-const ENTRY_BYTES: usize = 28;
+pub(super) const ENTRY_BYTES: usize = 28;
 /// Every section starts at a multiple of this many bytes.
 const ALIGN: u64 = 8;
 /// The flag of a section that a reader which does not know it must refuse the file for.
