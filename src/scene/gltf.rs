@@ -23,7 +23,7 @@ use ::gltf::mesh::{Mode, Semantic};
 use ::gltf::{Accessor, Document, Node, Primitive};
 use glam::{Mat4, Vec2, Vec3, Vec4};
 
-use super::instances::{Instance, InstancedScene};
+use super::instances::{available_memory, check_flat_triangles, Instance, InstancedScene};
 use super::material::{Material, NO_MATERIAL};
 use super::texture::{Texture, Wrap};
 use super::{ObjectSurface, Scene};
@@ -37,7 +37,20 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
     let fail = |message: String| Error::parse(path, None, message);
     let mut scene = Scene::new(path.display().to_string());
     let mut materials = Materials::new(path, &base, &buffers);
-    for (node, transform) in mesh_instances(&document).map_err(fail)? {
+    let placed = mesh_instances(&document).map_err(fail)?;
+    // Copying every node's mesh in place: refused before any is decoded where that would not
+    // fit in memory, as a scene file of instances is (`InstancedScene::check_flat_fits`).
+    let triangles: u64 = placed
+        .iter()
+        .filter_map(|(node, _)| node.mesh())
+        .flat_map(|mesh| {
+            mesh.primitives()
+                .map(|p| triangles_of(&p))
+                .collect::<Vec<_>>()
+        })
+        .sum();
+    check_flat_triangles(&scene.name, triangles, available_memory())?;
+    for (node, transform) in placed {
         let Some(mesh) = node.mesh() else { continue };
         push_mesh(&mut scene, &mesh, transform, &mut materials)?;
     }
@@ -509,6 +522,23 @@ fn open_error(path: &Path, e: ::gltf::Error) -> Error {
             Error::parse(path, Some(e.line()), e.to_string())
         }
         other => Error::parse(path, None, other.to_string()),
+    }
+}
+
+/// The triangles `primitive` adds as [`push_mesh`] reads it, from its accessors' counts alone
+/// (no buffer read): a list's index count over 3, a strip's or fan's less 2; none for points
+/// and lines.
+fn triangles_of(primitive: &Primitive) -> u64 {
+    let count = match primitive.indices() {
+        Some(indices) => indices.count(),
+        None => primitive
+            .get(&Semantic::Positions)
+            .map_or(0, |positions| positions.count()),
+    } as u64;
+    match primitive.mode() {
+        Mode::Triangles => count / 3,
+        Mode::TriangleStrip | Mode::TriangleFan => count.saturating_sub(2),
+        _ => 0,
     }
 }
 

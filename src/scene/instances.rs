@@ -225,21 +225,7 @@ impl InstancedScene {
     /// (`scenes/dragons-1000.toml` places 871M triangles; its two-level structures take
     /// megabytes).
     pub fn check_flat_fits(&self, available: Option<u64>) -> Result<()> {
-        let triangles = self.placed_triangle_count() as u64;
-        let needed = triangles.saturating_mul(FLAT_BYTES_PER_TRIANGLE);
-        match available {
-            Some(available) if needed > available => Err(Error::InvalidGeometry {
-                source_name: self.name.clone(),
-                message: format!(
-                    "{triangles} triangles as placed; flattened, its scene and flat structures \
-                     would need about {:.1} GB of host memory, and {:.1} GB are available: it is \
-                     traced in two levels only (its meshes held once)",
-                    needed as f64 / 1e9,
-                    available as f64 / 1e9
-                ),
-            }),
-            _ => Ok(()),
-        }
+        check_flat_triangles(&self.name, self.placed_triangle_count() as u64, available)
     }
 
     /// Checks what a two-level build relies on: each mesh valid ([`Scene::validate`]), at most
@@ -317,6 +303,29 @@ impl InstancedScene {
         flat.camera = self.camera;
         flat.light = self.light;
         flat
+    }
+}
+
+/// [`InstancedScene::check_flat_fits`] of a scene named `name` that places `triangles`: also
+/// what a glTF file's flat loader checks before it copies its nodes' meshes in place.
+pub(crate) fn check_flat_triangles(
+    name: &str,
+    triangles: u64,
+    available: Option<u64>,
+) -> Result<()> {
+    let needed = triangles.saturating_mul(FLAT_BYTES_PER_TRIANGLE);
+    match available {
+        Some(available) if needed > available => Err(Error::InvalidGeometry {
+            source_name: name.to_owned(),
+            message: format!(
+                "{triangles} triangles as placed; flattened, its scene and flat structures \
+                 would need about {:.1} GB of host memory, and {:.1} GB are available: it is \
+                 traced in two levels only (its meshes held once)",
+                needed as f64 / 1e9,
+                available as f64 / 1e9
+            ),
+        }),
+        _ => Ok(()),
     }
 }
 
