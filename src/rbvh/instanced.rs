@@ -7,11 +7,14 @@
 //! `texels_per_diagonal` ([`InstancedScene::placed_bounds`]: the box of the placed vertices, the
 //! flat scene's own). An instance stretches its mesh by at most its transform's largest stretch
 //! ([`stretch`]: the longest axis of the linear part where its axes are orthogonal, a rotation and
-//! scales, else a bound above it), so a mesh is rasterized at that texel over its largest stretch: its largest
-//! placement then has the flat scene's world texel, and smaller ones a finer one (never a coarser
-//! one), stored once. Objects' own rates are relative to their own boxes, so they are the flat
-//! scene's in any space. What it costs is measured in `docs/paper-scale.md` ("The RBVH in two
-//! levels"): the dragons placed at scales 9 to 13 all take the scale-13 dragon's texel.
+//! scales, else a bound above it), so a mesh is rasterized at that texel over its largest stretch:
+//! its largest placement then has the flat scene's world texel, and smaller ones a finer one
+//! (never a coarser one), stored once. Objects' own rates ([`RbvhParams::object_rate`]) are
+//! relative to their own boxes, so they are the flat scene's in any space; where an object's own
+//! rate is the finer one (an object small beside its scene: the presets' 3/16 makes it so for
+//! every dragon of the paper-scale scene), each placement has the flat scene's world texel,
+//! whatever its scale, and the rule above costs nothing. `docs/paper-scale.md` ("The RBVH in two
+//! levels") measures it: the dragons, placed at scales 9 to 13, take their own rate there.
 //!
 //! **Painting** is not offered for it yet (the painter takes a flat RBVH): it would write texels
 //! of the one tile a mesh's surface has, which every instance of the mesh shows, so a colour of
@@ -64,7 +67,9 @@ pub struct InstancedRbvh {
     pub transforms: Vec<Mat4>,
     /// Per mesh of the scene, where its tree lies (its triangles: its exact ones).
     pub meshes: Vec<BottomLevel>,
-    /// Per mesh, its texel in its own space; 0 for a mesh no instance places (it has no tree).
+    /// Per mesh, its texel in its own space, before its objects' own rates
+    /// ([`RbvhParams::object_rate`]), which make an object's finer where they ask for it; 0 for a
+    /// mesh no instance places (it has no tree).
     pub mesh_texels: Vec<f32>,
     /// Nodes of the top level.
     pub top_nodes: u32,

@@ -225,7 +225,7 @@ fn two_levels(
         if print {
             let texels: Vec<String> = r.mesh_texels.iter().map(|t| format!("{t:.3e}")).collect();
             println!(
-                "{name:>7} two-level RBVH: mesh texels [{}] (world {:.3e}), {} height-field + {} \
+                "{name:>7} two-level RBVH: mesh texels [{}] (before objects' own rates; world {:.3e}), {} height-field + {} \
                  triangle leaves, {:.2} MB (tree {:.2} + atlas {:.2} + triangles {:.2} + instances \
                  {:.3}), {:.1}x smaller than the two-level exact BVH, built in {:.0} ms; peak host \
                  memory so far {}",
