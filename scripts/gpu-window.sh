@@ -18,8 +18,10 @@
 # WIDTH/HEIGHT (default 1920x1080), RUNS (default 5).
 #
 # Order of value: the shaders' registers (seconds), then the dragon close-up and the default scene
-# (exact and Q0-Q4) for primary, AO and shadow rays, then the paper-scale scene (the three ray
-# types in one run), whose builds take minutes.
+# (exact and Q0-Q4) for primary, AO and shadow rays, then the thousand dragons in two levels
+# (builds of seconds), then the paper-scale scene (the three ray types in one run) and its
+# instanced twin (Q2 flat and in two levels, primary and shadow rays), whose flat builds take
+# minutes.
 set -uo pipefail
 
 budget=${1:?usage: scripts/gpu-window.sh BUDGET_SECONDS OUT_DIR [DATASETS_DIR]}
@@ -77,10 +79,13 @@ step() {
 }
 
 say "rbvh gpu-window: budget ${budget}s, device $device, ${width}x${height}, $runs runs, commit $commit"
-common=(--device "$device" --quality all --width "$width" --height "$height" --runs "$runs" --allow-invalid)
+base=(--device "$device" --width "$width" --height "$height" --runs "$runs" --allow-invalid)
+common=("${base[@]}" --quality all)
 dragon=$datasets/dragon/dragon_vrip.obj
 closeup=$(scene_copy dragon-closeup.toml)
 paper=$(scene_copy paper-scale.toml)
+dragons=$(scene_copy dragons-1000.toml)
+paper_instanced=$(scene_copy paper-scale-instanced.toml)
 
 step shaders 20 "" -- "$rbvh" shaders --device "$device" --json "$out/shaders-gpu.json"
 # A file per ray type for the small scenes, so that the budget's end loses one ray type, not all
@@ -90,5 +95,7 @@ for rays in primary ao shadow; do
   step "dragon-closeup $rays" 60 "$dragon" -- "$rbvh" bench --scene "$closeup" --rays "$rays" "${common[@]}" --json "$out/bench-gpu-dragon-closeup-$rays.json"
   step "default $rays" 40 "" -- "$rbvh" bench --scene default --rays "$rays" "${common[@]}" --json "$out/bench-gpu-default-$rays.json"
 done
+step "dragons-1000" 90 "$dragon" -- "$rbvh" bench --scene "$dragons" --rays primary,shadow "${common[@]}" --json "$out/bench-gpu-dragons-1000.json"
 step "paper-scale" 300 "$datasets/sponza-dabrovic/sponza.obj" -- "$rbvh" bench --scene "$paper" --rays primary,ao,shadow "${common[@]}" --json "$out/bench-gpu-paper-scale.json"
+step "paper-scale-instanced" 300 "$datasets/sponza-dabrovic/sponza.obj" -- "$rbvh" bench --scene "$paper_instanced" --rays primary,shadow "${base[@]}" --quality 2 --json "$out/bench-gpu-paper-scale-instanced.json"
 say "all steps ended; $(left) s of the budget left"
