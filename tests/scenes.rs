@@ -896,6 +896,26 @@ fn gltf_nodes_sharing_a_mesh_are_its_instances() {
         assert_close(*a, *b, 1e-6);
     }
     assert_eq!(flat.positions.len(), expected.positions.len());
+
+    // Told from the nodes alone, before either loader reads the buffers.
+    use rbvh::scene::InstancedScene;
+    assert_eq!(
+        InstancedScene::would_repeat_a_mesh(spec).unwrap(),
+        Some(true)
+    );
+    let once = gltf_json(r#"{ "uri": "data.bin", "byteLength": 56 }"#, "", "[2]");
+    let once = write(dir.path(), "once.gltf", once);
+    assert_eq!(
+        InstancedScene::would_repeat_a_mesh(once.to_str().unwrap()).unwrap(),
+        Some(false)
+    );
+    assert_eq!(
+        InstancedScene::would_repeat_a_mesh("grove-instanced").unwrap(),
+        None
+    );
+    let missing = dir.path().join("missing.gltf");
+    let e = InstancedScene::would_repeat_a_mesh(missing.to_str().unwrap()).unwrap_err();
+    assert!(e.to_string().contains("missing.gltf"), "{e}");
 }
 
 /// A glTF file whose nodes place more triangles than flattening could hold in memory is refused

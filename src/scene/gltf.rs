@@ -525,6 +525,22 @@ fn open_error(path: &Path, e: ::gltf::Error) -> Error {
     }
 }
 
+/// Whether some mesh of the glTF file at `path` is drawn by more than one node (what
+/// [`load_instanced`] keeps as instances), from its document alone: no buffer or image is
+/// decoded, so that a caller can pick [`load`] or [`load_instanced`] and read the meshes once.
+pub(super) fn shares_a_mesh(path: &Path) -> Result<bool> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let document = ::gltf::Gltf::from_slice_without_validation(&bytes)
+        .map_err(|e| open_error(path, e))?
+        .document;
+    let placed = mesh_instances(&document).map_err(|m| Error::parse(path, None, m))?;
+    let mut drawn = vec![false; document.meshes().len()];
+    Ok(placed
+        .iter()
+        .filter_map(|(node, _)| node.mesh())
+        .any(|mesh| std::mem::replace(&mut drawn[mesh.index()], true)))
+}
+
 /// The triangles `primitive` adds as [`push_mesh`] reads it, from its accessors' counts alone
 /// (no buffer read): a list's index count over 3, a strip's or fan's less 2; none for points
 /// and lines.

@@ -88,6 +88,25 @@ impl InstancedScene {
     }
 }
 
+impl InstancedScene {
+    /// Whether [`InstancedScene::load`] of `spec` would place some mesh more than once, told
+    /// without loading it where that is cheaper than loading: for a glTF file from its nodes
+    /// alone (no buffer or image decoded), so that a caller that traces a scene flat unless
+    /// it repeats a mesh reads the meshes once, with the loader it needs; false for any other
+    /// mesh file; `None` for a scene file or a built-in scene, which only loading tells. Errors
+    /// as loading would give them for a missing or malformed file.
+    pub fn would_repeat_a_mesh(spec: &str) -> Result<Option<bool>> {
+        match resolve(spec)? {
+            Some((path, FileType::Gltf)) => {
+                check_mesh_file(path)?;
+                gltf::shares_a_mesh(path).map(Some)
+            }
+            Some((_, FileType::Obj | FileType::Points)) => Ok(Some(false)),
+            Some((_, FileType::SceneFile)) | None => Ok(None),
+        }
+    }
+}
+
 /// What `spec` names: None for a built-in scene, else an existing regular file and its type; an
 /// error for a missing file (or an unknown name that does not look like a path), a directory, or
 /// an unknown extension.

@@ -556,7 +556,9 @@ pub fn load_flat(spec: &str, progress: &dyn rbvh::progress::Progress) -> Result<
 /// The scene `c` names, kept in instances or flattened as `--instances` says ([`Instances`]):
 /// a scene that may place meshes (a scene file, a glTF file, a built-in scene) is loaded with
 /// its instances, and kept so where it places a mesh more than once (or two levels are asked
-/// for) and the method traces two levels; anything else is loaded flat ([`load_flat`]).
+/// for) and the method traces two levels; anything else is loaded flat ([`load_flat`]). Each is
+/// read once: a glTF file's nodes say whether it repeats a mesh before either loader reads its
+/// buffers ([`InstancedScene::would_repeat_a_mesh`]).
 fn load(c: &Common, progress: &dyn rbvh::progress::Progress) -> Result<Loaded> {
     let spec = c.source.scene.as_str();
     // A saved two-level RBVH is traced with the scene of instances it was built from.
@@ -613,17 +615,27 @@ fn load(c: &Common, progress: &dyn rbvh::progress::Progress) -> Result<Loaded> {
         Some(_) => false,
         None => Scene::check(spec).is_ok() && !spec.contains(['/', '\\']),
     };
-    if !may_place && instances == Instances::Auto {
+    // A glTF file whose nodes share no mesh, told from its nodes alone, is read once, flat.
+    let repeats = match may_place {
+        true => InstancedScene::would_repeat_a_mesh(spec).map_err(flag_error)?,
+        false => Some(false),
+    };
+    if repeats == Some(false) && instances == Instances::Auto {
         return Ok(Loaded::Flat(load_flat(spec, progress)?));
     }
-    let placed = InstancedScene::load_observed(spec, progress).map_err(flag_error)?;
+    let mut placed = InstancedScene::load_observed(spec, progress).map_err(flag_error)?;
     if instances == Instances::TwoLevel || placed.repeats_a_mesh() {
         placed.validate().map_err(flag_error)?;
         return Ok(Loaded::Instanced(placed));
     }
+    let single = placed.meshes.len() == 1
+        && placed.instances.len() == 1
+        && placed.instances[0].transform == rbvh::glam::Mat4::IDENTITY;
     Ok(Loaded::Flat(match extension.as_deref() {
         Some("toml") => flatten(placed)?,
-        // A glTF file or built-in scene is loaded flat by its own loader, as without instances.
+        // A built-in scene that places nothing is the scene `InstancedScene::single` wraps.
+        None if single => placed.meshes.remove(0),
+        // Anything else flat by its own loader, as without instances.
         _ => load_flat(spec, progress)?,
     }))
 }
