@@ -9,6 +9,7 @@ mod prepare;
 mod progress;
 mod regress;
 mod render;
+mod report;
 mod shaders;
 mod tables;
 mod trace;

@@ -21,11 +21,9 @@ use rbvh::scene::{Light, SceneView};
 use rbvh::structure::{Kind, Structure};
 use rbvh::surface::hit_albedo;
 
-use crate::prepare::{
-    check_image_size, prepare, report_counters, report_throughput, CameraArgs, Common, Given,
-    Prepared,
-};
+use crate::prepare::{check_image_size, prepare, CameraArgs, Common, Given, Prepared};
 use crate::progress::step;
+use crate::report::{report_counters, report_throughput};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("method", |a| a.help(

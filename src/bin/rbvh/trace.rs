@@ -8,8 +8,9 @@ use rbvh::gpu::Query;
 use rbvh::io;
 use rbvh::lod::{Cones, RayCone};
 
-use crate::prepare::{prepare, prepare_cpu, report_throughput, Common, Given, Method};
+use crate::prepare::{prepare, prepare_cpu, Common, Given, Method};
 use crate::progress::step;
+use crate::report::report_throughput;
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("method", |a| a.help(
