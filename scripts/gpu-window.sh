@@ -95,7 +95,7 @@ for rays in primary ao shadow; do
   step "dragon-closeup $rays" 60 "$dragon" -- "$rbvh" bench --scene "$closeup" --rays "$rays" "${common[@]}" --json "$out/bench-gpu-dragon-closeup-$rays.json"
   step "default $rays" 40 "" -- "$rbvh" bench --scene default --rays "$rays" "${common[@]}" --json "$out/bench-gpu-default-$rays.json"
 done
-step "dragons-1000" 90 "$dragon" -- "$rbvh" bench --scene "$dragons" --rays primary,shadow "${common[@]}" --json "$out/bench-gpu-dragons-1000.json"
+step "dragons-1000" 90 "$dragon" -- "$rbvh" bench --scene "$dragons" --rays primary,shadow --seam-rays 0 "${common[@]}" --json "$out/bench-gpu-dragons-1000.json"
 step "paper-scale" 300 "$datasets/sponza-dabrovic/sponza.obj" -- "$rbvh" bench --scene "$paper" --rays primary,ao,shadow "${common[@]}" --json "$out/bench-gpu-paper-scale.json"
 step "paper-scale-instanced" 300 "$datasets/sponza-dabrovic/sponza.obj" -- "$rbvh" bench --scene "$paper_instanced" --rays primary,shadow "${base[@]}" --quality 2 --json "$out/bench-gpu-paper-scale-instanced.json"
 say "all steps ended; $(left) s of the budget left"

@@ -567,4 +567,16 @@ fn turned_instances_get_boxes_closer_than_their_mesh_box_turned() {
         whole.extent(),
         vertices.extent()
     );
+
+    // A mesh's tree whose root's one child is the root again (corrupt data: no file check
+    // looks for cycles) still gets a box, within its mesh's, in bounded time (it looped).
+    let mut corrupt = two.clone();
+    let root = corrupt.meshes[0].root as usize;
+    corrupt.nodes[root].a_child = root as u32;
+    corrupt.nodes[root].a_count = 0;
+    corrupt.nodes[root].b_child = rbvh::bvh::LEAF_BIT;
+    corrupt.nodes[root].b_count = 0;
+    corrupt.set_transforms(&[turn]).unwrap();
+    let b = corrupt.bounds;
+    assert!(!b.is_empty() && b.min.cmpge(whole.min).all() && b.max.cmple(whole.max).all());
 }

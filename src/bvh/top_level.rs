@@ -79,7 +79,7 @@ pub(crate) fn check_transforms(transforms: &[Mat4], instances: usize) -> Result<
 
 /// Most boxes of a mesh's tree that an instance's world box is made from ([`cut`]): 16 turned
 /// dragons' top-level boxes enclose less empty space than their root boxes turned would, so
-/// that fewer rays enter an instance they miss, for 128 corners transformed per instance when
+/// that fewer rays enter an instance they miss, for up to 136 corners transformed per instance when
 /// the top level is rebuilt.
 const CUT_BOXES: usize = 16;
 
@@ -88,8 +88,9 @@ const CUT_BOXES: usize = 16;
 /// replaced by its own children while there is room. An instance's world box is then the union
 /// of these boxes transformed, rather than the root's box transformed, which for a turned mesh
 /// encloses the corners of a box that itself encloses empty corners (the box of a box twice).
-/// A child reference outside the mesh's nodes is kept as a box, not followed (corrupt files
-/// are refused elsewhere; this never reads out of range). Empty for a mesh with no tree.
+/// A child reference outside the mesh's nodes is kept as a box, not followed, and the
+/// expansions are bounded: corrupt data (a loaded file's cycle) neither reads out of range nor
+/// loops. Empty for a mesh with no tree.
 fn cut(nodes: &[GpuNode], mesh: &BottomLevel) -> Vec<Aabb> {
     let inside = |child: u32| {
         child >= mesh.root && child - mesh.root < mesh.nodes && (child as usize) < nodes.len()
@@ -104,7 +105,12 @@ fn cut(nodes: &[GpuNode], mesh: &BottomLevel) -> Vec<Aabb> {
             .filter(|c| !c.is_absent())
     };
     let mut boxes: Vec<ChildRef> = children(mesh.root).collect();
-    while boxes.len() < CUT_BOXES {
+    // A tree reaches CUT_BOXES boxes in fewer expansions than this; a corrupt one whose nodes
+    // lead back to themselves (which no file check looks for) stops here instead of looping.
+    for _ in 0..2 * CUT_BOXES {
+        if boxes.len() >= CUT_BOXES {
+            break;
+        }
         let widest = boxes
             .iter()
             .enumerate()

@@ -33,23 +33,18 @@ use crate::{Error, Result};
 /// default scene (or in all scenes when none is the default), with node transforms applied.
 /// Each primitive instance becomes an object named `mesh/primN`.
 pub(super) fn load(path: &Path) -> Result<Scene> {
+    load_within(path, available_memory())
+}
+
+/// [`load`], refusing to copy meshes that several nodes draw where the copies would not fit in
+/// `available` bytes of host memory (`None`: not known, not checked).
+fn load_within(path: &Path, available: Option<u64>) -> Result<Scene> {
     let (document, buffers, base) = open(path)?;
     let fail = |message: String| Error::parse(path, None, message);
     let mut scene = Scene::new(path.display().to_string());
     let mut materials = Materials::new(path, &base, &buffers);
     let placed = mesh_instances(&document).map_err(fail)?;
-    // Copying every node's mesh in place: refused before any is decoded where that would not
-    // fit in memory, as a scene file of instances is (`InstancedScene::check_flat_fits`).
-    let triangles: u64 = placed
-        .iter()
-        .filter_map(|(node, _)| node.mesh())
-        .flat_map(|mesh| {
-            mesh.primitives()
-                .map(|p| triangles_of(&p))
-                .collect::<Vec<_>>()
-        })
-        .sum();
-    check_flat_triangles(&scene.name, triangles, available_memory())?;
+    check_copies(&scene.name, &placed, available)?;
     for (node, transform) in placed {
         let Some(mesh) = node.mesh() else { continue };
         push_mesh(&mut scene, &mesh, transform, &mut materials)?;
@@ -104,12 +99,11 @@ pub(super) fn load_instanced(path: &Path) -> Result<InstancedScene> {
     Ok(scene)
 }
 
-/// The document of the glTF or GLB file at `path`, checked, its buffers loaded, and the folder
-/// its relative URIs start from.
-fn open(path: &Path) -> Result<(Document, Vec<Data>, std::path::PathBuf)> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    // gltf 1.4 subtracts the 12-byte header from the GLB's declared length unchecked (a panic in
-    // debug builds, a misleading error in release ones): a shorter length is refused here.
+/// The document of a glTF file's `bytes` (JSON, or GLB with its binary chunk), checked, and the
+/// GLB's binary chunk. gltf 1.4 subtracts the 12-byte header from a GLB's declared length
+/// unchecked (a panic in debug builds, a misleading error in release ones): a shorter length is
+/// refused here.
+fn parse(bytes: &[u8], path: &Path) -> Result<(Document, Option<Vec<u8>>)> {
     if let Some(length) = bytes
         .strip_prefix(b"glTF")
         .and_then(|rest| rest.get(4..8))
@@ -123,12 +117,19 @@ fn open(path: &Path) -> Result<(Document, Vec<Data>, std::path::PathBuf)> {
         ));
     }
     let ::gltf::Gltf { document, blob } =
-        ::gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| open_error(path, e))?;
-    drop(bytes);
-    let fail = |message: String| Error::parse(path, None, message);
-    check_position_indices(document.as_json()).map_err(fail)?;
+        ::gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| open_error(path, e))?;
+    check_position_indices(document.as_json()).map_err(|m| Error::parse(path, None, m))?;
     let document =
         ::gltf::Document::from_json(document.into_json()).map_err(|e| open_error(path, e))?;
+    Ok((document, blob))
+}
+
+/// The document of the glTF or GLB file at `path`, checked, its buffers loaded, and the folder
+/// its relative URIs start from.
+fn open(path: &Path) -> Result<(Document, Vec<Data>, std::path::PathBuf)> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let (document, blob) = parse(&bytes, path)?;
+    drop(bytes);
     let base = match path.parent() {
         Some(dir) if !dir.as_os_str().is_empty() => dir,
         _ => Path::new("."),
@@ -530,9 +531,7 @@ fn open_error(path: &Path, e: ::gltf::Error) -> Error {
 /// decoded, so that a caller can pick [`load`] or [`load_instanced`] and read the meshes once.
 pub(super) fn shares_a_mesh(path: &Path) -> Result<bool> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let document = ::gltf::Gltf::from_slice_without_validation(&bytes)
-        .map_err(|e| open_error(path, e))?
-        .document;
+    let (document, _) = parse(&bytes, path)?;
     let placed = mesh_instances(&document).map_err(|m| Error::parse(path, None, m))?;
     let mut drawn = vec![false; document.meshes().len()];
     Ok(placed
@@ -541,16 +540,45 @@ pub(super) fn shares_a_mesh(path: &Path) -> Result<bool> {
         .any(|mesh| std::mem::replace(&mut drawn[mesh.index()], true)))
 }
 
+/// Refuses, before any mesh is decoded, a file whose nodes draw a mesh more than once where
+/// copying each in place would not fit in `available` bytes, as a scene file of instances is
+/// refused (`InstancedScene::check_flat_fits`): its triangles as placed counted from the
+/// accessors ([`triangles_of`]). A file that draws each mesh once holds what loading it makes,
+/// so it is not refused here.
+fn check_copies(name: &str, placed: &[(Node, Mat4)], available: Option<u64>) -> Result<()> {
+    let mut drawn = std::collections::HashSet::new();
+    let mut repeats = false;
+    let mut triangles = 0u64;
+    for mesh in placed.iter().filter_map(|(node, _)| node.mesh()) {
+        repeats |= !drawn.insert(mesh.index());
+        triangles = mesh
+            .primitives()
+            .map(|p| triangles_of(&p))
+            .fold(triangles, u64::saturating_add);
+    }
+    match repeats {
+        true => check_flat_triangles(name, triangles, available),
+        false => Ok(()),
+    }
+}
+
 /// The triangles `primitive` adds as [`push_mesh`] reads it, from its accessors' counts alone
 /// (no buffer read): a list's index count over 3, a strip's or fan's less 2; none for points
-/// and lines.
+/// and lines, and none for an accessor whose buffer view cannot hold its count (the reader
+/// names that fault).
 fn triangles_of(primitive: &Primitive) -> u64 {
-    let count = match primitive.indices() {
-        Some(indices) => indices.count(),
-        None => primitive
-            .get(&Semantic::Positions)
-            .map_or(0, |positions| positions.count()),
-    } as u64;
+    let Some(accessor) = primitive
+        .indices()
+        .or_else(|| primitive.get(&Semantic::Positions))
+    else {
+        return 0;
+    };
+    let fits = accessor.view().is_none_or(|view| {
+        (accessor.count() as u64)
+            .checked_mul(accessor.size() as u64)
+            .is_some_and(|bytes| bytes <= view.length() as u64)
+    });
+    let count = if fits { accessor.count() as u64 } else { 0 };
     match primitive.mode() {
         Mode::Triangles => count / 3,
         Mode::TriangleStrip | Mode::TriangleFan => count.saturating_sub(2),
@@ -804,4 +832,49 @@ fn elements<'a>(
         ));
     }
     Ok((0..count).map(move |i| &view_bytes[offset + i * stride..][..size]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A glTF file whose `nodes` draw mesh 0 (one indexed triangle, its buffer a data URI).
+    fn file(dir: &Path, name: &str, nodes: &str) -> std::path::PathBuf {
+        let json = format!(
+            r#"{{
+  "asset": {{ "version": "2.0" }},
+  "scene": 0,
+  "scenes": [{{ "nodes": {nodes} }}],
+  "nodes": [{{ "mesh": 0 }}, {{ "mesh": 0, "translation": [2, 0, 0] }}],
+  "meshes": [{{ "primitives": [{{ "attributes": {{ "POSITION": 0 }}, "indices": 1 }}] }}],
+  "buffers": [{{ "byteLength": 56, "uri": "data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAAAACAPwAAgD8AAAAAAAABAAIAAAA=" }}],
+  "bufferViews": [{{ "buffer": 0, "byteLength": 48 }}, {{ "buffer": 0, "byteOffset": 48, "byteLength": 6 }}],
+  "accessors": [
+    {{ "bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0] }},
+    {{ "bufferView": 1, "componentType": 5123, "count": 3, "type": "SCALAR" }}
+  ]
+}}"#
+        );
+        let path = dir.join(name);
+        std::fs::write(&path, json).unwrap();
+        path
+    }
+
+    /// Copies of a mesh that several nodes draw are refused where they would not fit, named;
+    /// a file that draws each mesh once is what it holds and loads whatever the budget.
+    #[test]
+    fn copies_of_shared_meshes_are_checked_against_memory() {
+        let dir = tempfile::tempdir().unwrap();
+        let shared = file(dir.path(), "shared.gltf", "[0, 1]");
+        let e = load_within(&shared, Some(100)).unwrap_err().to_string();
+        assert!(
+            e.contains("shared.gltf") && e.contains("2 triangles as placed"),
+            "{e}"
+        );
+        assert_eq!(load_within(&shared, None).unwrap().triangle_count(), 2);
+        assert!(shares_a_mesh(&shared).unwrap());
+        let once = file(dir.path(), "once.gltf", "[0]");
+        assert_eq!(load_within(&once, Some(100)).unwrap().triangle_count(), 1);
+        assert!(!shares_a_mesh(&once).unwrap());
+    }
 }

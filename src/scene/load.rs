@@ -91,8 +91,8 @@ impl InstancedScene {
 impl InstancedScene {
     /// Whether [`InstancedScene::load`] of `spec` would place some mesh more than once, told
     /// without loading it where that is cheaper than loading: for a glTF file from its nodes
-    /// alone (no buffer or image decoded), so that a caller that traces a scene flat unless
-    /// it repeats a mesh reads the meshes once, with the loader it needs; false for any other
+    /// alone (the file is read, no buffer or image decoded), so that a caller that traces a
+    /// scene flat unless it repeats a mesh decodes the meshes once, with the loader it needs; false for any other
     /// mesh file; `None` for a scene file or a built-in scene, which only loading tells. Errors
     /// as loading would give them for a missing or malformed file.
     pub fn would_repeat_a_mesh(spec: &str) -> Result<Option<bool>> {

@@ -556,8 +556,8 @@ pub fn load_flat(spec: &str, progress: &dyn rbvh::progress::Progress) -> Result<
 /// a scene that may place meshes (a scene file, a glTF file, a built-in scene) is loaded with
 /// its instances, and kept so where it places a mesh more than once (or two levels are asked
 /// for) and the method traces two levels; anything else is loaded flat ([`load_flat`]). Each is
-/// read once: a glTF file's nodes say whether it repeats a mesh before either loader reads its
-/// buffers ([`InstancedScene::would_repeat_a_mesh`]).
+/// decoded once: a glTF file's nodes say whether it repeats a mesh before either loader decodes
+/// its buffers ([`InstancedScene::would_repeat_a_mesh`], which reads its JSON).
 fn load(c: &Common, progress: &dyn rbvh::progress::Progress) -> Result<Loaded> {
     let spec = c.source.scene.as_str();
     // A saved two-level RBVH is traced with the scene of instances it was built from.
@@ -614,12 +614,12 @@ fn load(c: &Common, progress: &dyn rbvh::progress::Progress) -> Result<Loaded> {
         Some(_) => false,
         None => Scene::check(spec).is_ok() && !spec.contains(['/', '\\']),
     };
-    // A glTF file whose nodes share no mesh, told from its nodes alone, is read once, flat.
-    let repeats = match may_place {
-        true => InstancedScene::would_repeat_a_mesh(spec).map_err(flag_error)?,
-        false => Some(false),
-    };
-    if repeats == Some(false) && instances == Instances::Auto {
+    // Under `auto`, a glTF file whose nodes share no mesh (told from its nodes alone) is
+    // decoded once, flat.
+    if instances == Instances::Auto
+        && (!may_place
+            || InstancedScene::would_repeat_a_mesh(spec).map_err(flag_error)? == Some(false))
+    {
         return Ok(Loaded::Flat(load_flat(spec, progress)?));
     }
     let mut placed = InstancedScene::load_observed(spec, progress).map_err(flag_error)?;

@@ -112,8 +112,9 @@ pub use sections::{section_table, Section, REQUIRED};
 /// [`crate::rbvh::InstancedRbvh::load`]) rather than a flat one ([`Rbvh::load`]), from its
 /// header and section table alone (16 bytes and 28 a section), so that a command picks the
 /// loader without reading the file twice. False for a file that is no sectioned RBVH file (an
-/// earlier version, other bytes, a broken table), which either loader then refuses by name; an
-/// [`Error::Io`] where it cannot be opened or read.
+/// earlier version, other bytes, a table cut short before a `MESH` entry), which the flat loader
+/// then refuses by name; a broken file whose table lists `MESH` is true, and the two-level loader
+/// refuses it by name. An [`Error::Io`] where it cannot be opened or read.
 pub fn holds_instances(path: &Path) -> Result<bool> {
     use std::io::Read;
     let mut file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
