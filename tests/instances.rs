@@ -251,6 +251,11 @@ fn corrupt_instances_end_rays_without_panics() {
 fn a_scene_without_instances_is_one_placed_once() {
     let sphere = Scene::builtin("sphere").unwrap();
     let single = InstancedScene::single(sphere.clone());
+    // Unwrapped, it is the scene again; a scene placing anything else is not one.
+    assert_eq!(single.clone().into_single().as_ref(), Some(&sphere));
+    let mut moved = single.clone();
+    moved.instances[0].transform = glam::Mat4::from_translation(Vec3::X);
+    assert!(moved.into_single().is_none());
     let two = InstancedBvh::build(&single).unwrap();
     let flat = Bvh::build(&sphere).unwrap();
     let rays = random_rays(&sphere, 2_000, &mut Rng::new(1));

@@ -533,11 +533,16 @@ pub(super) fn shares_a_mesh(path: &Path) -> Result<bool> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let (document, _) = parse(&bytes, path)?;
     let placed = mesh_instances(&document).map_err(|m| Error::parse(path, None, m))?;
-    let mut drawn = vec![false; document.meshes().len()];
-    Ok(placed
+    Ok(repeats_a_mesh(&placed))
+}
+
+/// Whether some mesh is drawn by more than one of the `placed` nodes.
+fn repeats_a_mesh(placed: &[(Node, Mat4)]) -> bool {
+    let mut drawn = std::collections::HashSet::new();
+    placed
         .iter()
         .filter_map(|(node, _)| node.mesh())
-        .any(|mesh| std::mem::replace(&mut drawn[mesh.index()], true)))
+        .any(|mesh| !drawn.insert(mesh.index()))
 }
 
 /// Refuses, before any mesh is decoded, a file whose nodes draw a mesh more than once where
@@ -546,20 +551,19 @@ pub(super) fn shares_a_mesh(path: &Path) -> Result<bool> {
 /// accessors ([`triangles_of`]). A file that draws each mesh once holds what loading it makes,
 /// so it is not refused here.
 fn check_copies(name: &str, placed: &[(Node, Mat4)], available: Option<u64>) -> Result<()> {
-    let mut drawn = std::collections::HashSet::new();
-    let mut repeats = false;
-    let mut triangles = 0u64;
-    for mesh in placed.iter().filter_map(|(node, _)| node.mesh()) {
-        repeats |= !drawn.insert(mesh.index());
-        triangles = mesh
-            .primitives()
-            .map(|p| triangles_of(&p))
-            .fold(triangles, u64::saturating_add);
+    if !repeats_a_mesh(placed) {
+        return Ok(());
     }
-    match repeats {
-        true => check_flat_triangles(name, triangles, available),
-        false => Ok(()),
-    }
+    let triangles = placed
+        .iter()
+        .filter_map(|(node, _)| node.mesh())
+        .flat_map(|mesh| {
+            mesh.primitives()
+                .map(|p| triangles_of(&p))
+                .collect::<Vec<_>>()
+        })
+        .fold(0, u64::saturating_add);
+    check_flat_triangles(name, triangles, available)
 }
 
 /// The triangles `primitive` adds as [`push_mesh`] reads it, from its accessors' counts alone

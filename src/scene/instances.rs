@@ -68,6 +68,20 @@ impl InstancedScene {
         }
     }
 
+    /// The scene [`InstancedScene::single`] wrapped, where this is one mesh placed once where it
+    /// is; else `None`.
+    pub fn into_single(mut self) -> Option<Scene> {
+        match (self.meshes.len(), self.instances.as_slice()) {
+            (1, [only]) if only.mesh == 0 && only.transform == Mat4::IDENTITY => {
+                let mut scene = self.meshes.remove(0);
+                scene.camera = self.camera;
+                scene.light = self.light;
+                Some(scene)
+            }
+            _ => None,
+        }
+    }
+
     /// Triangles as placed: each instance counts its mesh's triangles.
     pub fn placed_triangle_count(&self) -> usize {
         self.instances

@@ -622,20 +622,19 @@ fn load(c: &Common, progress: &dyn rbvh::progress::Progress) -> Result<Loaded> {
     {
         return Ok(Loaded::Flat(load_flat(spec, progress)?));
     }
-    let mut placed = InstancedScene::load_observed(spec, progress).map_err(flag_error)?;
+    let placed = InstancedScene::load_observed(spec, progress).map_err(flag_error)?;
     if instances == Instances::TwoLevel || placed.repeats_a_mesh() {
         placed.validate().map_err(flag_error)?;
         return Ok(Loaded::Instanced(placed));
     }
-    let single = placed.meshes.len() == 1
-        && placed.instances.len() == 1
-        && placed.instances[0].transform == rbvh::glam::Mat4::IDENTITY;
     Ok(Loaded::Flat(match extension.as_deref() {
         Some("toml") => flatten(placed)?,
-        // A built-in scene that places nothing is the scene `InstancedScene::single` wraps.
-        None if single => placed.meshes.remove(0),
-        // Anything else flat by its own loader, as without instances.
-        _ => load_flat(spec, progress)?,
+        // A built-in scene that places nothing is the scene `InstancedScene::single` wraps;
+        // anything else is loaded flat by its own loader, as without instances.
+        _ => match placed.into_single() {
+            Some(scene) if extension.is_none() => scene,
+            _ => load_flat(spec, progress)?,
+        },
     }))
 }
 
