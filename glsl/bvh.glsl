@@ -58,17 +58,18 @@
 // occupancy on wide SIMD (docs/speed.md, "Words kept beside the stack"). A global, so that a hook
 // reaches it; a ray's trace writes its words before it reads them, and a shader that traces
 // several rays traces them one after another.
-// With RBVH_INSTANCES, five more: the world ray of a two-level trace, which the ray of the level
+// With RBVH_INSTANCES, six more: the world ray of a two-level trace, which the ray of the level
 // traversed (RBVH_STACK_RAY) leaves for an instance's mesh space, and the instance the ray is in
-// and the nearest hit's (the two-level RBVH's hook, read where a leaf is tested and once the ray
-// is done).
+// and the nearest hit's, an entry each (the two-level RBVH's hook, read where a leaf is tested,
+// where an instance is left and once the ray is done).
 #define RBVH_STACK_RAY RBVH_STACK_SIZE
 #define RBVH_STACK_HIT (RBVH_STACK_SIZE + 4)
 #define RBVH_STACK_CONE (RBVH_STACK_SIZE + 5)
 #ifdef RBVH_INSTANCES
 #define RBVH_STACK_WORLD (RBVH_STACK_SIZE + 6)
 #define RBVH_STACK_INSTANCE (RBVH_STACK_SIZE + 10)
-uvec2 rbvh_stack[RBVH_STACK_SIZE + 11];
+#define RBVH_STACK_HIT_INSTANCE (RBVH_STACK_SIZE + 11)
+uvec2 rbvh_stack[RBVH_STACK_SIZE + 12];
 #else
 uvec2 rbvh_stack[RBVH_STACK_SIZE + 6];
 #endif
@@ -412,20 +413,26 @@ uint rbvh_enter(BvhInstanceHook leaves, uint child, uint count, float t_entry) {
     return child;
 }
 
-// Enters the instance leaf `reference` names (count RBVH_INSTANCE_LEAF): `ray` becomes the ray in
-// its mesh's space, `root` its mesh's root. False for every other leaf.
-bool rbvh_enter_instance(inout BvhInstanceHook leaves, uint reference, uint count, inout Ray ray,
-                         out uint root) {
-    root = RBVH_INVALID;
+// The root of the mesh that the instance leaf `reference` names (count RBVH_INSTANCE_LEAF) places;
+// RBVH_INVALID for every other leaf. One exit and no out parameter: inlined in the traversal's
+// loop, an early return or an out parameter leaves the compiler a value merged across rounds,
+// which it holds in a register through every leaf test (docs/speed.md, "The two-level RBVH
+// tracer's registers").
+uint rbvh_instance_root(BvhInstanceHook leaves, uint reference, uint count) {
     uint k = reference & ~RBVH_LEAF_BIT;
-    if (count != RBVH_INSTANCE_LEAF || k >= leaves.sz.instance_count) {
-        return false;
+    uint root = RBVH_INVALID;
+    if (count == RBVH_INSTANCE_LEAF && k < leaves.sz.instance_count) {
+        root = RBVH_BVH_INSTANCE(k).root;
     }
-    BvhInstance inst = RBVH_BVH_INSTANCE(k);
-    ray = rbvh_ray_into(inst, ray);
+    return root;
+}
+
+// Enters the instance leaf `reference` names (rbvh_instance_root found its root): the ray in its
+// mesh's space.
+Ray rbvh_enter_instance(inout BvhInstanceHook leaves, uint reference, Ray ray) {
+    uint k = reference & ~RBVH_LEAF_BIT;
     leaves.entered = k;
-    root = inst.root;
-    return true;
+    return rbvh_ray_into(RBVH_BVH_INSTANCE(k), ray);
 }
 
 // Leaves the instance entered last: `ray` is the world's again (kept beside the stack).
@@ -436,16 +443,16 @@ void rbvh_exit_instance(inout BvhInstanceHook leaves, inout Ray ray) {
 
 bool rbvh_test(inout BvhInstanceHook leaves, Ray ray, bool any_hit, uint reference, uint count,
                inout float t_closest, inout uint steps, inout bool cut) {
-    // Triangles are the meshes': tested inside an instance only.
-    if (leaves.entered == RBVH_INVALID) {
-        return false;
-    }
-    uint first = reference & ~RBVH_LEAF_BIT;
-    uint end = rbvh_slot_end(first, count, leaves.sz.tri_count);
-    bool hit = rbvh_test_triangles(rbvh_shear(ray), ray, any_hit, first, end, leaves.sz.tri_count,
-                                   t_closest, leaves.best_slot, steps, cut);
-    if (hit) {
-        leaves.best_instance = leaves.entered;
+    // Triangles are the meshes': tested inside an instance only (one exit, as rbvh_instance_root).
+    bool hit = false;
+    if (leaves.entered != RBVH_INVALID) {
+        uint first = reference & ~RBVH_LEAF_BIT;
+        uint end = rbvh_slot_end(first, count, leaves.sz.tri_count);
+        hit = rbvh_test_triangles(rbvh_shear(ray), ray, any_hit, first, end, leaves.sz.tri_count, t_closest,
+                                  leaves.best_slot, steps, cut);
+        if (hit) {
+            leaves.best_instance = leaves.entered;
+        }
     }
     return hit;
 }

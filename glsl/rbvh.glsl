@@ -898,8 +898,15 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
 // leaves enter instances (bvh.glsl's records), the meshes' leaves are the RBVH's own, marched and
 // tested in the mesh's space. A top-level leaf and a height field share their count
 // (RBVH_INSTANCE_LEAF = RBVH_HEIGHTFIELD_COUNT): the level the ray is in tells them apart.
-// The instance the ray is in (x, RBVH_INVALID at the top level) and the nearest hit's (y) are kept
-// in rbvh_stack's RBVH_STACK_INSTANCE, not in registers through every march.
+// The instance the ray is in (RBVH_STACK_INSTANCE's x, RBVH_INVALID at the top level) and the
+// nearest hit's (RBVH_STACK_HIT_INSTANCE's x) are kept in rbvh_stack, not in registers through
+// every march. A hit marks its instance RBVH_HIT_INSIDE, "the instance the ray is in", named when
+// the ray leaves it or is done (rbvh_hit_instance): copying the instance's index where the hit is
+// found kept that word in a register through the march (72 VGPRs with block jumps where the flat
+// tracer takes 56; docs/speed.md, "The two-level RBVH tracer's registers"). Instances are fewer
+// than 2^32 − 2 (64 bytes each), so no index is RBVH_HIT_INSIDE.
+const uint RBVH_HIT_INSIDE = 0xFFFFFFFEu;
+
 struct RbvhInstanceHook {
     RbvhLeafHook inner;
     uint instance_count;
@@ -925,33 +932,44 @@ uint rbvh_enter(RbvhInstanceHook leaves, uint child, uint count, float t_entry) 
     return child;
 }
 
-bool rbvh_enter_instance(inout RbvhInstanceHook leaves, uint reference, uint count, inout Ray ray, out uint root) {
-    root = RBVH_INVALID;
+// The nearest hit's instance so far: RBVH_STACK_HIT_INSTANCE's, or, where that is RBVH_HIT_INSIDE,
+// the instance the ray is in.
+uint rbvh_hit_instance() {
+    uint hit = rbvh_stack[RBVH_STACK_HIT_INSTANCE].x;
+    return hit == RBVH_HIT_INSIDE ? rbvh_stack[RBVH_STACK_INSTANCE].x : hit;
+}
+
+// traverse.glsl's instance hooks, each with one exit and no out parameter (see traverse.glsl).
+uint rbvh_instance_root(RbvhInstanceHook leaves, uint reference, uint count) {
     uint k = reference & ~RBVH_LEAF_BIT;
-    if (count != RBVH_INSTANCE_LEAF || k >= leaves.instance_count) {
-        return false;
+    uint root = RBVH_INVALID;
+    if (count == RBVH_INSTANCE_LEAF && k < leaves.instance_count) {
+        root = RBVH_BVH_INSTANCE(k).root;
     }
-    BvhInstance inst = RBVH_BVH_INSTANCE(k);
-    ray = rbvh_ray_into(inst, ray);
+    return root;
+}
+
+Ray rbvh_enter_instance(inout RbvhInstanceHook leaves, uint reference, Ray ray) {
+    uint k = reference & ~RBVH_LEAF_BIT;
     rbvh_stack[RBVH_STACK_INSTANCE].x = k;
-    root = inst.root;
-    return true;
+    return rbvh_ray_into(RBVH_BVH_INSTANCE(k), ray);
 }
 
 void rbvh_exit_instance(inout RbvhInstanceHook leaves, inout Ray ray) {
     ray = rbvh_kept_world_ray();
+    rbvh_stack[RBVH_STACK_HIT_INSTANCE].x = rbvh_hit_instance();
     rbvh_stack[RBVH_STACK_INSTANCE].x = RBVH_INVALID;
 }
 
 bool rbvh_test(inout RbvhInstanceHook leaves, Ray ray, bool any_hit, uint reference, uint count,
                inout float t_closest, inout uint steps, inout bool cut) {
     // The meshes' leaves are tested inside an instance only.
-    if (rbvh_stack[RBVH_STACK_INSTANCE].x == RBVH_INVALID) {
-        return false;
-    }
-    bool hit = rbvh_test(leaves.inner, ray, any_hit, reference, count, t_closest, steps, cut);
-    if (hit) {
-        rbvh_stack[RBVH_STACK_INSTANCE].y = rbvh_stack[RBVH_STACK_INSTANCE].x;
+    bool hit = false;
+    if (rbvh_stack[RBVH_STACK_INSTANCE].x != RBVH_INVALID) {
+        hit = rbvh_test(leaves.inner, ray, any_hit, reference, count, t_closest, steps, cut);
+        if (hit) {
+            rbvh_stack[RBVH_STACK_HIT_INSTANCE].x = RBVH_HIT_INSIDE;
+        }
     }
     return hit;
 }
@@ -972,12 +990,13 @@ bool rbvh_test(inout RbvhInstanceHook leaves, Ray ray, bool any_hit, uint refere
 Hit rbvh_trace_rbvh_instances(Ray ray, bool any_hit, RbvhSizes sz, uint instance_count, out uint steps,
                               out bool overflow) {
     RbvhInstanceHook leaves = RbvhInstanceHook(rbvh_leaf_hook(sz), instance_count);
-    rbvh_stack[RBVH_STACK_INSTANCE] = uvec2(RBVH_INVALID, RBVH_INVALID);
+    rbvh_stack[RBVH_STACK_INSTANCE].x = RBVH_INVALID;
+    rbvh_stack[RBVH_STACK_HIT_INSTANCE].x = RBVH_INVALID;
     float t = rbvh_traverse_rbvh_instances(ray, any_hit, leaves, steps, overflow);
     if (leaves.inner.best == RBVH_INVALID) {
         return rbvh_miss();
     }
-    uint k = rbvh_stack[RBVH_STACK_INSTANCE].y;
+    uint k = rbvh_hit_instance();
     BvhInstance inst = RBVH_BVH_INSTANCE(k);
     Hit h = rbvh_rbvh_hit(leaves.inner, t, rbvh_ray_into(inst, rbvh_kept_world_ray()));
     vec3 n = rbvh_normal_out(inst, vec3(h.nx, h.ny, h.nz));

@@ -24,13 +24,17 @@
 // rbvh_kept_ray() after the traversal.
 // With RBVH_TRAVERSE_INSTANCES (the two-level structures: bvh.glsl's exact BVH, rbvh.glsl's RBVH),
 // two levels in one loop, as crate::bvh::traverse: the hook also has
-//     bool rbvh_enter_instance(inout RBVH_LEAVES leaves, uint reference, uint count, inout Ray ray,
-//                              out uint root)
-//         whether leaf `reference` is an instance; if so, `ray` becomes the ray in its mesh's
-//         space and `root` its mesh's root, where the next round starts
+//     uint rbvh_instance_root(RBVH_LEAVES leaves, uint reference, uint count)
+//         the root of the mesh that leaf `reference` places if it is an instance (where the next
+//         round starts), else RBVH_INVALID
+//     Ray rbvh_enter_instance(inout RBVH_LEAVES leaves, uint reference, Ray ray)
+//         enters that instance: the ray in its mesh's space
 //     void rbvh_exit_instance(inout RBVH_LEAVES leaves, inout Ray ray)
 //         the world ray back (the traversal keeps it with rbvh_keep_world_ray; with
 //         RBVH_KEEPS_RAY, rbvh_stack's ray is the level's: the mesh ray while in an instance)
+// (each with one exit and no out parameter: inlined in this loop, an early return or an out
+// parameter leaves the compiler a value merged across rounds, which ACO held in a register
+// through every leaf test; docs/speed.md, "The two-level RBVH tracer's registers"),
 // and the traversal pushes an instance's end (distance -inf, RBVH_INSTANCE_END, which no nearest
 // hit drops; its word the top level's visits so far) when it enters one, and leaves the instance
 // when it pops that entry. Distances are
@@ -243,8 +247,9 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
             break;
         }
 #ifdef RBVH_TRAVERSE_INSTANCES
-        uint root;
-        if (!inside && rbvh_enter_instance(leaves, pending, pending_count, ray, root)) {
+        uint root = inside ? RBVH_INVALID : rbvh_instance_root(leaves, pending, pending_count);
+        if (root != RBVH_INVALID) {
+            ray = rbvh_enter_instance(leaves, pending, ray);
 #ifdef RBVH_KEEPS_RAY
             rbvh_keep_ray(ray);
 #endif
