@@ -165,6 +165,22 @@ impl Bvh {
 /// The build input of `scene`'s triangles, once the scene is checked: [`Scene::validate`], fewer
 /// than 2^31 triangles, and triangles at all where it is a point cloud.
 pub(super) fn prims(scene: &Scene) -> Result<Vec<Prim>> {
+    check_triangles(scene)?;
+    Ok((0..scene.triangle_count())
+        .into_par_iter()
+        .map(|i| {
+            let bounds = Aabb::from_points(scene.triangle(i));
+            Prim {
+                bounds,
+                centroid: bounds.center(),
+            }
+        })
+        .collect())
+}
+
+/// The checks of [`prims`]: a valid scene, fewer than 2^31 triangles, and triangles rather than
+/// only points.
+pub(super) fn check_triangles(scene: &Scene) -> Result<()> {
     scene.validate()?;
     if scene.triangle_count() >= LEAF_BIT as usize {
         return Err(Error::param(
@@ -182,16 +198,7 @@ pub(super) fn prims(scene: &Scene) -> Result<Vec<Prim>> {
             ),
         ));
     }
-    Ok((0..scene.triangle_count())
-        .into_par_iter()
-        .map(|i| {
-            let bounds = Aabb::from_points(scene.triangle(i));
-            Prim {
-                bounds,
-                centroid: bounds.center(),
-            }
-        })
-        .collect())
+    Ok(())
 }
 
 /// The packed [`Bvh`] of the tree `root` over `scene`'s triangles in leaf `order`, built since

@@ -43,12 +43,22 @@ impl Builder<'_> {
                 .iter()
                 .fold(Aabb::EMPTY, |b, &i| b.grow(self.prims[i as usize].centroid)),
         };
-        let texel = self.texel_of(order);
         let first = &self.prims[order[0] as usize];
         let one_part = !self.params.object_split
             || order
                 .iter()
                 .all(|&i| self.prims[i as usize].component == first.component);
+        // The set's texel, a pass over its triangles, where a decision reads it: a set of several
+        // parts at least `min_leaf_texels` of the scene's texel across is not small at any finer
+        // one (no object's texel is coarser than the scene's), and is split.
+        let texel = if one_part
+            || matches!(self.input, Input::Points(_))
+            || bounds.diagonal() < self.params.min_leaf_texels * self.texel
+        {
+            self.texel_of(order)
+        } else {
+            self.texel
+        };
         if one_part {
             if let Some(tiles) = self.heightfield(order, bounds.diagonal(), texel) {
                 self.progress.advance(n as u64);
