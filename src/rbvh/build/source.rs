@@ -27,7 +27,8 @@ const SURFACE_LEAF: usize = 4;
 /// checked, its triangles (or points) gathered with their total area, and, at the first build
 /// that needs them, each element's split primitive (box, centroid, area, connected part) and
 /// the linear BVH of the scene that the ring samples trace. On the paper-scale scene (21.9M
-/// triangles) that is 10 of a Q2 build's 22 seconds, so `rbvh build --quality all` and `rbvh
+/// triangles) that is about 12 of a Q2 build's 27 seconds (docs/paper-scale.md, "Build time at
+/// 55b4840"), so `rbvh build --quality all` and `rbvh
 /// bench` build every level from one source. Its builds are meant to run one after another:
 /// two at once would each make the shared part (the same, twice).
 pub struct RbvhSource<'s> {
