@@ -7,6 +7,7 @@
 use std::time::Instant;
 
 use glam::Vec3;
+use rayon::prelude::*;
 
 use super::parts::connected_parts;
 use super::Input;
@@ -104,6 +105,7 @@ impl<'s> RbvhSource<'s> {
                 }
                 None => {
                     let tris: Vec<[Vec3; 3]> = (0..scene.triangle_count())
+                        .into_par_iter()
                         .map(|i| scene.triangle(i))
                         .collect();
                     let mut objects: Vec<ObjectSize> = scene
