@@ -939,7 +939,8 @@ uint rbvh_hit_instance() {
     return hit == RBVH_HIT_INSIDE ? rbvh_stack[RBVH_STACK_INSTANCE].x : hit;
 }
 
-// traverse.glsl's instance hooks, each with one exit and no out parameter (see traverse.glsl).
+// traverse.glsl's instance hooks; the first two return their results, with one exit (see
+// traverse.glsl).
 uint rbvh_instance_root(RbvhInstanceHook leaves, uint reference, uint count) {
     uint k = reference & ~RBVH_LEAF_BIT;
     uint root = RBVH_INVALID;

@@ -26,15 +26,15 @@
 // two levels in one loop, as crate::bvh::traverse: the hook also has
 //     uint rbvh_instance_root(RBVH_LEAVES leaves, uint reference, uint count)
 //         the root of the mesh that leaf `reference` places if it is an instance (where the next
-//         round starts), else RBVH_INVALID
+//         round starts), else RBVH_INVALID (an instance whose root is RBVH_INVALID is none)
 //     Ray rbvh_enter_instance(inout RBVH_LEAVES leaves, uint reference, Ray ray)
 //         enters that instance: the ray in its mesh's space
 //     void rbvh_exit_instance(inout RBVH_LEAVES leaves, inout Ray ray)
 //         the world ray back (the traversal keeps it with rbvh_keep_world_ray; with
 //         RBVH_KEEPS_RAY, rbvh_stack's ray is the level's: the mesh ray while in an instance)
-// (each with one exit and no out parameter: inlined in this loop, an early return or an out
-// parameter leaves the compiler a value merged across rounds, which ACO held in a register
-// through every leaf test; docs/speed.md, "The two-level RBVH tracer's registers"),
+// (the first two return their results, with one exit: inlined in this loop, an early return or
+// an out parameter leaves the compiler a value merged across rounds, which ACO held in a
+// register through every leaf test; docs/speed.md, "The two-level RBVH tracer's registers"),
 // and the traversal pushes an instance's end (distance -inf, RBVH_INSTANCE_END, which no nearest
 // hit drops; its word the top level's visits so far) when it enters one, and leaves the instance
 // when it pops that entry. Distances are

@@ -240,10 +240,14 @@ fn corrupt_instances_end_rays_without_panics() {
     two.instances[0].root = u32::MAX >> 1;
     two.instances[1].root = 0;
     two.instances[2].world_to_mesh = [[f32::NAN; 4]; 3];
+    // A root of u32::MAX (RBVH_INVALID) names no mesh: no instance, as on the device, so rays
+    // neither enter it nor hit it.
+    two.instances[3].root = u32::MAX;
     let flat_scene = scene.clone().into_flat();
     for ray in random_rays(&flat_scene, 2_000, &mut Rng::new(3)) {
         let (hit, _) = two.closest_hit(&ray);
         assert!(hit.t.is_nan() || hit.t >= ray.tmin || !hit.is_hit());
+        assert!(!hit.is_hit() || hit.instance != 3);
     }
 }
 

@@ -138,7 +138,7 @@ fn every_pipeline_compiles_on_the_null_device_and_reports_its_registers() {
                 p.pipeline
             ),
             // The two-level tracer: the flat one's bound, counting or not (48 since its instance
-            // hooks have one exit and no out parameter; 56, 64 counting, before; 80 as first
+            // hooks return their results with one exit; 56, 64 counting, before; 80 as first
             // written: docs/speed.md, "The two-level exact tracer's registers").
             "trace_exact_instances" => assert!(
                 vgprs <= 56 && spilled == 0,

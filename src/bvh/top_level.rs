@@ -285,6 +285,11 @@ impl<P: Probe, L: Leaves<P> + Aim> Leaves<P> for InstanceHook<'_, L> {
         let k = reference & !LEAF_BIT;
         let instance = self.instances.get(k as usize)?;
         probe.read(element::<GpuInstance>(Array::Instances, k as usize));
+        // A root of u32::MAX (RBVH_INVALID, which no builder writes) names no mesh: no instance,
+        // as the device's rbvh_instance_root reads it.
+        if instance.root == u32::MAX {
+            return None;
+        }
         let ray = instance.ray_into(&self.world);
         self.leaves.aim(&ray);
         self.entered = Some(k);
