@@ -1107,21 +1107,11 @@ mod tests {
                 "results": []})
         };
         // In two levels alone, the two-level exact BVH is the referee whose speed is shown.
-        let two_level = |method: &str, quality: Option<&str>, mrays: f64, speedup: f64| {
-            serde_json::json!({
-                "scene": "t", "ray_type": "shadow", "quality": quality, "method": method,
-                "params": null, "mrays_per_s": {"median": mrays}, "speedup_vs_exact": speedup,
-                "valid": true
-            })
-        };
-        let alone = [vec![
-            two_level("exact-instanced", None, 2.5, 1.0),
-            two_level("rbvh-instanced", Some("Q2"), 2.0, 0.8),
-        ]];
-        let refs: Vec<Vec<&Value>> = alone.iter().map(|r| r.iter().collect()).collect();
-        let table = ratios_table(&refs);
+        let (mut exact, mut two) = (record(None, 2.5, 1.0), record(Some("Q2"), 2.0, 0.8));
+        (exact["method"], two["method"]) = ("exact-instanced".into(), "rbvh-instanced".into());
+        let table = ratios_table(&[vec![&exact, &two]]);
         assert!(
-            table.contains("| t, shadow | 2.50 | 1.00 | 0.80 |"),
+            table.contains("| s, primary | 2.50 | 1.00 | 0.80 |"),
             "{table}"
         );
         let caption = measured_caption(&[file("x"), file("x")], true).unwrap();
