@@ -22,18 +22,17 @@ pub(crate) struct SplitPrim {
 /// Candidate planes per axis for the modified SAH (the paper's 32).
 const SAH_BINS: usize = 32;
 
-/// Splits `order` (non-empty, ≥ 2 entries) and returns the size of the first part, always in
-/// `1..order.len()`. `by_object` separates connected parts first when the node has several.
+/// Splits `order` (non-empty, ≥ 2 entries), whose centroids' box is `centroids`, and returns the
+/// size of the first part, always in `1..order.len()`. `by_object` separates connected parts first
+/// when the node has several.
 pub(crate) fn split(
     prims: &[SplitPrim],
     order: &mut [u32],
+    centroids: &Aabb,
     strategy: Subdivision,
     by_object: bool,
     median_only: bool,
 ) -> usize {
-    let centroids = order
-        .iter()
-        .fold(Aabb::EMPTY, |b, &i| b.grow(prims[i as usize].centroid));
     let axis = centroids.largest_axis();
     if median_only {
         return object_median(prims, order, axis);
@@ -48,7 +47,7 @@ pub(crate) fn split(
             let plane = centroids.center()[axis];
             partition(order, |i| prims[i as usize].centroid[axis] < plane)
         }
-        Subdivision::AreaSah => area_sah(prims, order, &centroids),
+        Subdivision::AreaSah => area_sah(prims, order, centroids),
     };
     if mid == 0 || mid == order.len() {
         object_median(prims, order, axis)
@@ -170,6 +169,20 @@ fn object_median(prims: &[SplitPrim], order: &mut [u32], axis: usize) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `split` of `order`, given its centroids' box as the recursion gives it.
+    fn split(
+        prims: &[SplitPrim],
+        order: &mut [u32],
+        strategy: Subdivision,
+        by_object: bool,
+        median_only: bool,
+    ) -> usize {
+        let centroids = order
+            .iter()
+            .fold(Aabb::EMPTY, |b, &i| b.grow(prims[i as usize].centroid));
+        super::split(prims, order, &centroids, strategy, by_object, median_only)
+    }
 
     /// Unit triangles at x = 0..n, two connected parts (first half, second half).
     fn row(n: usize) -> Vec<SplitPrim> {

@@ -10,7 +10,10 @@ use glam::Vec3;
 use super::{Builder, Input, Node, MAX_TRIANGLE_LEAF};
 use crate::bvh::GpuTriangle;
 use crate::geom::Aabb;
-use crate::rbvh::frame::{fit, passes, projection_axis, rounding_pad, triangle_elements};
+use crate::rbvh::frame::{
+    fails_every_axis, fit, passes, projection_axis, rounding_pad, triangle_element,
+    triangle_elements,
+};
 use crate::rbvh::raster::{rasterize, ring_reach, Frame, Ring, Tile, NO_SOURCE};
 use crate::rbvh::splat::{splat, Splat};
 
@@ -102,6 +105,16 @@ impl Builder<'_> {
     ) -> Option<Vec<Tile>> {
         match self.input {
             Input::Triangles(all) => {
+                // A set that fails the criterion whatever its axis, and is too large to be judged
+                // on its samples, is refused before it is gathered.
+                if diagonal > self.params.sampled_criterion_texels * texel
+                    && fails_every_axis(
+                        self.params.refinement,
+                        order.iter().map(|&i| triangle_element(&all[i as usize])),
+                    )
+                {
+                    return None;
+                }
                 let tris: Vec<[Vec3; 3]> = order.iter().map(|&i| all[i as usize]).collect();
                 let open: Vec<bool> = if self.open.is_empty() {
                     Vec::new()

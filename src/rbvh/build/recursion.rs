@@ -33,21 +33,27 @@ impl Builder<'_> {
 
     pub(super) fn build(&self, order: &mut [u32], offset: u32, depth: u32) -> Node {
         let n = order.len();
-        // The box of the surface the set samples: its triangles, or its points (whose splits
-        // see them with their reach, but whose size is that of the samples).
-        let bounds = match self.input {
-            Input::Triangles(_) => order
-                .iter()
-                .fold(Aabb::EMPTY, |b, &i| b.union(self.prims[i as usize].bounds)),
-            Input::Points(_) => order
-                .iter()
-                .fold(Aabb::EMPTY, |b, &i| b.grow(self.prims[i as usize].centroid)),
-        };
-        let first = &self.prims[order[0] as usize];
-        let one_part = !self.params.object_split
-            || order
-                .iter()
-                .all(|&i| self.prims[i as usize].component == first.component);
+        // One pass over the set (its triangles lie scattered in memory at the paper's scale):
+        // the box of the surface it samples (its triangles, or its points, whose splits see them
+        // with their reach but whose size is that of the samples), its centroids' box for the
+        // split, and whether it is one connected part.
+        let part = self.prims[order[0] as usize].component;
+        let (bounds, centroids, same_part) = order.iter().fold(
+            (Aabb::EMPTY, Aabb::EMPTY, true),
+            |(bounds, centroids, same), &i| {
+                let prim = &self.prims[i as usize];
+                let bounds = match self.input {
+                    Input::Triangles(_) => bounds.union(prim.bounds),
+                    Input::Points(_) => bounds.grow(prim.centroid),
+                };
+                (
+                    bounds,
+                    centroids.grow(prim.centroid),
+                    same && prim.component == part,
+                )
+            },
+        );
+        let one_part = !self.params.object_split || same_part;
         // The set's texel, a pass over its triangles, where a decision reads it: a set of several
         // parts at least `min_leaf_texels` of the scene's texel across is not small at any finer
         // one (no object's texel is coarser than the scene's), and is split.
@@ -106,6 +112,7 @@ impl Builder<'_> {
         let mid = split(
             self.prims,
             order,
+            &centroids,
             self.params.subdivision,
             self.params.object_split,
             depth >= MEDIAN_BELOW_DEPTH,

@@ -157,7 +157,7 @@ impl<'s> RbvhSource<'s> {
                 let components = step(progress, "finding the scene's connected parts", 0, || {
                     connected_parts(scene)
                 });
-                tris.iter()
+                tris.par_iter()
                     .zip(&components)
                     .map(|(t, &component)| {
                         let bounds = Aabb::from_points(*t);
