@@ -60,7 +60,9 @@ pub fn topology(scene: &Scene) -> Topology {
 /// [`topology`], its creases only `with_creases` (else empty): the seam probe's
 /// [`open_boundary`] needs no normals.
 fn analyse(scene: &Scene, with_creases: bool) -> Topology {
-    let (welded, count) = weld(scene);
+    let welded = weld(scene);
+    // Ids are vertex indices: below the vertex count.
+    let count = welded.len() as u32;
     let normals: Vec<Vec3> = if with_creases {
         scene
             .triangles
@@ -73,7 +75,7 @@ fn analyse(scene: &Scene, with_creases: bool) -> Topology {
     } else {
         Vec::new()
     };
-    let edges = EdgesByEnd::new(scene, &welded, count);
+    let edges = EdgesByEnd::new(scene, &welded);
     // Angles are at least 0, so their bits order as the angles do.
     let crease: Vec<AtomicU32> = (0..if with_creases {
         scene.triangles.len()
@@ -147,12 +149,12 @@ fn crease_pairs(run: &[u32], normals: &[Vec3], crease: &[AtomicU32]) {
     }
 }
 
-/// One id per distinct vertex position (`-0.0` and `0.0` the same), per vertex, and a bound on the
-/// ids. A position's id is its first vertex's index, so that neighbouring triangles, which a
+/// One id per distinct vertex position (`-0.0` and `0.0` the same), per vertex: the position's
+/// first vertex's index, so that neighbouring triangles, which a
 /// mesh stores near each other, have ends with nearby ids: the edges' counting sort then reads
 /// and writes memory nearly in order (ids in the positions' sorted order scattered it across
 /// gigabytes at the paper's scale).
-fn weld(scene: &Scene) -> (Vec<u32>, u32) {
+fn weld(scene: &Scene) -> Vec<u32> {
     let mut by_position: Vec<([u32; 3], u32)> = scene
         .positions
         .par_iter()
@@ -172,7 +174,7 @@ fn weld(scene: &Scene) -> (Vec<u32>, u32) {
         }
         welded[v as usize] = first;
     }
-    (welded, scene.positions.len() as u32)
+    welded
 }
 
 /// Lower ends whose edges one parallel task sorts.
@@ -190,7 +192,9 @@ struct EdgesByEnd {
 }
 
 impl EdgesByEnd {
-    fn new(scene: &Scene, welded: &[u32], count: u32) -> EdgesByEnd {
+    /// The edges of `scene`'s triangles between the `welded` ids of their ends (vertex indices).
+    fn new(scene: &Scene, welded: &[u32]) -> EdgesByEnd {
+        let count = welded.len();
         let ends = |t: &[u32; 3]| -> [Option<(u32, u32)>; 3] {
             let w = t.map(|v| welded[v as usize]);
             std::array::from_fn(|e| {
@@ -232,8 +236,8 @@ impl EdgesByEnd {
         // Sorted end by end, in parallel over blocks of ends (whose words lie together).
         let mut blocks = Vec::new();
         let mut rest = words.as_mut_slice();
-        for first in (0..count as usize).step_by(ENDS_A_BLOCK) {
-            let last = (first + ENDS_A_BLOCK).min(count as usize);
+        for first in (0..count).step_by(ENDS_A_BLOCK) {
+            let last = (first + ENDS_A_BLOCK).min(count);
             let (block, tail) = rest.split_at_mut(starts[last] - starts[first]);
             blocks.push((first, last, block));
             rest = tail;
