@@ -27,7 +27,7 @@
 //! | `scene` | string | scene name (built-in name, file name, or the scene file's `name`) |
 //! | `triangles` | int | triangles in the scene |
 //! | `points` | int | points the RBVHs were built from (`--points`: sampled over the triangles, or a scan's file); 0: built from the triangles |
-//! | `method` | `"exact"` \| `"rbvh"` \| `"rbvh-lod"` | exact triangle BVH, RBVH, or RBVH traced with level of detail |
+//! | `method` | `"exact"` \| `"rbvh"` \| `"rbvh-lod"` \| `"exact-instanced"` \| `"rbvh-instanced"` | exact triangle BVH, RBVH, RBVH traced with level of detail, or a scene of instances' two-level exact BVH or RBVH |
 //! | `quality` | null \| `"Q0"`…`"Q4"` \| `"custom"` | RBVH level; null for exact |
 //! | `params` | object \| null | RBVH build parameters (below); null for exact |
 //! | `lod` | object \| null | level-of-detail parameters (below); null but for `rbvh-lod` |
@@ -36,7 +36,7 @@
 //! | `mrays_per_s` | {`median`,`min`,`max`,`samples`} | million rays per second over the timed runs; `samples` each run's, in run order |
 //! | `speedup_vs_exact` | number | median MRays/s over the exact BVH's, same rays, same run (1 for exact) |
 //! | `build_ms` | number | CPU build time of the structure |
-//! | `memory_bytes` | {`tree`,`atlas`,`triangles`,`total`} | bytes uploaded: nodes (+ height-field leaf records for RBVH), atlas texels, triangles |
+//! | `memory_bytes` | {`tree`,`atlas`,`triangles`,`total`,`texels`,`narrow_texels`} | bytes uploaded: nodes (+ height-field leaf records for RBVH), atlas texels, triangles, their sum; the tiles' texels and those of them with 8-bit heights (0 for exact) |
 //! | `memory_ratio_vs_exact` | number | exact total / this total (above 1: smaller than exact) |
 //! | `error` | object \| null | errors against the exact BVH on the same rays (below); null for exact |
 //! | `valid` | bool | false when the hits are wrong rather than approximate (`bench::validate`); for exact: whether the GPU agrees with the CPU reference tracer |
@@ -74,10 +74,10 @@
 //! RFC 4180: a header line ([`csv_columns`]), then one line per record: first the run's provenance
 //! (`device`, `driver`, `date`, `git`, `git_dirty`, the host's fields as `host.cpu`,
 //! `host.l3_bytes`, …, then `version`), so that rows from several runs can be pasted
-//! into one table, then the record's fields flattened (`params.*`, `mrays_per_s.*`,
-//! `memory_bytes.*`, `error.*`, `counters.*` and the traffic figures without their prefix, except
-//! `mrays_median`/`mrays_min`/`mrays_max`, `*_bytes`, `lod_*`, `twin_*` and one
-//! `dram_bytes_per_ray_*`/`miss_rate_*` pair per modelled cache). The run's settings (`runs`, `min_run_ms`, image size, `ao_radius`, `seed`), the per-run `samples` and the steps' `nodes_by_depth` bands are in the JSON only. Null
+//! into one table, then the record's fields flattened, nested keys joined by `.`
+//! (`params.*`, `mrays_per_s.*`, `memory_bytes.*`, `error.*`, `counters.*`,
+//! `traffic.twin_counters.*`, the modelled caches by position as `traffic.caches.N.*`,
+//! `steps.*`). The run's settings (`runs`, `min_run_ms`, image size, `ao_radius`, `seed`), the per-run `samples` and the steps' `nodes_by_depth` bands are in the JSON only. Null
 //! is an empty cell; an infinite PSNR is `inf`.
 
 use std::io::Write;

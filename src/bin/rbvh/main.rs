@@ -60,8 +60,8 @@ enum Command {
     /// Compile every pipeline (on any device, or AMD's compiler with no GPU: --amd navi21) and
     /// print the registers, spills, code size and waves per SIMD each takes; runs nothing.
     Shaders(shaders::Args),
-    /// Write every measured table of README.md and docs/*.md from the results files in
-    /// docs/results (or check, with --check, that each is what its file makes).
+    /// Write every measured table of README.md, docs/*.md and scenes/README.md from the results
+    /// files in docs/results (or check, with --check, that each is what its file makes).
     Tables(tables::Args),
     /// List the built-in scenes, which every command takes for --scene without any file.
     Scenes,

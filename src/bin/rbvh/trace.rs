@@ -34,7 +34,7 @@ pub struct Args {
     /// Input rays: 8 little-endian f32 each (ox oy oz tmin dx dy dz tmax).
     #[arg(long)]
     rays: PathBuf,
-    /// Output hits: t, nx, ny, nz (f32), id (u32), 3 reserved u32 each.
+    /// Output hits: t, nx, ny, nz (f32), id (u32), instance (u32), 2 reserved u32 each.
     #[arg(long)]
     hits: PathBuf,
     /// Any-hit (occlusion) query instead of closest hit.
