@@ -14,8 +14,8 @@
 use rayon::prelude::*;
 
 use super::build::{check_triangles, join_halves, pack, BuildNode, PARALLEL_THRESHOLD};
-use super::layout::{GpuNode, LEAF_BIT};
-use super::traverse::{traverse, Leaves};
+use super::layout::{ChildRef, GpuNode, LEAF_BIT};
+use super::traverse::{traverse_from, Leaves};
 use glam::Vec3;
 
 use crate::geom::{intersect_triangle, Aabb, Hit, Ray, RayShear};
@@ -25,6 +25,12 @@ use crate::Result;
 
 /// Bits per axis of a code (63 in all).
 const BITS: u32 = 21;
+
+/// How far, relative to the scene's size (its box's extent plus its largest coordinate), a box
+/// must stay from a region for [`LinearBvh::subtree_over`] to take it as missed by every ray
+/// within the region: far beyond the few ulps by which the robust box test's distances may err
+/// (Ize 2013: relative errors of a few 2^-24 in the coordinates and distances).
+const SUBTREE_SLACK: f32 = 1e-4;
 
 /// Depth from which nodes are split at the middle of their range rather than at a bit: equal
 /// codes have no bit to split at, and bit splits may peel off one triangle a level (codes 1, 2,
@@ -39,6 +45,8 @@ pub(crate) struct LinearBvh<'s> {
     nodes: Vec<GpuNode>,
     /// Scene triangle indices in leaf order.
     order: Vec<u32>,
+    /// [`SUBTREE_SLACK`] of this scene.
+    slack: f32,
 }
 
 impl<'s> LinearBvh<'s> {
@@ -78,17 +86,63 @@ impl<'s> LinearBvh<'s> {
         };
         let root = (!order.is_empty()).then(|| builder.build(0, order.len(), 0));
         let (nodes, _) = pack(root.as_ref(), "scene")?;
+        let bounds = root.as_ref().map_or(Aabb::EMPTY, BuildNode::bounds);
+        let size = if bounds.is_empty() {
+            0.0
+        } else {
+            bounds.extent().max_element() + bounds.min.abs().max(bounds.max.abs()).max_element()
+        };
         Ok(LinearBvh {
             scene,
             nodes,
             order,
+            slack: SUBTREE_SLACK * size,
         })
+    }
+
+    /// The inner node from which [`LinearBvh::closest_hit_from`] finds, for any ray whose
+    /// segment lies in `region`, what it finds from the root (node 0), in the same steps: down from the root while one child's box alone comes within the slack of
+    /// the region and is an inner node. Every box beside that path is missed by such a ray, so
+    /// the traversal from the root reaches the node with nothing pushed. The ring of samples
+    /// around a leaf is traced by short rays near it (`raster/ring.rs`): at the paper's scale
+    /// their walk down from the root of 5.5M nodes was most of their cost.
+    pub(crate) fn subtree_over(&self, region: Aabb) -> u32 {
+        let region = Aabb {
+            min: region.min - self.slack,
+            max: region.max + self.slack,
+        };
+        let near = |c: &ChildRef| {
+            !c.is_absent()
+                && c.bounds.min.cmple(region.max).all()
+                && region.min.cmple(c.bounds.max).all()
+        };
+        let mut node = 0u32;
+        // A tree of n nodes is at most n deep; corrupt data could not loop here either.
+        for _ in 0..self.nodes.len() {
+            let Some(inner) = self.nodes.get(node as usize) else {
+                return 0;
+            };
+            let [a, b] = inner.children();
+            node = match (near(&a), near(&b)) {
+                (true, false) if !a.is_leaf() => a.child,
+                (false, true) if !b.is_leaf() => b.child,
+                _ => return node,
+            };
+        }
+        0
     }
 
     /// The closest hit of `ray` on a triangle whose unit normal (as wound) `accept`s, its `id`
     /// the scene triangle's index; or [`Hit::MISS`]. Triangles refused are passed through, as
-    /// if absent, so a nearer one refused hides nothing behind it.
-    pub(crate) fn closest_hit_where(&self, ray: &Ray, accept: impl Fn(Vec3) -> bool) -> Hit {
+    /// if absent, so a nearer one refused hides nothing behind it. The traversal starts at inner
+    /// node `root`: the root (0), or what [`LinearBvh::subtree_over`] gives for a region holding
+    /// the ray's segment.
+    pub(crate) fn closest_hit_from(
+        &self,
+        root: u32,
+        ray: &Ray,
+        accept: impl Fn(Vec3) -> bool,
+    ) -> Hit {
         let mut leaves = SceneTriangles {
             bvh: self,
             shear: RayShear::new(ray),
@@ -96,7 +150,7 @@ impl<'s> LinearBvh<'s> {
             accept,
             best: None,
         };
-        traverse(&self.nodes, ray, false, &mut leaves, &mut ());
+        traverse_from(&self.nodes, root, ray, false, &mut leaves, &mut ());
         leaves.best.map_or(Hit::MISS, |(prim, t)| {
             let [a, b, c] = self.scene.triangle(prim as usize);
             Hit {
@@ -233,7 +287,7 @@ mod tests {
         let rays = scene.camera_or_framed(1.0).primary_rays(64, 64);
         let mut hits = 0;
         for ray in &rays {
-            let a = linear.closest_hit_where(ray, |_| true);
+            let a = linear.closest_hit_from(0, ray, |_| true);
             let (b, _) = sah.closest_hit(ray);
             assert_eq!(a.is_hit(), b.is_hit());
             if a.is_hit() {
@@ -243,6 +297,50 @@ mod tests {
             }
         }
         assert!(hits > rays.len() / 8, "{hits} of {} rays hit", rays.len());
+    }
+
+    #[test]
+    fn rays_within_a_region_find_from_its_subtree_what_they_find_from_the_root() {
+        let scene = Scene::builtin("default").expect("built-in scene");
+        let linear = LinearBvh::build(&scene, 4).expect("builds");
+        let size = scene.bounds().extent().max_element();
+        let mut rng = crate::random::SplitMix64::new(11);
+        let mut unit = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+        let (mut below_root, mut hits, mut rays) = (0, 0, 0);
+        for r in 0..300 {
+            // Regions about a point of the surface, from a hundredth of the scene to a tenth.
+            let [a, b, c] = scene.triangle(r * 7919 % scene.triangle_count());
+            let centre = (a + b + c) / 3.0;
+            let half = size * (0.005 + 0.05 * unit().x);
+            let region = Aabb {
+                min: centre - half,
+                max: centre + half,
+            };
+            let root = linear.subtree_over(region);
+            below_root += usize::from(root != 0);
+            for _ in 0..20 {
+                let from = region.min + unit() * 2.0 * half;
+                let to = region.min + unit() * 2.0 * half;
+                let ray = Ray::new(from, to - from, 0.0, 1.0);
+                let facing = |n: Vec3| n.z.abs() > 0.2;
+                for accept in [&(|_: Vec3| true) as &dyn Fn(Vec3) -> bool, &facing] {
+                    let whole = linear.closest_hit_from(0, &ray, accept);
+                    let part = linear.closest_hit_from(root, &ray, accept);
+                    assert_eq!(
+                        (whole.t.to_bits(), whole.normal, whole.id),
+                        (part.t.to_bits(), part.normal, part.id),
+                        "{ray:?} from node {root}"
+                    );
+                    hits += usize::from(whole.is_hit());
+                    rays += 1;
+                }
+            }
+        }
+        assert!(
+            below_root > 250,
+            "{below_root} of 300 regions below the root"
+        );
+        assert!(hits > rays / 4, "{hits} of {rays} rays hit");
     }
 
     #[test]
@@ -263,9 +361,9 @@ mod tests {
             "a binary tree over 5000 leaves of one"
         );
         let down = Ray::new(Vec3::new(0.25, 0.25, 1.0), Vec3::NEG_Z, 0.0, f32::INFINITY);
-        let hit = bvh.closest_hit_where(&down, |_| true);
+        let hit = bvh.closest_hit_from(0, &down, |_| true);
         assert_eq!((hit.t, hit.normal), (1.0, [0.0, 0.0, 1.0]));
         // Refused triangles are passed through: all 5000 here.
-        assert!(!bvh.closest_hit_where(&down, |n| n.z < 0.0).is_hit());
+        assert!(!bvh.closest_hit_from(0, &down, |n| n.z < 0.0).is_hit());
     }
 }

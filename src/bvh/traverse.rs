@@ -91,6 +91,21 @@ pub(crate) fn traverse<P: Probe, L: Leaves<P>>(
     leaves: &mut L,
     probe: &mut P,
 ) -> TraceStats {
+    traverse_from(nodes, 0, ray, any_hit, leaves, probe)
+}
+
+/// [`traverse`] from inner node `root` rather than node 0: the same visits in the same order, but
+/// for the path down to `root`, where the ray misses every box beside it (as
+/// [`LinearBvh::subtree_over`](super::LinearBvh::subtree_over) finds it for rays within a
+/// region), so that the traversal from node 0 arrives there with an empty stack.
+pub(crate) fn traverse_from<P: Probe, L: Leaves<P>>(
+    nodes: &[GpuNode],
+    root: u32,
+    ray: &Ray,
+    any_hit: bool,
+    leaves: &mut L,
+    probe: &mut P,
+) -> TraceStats {
     let mut stats = TraceStats::default();
     if !ray.is_valid() {
         return stats;
@@ -106,7 +121,7 @@ pub(crate) fn traverse<P: Probe, L: Leaves<P>>(
     // the nearest hit is dropped when popped instead of visited or marched.
     let mut stack = [(0u32, 0f32); STACK_SIZE as usize];
     let mut sp = 0usize;
-    let mut entry = Some((0u32, 0u32));
+    let mut entry = Some((root, 0u32));
     loop {
         let (reference, count) = match entry {
             Some(e) => e,

@@ -10,7 +10,7 @@ use super::cells::cell_corners;
 use super::sample::EDGE_ON_COS;
 use super::{written_at, Frame, NONE};
 use crate::bvh::LinearBvh;
-use crate::geom::Ray;
+use crate::geom::{Aabb, Ray};
 use crate::rbvh::Refinement;
 
 /// How far from its written neighbours' mean height a ring sample may find the surface, in
@@ -97,16 +97,10 @@ pub(super) fn ring_from_surface(
 ) -> Vec<(usize, RingSample)> {
     let (res_u, res_v) = (frame.res_u as usize, frame.res_v as usize);
     let reach = ring.reach * frame.texel;
-    // The nearest hit before `tmax` along `dir` from `from` on a face not seen edge-on (which
-    // covers no sample centre in a way that defines one height, as in step 1).
-    let probe = |from: Vec3, dir: Vec3, tmax: f32| {
-        let facing = |n: Vec3| n.dot(frame.w).abs() > EDGE_ON_COS;
-        let hit = ring
-            .surface
-            .closest_hit_where(&Ray::new(from, dir, 0.0, tmax), facing);
-        hit.is_hit().then_some(hit)
-    };
-    let mut ring = Vec::new();
+    // Each ring sample's estimate, then the rays: they all lie within `reach` of their
+    // estimates along `±w`, so each is traced from the subtree of the scene's BVH over that
+    // region, in the same steps as from its root.
+    let mut estimates = Vec::new();
     for j in 0..res_v {
         for i in 0..res_u {
             let k = j * res_u + i;
@@ -136,28 +130,45 @@ pub(super) fn ring_from_surface(
                 + (i as f32 + 0.5) * frame.texel * frame.u
                 + (j as f32 + 0.5) * frame.texel * frame.v
                 + estimate * frame.w;
-            // Downwards only as far as the surface found upwards: only nearer counts (nothing
-            // is nearer than a hit at the estimate itself).
-            let up = probe(from, frame.w, reach);
-            let down = match up {
-                Some(h) if h.t == 0.0 => None,
-                _ => probe(from, -frame.w, up.map_or(reach, |h| h.t)),
-            };
-            let nearest = match (up, down) {
-                (_, Some(down)) => Some((estimate - down.t, down)),
-                (Some(up), None) => Some((estimate + up.t, up)),
-                (None, None) => None,
-            };
-            if let Some((height, hit)) = nearest {
-                ring.push((
-                    k,
-                    RingSample {
-                        height,
-                        normal: hit.normal(),
-                        input,
-                    },
-                ));
-            }
+            estimates.push((k, estimate, input, from));
+        }
+    }
+    let region = estimates.iter().fold(Aabb::EMPTY, |b, &(_, _, _, from)| {
+        b.grow(from - reach * frame.w).grow(from + reach * frame.w)
+    });
+    let root = ring.surface.subtree_over(region);
+    // The nearest hit before `tmax` along `dir` from `from` on a face not seen edge-on (which
+    // covers no sample centre in a way that defines one height, as in step 1).
+    let probe = |from: Vec3, dir: Vec3, tmax: f32| {
+        let facing = |n: Vec3| n.dot(frame.w).abs() > EDGE_ON_COS;
+        let hit = ring
+            .surface
+            .closest_hit_from(root, &Ray::new(from, dir, 0.0, tmax), facing);
+        hit.is_hit().then_some(hit)
+    };
+    let mut ring = Vec::new();
+    for (k, estimate, input, from) in estimates {
+        // Downwards only as far as the surface found upwards: only nearer counts (nothing
+        // is nearer than a hit at the estimate itself).
+        let up = probe(from, frame.w, reach);
+        let down = match up {
+            Some(h) if h.t == 0.0 => None,
+            _ => probe(from, -frame.w, up.map_or(reach, |h| h.t)),
+        };
+        let nearest = match (up, down) {
+            (_, Some(down)) => Some((estimate - down.t, down)),
+            (Some(up), None) => Some((estimate + up.t, up)),
+            (None, None) => None,
+        };
+        if let Some((height, hit)) = nearest {
+            ring.push((
+                k,
+                RingSample {
+                    height,
+                    normal: hit.normal(),
+                    input,
+                },
+            ));
         }
     }
     ring
