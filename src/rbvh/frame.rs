@@ -22,7 +22,8 @@ pub(crate) fn triangle_element([a, b, c]: &[Vec3; 3]) -> Vec3 {
 }
 
 /// Whether no projection axis can bring `elements` within `refinement`'s normal cone: two of them
-/// face apart by more than twice its angle, and a 2° margin far beyond rounding, so that every
+/// (whose squared lengths are normal floats) face apart by more than twice its angle, and a 2°
+/// margin far beyond rounding, so that every
 /// axis lies more than the angle from one of them and [`passes`] fails whatever
 /// [`projection_axis`] gives. Elements are compared with the first that has an area, up to the
 /// first that faces apart: a large curved set (a whole dragon, at the recursion's first levels)
@@ -39,7 +40,11 @@ pub(crate) fn fails_every_axis(
         return false;
     }
     let max_cos = apart.to_radians().cos();
-    let mut elements = elements.into_iter().filter(|e| e.length() > 0.0);
+    // Elements whose squared length is subnormal have lengths off by up to a tenth: left out,
+    // which only weakens the test (`passes` still counts them).
+    let mut elements = elements
+        .into_iter()
+        .filter(|e| e.length_squared() >= f32::MIN_POSITIVE);
     let Some(first) = elements.next() else {
         return false;
     };
@@ -137,7 +142,9 @@ pub(crate) fn fit(points: &[Vec3], w: Vec3, texel: f32, margin: f32) -> Frame {
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), d| {
             let h = d.dot(wd);
-            (lo.min(h), hi.max(h))
+            // As `DVec3::min` and `max` choose (the later of equal values, -0 or +0), which
+            // `f64::min` and `max` leave open.
+            (if lo < h { lo } else { h }, if hi > h { hi } else { h })
         });
     let extents = |u: DVec3, v: DVec3| {
         let (mut lo, mut hi) = (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY));
@@ -231,6 +238,15 @@ mod tests {
             [Vec3::ZERO, Vec3::Y, Vec3::ZERO, -Vec3::Y]
         ));
         assert!(!fails_every_axis(cone(10.0), []));
+        // Nor do elements whose squared length is subnormal, whose lengths are inexact.
+        assert!(!fails_every_axis(
+            cone(10.0),
+            [Vec3::new(-1e-22, 0.0, 0.0), Vec3::X]
+        ));
+        assert!(!fails_every_axis(
+            cone(10.0),
+            [Vec3::X, Vec3::new(-1e-22, 0.0, 0.0)]
+        ));
         let area = Refinement::ProjectedArea { min_ratio: 0.9 };
         assert!(!fails_every_axis(area, [Vec3::Y, -Vec3::Y]));
         // Wherever a random set is refused, no axis passes it: not its own, not any of many.

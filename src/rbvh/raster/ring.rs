@@ -133,9 +133,14 @@ pub(super) fn ring_from_surface(
             estimates.push((k, estimate, input, from));
         }
     }
-    let region = estimates.iter().fold(Aabb::EMPTY, |b, &(_, _, _, from)| {
-        b.grow(from - reach * frame.w).grow(from + reach * frame.w)
-    });
+    // A sample whose estimate is not finite casts rays that trace nothing (`Ray::is_valid`);
+    // its NaN would make the box forget the samples before it.
+    let region = estimates
+        .iter()
+        .filter(|e| e.3.is_finite())
+        .fold(Aabb::EMPTY, |b, &(_, _, _, from)| {
+            b.grow(from - reach * frame.w).grow(from + reach * frame.w)
+        });
     let root = ring.surface.subtree_over(region);
     // The nearest hit before `tmax` along `dir` from `from` on a face not seen edge-on (which
     // covers no sample centre in a way that defines one height, as in step 1).
