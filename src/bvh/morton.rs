@@ -101,11 +101,13 @@ impl<'s> LinearBvh<'s> {
     }
 
     /// The inner node from which [`LinearBvh::closest_hit_from`] finds, for any ray whose
-    /// segment lies in `region`, what it finds from the root (node 0), in the same steps: down from the root while one child's box alone comes within the slack of
-    /// the region and is an inner node. Every box beside that path is missed by such a ray, so
-    /// the traversal from the root reaches the node with nothing pushed. The ring of samples
-    /// around a leaf is traced by short rays near it (`raster/ring.rs`): at the paper's scale
-    /// their walk down from the root of 5.5M nodes was most of their cost.
+    /// segment lies in `region`, what it finds from the root (node 0), in the same steps: down
+    /// from the root while one child's box alone comes within the slack of the region and is an
+    /// inner node. Every box beside that path is missed by such a ray, so the traversal from the
+    /// root reaches the node with nothing pushed. The ring of samples around a leaf is traced by
+    /// short rays near it (`raster/ring.rs`), which skip that walk: at the paper's scale it saved
+    /// little (docs/paper-scale.md, "Build time at 461a407"), the nodes every ray shares being
+    /// those the caches hold.
     pub(crate) fn subtree_over(&self, region: Aabb) -> u32 {
         let region = Aabb {
             min: region.min - self.slack,

@@ -25,8 +25,8 @@ pub(crate) fn triangle_element([a, b, c]: &[Vec3; 3]) -> Vec3 {
 /// (whose squared lengths are normal floats) face apart by more than twice its angle, and a 2°
 /// margin far beyond rounding, so that every
 /// axis lies more than the angle from one of them and [`passes`] fails whatever
-/// [`projection_axis`] gives. Elements are compared with the first that has an area, up to the
-/// first that faces apart: a large curved set (a whole dragon, at the recursion's first levels)
+/// [`projection_axis`] gives. Elements are compared with the first such one, up to the first
+/// that faces apart: a large curved set (a whole dragon, at the recursion's first levels)
 /// is refused after a few of its triangles, where the axis and the criterion read all of them.
 pub(crate) fn fails_every_axis(
     refinement: Refinement,

@@ -137,7 +137,7 @@ pub(super) fn ring_from_surface(
     // its NaN would make the box forget the samples before it.
     let region = estimates
         .iter()
-        .filter(|e| e.3.is_finite())
+        .filter(|&&(_, _, _, from)| from.is_finite())
         .fold(Aabb::EMPTY, |b, &(_, _, _, from)| {
             b.grow(from - reach * frame.w).grow(from + reach * frame.w)
         });
