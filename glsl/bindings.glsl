@@ -18,11 +18,12 @@
 #define RBVH_RAYS_BINDING 4          // The rays (trace_io.glsl).
 #define RBVH_HITS_BINDING 5          // The hits (trace_io.glsl).
 #define RBVH_STATUS_BINDING 6        // The count of rays whose traversal overflowed (trace_io.glsl).
-#define RBVH_COUNTERS_BINDING 7      // The per-ray counters, or a 4-byte dummy (trace_io.glsl).
+#define RBVH_COUNTERS_BINDING 7      // The per-ray counters' first eight words, or a 4-byte dummy (trace_io.glsl).
 #define RBVH_LODS_BINDING 8          // The level of detail's per-node records (lod.glsl).
 #define RBVH_LOD_TEXELS_BINDING 9    // The level of detail's column words (lod.glsl).
 #define RBVH_CONES_BINDING 10        // The rays' cones (trace_rbvh_main.glsl, with RBVH_LOD).
 #define RBVH_BVH_INSTANCES_BINDING 11  // The instances of a two-level BVH (bvh.glsl, RBVH_INSTANCES).
+#define RBVH_COUNTERS_TAIL_BINDING 12  // The per-ray counters' last two words, or a 4-byte dummy (trace_io.glsl).
 
 // The paint shader (paint_main.glsl); paint_bda binds the brushes alone.
 #define RBVH_PAINT_ATLAS_BINDING 0    // The atlas words, as the trace shaders read them.

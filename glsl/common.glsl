@@ -25,7 +25,11 @@ struct Hit {
 // by the traversals only where the includer defines RBVH_COUNT as a true condition before the
 // #include (the trace shaders define it as a specialization constant, so that their timed runs
 // compile the counting away); other includers pay nothing. The traversal (traverse.glsl) resets
-// the counters when it starts.
+// the counters when it starts. They live in a private variable, rbvh_counters, unless the
+// includer defines RBVH_COUNTER(field) as the lvalue of each: the trace shaders count in the
+// ray's records of their counters buffers (trace_io.glsl), since ten counters held in registers
+// through the walk took the counting pipelines 16 VGPRs above the timed ones on RADV
+// (docs/speed.md, "Counters out of the registers").
 struct RbvhCounters {
     uint nodes;            // inner nodes visited
     uint leaves;           // height-field leaves (and chosen LOD nodes) handed to the march
@@ -41,9 +45,15 @@ struct RbvhCounters {
 #ifndef RBVH_COUNT
 #define RBVH_COUNT false
 #endif
+#ifndef RBVH_COUNTER
 RbvhCounters rbvh_counters;
-#define RBVH_COUNT_ADD(field, n) if (RBVH_COUNT) { rbvh_counters.field += (n); }
-#define RBVH_COUNT_RESET() if (RBVH_COUNT) { rbvh_counters = RbvhCounters(0u, 0u, 0u, 0u, 0u, 0u, 0u, 0u, 0u, 0u); }
+#define RBVH_COUNTER(field) rbvh_counters.field
+#endif
+#define RBVH_COUNT_ADD(field, n) if (RBVH_COUNT) { RBVH_COUNTER(field) += (n); }
+#define RBVH_COUNT_RESET() if (RBVH_COUNT) { \
+    RBVH_COUNTER(nodes) = 0u; RBVH_COUNTER(leaves) = 0u; RBVH_COUNTER(walks) = 0u; RBVH_COUNTER(cells) = 0u; \
+    RBVH_COUNTER(cells_tested) = 0u; RBVH_COUNTER(jumps) = 0u; RBVH_COUNTER(triangle_leaves) = 0u; \
+    RBVH_COUNTER(triangles) = 0u; RBVH_COUNTER(instances) = 0u; RBVH_COUNTER(top_nodes) = 0u; }
 
 const uint RBVH_INVALID = 0xFFFFFFFFu;
 #define RBVH_INF uintBitsToFloat(0x7F800000u)

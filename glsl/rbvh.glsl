@@ -743,8 +743,10 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
                 }
             }
             if (t < 0.0 && (dirs & RBVH_WALK_TESTS) != 0u) {
-                RBVH_COUNT_ADD(cells_tested, 1u);
                 t = rbvh_cell_triangles(leaf, fr, cell, kind, cut);
+                // Counted after the test: counted before it, the counting pipelines took 8 VGPRs
+                // more on RADV navi21 (docs/speed.md, "Counters out of the registers").
+                RBVH_COUNT_ADD(cells_tested, 1u);
             }
             if (t >= 0.0) {
                 // Where the hit's normal comes from, recorded here so that no cell outlives the walk.

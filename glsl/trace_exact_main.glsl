@@ -16,8 +16,8 @@ layout(constant_id = 0) const bool rbvh_count = false;
 #define RBVH_COUNT rbvh_count
 
 #include "trace_params.glsl"
-#include "bvh.glsl"
 #include "trace_io.glsl"
+#include "bvh.glsl"
 
 void main() {
     uint i = pc.ray_offset + gl_GlobalInvocationID.x;
@@ -27,10 +27,10 @@ void main() {
     uint steps;
     bool overflow;
 #ifdef RBVH_INSTANCES
-    Hit h = rbvh_trace_instances(rays[i], (pc.flags & 1u) != 0u,
+    Hit h = rbvh_trace_instances(rbvh_trace_load(i), (pc.flags & 1u) != 0u,
                                  BvhInstanceSizes(pc.node_count, pc.tri_count, pc.instance_count), steps, overflow);
 #else
-    Hit h = rbvh_trace_bvh(rays[i], (pc.flags & 1u) != 0u, BvhSizes(pc.node_count, pc.tri_count), steps, overflow);
+    Hit h = rbvh_trace_bvh(rbvh_trace_load(i), (pc.flags & 1u) != 0u, BvhSizes(pc.node_count, pc.tri_count), steps, overflow);
 #endif
     rbvh_trace_store(i, h, overflow);
 }

@@ -25,12 +25,12 @@ layout(constant_id = 2) const bool rbvh_height_only = false;
 #define RBVH_HEIGHT_ONLY rbvh_height_only
 
 #include "trace_params.glsl"
+#include "trace_io.glsl"
 #include "rbvh.glsl"
 #ifdef RBVH_LOD
 #include "lod.glsl"
 #endif
 
-#include "trace_io.glsl"
 #ifdef RBVH_LOD
 // Per-ray cones (width, spread): see RayCone in src/lod/cone.rs.
 layout(std430, set = 0, binding = RBVH_CONES_BINDING) readonly buffer Cones {
@@ -49,11 +49,11 @@ void main() {
     bool overflow;
 #ifdef RBVH_LOD
     RbvhLodSizes lsz = RbvhLodSizes(pc.lod_node_count, pc.lod_texel_len);
-    Hit h = rbvh_trace_rbvh_lod(rays[i], cones[i], (pc.flags & 1u) != 0u, sz, lsz, steps, overflow);
+    Hit h = rbvh_trace_rbvh_lod(rbvh_trace_load(i), cones[i], (pc.flags & 1u) != 0u, sz, lsz, steps, overflow);
 #elif defined(RBVH_INSTANCES)
-    Hit h = rbvh_trace_rbvh_instances(rays[i], (pc.flags & 1u) != 0u, sz, pc.instance_count, steps, overflow);
+    Hit h = rbvh_trace_rbvh_instances(rbvh_trace_load(i), (pc.flags & 1u) != 0u, sz, pc.instance_count, steps, overflow);
 #else
-    Hit h = rbvh_trace_rbvh(rays[i], (pc.flags & 1u) != 0u, sz, steps, overflow);
+    Hit h = rbvh_trace_rbvh(rbvh_trace_load(i), (pc.flags & 1u) != 0u, sz, steps, overflow);
 #endif
     rbvh_trace_store(i, h, overflow);
 }

@@ -283,6 +283,51 @@ fn header_reads_through_device_addresses_the_includer_passes() {
     assert_eq!(r.bindings.get("EngineDepth"), Some(&(0, 0)));
 }
 
+/// An engine that counts its rays' work (`RBVH_COUNT` true) reads the counters from the private
+/// `rbvh_counters` (`glsl/common.glsl`), a `RbvhCounters` in [`RayCounters`]' order, so that it
+/// can copy them into a buffer the crate's type reads.
+///
+/// [`RayCounters`]: rbvh::probe::RayCounters
+#[test]
+fn an_engine_counts_in_ray_counters_order() {
+    use rbvh::probe::RayCounters;
+    use std::mem::{offset_of, size_of};
+    let source = FOREIGN
+        .replace(
+            "#include \"rbvh.glsl\"",
+            "#define RBVH_COUNT true\n#include \"rbvh.glsl\"\n\
+             layout(std430, set = 0, binding = 1) writeonly buffer EngineCounters { RbvhCounters counters[]; };",
+        )
+        .replace(
+            "depth[gl_GlobalInvocationID.x] =",
+            "counters[gl_GlobalInvocationID.x] = rbvh_counters;\n    depth[gl_GlobalInvocationID.x] =",
+        );
+    let r = spirv::reflect(&compile(&source).unwrap());
+    let glsl: Vec<(&str, usize)> = r.structs["RbvhCounters"]
+        .iter()
+        .map(|(m, o)| (m.as_str(), *o as usize))
+        .collect();
+    assert_eq!(
+        glsl,
+        [
+            ("nodes", offset_of!(RayCounters, nodes)),
+            ("leaves", offset_of!(RayCounters, leaves)),
+            ("walks", offset_of!(RayCounters, walks)),
+            ("cells", offset_of!(RayCounters, cells)),
+            ("cells_tested", offset_of!(RayCounters, cells_tested)),
+            ("jumps", offset_of!(RayCounters, jumps)),
+            ("triangle_leaves", offset_of!(RayCounters, triangle_leaves)),
+            ("triangles", offset_of!(RayCounters, triangles)),
+            ("instances", offset_of!(RayCounters, instances)),
+            ("top_nodes", offset_of!(RayCounters, top_nodes)),
+        ]
+    );
+    assert_eq!(
+        r.array_strides.get("RbvhCounters").copied(),
+        Some(size_of::<RayCounters>() as u32)
+    );
+}
+
 #[test]
 fn each_header_compiles_on_its_own() {
     // traverse.glsl is a template that bvh.glsl, rbvh.glsl and lod.glsl instantiate, and

@@ -93,7 +93,9 @@ fn bvh_triangle_layout_matches() {
 
 #[test]
 fn counter_layout_matches_in_every_trace_shader() {
-    let fields = [
+    // The trace shaders count in two 32-byte records a ray (glsl/trace_io.glsl): RayCounters'
+    // first eight words, then its last two and six reserved.
+    let head = [
         ("nodes", offset_of!(RayCounters, nodes)),
         ("leaves", offset_of!(RayCounters, leaves)),
         ("walks", offset_of!(RayCounters, walks)),
@@ -102,9 +104,13 @@ fn counter_layout_matches_in_every_trace_shader() {
         ("jumps", offset_of!(RayCounters, jumps)),
         ("triangle_leaves", offset_of!(RayCounters, triangle_leaves)),
         ("triangles", offset_of!(RayCounters, triangles)),
-        ("instances", offset_of!(RayCounters, instances)),
-        ("top_nodes", offset_of!(RayCounters, top_nodes)),
     ];
+    let tail = [
+        ("instances", offset_of!(RayCounters, instances) - 32),
+        ("top_nodes", offset_of!(RayCounters, top_nodes) - 32),
+        ("reserved", 8),
+    ];
+    assert_eq!(size_of::<RayCounters>(), 40);
     for spirv_bytes in [
         shaders::TRACE_EXACT,
         shaders::TRACE_EXACT_BDA,
@@ -114,9 +120,12 @@ fn counter_layout_matches_in_every_trace_shader() {
         shaders::TRACE_RBVH_BDA,
         shaders::TRACE_RBVH_LOD,
         shaders::TRACE_RBVH_LOD_BDA,
+        shaders::TRACE_RBVH_INSTANCES,
+        shaders::TRACE_RBVH_INSTANCES_BDA,
     ] {
         let r = spirv::reflect(&shaders::words(spirv_bytes).unwrap());
-        check(&r, "RbvhCounters", size_of::<RayCounters>(), &fields);
+        check(&r, "RbvhCountersHead", 32, &head);
+        check(&r, "RbvhCountersTail", 32, &tail);
     }
 }
 

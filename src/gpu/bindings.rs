@@ -12,8 +12,8 @@ use crate::structure::Kind;
 include!(concat!(env!("OUT_DIR"), "/bindings.rs"));
 
 /// The bindings of `kind`'s trace shader for arrays reached by `reach`, in the order the tracer
-/// gives its buffers (ascending): the structure's arrays where bound, rays, hits, status and
-/// counters, then with levels of detail the LOD's arrays where bound and the cones.
+/// gives its buffers: the structure's arrays where bound, rays, hits, status and the counters' two
+/// records, then with levels of detail the LOD's arrays where bound and the cones.
 pub(crate) fn trace(kind: Kind, reach: Reach) -> Vec<u32> {
     let structure: &[u32] = match kind {
         Kind::Exact => &[BVH_NODES, BVH_TRIS],
@@ -30,7 +30,7 @@ pub(crate) fn trace(kind: Kind, reach: Reach) -> Vec<u32> {
     if bound {
         bindings.extend(structure);
     }
-    bindings.extend([RAYS, HITS, STATUS, COUNTERS]);
+    bindings.extend([RAYS, HITS, STATUS, COUNTERS, COUNTERS_TAIL]);
     if bound {
         bindings.extend(lod);
     }

@@ -1,7 +1,7 @@
 //! Traces rays on the device: through the exact BVH (`glsl/trace_exact.comp`), an RBVH
 //! (`glsl/trace_rbvh.comp`), or an RBVH with level of detail (`glsl/trace_rbvh_lod.comp`). All
 //! share the push constants ([`TraceParams`]) and the bindings after the structure's own buffers:
-//! rays, hits, status, per-ray counters; the LOD trace then binds the LOD records and columns and
+//! rays, hits, status, the per-ray counters' two records ([`CounterRecord`]); the LOD trace then binds the LOD records and columns and
 //! the per-ray cones (each numbered once, in `glsl/bindings.glsl`: [`super::bindings`]). Counting
 //! each ray's work ([`RayCounters`]) takes a second pipeline of the same shader, made on first
 //! use, with the specialization constant `rbvh_count` set: the timed pipeline compiles the
@@ -109,6 +109,21 @@ const JUMPS_CONSTANT_ID: u32 = 1;
 /// (`glsl/trace_rbvh_main.glsl`): the atlas holds height codes alone (two to a word, four in its
 /// narrow band: [`Atlas::device_words`](crate::rbvh::Atlas::device_words)).
 const HEIGHT_ONLY_CONSTANT_ID: u32 = 2;
+
+/// One of a ray's two counter records as the trace shaders keep them (`glsl/trace_io.glsl`):
+/// [`RayCounters`]' first eight words in the first binding's, its last two (then six reserved) in
+/// the second's. 32 bytes, as a ray and a hit are, so that one register holds the offset of a
+/// ray's ray, hit and counters through the walk (docs/speed.md, "Counters out of the registers").
+type CounterRecord = [u32; 8];
+const _: () = assert!(std::mem::size_of::<CounterRecord>() == std::mem::size_of::<Ray>());
+
+/// A ray's counters from its two records.
+fn ray_counters(head: &CounterRecord, tail: &CounterRecord) -> RayCounters {
+    let mut words = [0u32; 10];
+    words[..8].copy_from_slice(head);
+    words[8..].copy_from_slice(&tail[..2]);
+    bytemuck::cast(words)
+}
 
 /// The name of `kind`'s trace shader (its pipeline's name).
 pub(crate) fn shader_name(kind: Kind) -> &'static str {
@@ -229,7 +244,7 @@ pub struct TraceBinding {
     set: DescriptorSet,
     status: Buffer,
     count: u32,
-    /// Keeps the (unused) per-ray counters binding valid.
+    /// Keeps the (unused) per-ray counters bindings valid.
     _counters: Buffer,
 }
 
@@ -763,6 +778,7 @@ impl Tracer {
                 (hits.buffer, hits.offset),
                 (status.raw(), 0),
                 (counters.raw(), 0),
+                (counters.raw(), 0),
             ],
             cones.map(|c| (c.buffer, c.offset)),
         );
@@ -864,7 +880,7 @@ impl Tracer {
     /// arrays when bound and the cones.
     fn views(
         &self,
-        per_trace: [(vk::Buffer, u64); 4],
+        per_trace: [(vk::Buffer, u64); 5],
         cones: Option<(vk::Buffer, u64)>,
     ) -> Vec<(vk::Buffer, u64)> {
         let bound = self.reach == Reach::Bindings;
@@ -992,12 +1008,9 @@ impl Tracer {
         progress: Option<&dyn Progress>,
         passes: u32,
     ) -> Result<Traced> {
-        // Batches bounded by the largest per-ray buffer: the counters when counting, else the rays.
-        let per_ray = if counters {
-            std::mem::size_of::<RayCounters>()
-        } else {
-            std::mem::size_of::<Ray>()
-        } as u64;
+        // Batches bounded by the largest per-ray buffer (each record of the counters is as large
+        // as a ray).
+        let per_ray = std::mem::size_of::<Ray>() as u64;
         let batch =
             (self.ctx.limits().max_storage_buffer_range / per_ray).clamp(1, 1 << 22) as usize;
         let batch = if progress.is_some() {
@@ -1051,15 +1064,15 @@ impl Tracer {
             rays.len() as u64 * std::mem::size_of::<Hit>() as u64,
         )?;
         let mut status = self.ctx.zeroed_storage("trace status", 4)?;
-        let counter_bytes = std::mem::size_of::<RayCounters>() as u64;
-        let mut counters_buf = self.ctx.zeroed_storage(
-            "per-ray counters",
-            if counters {
-                rays.len() as u64 * counter_bytes
-            } else {
-                4
-            },
-        )?;
+        let counter_bytes = if counters {
+            rays.len() as u64 * std::mem::size_of::<CounterRecord>() as u64
+        } else {
+            4
+        };
+        let mut counters_head = self.ctx.zeroed_storage("per-ray counters", counter_bytes)?;
+        let mut counters_tail = self
+            .ctx
+            .zeroed_storage("per-ray counters (two-level)", counter_bytes)?;
         let flags = match query {
             Query::Closest => 0,
             Query::Any => FLAG_ANY_HIT,
@@ -1073,7 +1086,8 @@ impl Tracer {
                 (ray_buf.raw(), 0),
                 (hit_buf.raw(), 0),
                 (status.raw(), 0),
-                (counters_buf.raw(), 0),
+                (counters_head.raw(), 0),
+                (counters_tail.raw(), 0),
             ],
             cone_buf.as_ref().map(|c| (c.raw(), 0)),
         );
@@ -1098,9 +1112,15 @@ impl Tracer {
         let mut hits: Vec<Hit> = self.ctx.read(&mut hit_buf)?;
         hits.truncate(rays.len());
         let counters = if counters {
-            let mut c: Vec<RayCounters> = self.ctx.read(&mut counters_buf)?;
-            c.truncate(rays.len());
-            Some(c)
+            let head: Vec<CounterRecord> = self.ctx.read(&mut counters_head)?;
+            let tail: Vec<CounterRecord> = self.ctx.read(&mut counters_tail)?;
+            Some(
+                head.iter()
+                    .zip(&tail)
+                    .take(rays.len())
+                    .map(|(head, tail)| ray_counters(head, tail))
+                    .collect(),
+            )
         } else {
             None
         };
