@@ -12,8 +12,9 @@ use crate::structure::Kind;
 include!(concat!(env!("OUT_DIR"), "/bindings.rs"));
 
 /// The bindings of `kind`'s trace shader for arrays reached by `reach`, in the order the tracer
-/// gives its buffers: the structure's arrays where bound, rays, hits, status and the counters' two
-/// records, then with levels of detail the LOD's arrays where bound and the cones.
+/// gives its buffers (ascending but for the instances'): the structure's arrays where bound, rays,
+/// hits, status and the counters' first record, then with levels of detail the LOD's arrays where
+/// bound and the cones, then the counters' second record.
 pub(crate) fn trace(kind: Kind, reach: Reach) -> Vec<u32> {
     let structure: &[u32] = match kind {
         Kind::Exact => &[BVH_NODES, BVH_TRIS],
@@ -30,13 +31,14 @@ pub(crate) fn trace(kind: Kind, reach: Reach) -> Vec<u32> {
     if bound {
         bindings.extend(structure);
     }
-    bindings.extend([RAYS, HITS, STATUS, COUNTERS, COUNTERS_TAIL]);
+    bindings.extend([RAYS, HITS, STATUS, COUNTERS]);
     if bound {
         bindings.extend(lod);
     }
     if kind == Kind::RbvhLod {
         bindings.push(CONES);
     }
+    bindings.push(COUNTERS_TAIL);
     bindings
 }
 

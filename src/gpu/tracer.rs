@@ -876,23 +876,26 @@ impl Tracer {
     }
 
     /// The buffers of one trace in the pipeline's binding order ([`bindings::trace`]): the
-    /// structure's when bound, the per-trace four (rays, hits, status, counters), then the LOD
-    /// arrays when bound and the cones.
+    /// structure's when bound, the per-trace four (rays, hits, status, the counters' first
+    /// record), then the LOD arrays when bound and the cones, then the counters' second record
+    /// (`per_trace`'s fifth).
     fn views(
         &self,
         per_trace: [(vk::Buffer, u64); 5],
         cones: Option<(vk::Buffer, u64)>,
     ) -> Vec<(vk::Buffer, u64)> {
         let bound = self.reach == Reach::Bindings;
+        let [rays, hits, status, counters_head, counters_tail] = per_trace;
         let mut views: Vec<(vk::Buffer, u64)> = Vec::new();
         if bound {
             views.extend(self.structure.iter().map(|b| (b.raw(), 0)));
         }
-        views.extend(per_trace);
+        views.extend([rays, hits, status, counters_head]);
         if bound {
             views.extend(self.lod.iter().flatten().map(|b| (b.raw(), 0)));
         }
         views.extend(cones);
+        views.push(counters_tail);
         views
     }
 
