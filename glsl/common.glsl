@@ -21,7 +21,7 @@ struct Hit {
     uint reserved2;
 };
 
-// One ray's work (src/probe.rs, RayCounters; 40 bytes, tests/layout.rs checks the order): counted
+// One ray's work (src/probe.rs, RayCounters; 40 bytes, tests/glsl_header.rs checks the order): counted
 // by the traversals only where the includer defines RBVH_COUNT as a true condition before the
 // #include (the trace shaders define it as a specialization constant, so that their timed runs
 // compile the counting away); other includers pay nothing. The traversal (traverse.glsl) resets

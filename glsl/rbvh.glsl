@@ -745,7 +745,8 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
             if (t < 0.0 && (dirs & RBVH_WALK_TESTS) != 0u) {
                 t = rbvh_cell_triangles(leaf, fr, cell, kind, cut);
                 // Counted after the test: counted before it, the counting pipelines took 8 VGPRs
-                // more on RADV navi21 (docs/speed.md, "Counters out of the registers").
+                // more than the timed ones on RADV navi21 with the counters in trace_io.glsl's
+                // records (docs/speed.md, "Counters out of the registers").
                 RBVH_COUNT_ADD(cells_tested, 1u);
             }
             if (t >= 0.0) {

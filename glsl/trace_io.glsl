@@ -4,15 +4,19 @@
 // else each counters binding may hold a 4-byte dummy). Included before the structure's headers, so
 // that the traversals count in the ray's records (RBVH_COUNTER, see common.glsl).
 //
-// Every per-ray record here is 32 bytes, so that one register holds the offset of ray i's ray, hit
-// and counters through the walk: the counters, ten words, are split into a record of eight and a
+// The ray, the hit and both counter records are 32 bytes each, likely so that one offset serves
+// them all through the walk: the counters, ten words, are split into a record of eight and a
 // record of the two-level structures' two (six words reserved), each in its own binding. Counted
-// in registers instead, or in one 40-byte record, they took the counting pipelines 16 and 8 VGPRs
-// above the timed ones on RADV navi21 (docs/speed.md, "Counters out of the registers").
+// in registers instead, they took the counting pipelines 16 VGPRs above the timed ones on RADV
+// navi21; in one 40-byte record, 8 (docs/speed.md, "Counters out of the registers", where the
+// split and counting cells_tested after the cell's test reach the timed ones' 56 together).
 #ifndef RBVH_TRACE_IO_GLSL
 #define RBVH_TRACE_IO_GLSL
 
 // Before common.glsl, which otherwise counts in a private variable.
+#ifdef RBVH_COMMON_GLSL
+#error "include trace_io.glsl before common.glsl and the structure's headers, so that they count in its records"
+#endif
 #define RBVH_COUNTER(field) rbvh_counters_of_##field.field
 #define rbvh_counters_of_nodes counters_head[rbvh_ray_slot]
 #define rbvh_counters_of_leaves counters_head[rbvh_ray_slot]

@@ -1,6 +1,6 @@
 //! What a traversal reports about its own work, in the same terms on the GPU and the CPU twins:
-//! per-ray [`RayCounters`] (`glsl/common.glsl`'s `RbvhCounters`, counted by the trace shaders when
-//! counting is specialised on, in two records of `glsl/trace_io.glsl`) and the reads a ray makes of the structure's device arrays
+//! per-ray [`RayCounters`] (counted by the trace shaders when counting is specialised on, in the
+//! two records of `glsl/trace_io.glsl`; `glsl/common.glsl`'s `RbvhCounters` where an engine counts) and the reads a ray makes of the structure's device arrays
 //! ([`Read`], reported to a [`Probe`] by the CPU twins), from which `crate::bench::traffic` models
 //! memory traffic.
 //!
@@ -10,7 +10,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
-/// One ray's work, counted the same way by the device (`RbvhCounters` in `glsl/common.glsl`) and
+/// One ray's work, counted the same way by the device (`glsl/trace_io.glsl`'s records) and
 /// by the CPU twins (`Bvh::closest_hit`, `Rbvh::closest_hit`), so the two can be compared ray by
 /// ray. 40 bytes, 10 words in this order (`tests/layout.rs` checks the trace shaders' two records,
 /// the first eight words and the last two, and `tests/glsl_header.rs` the struct an engine

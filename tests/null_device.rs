@@ -123,10 +123,10 @@ fn every_pipeline_compiles_on_the_null_device_and_reports_its_registers() {
     };
     for p in &pipelines {
         let (vgprs, spilled) = (number(p, 0), number(p, 2) + number(p, 3));
-        // The two-level tracers within the flat ones' bounds (since the instance hooks return
-        // their results with one exit and the hit's instance is named where the ray leaves it;
-        // the exact one took 56, the RBVH one 72, before: docs/speed.md, "The two-level exact
-        // tracer's registers", "The two-level RBVH tracer's registers").
+        // Every trace pipeline, the two-level ones within the flat ones' bounds (since the
+        // instance hooks return their results with one exit and the hit's instance is named
+        // where the ray leaves it; the exact one took 56, the RBVH one 72, before: docs/speed.md,
+        // "The two-level exact tracer's registers", "The two-level RBVH tracer's registers").
         if !matches!(
             p.shader,
             "trace_exact"

@@ -1,8 +1,9 @@
 //! Traces rays on the device: through the exact BVH (`glsl/trace_exact.comp`), an RBVH
 //! (`glsl/trace_rbvh.comp`), or an RBVH with level of detail (`glsl/trace_rbvh_lod.comp`). All
 //! share the push constants ([`TraceParams`]) and the bindings after the structure's own buffers:
-//! rays, hits, status, the per-ray counters' two records ([`CounterRecord`]); the LOD trace then binds the LOD records and columns and
-//! the per-ray cones (each numbered once, in `glsl/bindings.glsl`: [`super::bindings`]). Counting
+//! rays, hits, status, the per-ray counters' first record; the LOD trace then binds the LOD
+//! records and columns and the per-ray cones; every trace then binds the counters' second record
+//! ([`CounterRecord`]; each binding numbered once, in `glsl/bindings.glsl`: [`super::bindings`]). Counting
 //! each ray's work ([`RayCounters`]) takes a second pipeline of the same shader, made on first
 //! use, with the specialization constant `rbvh_count` set: the timed pipeline compiles the
 //! counting away. Each shader has a `_bda` twin that reads the structure's
@@ -112,8 +113,9 @@ const HEIGHT_ONLY_CONSTANT_ID: u32 = 2;
 
 /// One of a ray's two counter records as the trace shaders keep them (`glsl/trace_io.glsl`):
 /// [`RayCounters`]' first eight words in the first binding's, its last two (then six reserved) in
-/// the second's. 32 bytes, as a ray and a hit are, so that one register holds the offset of a
-/// ray's ray, hit and counters through the walk (docs/speed.md, "Counters out of the registers").
+/// the second's. 32 bytes, as a ray and a hit are: with one 40-byte record the counting pipelines
+/// took a register more on RADV, likely the second offset held through the walk (docs/speed.md,
+/// "Counters out of the registers").
 type CounterRecord = [u32; 8];
 const _: () = assert!(std::mem::size_of::<CounterRecord>() == std::mem::size_of::<Ray>());
 
@@ -219,8 +221,8 @@ pub struct Tracer {
     /// The structure's leading arrays, in the shader's binding order (shared: a [`super::Painter`]
     /// may paint with the RBVH's atlas).
     structure: Vec<Arc<Buffer>>,
-    /// Level of detail: the LOD records and columns, bound after the per-trace buffers and
-    /// followed by the per-ray cones.
+    /// Level of detail: the LOD records and columns, bound after the per-trace buffers (but the
+    /// counters' second record) and followed by the per-ray cones.
     lod: Option<[Arc<Buffer>; 2]>,
     /// Sizes the shader needs (`ray_offset`, `ray_count` and `flags` are set per dispatch).
     sizes: TraceParams,
@@ -831,7 +833,7 @@ impl Tracer {
             }
         }
         // The LOD shader binds the last two structure arrays (records and columns) and the cones
-        // after the per-trace buffers.
+        // after the per-trace buffers (but the counters' second record, bound last).
         let kind = shader.0;
         let lod = if kind == Kind::RbvhLod {
             let tail = structure.split_off(structure.len().saturating_sub(2));
@@ -1075,7 +1077,7 @@ impl Tracer {
         let mut counters_head = self.ctx.zeroed_storage("per-ray counters", counter_bytes)?;
         let mut counters_tail = self
             .ctx
-            .zeroed_storage("per-ray counters (two-level)", counter_bytes)?;
+            .zeroed_storage("per-ray counters, second record", counter_bytes)?;
         let flags = match query {
             Query::Closest => 0,
             Query::Any => FLAG_ANY_HIT,
