@@ -41,6 +41,15 @@ pub enum Kind {
 }
 
 impl Kind {
+    /// Every kind, in the order the shader statistics list their pipelines.
+    pub const ALL: [Kind; 5] = [
+        Kind::Exact,
+        Kind::ExactInstanced,
+        Kind::Rbvh,
+        Kind::RbvhLod,
+        Kind::RbvhInstanced,
+    ];
+
     /// `"exact"`, `"rbvh"`, `"rbvh-lod"`, `"exact-instanced"` or `"rbvh-instanced"`, as records
     /// and file names write it.
     pub fn name(self) -> &'static str {

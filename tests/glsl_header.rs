@@ -291,7 +291,7 @@ fn header_reads_through_device_addresses_the_includer_passes() {
 #[test]
 fn an_engine_counts_in_ray_counters_order() {
     use rbvh::probe::RayCounters;
-    use std::mem::{offset_of, size_of};
+    use std::mem::size_of;
     let source = FOREIGN
         .replace(
             "#include \"rbvh.glsl\"",
@@ -303,28 +303,11 @@ fn an_engine_counts_in_ray_counters_order() {
             "counters[gl_GlobalInvocationID.x] = rbvh_counters;\n    depth[gl_GlobalInvocationID.x] =",
         );
     let r = spirv::reflect(&compile(&source).unwrap());
-    let glsl: Vec<(&str, usize)> = r.structs["RbvhCounters"]
-        .iter()
-        .map(|(m, o)| (m.as_str(), *o as usize))
-        .collect();
-    assert_eq!(
-        glsl,
-        [
-            ("nodes", offset_of!(RayCounters, nodes)),
-            ("leaves", offset_of!(RayCounters, leaves)),
-            ("walks", offset_of!(RayCounters, walks)),
-            ("cells", offset_of!(RayCounters, cells)),
-            ("cells_tested", offset_of!(RayCounters, cells_tested)),
-            ("jumps", offset_of!(RayCounters, jumps)),
-            ("triangle_leaves", offset_of!(RayCounters, triangle_leaves)),
-            ("triangles", offset_of!(RayCounters, triangles)),
-            ("instances", offset_of!(RayCounters, instances)),
-            ("top_nodes", offset_of!(RayCounters, top_nodes)),
-        ]
-    );
-    assert_eq!(
-        r.array_strides.get("RbvhCounters").copied(),
-        Some(size_of::<RayCounters>() as u32)
+    common::check_struct_layout(
+        &r,
+        "RbvhCounters",
+        size_of::<RayCounters>(),
+        &common::ray_counter_fields(),
     );
 }
 

@@ -10,25 +10,11 @@ use rbvh::geom::{Hit, Ray};
 use rbvh::gpu::{shaders, spirv};
 use rbvh::probe::RayCounters;
 
+mod common;
+use common::{check_struct_layout as check, ray_counter_fields};
+
 fn reflect_trace_exact() -> spirv::Reflection {
     spirv::reflect(&shaders::words(shaders::TRACE_EXACT).unwrap())
-}
-
-fn check(r: &spirv::Reflection, name: &str, size: usize, rust: &[(&str, usize)]) {
-    let glsl = r
-        .structs
-        .get(name)
-        .unwrap_or_else(|| panic!("struct {name} not in SPIR-V: {:?}", r.structs.keys()));
-    let glsl: Vec<(&str, usize)> = glsl
-        .iter()
-        .map(|(m, o)| (m.as_str(), *o as usize))
-        .collect();
-    assert_eq!(glsl, rust, "{name}: GLSL member offsets differ from Rust");
-    assert_eq!(
-        r.array_strides.get(name).copied(),
-        Some(size as u32),
-        "{name}: array stride"
-    );
 }
 
 #[test]
@@ -95,21 +81,10 @@ fn bvh_triangle_layout_matches() {
 fn counter_layout_matches_in_every_trace_shader() {
     // The trace shaders count in two 32-byte records a ray (glsl/trace_io.glsl): RayCounters'
     // first eight words, then its last two and six reserved.
-    let head = [
-        ("nodes", offset_of!(RayCounters, nodes)),
-        ("leaves", offset_of!(RayCounters, leaves)),
-        ("walks", offset_of!(RayCounters, walks)),
-        ("cells", offset_of!(RayCounters, cells)),
-        ("cells_tested", offset_of!(RayCounters, cells_tested)),
-        ("jumps", offset_of!(RayCounters, jumps)),
-        ("triangle_leaves", offset_of!(RayCounters, triangle_leaves)),
-        ("triangles", offset_of!(RayCounters, triangles)),
-    ];
-    let tail = [
-        ("instances", offset_of!(RayCounters, instances) - 32),
-        ("top_nodes", offset_of!(RayCounters, top_nodes) - 32),
-        ("reserved", 8),
-    ];
+    let fields = ray_counter_fields();
+    let (head, tail) = fields.split_at(8);
+    let mut tail: Vec<(&str, usize)> = tail.iter().map(|&(name, at)| (name, at - 32)).collect();
+    tail.push(("reserved", 8));
     assert_eq!(size_of::<RayCounters>(), 40);
     for spirv_bytes in [
         shaders::TRACE_EXACT,
@@ -124,7 +99,7 @@ fn counter_layout_matches_in_every_trace_shader() {
         shaders::TRACE_RBVH_INSTANCES_BDA,
     ] {
         let r = spirv::reflect(&shaders::words(spirv_bytes).unwrap());
-        check(&r, "RbvhCountersHead", 32, &head);
+        check(&r, "RbvhCountersHead", 32, head);
         check(&r, "RbvhCountersTail", 32, &tail);
     }
 }

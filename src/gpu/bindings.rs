@@ -79,13 +79,7 @@ mod tests {
     #[test]
     fn every_pipeline_binds_what_its_shader_declares() {
         for reach in [Reach::Bindings, Reach::DeviceAddresses] {
-            for kind in [
-                Kind::Exact,
-                Kind::ExactInstanced,
-                Kind::Rbvh,
-                Kind::RbvhLod,
-                Kind::RbvhInstanced,
-            ] {
+            for kind in Kind::ALL {
                 let rust = trace(kind, reach);
                 let mut sorted = rust.clone();
                 sorted.sort_unstable();

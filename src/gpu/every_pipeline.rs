@@ -24,13 +24,7 @@ pub fn compile_every_pipeline(ctx: &Context) -> Result<Vec<CompiledPipeline>> {
     let default_jumps = !ctx.limits().cpu;
     let mut compiled = Vec::new();
     for &reach in &reaches {
-        for kind in [
-            Kind::Exact,
-            Kind::ExactInstanced,
-            Kind::Rbvh,
-            Kind::RbvhLod,
-            Kind::RbvhInstanced,
-        ] {
+        for kind in Kind::ALL {
             let texel_formats: &[TexelFormat] = if matches!(kind, Kind::Rbvh | Kind::RbvhInstanced)
             {
                 &[TexelFormat::HeightNormal, TexelFormat::Height]

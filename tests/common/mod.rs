@@ -211,3 +211,46 @@ pub fn moved_as_fresh(
     assert_ne!(after, before, "the instances moved");
     after
 }
+
+/// Checks that struct `name` of the reflected SPIR-V `r` has the members and byte offsets `rust`
+/// (its `#[repr(C)]` mirror's, from `offset_of!`) and is an array element of stride `size`.
+pub fn check_struct_layout(
+    r: &rbvh::gpu::spirv::Reflection,
+    name: &str,
+    size: usize,
+    rust: &[(&str, usize)],
+) {
+    let glsl = r
+        .structs
+        .get(name)
+        .unwrap_or_else(|| panic!("struct {name} not in SPIR-V: {:?}", r.structs.keys()));
+    let glsl: Vec<(&str, usize)> = glsl
+        .iter()
+        .map(|(m, o)| (m.as_str(), *o as usize))
+        .collect();
+    assert_eq!(glsl, rust, "{name}: GLSL member offsets differ from Rust");
+    assert_eq!(
+        r.array_strides.get(name).copied(),
+        Some(size as u32),
+        "{name}: array stride"
+    );
+}
+
+/// `RayCounters`' fields and byte offsets, in order: what `RbvhCounters` (glsl/common.glsl) and the
+/// trace shaders' two records (glsl/trace_io.glsl) must mirror.
+pub fn ray_counter_fields() -> [(&'static str, usize); 10] {
+    use rbvh::probe::RayCounters;
+    use std::mem::offset_of;
+    [
+        ("nodes", offset_of!(RayCounters, nodes)),
+        ("leaves", offset_of!(RayCounters, leaves)),
+        ("walks", offset_of!(RayCounters, walks)),
+        ("cells", offset_of!(RayCounters, cells)),
+        ("cells_tested", offset_of!(RayCounters, cells_tested)),
+        ("jumps", offset_of!(RayCounters, jumps)),
+        ("triangle_leaves", offset_of!(RayCounters, triangle_leaves)),
+        ("triangles", offset_of!(RayCounters, triangles)),
+        ("instances", offset_of!(RayCounters, instances)),
+        ("top_nodes", offset_of!(RayCounters, top_nodes)),
+    ]
+}
