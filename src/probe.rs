@@ -1,8 +1,8 @@
 //! What a traversal reports about its own work, in the same terms on the GPU and the CPU twins:
 //! per-ray [`RayCounters`] (counted by the trace shaders when counting is specialised on, in the
-//! two records of `glsl/trace_io.glsl`; `glsl/common.glsl`'s `RbvhCounters` where an engine counts) and the reads a ray makes of the structure's device arrays
-//! ([`Read`], reported to a [`Probe`] by the CPU twins), from which `crate::bench::traffic` models
-//! memory traffic.
+//! two records of `glsl/trace_io.glsl`; `glsl/common.glsl`'s `RbvhCounters` where an engine
+//! counts) and the reads a ray makes of the structure's device arrays ([`Read`], reported to a
+//! [`Probe`] by the CPU twins), from which `crate::bench::traffic` models memory traffic.
 //!
 //! The counters are how the "where a ray's work goes" tables of docs/ray-work.md are made, and how a speed
 //! difference is explained rather than only measured: the exact BVH's and the RBVH's steps are

@@ -3,10 +3,10 @@
 //! share the push constants ([`TraceParams`]) and the bindings after the structure's own buffers:
 //! rays, hits, status, the per-ray counters' first record; the LOD trace then binds the LOD
 //! records and columns and the per-ray cones; every trace then binds the counters' second record
-//! ([`CounterRecord`]; each binding numbered once, in `glsl/bindings.glsl`: [`super::bindings`]). Counting
-//! each ray's work ([`RayCounters`]) takes a second pipeline of the same shader, made on first
-//! use, with the specialization constant `rbvh_count` set: the timed pipeline compiles the
-//! counting away. Each shader has a `_bda` twin that reads the structure's
+//! ([`CounterRecord`]; each binding numbered once, in `glsl/bindings.glsl`:
+//! [`super::bindings`]). Counting each ray's work ([`RayCounters`]) takes a second pipeline of the
+//! same shader, made on first use, with the specialization constant `rbvh_count` set: the timed
+//! pipeline compiles the counting away. Each shader has a `_bda` twin that reads the structure's
 //! arrays through buffer device addresses rather than bindings, for arrays over
 //! `maxStorageBufferRange` ([`Reach`]). The RBVH shaders' block jumps are a second specialization
 //! constant, `rbvh_block_jumps` ([`Tracer::block_jumps`]).
