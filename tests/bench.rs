@@ -822,7 +822,8 @@ fn placed_bench(dir: &Path) -> BenchConfig {
 /// the two-level exact BVH is the referee, checked against its CPU twin, and the two-level RBVH
 /// errs against it as it errs against the flat exact BVH beside the flat scene: the two referees
 /// hit alike. Errors relative to each object are measured on the object as its instance places
-/// it. Points and levels of detail, built over the flat scene, are refused.
+/// it. Points and levels of detail, built over the flat scene, are refused, and so are the steps,
+/// which the flat structures' CPU twins count.
 #[test]
 fn a_scene_measured_in_two_levels_alone_is_refereed_by_the_two_level_exact_bvh() {
     let dir = tempfile::tempdir().unwrap();
@@ -860,17 +861,41 @@ fn a_scene_measured_in_two_levels_alone_is_refereed_by_the_two_level_exact_bvh()
             assert!(e.t_err_object_p99.is_some(), "{e:?}");
         }
     }
-    for (points, plain, field) in [
-        (Some(PointSource::Sampled(1000)), true, "points"),
-        (None, false, "plain"),
+    let lod = Some(rbvh::lod::LodParams::default());
+    for (points, plain, lod, steps, field) in [
+        (
+            Some(PointSource::Sampled(1000)),
+            true,
+            None,
+            false,
+            "points",
+        ),
+        (None, false, lod, false, "lod"),
+        (None, true, lod, false, "lod"),
+        (None, true, None, true, "steps"),
     ] {
         let mut refused = config.clone();
         refused.points = points;
         refused.plain = plain;
-        refused.lod = Some(rbvh::lod::LodParams::default());
+        refused.lod = lod;
+        refused.steps = steps;
         match bench::run(&refused) {
             Err(rbvh::Error::InvalidParameter { name, .. }) => assert_eq!(name, field),
             other => panic!("{field}: {:?}", other.map(|r| r.results.len())),
         }
     }
+}
+
+/// An RBVH of points is built over the flat scene: a scene with instances benched with `--points`
+/// is measured flat alone, with no two-level row built from the meshes' triangles beside it.
+#[test]
+fn points_measure_a_scene_with_instances_flat() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut config = placed_bench(dir.path());
+    config.points = Some(PointSource::Sampled(4000));
+    config.ray_types = vec![RayType::Primary];
+    let report = bench::run(&config).unwrap();
+    let methods: Vec<Kind> = report.results.iter().map(|r| r.method).collect();
+    assert_eq!(methods, [Kind::Exact, Kind::Rbvh]);
+    assert_eq!(report.results[1].points, 4000);
 }

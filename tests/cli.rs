@@ -993,6 +993,19 @@ fn point_clouds_render_build_and_bench() {
     ]);
     assert!(stdout.contains("built from 20000 points"), "{stdout}");
     assert!(stdout.contains(" Q1 "), "{stdout}");
+    // A scene with instances: its points are sampled over it flattened, and no two-level line
+    // of its meshes' triangles stands beside them.
+    let (stdout, _) = succeeds(&[
+        "build",
+        "--scene",
+        "grove-instanced",
+        "--points",
+        "5000",
+        "--quality",
+        "0",
+    ]);
+    assert!(stdout.contains("built from 5000 points"), "{stdout}");
+    assert!(!stdout.contains("two-level"), "{stdout}");
     let bench = [
         &[
             "bench",
@@ -1411,6 +1424,50 @@ fn flags_without_effect_are_refused() {
             ]),
             vec!["--seed draws", "has none of them"],
         ),
+        // paint samples every triangle: the rules for tracing some exactly have none to choose.
+        (
+            paint(&["--exact-crease", "45"]),
+            vec!["--exact-crease: paint samples every triangle"],
+        ),
+        (
+            paint(&["--exact-from-texels", "2"]),
+            vec!["--exact-from-texels: paint samples every triangle"],
+        ),
+        (
+            paint(&["--exact-edge-fraction", "0.01"]),
+            vec!["--exact-edge-fraction: paint samples every triangle"],
+        ),
+        // build: a comparison of flat RBVHs where the scene is saved in two levels.
+        (
+            words(&[
+                "build",
+                "--scene",
+                "grove-instanced",
+                "--out",
+                file,
+                "--compare-splits",
+            ]),
+            vec!["--compare-splits compares flat RBVHs", "--instances flat"],
+        ),
+        // bench: steps are the flat plain levels' and the exact BVH's; levels of detail are flat.
+        (
+            words(&["bench", "--method", "exact,rbvh-lod", "--steps"]),
+            vec!["--steps counts", "add rbvh to --method"],
+        ),
+        (
+            words(&["bench", "--instances", "two-level", "--steps"]),
+            vec!["--steps: where steps go", "--instances auto or flat"],
+        ),
+        (
+            words(&[
+                "bench",
+                "--method",
+                "rbvh,rbvh-lod",
+                "--instances",
+                "two-level",
+            ]),
+            vec!["--method rbvh-lod: levels of detail", "drop rbvh-lod"],
+        ),
         // bench: RBVHs beside the exact BVH, seams and height-only levels of the plain levels.
         (
             words(&["bench", "--method", "exact"]),
@@ -1529,12 +1586,18 @@ fn help_says_what_each_command_takes() {
     }
     let paint = help("paint");
     assert!(!paint.contains("--method"), "{paint}");
-    assert!(
-        !paint
-            .lines()
-            .any(|l| l.trim_start().starts_with("--sample-all")),
-        "{paint}"
-    );
+    for flag in [
+        "--sample-all",
+        "--exact-from-texels",
+        "--exact-edge-fraction",
+        "--exact-crease",
+    ] {
+        assert!(
+            !paint.lines().any(|l| l.trim_start().starts_with(flag)),
+            "{flag}: {paint}"
+        );
+    }
+    assert!(paint.contains("`auto` and `flat` alike"), "{paint}");
     let trace = help("trace");
     for flag in ["--camera-eye", "--camera-target", "--vfov"] {
         assert!(!trace.contains(flag), "{trace}");

@@ -120,7 +120,10 @@ pub fn run_observed(
         let two_level = match config.instances {
             Instances::Flat => None,
             Instances::TwoLevel => Some(placed.clone()),
-            Instances::Auto => (placed.instances.len() > 1).then(|| placed.clone()),
+            // An RBVH of points is built over the flat scene: no two-level candidate.
+            Instances::Auto => {
+                (placed.instances.len() > 1 && config.points.is_none()).then(|| placed.clone())
+            }
         };
         let fits = match config.instances {
             Instances::TwoLevel => None,
@@ -132,9 +135,13 @@ pub fn run_observed(
                 return Err(too_large)
             }
             Some(Err(too_large)) => {
+                let steps = match config.steps {
+                    true => " (no steps: they are counted for flat structures)",
+                    false => "",
+                };
                 observe(Event::Warning(format!(
                     "{too_large}; measured in two levels alone, refereed by the two-level exact \
-                     BVH"
+                     BVH{steps}"
                 )));
                 None
             }

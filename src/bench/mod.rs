@@ -114,7 +114,9 @@ pub struct BenchConfig {
     pub traffic: bool,
     /// Also trace the exact BVH's and every plain RBVH level's CPU twin to say where each ray's
     /// steps go ([`steps`]): nodes by depth, why leaves handed to the march gave no hit, leaf
-    /// boxes at the hit. Costs a CPU trace per method and ray type.
+    /// boxes at the hit. Costs a CPU trace per method and ray type. Flat structures only: the
+    /// two-level ones and the levels of detail have no such twin, so it needs the plain levels
+    /// and a flat scene.
     pub steps: bool,
     /// Rays aimed at every plain RBVH level's seams between leaves ([`seams`]),
     /// traced by the CPU twins of it and of the exact BVH, for the level's leak count (0: none).
@@ -236,14 +238,30 @@ impl BenchConfig {
                         .to_string(),
                 ));
             }
-            if !self.plain {
+            if self.lod.is_some() {
                 return Err(Error::param(
-                    "plain",
+                    "lod",
                     "levels of detail are built over a flat RBVH: in two levels alone, measure \
                      the plain levels"
                         .to_string(),
                 ));
             }
+            if self.steps {
+                return Err(Error::param(
+                    "steps",
+                    "where steps go is counted by the flat structures' CPU twins: not with \
+                     instances in two levels alone"
+                        .to_string(),
+                ));
+            }
+        }
+        if self.steps && !self.plain {
+            return Err(Error::param(
+                "steps",
+                "where steps go is counted for the levels traced without level of detail, and \
+                 none is measured: add the plain levels"
+                    .to_string(),
+            ));
         }
         if self.plot_dir.is_some() && !self.ray_types.contains(&RayType::Primary) {
             return Err(Error::param(

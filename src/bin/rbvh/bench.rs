@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use crate::progress::Bar;
 use anyhow::{Context as _, Result};
 use rbvh::bench::{self, BenchConfig, Device, Event, RayType};
+use rbvh::gpu::Context;
 use rbvh::scene::PointSource;
 
 use crate::prepare::{
@@ -33,8 +34,8 @@ pub struct Args {
     points: PointsArg,
     /// How a scene with instances is measured: `auto` (flat and in two levels, and in two levels
     /// alone, refereed by the two-level exact BVH, where the flat copy would not fit the host's
-    /// memory), `flat` (flat alone), `two-level` (in two levels alone; not with --points or
-    /// rbvh-lod alone).
+    /// memory; flat alone with --points, whose RBVHs are built over the flat scene), `flat` (flat
+    /// alone), `two-level` (in two levels alone; not with --points, rbvh-lod or --steps).
     #[arg(long, value_enum, default_value_t = InstancesArg::Auto)]
     instances: InstancesArg,
     /// Ray types to trace, comma-separated: primary, ao, shadow, diffuse.
@@ -64,8 +65,8 @@ pub struct Args {
     /// samples (default: a fixed seed, so runs repeat; refused where none of them is traced).
     #[arg(long)]
     seed: Option<u64>,
-    /// Lavapipe worker threads (sets LP_NUM_THREADS; default: Mesa's, one per CPU). Other
-    /// drivers do not read it.
+    /// Lavapipe worker threads (sets LP_NUM_THREADS; default: Mesa's, one per CPU). Refused on
+    /// other devices, which do not read it.
     #[arg(long)]
     threads: Option<u32>,
     /// Vulkan device to use: any part of its name (default: $RBVH_DEVICE, else the best GPU, else lavapipe).
@@ -88,9 +89,10 @@ pub struct Args {
     #[arg(long)]
     traffic: bool,
     /// Also say where each ray's steps go, from the CPU twins of the exact BVH and each RBVH
-    /// level: inner nodes by tree depth, the leaves handed to the march by what came of them
+    /// level traced without level of detail (flat structures: not the two-level ones, not
+    /// rbvh-lod): inner nodes by tree depth, the leaves handed to the march by what came of them
     /// (tile box missed, no surface met, surface behind the nearest hit, the nearest), and the
-    /// leaf boxes holding a hit's point (slower: a CPU trace each).
+    /// leaf boxes holding a hit's point (slower: a CPU trace each). Needs rbvh in --method.
     #[arg(long)]
     steps: bool,
     /// Rays aimed at each RBVH level's seams between leaves (their rims and corners), traced by
@@ -127,6 +129,23 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
          --method measures none: add rbvh to --method"
     );
     anyhow::ensure!(
+        plain || !a.steps,
+        "--steps counts where the steps of the levels traced without level of detail go, and \
+         --method measures none: add rbvh to --method"
+    );
+    if a.instances == InstancesArg::TwoLevel {
+        anyhow::ensure!(
+            !a.steps,
+            "--steps: where steps go is counted by the flat structures' CPU twins, and \
+             --instances two-level measures none: give --instances auto or flat"
+        );
+        anyhow::ensure!(
+            !lod,
+            "--method rbvh-lod: levels of detail are built over a flat RBVH, and --instances \
+             two-level measures none: drop rbvh-lod, or give --instances auto or flat"
+        );
+    }
+    anyhow::ensure!(
         !given.has("ao_radius") || a.rays.contains(&RayType::Ao),
         "--ao-radius is the length of ambient-occlusion rays, and --rays traces none: add ao to \
          --rays"
@@ -137,8 +156,14 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         || matches!(a.points.points, Some(PointSource::Sampled(_)));
     anyhow::ensure!(
         !given.has("seed") || seeded,
-        "--seed draws the directions of ao and diffuse rays, the seam rays and --points N's \
-         samples, and this run has none of them (add ao or diffuse to --rays, or --seam-rays)"
+        "--seed draws the directions of ao and diffuse rays, the seam rays (of the levels rbvh \
+         measures) and --points N's samples, and this run has none of them: add ao or diffuse \
+         to --rays{}",
+        if plain && a.seam_rays == 0 {
+            ", or give --seam-rays more than 0"
+        } else {
+            ""
+        }
     );
     if let Some(threads) = a.threads {
         anyhow::ensure!(threads >= 1, "--threads must be at least 1");
@@ -150,9 +175,25 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     }
     let quality = &a.structures.quality;
     let levels = quality.quality_levels()?;
+    let options = context_options(a.device.as_deref(), a.validate)?;
+    let device = match a.threads {
+        None => Device::Create(options),
+        // Only lavapipe reads LP_NUM_THREADS: the device is made here, after it is set, to say
+        // so before anything is measured on another.
+        Some(_) => {
+            let ctx = Context::new(&options).context("creating the Vulkan device")?;
+            anyhow::ensure!(
+                ctx.device_name().contains("llvmpipe"),
+                "--threads sets lavapipe's worker threads (LP_NUM_THREADS), and {} does not read \
+                 it: drop --threads",
+                ctx.device_name()
+            );
+            Device::Existing(ctx)
+        }
+    };
     let mut config = BenchConfig::new(
         a.scene.iter().map(|s| s.trim().to_string()).collect(),
-        Device::Create(context_options(a.device.as_deref(), a.validate)?),
+        device,
     );
     config.levels = levels;
     config.texels = quality.texel_formats();

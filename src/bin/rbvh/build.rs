@@ -65,12 +65,19 @@ pub fn run(a: Args) -> Result<()> {
             "--points builds a flat RBVH of points: give --instances flat"
         );
         anyhow::ensure!(
+            !a.compare_splits,
+            "--compare-splits compares flat RBVHs' subdivisions, and --out saves this scene in two \
+             levels: give --instances flat"
+        );
+        anyhow::ensure!(
             levels.len() == 1,
             "--out saves one level: give a single --quality and a single --texels"
         );
         return two_levels(&placed, &levels, table, a.out.as_deref());
     }
-    if table && placed.instances.len() > 1 {
+    // An RBVH of points is built over the flat scene: the two-level lines, of the meshes'
+    // triangles, would not be what --points asked for.
+    if table && placed.instances.len() > 1 && a.points.points.is_none() {
         two_levels(&placed, &levels, true, None)?;
     }
     if let Err(e) = fits {
@@ -78,6 +85,11 @@ pub fn run(a: Args) -> Result<()> {
         anyhow::ensure!(
             a.out.is_none(),
             "{e}; --out with --instances flat saves a flat RBVH"
+        );
+        anyhow::ensure!(
+            a.points.points.is_none() && !a.compare_splits,
+            "{e}: --points and --compare-splits build flat RBVHs, and this scene is held in two \
+             levels alone"
         );
         eprintln!("no flat structures: {e}");
         return Ok(());

@@ -34,6 +34,16 @@ use crate::progress::step;
 // Paint samples every triangle it builds (paint is stored in texels): --sample-all is what it
 // does anyway, so it is hidden and refused rather than accepted for nothing.
 #[command(mut_arg("sample_all", |a| a.hide(true)))]
+// The presets' rules for tracing triangles exactly choose what is not sampled: with every
+// triangle sampled they have nothing to choose, so they are hidden and refused too.
+#[command(mut_arg("exact_from_texels", |a| a.hide(true)))]
+#[command(mut_arg("exact_edge_fraction", |a| a.hide(true)))]
+#[command(mut_arg("exact_crease", |a| a.hide(true)))]
+#[command(mut_arg("instances", |a| a.hide_possible_values(true).help(
+    "How a scene with instances is painted: flat, every placement copied in place with texels \
+     of its own (`auto` and `flat` alike; `two-level` is refused: a mesh's texels held once \
+     would paint every instance of it)"
+)))]
 // Paint writes a plain RBVH's texels: the one method it takes is the default, and levels of
 // detail (which have no texels to paint) are not built.
 #[command(mut_arg("method", |a| a.default_value("rbvh").hide(true)))]
@@ -77,6 +87,17 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         !given.has("sample_all"),
         "--sample-all: paint samples every triangle it builds anyway (paint is stored in texels)"
     );
+    for (id, flag) in [
+        ("exact_from_texels", "--exact-from-texels"),
+        ("exact_edge_fraction", "--exact-edge-fraction"),
+        ("exact_crease", "--exact-crease"),
+    ] {
+        anyhow::ensure!(
+            !given.has(id),
+            "{flag}: paint samples every triangle it builds (paint is stored in texels), so no \
+             triangle is traced exactly for it to choose"
+        );
+    }
     anyhow::ensure!(
         !a.common
             .structures
