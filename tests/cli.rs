@@ -1449,11 +1449,7 @@ fn flags_without_effect_are_refused() {
             ]),
             vec!["--compare-splits compares flat RBVHs", "--instances flat"],
         ),
-        // bench: steps are the flat plain levels' and the exact BVH's; levels of detail are flat.
-        (
-            words(&["bench", "--method", "exact,rbvh-lod", "--steps"]),
-            vec!["--steps counts", "add rbvh to --method"],
-        ),
+        // bench: steps are counted for flat structures; levels of detail are built over one.
         (
             words(&["bench", "--instances", "two-level", "--steps"]),
             vec!["--steps: where steps go", "--instances auto or flat"],
@@ -1466,7 +1462,10 @@ fn flags_without_effect_are_refused() {
                 "--instances",
                 "two-level",
             ]),
-            vec!["--method rbvh-lod: levels of detail", "drop rbvh-lod"],
+            vec![
+                "--method rbvh-lod: levels of detail",
+                "measure rbvh instead",
+            ],
         ),
         // bench: RBVHs beside the exact BVH, seams and height-only levels of the plain levels.
         (

@@ -114,9 +114,9 @@ pub struct BenchConfig {
     pub traffic: bool,
     /// Also trace the exact BVH's and every plain RBVH level's CPU twin to say where each ray's
     /// steps go ([`steps`]): nodes by depth, why leaves handed to the march gave no hit, leaf
-    /// boxes at the hit. Costs a CPU trace per method and ray type. Flat structures only: the
-    /// two-level ones and the levels of detail have no such twin, so it needs the plain levels
-    /// and a flat scene.
+    /// boxes at the hit. Costs a CPU trace per method and ray type. Flat structures only (the
+    /// two-level ones and the levels of detail have no such twin), so not with
+    /// [`Instances::TwoLevel`].
     pub steps: bool,
     /// Rays aimed at every plain RBVH level's seams between leaves ([`seams`]),
     /// traced by the CPU twins of it and of the exact BVH, for the level's leak count (0: none).
@@ -133,8 +133,9 @@ pub struct BenchConfig {
     /// triangles.
     pub points: Option<PointSource>,
     /// How a scene with instances is measured ([`Instances`]): flat and in two levels (`Auto`,
-    /// two levels alone where flattening would not fit in memory), flat alone, or in two levels
-    /// alone (refereed by the two-level exact BVH).
+    /// two levels alone where flattening would not fit in memory, flat alone with
+    /// [`BenchConfig::points`]), flat alone, or in two levels alone (refereed by the two-level
+    /// exact BVH).
     pub instances: Instances,
 }
 
@@ -254,14 +255,6 @@ impl BenchConfig {
                         .to_string(),
                 ));
             }
-        }
-        if self.steps && !self.plain {
-            return Err(Error::param(
-                "steps",
-                "where steps go is counted for the levels traced without level of detail, and \
-                 none is measured: add the plain levels"
-                    .to_string(),
-            ));
         }
         if self.plot_dir.is_some() && !self.ray_types.contains(&RayType::Primary) {
             return Err(Error::param(

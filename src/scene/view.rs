@@ -12,9 +12,10 @@ use crate::geom::{Aabb, Hit, Ray};
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Instances {
     /// As the scene asks: a command traces two levels where the scene places a mesh more than
-    /// once, else flat; the bench measures a scene with instances both ways, and in two levels
+    /// once, else flat; the bench measures a scene with instances both ways, in two levels
     /// alone where its flat copy would not fit in memory
-    /// ([`InstancedScene::check_flat_fits`]).
+    /// ([`InstancedScene::check_flat_fits`]), and flat alone where its RBVHs are built from
+    /// points (over the flat scene).
     #[default]
     Auto,
     /// Every placement copied in place: one triangle list.

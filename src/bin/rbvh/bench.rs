@@ -92,7 +92,7 @@ pub struct Args {
     /// level traced without level of detail (flat structures: not the two-level ones, not
     /// rbvh-lod): inner nodes by tree depth, the leaves handed to the march by what came of them
     /// (tile box missed, no surface met, surface behind the nearest hit, the nearest), and the
-    /// leaf boxes holding a hit's point (slower: a CPU trace each). Needs rbvh in --method.
+    /// leaf boxes holding a hit's point (slower: a CPU trace each).
     #[arg(long)]
     steps: bool,
     /// Rays aimed at each RBVH level's seams between leaves (their rims and corners), traced by
@@ -128,11 +128,6 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         "--seam-rays aims at the seams of the levels traced without level of detail, and \
          --method measures none: add rbvh to --method"
     );
-    anyhow::ensure!(
-        plain || !a.steps,
-        "--steps counts where the steps of the levels traced without level of detail go, and \
-         --method measures none: add rbvh to --method"
-    );
     if a.instances == InstancesArg::TwoLevel {
         anyhow::ensure!(
             !a.steps,
@@ -142,7 +137,8 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         anyhow::ensure!(
             !lod,
             "--method rbvh-lod: levels of detail are built over a flat RBVH, and --instances \
-             two-level measures none: drop rbvh-lod, or give --instances auto or flat"
+             two-level measures none: measure rbvh instead of rbvh-lod, or give --instances auto \
+             or flat"
         );
     }
     anyhow::ensure!(

@@ -75,13 +75,9 @@ pub fn run(a: Args) -> Result<()> {
         );
         return two_levels(&placed, &levels, table, a.out.as_deref());
     }
-    // An RBVH of points is built over the flat scene: the two-level lines, of the meshes'
-    // triangles, would not be what --points asked for.
-    if table && placed.instances.len() > 1 && a.points.points.is_none() {
-        two_levels(&placed, &levels, true, None)?;
-    }
-    if let Err(e) = fits {
-        // A scene held only in two levels: its lines above are the table.
+    // A scene held only in two levels: what only a flat one can give is refused before the
+    // two-level lines are built.
+    if let Err(e) = &fits {
         anyhow::ensure!(
             a.out.is_none(),
             "{e}; --out with --instances flat saves a flat RBVH"
@@ -91,6 +87,14 @@ pub fn run(a: Args) -> Result<()> {
             "{e}: --points and --compare-splits build flat RBVHs, and this scene is held in two \
              levels alone"
         );
+    }
+    // An RBVH of points is built over the flat scene: the two-level lines, of the meshes'
+    // triangles, would not be what --points asked for.
+    if table && placed.instances.len() > 1 && a.points.points.is_none() {
+        two_levels(&placed, &levels, true, None)?;
+    }
+    if let Err(e) = fits {
+        // A scene held only in two levels: its lines above are the table.
         eprintln!("no flat structures: {e}");
         return Ok(());
     }
