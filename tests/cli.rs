@@ -1258,6 +1258,47 @@ fn a_render_never_runs_on_a_null_device() {
     assert!(!png.exists(), "nothing written");
 }
 
+/// `bench --threads` sets lavapipe's worker threads, which no other driver reads: on RADV's null
+/// device (another device, with no GPU needed) it is refused, naming the device, before any work.
+#[test]
+fn bench_threads_are_refused_where_lavapipe_does_not_run() {
+    if !common::radv_or_skip() {
+        return;
+    }
+    let out = Command::new(env!("CARGO_BIN_EXE_rbvh"))
+        .args([
+            "bench",
+            "--threads",
+            "2",
+            "--device",
+            "RADV",
+            "--scene",
+            "sphere",
+        ])
+        .args([
+            "--quality",
+            "0",
+            "--rays",
+            "primary",
+            "--width",
+            "8",
+            "--height",
+            "8",
+        ])
+        .env("RADV_FORCE_FAMILY", "navi21")
+        .env("MESA_SHADER_CACHE_DISABLE", "true")
+        .env("RBVH_VALIDATION", "auto")
+        .env_remove("RBVH_DEVICE")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1), "an error, not a crash");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("--threads sets lavapipe's worker threads") && stderr.contains("RADV"),
+        "{stderr}"
+    );
+}
+
 /// Every flag does what its help says or is refused, naming itself and why: a flag that would
 /// have no effect in a combination (an RBVH's build parameters where none is built, a camera for
 /// rays from a file, a tolerance while blessing, ...) is an error there, before any work.
