@@ -87,13 +87,8 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         !given.has("sample_all"),
         "--sample-all: paint samples every triangle it builds anyway (paint is stored in texels)"
     );
-    for (id, flag) in [
-        ("exact_from_texels", "--exact-from-texels"),
-        ("exact_edge_fraction", "--exact-edge-fraction"),
-        ("exact_crease", "--exact-crease"),
-    ] {
-        anyhow::ensure!(
-            !given.has(id),
+    if let Some(flag) = given.first(&["exact_from_texels", "exact_edge_fraction", "exact_crease"]) {
+        bail!(
             "{flag}: paint samples every triangle it builds (paint is stored in texels), so no \
              triangle is traced exactly for it to choose"
         );
