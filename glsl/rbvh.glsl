@@ -959,8 +959,9 @@ Ray rbvh_enter_instance(inout RbvhInstanceHook leaves, uint reference, Ray ray) 
     return rbvh_ray_into(RBVH_BVH_INSTANCE(k), ray);
 }
 
+// Leaves the instance entered last. The ray is left be: the traversal reads the world's from its
+// own words (RBVH_KEEPS_RAY).
 void rbvh_exit_instance(inout RbvhInstanceHook leaves, inout Ray ray) {
-    ray = rbvh_kept_world_ray();
     rbvh_stack[RBVH_STACK_HIT_INSTANCE].x = rbvh_hit_instance();
     rbvh_stack[RBVH_STACK_INSTANCE].x = RBVH_INVALID;
 }

@@ -30,8 +30,10 @@
 //     Ray rbvh_enter_instance(inout RBVH_LEAVES leaves, uint reference, Ray ray)
 //         enters that instance: the ray in its mesh's space
 //     void rbvh_exit_instance(inout RBVH_LEAVES leaves, inout Ray ray)
-//         the world ray back (the traversal keeps it with rbvh_keep_world_ray; with
-//         RBVH_KEEPS_RAY, rbvh_stack's ray is the level's: the mesh ray while in an instance)
+//         leaves it: the world ray back in `ray` (the traversal keeps it with
+//         rbvh_keep_world_ray). With RBVH_KEEPS_RAY the hook may leave `ray` be: each round reads
+//         the ray of the level it is in from that level's words (RBVH_STACK_RAY, the mesh ray,
+//         inside an instance; RBVH_STACK_WORLD at the top level)
 // (the first two return their results, with one exit: inlined in this loop, an early return or
 // an out parameter leaves the compiler a value merged across rounds, which ACO held in a
 // register through every leaf test; docs/speed.md, "The two-level RBVH tracer's registers"),
@@ -114,23 +116,27 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
         // Read back and made anew each round rather than kept through the leaf test, where each
         // would hold registers through the march (docs/speed.md, "What holds the RBVH tracer's
         // registers", "Words kept beside the stack").
-#ifdef RBVH_KEEPS_RAY
-        ray = rbvh_kept_ray();
-#endif
 #ifdef RBVH_TRAVERSE_INSTANCES
         // An instance's end popped in the last round: the world ray back, here rather than in
         // the inner loop, where the hook's new shear would be made beside every node's values.
         if (leaving) {
             rbvh_exit_instance(leaves, ray);
-#ifdef RBVH_KEEPS_RAY
-            rbvh_keep_ray(ray);
-#endif
             inside = false;
             // The top level's visits, kept in the instance's end entry (still at sp) rather than
             // in a register through the instance's marches.
             visits = rbvh_stack[sp].x;
             leaving = false;
         }
+#endif
+#ifdef RBVH_KEEPS_RAY
+#ifdef RBVH_TRAVERSE_INSTANCES
+        // The level's own words, so that leaving an instance copies no ray: copying the world
+        // ray back into RBVH_STACK_RAY there cost the two-level RBVH 3-6% of its speed on
+        // lavapipe (docs/speed.md, "The two-level RBVH tracer on lavapipe").
+        ray = rbvh_kept_ray_at(inside ? RBVH_STACK_RAY : RBVH_STACK_WORLD);
+#else
+        ray = rbvh_kept_ray();
+#endif
 #endif
         vec3 inv_dir = rbvh_safe_inverse(ray.dir);
         // The reference to visit next: the root in the first round, else RBVH_INVALID (pop one).
@@ -262,9 +268,6 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
                 start = root;
             } else {
                 rbvh_exit_instance(leaves, ray);
-#ifdef RBVH_KEEPS_RAY
-                rbvh_keep_ray(ray);
-#endif
                 overflow = true;
             }
             continue;
