@@ -58,18 +58,19 @@
 // occupancy on wide SIMD (docs/speed.md, "Words kept beside the stack"). A global, so that a hook
 // reaches it; a ray's trace writes its words before it reads them, and a shader that traces
 // several rays traces them one after another.
-// With RBVH_INSTANCES, six more: the world ray of a two-level trace, which the ray of the level
-// traversed (RBVH_STACK_RAY) leaves for an instance's mesh space, and the instance the ray is in
-// and the nearest hit's, an entry each (the two-level RBVH's hook, read where a leaf is tested,
-// where an instance is left and once the ray is done).
+// With RBVH_INSTANCES, the ray's words hold the world ray of a two-level trace (RBVH_STACK_WORLD:
+// with RBVH_KEEPS_RAY the ray of an instance's mesh space is made from it each round, not kept),
+// and two more entries the instance entered last and the nearest hit's (the two-level RBVH's
+// hook, read where a round inside an instance starts, where an instance is entered and once the
+// ray is done).
 #define RBVH_STACK_RAY RBVH_STACK_SIZE
 #define RBVH_STACK_HIT (RBVH_STACK_SIZE + 4)
 #define RBVH_STACK_CONE (RBVH_STACK_SIZE + 5)
 #ifdef RBVH_INSTANCES
-#define RBVH_STACK_WORLD (RBVH_STACK_SIZE + 6)
-#define RBVH_STACK_INSTANCE (RBVH_STACK_SIZE + 10)
-#define RBVH_STACK_HIT_INSTANCE (RBVH_STACK_SIZE + 11)
-uvec2 rbvh_stack[RBVH_STACK_SIZE + 12];
+#define RBVH_STACK_WORLD RBVH_STACK_RAY
+#define RBVH_STACK_INSTANCE (RBVH_STACK_SIZE + 6)
+#define RBVH_STACK_HIT_INSTANCE (RBVH_STACK_SIZE + 7)
+uvec2 rbvh_stack[RBVH_STACK_SIZE + 8];
 #else
 uvec2 rbvh_stack[RBVH_STACK_SIZE + 6];
 #endif

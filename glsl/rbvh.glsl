@@ -901,10 +901,11 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
 // leaves enter instances (bvh.glsl's records), the meshes' leaves are the RBVH's own, marched and
 // tested in the mesh's space. A top-level leaf and a height field share their count
 // (RBVH_INSTANCE_LEAF = RBVH_HEIGHTFIELD_COUNT): the level the ray is in tells them apart.
-// The instance the ray is in (RBVH_STACK_INSTANCE's x, RBVH_INVALID at the top level) and the
-// nearest hit's (RBVH_STACK_HIT_INSTANCE's x) are kept in rbvh_stack, not in registers through
-// every march. A hit marks its instance RBVH_HIT_INSIDE, "the instance the ray is in", named when
-// the ray leaves it or is done (rbvh_hit_instance): copying the instance's index where the hit is
+// The instance entered last (RBVH_STACK_INSTANCE's x, RBVH_INVALID before the first), which is
+// the one the ray is in while the traversal is inside one, and the nearest hit's
+// (RBVH_STACK_HIT_INSTANCE's x) are kept in rbvh_stack, not in registers through every march. A
+// hit marks its instance RBVH_HIT_INSIDE, "the instance entered last", named when the ray enters
+// another or is done (rbvh_hit_instance): copying the instance's index where the hit is
 // found kept that word in a register through the march (72 VGPRs with block jumps where the flat
 // tracer takes 56; docs/speed.md, "The two-level RBVH tracer's registers"). Instances are fewer
 // than 2^32 − 2 (64 bytes each), so no index is RBVH_HIT_INSIDE.
@@ -953,28 +954,36 @@ uint rbvh_instance_root(RbvhInstanceHook leaves, uint reference, uint count) {
     return root;
 }
 
+// Enters instance leaf `reference`: the instance the ray is in, after naming the one a hit marked
+// RBVH_HIT_INSIDE was found in (the instance entered before). The ray comes from rbvh_level_ray.
 Ray rbvh_enter_instance(inout RbvhInstanceHook leaves, uint reference, Ray ray) {
     uint k = reference & ~RBVH_LEAF_BIT;
+    rbvh_stack[RBVH_STACK_HIT_INSTANCE].x = rbvh_hit_instance();
     rbvh_stack[RBVH_STACK_INSTANCE].x = k;
-    return rbvh_ray_into(RBVH_BVH_INSTANCE(k), ray);
+    return ray;
 }
 
-// Leaves the instance entered last. The ray is left be: the traversal reads the world's from its
-// own words (RBVH_KEEPS_RAY).
+// The world ray, or inside an instance the ray in its mesh's space: the instance entered last is
+// the one the ray is in.
+Ray rbvh_level_ray(RbvhInstanceHook leaves, bool inside) {
+    Ray ray = rbvh_kept_world_ray();
+    if (inside) {
+        ray = rbvh_ray_into(RBVH_BVH_INSTANCE(rbvh_stack[RBVH_STACK_INSTANCE].x), ray);
+    }
+    return ray;
+}
+
+// Leaves the instance entered last: nothing to do. The ray comes from rbvh_level_ray, and the
+// instance stays the last entered until the next is entered, which names a hit's instance.
 void rbvh_exit_instance(inout RbvhInstanceHook leaves, inout Ray ray) {
-    rbvh_stack[RBVH_STACK_HIT_INSTANCE].x = rbvh_hit_instance();
-    rbvh_stack[RBVH_STACK_INSTANCE].x = RBVH_INVALID;
 }
 
 bool rbvh_test(inout RbvhInstanceHook leaves, Ray ray, bool any_hit, uint reference, uint count,
                inout float t_closest, inout uint steps, inout bool cut) {
-    // The meshes' leaves are tested inside an instance only.
-    bool hit = false;
-    if (rbvh_stack[RBVH_STACK_INSTANCE].x != RBVH_INVALID) {
-        hit = rbvh_test(leaves.inner, ray, any_hit, reference, count, t_closest, steps, cut);
-        if (hit) {
-            rbvh_stack[RBVH_STACK_HIT_INSTANCE].x = RBVH_HIT_INSIDE;
-        }
+    // The traversal hands over the meshes' leaves alone, met inside an instance.
+    bool hit = rbvh_test(leaves.inner, ray, any_hit, reference, count, t_closest, steps, cut);
+    if (hit) {
+        rbvh_stack[RBVH_STACK_HIT_INSTANCE].x = RBVH_HIT_INSIDE;
     }
     return hit;
 }

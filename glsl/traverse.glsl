@@ -17,11 +17,11 @@
 //                    inout float t_closest, inout uint steps, inout bool cut)
 //         tests the leaf over [tmin, t_closest); on a hit lowers t_closest, keeps the hit and
 //         returns true. Sets `cut` where the device ended one of its loops early.
-// and, optionally, RBVH_KEEPS_RAY: the traversal then keeps the ray (the world's, or with
-// instances the ray of the level traversed) in rbvh_stack and reads it back at each round's start rather than holding it in registers through the leaf tests
-// (the RBVH's marches, where that costs occupancy; the exact BVH's triangle tests hold few
-// registers, so its tracer keeps the ray where it is); the caller reads the ray back with
-// rbvh_kept_ray() after the traversal.
+// and, optionally, RBVH_KEEPS_RAY: the traversal then keeps the ray in rbvh_stack and reads it
+// back at each round's start rather than holding it in registers through the leaf tests (the
+// RBVH's marches, where that costs occupancy; the exact BVH's triangle tests hold few registers,
+// so its tracer keeps the ray where it is); the caller reads the ray back with rbvh_kept_ray()
+// after the traversal (with instances, rbvh_kept_world_ray()).
 // With RBVH_TRAVERSE_INSTANCES (the two-level structures: bvh.glsl's exact BVH, rbvh.glsl's RBVH),
 // two levels in one loop, as crate::bvh::traverse: the hook also has
 //     uint rbvh_instance_root(RBVH_LEAVES leaves, uint reference, uint count)
@@ -30,16 +30,19 @@
 //     Ray rbvh_enter_instance(inout RBVH_LEAVES leaves, uint reference, Ray ray)
 //         enters that instance: the ray in its mesh's space
 //     void rbvh_exit_instance(inout RBVH_LEAVES leaves, inout Ray ray)
-//         leaves it: the world ray back in `ray` (the traversal keeps it with
-//         rbvh_keep_world_ray). With RBVH_KEEPS_RAY the hook may leave `ray` be: each round reads
-//         the ray of the level it is in from that level's words (RBVH_STACK_RAY, the mesh ray,
-//         inside an instance; RBVH_STACK_WORLD at the top level)
+//         leaves it: the world ray back in `ray` (the traversal keeps it with rbvh_keep_world_ray)
+// and with RBVH_KEEPS_RAY
+//     Ray rbvh_level_ray(RBVH_LEAVES leaves, bool inside)
+//         the ray of the level a round is in: the world ray, kept with rbvh_keep_world_ray, or
+//         inside an instance that ray in its mesh's space, made again each round rather than
+//         kept (the traversal then ignores the ray the other two hooks give)
 // (the first two return their results, with one exit: inlined in this loop, an early return or
 // an out parameter leaves the compiler a value merged across rounds, which ACO held in a
 // register through every leaf test; docs/speed.md, "The two-level RBVH tracer's registers"),
 // and the traversal pushes an instance's end (distance -inf, RBVH_INSTANCE_END, which no nearest
 // hit drops; its word the top level's visits so far) when it enters one, and leaves the instance
-// when it pops that entry. Distances are
+// when it pops that entry; it hands the hook's rbvh_test leaves met inside an instance only (a
+// top-level leaf is an instance or nothing). Distances are
 // the same along both rays (the direction is transformed, not normalized). Visits are bounded per
 // level: a mesh placed twice may be visited twice.
 // It also uses, from bvh.glsl (included before it wherever it is instantiated: bvh.glsl,
@@ -85,7 +88,9 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
     RBVH_COUNT_RESET();
     overflow = false;
     float t_closest = ray.tmax;
-#ifdef RBVH_KEEPS_RAY
+#ifdef RBVH_TRAVERSE_INSTANCES
+    rbvh_keep_world_ray(ray);
+#elif defined(RBVH_KEEPS_RAY)
     rbvh_keep_ray(ray);
 #endif
     if (!rbvh_ray_valid(ray)) {
@@ -94,7 +99,6 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
     uint node_count = rbvh_node_count(leaves);
     uint bound = rbvh_round_bound(leaves);
 #ifdef RBVH_TRAVERSE_INSTANCES
-    rbvh_keep_world_ray(ray);
     // The instance's end on the stack: floatBitsToUint(-inf).
     const uint RBVH_INSTANCE_END = 0xFF800000u;
     bool inside = false;
@@ -130,10 +134,12 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
 #endif
 #ifdef RBVH_KEEPS_RAY
 #ifdef RBVH_TRAVERSE_INSTANCES
-        // The level's own words, so that leaving an instance copies no ray: copying the world
-        // ray back into RBVH_STACK_RAY there cost the two-level RBVH 3-6% of its speed on
-        // lavapipe (docs/speed.md, "The two-level RBVH tracer on lavapipe").
-        ray = rbvh_kept_ray_at(inside ? RBVH_STACK_RAY : RBVH_STACK_WORLD);
+        // Made from the world ray each round, so that entering and leaving an instance write no
+        // ray: keeping the mesh ray beside the stack, and copying the world ray back there on
+        // leaving, cost the two-level RBVH 8-10% of its speed on lavapipe, whose SIMD groups run
+        // each round's branches whether a lane takes them or not (docs/paper-scale.md, "What two
+        // levels cost a ray on lavapipe").
+        ray = rbvh_level_ray(leaves, inside);
 #else
         ray = rbvh_kept_ray();
 #endif
@@ -256,9 +262,6 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
         uint root = inside ? RBVH_INVALID : rbvh_instance_root(leaves, pending, pending_count);
         if (root != RBVH_INVALID) {
             ray = rbvh_enter_instance(leaves, pending, ray);
-#ifdef RBVH_KEEPS_RAY
-            rbvh_keep_ray(ray);
-#endif
             if (sp < RBVH_STACK_SIZE) {
                 RBVH_COUNT_ADD(instances, 1u);
                 rbvh_stack[sp] = uvec2(visits, RBVH_INSTANCE_END);
@@ -270,6 +273,10 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
                 rbvh_exit_instance(leaves, ray);
                 overflow = true;
             }
+            continue;
+        }
+        // A top-level leaf that is no instance: nothing to test.
+        if (!inside) {
             continue;
         }
 #endif
