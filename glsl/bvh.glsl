@@ -48,7 +48,8 @@
 #define RBVH_STACK_SIZE 64
 // The traversal's memory (traverse.glsl): its stack of (word, distance) entries, then the words an
 // RBVH ray's loops read too rarely to hold a register for: the ray (four entries, RBVH_KEEPS_RAY;
-// in a two-level trace the ray of the level traversed), which only each round's start and the hit need again after a leaf's march;
+// in a two-level trace the world ray, from which each round makes the ray of its level), which
+// only each round's start and the hit need again after a leaf's march;
 // the nearest hit's normal source (RbvhLeafHook, read once the ray is done); the level-of-detail
 // cone (lod.glsl, read where an inner child is entered). They share the stack's array on
 // purpose: the stack's pushes write it at indices the compiler measured (ACO) does not resolve (a
@@ -60,7 +61,7 @@
 // several rays traces them one after another.
 // With RBVH_INSTANCES, the ray's words hold the world ray of a two-level trace (RBVH_STACK_WORLD:
 // with RBVH_KEEPS_RAY the ray of an instance's mesh space is made from it each round, not kept),
-// and two more entries the instance entered last and the nearest hit's (the two-level RBVH's
+// and two more entries: the instance entered last and the nearest hit's (the two-level RBVH's
 // hook, read where a round inside an instance starts, where an instance is entered and once the
 // ray is done).
 #define RBVH_STACK_RAY RBVH_STACK_SIZE
@@ -444,16 +445,13 @@ void rbvh_exit_instance(inout BvhInstanceHook leaves, inout Ray ray) {
 
 bool rbvh_test(inout BvhInstanceHook leaves, Ray ray, bool any_hit, uint reference, uint count,
                inout float t_closest, inout uint steps, inout bool cut) {
-    // Triangles are the meshes': tested inside an instance only (one exit, as rbvh_instance_root).
-    bool hit = false;
-    if (leaves.entered != RBVH_INVALID) {
-        uint first = reference & ~RBVH_LEAF_BIT;
-        uint end = rbvh_slot_end(first, count, leaves.sz.tri_count);
-        hit = rbvh_test_triangles(rbvh_shear(ray), ray, any_hit, first, end, leaves.sz.tri_count, t_closest,
-                                  leaves.best_slot, steps, cut);
-        if (hit) {
-            leaves.best_instance = leaves.entered;
-        }
+    // Triangles are the meshes': the traversal hands over leaves met inside an instance only.
+    uint first = reference & ~RBVH_LEAF_BIT;
+    uint end = rbvh_slot_end(first, count, leaves.sz.tri_count);
+    bool hit = rbvh_test_triangles(rbvh_shear(ray), ray, any_hit, first, end, leaves.sz.tri_count, t_closest,
+                                   leaves.best_slot, steps, cut);
+    if (hit) {
+        leaves.best_instance = leaves.entered;
     }
     return hit;
 }

@@ -937,7 +937,7 @@ uint rbvh_enter(RbvhInstanceHook leaves, uint child, uint count, float t_entry) 
 }
 
 // The nearest hit's instance so far: RBVH_STACK_HIT_INSTANCE's, or, where that is RBVH_HIT_INSIDE,
-// the instance the ray is in.
+// the instance entered last.
 uint rbvh_hit_instance() {
     uint hit = rbvh_stack[RBVH_STACK_HIT_INSTANCE].x;
     return hit == RBVH_HIT_INSIDE ? rbvh_stack[RBVH_STACK_INSTANCE].x : hit;
@@ -954,8 +954,9 @@ uint rbvh_instance_root(RbvhInstanceHook leaves, uint reference, uint count) {
     return root;
 }
 
-// Enters instance leaf `reference`: the instance the ray is in, after naming the one a hit marked
-// RBVH_HIT_INSIDE was found in (the instance entered before). The ray comes from rbvh_level_ray.
+// Enters instance leaf `reference`: it becomes the instance entered last (which the ray goes into
+// unless the stack is full), after naming the one a hit marked RBVH_HIT_INSIDE was found in (the
+// instance entered before). The ray comes from rbvh_level_ray.
 Ray rbvh_enter_instance(inout RbvhInstanceHook leaves, uint reference, Ray ray) {
     uint k = reference & ~RBVH_LEAF_BIT;
     rbvh_stack[RBVH_STACK_HIT_INSTANCE].x = rbvh_hit_instance();

@@ -48,7 +48,7 @@
 // It also uses, from bvh.glsl (included before it wherever it is instantiated: bvh.glsl,
 // rbvh.glsl, lod.glsl) and what that includes (common.glsl, intersect.glsl): Ray, BvhNode,
 // RBVH_BVH_NODE(i), rbvh_node_boxes, RBVH_LEAF_BIT, RBVH_INVALID, RBVH_STACK_SIZE, rbvh_stack,
-// rbvh_keep_ray, rbvh_kept_ray, with instances rbvh_keep_world_ray, rbvh_stack_entry, rbvh_stack_pop, rbvh_ray_valid,
+// rbvh_keep_ray, rbvh_kept_ray, rbvh_stack_entry, rbvh_stack_pop, rbvh_ray_valid, with instances rbvh_keep_world_ray,
 // rbvh_safe_inverse, rbvh_intersect_box, RBVH_COUNT_RESET and RBVH_COUNT_ADD. Define the two names above and include it; then
 // `float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint steps, out bool
 // overflow)` returns the nearest distance found (ray.tmax if none; the
@@ -66,7 +66,8 @@
 // which bounds the rounds.
 // The leaf is tested at the end of the round that met it, and what the traversal needs again
 // after the test is made anew each round (the ray's inverse, the next node, with RBVH_KEEPS_RAY
-// the ray itself, read back from rbvh_stack) rather than carried through it: a value live across
+// the ray itself, read back from rbvh_stack, or with instances made from the world ray read
+// back) rather than carried through it: a value live across
 // the march holds a register through it (docs/speed.md, "The leaf tested where it is met",
 // "Words kept beside the stack").
 //
@@ -117,12 +118,9 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
     bool finished = false;
     uint iter = 0u;
     for (uint round = 0u; round <= bound; ++round) {
-        // Read back and made anew each round rather than kept through the leaf test, where each
-        // would hold registers through the march (docs/speed.md, "What holds the RBVH tracer's
-        // registers", "Words kept beside the stack").
 #ifdef RBVH_TRAVERSE_INSTANCES
         // An instance's end popped in the last round: the world ray back, here rather than in
-        // the inner loop, where the hook's new shear would be made beside every node's values.
+        // the inner loop, which would carry the hook's work beside every node visit.
         if (leaving) {
             rbvh_exit_instance(leaves, ray);
             inside = false;
@@ -132,6 +130,9 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
             leaving = false;
         }
 #endif
+        // Read back and made anew each round rather than kept through the leaf test, where each
+        // would hold registers through the march (docs/speed.md, "What holds the RBVH tracer's
+        // registers", "Words kept beside the stack").
 #ifdef RBVH_KEEPS_RAY
 #ifdef RBVH_TRAVERSE_INSTANCES
         // Made from the world ray each round, so that entering and leaving an instance write no

@@ -284,6 +284,9 @@ impl<P: Probe, L: Leaves<P> + Aim> Leaves<P> for InstanceHook<'_, L> {
         }
         let k = reference & !LEAF_BIT;
         let instance = self.instances.get(k as usize)?;
+        // The device reads the record here; the two-level RBVH's reads it again at the start of
+        // each round inside the instance (`rbvh_level_ray`), the same lines, which the traffic
+        // model's distinct lines and caches count once, so they are not reported.
         probe.read(element::<GpuInstance>(Array::Instances, k as usize));
         // A root of u32::MAX (RBVH_INVALID, which no builder writes) names no mesh: no instance,
         // as the device's rbvh_instance_root reads it.
@@ -313,8 +316,7 @@ impl<P: Probe, L: Leaves<P> + Aim> Leaves<P> for InstanceHook<'_, L> {
         stats: &mut TraceStats,
         probe: &mut P,
     ) -> bool {
-        // A mesh's leaves are tested inside an instance only (a top-level leaf that names no
-        // instance holds nothing).
+        // The traversal hands over the leaves met inside an instance only.
         let Some(k) = self.entered else { return false };
         let found = self.leaves.test(reference, count, t_closest, stats, probe);
         if found {

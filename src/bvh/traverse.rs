@@ -39,8 +39,9 @@ pub(crate) trait Leaves<P: Probe> {
     /// leaf of a two-level structure, [`INSTANCE_LEAF`](super::INSTANCE_LEAF)): the hook takes the ray into the
     /// instance's mesh space and returns that ray (the same `t` along it) and the root node of
     /// the mesh's tree, where the traversal goes on, on the same stack, until it pops the
-    /// instance's end and calls [`Leaves::exit_instance`]. `None` for every other leaf (handed to
-    /// [`Leaves::test`]), and always in structures without instances.
+    /// instance's end and calls [`Leaves::exit_instance`]. `None` for every other leaf, and always
+    /// in structures without instances: [`Leaves::test`] gets it, unless it is a top level's
+    /// (outside any instance, a leaf that names no instance holds nothing), as the shaders skip it.
     fn enter_instance(
         &mut self,
         _reference: u32,
@@ -170,7 +171,10 @@ pub(crate) fn traverse_from<P: Probe, L: Leaves<P>>(
                     leaves.exit_instance();
                     stats.overflow = true;
                 }
-            } else if leaves.test(reference, count, &mut t_closest, &mut stats, probe) && any_hit {
+            } else if (inside || !leaves.has_instances())
+                && leaves.test(reference, count, &mut t_closest, &mut stats, probe)
+                && any_hit
+            {
                 return stats;
             }
         } else if let Some(node) = nodes.get(reference as usize) {
