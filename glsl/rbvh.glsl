@@ -904,12 +904,13 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
 // The instance entered last (RBVH_STACK_INSTANCE's x, RBVH_INVALID before the first), which is
 // the one the ray is in while the traversal is inside one, and the nearest hit's
 // (RBVH_STACK_HIT_INSTANCE's x) are kept in rbvh_stack, not in registers through every march. A
-// hit marks its instance RBVH_HIT_INSIDE, "the instance entered last", named when the ray enters
-// another or is done (rbvh_hit_instance): copying the instance's index where the hit is
-// found kept that word in a register through the march (72 VGPRs with block jumps where the flat
-// tracer takes 56; docs/speed.md, "The two-level RBVH tracer's registers"). Instances are fewer
-// than 2^32 − 2 (64 bytes each), so no index is RBVH_HIT_INSIDE.
-const uint RBVH_HIT_INSIDE = 0xFFFFFFFEu;
+// hit copies the instance's index where it is found, read after the march: while the hook read
+// that index before the march too (to check that the ray was inside an instance), the compiler
+// kept it in a register through the march (72 VGPRs with block jumps where the flat tracer takes
+// 56), so the hit was marked "the instance the ray is in" and named later, which cost lavapipe
+// a store in every round (docs/speed.md, "The two-level RBVH tracer's registers";
+// docs/paper-scale.md, "What two levels cost a ray on lavapipe"). The traversal now hands the
+// hook the leaves met inside an instance only, and the index is read once the march is done.
 
 struct RbvhInstanceHook {
     RbvhLeafHook inner;
@@ -936,11 +937,9 @@ uint rbvh_enter(RbvhInstanceHook leaves, uint child, uint count, float t_entry) 
     return child;
 }
 
-// The nearest hit's instance so far: RBVH_STACK_HIT_INSTANCE's, or, where that is RBVH_HIT_INSIDE,
-// the instance entered last.
+// The nearest hit's instance so far.
 uint rbvh_hit_instance() {
-    uint hit = rbvh_stack[RBVH_STACK_HIT_INSTANCE].x;
-    return hit == RBVH_HIT_INSIDE ? rbvh_stack[RBVH_STACK_INSTANCE].x : hit;
+    return rbvh_stack[RBVH_STACK_HIT_INSTANCE].x;
 }
 
 // traverse.glsl's instance hooks; the first two return their results, with one exit (see
@@ -955,11 +954,9 @@ uint rbvh_instance_root(RbvhInstanceHook leaves, uint reference, uint count) {
 }
 
 // Enters instance leaf `reference`: it becomes the instance entered last (which the ray goes into
-// unless the stack is full), after naming the one a hit marked RBVH_HIT_INSIDE was found in (the
-// instance entered before). The ray comes from rbvh_level_ray.
+// unless the stack is full). The ray comes from rbvh_level_ray.
 Ray rbvh_enter_instance(inout RbvhInstanceHook leaves, uint reference, Ray ray) {
     uint k = reference & ~RBVH_LEAF_BIT;
-    rbvh_stack[RBVH_STACK_HIT_INSTANCE].x = rbvh_hit_instance();
     rbvh_stack[RBVH_STACK_INSTANCE].x = k;
     return ray;
 }
@@ -974,8 +971,7 @@ Ray rbvh_level_ray(RbvhInstanceHook leaves, bool inside) {
     return ray;
 }
 
-// Leaves the instance entered last: nothing to do. The ray comes from rbvh_level_ray, and the
-// instance stays the last entered until the next is entered, which names a hit's instance.
+// Leaves the instance entered last: nothing to do. The ray comes from rbvh_level_ray.
 void rbvh_exit_instance(inout RbvhInstanceHook leaves, inout Ray ray) {
 }
 
@@ -984,7 +980,7 @@ bool rbvh_test(inout RbvhInstanceHook leaves, Ray ray, bool any_hit, uint refere
     // The traversal hands over the meshes' leaves alone, met inside an instance.
     bool hit = rbvh_test(leaves.inner, ray, any_hit, reference, count, t_closest, steps, cut);
     if (hit) {
-        rbvh_stack[RBVH_STACK_HIT_INSTANCE].x = RBVH_HIT_INSIDE;
+        rbvh_stack[RBVH_STACK_HIT_INSTANCE].x = rbvh_stack[RBVH_STACK_INSTANCE].x;
     }
     return hit;
 }
