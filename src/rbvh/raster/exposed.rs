@@ -6,6 +6,7 @@
 use glam::{DVec2, DVec3, Vec3};
 
 use super::cells::{cell_range, cells_met};
+use super::ring::RING_REACH;
 use super::sample::unit_normal;
 use super::{Frame, NONE};
 use crate::geom::clip::{clip, clip_half};
@@ -33,15 +34,35 @@ use crate::geom::sat::convex_overlap;
 pub const CREST_TEXELS: f32 = 2.0;
 
 /// How far below the surface of a cell with an extrapolated corner one of the leaf's triangles
-/// may lie before it is traced exactly too, in texels ([`exposed`]): there the extrapolation
-/// has made a lid over the leaf's own surface, and a ray coming in from the side under the lid
+/// may lie before it is traced exactly too, in texels, for a leaf whose criterion lets its
+/// surface turn steeper than the presets' ([`lid_sink_texels`]): there the extrapolation has
+/// made a lid over the leaf's own surface, and a ray coming in from the side under the lid
 /// (where the skirt tapers to nothing, `layout::MARCH_SKIRT_TEXELS`) meets the triangle but none
 /// of the leaf's cells. Half a texel took the dragon's seam leaks at A⊥/A 0.01 from 210 to 74 per
 /// million for 9% more exact parts at Q0 than a texel; with the steep-cell rule
 /// ([`STEEP_CELL_TEXELS`]), 0.3 texel from 32 to 16, 0.1 texel to 14. At [`CREST_TEXELS`] the
-/// cone's seam leaks at A⊥/A 0.01 rose from 25 to 215 per million: the lids keep theirs
-/// (docs/guarantees.md).
+/// cone's seam leaks at A⊥/A 0.01 rose from 10 to 224 per million and the dragon's from 314 to
+/// 737, two of them through it: at such criteria the lids keep theirs (docs/guarantees.md).
 const EXPOSED_SINK_TEXELS: f32 = 0.3;
+
+/// How far below an extrapolated lid one of the leaf's triangles may lie before it is traced
+/// exactly too ([`exposed`]), in texels, for a leaf whose ring reaches `reach` texels
+/// ([`ring_reach`](super::ring_reach): the slope its criterion allows; `None` without a ring):
+/// [`CREST_TEXELS`] where the criterion keeps the slope within the ring's least reach
+/// ([`RING_REACH`]: φ_max up to 63°, the presets' 60° among them), as under any other cell,
+/// else [`EXPOSED_SINK_TEXELS`]. Under the presets the leaf's surface falls at most that steeply
+/// from its ring, and below the sampling rate nearly every triangle of a scan by a rim lies a
+/// few tenths of a texel under the lid somewhere: at 0.3 texel these were three quarters of the
+/// paper-scale scene's exposed triangles at Q2 (300,786 of 393,251; its exact triangles 13.3 of
+/// its 30.9 MB), at two texels its exact triangles take 5.2 MB, the tree 9.7, the whole 19.5;
+/// accuracy and seam leaks at the presets as before, within a few per ten million rays
+/// (docs/guarantees.md, "Crests clipped by up to two texels").
+pub(super) fn lid_sink_texels(reach: Option<f32>) -> f32 {
+    match reach {
+        Some(reach) if reach <= RING_REACH => CREST_TEXELS,
+        _ => EXPOSED_SINK_TEXELS,
+    }
+}
 
 /// How far apart in height the corners of a cell (holes aside) may lie before the cell counts as
 /// *steep*, in texels ([`exposed`]): more than 71° on average along a side. There a height field
@@ -69,8 +90,8 @@ const STEEP_CELL_TEXELS: f32 = 3.0;
 ///   there passes over it (or, over an extrapolated corner, may leave the leaf over the rim
 ///   before it crosses the surface);
 /// * a cell with an extrapolated corner (`sampled` false: the ring found no surface over it),
-///   lying more than [`EXPOSED_SINK_TEXELS`] below it: the extrapolation is a lid over the
-///   surface, which a ray from the side passes under;
+///   lying more than `lid_sink` texels below it ([`lid_sink_texels`]): the extrapolation is a
+///   lid over the surface, which a ray from the side passes under;
 /// * a cell of sampled corners (three or four), lying more than [`CREST_TEXELS`] below it: a
 ///   sheet under the leaf's surface, which a ray meets from below or from the side, not through
 ///   the cell over it;
@@ -85,8 +106,9 @@ pub(super) fn exposed(
     height: &[f32],
     source: &[u32],
     sampled: &[bool],
+    lid_sink: f32,
 ) -> Vec<Exposed> {
-    exposed_in(triangles, frame, height, source, sampled, true)
+    exposed_in(triangles, frame, height, source, sampled, lid_sink, true)
 }
 
 /// [`exposed`], skipping with `prefilter` the triangles that a bound on their corners shows
@@ -97,12 +119,13 @@ pub(super) fn exposed_in(
     height: &[f32],
     source: &[u32],
     sampled: &[bool],
+    lid_sink: f32,
     prefilter: bool,
 ) -> Vec<Exposed> {
     let (res_u, res_v) = (frame.res_u as i64, frame.res_v as i64);
     let texel = frame.texel as f64;
     let crest = CREST_TEXELS as f64 * texel;
-    let sink_extrapolated = EXPOSED_SINK_TEXELS as f64 * texel;
+    let sink_extrapolated = lid_sink as f64 * texel;
     let steep = STEEP_CELL_TEXELS as f64 * texel;
     let mut out = Vec::new();
     for (input, tri) in triangles.iter().enumerate() {
@@ -361,6 +384,7 @@ mod tests {
     use super::super::rasterize;
     use super::super::tests::{plain, square, xy_frame};
     use super::*;
+    use crate::rbvh::Refinement;
 
     /// A triangle over a cell that the finished tile leaves bare is exposed (traced exactly by
     /// the builder's triangle leaves), one the tile covers is not: the small triangle of
@@ -405,7 +429,14 @@ mod tests {
         let tris = [covered, on_diagonal, across];
         let inputs = |e: Vec<Exposed>| e.iter().map(|e| e.input).collect::<Vec<_>>();
         assert_eq!(
-            inputs(exposed(&tris, &frame, &height, &source, &sampled)),
+            inputs(exposed(
+                &tris,
+                &frame,
+                &height,
+                &source,
+                &sampled,
+                EXPOSED_SINK_TEXELS
+            )),
             [2]
         );
     }
@@ -498,7 +529,14 @@ mod tests {
         }
         let p = |x: f32, y: f32| Vec3::new(x + 0.5, y + 0.5, 0.0);
         let long = [p(1.0, 1.0), p(14.0, 2.0), p(1.2, 3.0)];
-        let found = exposed(&[long], &frame, &height, &source, &sampled);
+        let found = exposed(
+            &[long],
+            &frame,
+            &height,
+            &source,
+            &sampled,
+            EXPOSED_SINK_TEXELS,
+        );
         assert_eq!(found.len(), 1, "{found:?}");
         assert!(found[0].bare, "the holes leave cells bare");
         let boxes = &found[0].cells;
@@ -521,9 +559,9 @@ mod tests {
     }
 
     /// Over a cell with an extrapolated corner, a triangle rising more than [`CREST_TEXELS`]
-    /// above the cell's surface, or lying more than [`EXPOSED_SINK_TEXELS`] below it, is
-    /// exposed; one rising or sinking less is not, nor one lying as far below a cell of sampled
-    /// corners.
+    /// above the cell's surface, or lying more than the lid's sink below it (at the presets'
+    /// criterion [`CREST_TEXELS`], at steeper ones [`EXPOSED_SINK_TEXELS`]), is exposed; one
+    /// rising or sinking less is not, nor one lying as far below a cell of sampled corners.
     #[test]
     fn a_triangle_past_a_crest_or_under_an_extrapolated_lid_is_exposed() {
         let frame = xy_frame(3);
@@ -534,26 +572,55 @@ mod tests {
             let p = |x: f32, y: f32, h: f32| Vec3::new(x + 0.5, y + 0.5, h);
             [[p(1.0, 1.0, 0.0), p(2.0, 1.0, 0.0), p(2.0, 2.0, rise)]]
         };
-        let sink = EXPOSED_SINK_TEXELS;
-        assert!(exposed(&over(-sink - 0.05), &frame, &height, &source, &sampled).is_empty());
-        sampled[8] = false;
-        let rise = CREST_TEXELS;
-        assert_eq!(
-            exposed(&over(rise + 0.05), &frame, &height, &source, &sampled),
-            [Exposed {
-                input: 0,
-                cells: vec![[1, 1, 1, 1]],
-                bare: false,
-            }]
-        );
-        assert!(exposed(&over(rise - 0.05), &frame, &height, &source, &sampled).is_empty());
-        // A little below the surface it is hit from above through the cell; further below,
-        // under an extrapolated lid, a ray from the side would miss the cell.
-        assert!(exposed(&over(-sink + 0.05), &frame, &height, &source, &sampled).is_empty());
-        assert_eq!(
-            exposed(&over(-sink - 0.05), &frame, &height, &source, &sampled).len(),
-            1
-        );
+        for reach in [
+            super::super::ring_reach(Refinement::NormalCone {
+                max_angle_deg: 89.5,
+            }),
+            2.0,
+        ] {
+            let sink = lid_sink_texels(Some(reach));
+            let exposed = |tris: &[[Vec3; 3]], sampled: &[bool]| {
+                exposed(tris, &frame, &height, &source, sampled, sink)
+            };
+            // Under a steeper criterion's shallower lid, as far below sampled corners is fine.
+            sampled[8] = true;
+            assert_eq!(
+                exposed(&over(-sink - 0.05), &sampled).is_empty(),
+                sink < CREST_TEXELS
+            );
+            sampled[8] = false;
+            let rise = CREST_TEXELS;
+            assert_eq!(
+                exposed(&over(rise + 0.05), &sampled),
+                [Exposed {
+                    input: 0,
+                    cells: vec![[1, 1, 1, 1]],
+                    bare: false,
+                }]
+            );
+            assert!(exposed(&over(rise - 0.05), &sampled).is_empty());
+            // A little below the surface it is hit from above through the cell; further below,
+            // under an extrapolated lid, a ray from the side would miss the cell.
+            assert!(exposed(&over(-sink + 0.05), &sampled).is_empty());
+            assert_eq!(exposed(&over(-sink - 0.05), &sampled).len(), 1);
+        }
+    }
+
+    /// A lid may hide the surface by [`CREST_TEXELS`] where the leaf's criterion keeps its slope
+    /// within the ring's least reach (the presets), by [`EXPOSED_SINK_TEXELS`] where it lets the
+    /// surface turn edge-on, or without a ring.
+    #[test]
+    fn the_lid_sinks_as_far_as_the_criterion_lets_the_surface_fall() {
+        use super::super::ring_reach;
+        let cone = |deg: f32| Some(ring_reach(Refinement::NormalCone { max_angle_deg: deg }));
+        let area = |min_ratio: f32| Some(ring_reach(Refinement::ProjectedArea { min_ratio }));
+        assert_eq!(lid_sink_texels(cone(60.0)), CREST_TEXELS);
+        assert_eq!(lid_sink_texels(cone(0.5)), CREST_TEXELS);
+        assert_eq!(lid_sink_texels(area(1.0)), CREST_TEXELS);
+        assert_eq!(lid_sink_texels(cone(70.0)), EXPOSED_SINK_TEXELS);
+        assert_eq!(lid_sink_texels(cone(89.5)), EXPOSED_SINK_TEXELS);
+        assert_eq!(lid_sink_texels(area(0.01)), EXPOSED_SINK_TEXELS);
+        assert_eq!(lid_sink_texels(None), EXPOSED_SINK_TEXELS);
     }
 
     /// Over a cell of sampled corners, a triangle rising more than [`CREST_TEXELS`] above its
@@ -565,7 +632,16 @@ mod tests {
         let (height, source, sampled) = (vec![0.0; 9], vec![0; 9], vec![true; 9]);
         let p = |x: f32, y: f32, h: f32| Vec3::new(x + 0.5, y + 0.5, h);
         let over = |rise: f32| [[p(1.0, 1.0, 0.0), p(2.0, 1.0, 0.0), p(2.0, 2.0, rise)]];
-        let exposed = |tris: &[[Vec3; 3]]| exposed(tris, &frame, &height, &source, &sampled);
+        let exposed = |tris: &[[Vec3; 3]]| {
+            exposed(
+                tris,
+                &frame,
+                &height,
+                &source,
+                &sampled,
+                EXPOSED_SINK_TEXELS,
+            )
+        };
         let rise = CREST_TEXELS;
         assert_eq!(
             exposed(&over(rise + 0.05)),
@@ -593,7 +669,9 @@ mod tests {
         // bound skips the test: the same thresholds hold over three sampled corners.
         let mut holed = source.clone();
         holed[7] = NONE;
-        let three = |tris: &[[Vec3; 3]]| super::exposed(tris, &frame, &height, &holed, &sampled);
+        let three = |tris: &[[Vec3; 3]]| {
+            super::exposed(tris, &frame, &height, &holed, &sampled, EXPOSED_SINK_TEXELS)
+        };
         assert_eq!(three(&over(rise + 0.05)).len(), 1);
         assert!(three(&over(rise - 0.05)).is_empty());
         assert_eq!(three(&flat(-sink - 0.05, false)).len(), 1);
@@ -632,8 +710,9 @@ mod tests {
                 [[a, c, b]]
             }
         };
-        let exposed =
-            |tris: &[[Vec3; 3]], height: &[f32]| exposed(tris, &frame, height, &source, &sampled);
+        let exposed = |tris: &[[Vec3; 3]], height: &[f32]| {
+            exposed(tris, &frame, height, &source, &sampled, EXPOSED_SINK_TEXELS)
+        };
         let rise = CREST_TEXELS;
         let wall = STEEP_CELL_TEXELS + 0.5;
         assert_eq!(
@@ -699,8 +778,24 @@ mod tests {
                     })
                 })
                 .collect();
-            let with = exposed_in(&triangles, &frame, &height, &source, &sampled, true);
-            let without = exposed_in(&triangles, &frame, &height, &source, &sampled, false);
+            let with = exposed_in(
+                &triangles,
+                &frame,
+                &height,
+                &source,
+                &sampled,
+                EXPOSED_SINK_TEXELS,
+                true,
+            );
+            let without = exposed_in(
+                &triangles,
+                &frame,
+                &height,
+                &source,
+                &sampled,
+                EXPOSED_SINK_TEXELS,
+                false,
+            );
             let differ = with.iter().zip(&without).find(|(a, b)| a != b);
             assert!(
                 with.len() == without.len() && differ.is_none(),

@@ -87,8 +87,9 @@
 //! 6. **Exposed triangles** ([`Tile::exposed`], issue "No leaks between height fields"): the
 //!    leaf's triangles that meet the bare part of a cell (no cell triangle over it: the ring found
 //!    no surface for a corner), or rise more than [`CREST_TEXELS`] above a cell, or lie more than
-//!    that below a cell of sampled corners or more than [`exposed::EXPOSED_SINK_TEXELS`] below one
-//!    with an extrapolated corner, or face away from the axis over a steep cell
+//!    that below a cell of sampled corners or below a lid, one with an extrapolated corner (that
+//!    far too under the presets' criterion, 0.3 texel at steeper ones:
+//!    [`exposed::lid_sink_texels`]), or face away from the axis over a steep cell
 //!    ([`exposed::STEEP_CELL_TEXELS`]; [`exposed`]).
 //!    A ray entering the solid through one may pass beside the height field, slide over its
 //!    rim, pass under an extrapolated lid, or reach the triangle from below or beside rather
@@ -330,6 +331,8 @@ pub fn rasterize(
             return None;
         }
     }
+    // How deep a lid may hide the surface: as far as the criterion lets it fall from the ring.
+    let lid_sink = exposed::lid_sink_texels(ring.map(|ring| ring.reach));
     let ring = match ring {
         Some(ring) => {
             let corners = ring_corners(triangles, frame, &source);
@@ -363,7 +366,7 @@ pub fn rasterize(
         }
     }
     let mut tile = quantize(frame, &height, &source, &sampled, &normals, covered);
-    tile.exposed = exposed(triangles, frame, &height, &source, &sampled);
+    tile.exposed = exposed(triangles, frame, &height, &source, &sampled, lid_sink);
     tile.sources = source
         .iter()
         .map(|&s| input_index.get(s as usize).copied().unwrap_or(NO_SOURCE))

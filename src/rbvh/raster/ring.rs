@@ -17,7 +17,7 @@ use crate::rbvh::Refinement;
 /// texels, at least: 2 where 3 made leaf boxes taller for nothing (dragon at the presets: the
 /// same or fewer seam leaks, t p99 the same or better, 3% fewer cells per ray at Q0; 1.5 lost
 /// accuracy, t p99 +7%; 3 and 4 for every leaf cost its Q0 t p99 0.150 → 0.155 and 0.170%).
-const RING_REACH: f32 = 2.0;
+pub(super) const RING_REACH: f32 = 2.0;
 
 /// How far a ring sample may find the surface at most, in texels ([`ring_reach`]): at 8 the ring
 /// of leaves seen nearly edge-on reached other sheets across creases (dragon at φ_max 89.5°:
