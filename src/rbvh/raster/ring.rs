@@ -248,6 +248,42 @@ mod tests {
         }
     }
 
+    /// The lid's sink follows the ring's reach through [`rasterize`]
+    /// (`exposed::lid_sink_texels`): a sliver of the leaf's own, a texel under the lid over its
+    /// rim (a cell whose outer corners the ring extrapolated: no surface continues there), is
+    /// traced exactly where the ring reaches as far as an edge-on criterion's, not where it
+    /// reaches the presets'.
+    #[test]
+    fn a_sliver_a_texel_under_the_lid_is_exact_only_at_edge_on_criteria() {
+        let frame = xy_frame(16);
+        // The leaf: flat at height 3 over samples 4..=11; the cells between samples 3 and 4
+        // have their -u corners extrapolated. The sliver lies inside one of them, holding no
+        // sample centre, at height 2, facing +w.
+        let mut own = square(&frame, 4.0, 12.0, |_, _| 3.0);
+        let p = |x: f32, y: f32| Vec3::new(x, y, 2.0);
+        own.push([p(3.7, 6.7), p(4.3, 6.7), p(3.9, 7.3)]);
+        let sliver = (own.len() - 1) as u32;
+        let mut scene = crate::scene::Scene::new("lid");
+        let positions: Vec<Vec3> = own.iter().flatten().copied().collect();
+        let indices: Vec<[u32; 3]> = (0..own.len() as u32)
+            .map(|k| [3 * k, 3 * k + 1, 3 * k + 2])
+            .collect();
+        scene.push_object("lid", &positions, &indices);
+        let surface = LinearBvh::build(&scene, 4).expect("builds");
+        for (reach, exact) in [(RING_REACH, false), (MAX_RING_REACH, true)] {
+            let ring = Ring {
+                surface: &surface,
+                reach,
+            };
+            let tile = rasterize(&own, &frame, 0.01, None, Some(ring), &[]).unwrap();
+            // Its cell's -u corners are extrapolated, its +u corners sampled at 3.
+            let (rim, inner) = ((6 * 16 + 3) as usize, (6 * 16 + 4) as usize);
+            assert!(!tile.texels[rim].is_sampled() && tile.texels[inner].is_sampled());
+            let found = tile.exposed.iter().any(|e| e.input == sliver);
+            assert_eq!(found, exact, "reach {reach}: {:?}", tile.exposed);
+        }
+    }
+
     #[test]
     fn cells_under_a_triangle_without_sample_centres_get_their_corners() {
         let frame = xy_frame(8);
