@@ -187,6 +187,18 @@ mod tests {
     use super::super::tests::{decoded, plain, quantum, square, xy_frame};
     use super::*;
 
+    /// A scene of one object, `name`, made of the triangles `tris` (unshared corners): the
+    /// surface a leaf's ring samples.
+    fn scene_of(name: &str, tris: &[[Vec3; 3]]) -> crate::scene::Scene {
+        let mut scene = crate::scene::Scene::new(name);
+        let positions: Vec<Vec3> = tris.iter().flatten().copied().collect();
+        let indices: Vec<[u32; 3]> = (0..tris.len() as u32)
+            .map(|k| [3 * k, 3 * k + 1, 3 * k + 2])
+            .collect();
+        scene.push_object(name, &positions, &indices);
+        scene
+    }
+
     #[test]
     fn the_ring_reaches_as_far_as_the_criterion_lets_the_surface_rise() {
         let cone = |max_angle_deg| ring_reach(Refinement::NormalCone { max_angle_deg });
@@ -216,12 +228,7 @@ mod tests {
         scene_tris.push([p(12.0, 4.0, 3.0), p(16.0, 12.0, 7.0), p(12.0, 12.0, 3.0)]);
         scene_tris.push([p(12.0, 4.0, 4.9), p(16.0, 4.0, 4.9), p(16.0, 12.0, 4.9)]);
         scene_tris.push([p(12.0, 4.0, 4.9), p(16.0, 12.0, 4.9), p(12.0, 12.0, 4.9)]);
-        let mut scene = crate::scene::Scene::new("bend");
-        let positions: Vec<Vec3> = scene_tris.iter().flatten().copied().collect();
-        let indices: Vec<[u32; 3]> = (0..scene_tris.len() as u32)
-            .map(|k| [3 * k, 3 * k + 1, 3 * k + 2])
-            .collect();
-        scene.push_object("bend", &positions, &indices);
+        let scene = scene_of("bend", &scene_tris);
         let surface = LinearBvh::build(&scene, 4).expect("builds");
         let ring = Ring {
             surface: &surface,
@@ -263,12 +270,7 @@ mod tests {
         let p = |x: f32, y: f32| Vec3::new(x, y, 2.0);
         own.push([p(3.7, 6.7), p(4.3, 6.7), p(3.9, 7.3)]);
         let sliver = (own.len() - 1) as u32;
-        let mut scene = crate::scene::Scene::new("lid");
-        let positions: Vec<Vec3> = own.iter().flatten().copied().collect();
-        let indices: Vec<[u32; 3]> = (0..own.len() as u32)
-            .map(|k| [3 * k, 3 * k + 1, 3 * k + 2])
-            .collect();
-        scene.push_object("lid", &positions, &indices);
+        let scene = scene_of("lid", &own);
         let surface = LinearBvh::build(&scene, 4).expect("builds");
         for (reach, exact) in [(RING_REACH, false), (MAX_RING_REACH, true)] {
             let ring = Ring {
