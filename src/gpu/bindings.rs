@@ -3,7 +3,7 @@
 //! `#define RBVH_<NAME>_BINDING <n>` lines a constant `<NAME>` here. The tracer and the painter
 //! bind their buffers by these (`trace`, `paint`), so a binding is numbered once, and a
 //! pipeline's list is checked against its SPIR-V below. An engine that traces in its own shaders
-//! picks its own bindings (README, "Embedding in an engine"); the headers' defaults are these
+//! picks its own bindings (docs/embedding.md, "In the engine's own shaders"); the headers' defaults are these
 //! (`tests/glsl_header.rs` checks).
 
 use super::Reach;

@@ -7,7 +7,7 @@ pub fn words(bytes: &[u8]) -> std::io::Result<Vec<u32>> {
     ash::util::read_spv(&mut std::io::Cursor::new(bytes))
 }
 
-/// The GLSL headers an engine includes in its own shaders (README, "Embedding in an engine"), by
+/// The GLSL headers an engine includes in its own shaders (docs/embedding.md, "In the engine's own shaders"), by
 /// the name `#include` gives them: `rbvh.glsl` (the RBVH's march and leaf hook), `bvh.glsl` (the
 /// exact BVH), `traverse.glsl` (the one traversal they instantiate), `grid.glsl` (grid stepping
 /// for both marches), `lod.glsl` (level of detail, on top of `rbvh.glsl`) and what they include. An
