@@ -473,8 +473,8 @@ fn ibl_visibility_rays_trace_with_level_of_detail() {
          {sharper_flip:.4}), without {plain_flip:.4}"
     );
     // Measured 0.0296 with LOD (default parameters), 0.0213 at bias -2 and 0.0067 without:
-    // solid coarse columns occlude more than the surfaces they stand for (README, "Level of
-    // detail"), and this tiny image's wide pixels (1/48 of the view) choose them early. Bounded so
+    // solid coarse columns occlude more than the surfaces they stand for
+    // (docs/level-of-detail.md), and this tiny image's wide pixels (1/48 of the view) choose them early. Bounded so
     // it cannot grow, and a sharper bias must buy accuracy back. (0.0164 at bias -2 over the
     // construction's own tree; the SAH tree over the leaves, cheaper for this scene, groups
     // them into other nodes, whose columns are coarser here.)
