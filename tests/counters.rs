@@ -212,8 +212,10 @@ fn the_twins_block_jumps_change_no_hit_and_save_cells() {
             }
         }
         println!("Q{level}: cells plain {plain_cells}, with jumps {twin_cells}");
+        // A fifth saved at least: the jumps saved 35–48% before the tiles' planes, which halved
+        // the plain walk's cells here by themselves (Q0 511,343 → 259,100).
         assert!(
-            twin_cells * 4 < plain_cells * 3,
+            twin_cells * 5 < plain_cells * 4,
             "Q{level}: {twin_cells} of {plain_cells}"
         );
     }

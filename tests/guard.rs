@@ -57,11 +57,12 @@ fn every_preset_of_the_hall_is_small_and_mostly_height_fields() {
 /// What a texel of the hall costs on the device at every preset (`Rbvh::bytes_per_texel`: the
 /// atlas, its unused texels and block ranges included, over the tiles' texels), with normals and
 /// without: tiles whose heights span at most two texels store them in a byte
-/// (`rbvh::rbvh::NARROW_QUANTUM_TEXELS`), and the packing wastes a few percent. With every
-/// triangle sampled (`Q2s`) measured 3.53–3.81 bytes with normals, 1.47–1.69 without, 47–64% of
-/// the texels 8-bit; 16-bit heights everywhere would take 4.2 and 2.1. The presets trace the
-/// room's flat walls and floor exactly, which were most of the 8-bit tiles: the texels left cost
-/// 4.07–4.29 and 1.69–2.16 bytes (2.6–47% 8-bit; bounded at 4.35 and 2.2 bytes and 2%), over a
+/// (`rbvh::rbvh::NARROW_QUANTUM_TEXELS`) over the tile's plane, and the packing wastes a few
+/// percent. With every triangle sampled (`Q2s`) measured 3.54–3.79 bytes with normals, 1.47–1.68
+/// without, 48–64% of the texels 8-bit; 16-bit heights everywhere would take 4.2 and 2.1. The
+/// presets trace the room's flat walls and floor exactly, which were most of the 8-bit tiles: the
+/// texels left cost 4.06–4.27 and 1.67–2.16 bytes (0–49% 8-bit: where a narrow band would cost
+/// more than it saves, its few tiles are stored wide; bounded at 4.35 and 2.2 bytes), over a
 /// structure that is smaller in all.
 #[test]
 fn every_preset_of_the_hall_stores_texels_in_the_bytes_they_need() {
@@ -87,10 +88,6 @@ fn every_preset_of_the_hall_stores_texels_in_the_bytes_they_need() {
                 );
                 if exact_when_cheaper {
                     assert!(bytes <= most, "{label}: {bytes} bytes a texel");
-                    assert!(
-                        narrow * 50 >= r.stats.tile_texels,
-                        "{label}: {narrow} texels 8-bit"
-                    );
                 } else {
                     assert!(bytes <= most_sampled, "{label}: {bytes} bytes a texel");
                     assert!(

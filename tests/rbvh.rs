@@ -735,13 +735,13 @@ fn each_object_is_sampled_at_its_own_rate() {
     for r in [&plain, &fine] {
         assert!((r.texel_size - scene_texel).abs() <= 1e-6 * scene_texel);
     }
-    // A leaf's texel is its grid's step; the ball's leaves start near the ball (the ground's
+    // A leaf's texel (`texel_size`); the ball's leaves start near the ball (the ground's
     // tiles, 64 texels a side, have none of their corners there).
     let texels = |r: &Rbvh, on_ball: bool| -> Vec<f32> {
         r.heightfields
             .iter()
             .filter(|l| ((Vec3::from(l.origin) - Vec3::Y).length() < 1.5) == on_ball)
-            .map(|l| l.grid().step_u.length())
+            .map(|l| l.texel_size())
             .collect()
     };
     let near = |t: f32, want: f32| (t - want).abs() <= 1e-3 * want;

@@ -122,9 +122,11 @@ fn block_jumps_skip_many_cells_of_grazing_rays_and_change_no_hit() {
             hits > 1000 && hits < rays.len(),
             "both hits and misses: {hits}"
         );
-        // Measured: 390k against 679k steps for closest hits (node visits included).
+        // Measured: 390k against 679k steps for closest hits (node visits included) before the
+        // tiles' planes, 79k against 100k since: the planes' thinner tile boxes took most of the
+        // grazing rays' cells, and what the jumps skip with them.
         assert!(
-            gpu_steps * 4 < cpu_steps * 3,
+            gpu_steps * 10 < cpu_steps * 9,
             "jumps should skip many cells: GPU {gpu_steps} steps, CPU {cpu_steps}"
         );
     }
@@ -472,10 +474,32 @@ fn height_only_texels_hit_the_same_and_report_the_facet_normal() {
                 ..normals.params
             };
             let height = Arc::new(Rbvh::build(&scene, &params).unwrap());
+            // The same tiles and codes; the packing may place them apart, keeping the narrow
+            // band in one format and not in the other (`atlas::pack`).
+            let placed_at = |r: &Rbvh| -> Vec<_> {
+                r.heightfields
+                    .iter()
+                    .map(|l| rbvh::rbvh::GpuHeightfield {
+                        atlas_base: 0,
+                        ..*l
+                    })
+                    .collect()
+            };
             assert_eq!(
-                (&height.nodes, &height.heightfields),
-                (&normals.nodes, &normals.heightfields)
+                (&height.nodes, placed_at(&height)),
+                (&normals.nodes, placed_at(&normals))
             );
+            let pitch = |r: &Rbvh| r.atlas.pitch as usize;
+            for (a, b) in height.heightfields.iter().zip(&normals.heightfields) {
+                for j in 0..a.res_v as usize {
+                    for i in 0..a.res_u as usize {
+                        let at = |r: &Rbvh, l: &rbvh::rbvh::GpuHeightfield| {
+                            r.atlas.texels[l.atlas_base as usize + j * pitch(r) + i].height_code()
+                        };
+                        assert_eq!(at(&height, a), at(&normals, b), "{name} Q{level}");
+                    }
+                }
+            }
             assert!(height.colours.is_none());
             assert!(height.atlas_bytes() < normals.atlas_bytes() * 3 / 4);
             let tracer = Tracer::new(&ctx, &Structure::from(height.clone())).unwrap();

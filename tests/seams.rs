@@ -513,12 +513,19 @@ fn check_parts(ctx: &Context, name: &str, params: &RbvhParams) -> (usize, usize)
             let scale = (whole[1] - whole[0])
                 .length()
                 .max((whole[2] - whole[0]).length());
+            // A part's corners are f32 points: a few ulps of the coordinates off an edge is inside.
+            let reach = whole
+                .iter()
+                .map(|p| p.abs().max_element())
+                .fold(0.0, f32::max);
             for q in [a, b, c] {
                 // Inside the whole triangle: on its side of each of its edges.
                 for e in 0..3 {
                     let (p0, p1) = (whole[e], whole[(e + 1) % 3]);
                     let side = (p1 - p0).cross(q - p0).dot(plane);
-                    assert!(side >= -1e-6 * scale * scale, "part {t:?} leaves {whole:?}");
+                    let slack =
+                        (1e-6 * scale * scale).max(4.0 * f32::EPSILON * reach * (p1 - p0).length());
+                    assert!(side >= -slack, "part {t:?} leaves {whole:?}");
                 }
                 let off = (q - whole[0]).dot(plane).abs();
                 assert!(off < 1e-6 * scale.max(1.0), "{q} off {whole:?}");

@@ -219,7 +219,7 @@ impl Rbvh {
             let (res_u, res_v) = (leaf.res_u as i64, leaf.res_v as i64);
             let grid = leaf.grid();
             let (du, dv, w) = (grid.step_u, grid.step_v, grid.axis_w);
-            let size = du.length();
+            let size = leaf.texel_size();
             let texel = |i: i64, j: i64| {
                 if i < 0 || j < 0 || i >= res_u || j >= res_v {
                     return None;

@@ -10,6 +10,8 @@
 use std::borrow::Borrow;
 
 use super::layout::{Atlas, Texel};
+use super::params::TexelFormat;
+use super::ranges::BLOCK;
 use super::raster::Tile;
 use crate::{Error, Result};
 
@@ -62,8 +64,45 @@ pub struct Packing {
 /// and a pitch chosen for a square atlas left a last shelf of 64-texel tiles mostly empty (the
 /// default scene's Q2: 83.5% filled at pitch 1024).
 ///
+/// The narrow tiles keep their band only where it costs the device fewer bytes in `format` than
+/// storing every tile wide: the band starts on a shelf of its own, and a few narrow tiles save
+/// less than that shelf's unused texels cost (the default scene's Q2, 1.4% of its texels narrow,
+/// took 0.508 → 0.513 MB of atlas with its band). A narrow tile stored wide keeps its codes,
+/// 16-bit ones (`257 c`, [`Texel::narrow_code_of`]) that every reader decodes the same; so one
+/// RBVH's builds in the two formats hold the same tiles and codes, placed apart only where one
+/// keeps the band and the other does not.
+///
 /// Fails when the atlas would need more texels than a 32-bit texel index can address.
-pub fn pack(tiles: &[Footprint]) -> Result<Packing> {
+pub fn pack(tiles: &[Footprint], format: TexelFormat) -> Result<Packing> {
+    let banded = pack_as_given(tiles)?;
+    if banded.narrow_rows == 0 {
+        return Ok(banded);
+    }
+    let wide: Vec<Footprint> = tiles
+        .iter()
+        .map(|&f| Footprint { narrow: false, ..f })
+        .collect();
+    let unbanded = pack_as_given(&wide)?;
+    let cheaper = device_bytes(&unbanded, format) < device_bytes(&banded, format);
+    Ok(if cheaper { unbanded } else { banded })
+}
+
+/// What `packing`'s atlas costs the device in `format` (as [`Atlas::device_words`] lays it out:
+/// 4 or 2 bytes a wide texel, 3 or 1 a narrow one, 4 a block range), to a few bytes of rounding.
+fn device_bytes(packing: &Packing, format: TexelFormat) -> u64 {
+    let (pitch, rows) = (u64::from(packing.pitch), u64::from(packing.rows));
+    let narrow = u64::from(packing.narrow_rows) * pitch;
+    let wide = rows * pitch - narrow;
+    let (wide_bytes, narrow_bytes) = match format {
+        TexelFormat::HeightNormal => (4, 3),
+        TexelFormat::Height => (2, 1),
+    };
+    let blocks = pitch.div_ceil(u64::from(BLOCK)) * rows.div_ceil(u64::from(BLOCK));
+    wide * wide_bytes + narrow * narrow_bytes + 4 * blocks
+}
+
+/// [`pack`] with every tile's format as given.
+fn pack_as_given(tiles: &[Footprint]) -> Result<Packing> {
     let widest = tiles
         .iter()
         .filter(|f| f.res_v > 0)
@@ -242,14 +281,18 @@ mod tests {
     fn random_tiles_do_not_overlap_and_fill_well() {
         for n in [1, 7, 100, 300, 600] {
             let s = sizes(n, 4, 64);
-            let p = pack(&wide(&s)).unwrap();
+            let p = pack(&wide(&s), TexelFormat::HeightNormal).unwrap();
             check_placement(&s, &p);
             let used: u64 = s.iter().map(|&(u, v)| u as u64 * v as u64).sum();
             let fill = used as f64 / (p.pitch as u64 * p.rows as u64) as f64;
             if n >= 100 {
                 assert!(fill >= 0.7, "{n} tiles: fill {fill}");
             }
-            assert_eq!(pack(&wide(&s)).unwrap(), p, "not deterministic");
+            assert_eq!(
+                pack(&wide(&s), TexelFormat::HeightNormal).unwrap(),
+                p,
+                "not deterministic"
+            );
         }
     }
 
@@ -265,7 +308,7 @@ mod tests {
                 narrow: n % 3 != 0,
             })
             .collect();
-        let p = pack(&tiles).unwrap();
+        let p = pack(&tiles, TexelFormat::HeightNormal).unwrap();
         check_placement(&s, &p);
         assert!(p.narrow_rows > 0 && p.narrow_rows < p.rows);
         let band = (p.rows - p.narrow_rows) * p.pitch;
@@ -287,9 +330,35 @@ mod tests {
             .iter()
             .map(|&f| Footprint { narrow: true, ..f })
             .collect();
-        let p = pack(&all_narrow).unwrap();
+        let p = pack(&all_narrow, TexelFormat::HeightNormal).unwrap();
         assert_eq!(p.narrow_rows, p.rows);
-        assert_eq!(pack(&wide(&s)).unwrap().narrow_rows, 0);
+        assert_eq!(
+            pack(&wide(&s), TexelFormat::HeightNormal)
+                .unwrap()
+                .narrow_rows,
+            0
+        );
+    }
+
+    /// A band of one small narrow tile would take a shelf of its own, where stored wide it fits
+    /// beside the last wide tile: it is stored wide, in either format.
+    #[test]
+    fn a_band_that_costs_more_than_it_saves_is_not_kept() {
+        let mut tiles = wide(&[(60, 64); 5]);
+        tiles.push(Footprint {
+            res_u: 4,
+            res_v: 8,
+            narrow: true,
+        });
+        let sizes: Vec<(u32, u32)> = tiles.iter().map(|f| (f.res_u, f.res_v)).collect();
+        for format in [TexelFormat::HeightNormal, TexelFormat::Height] {
+            let p = pack(&tiles, format).unwrap();
+            check_placement(&sizes, &p);
+            assert_eq!((p.pitch, p.rows, p.narrow_rows), (64, 320, 0), "{format:?}");
+            let banded = pack_as_given(&tiles).unwrap();
+            assert_eq!(banded.narrow_rows, 8);
+            assert!(device_bytes(&p, format) < device_bytes(&banded, format));
+        }
     }
 
     /// Five 64 × 64 tiles: a square atlas (pitch 256) would leave its second shelf half empty
@@ -297,7 +366,7 @@ mod tests {
     #[test]
     fn the_pitch_with_the_fewest_texels_is_chosen() {
         let s = vec![(64, 64); 5];
-        let p = pack(&wide(&s)).unwrap();
+        let p = pack(&wide(&s), TexelFormat::HeightNormal).unwrap();
         check_placement(&s, &p);
         assert_eq!((p.pitch, p.rows), (64, 320));
         // Against every pitch it could have taken, none holds them in fewer texels.
@@ -315,7 +384,7 @@ mod tests {
     #[test]
     fn equal_and_zero_sized_tiles_are_placed_deterministically() {
         let s = vec![(8, 8), (0, 5), (8, 8), (16, 4), (3, 0), (8, 8)];
-        let p = pack(&wide(&s)).unwrap();
+        let p = pack(&wide(&s), TexelFormat::HeightNormal).unwrap();
         check_placement(&s, &p);
         // Equal tiles keep their input order along the shelf.
         assert!(p.bases[0] < p.bases[2] && p.bases[2] < p.bases[5]);
@@ -324,7 +393,7 @@ mod tests {
 
     #[test]
     fn empty_input_gives_an_empty_atlas() {
-        let p = pack(&[]).unwrap();
+        let p = pack(&[], TexelFormat::HeightNormal).unwrap();
         assert_eq!(
             p,
             Packing {
@@ -342,11 +411,13 @@ mod tests {
     #[test]
     fn oversized_atlas_is_a_parameter_error() {
         for s in [vec![(16384, 16384); 17], vec![(u32::MAX, u32::MAX)]] {
-            let err = pack(&wide(&s)).unwrap_err().to_string();
+            let err = pack(&wide(&s), TexelFormat::HeightNormal)
+                .unwrap_err()
+                .to_string();
             assert!(err.contains("texels_per_diagonal") && err.contains("lower the sampling rate"));
         }
         // A tile wider than the usual pitch cap still packs.
-        let p = pack(&wide(&[(20000, 2)])).unwrap();
+        let p = pack(&wide(&[(20000, 2)]), TexelFormat::HeightNormal).unwrap();
         assert_eq!((p.pitch, p.rows), (32768, 2));
     }
 
@@ -370,13 +441,14 @@ mod tests {
                     .map(|k| Texel::new((n as u32 * 100 + k) as u16, Vec3::Z))
                     .collect(),
                 h_scale: 1.0,
+                slope: glam::Vec2::ZERO,
                 narrow: false,
                 covered: u * v,
                 sources: Vec::new(),
                 exposed: Vec::new(),
             })
             .collect();
-        let p = pack(&wide(&s)).unwrap();
+        let p = pack(&wide(&s), TexelFormat::HeightNormal).unwrap();
         let refs: Vec<&Tile> = tiles.iter().collect();
         let atlas = assemble(&refs, &p);
         assert_eq!(atlas, assemble(&tiles, &p));

@@ -43,7 +43,9 @@ use super::atlas::{self, Footprint};
 use super::child::Child;
 use super::layout::Texel;
 use super::march::{trace_instanced, Walk};
-use super::{Atlas, ExactTriangles, GpuHeightfield, Rbvh, RbvhParams, RbvhSource, RbvhStats};
+use super::{
+    Atlas, ExactTriangles, GpuHeightfield, Rbvh, RbvhParams, RbvhSource, RbvhStats, TexelFormat,
+};
 use crate::bvh::{
     check_transforms, index, place, top_node_count, BottomLevel, GpuInstance, GpuNode, GpuTriangle,
 };
@@ -409,7 +411,7 @@ fn merge(
     index(nodes.len(), "nodes")?;
     index(gathered.len(), "exact triangles")?;
     index(heightfields.len(), "height fields")?;
-    let (atlas, colours) = repack(parts, &footprints, &mut heightfields)?;
+    let (atlas, colours) = repack(parts, &footprints, &mut heightfields, params.texels)?;
     let rbvh = Rbvh {
         params: *params,
         nodes,
@@ -449,15 +451,17 @@ fn relocated(node: &GpuNode, node_base: u32, triangle_base: u32, heightfield_bas
     }
 }
 
-/// Every part's tiles (`footprints`, in the order of `heightfields`) packed into one atlas,
+/// Every part's tiles (`footprints`, in the order of `heightfields`) packed into one atlas for
+/// texels in `format`,
 /// their texels (and colours, where any part has them) copied there and `heightfields`' bases
 /// moved to match.
 fn repack(
     parts: &[Option<Rbvh>],
     footprints: &[Footprint],
     heightfields: &mut [GpuHeightfield],
+    format: TexelFormat,
 ) -> Result<(Atlas, Option<Vec<u32>>)> {
-    let packing = atlas::pack(footprints)?;
+    let packing = atlas::pack(footprints, format)?;
     let pitch = packing.pitch as usize;
     let len = pitch * packing.rows as usize;
     let mut texels = vec![Texel::HOLE; len];

@@ -10,7 +10,11 @@
 //! A leaf is an orthographic projection along `axis_w` (the normalised area-weighted normal sum
 //! Σ nᵢAᵢ of its triangles, Novák & Dachsbacher 2012), with tangents `u`, `v`. A point `p` has
 //! texel-space coordinates `s = (p − origin)·axis_u`, `t = (p − origin)·axis_v` (so `axis_u =
-//! u / texel_size`) and height `h = (p − origin)·axis_w`. Sample `(i, j)` sits at the texel centre
+//! u / texel_size`) and height `h = (p − origin)·axis_w`, measured along the unit axis `w` from
+//! the tile's plane: `axis_w = w − a·axis_u − b·axis_v` for the plane's slopes `a`, `b` (world
+//! height per texel; zero for most tiles, `axis_w = w`), which narrows a tilted tile's range of
+//! heights and so its codes (`raster/quantize.rs`). The map is affine either way, and the march
+//! works in its coordinates alone. Sample `(i, j)` sits at the texel centre
 //! `(s, t) = (i + ½, j + ½)` with height `q · h_scale`, `q` its 16-bit quantized height. The surface
 //! inside the *cell* between samples `(i, j)` and `(i + 1, j + 1)` is two triangles through the four
 //! corner samples (see `march/cell.rs`); cells with a missing corner keep the triangle of the other three.
@@ -65,6 +69,13 @@ pub const MARCH_SKIRT_TEXELS: f32 = 1.0;
 /// a tenth of a texel leaves it unchanged.
 pub const MARCH_DIAGONAL_SKIRT_TEXELS: f32 = 0.1;
 
+/// The least slope of a tile's plane, in texels of height a texel, that its record carries
+/// ([`GpuHeightfield::grid`], `raster/quantize.rs`): ten times the f32 rounding that leaves a
+/// plane-less record's `axis_w` not quite orthogonal to its `axis_u` and `axis_v`. The builder
+/// keeps a plane only where it narrows the heights' range by a narrow quantum (1/128 texel), which
+/// a tile of at most 4096 texels a side cannot do below 1/(128 · 4096) ≈ 1.9e-6.
+pub const MIN_PLANE_SLOPE: f32 = 1e-6;
+
 /// One height-field leaf. 64 bytes:
 ///
 /// | bytes | field |
@@ -72,7 +83,7 @@ pub const MARCH_DIAGONAL_SKIRT_TEXELS: f32 = 0.1;
 /// | 0..12, 12..16 | `origin` (world), `atlas_base` (index of texel (0, 0) in the atlas) |
 /// | 16..28, 28..32 | `axis_u` (= u / texel size), `res_u` (samples along u) |
 /// | 32..44, 44..48 | `axis_v` (= v / texel size), `res_v` |
-/// | 48..60, 60..64 | `axis_w` (unit projection axis), `h_scale` (world height per quantum) |
+/// | 48..60, 60..64 | `axis_w` (height row: the unit projection axis, sheared by the tile's plane), `h_scale` (world height per quantum) |
 ///
 /// Texel `(i, j)` of the tile is at atlas index `atlas_base + j · pitch + i`.
 #[repr(C)]
@@ -92,7 +103,9 @@ pub struct GpuHeightfield {
     pub axis_v: [f32; 3],
     /// GLSL `res_v`: samples (texels) along `v`.
     pub res_v: u32,
-    /// GLSL `axis_w`: unit world-space projection axis; heights are measured along it.
+    /// GLSL `axis_w`: the height row of the frame, `h = (p − origin)·axis_w`: the unit
+    /// world-space projection axis `w`, less the tile's plane `a·axis_u + b·axis_v` where it has
+    /// one (module docs); heights are measured along `w`.
     pub axis_w: [f32; 3],
     /// GLSL `h_scale`: world height per height-code quantum (`h = code · h_scale`).
     pub h_scale: f32,
@@ -112,16 +125,38 @@ impl GpuHeightfield {
         )
     }
 
-    /// The world-space sample grid of the leaf (see [`SampleGrid`]).
+    /// The world-space sample grid of the leaf (see [`SampleGrid`]): the inverse of the frame's
+    /// map. With `axis_u ⟂ axis_v` and `w` orthogonal to both, `axis_w = w − a·axis_u −
+    /// b·axis_v` gives the plane's slopes `a = −axis_w·axis_u / |axis_u|²` (likewise `b`) and `w =
+    /// axis_w + a·axis_u + b·axis_v`, so a step along `u` is `axis_u / |axis_u|² + a·w`.
+    /// A record whose slopes are below [`MIN_PLANE_SLOPE`] texels a texel has no plane: its
+    /// `axis_w` is `w`, and the grid is made without the plane, bit for bit as before planes.
     pub fn grid(&self) -> SampleGrid {
         let (u, v) = (Vec3::from(self.axis_u), Vec3::from(self.axis_v));
+        let row = Vec3::from(self.axis_w);
+        let (uu, vv) = (u.dot(u), v.dot(v));
+        let (a, b) = (-row.dot(u) / uu, -row.dot(v) / vv);
+        let (step_u, step_v, w) =
+            if (a * uu.sqrt()).abs() < MIN_PLANE_SLOPE && (b * vv.sqrt()).abs() < MIN_PLANE_SLOPE {
+                (u / uu, v / vv, row)
+            } else {
+                let w = row + a * u + b * v;
+                (u / uu + a * w, v / vv + b * w, w)
+            };
         SampleGrid {
             origin: Vec3::from(self.origin),
-            step_u: u / u.dot(u),
-            step_v: v / v.dot(v),
-            axis_w: Vec3::from(self.axis_w),
+            step_u,
+            step_v,
+            axis_w: w,
             h_scale: self.h_scale,
         }
+    }
+
+    /// World size of the leaf's texel: `|axis_u / |axis_u|²|` (the grid's steps rise along the
+    /// tile's plane, so they are longer where it has one).
+    pub fn texel_size(&self) -> f32 {
+        let u = Vec3::from(self.axis_u);
+        (u / u.dot(u)).length()
     }
 
     /// World position of sample `(i, j)` with height code `code` ([`SampleGrid::point`]).
@@ -247,8 +282,9 @@ fn nearest_code(q: f64, sampled: bool, max: u16) -> u16 {
     ((2.0 * half.round()).clamp(0.0, max - 2.0 * odd) + odd) as u16
 }
 
-/// A leaf's samples in world space: `step_u = axis_u / |axis_u|²` (= `u · texel`, the axes being
-/// orthogonal) and likewise `step_v` are the world vectors of one texel step. Computed once per
+/// A leaf's samples in world space: `step_u` and `step_v`, the world vectors of one texel step
+/// at a constant height over the tile's plane (`u · texel`, plus the plane's rise along `w`), and
+/// the unit axis `w` heights are measured along ([`GpuHeightfield::grid`]). Computed once per
 /// leaf, on the host, for the CPU and for `glsl/paint.comp` alike.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SampleGrid {
@@ -258,7 +294,8 @@ pub struct SampleGrid {
     pub step_u: Vec3,
     /// World vector of one texel step along `v`.
     pub step_v: Vec3,
-    /// Unit world-space height axis, as [`GpuHeightfield::axis_w`].
+    /// Unit world-space height axis `w` (the record's [`GpuHeightfield::axis_w`] without the
+    /// plane).
     pub axis_w: Vec3,
     /// World height per height-code quantum, as [`GpuHeightfield::h_scale`].
     pub h_scale: f32,

@@ -160,8 +160,8 @@ mod tests {
     /// World height of sample `(i, j)` of `tile`, or None at a hole.
     fn height(tile: &Tile, i: usize, j: usize) -> Option<f32> {
         let texel = tile.texels[j * tile.frame.res_u as usize + i];
-        (!texel.is_hole())
-            .then(|| tile.frame.origin.z + f32::from(texel.height_code()) * tile.h_scale)
+        let h = f32::from(texel.height_code()) * tile.h_scale;
+        (!texel.is_hole()).then(|| tile.point(i as f32 + 0.5, j as f32 + 0.5, h).z)
     }
 
     /// Points on the plane z = 0.25·x + 1 every `step` texels, normals of the plane.

@@ -21,7 +21,7 @@ use super::*;
 ///
 ///   These stay below 3% leaks and 1% hit/miss.
 /// * sampling rates: 1 and 2 texels per diagonal build valid, very coarse results (a sphere is 8
-///   tiles of 3×3), traced without error; 4096 is exact to 1e-5 of the diagonal.
+///   tiles of 3×3), traced without error; 4096 is exact to 2e-5 of the diagonal.
 /// * out of range: each gives `InvalidParameter` naming the parameter and its range, and a rate
 ///   whose texels would exceed the builder's limit (1e5 per diagonal: ~1e10 texels) an error
 ///   naming `texels_per_diagonal` and saying to lower it — before any memory is spent.
@@ -219,7 +219,10 @@ fn parameter_extremes_build_valid_results_or_clear_errors() {
                     .filter(|(a, e)| a.is_hit() && e.is_hit())
                     .map(|(a, e)| (a.t - e.t).abs())
                     .fold(0.0, f32::max);
-                assert!(worst <= 1e-5 * diag, "{name} rate 4096: {worst}");
+                // 1e-5 of the diagonal before the tiles' planes; since, tiles of the sphere that
+                // were 16-bit are 8-bit, their heights within 1/128 texel, and a grazing ray's
+                // distance errs by that over the sine of its angle (4.7e-5 at worst here).
+                assert!(worst <= 2e-5 * diag, "{name} rate 4096: {worst}");
             }
         }
     }

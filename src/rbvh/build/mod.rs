@@ -298,7 +298,7 @@ impl Rbvh {
         let footprints: Vec<atlas::Footprint> =
             out.tiles.iter().map(atlas::Footprint::of).collect();
         let packing = step(progress, "packing the atlas", 0, || {
-            atlas::pack(&footprints)
+            atlas::pack(&footprints, params.texels)
         })?;
         for (leaf, &base) in out.heightfields.iter_mut().zip(&packing.bases) {
             leaf.atlas_base = base;

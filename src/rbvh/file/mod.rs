@@ -46,7 +46,7 @@
 //! | `HEAD` | 1 | required | the structure, 68 bytes: `bounds` (6 × f32: min x, y, z, max x, y, z), `depth` (u32), `texel_size` (f32), `stats.build_ms` (f64), `stats.heightfield_leaves`, `stats.triangle_leaves` (u32 each), `stats.tile_texels` (u64), `atlas.pitch`, `atlas.rows`, `atlas.narrow_rows` (u32 each: the last are the rows whose heights are 8-bit codes) |
 //! | `NODE` | 1 | required | `nodes`, 48 bytes each ([`crate::bvh::GpuNode`]) |
 //! | `TRIS` | 1 | required | `triangles`, 48 bytes each ([`crate::bvh::GpuTriangle`], gathered: the device's indexed form is made from them, [`crate::rbvh::ExactTriangles`]) |
-//! | `LEAF` | 1 | required | `heightfields`, 64 bytes each ([`super::GpuHeightfield`]) |
+//! | `LEAF` | 2 | required | `heightfields`, 64 bytes each ([`super::GpuHeightfield`]); since version 2 a record's `axis_w` may carry its tile's plane (version 1 loads: its records have none) |
 //! | `TEXN` or `TEXH` | 1 | required | `atlas.texels` row by row, exactly one of the two: `TEXN` 4 bytes each (height code and normal, [`super::Texel`]), `TEXH` 2 bytes each (the height code, for `params.texels` = `Height`). The tag is the texel format: a new encoding is a new tag |
 //! | `COLR` | 1 | optional | with a colour channel only: `colours`, one packed RGBA8 word per texel (see [`crate::rgba`]); a height-only RBVH has none |
 //!

@@ -101,6 +101,11 @@ const PARAMS_VERSION: u32 = 7;
 /// Words of `PARM` at each version, from 1: each version appended one parameter (the first had
 /// the paper's, `refinement` taking two words).
 const PARAMS_WORDS: [usize; PARAMS_VERSION as usize] = [7, 8, 9, 10, 11, 12, 13];
+/// The version of `LEAF` this build writes: 2, whose records may carry their tile's plane in
+/// `axis_w` ([`GpuHeightfield::grid`] reads it back); version 1's never do, and read the same. A
+/// reader of version 1 alone refuses version 2, whose planes it would not undo where it places
+/// samples in the world (painting, seam rays, level of detail).
+const LEAVES_VERSION: u32 = 2;
 /// Bytes of `HEAD`.
 const HEAD_BYTES: usize = 68;
 
@@ -132,7 +137,7 @@ const KNOWN: [Known; 10] = [
     },
     Known {
         tag: LEAVES,
-        versions: 1..2,
+        versions: 1..LEAVES_VERSION + 1,
         required: true,
         record: std::mem::size_of::<GpuHeightfield>(),
     },

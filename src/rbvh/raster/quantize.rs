@@ -1,9 +1,10 @@
 //! Step 5 of rasterizing a leaf (see [`super`]): **quantization** of its heights into the packed
 //! [`Texel`]s of `layout.rs` — 8-bit codes for a narrow tile, 16-bit ones otherwise (issue "Small
 //! and valid at every scale": bytes per texel that fit the surface), the parity of each code
-//! telling a sampled height from an extrapolated one.
+//! telling a sampled height from an extrapolated one. The heights are measured from the tile's
+//! least-squares plane where that narrows their range ([`Tile::slope`]).
 
-use glam::Vec3;
+use glam::{DVec3, Vec2, Vec3};
 
 use super::{Frame, Tile, NONE};
 use crate::rbvh::layout::Texel;
@@ -19,8 +20,8 @@ use crate::rbvh::layout::Texel;
 /// 8-bit tiles (89% at 1/64).
 pub const NARROW_QUANTUM_TEXELS: f32 = 1.0 / 128.0;
 
-/// Step 5 of the module docs: 8- or 16-bit heights over the tile's own range, origin moved to
-/// `h_lo`.
+/// Step 5 of the module docs: 8- or 16-bit heights over the tile's own range, measured from its
+/// plane where that narrows the range ([`plane_slope`]), origin moved to the lowest.
 pub(in crate::rbvh) fn quantize(
     frame: &Frame,
     height: &[f32],
@@ -29,41 +30,49 @@ pub(in crate::rbvh) fn quantize(
     normals: &[Vec3],
     covered: u32,
 ) -> Tile {
-    let valid = || {
-        height
-            .iter()
-            .zip(source)
-            .filter(|(_, &s)| s != NONE)
-            .map(|(&h, _)| h)
+    let res_u = frame.res_u.max(1) as usize;
+    let centre = |k: usize| DVec3::new((k % res_u) as f64 + 0.5, (k / res_u) as f64 + 0.5, 0.0);
+    let residual = |slope: Vec2, k: usize| {
+        let c = centre(k);
+        height[k] as f64 - f64::from(slope.x) * c.x - f64::from(slope.y) * c.y
     };
-    let h_lo = valid().fold(f32::INFINITY, f32::min);
-    let h_hi = valid().fold(f32::NEG_INFINITY, f32::max);
-    let range = if h_lo <= h_hi {
-        h_hi as f64 - h_lo as f64
+    let range_over = |slope: Vec2| {
+        let (lo, hi) = (0..height.len())
+            .filter(|&k| source[k] != NONE)
+            .map(|k| residual(slope, k))
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), r| {
+                (lo.min(r), hi.max(r))
+            });
+        (lo, if lo <= hi { hi - lo } else { 0.0 })
+    };
+    // The plane is kept where it narrows the range by a narrow quantum or more: less would not
+    // change a tile's format, and a slope that small is one the record cannot tell from none
+    // (`MIN_PLANE_SLOPE`).
+    let fitted = plane_slope(height, source, res_u);
+    let quantum = f64::from(NARROW_QUANTUM_TEXELS) * f64::from(frame.texel);
+    let slope = if range_over(fitted).1 + quantum <= range_over(Vec2::ZERO).1 {
+        fitted
     } else {
-        0.0
+        Vec2::ZERO
     };
+    let (h_lo, range) = range_over(slope);
+    let h_lo = if h_lo.is_finite() { h_lo as f32 } else { 0.0 };
     let narrow = range <= 254.0 * f64::from(NARROW_QUANTUM_TEXELS) * f64::from(frame.texel);
     let top = if narrow {
         Texel::NARROW_MAX
     } else {
         u32::from(Texel::MAX_CODE)
     };
-    let (h_lo, h_scale) = if h_lo <= h_hi {
-        (h_lo, (range / f64::from(top)) as f32)
-    } else {
-        (0.0, 0.0)
-    };
-    let texels = height
-        .iter()
+    let h_scale = (range / f64::from(top)) as f32;
+    let texels = (0..height.len())
         .zip(source)
         .zip(sampled)
-        .map(|((&h, &s), &sampled)| {
+        .map(|((k, &s), &sampled)| {
             if s == NONE {
                 return Texel::HOLE;
             }
             let q = if h_scale > 0.0 {
-                (h as f64 - h_lo as f64) / h_scale as f64
+                (residual(slope, k) - h_lo as f64) / h_scale as f64
             } else {
                 0.0
             };
@@ -82,6 +91,7 @@ pub(in crate::rbvh) fn quantize(
         },
         texels,
         h_scale,
+        slope,
         narrow,
         covered,
         sources: Vec::new(),
@@ -89,11 +99,54 @@ pub(in crate::rbvh) fn quantize(
     }
 }
 
+/// The slopes `(a, b)` of the least-squares plane `h ≈ c + a·s + b·t` through the valid heights
+/// over their sample centres `(s, t) = (i + ½, j + ½)`, in world height per texel, rounded to f32
+/// (what [`Tile::slope`] and the record keep, so that the codes are made from the plane the
+/// tracers decode). Zero where the samples do not determine a plane (fewer than three, or all on
+/// a line). A plane per tile, not per block: the tile's record carries it for free, sheared into
+/// its height axis, where a block's would cost bytes (docs/paper-scale.md, "What smaller units of
+/// 8-bit heights would keep").
+fn plane_slope(height: &[f32], source: &[u32], res_u: usize) -> Vec2 {
+    let valid: Vec<(f64, f64, f64)> = (0..height.len())
+        .filter(|&k| source[k] != NONE)
+        .map(|k| {
+            let (i, j) = (k % res_u, k / res_u);
+            (i as f64 + 0.5, j as f64 + 0.5, f64::from(height[k]))
+        })
+        .collect();
+    let n = valid.len() as f64;
+    if valid.len() < 3 {
+        return Vec2::ZERO;
+    }
+    let mean = valid
+        .iter()
+        .fold(DVec3::ZERO, |m, &(s, t, h)| m + DVec3::new(s, t, h) / n);
+    let (mut ss, mut tt, mut st, mut sh, mut th) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for &(s, t, h) in &valid {
+        let (s, t, h) = (s - mean.x, t - mean.y, h - mean.z);
+        (ss, tt, st, sh, th) = (ss + s * s, tt + t * t, st + s * t, sh + s * h, th + t * h);
+    }
+    // Samples on one line (or one point) determine no plane (NaN sums neither).
+    let det = ss * tt - st * st;
+    if det.partial_cmp(&(1e-9 * ss * tt)) != Some(std::cmp::Ordering::Greater) {
+        return Vec2::ZERO;
+    }
+    let slope = Vec2::new(
+        ((sh * tt - th * st) / det) as f32,
+        ((th * ss - sh * st) / det) as f32,
+    );
+    if slope.is_finite() {
+        slope
+    } else {
+        Vec2::ZERO
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use glam::Vec3;
 
-    use super::super::tests::{decoded, plain, quantum, square, xy_frame};
+    use super::super::tests::{decoded, plain, quantum, square, world_sample, xy_frame};
     use super::*;
 
     #[test]
@@ -109,28 +162,93 @@ mod tests {
         }
     }
 
-    /// Heights spanning up to 254 steps of [`NARROW_QUANTUM_TEXELS`] take 8-bit codes, and err by
-    /// at most that step; a span a little larger keeps 16-bit codes.
+    /// A roof over `frame`'s `[0, 16]²` texels: heights `rise · |s − 8|` (world units per texel
+    /// of `s`), two rectangles of two triangles each. Its least-squares plane over the sample
+    /// centres is level, so the plane takes nothing off its range.
+    fn roof(frame: &Frame, rise: f32) -> Vec<[Vec3; 3]> {
+        let p = |s: f32, t: f32| {
+            frame.origin
+                + s * frame.texel * frame.u
+                + t * frame.texel * frame.v
+                + rise * (s - 8.0).abs() * frame.w
+        };
+        let rect = |a: f32, b: f32| {
+            [
+                [p(a, 0.0), p(b, 0.0), p(b, 16.0)],
+                [p(a, 0.0), p(b, 16.0), p(a, 16.0)],
+            ]
+        };
+        [rect(0.0, 8.0), rect(8.0, 16.0)].concat()
+    }
+
+    /// Heights spanning up to 254 steps of [`NARROW_QUANTUM_TEXELS`] over the tile's plane take
+    /// 8-bit codes, and err by at most that step; a span a little larger keeps 16-bit codes.
     #[test]
     fn narrow_tiles_err_by_at_most_their_quantum() {
         let frame = Frame {
             texel: 0.5,
             ..xy_frame(16)
         };
-        // Heights over the sample centres 0.5..15.5 of s: a span of 15 · slope world units.
+        // The roof over the sample centres 0.5..15.5 of s spans 7 · rise world units.
         let span_texels = 254.0 * NARROW_QUANTUM_TEXELS;
         for (span, narrow) in [(0.0, true), (0.5, true), (0.99, true), (1.02, false)] {
-            let slope = span * span_texels * frame.texel / 15.0;
-            let plane = |s: f32, _: f32| slope * s;
-            let tile = plain(&square(&frame, 0.0, 16.0, plane), &frame, 0.01).unwrap();
+            let rise = span * span_texels * frame.texel / 7.0;
+            let tile = plain(&roof(&frame, rise), &frame, 0.01).unwrap();
             assert_eq!(tile.narrow, narrow, "a span of {span} × 254 steps");
+            assert_eq!(tile.slope, Vec2::ZERO, "a span of {span} × 254 steps");
             assert!(quantum(&tile) <= NARROW_QUANTUM_TEXELS * frame.texel * 1.0001 || !narrow);
             for k in 0..256usize {
-                let want = plane((k % 16) as f32 + 0.5, 0.0);
+                let want = rise * ((k % 16) as f32 + 0.5 - 8.0).abs();
                 let got = decoded(&tile, k, frame.origin);
                 assert!((got - want).abs() <= quantum(&tile) + 1e-5, "{span}: {k}");
                 let code = u32::from(tile.texels[k].height_code());
                 assert!(!narrow || code % Texel::NARROW_STEP == 0, "{span}: {k}");
+            }
+        }
+    }
+
+    /// A tilted plane spanning several texels is measured from its own plane: its heights are
+    /// 8-bit codes, within the narrow quantum of the plane, and the record's sheared height row
+    /// and [`GpuHeightfield::grid`] map each sample to the same point as the tile.
+    #[test]
+    fn a_tilted_plane_is_measured_from_its_plane() {
+        let frame = Frame {
+            origin: Vec3::new(3.0, -2.0, 0.5),
+            texel: 0.25,
+            ..xy_frame(16)
+        };
+        // 0.3 and 0.2 texels of height a texel: 7.5 texels of range over the tile.
+        let plane = |s: f32, t: f32| (0.3 * s - 0.2 * t) * frame.texel + 1.0;
+        let tile = plain(&square(&frame, 0.0, 16.0, plane), &frame, 0.01).unwrap();
+        assert!(tile.narrow);
+        assert!(
+            (tile.slope - Vec2::new(0.3, -0.2) * frame.texel).length() < 1e-5,
+            "{}",
+            tile.slope
+        );
+        assert!(quantum(&tile) <= NARROW_QUANTUM_TEXELS * frame.texel * 1.0001);
+        let record = tile.heightfield(0);
+        let grid = record.grid();
+        assert!((grid.axis_w - frame.w).length() < 1e-6);
+        for j in 0..16 {
+            for i in 0..16 {
+                let k = (j * 16 + i) as usize;
+                let want = plane(i as f32 + 0.5, j as f32 + 0.5);
+                let got = decoded(&tile, k, frame.origin);
+                assert!(
+                    (got - want).abs() <= quantum(&tile) + 1e-5,
+                    "({i}, {j}): {got} vs {want}"
+                );
+                let code = tile.texels[k].height_code();
+                let p = world_sample(&tile, i, j);
+                assert!((grid.point(i, j, code) - p).length() < 1e-5, "({i}, {j})");
+                let f = record.to_frame(p);
+                let h = f32::from(code) * tile.h_scale;
+                let expected = Vec3::new(i as f32 + 0.5, j as f32 + 0.5, h);
+                assert!(
+                    (f - expected).length() < 1e-4,
+                    "({i}, {j}): {f} vs {expected}"
+                );
             }
         }
     }
