@@ -59,10 +59,11 @@ pub struct Packing {
 /// the narrow band is whole rows at the end); within each, sorted by `res_v` descending, ties
 /// by `res_u` descending then input index (deterministic), placed left to right on shelves as
 /// tall as their first tile, with a new shelf when the row is full. The pitch is the power of
-/// two, from the widest tile's (at least 16) up to 16384 (see [`MAX_PITCH`]), that gives the
-/// fewest texels in all (the smallest on a tie): every unused texel costs the device its bytes,
-/// and a pitch chosen for a square atlas left a last shelf of 64-texel tiles mostly empty (the
-/// default scene's Q2: 83.5% filled at pitch 1024).
+/// two, from the widest tile's (at least 16) up to 16384 (see [`MAX_PITCH`]), whose texels cost
+/// the device the fewest bytes in `format` (then the fewest texels, then the smallest pitch):
+/// every unused texel costs the device its bytes, and a pitch chosen for a square atlas left a
+/// last shelf of 64-texel tiles mostly empty (the default scene's Q2: 83.5% filled at pitch
+/// 1024). Without a narrow band that is the pitch of the fewest texels.
 ///
 /// The narrow tiles keep their band only where it costs the device fewer bytes in `format` than
 /// storing every tile wide: the band starts on a shelf of its own, and a few narrow tiles save
@@ -74,7 +75,7 @@ pub struct Packing {
 ///
 /// Fails when the atlas would need more texels than a 32-bit texel index can address.
 pub fn pack(tiles: &[Footprint], format: TexelFormat) -> Result<Packing> {
-    let banded = pack_as_given(tiles)?;
+    let banded = pack_as_given(tiles, format)?;
     if banded.narrow_rows == 0 {
         return Ok(banded);
     }
@@ -82,7 +83,7 @@ pub fn pack(tiles: &[Footprint], format: TexelFormat) -> Result<Packing> {
         .iter()
         .map(|&f| Footprint { narrow: false, ..f })
         .collect();
-    let unbanded = pack_as_given(&wide)?;
+    let unbanded = pack_as_given(&wide, format)?;
     let cheaper = device_bytes(&unbanded, format) < device_bytes(&banded, format);
     Ok(if cheaper { unbanded } else { banded })
 }
@@ -91,18 +92,22 @@ pub fn pack(tiles: &[Footprint], format: TexelFormat) -> Result<Packing> {
 /// 4 or 2 bytes a wide texel, 3 or 1 a narrow one, 4 a block range), to a few bytes of rounding.
 fn device_bytes(packing: &Packing, format: TexelFormat) -> u64 {
     let (pitch, rows) = (u64::from(packing.pitch), u64::from(packing.rows));
-    let narrow = u64::from(packing.narrow_rows) * pitch;
-    let wide = rows * pitch - narrow;
+    let blocks = pitch.div_ceil(u64::from(BLOCK)) * rows.div_ceil(u64::from(BLOCK));
+    texel_bytes(pitch, rows, u64::from(packing.narrow_rows), format) + 4 * blocks
+}
+
+/// What `rows` rows of `pitch` texels cost the device in `format`, the last `narrow_rows` of them
+/// 8-bit (the block ranges aside).
+fn texel_bytes(pitch: u64, rows: u64, narrow_rows: u64, format: TexelFormat) -> u64 {
     let (wide_bytes, narrow_bytes) = match format {
         TexelFormat::HeightNormal => (4, 3),
         TexelFormat::Height => (2, 1),
     };
-    let blocks = pitch.div_ceil(u64::from(BLOCK)) * rows.div_ceil(u64::from(BLOCK));
-    wide * wide_bytes + narrow * narrow_bytes + 4 * blocks
+    (rows - narrow_rows) * pitch * wide_bytes + narrow_rows * pitch * narrow_bytes
 }
 
 /// [`pack`] with every tile's format as given.
-fn pack_as_given(tiles: &[Footprint]) -> Result<Packing> {
+fn pack_as_given(tiles: &[Footprint], format: TexelFormat) -> Result<Packing> {
     let widest = tiles
         .iter()
         .filter(|f| f.res_v > 0)
@@ -123,7 +128,11 @@ fn pack_as_given(tiles: &[Footprint]) -> Result<Packing> {
     });
     let (pitch, shelves) = std::iter::successors(Some(least), |&p| (p < most).then_some(p * 2))
         .map(|pitch| (pitch, shelve(tiles, &order, pitch)))
-        .min_by_key(|(pitch, shelves)| (pitch * shelves.rows, *pitch))
+        .min_by_key(|(pitch, shelves)| {
+            let narrow_rows = shelves.rows - shelves.narrow_from;
+            let bytes = texel_bytes(*pitch, shelves.rows, narrow_rows, format);
+            (bytes, pitch * shelves.rows, *pitch)
+        })
         .expect("at least one pitch");
 
     let texels = shelves.rows * pitch;
@@ -355,7 +364,7 @@ mod tests {
             let p = pack(&tiles, format).unwrap();
             check_placement(&sizes, &p);
             assert_eq!((p.pitch, p.rows, p.narrow_rows), (64, 320, 0), "{format:?}");
-            let banded = pack_as_given(&tiles).unwrap();
+            let banded = pack_as_given(&tiles, format).unwrap();
             assert_eq!(banded.narrow_rows, 8);
             assert!(device_bytes(&p, format) < device_bytes(&banded, format));
         }
