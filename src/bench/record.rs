@@ -36,7 +36,7 @@
 //! | `mrays_per_s` | {`median`,`min`,`max`,`samples`} | million rays per second over the timed runs; `samples` each run's, in run order |
 //! | `speedup_vs_exact` | number | median MRays/s over the exact BVH's, same rays, same run (1 for exact) |
 //! | `build_ms` | number | CPU build time of the structure |
-//! | `memory_bytes` | {`tree`,`atlas`,`triangles`,`total`,`texels`,`narrow_texels`} | bytes uploaded: nodes (+ height-field leaf records for RBVH), atlas texels, triangles, their sum; the tiles' texels and those of them with 8-bit heights (0 for exact) |
+//! | `memory_bytes` | {`tree`,`atlas`,`triangles`,`total`,`texels`,`narrow_texels`} | bytes uploaded: nodes (+ height-field leaf records for RBVH), atlas texels, triangles, their sum; the tiles' texels and those of them stored with 8-bit heights (the narrow band; 0 for exact) |
 //! | `memory_ratio_vs_exact` | number | exact total / this total (above 1: smaller than exact) |
 //! | `error` | object \| null | errors against the exact BVH on the same rays (below); null for exact |
 //! | `valid` | bool | false when the hits are wrong rather than approximate (`bench::validate`); for exact: whether the GPU agrees with the CPU reference tracer |

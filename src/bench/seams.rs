@@ -211,7 +211,8 @@ pub struct SeamRays {
 impl Rbvh {
     /// The seam targets of every height-field leaf: each rim sample (a valid sample with a hole
     /// or the tile's edge among its eight neighbours) and, for each such neighbour, the point half
-    /// a texel towards it at the sample's height. In leaf order, deterministic.
+    /// a texel step of the leaf's grid towards it (at the sample's height over the tile's plane,
+    /// where the leaf has one). In leaf order, deterministic.
     pub fn seam_targets(&self) -> Vec<SeamTarget> {
         let mut out = Vec::new();
         let pitch = self.atlas.pitch as usize;

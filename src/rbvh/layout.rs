@@ -73,7 +73,9 @@ pub const MARCH_DIAGONAL_SKIRT_TEXELS: f32 = 0.1;
 /// ([`GpuHeightfield::grid`], `raster/quantize.rs`): ten times the f32 rounding that leaves a
 /// plane-less record's `axis_w` not quite orthogonal to its `axis_u` and `axis_v`. The builder
 /// keeps a plane only where it narrows the heights' range by a narrow quantum (1/128 texel), which
-/// a tile of at most 4096 texels a side cannot do below 1/(128 · 4096) ≈ 1.9e-6.
+/// a tile of at most 4096 texels a side could do with both slopes just under 1/(2 · 128 · 4095)
+/// ≈ 9.5e-7, so it also keeps none whose steeper slope is below this (`raster/quantize.rs`):
+/// builder and reader agree by construction.
 pub const MIN_PLANE_SLOPE: f32 = 1e-6;
 
 /// One height-field leaf. 64 bytes:

@@ -189,7 +189,9 @@ impl Rbvh {
         ))
     }
 
-    /// Texels of the tiles with 8-bit heights (in the atlas's narrow band, [`Atlas::narrow_rows`]).
+    /// Texels of the tiles stored with 8-bit heights: those in the atlas's narrow band
+    /// ([`Atlas::narrow_rows`]). A tile whose codes are 8-bit ones but whose band would cost more
+    /// than it saves is stored wide (`atlas::pack`) and does not count.
     pub fn narrow_texels(&self) -> u64 {
         let wide = self.atlas.wide_len() as u64;
         self.heightfields

@@ -220,8 +220,10 @@ fn parameter_extremes_build_valid_results_or_clear_errors() {
                     .map(|(a, e)| (a.t - e.t).abs())
                     .fold(0.0, f32::max);
                 // 1e-5 of the diagonal before the tiles' planes; since, tiles of the sphere that
-                // were 16-bit are 8-bit, their heights within 1/128 texel, and a grazing ray's
-                // distance errs by that over the sine of its angle (4.7e-5 at worst here).
+                // were 16-bit over their rise are 8-bit over their plane, their heights within
+                // 1/128 texel, and a grazing ray's distance errs by that over the sine of its
+                // angle: 4.7e-5 world units at worst here, 1.4e-5 of the diagonal (these rays'
+                // angles, not a bound; an accuracy the narrow quantum trades for bytes).
                 assert!(worst <= 2e-5 * diag, "{name} rate 4096: {worst}");
             }
         }

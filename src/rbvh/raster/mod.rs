@@ -186,7 +186,7 @@ pub struct Tile {
     /// The record shears it into its height axis ([`Tile::heightfield`]).
     pub slope: Vec2,
     /// Whether the codes are 8-bit ones (step 5 of the module docs): the tile goes to the atlas's
-    /// narrow band ([`crate::rbvh::Atlas::narrow_rows`]).
+    /// narrow band ([`crate::rbvh::Atlas::narrow_rows`]) where the band pays (`atlas::pack`).
     pub narrow: bool,
     /// Samples covered by triangles (before dilation).
     pub covered: u32,

@@ -7,7 +7,7 @@
 use glam::{DVec3, Vec2, Vec3};
 
 use super::{Frame, Tile, NONE};
-use crate::rbvh::layout::Texel;
+use crate::rbvh::layout::{Texel, MIN_PLANE_SLOPE};
 
 /// Largest quantization step, in texels, of a tile's 8-bit heights (step 5 of the module docs):
 /// a tile whose heights span at most 254 such steps (two texels) stores a byte per height instead
@@ -45,12 +45,13 @@ pub(in crate::rbvh) fn quantize(
             });
         (lo, if lo <= hi { hi - lo } else { 0.0 })
     };
-    // The plane is kept where it narrows the range by a narrow quantum or more: less would not
-    // change a tile's format, and a slope that small is one the record cannot tell from none
-    // (`MIN_PLANE_SLOPE`).
+    // The plane is kept where it narrows the range by a narrow quantum or more (less would not
+    // change a tile's format) and its steeper slope is one the record tells from none
+    // (`MIN_PLANE_SLOPE`, texels a texel).
     let fitted = plane_slope(height, source, res_u);
     let quantum = f64::from(NARROW_QUANTUM_TEXELS) * f64::from(frame.texel);
-    let slope = if range_over(fitted).1 + quantum <= range_over(Vec2::ZERO).1 {
+    let steep_enough = fitted.abs().max_element() >= MIN_PLANE_SLOPE * frame.texel;
+    let slope = if steep_enough && range_over(fitted).1 + quantum <= range_over(Vec2::ZERO).1 {
         fitted
     } else {
         Vec2::ZERO
