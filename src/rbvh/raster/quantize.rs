@@ -51,12 +51,12 @@ pub(in crate::rbvh) fn quantize(
     let fitted = plane_slope(height, source, res_u);
     let quantum = f64::from(NARROW_QUANTUM_TEXELS) * f64::from(frame.texel);
     let steep_enough = fitted.abs().max_element() >= MIN_PLANE_SLOPE * frame.texel;
-    let slope = if steep_enough && range_over(fitted).1 + quantum <= range_over(Vec2::ZERO).1 {
-        fitted
+    let (level, over_plane) = (range_over(Vec2::ZERO), range_over(fitted));
+    let (slope, (h_lo, range)) = if steep_enough && over_plane.1 + quantum <= level.1 {
+        (fitted, over_plane)
     } else {
-        Vec2::ZERO
+        (Vec2::ZERO, level)
     };
-    let (h_lo, range) = range_over(slope);
     let h_lo = if h_lo.is_finite() { h_lo as f32 } else { 0.0 };
     let narrow = range <= 254.0 * f64::from(NARROW_QUANTUM_TEXELS) * f64::from(frame.texel);
     let top = if narrow {
