@@ -22,7 +22,7 @@ use crate::{Error, Result};
 /// Leaves of the builder's BVH of the scene, which the ring of samples around each leaf is
 /// sampled from by short rays (`raster/ring.rs`). Eight: at the paper's scale the linear BVH of
 /// leaves of four took 6.6–7.7 s of a level's 25, half of it packing its nodes (one thread), and
-/// leaves of eight take 4.0–4.2 s while the rings' rays, testing more triangles a leaf, take no
+/// leaves of eight take 4.0–4.7 s while the rings' rays, testing more triangles a leaf, take no
 /// measurably longer; sixteen made the dragon close-up's Q4 recursion 17% slower
 /// (docs/paper-scale.md, "The ring's BVH with leaves of eight").
 const SURFACE_LEAF: usize = 8;
