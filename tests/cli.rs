@@ -1490,6 +1490,17 @@ fn flags_without_effect_are_refused() {
             ]),
             vec!["--compare-splits compares flat RBVHs", "--instances flat"],
         ),
+        (
+            words(&[
+                "build",
+                "--scene",
+                "grove-instanced",
+                "--out",
+                file,
+                "--timings",
+            ]),
+            vec!["--timings times flat builds", "--instances flat"],
+        ),
         // bench: steps are counted for flat structures; levels of detail are built over one.
         (
             words(&["bench", "--instances", "two-level", "--steps"]),
@@ -1900,5 +1911,63 @@ fn scenes_of_instances_render_in_two_levels() {
             "{args:?}: {stderr}"
         );
         assert!(!refused.exists());
+    }
+}
+
+/// `rbvh build --timings` names each step of each build with its wall time, the shared steps at
+/// the first level only, and the steps' times add up to no more than the build's.
+#[test]
+fn build_timings_name_each_step_within_the_build() {
+    let out = rbvh(&[
+        "build",
+        "--scene",
+        "sphere",
+        "--quality",
+        "0,2",
+        "--timings",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let took: Vec<&str> = stdout.lines().filter(|l| l.contains(" took ")).collect();
+    assert_eq!(took.len(), 3, "the exact BVH and two levels:\n{stdout}");
+    assert!(
+        took[0].trim_start().starts_with("exact BVH took"),
+        "{}",
+        took[0]
+    );
+    let shared = "building the BVH the rings are sampled by";
+    assert!(
+        took[1].trim_start().starts_with("Q0 took") && took[1].contains(shared),
+        "{}",
+        took[1]
+    );
+    assert!(
+        took[2].trim_start().starts_with("Q2 took") && !took[2].contains(shared),
+        "{}",
+        took[2]
+    );
+    for line in &took[1..] {
+        assert!(
+            line.contains("ms building the RBVH (triangles into leaves)"),
+            "{line}"
+        );
+        assert!(
+            line.contains("ms building the tree over the leaves"),
+            "{line}"
+        );
+        assert!(line.contains("ms packing the atlas"), "{line}");
+    }
+    for line in &took {
+        let ms = |s: &str| -> f64 { s.trim().split(' ').next().unwrap().parse().unwrap() };
+        let (head, steps) = line.split_once(": ").unwrap();
+        let total = ms(head.rsplit(" took ").next().unwrap());
+        let listed: f64 = steps.split("; ").map(ms).sum();
+        // Each printed figure is rounded to the millisecond.
+        let parts = steps.split("; ").count() as f64;
+        assert!((listed - total).abs() <= parts, "{line}");
     }
 }

@@ -43,6 +43,14 @@ pub struct Args {
     /// height-field cells per ray, and CPU-reference MRays/s on the scene camera's primary rays.
     #[arg(long)]
     compare_splits: bool,
+    /// Also print, after the exact BVH's line and after each level's row, how long each of its
+    /// build's steps took (for an RBVH: the scene's connected parts, its open edges and creases,
+    /// the BVH its rings are sampled by — these three once, at the first level, which the later
+    /// ones share — the leaves, the tree over them, the atlas) and the time between them: the
+    /// wall time of this command's builds, where a level's `build ms` counts the shared steps
+    /// into every level as if it were built alone. Flat builds only.
+    #[arg(long)]
+    timings: bool,
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -73,6 +81,11 @@ pub fn run(a: Args) -> Result<()> {
             levels.len() == 1,
             "--out saves one level: give a single --quality and a single --texels"
         );
+        anyhow::ensure!(
+            !a.timings,
+            "--timings times flat builds, and --out saves this scene in two levels: give \
+             --instances flat"
+        );
         return two_levels(&placed, &levels, table, a.out.as_deref());
     }
     // A scene held only in two levels: what only a flat one can give is refused before the
@@ -83,9 +96,9 @@ pub fn run(a: Args) -> Result<()> {
             "{e}; --out with --instances flat saves a flat RBVH"
         );
         anyhow::ensure!(
-            a.points.points.is_none() && !a.compare_splits,
-            "{e}: --points and --compare-splits build flat RBVHs, and this scene is held in two \
-             levels alone"
+            a.points.points.is_none() && !a.compare_splits && !a.timings,
+            "{e}: --points, --compare-splits and --timings build flat RBVHs, and this scene is held \
+             in two levels alone"
         );
     }
     // An RBVH of points is built over the flat scene: the two-level lines, of the meshes'
@@ -124,9 +137,10 @@ pub fn run(a: Args) -> Result<()> {
         );
         None
     } else {
-        let exact = step("building exact BVH", |bar| {
+        let (exact, steps) = timed("building exact BVH", |bar| {
             Bvh::build_observed(&scene, &BuildParams::DEFAULT, bar)
-        })?;
+        });
+        let exact = exact?;
         let bytes = exact.tree_bytes() + exact.triangle_bytes();
         let points = match scene.point_count() {
             0 => String::new(),
@@ -141,6 +155,9 @@ pub fn run(a: Args) -> Result<()> {
             exact.build_ms,
             peak_host_mb()
         );
+        if a.timings {
+            println!("{}", steps.line("exact BVH"));
+        }
         Some(bytes)
     };
     if table {
@@ -170,10 +187,11 @@ pub fn run(a: Args) -> Result<()> {
     let source = RbvhSource::new(&scene).map_err(flag_error)?;
     for params in levels {
         let name = params.level_label();
-        let r = step(&format!("building RBVH {name}"), |bar| {
+        let (r, steps) = timed(&format!("building RBVH {name}"), |bar| {
             params.validate().map_err(flag_error)?;
             Rbvh::build_from(&source, &params, bar).map_err(flag_error)
-        })?;
+        });
+        let r = r?;
         if table {
             println!(
             "{:>7} {:>9.3e} {:>9.0} {:>9} {:>8} {:>9} {:>11} {:>10} {:>6.1}% {:>6.1}% {:>8.2} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>10} {:>9}",
@@ -207,6 +225,9 @@ pub fn run(a: Args) -> Result<()> {
                 );
             }
         }
+        if a.timings {
+            println!("{}", steps.line(&name));
+        }
         if a.compare_splits {
             compare_splits(&source, &scene, &name, &params)?;
         }
@@ -216,6 +237,51 @@ pub fn run(a: Args) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The library's steps of one build as `--timings` prints them: each with its wall time, and
+/// the build's whole wall time.
+struct Steps {
+    steps: Vec<(String, std::time::Duration)>,
+    total: std::time::Duration,
+}
+
+impl Steps {
+    /// `label took T ms: t1 ms <step 1>; …; r ms between them`.
+    fn line(&self, label: &str) -> String {
+        let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+        let listed: std::time::Duration = self.steps.iter().map(|s| s.1).sum();
+        let mut parts: Vec<String> = self
+            .steps
+            .iter()
+            .map(|(what, d)| format!("{:.0} ms {what}", ms(*d)))
+            .collect();
+        parts.push(format!(
+            "{:.0} ms between them",
+            ms(self.total.saturating_sub(listed))
+        ));
+        format!(
+            "{label:>7} took {:.0} ms: {}",
+            ms(self.total),
+            parts.join("; ")
+        )
+    }
+}
+
+/// Runs `f` under a spinner labelled `what` ([`step`]), timing it and the library's steps in it.
+fn timed<T>(what: &str, f: impl FnOnce(&crate::progress::Bar) -> T) -> (T, Steps) {
+    let start = Instant::now();
+    step(what, |bar| {
+        let out = f(bar);
+        let steps = bar.timings();
+        (
+            out,
+            Steps {
+                steps,
+                total: start.elapsed(),
+            },
+        )
+    })
 }
 
 /// The two-level structures of a scene with instances (a tree per mesh, a top level over the

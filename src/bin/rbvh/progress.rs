@@ -5,7 +5,7 @@
 
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 use std::sync::Mutex;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -20,6 +20,10 @@ pub struct Bar {
     done: AtomicU64,
     shown: AtomicU64,
     grain: AtomicU64,
+    /// The library's step under way (its name and start), and each finished one with its wall
+    /// time, in order: what `rbvh build --timings` prints.
+    current: Mutex<Option<(String, Instant)>>,
+    timings: Mutex<Vec<(String, Duration)>>,
 }
 
 fn spinner_style() -> ProgressStyle {
@@ -46,7 +50,17 @@ impl Bar {
             done: AtomicU64::new(0),
             shown: AtomicU64::new(0),
             grain: AtomicU64::new(1),
+            current: Mutex::new(None),
+            timings: Mutex::new(Vec::new()),
         }
+    }
+
+    /// The library's steps finished so far under this bar, each with its wall time, in order.
+    pub fn timings(&self) -> Vec<(String, Duration)> {
+        self.timings
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
     }
 
     /// Changes the spinner's label (for steps the library does not count).
@@ -68,6 +82,8 @@ impl Bar {
 
 impl rbvh::progress::Progress for Bar {
     fn begin(&self, what: &str, total: u64) {
+        *self.current.lock().unwrap_or_else(|e| e.into_inner()) =
+            Some((what.to_string(), Instant::now()));
         self.bar.set_message(what.to_string());
         self.done.store(0, Relaxed);
         self.shown.store(0, Relaxed);
@@ -89,6 +105,17 @@ impl rbvh::progress::Progress for Bar {
     }
 
     fn end(&self) {
+        if let Some((what, start)) = self
+            .current
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .take()
+        {
+            self.timings
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .push((what, start.elapsed()));
+        }
         self.bar.set_style(spinner_style());
         let label = self.label.lock().unwrap_or_else(|e| e.into_inner()).clone();
         self.bar.set_message(label);

@@ -190,7 +190,12 @@ impl<'s> RbvhSource<'s> {
         let surface = match self.input() {
             // Only traced by rays a few texels long: a linear BVH serves, in a fraction of the
             // exact BVH's time.
-            Input::Triangles(_) => Some(LinearBvh::build(scene, SURFACE_LEAF)?),
+            Input::Triangles(_) => Some(step(
+                progress,
+                "building the BVH the rings are sampled by",
+                0,
+                || LinearBvh::build(scene, SURFACE_LEAF),
+            )?),
             Input::Points(_) => None,
         };
         let Topology { open, creases } = match self.input() {
