@@ -1914,8 +1914,8 @@ fn scenes_of_instances_render_in_two_levels() {
     }
 }
 
-/// `rbvh build --timings` names each step of each build with its wall time, the shared steps at
-/// the first level only, and the steps' times add up to no more than the build's.
+/// `rbvh build --timings` names each step of each build with its wall time, in order, each once:
+/// the shared steps at the first level only; and the steps' times add up to the build's.
 #[test]
 fn build_timings_name_each_step_within_the_build() {
     let out = rbvh(&[
@@ -1934,40 +1934,46 @@ fn build_timings_name_each_step_within_the_build() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     let took: Vec<&str> = stdout.lines().filter(|l| l.contains(" took ")).collect();
     assert_eq!(took.len(), 3, "the exact BVH and two levels:\n{stdout}");
-    assert!(
-        took[0].trim_start().starts_with("exact BVH took"),
-        "{}",
-        took[0]
-    );
-    let shared = "building the BVH the rings are sampled by";
-    assert!(
-        took[1].trim_start().starts_with("Q0 took") && took[1].contains(shared),
-        "{}",
-        took[1]
-    );
-    assert!(
-        took[2].trim_start().starts_with("Q2 took") && !took[2].contains(shared),
-        "{}",
-        took[2]
-    );
-    for line in &took[1..] {
-        assert!(
-            line.contains("ms building the RBVH (triangles into leaves)"),
+    let level = [
+        "building the RBVH (triangles into leaves)",
+        "building the tree over the leaves",
+        "packing the atlas",
+    ];
+    let first: Vec<&str> = [
+        "finding the scene's connected parts",
+        "building the BVH the rings are sampled by",
+        "finding the scene's open edges and creases",
+    ]
+    .into_iter()
+    .chain(level)
+    .collect();
+    for (line, label, steps) in [
+        (
+            took[0],
+            "exact BVH",
+            vec!["building the exact BVH (triangles)"],
+        ),
+        (took[1], "Q0", first),
+        (took[2], "Q2", level.to_vec()),
+    ] {
+        let (head, listed) = line.split_once(": ").unwrap();
+        assert_eq!(
+            head.trim_start().split(" took ").next(),
+            Some(label),
             "{line}"
         );
-        assert!(
-            line.contains("ms building the tree over the leaves"),
-            "{line}"
-        );
-        assert!(line.contains("ms packing the atlas"), "{line}");
-    }
-    for line in &took {
-        let ms = |s: &str| -> f64 { s.trim().split(' ').next().unwrap().parse().unwrap() };
-        let (head, steps) = line.split_once(": ").unwrap();
-        let total = ms(head.rsplit(" took ").next().unwrap());
-        let listed: f64 = steps.split("; ").map(ms).sum();
+        let ms = |s: &str| -> f64 { s.split(' ').next().unwrap().parse().unwrap() };
+        let parts: Vec<&str> = listed.split("; ").collect();
+        let names: Vec<&str> = parts
+            .iter()
+            .map(|p| p.split_once(" ms ").unwrap().1)
+            .collect();
+        let mut expected = steps.clone();
+        expected.push("between them");
+        assert_eq!(names, expected, "{line}");
         // Each printed figure is rounded to the millisecond.
-        let parts = steps.split("; ").count() as f64;
-        assert!((listed - total).abs() <= parts, "{line}");
+        let total = ms(head.rsplit(" took ").next().unwrap());
+        let sum: f64 = parts.iter().map(|p| ms(p)).sum();
+        assert!((sum - total).abs() <= parts.len() as f64, "{line}");
     }
 }

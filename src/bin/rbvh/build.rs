@@ -2,7 +2,7 @@
 //! bytes of tree, atlas and triangles, and the ratio to the exact BVH — optionally saving it.
 
 use std::path::PathBuf;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, Result};
 use rayon::prelude::*;
@@ -43,12 +43,14 @@ pub struct Args {
     /// height-field cells per ray, and CPU-reference MRays/s on the scene camera's primary rays.
     #[arg(long)]
     compare_splits: bool,
-    /// Also print, after the exact BVH's line and after each level's row, how long each of its
-    /// build's steps took (for an RBVH: the scene's connected parts, its open edges and creases,
-    /// the BVH its rings are sampled by — these three once, at the first level, which the later
-    /// ones share — the leaves, the tree over them, the atlas) and the time between them: the
-    /// wall time of this command's builds, where a level's `build ms` counts the shared steps
-    /// into every level as if it were built alone. Flat builds only.
+    /// Also print, after the exact BVH's line and after each level's row (or alone, with --out
+    /// and no --stats), how long each of its build's steps took and the time between them: for
+    /// an RBVH of triangles the scene's connected parts, the BVH its rings are sampled by and its
+    /// open edges and creases (these three once, at the first level, which the later ones share),
+    /// then the leaves, the tree over them, the atlas and, for a scene with materials, the colour
+    /// channel. Wall times of this command's builds, where a level's `build ms` counts the shared
+    /// steps, and the scene's gathering before the first level, into every level as if it were
+    /// built alone. Flat builds only (not the two-level lines, nor --compare-splits' rebuilds).
     #[arg(long)]
     timings: bool,
 }
@@ -97,8 +99,8 @@ pub fn run(a: Args) -> Result<()> {
         );
         anyhow::ensure!(
             a.points.points.is_none() && !a.compare_splits && !a.timings,
-            "{e}: --points, --compare-splits and --timings build flat RBVHs, and this scene is held \
-             in two levels alone"
+            "{e}: --points and --compare-splits build flat RBVHs and --timings times flat builds, \
+             and this scene is held in two levels alone"
         );
     }
     // An RBVH of points is built over the flat scene: the two-level lines, of the meshes'
@@ -242,15 +244,15 @@ pub fn run(a: Args) -> Result<()> {
 /// The library's steps of one build as `--timings` prints them: each with its wall time, and
 /// the build's whole wall time.
 struct Steps {
-    steps: Vec<(String, std::time::Duration)>,
-    total: std::time::Duration,
+    steps: Vec<(String, Duration)>,
+    total: Duration,
 }
 
 impl Steps {
     /// `label took T ms: t1 ms <step 1>; …; r ms between them`.
     fn line(&self, label: &str) -> String {
-        let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
-        let listed: std::time::Duration = self.steps.iter().map(|s| s.1).sum();
+        let ms = |d: Duration| d.as_secs_f64() * 1e3;
+        let listed: Duration = self.steps.iter().map(|s| s.1).sum();
         let mut parts: Vec<String> = self
             .steps
             .iter()
