@@ -13,7 +13,7 @@
 
 use rayon::prelude::*;
 
-use super::build::{check_triangles, join_halves, pack, BuildNode, PARALLEL_THRESHOLD};
+use super::build::{check_triangles, free, join_halves, pack, BuildNode, PARALLEL_THRESHOLD};
 use super::layout::{ChildRef, GpuNode, LEAF_BIT};
 use super::traverse::{traverse_from, Leaves};
 use glam::Vec3;
@@ -87,6 +87,9 @@ impl<'s> LinearBvh<'s> {
         let root = (!order.is_empty()).then(|| builder.build(0, order.len(), 0));
         let (nodes, _) = pack(root.as_ref(), "scene")?;
         let bounds = root.as_ref().map_or(Aabb::EMPTY, BuildNode::bounds);
+        if let Some(root) = root {
+            free(root);
+        }
         let size = if bounds.is_empty() {
             0.0
         } else {
@@ -255,10 +258,7 @@ impl Linear<'_> {
             || self.build(lo, mid, depth + 1),
             || self.build(mid, hi, depth + 1),
         );
-        BuildNode::Inner {
-            bounds: a.bounds().union(b.bounds()),
-            children: Box::new([a, b]),
-        }
+        BuildNode::inner(a.bounds().union(b.bounds()), a, b)
     }
 }
 
