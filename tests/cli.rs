@@ -1391,6 +1391,13 @@ fn flags_without_effect_are_refused() {
             with_file(render(&["--method", "exact"]), &[]),
             vec!["--method exact", "--rbvh"],
         ),
+        (
+            with_file(trace(&[]), &["--points", "100"]),
+            vec![
+                "--points says what an RBVH is built from",
+                "--rbvh loads one",
+            ],
+        ),
         // Flags of level of detail and of other outputs, without them.
         (
             render(&["--lod-bias", "0"]),
@@ -1895,10 +1902,12 @@ fn scenes_of_instances_render_in_two_levels() {
     );
     // Levels of detail are flat: auto gives them the flat scene, two-level is refused.
     render(&png("lod.png"), &["--method", "rbvh-lod"]);
-    let refused = png("refused.png");
-    for args in [
-        &["render", "--method", "rbvh-lod"][..],
-        &["paint", "--method", "rbvh", "--strokes", "none.json"][..],
+    for (args, refused) in [
+        (&["render", "--method", "rbvh-lod"][..], png("refused.png")),
+        (
+            &["paint", "--method", "rbvh", "--strokes", "none.json"][..],
+            png("refused.rbvh"),
+        ),
     ] {
         let mut args = args.to_vec();
         args.extend(["--scene", "grove-instanced", "--instances", "two-level"]);
@@ -1976,4 +1985,52 @@ fn build_timings_name_each_step_within_the_build() {
         let sum: f64 = parts.iter().map(|p| ms(p)).sum();
         assert!((sum - total).abs() <= parts.len() as f64, "{line}");
     }
+}
+
+/// **Misuse the tool once answered with an abort, a panic or a field's name**: an AMD family
+/// that RADV does not know (RADV aborted the process), the library's limits on bench and regress
+/// parameters (told as `min_run_ms`, `flip_mean`), and a reader of the output that goes away
+/// (`| head`: `println!` panicked).
+#[test]
+fn misuse_is_told_by_its_flag_and_never_aborts() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases: [(&[&str], &str); 4] = [
+        (
+            &["shaders", "--amd", "navi99"],
+            "--amd \"navi99\": not a family RADV knows",
+        ),
+        (
+            &["bench", "--scene", "sphere", "--min-run-ms", "-1"],
+            "--min-run-ms: -1 is outside",
+        ),
+        (
+            &["bench", "--scene", "sphere", "--ao-radius", "0"],
+            "--ao-radius: 0 is not",
+        ),
+        (
+            &["regress", "--out", arg(dir.path()), "--max-flip-mean", "2"],
+            "--max-flip-mean: 2 is outside",
+        ),
+    ];
+    for (args, needle) in cases {
+        let out = rbvh(args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}:\n{stderr}");
+        assert!(
+            stderr.contains(needle),
+            "{args:?}: {needle:?} not in\n{stderr}"
+        );
+    }
+    // Its reader gone before it writes a line: ended by SIGPIPE, as Unix tools are, or done.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_rbvh"))
+        .arg("scenes")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run rbvh");
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_ne!(out.status.code(), Some(101), "{stderr}");
 }

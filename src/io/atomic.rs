@@ -2,7 +2,7 @@
 
 use std::fs::File;
 use std::io::{self, BufWriter, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use crate::Error;
 
@@ -15,12 +15,61 @@ use crate::Error;
 /// removed (when it is dropped) and `path` is left as it was. The file gets the permissions a
 /// plain `File::create` would give it (0o666 less the umask), not a temporary file's 0o600.
 ///
+/// A symbolic link is followed: the file it names is replaced, the link kept. What is not a
+/// regular file where it stands is written through as it is, since replacing it would lose
+/// what it is: a device such as `/dev/null` stays a device, a FIFO passes the bytes to its
+/// reader. A directory is refused.
+///
 /// Errors name `path`, whatever step failed, since that is the file the user asked for.
 pub fn write_atomically(
     path: &Path,
     write: impl FnOnce(&mut BufWriter<File>) -> io::Result<()>,
 ) -> crate::Result<()> {
-    write_then_persist(path, write).map_err(|e| Error::io(path, e))
+    let target = followed(path).map_err(|e| Error::io(path, e))?;
+    match std::fs::metadata(&target) {
+        Ok(m) if m.is_dir() => Err(Error::io(
+            path,
+            io::Error::new(
+                io::ErrorKind::IsADirectory,
+                "a directory, not a file to write",
+            ),
+        )),
+        Ok(m) if !m.is_file() => write_through(&target, write).map_err(|e| Error::io(path, e)),
+        _ => write_then_persist(&target, write).map_err(|e| Error::io(path, e)),
+    }
+}
+
+/// The path `path`'s symbolic links lead to (itself where it is none, or missing), so that the
+/// rename replaces the file a link names rather than the link.
+fn followed(path: &Path) -> io::Result<PathBuf> {
+    let mut path = path.to_path_buf();
+    // As the kernel's limit on links followed in one lookup (Linux's 40).
+    for _ in 0..40 {
+        match std::fs::symlink_metadata(&path) {
+            Ok(m) if m.file_type().is_symlink() => {
+                let link = std::fs::read_link(&path)?;
+                path = match path.parent() {
+                    Some(dir) if link.is_relative() => dir.join(link),
+                    _ => link,
+                };
+            }
+            _ => return Ok(path),
+        }
+    }
+    Err(io::Error::new(
+        io::ErrorKind::InvalidInput,
+        "too many levels of symbolic links",
+    ))
+}
+
+/// Writes into what is at `path` without replacing it (a device or a FIFO).
+fn write_through(
+    path: &Path,
+    write: impl FnOnce(&mut BufWriter<File>) -> io::Result<()>,
+) -> io::Result<()> {
+    let mut writer = BufWriter::new(File::options().write(true).open(path)?);
+    write(&mut writer)?;
+    writer.flush()
 }
 
 fn write_then_persist(
@@ -79,6 +128,56 @@ mod tests {
         assert_eq!(names.len(), 2, "{names:?}");
         let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions();
         assert_eq!(mode(&target), mode(&plain));
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_link_is_followed_and_kept() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("target.png");
+        std::fs::write(&target, b"old").unwrap();
+        let link = dir.path().join("link.png");
+        std::os::unix::fs::symlink("target.png", &link).unwrap();
+        write_atomically(&link, |w| w.write_all(b"new")).unwrap();
+        assert!(std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        assert_eq!(std::fs::read(&target).unwrap(), b"new");
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_fifo_is_written_through_and_stays_a_fifo() {
+        use std::os::unix::fs::FileTypeExt;
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("out.fifo");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        if !made.is_ok_and(|s| s.success()) {
+            // No mkfifo here: nothing to test with.
+            return;
+        }
+        let reader = {
+            let fifo = fifo.clone();
+            std::thread::spawn(move || std::fs::read(fifo).unwrap())
+        };
+        write_atomically(&fifo, |w| w.write_all(b"through")).unwrap();
+        assert_eq!(reader.join().unwrap(), b"through");
+        assert!(std::fs::symlink_metadata(&fifo)
+            .unwrap()
+            .file_type()
+            .is_fifo());
+    }
+
+    #[test]
+    fn a_directory_is_refused_by_name() {
+        let dir = tempfile::tempdir().unwrap();
+        let err = write_atomically(dir.path(), |w| w.write_all(b"x")).unwrap_err();
+        assert!(
+            err.to_string().contains(&*dir.path().to_string_lossy()),
+            "{err}"
+        );
+        assert!(dir.path().is_dir());
     }
 
     #[test]

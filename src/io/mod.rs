@@ -16,10 +16,12 @@
 //! one bad ray cost a whole batch, and would shift the ray-to-hit correspondence by index.
 //!
 //! Every writer goes through [`write_atomically`], so an interrupted or failed write never leaves
-//! a file that looks complete.
+//! a file that looks complete; every reader of a named file through [`input`], which refuses
+//! anything but a regular file before opening it.
 
 mod atomic;
 mod hits;
+pub mod input;
 mod rays;
 mod records;
 

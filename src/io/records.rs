@@ -25,7 +25,7 @@ pub(super) trait Record: Sized {
 
 /// Reads a whole file of `R` records. Only the framing is checked; see the module docs.
 pub(super) fn read_records<R: Record>(path: &Path) -> crate::Result<Vec<R>> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = super::input::read(path)?;
     if bytes.is_empty() {
         return Err(Error::parse(
             path,

@@ -13,7 +13,6 @@
 //! belongs in a PLY, where its header says what each column is), and columns 4–6 with a value
 //! beyond ±1.5, as colours of 0–255 have, are refused as no normal. An error names the line.
 
-use std::fs::File;
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 
@@ -24,7 +23,7 @@ use crate::{Error, Result};
 
 /// Reads the points of the XYZ file at `path`.
 pub(super) fn read(path: &Path) -> Result<RawPoints> {
-    let file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let file = crate::io::input::open(path)?;
     read_from(path, BufReader::new(file))
 }
 

@@ -149,7 +149,7 @@ fn open(path: &Path) -> Result<(Document, Vec<Data>, std::path::PathBuf)> {
                         format!("buffer {}: {}: {e}", buffer.index(), file.display()),
                     )
                 })?;
-                super::regular_file::regular_file(&file, &metadata)?;
+                crate::io::input::regular_file(&file, &metadata)?;
             }
         }
     }

@@ -3,8 +3,8 @@
 use std::path::Path;
 
 use super::mesh_file::{check_mesh_file, load_mesh_file, FileType};
-use super::regular_file::regular_file;
 use super::{builtin, gltf, scene_file, InstancedScene, Scene};
+use crate::io::input::regular_file;
 use crate::progress::{step, Progress, Quiet};
 use crate::{Error, Result};
 

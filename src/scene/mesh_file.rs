@@ -3,8 +3,8 @@
 
 use std::path::Path;
 
-use super::regular_file::regular_file;
 use super::{gltf, obj, Scene};
+use crate::io::input::regular_file;
 use crate::points::PointCloud;
 use crate::{Error, Result};
 

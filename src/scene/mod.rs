@@ -22,7 +22,6 @@ mod mesh;
 mod mesh_file;
 pub mod mipmap;
 mod obj;
-mod regular_file;
 mod sample;
 mod scene_file;
 pub mod texture;

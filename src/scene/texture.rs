@@ -93,9 +93,7 @@ impl Texture {
     /// Reads and decodes the image file at `path`: a missing file is [`Error::Io`] naming it, a
     /// corrupt one [`Error::Parse`] naming it.
     pub fn load(path: &Path) -> Result<Texture> {
-        let metadata = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
-        super::regular_file::regular_file(path, &metadata)?;
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let bytes = crate::io::input::read(path)?;
         Self::decode(&bytes, path, "texture")
     }
 

@@ -47,7 +47,7 @@ pub struct Dab {
 
 /// Reads and parses the strokes file at `path`.
 pub fn load(path: &Path) -> Result<Vec<Dab>> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let text = crate::io::input::read_to_string(path)?;
     parse(&text, path)
 }
 

@@ -3,6 +3,7 @@
 
 use std::path::PathBuf;
 
+use crate::outputs::{self, output};
 use crate::progress::Bar;
 use anyhow::{Context as _, Result};
 use rbvh::bench::{self, BenchConfig, Device, Event, RayType};
@@ -114,6 +115,18 @@ pub struct Args {
 
 pub fn run(a: Args, given: &Given) -> Result<()> {
     a.structures.check(given, false)?;
+    let inputs: Vec<outputs::Named> = a
+        .scene
+        .iter()
+        .flat_map(|scene| outputs::scene_inputs(scene, a.points.points.as_ref()))
+        .collect();
+    outputs::check(
+        &[
+            output("--json", a.json.as_deref(), "json"),
+            output("--csv", a.csv.as_deref(), "csv"),
+        ],
+        &inputs,
+    )?;
     let (plain, lod) = (
         a.structures.has(Method::Rbvh),
         a.structures.has(Method::RbvhLod),

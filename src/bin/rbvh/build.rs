@@ -11,6 +11,7 @@ use rbvh::probe::TraceStats;
 use rbvh::rbvh::{InstancedRbvh, Rbvh, RbvhParams, RbvhSource, Subdivision};
 use rbvh::scene::{InstancedScene, Instances, Scene};
 
+use crate::outputs::{self, output};
 use crate::prepare::{flag_error, InstancesArg, PointsArg, Quality};
 use crate::progress::step;
 
@@ -56,6 +57,10 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> Result<()> {
+    outputs::check(
+        &[output("--out", a.out.as_deref(), "rbvh")],
+        &outputs::scene_inputs(&a.scene, a.points.points.as_ref()),
+    )?;
     let placed = step("loading scene", |bar| {
         InstancedScene::load_observed(&a.scene, bar)
     })

@@ -15,6 +15,7 @@ use rbvh::ibl::{self, Environment, Frame, Rendered, Settings};
 use rbvh::lod::{Cones, RayCone};
 use rbvh::output;
 
+use crate::outputs::{self, output};
 use crate::prepare::{prepare, CameraArgs, Common, Given, Loaded, Method};
 use crate::progress::step;
 use crate::render::{ibl_albedo, instance_offsets, load_environment, progressive, sky_of};
@@ -91,6 +92,9 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         a.out.display()
     );
     a.common.check(given)?;
+    let mut inputs = outputs::source_inputs(&a.common.source);
+    inputs.push(("--env", a.env.as_deref()));
+    outputs::check(&[output("--out", Some(&a.out), "png")], &inputs)?;
     ensure!(
         a.common.structures.method()? != Method::Exact,
         "--method exact: compare sets an RBVH beside the exact BVH; give rbvh or rbvh-lod"

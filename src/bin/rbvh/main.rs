@@ -4,6 +4,7 @@
 mod bench;
 mod build;
 mod compare;
+mod outputs;
 mod paint;
 mod prepare;
 mod progress;
@@ -70,6 +71,14 @@ enum Command {
 }
 
 fn main() {
+    // Rust ignores SIGPIPE, so a write to a pipe whose reader has gone (`rbvh build | head -1`)
+    // fails and `println!` panics; the default action ends the process quietly instead, as
+    // every Unix tool that writes to a pipe does.
+    #[cfg(unix)]
+    // SAFETY: before any thread is started; SIG_DFL is a valid disposition for SIGPIPE.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let matches = Cli::command().get_matches();
     let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
     // Which flags were given rather than left at their defaults: a flag that would have no
@@ -98,8 +107,15 @@ fn main() {
     };
     if let Err(e) = result {
         eprintln!("error: {e}");
+        // A cause already told by the message above it (the library's errors name their file
+        // and say why in one line, and keep the why as their source) is not told again.
+        let mut told = e.to_string();
         for cause in e.chain().skip(1) {
-            eprintln!("  caused by: {cause}");
+            let cause = cause.to_string();
+            if !told.contains(&cause) {
+                eprintln!("  caused by: {cause}");
+            }
+            told = cause;
         }
         std::process::exit(1);
     }

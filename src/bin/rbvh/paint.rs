@@ -12,6 +12,7 @@ use rbvh::gpu::{Painter, Query, Tracer};
 use rbvh::surface::{strokes, Brush};
 use rbvh::{output, preview};
 
+use crate::outputs::{self, output};
 use crate::prepare::{
     check_image_size, prepare, two_level_file, CameraArgs, Common, Given, InstancesArg, Method,
     Prepared, TexelsArg,
@@ -78,6 +79,18 @@ pub struct Args {
 pub fn run(a: Args, given: &Given) -> Result<()> {
     check_image_size(a.width, a.height)?;
     a.common.check(given)?;
+    // The RBVH file may be painted in place: it is read whole before the painted one replaces it.
+    let source = &a.common.source;
+    let mut inputs = outputs::scene_inputs(&source.scene, source.points.points.as_ref()).to_vec();
+    inputs.push(("--strokes", Some(&a.strokes)));
+    outputs::check(
+        &[
+            output("--out", Some(&a.out), "rbvh"),
+            output("--before", a.before.as_deref(), "png"),
+            output("--after", a.after.as_deref(), "png"),
+        ],
+        &inputs,
+    )?;
     anyhow::ensure!(
         a.common.structures.method()? == Method::Rbvh,
         "--method: paint paints an RBVH's texels, so it takes rbvh alone (the exact BVH has no \

@@ -122,6 +122,11 @@ impl Structures {
                      the parameters it was built with): drop {flag}, or drop --rbvh to build one"
                 );
             }
+            anyhow::ensure!(
+                !given.has("points"),
+                "--points says what an RBVH is built from, but --rbvh loads one built already \
+                 (from what it was built from): drop --points, or drop --rbvh to build one"
+            );
         } else if self.method.iter().all(|m| *m == Method::Exact) {
             if let Some(flag) = given.first(&BUILD_FLAGS) {
                 anyhow::bail!(
@@ -518,10 +523,10 @@ pub fn check_image_size(width: u32, height: u32) -> Result<()> {
 }
 
 /// The library's error about a parameter, reworded to name the command-line flag that set it
-/// (the library names its fields: `texels_per_diagonal`, `lod columns`, ...); any other error as
-/// it is.
+/// (the library names its fields: `texels_per_diagonal`, `lod columns`, `flip_mean`, ...); any
+/// other error as it is.
 pub fn flag_error(e: rbvh::Error) -> anyhow::Error {
-    const FLAGS: [(&str, &str); 13] = [
+    const FLAGS: [(&str, &str); 23] = [
         ("texels_per_diagonal", "--texels-per-diagonal"),
         ("object_rate", "--object-rate"),
         ("max_angle_deg", "--max-angle"),
@@ -535,6 +540,16 @@ pub fn flag_error(e: rbvh::Error) -> anyhow::Error {
         ("lod columns", "--lod-columns"),
         ("lod min leaves", "--lod-min-leaves"),
         ("lod bias", "--lod-bias"),
+        ("lod", "--method rbvh-lod"),
+        ("width", "--width"),
+        ("height", "--height"),
+        ("runs", "--runs"),
+        ("min_run_ms", "--min-run-ms"),
+        ("ao_radius", "--ao-radius"),
+        ("flip_mean", "--max-flip-mean"),
+        ("outlier_fraction", "--max-outliers"),
+        ("depth_relative", "--depth-tolerance"),
+        ("depth_outlier_fraction", "--max-depth-off"),
     ];
     if let rbvh::Error::InvalidParameter { name, message } = &e {
         if let Some((_, flag)) = FLAGS.iter().find(|(field, _)| field == name) {

@@ -7,7 +7,9 @@ use anyhow::{bail, ensure, Context as _, Result};
 use rbvh::gpu::Context;
 use rbvh::regress::{self, Config, Method, Mode, Tolerance};
 
-use crate::prepare::{self, context_options, presets, Given, Structures, BUILD_FLAGS, LOD_FLAGS};
+use crate::prepare::{
+    self, context_options, flag_error, presets, Given, Structures, BUILD_FLAGS, LOD_FLAGS,
+};
 use crate::progress::step;
 
 #[derive(clap::Args, Debug)]
@@ -122,7 +124,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         },
         mode: if a.bless { Mode::Bless } else { Mode::Compare },
     };
-    config.validate()?;
+    config.validate().map_err(flag_error)?;
     let ctx = Context::new(&context_options(a.device.as_deref(), a.validate)?)
         .context("creating the Vulkan device")?;
     eprintln!(

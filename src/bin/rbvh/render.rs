@@ -21,6 +21,7 @@ use rbvh::scene::{Light, SceneView};
 use rbvh::structure::{Kind, Structure};
 use rbvh::surface::hit_albedo;
 
+use crate::outputs::{self, output};
 use crate::prepare::{check_image_size, prepare, CameraArgs, Common, Given, Prepared};
 use crate::progress::step;
 use crate::report::{report_counters, report_throughput};
@@ -99,6 +100,16 @@ enum Shading {
 pub fn run(a: Args, given: &Given) -> Result<()> {
     check_image_size(a.width, a.height)?;
     a.common.check(given)?;
+    let mut inputs = outputs::source_inputs(&a.common.source);
+    inputs.push(("--env", a.env.as_deref()));
+    outputs::check(
+        &[
+            output("--out", Some(&a.out), "png"),
+            output("--exr", a.exr.as_deref(), "exr"),
+            output("--heatmap", a.heatmap.as_deref(), "png"),
+        ],
+        &inputs,
+    )?;
     for (set, flag) in [
         (a.env.is_some(), "--env"),
         (a.samples.is_some(), "--samples"),
@@ -115,22 +126,6 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         ibl::MAX_SAMPLES,
         a.samples()
     );
-    // The format is the flag's, not the name's: a name that says otherwise is refused.
-    for (path, flag, ext) in [
-        (Some(&a.out), "--out", "png"),
-        (a.heatmap.as_ref(), "--heatmap", "png"),
-        (a.exr.as_ref(), "--exr", "exr"),
-    ] {
-        if let Some(path) = path {
-            ensure!(
-                path.extension()
-                    .is_some_and(|e| e.eq_ignore_ascii_case(ext)),
-                "{flag} {}: writes {}, so give it a .{ext} name",
-                path.display(),
-                ext.to_uppercase()
-            );
-        }
-    }
     // Read the environment before the (possibly long) build, so a bad file fails at once.
     let env = load_environment(a.env.as_ref())?;
     let p = prepare(&a.common, a.camera.camera()?)?;

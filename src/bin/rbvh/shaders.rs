@@ -8,6 +8,7 @@ use anyhow::{Context as _, Result};
 use rbvh::bench::{shader_report, shader_report_table, write_shader_json};
 use rbvh::gpu::Context;
 
+use crate::outputs::{self, output};
 use crate::prepare::context_options;
 
 #[derive(clap::Args, Debug)]
@@ -34,12 +35,60 @@ pub struct Args {
     validate: bool,
 }
 
+/// The families RADV's null device can pretend to be (`RADV_FORCE_FAMILY`, compared without
+/// case): Mesa 22.3's `ac_get_family_name`, Debian 12's. RADV aborts the process on any other
+/// name, so it is refused here first.
+const AMD_FAMILIES: [&str; 38] = [
+    "TAHITI",
+    "PITCAIRN",
+    "VERDE",
+    "OLAND",
+    "HAINAN",
+    "BONAIRE",
+    "KAVERI",
+    "KABINI",
+    "HAWAII",
+    "TONGA",
+    "ICELAND",
+    "CARRIZO",
+    "FIJI",
+    "STONEY",
+    "POLARIS10",
+    "POLARIS11",
+    "POLARIS12",
+    "VEGAM",
+    "VEGA10",
+    "VEGA12",
+    "VEGA20",
+    "RAVEN",
+    "RAVEN2",
+    "RENOIR",
+    "ARCTURUS",
+    "ALDEBARAN",
+    "NAVI10",
+    "NAVI12",
+    "NAVI14",
+    "NAVI21",
+    "NAVI22",
+    "NAVI23",
+    "NAVI24",
+    "VANGOGH",
+    "GFX1036",
+    "GFX1100",
+    "GFX1101",
+    "GFX1102",
+];
+
 pub fn run(a: Args) -> Result<()> {
+    outputs::check(&[output("--json", a.json.as_deref(), "json")], &[])?;
     let device = match &a.amd {
         Some(family) => {
             anyhow::ensure!(
-                !family.is_empty() && family.chars().all(|c| c.is_ascii_alphanumeric()),
-                "--amd {family:?}: a family name such as navi21"
+                AMD_FAMILIES
+                    .iter()
+                    .any(|known| known.eq_ignore_ascii_case(family)),
+                "--amd {family:?}: not a family RADV knows; one of {}",
+                AMD_FAMILIES.join(", ").to_lowercase()
             );
             // Read by Mesa when the instance enumerates devices, which is after this; nothing
             // else runs yet.

@@ -8,9 +8,10 @@ use rbvh::gpu::Query;
 use rbvh::io;
 use rbvh::lod::{Cones, RayCone};
 
+use crate::outputs;
 use crate::prepare::{prepare, prepare_cpu, Common, Given, Method};
 use crate::progress::step;
-use crate::report::report_throughput;
+use crate::report::{report_counters, report_throughput};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("method", |a| a.help(
@@ -48,6 +49,16 @@ pub struct Args {
 
 pub fn run(a: Args, given: &Given) -> Result<()> {
     a.common.check(given)?;
+    let mut inputs = outputs::source_inputs(&a.common.source);
+    inputs.push(("--rays", Some(&a.rays)));
+    outputs::check(
+        &[outputs::Output {
+            flag: "--hits",
+            path: Some(&a.hits),
+            ext: None,
+        }],
+        &inputs,
+    )?;
     anyhow::ensure!(
         !given.has("lod_spread") || a.common.structures.has(Method::RbvhLod),
         "--lod-spread is the rays' footprint for level of detail, and --method asks for none: use \
@@ -92,6 +103,14 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         })?;
         if a.common.source.stats {
             report_throughput(&p, &rays, cones, query, &traced)?;
+            // Counted in a trace of their own, as render does: the timed one compiles the
+            // counting away.
+            let counted = step("counting each ray's work", |bar| {
+                p.trace(&tracer, &rays, cones, query, true, bar)
+            })?;
+            if let Some(c) = &counted.counters {
+                report_counters(p.structure.label(), c);
+            }
         }
         traced.hits
     };

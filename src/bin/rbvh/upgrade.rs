@@ -5,9 +5,11 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context as _, Result};
+use anyhow::Result;
 use rbvh::rbvh::file::{file_version, section_table, Section, VERSION};
 use rbvh::rbvh::Rbvh;
+
+use crate::outputs::{self, output};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -20,8 +22,9 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let bytes =
-        std::fs::read(&a.input).with_context(|| format!("reading {}", a.input.display()))?;
+    // The input may be the output: the file is read whole before the new one replaces it.
+    outputs::check(&[output("--out", Some(&a.out), "rbvh")], &[])?;
+    let bytes = rbvh::io::input::read(&a.input)?;
     let version = file_version(&bytes, &a.input)?;
     let rbvh = Rbvh::from_bytes(&bytes, &a.input)?;
     let written = rbvh.to_bytes();

@@ -38,7 +38,6 @@ mod body;
 mod header;
 mod layout;
 
-use std::fs::File;
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 
@@ -59,7 +58,7 @@ const COLOUR: usize = 6;
 
 /// Reads the vertices of the PLY file at `path`.
 pub(super) fn read(path: &Path) -> Result<RawPoints> {
-    let file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let file = crate::io::input::open(path)?;
     let metadata = file.metadata().map_err(|e| Error::io(path, e))?;
     let len = metadata.is_file().then_some(metadata.len());
     read_from(path, BufReader::new(file), len)

@@ -93,7 +93,7 @@ impl InstancedRbvh {
     /// [`Error::Io`]; a flat RBVH's file, or any malformation (the flat file's, and the module's
     /// checks of meshes and placements), is [`Error::Parse`] naming the file and the section.
     pub fn load(path: &Path) -> Result<InstancedRbvh> {
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let bytes = crate::io::input::read(path)?;
         Self::from_bytes(&bytes, path)
     }
 

@@ -117,7 +117,7 @@ pub use sections::{section_table, Section, REQUIRED};
 /// refuses it by name. An [`Error::Io`] where it cannot be opened or read.
 pub fn holds_instances(path: &Path) -> Result<bool> {
     use std::io::Read;
-    let mut file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut file = crate::io::input::open(path)?;
     let mut head = Vec::with_capacity(sections::TABLE_AT);
     (&mut file)
         .take(sections::TABLE_AT as u64)
@@ -165,7 +165,7 @@ impl Rbvh {
     /// truncation, a broken section table, lengths inconsistent with the contents, references
     /// out of range, NaN) is [`Error::Parse`] naming the file and the problem.
     pub fn load(path: &Path) -> Result<Rbvh> {
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let bytes = crate::io::input::read(path)?;
         Self::from_bytes(&bytes, path)
     }
 
