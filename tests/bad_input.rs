@@ -249,6 +249,11 @@ fn bad_mesh_and_scene_files_fail_cleanly() {
             b"[[mesh]]\nbuiltin = \"sphere\"\nscale = 2e38\ntranslate = [2e38, 0, 0]\n".to_vec(),
             vec!["overflow.toml", "not finite"],
         ),
+        (
+            "four.toml",
+            b"[[mesh]]\nbuiltin = \"sphere\"\ntranslate = [1, 2, 3, 4]\n".to_vec(),
+            vec!["four.toml:3", "invalid length 4, expected three numbers"],
+        ),
     ];
     for (name, content, _) in &cases {
         write(d, name, content);

@@ -1184,3 +1184,27 @@ fn edit_triangle(r: &mut Rbvh, i: usize, edit: impl FnOnce(&mut GpuTriangle)) {
     edit(&mut triangles[i]);
     r.triangles = ExactTriangles::new(triangles);
 }
+
+/// **A saved RBVH is checked against the scene it is traced with by its exact triangles too**:
+/// a scene whose box is the RBVH's within the texels the check allows, but whose triangles are
+/// others, is refused, naming a triangle; the scene it was built from passes.
+#[test]
+fn an_rbvh_of_another_scene_in_the_same_box_is_refused() {
+    let cube = rbvh::Scene::builtin("cube").unwrap();
+    let built = Rbvh::build(&cube, &RbvhParams::quality(0).unwrap()).unwrap();
+    assert!(!built.triangles.is_empty(), "the cube's Q0 traces none exactly");
+    built.check_built_from(&cube).unwrap();
+    let b = cube.bounds();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("one.obj");
+    let v = |p: Vec3| format!("v {} {} {}\n", p.x, p.y, p.z);
+    let text = v(b.min) + &v(b.max) + &v(Vec3::new(b.max.x, b.min.y, b.max.z)) + "f 1 2 3\n";
+    std::fs::write(&path, text).unwrap();
+    let one = rbvh::Scene::load(path.to_str().unwrap()).unwrap();
+    assert_eq!(one.bounds().min, b.min);
+    let e = built.check_built_from(&one).unwrap_err().to_string();
+    assert!(
+        e.contains("built for another scene") && e.contains("exact triangle"),
+        "{e}"
+    );
+}

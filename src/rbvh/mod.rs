@@ -171,7 +171,7 @@ impl Rbvh {
             .max_element();
         // NaN (an empty box on one side only) fails too.
         if apart <= tolerance {
-            return Ok(());
+            return self.check_triangles_of(scene, 1e-5 * expected.diagonal());
         }
         Err(Error::param(
             "rbvh",
@@ -187,6 +187,38 @@ impl Rbvh {
                 self.texel_size
             ),
         ))
+    }
+
+    /// The rest of [`Rbvh::check_built_from`], for two scenes of one box: each exact triangle
+    /// names a triangle of `scene` (its `prim`) and lies in that triangle's box, within `slack`
+    /// (an exact part is the triangle or a piece of it). A scene of points has none.
+    fn check_triangles_of(&self, scene: &Scene, slack: f32) -> Result<()> {
+        if scene.points.is_some() {
+            return Ok(());
+        }
+        let count = scene.triangle_count();
+        for (slot, t) in self.triangles.gathered().iter().enumerate() {
+            let prim = t.prim as usize;
+            let fits = prim < count && {
+                let b = crate::geom::Aabb::from_points(scene.triangle(prim));
+                [t.v0, t.v1, t.v2].iter().all(|&v| {
+                    let v = glam::Vec3::from_array(v);
+                    v.cmpge(b.min - slack).all() && v.cmple(b.max + slack).all()
+                })
+            };
+            if !fits {
+                return Err(Error::param(
+                    "rbvh",
+                    format!(
+                        "built for another scene: its exact triangle {slot} is scene triangle \
+                         {prim}, which scene {:?} ({count} triangles) does not have there; \
+                         rebuild it from this scene (rbvh build --scene ... --out ...)",
+                        scene.name
+                    ),
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Texels of the tiles stored with 8-bit heights: those in the atlas's narrow band

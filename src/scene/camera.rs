@@ -54,6 +54,18 @@ impl std::fmt::Display for CameraFault {
     }
 }
 
+/// The unit vector along `v`, scaled to its largest component first, so that a vector of tiny
+/// or huge finite components (1e-30, 1e30), whose squared length underflows or overflows `f32`,
+/// keeps its direction; `None` for a zero or non-finite vector.
+pub(crate) fn direction(v: Vec3) -> Option<Vec3> {
+    let largest = v.abs().max_element();
+    if largest > 0.0 && largest.is_finite() {
+        (v / largest).try_normalize()
+    } else {
+        None
+    }
+}
+
 impl Camera {
     /// The camera at `eye` looking at `target`, rolled by `up`, with a vertical field of view of
     /// `vfov_deg` degrees; refused when it cannot make rays (the fault says why, for the caller
@@ -67,11 +79,15 @@ impl Camera {
         if !(eye.is_finite() && target.is_finite() && up.is_finite()) {
             return Err(CameraFault::NotFinite);
         }
-        if eye == target {
-            return Err(CameraFault::SameEyeAndTarget);
-        }
-        let view = (target - eye).normalize();
-        if up.length() == 0.0 || view.cross(up.normalize()).length() < 1.0e-4 {
+        let Some(view) = direction(target - eye) else {
+            // Equal, or so far apart that their difference overflows.
+            return Err(if eye == target {
+                CameraFault::SameEyeAndTarget
+            } else {
+                CameraFault::NotFinite
+            });
+        };
+        if direction(up).is_none_or(|up| view.cross(up).length() < 1.0e-4) {
             return Err(CameraFault::BadUp);
         }
         if !(vfov_deg > 0.0 && vfov_deg < 180.0) {
@@ -157,10 +173,10 @@ struct View {
 impl View {
     fn new(camera: &Camera, width: u32, height: u32) -> View {
         let (width, height) = (width.max(1) as f32, height.max(1) as f32);
-        let forward = (camera.target - camera.eye).normalize_or(Vec3::NEG_Z);
+        let forward = direction(camera.target - camera.eye).unwrap_or(Vec3::NEG_Z);
         // An `up` parallel to the view direction leaves the roll open; any perpendicular will do.
         let right = forward
-            .cross(camera.up)
+            .cross(direction(camera.up).unwrap_or(Vec3::ZERO))
             .try_normalize()
             .unwrap_or_else(|| forward.any_orthonormal_vector());
         let up = right.cross(forward);
@@ -211,5 +227,21 @@ mod tests {
             fault(Vec3::NAN, target, Vec3::Y, 30.0),
             CameraFault::NotFinite
         );
+        let far = Vec3::new(3e38, 0.0, 0.0);
+        assert_eq!(fault(-far, far, Vec3::Y, 30.0), CameraFault::NotFinite);
+    }
+
+    /// Directions whose squared length underflows or overflows `f32` keep their direction: a
+    /// target 1e-30 beside the eye is looked at, not replaced by -Z, and so is an `up` of 1e30.
+    #[test]
+    fn tiny_and_huge_directions_are_kept() {
+        assert_eq!(direction(Vec3::new(1e-30, 0.0, 0.0)), Some(Vec3::X));
+        assert_eq!(direction(Vec3::new(0.0, -1e30, 0.0)), Some(Vec3::NEG_Y));
+        assert_eq!(direction(Vec3::ZERO), None);
+        let eye = Vec3::new(0.0, 0.0, 4.0);
+        let camera = Camera::look_at(eye, eye + Vec3::new(1e-30, 0.0, 0.0), Vec3::Y * 1e30, 30.0)
+            .unwrap();
+        let ray = camera.primary_rays(1, 1)[0];
+        assert!((ray.dir() - Vec3::X).length() < 1e-6, "{:?}", ray.dir());
     }
 }

@@ -25,7 +25,10 @@ use crate::{Error, Result};
 /// Loads the OBJ file at `path`: polygons are fan-triangulated, points and lines ignored.
 pub(super) fn load(path: &Path) -> Result<Scene> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    check_face_indices(path, &bytes)?;
+    // A UTF-8 byte order mark (as some Windows editors write) would make the first line's
+    // keyword unknown to tobj, which skips such lines: its first vertex would be lost unsaid.
+    let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(&bytes);
+    check_face_indices(path, bytes)?;
     let options = tobj::LoadOptions {
         triangulate: true,
         single_index: false,
@@ -36,7 +39,7 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
         Some(dir) if !dir.as_os_str().is_empty() => dir.to_path_buf(),
         _ => PathBuf::from("."),
     };
-    let mut cursor = Cursor::new(bytes.as_slice());
+    let mut cursor = Cursor::new(bytes);
     let (models, materials) = tobj::load_obj_buf(&mut cursor, &options, |mtl| {
         let file = base.join(mtl);
         let regular = std::fs::metadata(&file).is_ok_and(|m| m.is_file());
@@ -51,7 +54,7 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
         tobj::load_mtl_buf(&mut text.as_bytes())
     })
     .map_err(|e| {
-        let line = line_at(&bytes, cursor.position() as usize);
+        let line = line_at(bytes, cursor.position() as usize);
         Error::parse(path, Some(line), describe(e))
     })?;
 
@@ -95,7 +98,7 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
     // `tobj` renumbers vertices per model, so point at the file's own line instead when we can.
     scene
         .validate()
-        .map_err(|e| non_finite_vertex(path, &bytes).unwrap_or(e))?;
+        .map_err(|e| non_finite_vertex(path, bytes).unwrap_or(e))?;
     Ok(scene)
 }
 
@@ -295,6 +298,16 @@ fn non_finite_vertex(path: &Path, bytes: &[u8]) -> Option<Error> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A byte order mark before the first line leaves that line's vertex where it is.
+    #[test]
+    fn a_byte_order_mark_keeps_the_first_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bom.obj");
+        std::fs::write(&path, b"\xEF\xBB\xBFv 5 5 5\nv 0 0 0\nv 1 0 0\nf 1 2 3\n").unwrap();
+        let scene = load(&path).unwrap();
+        assert_eq!(scene.triangle(0)[0], Vec3::splat(5.0));
+    }
 
     #[test]
     fn line_at_counts_the_line_being_parsed() {

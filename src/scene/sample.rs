@@ -44,6 +44,10 @@ impl PointSource {
     }
 }
 
+/// Host bytes a sampled point takes while the cloud is made: its sample (triangle and point, 24)
+/// beside the cloud's position, normal, spacing and colour (32).
+const SAMPLE_BYTES: u64 = 56;
+
 impl Scene {
     /// Sets [`Scene::points`] from `source` (sampled with `seed`), so that an RBVH of the scene
     /// is built from them while the exact BVH stays on the triangles, its referee. A scan from a
@@ -109,14 +113,29 @@ impl Scene {
     /// on any number of threads.
     ///
     /// # Errors
-    /// [`Error::InvalidParameter`] (`points`) when `count` is below [`MIN_POINTS`] or no triangle
-    /// has an area; the errors of [`Scene::validate`] for a scene that is not well formed.
+    /// [`Error::InvalidParameter`] (`points`) when `count` is below [`MIN_POINTS`], when the
+    /// cloud would not fit the host's available memory, or when no triangle has an area; the errors of [`Scene::validate`] for a scene that is not well formed.
     pub fn sample_points(&self, count: usize, seed: u64) -> Result<PointCloud> {
         if count < MIN_POINTS {
             return Err(Error::param(
                 "points",
                 format!("{count} point(s) asked for: a point cloud needs at least {MIN_POINTS}"),
             ));
+        }
+        // Refused up front where they cannot fit, rather than aborted on by the allocator.
+        let needed = (count as u64).saturating_mul(SAMPLE_BYTES);
+        if let Some(available) = super::instances::available_memory() {
+            if needed > available {
+                return Err(Error::param(
+                    "points",
+                    format!(
+                        "{count} points would take about {:.1} GB of host memory to sample, and \
+                         {:.1} GB are available",
+                        needed as f64 / 1e9,
+                        available as f64 / 1e9
+                    ),
+                ));
+            }
         }
         self.validate()?;
         // Areas and normals in f64: a cross product of f32 edges can overflow f32, and a

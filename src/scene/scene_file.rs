@@ -33,20 +33,33 @@ struct SceneFile {
     instance: Vec<Spanned<MeshEntry>>,
 }
 
+/// Three numbers, exactly: an `[f32; 3]` would take the first three of a longer array and drop
+/// the rest unsaid.
+struct Triple([f32; 3]);
+
+impl<'de> Deserialize<'de> for Triple {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        let numbers = Vec::<f32>::deserialize(d)?;
+        <[f32; 3]>::try_from(numbers.as_slice())
+            .map(Triple)
+            .map_err(|_| serde::de::Error::invalid_length(numbers.len(), &"three numbers"))
+    }
+}
+
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct CameraEntry {
-    eye: Spanned<[f32; 3]>,
-    target: Spanned<[f32; 3]>,
-    up: Option<Spanned<[f32; 3]>>,
+    eye: Spanned<Triple>,
+    target: Spanned<Triple>,
+    up: Option<Spanned<Triple>>,
     vfov: Option<Spanned<f32>>,
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct LightEntry {
-    direction: Option<Spanned<[f32; 3]>>,
-    position: Option<Spanned<[f32; 3]>>,
+    direction: Option<Spanned<Triple>>,
+    position: Option<Spanned<Triple>>,
 }
 
 #[derive(Deserialize)]
@@ -54,8 +67,8 @@ struct LightEntry {
 struct MeshEntry {
     builtin: Option<Spanned<String>>,
     path: Option<Spanned<String>>,
-    translate: Option<Spanned<[f32; 3]>>,
-    rotate: Option<Spanned<[f32; 3]>>,
+    translate: Option<Spanned<Triple>>,
+    rotate: Option<Spanned<Triple>>,
     scale: Option<Spanned<ScaleEntry>>,
 }
 
@@ -63,7 +76,7 @@ struct MeshEntry {
 #[serde(untagged, expecting = "a number or an array of three numbers")]
 enum ScaleEntry {
     Uniform(f32),
-    PerAxis([f32; 3]),
+    PerAxis(Triple),
 }
 
 /// The text of the scene file at `path`, and the file parsed from it (with at least one mesh or
@@ -220,8 +233,8 @@ impl Source<'_> {
     }
 
     /// `value` as a vector, or an error naming `key` when a component is not finite.
-    fn vec3(&self, key: &str, value: &Spanned<[f32; 3]>) -> Result<Vec3> {
-        let v = Vec3::from_array(*value.get_ref());
+    fn vec3(&self, key: &str, value: &Spanned<Triple>) -> Result<Vec3> {
+        let v = Vec3::from_array(value.get_ref().0);
         if v.is_finite() {
             Ok(v)
         } else {
@@ -253,12 +266,10 @@ impl Source<'_> {
         match (&entry.get_ref().direction, &entry.get_ref().position) {
             (Some(direction), None) => {
                 let d = self.vec3("direction", direction)?;
-                if d.length() == 0.0 {
+                let Some(direction) = super::camera::direction(d) else {
                     return Err(self.error(direction.span(), "light `direction` must be non-zero"));
-                }
-                Ok(Light::Directional {
-                    direction: d.normalize(),
-                })
+                };
+                Ok(Light::Directional { direction })
             }
             (None, Some(position)) => Ok(Light::Point {
                 position: self.vec3("position", position)?,
@@ -286,7 +297,7 @@ impl Source<'_> {
             Some(s) => {
                 let v = match s.get_ref() {
                     ScaleEntry::Uniform(k) => Vec3::splat(*k),
-                    ScaleEntry::PerAxis(v) => Vec3::from_array(*v),
+                    ScaleEntry::PerAxis(v) => Vec3::from_array(v.0),
                 };
                 if !v.is_finite() || v.cmpeq(Vec3::ZERO).any() {
                     return Err(self.error(
