@@ -112,8 +112,9 @@ fn triangle_bin() -> Vec<u8> {
 
 /// **Every bad mesh or scene file fails `render`, `build` and `trace` cleanly, naming the file**
 /// (and the line, where there is one): empty files, vertices without faces, truncated text,
-/// binary garbage and a PNG renamed to each extension, out-of-range and zero face indices,
-/// glTF that is valid JSON but no glTF, glTF without meshes, data URIs that are not base64,
+/// binary garbage and a PNG renamed to each extension, out-of-range and zero face indices, a
+/// face of two vertices, a glTF triangle list whose count is no multiple of 3, glTF that is
+/// valid JSON but no glTF, glTF without meshes, data URIs that are not base64,
 /// accessors whose counts overflow, GLB with a wrong version, a length beyond the file or a
 /// chunk beyond the file, scene files that are empty, truncated, refer to a bad mesh, to
 /// themselves, or scale the geometry beyond f32, a directory named like a mesh, and missing
@@ -156,6 +157,23 @@ fn bad_mesh_and_scene_files_fail_cleanly() {
             "huge.obj",
             b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99999999999999999999\n".to_vec(),
             vec!["huge.obj:4"],
+        ),
+        (
+            "twoface.obj",
+            b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2\n".to_vec(),
+            vec!["twoface.obj:5", "a face needs at least 3"],
+        ),
+        (
+            "fourth.glb",
+            {
+                let json = ONE_TRIANGLE_GLTF
+                    .replace("\"count\":3", "\"count\":4")
+                    .replace("36", "48");
+                let mut bin = triangle_bin();
+                bin.extend([1f32, 1., 0.].iter().flat_map(|v| v.to_le_bytes()));
+                glb(&json, &bin)
+            },
+            vec!["fourth.glb", "not a multiple of 3"],
         ),
         ("empty.gltf", vec![], vec!["empty.gltf"]),
         ("png.gltf", PNG_HEAD.to_vec(), vec!["png.gltf"]),

@@ -1391,13 +1391,6 @@ fn flags_without_effect_are_refused() {
             with_file(render(&["--method", "exact"]), &[]),
             vec!["--method exact", "--rbvh"],
         ),
-        (
-            with_file(trace(&[]), &["--points", "100"]),
-            vec![
-                "--points says what an RBVH is built from",
-                "--rbvh loads one",
-            ],
-        ),
         // Flags of level of detail and of other outputs, without them.
         (
             render(&["--lod-bias", "0"]),
@@ -2021,16 +2014,51 @@ fn misuse_is_told_by_its_flag_and_never_aborts() {
             "{args:?}: {needle:?} not in\n{stderr}"
         );
     }
-    // Its reader gone before it writes a line: ended by SIGPIPE, as Unix tools are, or done.
-    let mut child = Command::new(env!("CARGO_BIN_EXE_rbvh"))
+    // Its reader gone before it writes a line: ended by SIGPIPE, as Unix tools are, not by a
+    // panic (exit 101).
+    let write_end = {
+        use std::os::fd::FromRawFd;
+        let mut fds = [0; 2];
+        // SAFETY: `fds` has room for the two descriptors the call makes.
+        assert_eq!(unsafe { libc::pipe(fds.as_mut_ptr()) }, 0);
+        // SAFETY: both descriptors were just made, and each is owned by one File alone.
+        let (read_end, write_end) = unsafe {
+            (
+                std::fs::File::from_raw_fd(fds[0]),
+                std::fs::File::from_raw_fd(fds[1]),
+            )
+        };
+        drop(read_end);
+        write_end
+    };
+    let out = Command::new(env!("CARGO_BIN_EXE_rbvh"))
         .arg("scenes")
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
+        .stdout(write_end)
+        .output()
         .expect("run rbvh");
-    drop(child.stdout.take());
-    let out = child.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!stderr.contains("panicked"), "{stderr}");
-    assert_ne!(out.status.code(), Some(101), "{stderr}");
+    use std::os::unix::process::ExitStatusExt;
+    assert_eq!(out.status.signal(), Some(libc::SIGPIPE), "{stderr}");
+}
+
+/// A level named twice (`--quality 0,0`, `all,2`) is built once, as a texel format named twice is.
+#[test]
+fn a_level_named_twice_is_built_once() {
+    let out = rbvh(&["build", "--scene", "sphere", "--quality", "0,q0"]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rows = stdout
+        .lines()
+        .filter(|l| l.trim_start().starts_with("Q0 "))
+        .count();
+    assert_eq!(rows, 1, "{stdout}");
+    assert!(stdout.contains("peak host memory so far "), "{stdout}");
+    assert!(
+        stdout.lines().next().unwrap_or("").ends_with(" MB"),
+        "{stdout}"
+    );
 }

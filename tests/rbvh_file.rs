@@ -1192,7 +1192,10 @@ fn edit_triangle(r: &mut Rbvh, i: usize, edit: impl FnOnce(&mut GpuTriangle)) {
 fn an_rbvh_of_another_scene_in_the_same_box_is_refused() {
     let cube = rbvh::Scene::builtin("cube").unwrap();
     let built = Rbvh::build(&cube, &RbvhParams::quality(0).unwrap()).unwrap();
-    assert!(!built.triangles.is_empty(), "the cube's Q0 traces none exactly");
+    assert!(
+        !built.triangles.is_empty(),
+        "the cube's Q0 traces none exactly"
+    );
     built.check_built_from(&cube).unwrap();
     let b = cube.bounds();
     let dir = tempfile::tempdir().unwrap();

@@ -183,15 +183,9 @@ impl LatLongMap {
         use std::fs::File;
         use std::io::{BufReader, Seek};
 
-        // Checked before opening: opening a pipe would block until something writes to it.
+        // Checked before opening, a regular file: the EXR reader seeks.
         let metadata = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
-        if !metadata.is_file() {
-            return Err(Error::parse(
-                path,
-                None,
-                "not a regular file (a directory, device or pipe)",
-            ));
-        }
+        crate::io::input::regular_file(path, &metadata)?;
         let file = File::open(path).map_err(|e| Error::io(path, e))?;
         let mut reader = BufReader::new(file);
         let malformed = |e: ::exr::error::Error| {

@@ -16,35 +16,43 @@ use crate::Error;
 /// plain `File::create` would give it (0o666 less the umask), not a temporary file's 0o600.
 ///
 /// A symbolic link is followed: the file it names is replaced, the link kept. What is not a
-/// regular file where it stands is written through as it is, since replacing it would lose
-/// what it is: a device such as `/dev/null` stays a device, a FIFO passes the bytes to its
-/// reader. A directory is refused.
+/// regular file where it stands is written through (appended to) as it is, since replacing it
+/// would lose what it is: a device such as `/dev/null` stays a device, a FIFO passes the bytes
+/// to its reader, and so is a file reached through `/proc` (`/dev/stdout`, `/dev/fd/N`), which a
+/// descriptor holds open. A directory is refused.
 ///
 /// Errors name `path`, whatever step failed, since that is the file the user asked for.
 pub fn write_atomically(
     path: &Path,
     write: impl FnOnce(&mut BufWriter<File>) -> io::Result<()>,
 ) -> crate::Result<()> {
-    let target = followed(path).map_err(|e| Error::io(path, e))?;
-    match std::fs::metadata(&target) {
-        Ok(m) if m.is_dir() => Err(Error::io(
-            path,
-            io::Error::new(
-                io::ErrorKind::IsADirectory,
-                "a directory, not a file to write",
-            ),
-        )),
-        Ok(m) if !m.is_file() => write_through(&target, write).map_err(|e| Error::io(path, e)),
-        _ => write_then_persist(&target, write).map_err(|e| Error::io(path, e)),
+    match rename_target(path).map_err(|e| Error::io(path, e))? {
+        Some(target) => write_then_persist(&target, write).map_err(|e| Error::io(path, e)),
+        None => write_through(path, write).map_err(|e| Error::io(path, e)),
     }
 }
 
-/// The path `path`'s symbolic links lead to (itself where it is none, or missing), so that the
-/// rename replaces the file a link names rather than the link.
-fn followed(path: &Path) -> io::Result<PathBuf> {
+/// The file that [`write_atomically`] renames its complete content over: `path` with its
+/// symbolic links followed, so that a link is kept and the file it names replaced; `None`
+/// where it writes through instead (not a regular file where the kernel follows `path`, or a
+/// link into `/proc`); an error for a directory.
+pub fn rename_target(path: &Path) -> io::Result<Option<PathBuf>> {
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_dir() => {
+            return Err(io::Error::new(
+                io::ErrorKind::IsADirectory,
+                "a directory, not a file to write",
+            ))
+        }
+        Ok(m) if !m.is_file() => return Ok(None),
+        _ => {}
+    }
     let mut path = path.to_path_buf();
     // As the kernel's limit on links followed in one lookup (Linux's 40).
     for _ in 0..40 {
+        if path.starts_with("/proc") {
+            return Ok(None);
+        }
         match std::fs::symlink_metadata(&path) {
             Ok(m) if m.file_type().is_symlink() => {
                 let link = std::fs::read_link(&path)?;
@@ -53,7 +61,7 @@ fn followed(path: &Path) -> io::Result<PathBuf> {
                     _ => link,
                 };
             }
-            _ => return Ok(path),
+            _ => return Ok(Some(path)),
         }
     }
     Err(io::Error::new(
@@ -62,12 +70,14 @@ fn followed(path: &Path) -> io::Result<PathBuf> {
     ))
 }
 
-/// Writes into what is at `path` without replacing it (a device or a FIFO).
+/// Writes into what is at `path` without replacing it (a device, a FIFO, a descriptor's file),
+/// after what it holds: a shell's `> out` has emptied it already, and what the command printed
+/// there before stays.
 fn write_through(
     path: &Path,
     write: impl FnOnce(&mut BufWriter<File>) -> io::Result<()>,
 ) -> io::Result<()> {
-    let mut writer = BufWriter::new(File::options().write(true).open(path)?);
+    let mut writer = BufWriter::new(File::options().append(true).open(path)?);
     write(&mut writer)?;
     writer.flush()
 }
@@ -144,6 +154,10 @@ mod tests {
             .file_type()
             .is_symlink());
         assert_eq!(std::fs::read(&target).unwrap(), b"new");
+        // A descriptor's file (`/dev/stdout`, whatever it is now) is written through, not
+        // replaced behind the descriptor.
+        #[cfg(target_os = "linux")]
+        assert_eq!(rename_target(Path::new("/dev/fd/1")).unwrap(), None);
     }
 
     #[cfg(unix)]
@@ -157,12 +171,31 @@ mod tests {
             // No mkfifo here: nothing to test with.
             return;
         }
-        let reader = {
-            let fifo = fifo.clone();
-            std::thread::spawn(move || std::fs::read(fifo).unwrap())
-        };
-        write_atomically(&fifo, |w| w.write_all(b"through")).unwrap();
-        assert_eq!(reader.join().unwrap(), b"through");
+        // Each end in a thread of its own, so that a write that replaced the FIFO rather than
+        // going through it fails the test (its reader never ends) instead of hanging it.
+        let (done, ended) = std::sync::mpsc::channel();
+        for reads in [true, false] {
+            let (fifo, done) = (fifo.clone(), done.clone());
+            std::thread::spawn(move || {
+                let bytes = if reads {
+                    std::fs::read(&fifo).unwrap_or_default()
+                } else {
+                    write_atomically(&fifo, |w| w.write_all(b"through")).unwrap();
+                    Vec::new()
+                };
+                let _ = done.send((reads, bytes));
+            });
+        }
+        let mut read = Vec::new();
+        for _ in 0..2 {
+            let (reads, bytes) = ended
+                .recv_timeout(std::time::Duration::from_secs(30))
+                .expect("the write through the FIFO and its read end");
+            if reads {
+                read = bytes;
+            }
+        }
+        assert_eq!(read, b"through");
         assert!(std::fs::symlink_metadata(&fifo)
             .unwrap()
             .file_type()

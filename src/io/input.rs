@@ -1,10 +1,11 @@
-//! Reading the files a user names: regular files only.
+//! Reading the files a user names: files and pipes, nothing else.
 //!
-//! A device such as `/dev/zero` would be read forever, a FIFO with no writer blocks its reader
-//! at `open`, and a directory is a mistake; each is refused by name before it is opened. Every
-//! file the crate reads from a path goes through here: scenes and what they name (meshes,
-//! buffers, textures), point clouds, environments, ray files, RBVH files, paint strokes,
-//! goldens.
+//! A device such as `/dev/zero` would be read forever and a directory is a mistake: each is
+//! refused by name before it is opened. A stream's file (rays, RBVH files, point clouds, paint
+//! strokes, goldens, read once from start to end) may also be a pipe (`--rays <(make-rays)`,
+//! `/dev/stdin`), which, like any reader of one, waits for its writer. What a scene names
+//! (meshes, their buffers and textures) and an environment map, which the EXR reader seeks in,
+//! must be regular files ([`regular_file`]).
 
 use std::fs::{File, Metadata};
 use std::path::Path;
@@ -24,26 +25,41 @@ pub(crate) fn regular_file(path: &Path, metadata: &Metadata) -> Result<()> {
     }
 }
 
-/// Opens the regular file at `path` for reading: [`Error::Io`] where it is missing or
-/// unreadable, [`Error::Parse`] where it is no regular file.
-pub fn open(path: &Path) -> Result<File> {
+/// Refuses `path` unless it is a regular file or a pipe, before it is opened.
+fn file_or_pipe(path: &Path) -> Result<()> {
     let metadata = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
-    regular_file(path, &metadata)?;
+    #[cfg(unix)]
+    let pipe = std::os::unix::fs::FileTypeExt::is_fifo(&metadata.file_type());
+    #[cfg(not(unix))]
+    let pipe = false;
+    if metadata.is_file() || pipe {
+        Ok(())
+    } else {
+        Err(Error::parse(
+            path,
+            None,
+            "not a file or a pipe (a directory or device)",
+        ))
+    }
+}
+
+/// Opens the file or pipe at `path` for reading: [`Error::Io`] where it is missing or
+/// unreadable, [`Error::Parse`] where it is neither.
+pub fn open(path: &Path) -> Result<File> {
+    file_or_pipe(path)?;
     File::open(path).map_err(|e| Error::io(path, e))
 }
 
-/// The bytes of the regular file at `path`, as [`open`] refuses it.
+/// The bytes of the file or pipe at `path`, as [`open`] refuses it.
 pub fn read(path: &Path) -> Result<Vec<u8>> {
-    let metadata = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
-    regular_file(path, &metadata)?;
+    file_or_pipe(path)?;
     std::fs::read(path).map_err(|e| Error::io(path, e))
 }
 
-/// The text of the regular file at `path`, as [`open`] refuses it; not UTF-8 is
+/// The text of the file or pipe at `path`, as [`open`] refuses it; not UTF-8 is
 /// [`Error::Io`] (`InvalidData`).
 pub fn read_to_string(path: &Path) -> Result<String> {
-    let metadata = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
-    regular_file(path, &metadata)?;
+    file_or_pipe(path)?;
     std::fs::read_to_string(path).map_err(|e| Error::io(path, e))
 }
 
@@ -52,23 +68,16 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_pipe_a_device_or_a_directory_is_refused_before_it_is_opened() {
+    fn a_device_or_a_directory_is_refused_before_it_is_opened() {
         let dir = tempfile::tempdir().unwrap();
-        let fifo = dir.path().join("rays.fifo");
-        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
-        // Opened, a FIFO with no writer would block this test for ever.
-        let mut refused = vec![dir.path().to_path_buf(), "/dev/zero".into()];
-        if made.is_ok_and(|s| s.success()) {
-            refused.push(fifo);
-        }
-        for path in &refused {
+        for path in [dir.path(), Path::new("/dev/zero")] {
             for err in [
                 open(path).err(),
                 read(path).err(),
                 read_to_string(path).err(),
             ] {
                 let err = err.expect("refused").to_string();
-                assert!(err.contains("not a regular file"), "{err}");
+                assert!(err.contains("not a file or a pipe"), "{err}");
                 assert!(err.contains(&*path.to_string_lossy()), "{err}");
             }
         }
@@ -77,5 +86,22 @@ mod tests {
         assert_eq!(read_to_string(&file).unwrap(), "text");
         let missing = read(&dir.path().join("missing")).unwrap_err();
         assert!(matches!(missing, Error::Io { .. }), "{missing}");
+    }
+
+    #[test]
+    fn a_pipe_is_read_to_its_end() {
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("rays.fifo");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        if !made.is_ok_and(|s| s.success()) {
+            // No mkfifo here: nothing to test with.
+            return;
+        }
+        let writer = {
+            let fifo = fifo.clone();
+            std::thread::spawn(move || std::fs::write(fifo, "streamed").unwrap())
+        };
+        assert_eq!(read_to_string(&fifo).unwrap(), "streamed");
+        writer.join().unwrap();
     }
 }

@@ -25,6 +25,6 @@ pub mod input;
 mod rays;
 mod records;
 
-pub use atomic::write_atomically;
+pub use atomic::{rename_target, write_atomically};
 pub use hits::{read_hits, write_hits};
 pub use rays::{read_rays, write_rays};

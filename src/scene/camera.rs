@@ -239,8 +239,8 @@ mod tests {
         assert_eq!(direction(Vec3::new(0.0, -1e30, 0.0)), Some(Vec3::NEG_Y));
         assert_eq!(direction(Vec3::ZERO), None);
         let eye = Vec3::new(0.0, 0.0, 4.0);
-        let camera = Camera::look_at(eye, eye + Vec3::new(1e-30, 0.0, 0.0), Vec3::Y * 1e30, 30.0)
-            .unwrap();
+        let camera =
+            Camera::look_at(eye, eye + Vec3::new(1e-30, 0.0, 0.0), Vec3::Y * 1e30, 30.0).unwrap();
         let ray = camera.primary_rays(1, 1)[0];
         assert!((ray.dir() - Vec3::X).length() < 1e-6, "{:?}", ray.dir());
     }

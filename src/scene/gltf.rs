@@ -680,10 +680,21 @@ fn read_primitive(
         Mode::TriangleFan => (1..indices.len().saturating_sub(1))
             .map(|i| [indices[i], indices[i + 1], indices[0]])
             .collect(),
-        _ => indices
-            .chunks_exact(3)
-            .map(|t| [t[0], t[1], t[2]])
-            .collect(),
+        _ => {
+            // glTF 2.0 §3.7.2.1: a triangle list's count is a multiple of three; the indices
+            // left over would be dropped unsaid.
+            if indices.len() % 3 != 0 {
+                return Err(format!(
+                    "its {} indices (or vertices) are not a multiple of 3, as a triangle list's \
+                     must be",
+                    indices.len()
+                ));
+            }
+            indices
+                .chunks_exact(3)
+                .map(|t| [t[0], t[1], t[2]])
+                .collect()
+        }
     };
     Ok(Some((positions, triangles)))
 }

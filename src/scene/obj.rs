@@ -216,6 +216,15 @@ fn check_face_indices(path: &Path, bytes: &[u8]) -> Result<()> {
         if words.next() != Some("f") {
             continue;
         }
+        // tobj drops a face of one or two vertices unsaid.
+        let corners = words.clone().count();
+        if corners < 3 {
+            return Err(Error::parse(
+                path,
+                Some(n + 1),
+                format!("a face has {corners} vertices; a face needs at least 3"),
+            ));
+        }
         for word in words {
             for (k, part) in word.split('/').take(3).enumerate() {
                 let Ok(x) = part.parse::<i64>() else {

@@ -122,7 +122,8 @@ impl Scene {
                 format!("{count} point(s) asked for: a point cloud needs at least {MIN_POINTS}"),
             ));
         }
-        // Refused up front where they cannot fit, rather than aborted on by the allocator.
+        // Refused up front where they cannot fit, rather than aborted on by the allocator (the
+        // system's MemAvailable: a cgroup's own limit is not seen).
         let needed = (count as u64).saturating_mul(SAMPLE_BYTES);
         if let Some(available) = super::instances::available_memory() {
             if needed > available {
@@ -219,6 +220,17 @@ mod tests {
             &[[0, 1, 2], [0, 2, 3]],
         );
         scene
+    }
+
+    /// More points than the host's memory could hold are refused before any is sampled, where
+    /// the system says what is available (`MemAvailable`; a cgroup's own limit is not seen).
+    #[test]
+    fn points_beyond_the_hosts_memory_are_refused_up_front() {
+        if crate::scene::available_memory().is_none() {
+            return;
+        }
+        let e = square().sample_points(1 << 40, 1).unwrap_err().to_string();
+        assert!(e.contains("host memory") && e.contains("points"), "{e}");
     }
 
     #[test]

@@ -137,7 +137,7 @@ pub fn run(a: Args) -> Result<()> {
         None
     } else if scene.triangle_count() == 0 {
         println!(
-            "{}: {} points, no triangles: no exact BVH to compare with; peak host memory so far {}",
+            "{}: {} points, no triangles: no exact BVH to compare with; peak host memory so far {} MB",
             scene.name,
             scene.point_count(),
             peak_host_mb()
@@ -154,7 +154,7 @@ pub fn run(a: Args) -> Result<()> {
             n => format!(" (RBVHs built from {n} points instead)"),
         };
         println!(
-            "{}: {} triangles{points}; exact BVH {} nodes, {:.2} MB (tree + triangles), built in {:.0} ms; peak host memory so far {}",
+            "{}: {} triangles{points}; exact BVH {} nodes, {:.2} MB (tree + triangles), built in {:.0} ms; peak host memory so far {} MB",
             scene.name,
             scene.triangle_count(),
             exact.nodes.len(),
@@ -353,7 +353,7 @@ fn two_level_exact(placed: &InstancedScene) -> Result<u64> {
     println!(
         "{}: {} instances of {} meshes, {} triangles as placed, {} stored; two-level exact BVH {} \
          nodes (top level {}, depth {}), {:.2} MB (tree {:.2} + triangles {:.2} + instances {:.3}), \
-         built in {:.0} ms; peak host memory so far {}",
+         built in {:.0} ms; peak host memory so far {} MB",
         placed.name,
         placed.instances.len(),
         placed.meshes.len(),

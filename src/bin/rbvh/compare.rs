@@ -198,9 +198,11 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         Some(path) => format!("lit by {}", path.display()),
         None => "lit by the procedural sky".to_string(),
     };
-    let points = match p.scene().point_count() {
-        0 => String::new(),
-        n => format!(" (the RBVH's from {n} points)"),
+    let points = match (p.scene().point_count(), &a.common.source.rbvh) {
+        (0, _) => String::new(),
+        // The file's RBVH was built already: the points are what it is checked against.
+        (n, Some(_)) => format!(" (the RBVH's file checked against {n} points)"),
+        (n, None) => format!(" (the RBVH's from {n} points)"),
     };
     let layout = match &p.loaded {
         Loaded::Instanced(placed) => format!(

@@ -107,15 +107,15 @@ fn main() {
     };
     if let Err(e) = result {
         eprintln!("error: {e}");
-        // A cause already told by the message above it (the library's errors name their file
-        // and say why in one line, and keep the why as their source) is not told again.
-        let mut told = e.to_string();
+        // A cause already told by a message above it (the library's errors name their file and
+        // say why in one line, and keep the why as their source) is not told again.
+        let mut told = vec![e.to_string()];
         for cause in e.chain().skip(1) {
             let cause = cause.to_string();
-            if !told.contains(&cause) {
+            if !told.iter().any(|t| t.contains(&cause)) {
                 eprintln!("  caused by: {cause}");
+                told.push(cause);
             }
-            told = cause;
         }
         std::process::exit(1);
     }

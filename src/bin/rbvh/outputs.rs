@@ -2,12 +2,14 @@
 //!
 //! Every output is written atomically (`rbvh::io::write_atomically`), so one write that fails
 //! loses nothing; but a command whose second output fails after its first was written, or which
-//! writes over a file it reads, still would: a render's picture over the mesh it was made from,
+//! writes over a file it names, still would: a render's picture over the mesh it was made from,
 //! a bench's records lost at the end of its run to a JSON path in a missing folder. So each
-//! command names its outputs and inputs first, and [`check`] refuses, before any work, an output
-//! in a folder that does not exist or that is a folder, two outputs that are one file, and an
-//! output that is one of the command's inputs (`upgrade` and `paint` may write the RBVH file they
-//! read: it is read whole before the new one replaces it).
+//! command names its outputs and the files its flags name first, and [`check`] refuses, before
+//! any work, an output whose folder is missing or cannot be read, one that is a folder, two
+//! outputs that are one file, and an output that is one of those inputs (`upgrade` and `paint`
+//! may write the RBVH file they read: it is read whole before the new one replaces it). What a
+//! scene file names in turn (its meshes, their textures) is not checked, nor whether a folder
+//! can be written: a write that fails there still fails after the work.
 
 use std::path::{Path, PathBuf};
 
@@ -53,17 +55,29 @@ pub fn check(outputs: &[Output], inputs: &[Named]) -> Result<()> {
             Some(folder) if !folder.as_os_str().is_empty() => folder,
             _ => Path::new("."),
         };
-        if !folder.is_dir() {
-            bail!(
+        match std::fs::metadata(folder) {
+            Ok(m) if m.is_dir() => {}
+            Ok(_) => bail!(
+                "{flag} {}: {} is not a folder",
+                path.display(),
+                folder.display()
+            ),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => bail!(
                 "{flag} {}: the folder {} does not exist",
                 path.display(),
                 folder.display()
-            );
+            ),
+            Err(e) => bail!(
+                "{flag} {}: the folder {}: {e}",
+                path.display(),
+                folder.display()
+            ),
         }
-        if path.is_dir() {
-            bail!("{flag} {}: a folder, not a file to write", path.display());
-        }
-        let replaced = std::fs::metadata(path).map_or(true, |m| m.is_file());
+        // Replaced by a file of its own, or written through (a device, FIFO or descriptor).
+        let replaced = match rbvh::io::rename_target(path) {
+            Ok(target) => target.is_some(),
+            Err(e) => bail!("{flag} {}: {e}", path.display()),
+        };
         if let (Some(ext), true) = (out.ext, replaced) {
             if !path
                 .extension()
@@ -97,14 +111,15 @@ pub fn check(outputs: &[Output], inputs: &[Named]) -> Result<()> {
     Ok(())
 }
 
-/// The inputs of a command's `--scene` (where it names a file) and `--points` (where it names
-/// one).
+/// The inputs of a command's `--scene` (where it names a file rather than a built-in scene,
+/// which the loader prefers) and `--points` (where it names one).
 pub fn scene_inputs<'a>(scene: &'a str, points: Option<&'a PointSource>) -> [Named<'a>; 2] {
     let points = match points {
         Some(PointSource::File(path)) => Some(path.as_path()),
         _ => None,
     };
-    [("--scene", Some(Path::new(scene))), ("--points", points)]
+    let file = (!rbvh::scene::builtin::NAMES.contains(&scene)).then(|| Path::new(scene));
+    [("--scene", file), ("--points", points)]
 }
 
 /// The inputs of a command that traces one structure: its scene, points and RBVH file.

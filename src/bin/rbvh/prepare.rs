@@ -122,11 +122,6 @@ impl Structures {
                      the parameters it was built with): drop {flag}, or drop --rbvh to build one"
                 );
             }
-            anyhow::ensure!(
-                !given.has("points"),
-                "--points says what an RBVH is built from, but --rbvh loads one built already \
-                 (from what it was built from): drop --points, or drop --rbvh to build one"
-            );
         } else if self.method.iter().all(|m| *m == Method::Exact) {
             if let Some(flag) = given.first(&BUILD_FLAGS) {
                 anyhow::bail!(
@@ -517,7 +512,7 @@ pub fn context_options(device: Option<&str>, validate: bool) -> Result<ContextOp
 pub fn check_image_size(width: u32, height: u32) -> Result<()> {
     anyhow::ensure!(
         (1..=16384).contains(&width) && (1..=16384).contains(&height),
-        "--width and --height must be within 1..=16384 (got {width}x{height})"
+        "--width and --height must be within 1..=16384 (got --width {width} --height {height})"
     );
     Ok(())
 }
@@ -1010,6 +1005,10 @@ pub fn presets(quality: &[String]) -> Result<Vec<u32>> {
         levels.push(level);
     }
     anyhow::ensure!(!levels.is_empty(), "--quality names no level");
+    // A level named twice (`--quality 2,2`, `all,2`) is built and measured once, as a texel
+    // format named twice is.
+    let mut seen = [false; 5];
+    levels.retain(|&l| !std::mem::replace(&mut seen[l as usize], true));
     Ok(levels)
 }
 

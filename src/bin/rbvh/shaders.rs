@@ -36,9 +36,9 @@ pub struct Args {
 }
 
 /// The families RADV's null device can pretend to be (`RADV_FORCE_FAMILY`, compared without
-/// case): Mesa 22.3's `ac_get_family_name`, Debian 12's. RADV aborts the process on any other
+/// case): Mesa 22.3.6's `ac_get_family_name`, Debian 12's. RADV aborts the process on any other
 /// name, so it is refused here first.
-const AMD_FAMILIES: [&str; 38] = [
+const AMD_FAMILIES: [&str; 41] = [
     "TAHITI",
     "PITCAIRN",
     "VERDE",
@@ -77,6 +77,9 @@ const AMD_FAMILIES: [&str; 38] = [
     "GFX1100",
     "GFX1101",
     "GFX1102",
+    "REMBRANDT",
+    "GFX1103_R1",
+    "GFX1103_R2",
 ];
 
 pub fn run(a: Args) -> Result<()> {
