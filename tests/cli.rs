@@ -784,6 +784,19 @@ fn rbvh_addressing_forces_device_addresses_and_refuses_what_it_does_not_know() {
         "{stderr}"
     );
     assert!(!bad_png.exists());
+    // A misspelt request for the validation layer is an error, not the layer off.
+    let out = Command::new(env!("CARGO_BIN_EXE_rbvh"))
+        .args(["render", "--scene", "cube", "--width", "8", "--height", "8"])
+        .args(["--out", arg(&bad_png)])
+        .env("RBVH_VALIDATION", "requried")
+        .output()
+        .expect("run rbvh");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("RBVH_VALIDATION"),
+        "{stderr}"
+    );
+    assert!(!bad_png.exists());
 }
 
 /// A bench whose hits are wrong fails after reporting, unless told to allow it.
@@ -2061,4 +2074,36 @@ fn a_level_named_twice_is_built_once() {
         stdout.lines().next().unwrap_or("").ends_with(" MB"),
         "{stdout}"
     );
+}
+
+/// A view straight down needs an up other than +y: `--camera-up` gives it, and without it the
+/// error names the flag.
+#[test]
+fn a_view_straight_down_takes_its_up_from_camera_up() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("down.png");
+    let down = [
+        "render", "--scene", "plane", "--width", "8", "--height", "8",
+    ];
+    let looking = ["--camera-eye", "0,5,0", "--camera-target", "0,0,0"];
+    let out = rbvh(&[&down[..], &looking, &["--out", arg(&png)]].concat());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("--camera-up"),
+        "{stderr}"
+    );
+    let out = rbvh(
+        &[
+            &down[..],
+            &looking,
+            &["--camera-up", "0,0,-1", "--out", arg(&png)],
+        ]
+        .concat(),
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(png.exists());
 }

@@ -31,16 +31,21 @@ pub enum Validation {
 }
 
 impl Validation {
-    /// From `RBVH_VALIDATION`: `1`/`on`/`required` → Required, `auto` → IfInstalled, otherwise Off.
-    pub fn from_env() -> Self {
-        match std::env::var("RBVH_VALIDATION")
-            .unwrap_or_default()
-            .to_ascii_lowercase()
-            .as_str()
-        {
-            "1" | "on" | "required" => Validation::Required,
-            "auto" => Validation::IfInstalled,
-            _ => Validation::Off,
+    /// From `RBVH_VALIDATION`: `1`/`on`/`true`/`yes`/`required` → Required, `auto` →
+    /// IfInstalled, unset, empty, `0`/`off`/`false`/`no` → Off; anything else an error naming the
+    /// variable, since a misspelt request for the layer would otherwise turn it off unsaid.
+    pub fn from_env() -> Result<Self> {
+        let value = std::env::var("RBVH_VALIDATION").unwrap_or_default();
+        match value.to_ascii_lowercase().as_str() {
+            "1" | "on" | "true" | "yes" | "required" => Ok(Validation::Required),
+            "auto" => Ok(Validation::IfInstalled),
+            "" | "0" | "off" | "false" | "no" => Ok(Validation::Off),
+            _ => Err(Error::param(
+                "RBVH_VALIDATION",
+                format!(
+                    "{value:?} is not one of required (1, on, true, yes), auto, off (0, false, no)"
+                ),
+            )),
         }
     }
 }
@@ -51,7 +56,8 @@ pub struct ContextOptions {
     /// Pick the first device whose name contains this (case-insensitive); `RBVH_DEVICE` when None.
     /// Without either, a discrete GPU is preferred, then integrated, virtual, and CPU (lavapipe).
     pub device_name: Option<String>,
-    /// Whether to load the Khronos validation layer; `RBVH_VALIDATION` by default.
+    /// Whether to load the Khronos validation layer; `RBVH_VALIDATION` by default (Off when it
+    /// is not understood; [`Validation::from_env`] reports that).
     pub validation: Validation,
     /// How shaders reach a structure's arrays; see [`Addressing`]. `RBVH_ADDRESSING` by default
     /// (Auto when it is unset or not understood; [`Addressing::from_env`] reports the latter).
@@ -62,7 +68,7 @@ impl Default for ContextOptions {
     fn default() -> Self {
         ContextOptions {
             device_name: std::env::var("RBVH_DEVICE").ok().filter(|s| !s.is_empty()),
-            validation: Validation::from_env(),
+            validation: Validation::from_env().unwrap_or(Validation::Off),
             addressing: Addressing::from_env().unwrap_or_default(),
         }
     }

@@ -200,13 +200,23 @@ pub struct CameraArgs {
         requires = "camera_eye"
     )]
     pub camera_target: Option<Vec<f32>>,
+    /// The direction that is up in the picture, x,y,z (with --camera-eye) [default: 0,1,0]: for a
+    /// view along the y axis, which +y cannot roll, say 0,0,-1 looking down.
+    #[arg(
+        long,
+        value_name = "X,Y,Z",
+        value_delimiter = ',',
+        num_args = 1,
+        requires = "camera_eye"
+    )]
+    pub camera_up: Option<Vec<f32>>,
     /// The camera's vertical field of view in degrees (with --camera-eye) [default: 40].
     #[arg(long, requires = "camera_eye")]
     pub vfov: Option<f32>,
 }
 
 impl CameraArgs {
-    /// The camera the flags describe, when they describe one (+y up).
+    /// The camera the flags describe, when they describe one (+y up unless --camera-up).
     pub fn camera(&self) -> Result<Option<Camera>> {
         let (Some(eye), Some(target)) = (&self.camera_eye, &self.camera_target) else {
             return Ok(None);
@@ -223,10 +233,16 @@ impl CameraArgs {
             point("--camera-eye", eye)?,
             point("--camera-target", target)?,
         );
+        let up = match &self.camera_up {
+            Some(up) => point("--camera-up", up)?,
+            None => Vec3::Y,
+        };
         let vfov = self.vfov.unwrap_or(DEFAULT_VFOV_DEG);
-        Camera::look_at(eye, target, Vec3::Y, vfov)
+        Camera::look_at(eye, target, up, vfov)
             .map(Some)
-            .map_err(|fault| anyhow::anyhow!("--camera-eye/--camera-target/--vfov: {fault}"))
+            .map_err(|fault| {
+                anyhow::anyhow!("--camera-eye/--camera-target/--camera-up/--vfov: {fault}")
+            })
     }
 }
 
@@ -502,7 +518,7 @@ pub fn context_options(device: Option<&str>, validate: bool) -> Result<ContextOp
         validation: if validate {
             Validation::Required
         } else {
-            Validation::from_env()
+            Validation::from_env()?
         },
         addressing: Addressing::from_env()?,
     })
