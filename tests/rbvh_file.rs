@@ -124,13 +124,13 @@ fn save_load_round_trips_exactly() {
     loaded.save(&again).unwrap();
     assert_eq!(std::fs::read(&again).unwrap(), bytes);
 
-    // The documented framing: magic, version 13, six sections (no colour channel) in the
-    // written order, each at the first multiple of 8 after the one before, the file ending with
-    // the last.
+    // The documented framing: magic, version 13, six sections (no colour channel) and their
+    // checksums in the written order, each at the first multiple of 8 after the one before, the
+    // file ending with the last.
     assert_eq!(&bytes[..8], b"RBVHv\0\0\0");
-    assert_eq!((word(&bytes, 8), word(&bytes, 12)), (13, 6));
+    assert_eq!((word(&bytes, 8), word(&bytes, 12)), (13, 7));
     assert_eq!(&bytes[16..20], b"PARM");
-    assert_eq!(u64_at(&bytes, 28), 184);
+    assert_eq!(u64_at(&bytes, 28), 216);
     let table: Vec<_> = section_table(&bytes, &path)
         .unwrap()
         .into_iter()
@@ -139,16 +139,26 @@ fn save_load_round_trips_exactly() {
     assert_eq!(
         table,
         [
-            (*b"PARM", 7, REQUIRED, 184, 52),
-            (*b"HEAD", 1, REQUIRED, 240, 68),
-            (*b"NODE", 1, REQUIRED, 312, 2 * 48),
-            (*b"TRIS", 1, REQUIRED, 408, 2 * 48),
-            (*b"LEAF", 2, REQUIRED, 504, 2 * 64),
-            (*b"TEXN", 1, REQUIRED, 632, 72 * 4),
+            (*b"PARM", 7, REQUIRED, 216, 52),
+            (*b"HEAD", 1, REQUIRED, 272, 68),
+            (*b"NODE", 1, REQUIRED, 344, 2 * 48),
+            (*b"TRIS", 1, REQUIRED, 440, 2 * 48),
+            (*b"LEAF", 2, REQUIRED, 536, 2 * 64),
+            (*b"TEXN", 1, REQUIRED, 664, 72 * 4),
+            (*b"SUMS", 1, 0, 952, 6 * 8),
         ]
     );
-    assert_eq!(bytes.len(), 632 + 72 * 4);
-    assert!(bytes[236..240].iter().all(|&b| b == 0), "padding");
+    assert_eq!(bytes.len(), 952 + 6 * 8);
+    assert!(bytes[268..272].iter().all(|&b| b == 0), "padding");
+    // Each section's tag and CRC-32, in the table's order.
+    for (k, s) in section_table(&bytes, &path).unwrap()[..6]
+        .iter()
+        .enumerate()
+    {
+        let record = 952 + 8 * k;
+        assert_eq!(&bytes[record..record + 4], &s.tag);
+        assert_eq!(word(&bytes, record + 4), crc32fast::hash(&bytes[s.bytes()]));
+    }
     // The parameters: the sampling judgement's size, each object's rate, whether triangles are
     // traced exactly where cheaper, from what size, from what edge and from what crease last.
     assert_eq!(f32::from_bits(word(&bytes, parm(&bytes, 7))), 2.5);
@@ -160,7 +170,7 @@ fn save_load_round_trips_exactly() {
     // The structure: the atlas's pitch, rows and narrow rows last.
     let at = head(&bytes);
     assert_eq!([56, 60, 64].map(|k| word(&bytes, at + k)), [8, 9, 0]);
-    assert_eq!(word(&bytes, 632), original.atlas.texels[0].0);
+    assert_eq!(word(&bytes, 664), original.atlas.texels[0].0);
 }
 
 /// The little-endian u64 at byte `at`.
@@ -583,10 +593,13 @@ fn height_only_texels_round_trip_in_half_the_bytes() {
     let bytes = height.to_bytes();
     assert_eq!(Rbvh::from_bytes(&bytes, path).unwrap(), height);
     // The texel section's tag says height-only; the other sections are the same, the texels
-    // two bytes each.
+    // two bytes each, and their checksums last.
     let normals = sample().to_bytes();
     let texels = section(&bytes, b"TEXH");
-    assert_eq!((texels.len(), texels.end), (72 * 2, bytes.len()));
+    assert_eq!(
+        (texels.len(), texels.end),
+        (72 * 2, section(&bytes, b"SUMS").start)
+    );
     assert_eq!(bytes.len(), normals.len() - 72 * 2);
     for tag in [b"PARM", b"HEAD", b"NODE", b"TRIS", b"LEAF"] {
         assert_eq!(bytes[section(&bytes, tag)], normals[section(&normals, tag)]);
@@ -904,7 +917,7 @@ fn unknown_sections_are_skipped_when_optional_and_refused_when_required() {
     p[2].2 = REQUIRED;
     let message = parse_error(Rbvh::from_bytes(&assemble(&p), path), path);
     assert!(
-        message.contains("section XTRA (table entry 2, bytes 344..347) is required")
+        message.contains("section XTRA (table entry 2, bytes 368..371) is required")
             && message.contains("does not know its tag"),
         "{message}"
     );
@@ -944,7 +957,13 @@ fn unknown_sections_are_skipped_when_optional_and_refused_when_required() {
 #[test]
 fn broken_section_tables_are_refused_naming_the_section() {
     let path = Path::new("table.rbvh");
-    let bytes = sample().to_bytes();
+    // Without its checksums, whose section would come last: the offsets below are the six
+    // sections' (a_damaged_section_is_refused_by_its_checksum checks SUMS).
+    let bytes = {
+        let mut p = parts(&sample().to_bytes());
+        p.retain(|part| &part.0 != b"SUMS");
+        assemble(&p)
+    };
     let refused = |file: &[u8], expect: &[&str]| {
         let message = parse_error(Rbvh::from_bytes(file, path), path);
         for e in expect {
@@ -1053,7 +1072,8 @@ fn broken_section_tables_are_refused_naming_the_section() {
     );
     let [_, height] = painted_and_height();
     let mut p = parts(&height.to_bytes());
-    p.push((*b"COLR", 1, 0, vec![0; 72 * 4]));
+    // Before its checksums, as a writer places it.
+    p.insert(6, (*b"COLR", 1, 0, vec![0; 72 * 4]));
     refused(
         &assemble(&p),
         &[
@@ -1067,19 +1087,19 @@ fn broken_section_tables_are_refused_naming_the_section() {
     r.nodes[1].b_child = LEAF_BIT | 2;
     refused(
         &r.to_bytes(),
-        &["section NODE (table entry 2) at byte 360: node 1, child b: height-field leaf index"],
+        &["section NODE (table entry 2) at byte 392: node 1, child b: height-field leaf index"],
     );
     let mut r = sample();
     edit_triangle(&mut r, 1, |t| t.pad2 = 1);
     refused(
         &r.to_bytes(),
-        &["section TRIS (table entry 3) at byte 456: triangle 1"],
+        &["section TRIS (table entry 3) at byte 488: triangle 1"],
     );
     let mut r = sample();
     r.texel_size = f32::NAN;
     refused(
         &r.to_bytes(),
-        &["section HEAD (table entry 1, bytes 240..308): texel_size is NaN"],
+        &["section HEAD (table entry 1, bytes 272..340): texel_size is NaN"],
     );
     // A version 12 file has no table to read.
     let message = section_table(&as_v12(&sample()), path)
@@ -1210,4 +1230,32 @@ fn an_rbvh_of_another_scene_in_the_same_box_is_refused() {
         e.contains("built for another scene") && e.contains("exact triangle"),
         "{e}"
     );
+}
+
+/// **A damaged file is refused, naming the section**: every section but `SUMS` is checked by
+/// its CRC-32 there, so a byte changed in a node or a texel (which every structural check may
+/// pass, and which would trace otherwise) is an error; a file without `SUMS` (older, or another
+/// writer's) loads unchecked, and so does an optional section `SUMS` does not list.
+#[test]
+fn a_damaged_section_is_refused_by_its_checksum() {
+    let path = Path::new("damaged.rbvh");
+    let bytes = sample().to_bytes();
+    let table = section_table(&bytes, path).unwrap();
+    assert_eq!(&table.last().unwrap().tag, b"SUMS");
+    for tag in [b"NODE", b"TRIS", b"LEAF", b"TEXN"] {
+        let s = table.iter().find(|s| &s.tag == tag).unwrap();
+        let mut damaged = bytes.clone();
+        damaged[s.bytes().start + 5] ^= 0x10;
+        let message = parse_error(Rbvh::from_bytes(&damaged, path), path);
+        let name = String::from_utf8_lossy(tag).into_owned();
+        assert!(
+            message.contains(&format!("section {name}"))
+                && message.contains("CRC-32")
+                && message.contains("damaged"),
+            "{message}"
+        );
+    }
+    let mut p = parts(&bytes);
+    p.retain(|part| &part.0 != b"SUMS");
+    assert_eq!(Rbvh::from_bytes(&assemble(&p), path).unwrap(), sample());
 }

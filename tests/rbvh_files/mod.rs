@@ -175,20 +175,37 @@ pub fn parts(bytes: &[u8]) -> Parts {
 }
 
 /// A version 13 file of `parts`, laid out as the module docs of `src/rbvh/file` say: the
-/// table, then each section in table order at the first multiple of 8 after the one before.
+/// table, then each section in table order at the first multiple of 8 after the one before; a
+/// `SUMS` part is made again, as a writer makes it, from the other parts as they are now.
 pub fn assemble(parts: &Parts) -> Vec<u8> {
+    let sums: Vec<u8> = parts
+        .iter()
+        .filter(|p| &p.0 != b"SUMS")
+        .flat_map(|(tag, _, _, content)| {
+            let mut record = tag.to_vec();
+            record.extend(crc32fast::hash(content).to_le_bytes());
+            record
+        })
+        .collect();
+    let parts: Parts = parts
+        .iter()
+        .map(|p| match &p.0 {
+            b"SUMS" => (p.0, p.1, p.2, sums.clone()),
+            _ => p.clone(),
+        })
+        .collect();
     let aligned = |x: usize| x.div_ceil(8) * 8;
     let mut out = b"RBVHv\0\0\0".to_vec();
     put(&mut out, &[13, parts.len() as u32]);
     let mut offset = aligned(16 + 28 * parts.len());
-    for (tag, version, flags, content) in parts {
+    for (tag, version, flags, content) in &parts {
         out.extend_from_slice(tag);
         put(&mut out, &[*version, *flags]);
         out.extend_from_slice(&(offset as u64).to_le_bytes());
         out.extend_from_slice(&(content.len() as u64).to_le_bytes());
         offset = aligned(offset + content.len());
     }
-    for (_, _, _, content) in parts {
+    for (_, _, _, content) in &parts {
         out.resize(aligned(out.len()), 0);
         out.extend_from_slice(content);
     }

@@ -49,6 +49,7 @@
 //! | `LEAF` | 2 | required | `heightfields`, 64 bytes each ([`super::GpuHeightfield`]); since version 2 a record's `axis_w` may carry its tile's plane (version 1 loads: its records have none) |
 //! | `TEXN` or `TEXH` | 1 | required | `atlas.texels` row by row, exactly one of the two: `TEXN` 4 bytes each (height code and normal, [`super::Texel`]), `TEXH` 2 bytes each (the height code, for `params.texels` = `Height`). The tag is the texel format: a new encoding is a new tag |
 //! | `COLR` | 1 | optional | with a colour channel only: `colours`, one packed RGBA8 word per texel (see [`crate::rgba`]); a height-only RBVH has none |
+//! | `SUMS` | 1 | optional | last: for each section before it, its tag (4 bytes) and the CRC-32 (IEEE, u32) of its bytes, so that a damaged file is refused, naming the section; a file without it (written before it, or by another writer) loads unchecked |
 //!
 //! The counts are the lengths: a section's length must be a whole number of its records, and
 //! the texels `pitch × rows` with a power-of-two pitch. `PARM` holds `params` but for `texels`

@@ -95,6 +95,11 @@ pub(super) const MESH_BYTES: usize = 48;
 /// Bytes of a `PLAC` record: the mesh (u32), then the transform's first three rows (12 × f32;
 /// the last row is `0 0 0 1`).
 pub(super) const PLACEMENT_BYTES: usize = 52;
+/// Each other section's checksum, so that a file damaged on a disk or on its way (a bit flipped
+/// in a node or a leaf, which no structural check sees) is refused rather than traced.
+const CHECKSUMS: [u8; 4] = *b"SUMS";
+/// Bytes of a `SUMS` record: the tag of the section it checks, its CRC-32 (u32).
+const CHECKSUM_BYTES: usize = 8;
 
 /// The version of `PARM` this build writes: 7, for the fields of the module docs' table.
 const PARAMS_VERSION: u32 = 7;
@@ -110,7 +115,7 @@ const LEAVES_VERSION: u32 = 2;
 const HEAD_BYTES: usize = 68;
 
 /// Every section this build knows, in the order it writes them.
-const KNOWN: [Known; 10] = [
+const KNOWN: [Known; 11] = [
     Known {
         tag: PARAMS,
         versions: 1..PARAMS_VERSION + 1,
@@ -170,6 +175,13 @@ const KNOWN: [Known; 10] = [
         versions: 1..2,
         required: true,
         record: PLACEMENT_BYTES,
+    },
+    // Optional: a reader that does not know it reads the file as before, unchecked.
+    Known {
+        tag: CHECKSUMS,
+        versions: 1..2,
+        required: false,
+        record: CHECKSUM_BYTES,
     },
 ];
 
@@ -240,6 +252,13 @@ pub(super) fn write<'a>(r: &'a Rbvh, extra: Vec<([u8; 4], usize, Put<'a>)>) -> V
         ));
     }
     sections.extend(extra);
+    // Written last, as zeros, and filled once every section it checks is in place.
+    let checked = sections.len();
+    sections.push((
+        CHECKSUMS,
+        CHECKSUM_BYTES * checked,
+        Box::new(move |out| out.resize(out.len() + CHECKSUM_BYTES * checked, 0)),
+    ));
 
     let table_end = (TABLE_AT + ENTRY_BYTES * sections.len()) as u64;
     let mut offset = aligned(table_end);
@@ -259,14 +278,59 @@ pub(super) fn write<'a>(r: &'a Rbvh, extra: Vec<([u8; 4], usize, Put<'a>)>) -> V
         out.extend_from_slice(&(*length as u64).to_le_bytes());
         offset = aligned(offset + *length as u64);
     }
+    let mut ranges = Vec::with_capacity(sections.len());
     for (tag, length, put) in &sections {
         out.resize(aligned(out.len() as u64) as usize, 0);
         let start = out.len();
         put(&mut out);
         debug_assert_eq!(out.len() - start, *length, "{}", tag.escape_ascii());
+        ranges.push(start..out.len());
     }
     debug_assert_eq!(out.len() as u64, total);
+    let sums = ranges[checked].start;
+    for (k, ((tag, _, _), range)) in sections.iter().zip(&ranges).take(checked).enumerate() {
+        let at = sums + CHECKSUM_BYTES * k;
+        let crc = crc32fast::hash(&out[range.clone()]);
+        out[at..at + 4].copy_from_slice(tag);
+        out[at + 4..at + 8].copy_from_slice(&crc.to_le_bytes());
+    }
     out
+}
+
+/// Refuses a file whose `SUMS` (the section at `sums`) names a section it lacks or a CRC-32 that
+/// is not its bytes': the file was damaged after it was written. Sections without a checksum
+/// (an optional one an older writer added) are not checked.
+fn check_sums(bytes: &[u8], table: &[Section], sums: (usize, Section), path: &Path) -> Result<()> {
+    let (entry, s) = sums;
+    for record in bytes[s.bytes()].chunks_exact(CHECKSUM_BYTES) {
+        let tag: [u8; 4] = [record[0], record[1], record[2], record[3]];
+        let stored = u32::from_le_bytes([record[4], record[5], record[6], record[7]]);
+        let Some((k, checked)) = table.iter().enumerate().find(|(_, c)| c.tag == tag) else {
+            return Err(Error::parse(
+                path,
+                None,
+                format!(
+                    "{}: a checksum of section {}, which the file does not have: the file is \
+                     damaged",
+                    s.place(entry),
+                    tag.escape_ascii()
+                ),
+            ));
+        };
+        let computed = crc32fast::hash(&bytes[checked.bytes()]);
+        if computed != stored {
+            return Err(Error::parse(
+                path,
+                None,
+                format!(
+                    "{}: its bytes' CRC-32 is {computed:08x}, not the {stored:08x} it was written \
+                     with: the file is damaged",
+                    checked.place(k)
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// `PARM` at [`PARAMS_VERSION`].
@@ -444,6 +508,9 @@ pub(super) struct Parsed<'a> {
     rbvh: Rbvh,
     found: [Option<(usize, Section)>; KNOWN.len()],
     path: &'a Path,
+    /// The file, and its section table: what `SUMS` is checked against, last.
+    bytes: &'a [u8],
+    table: Vec<Section>,
     /// `MESH`'s bytes, if the file has it.
     pub(super) meshes: Option<&'a [u8]>,
     /// `PLAC`'s bytes, if the file has it.
@@ -463,7 +530,8 @@ impl Parsed<'_> {
     }
 
     /// The RBVH, checked as the module docs list (its first `top_nodes` nodes, a two-level
-    /// RBVH's top level built on load, skipped), every failure naming its section and bytes.
+    /// RBVH's top level built on load, skipped), every failure naming its section and bytes,
+    /// then its sections against their checksums.
     pub(super) fn checked(self, top_nodes: usize) -> Result<Rbvh> {
         let (found, path) = (self.found, self.path);
         let err = |message: String| Error::parse(path, None, message);
@@ -491,6 +559,11 @@ impl Parsed<'_> {
             };
             err(format!("{place}: {}", bad.message))
         })?;
+        // Last, so that a file whose contents are wrong as written is told what is wrong with
+        // them, and one that passes every check but its bytes changed since is told that.
+        if let Some(sums) = found[known(CHECKSUMS)] {
+            check_sums(self.bytes, &self.table, sums, path)?;
+        }
         Ok(self.rbvh)
     }
 }
@@ -539,6 +612,7 @@ pub(super) fn parse<'a>(bytes: &'a [u8], path: &'a Path) -> Result<Parsed<'a>> {
             )));
         }
     }
+
     let section = |tag: [u8; 4]| found[known(tag)];
     let need = |tag: [u8; 4]| {
         section(tag).ok_or_else(|| {
@@ -649,6 +723,8 @@ pub(super) fn parse<'a>(bytes: &'a [u8], path: &'a Path) -> Result<Parsed<'a>> {
         rbvh,
         found,
         path,
+        bytes,
+        table,
         meshes,
         placements,
     })
