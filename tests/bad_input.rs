@@ -113,7 +113,8 @@ fn triangle_bin() -> Vec<u8> {
 /// **Every bad mesh or scene file fails `render`, `build` and `trace` cleanly, naming the file**
 /// (and the line, where there is one): empty files, vertices without faces, truncated text,
 /// binary garbage and a PNG renamed to each extension, out-of-range and zero face indices, a
-/// face of two vertices, a glTF triangle list whose count is no multiple of 3, glTF that is
+/// face of two vertices, a glTF triangle list whose count is no multiple of 3, a GLB whose BIN
+/// chunk is shorter than its buffer, glTF that is
 /// valid JSON but no glTF, glTF without meshes, data URIs that are not base64,
 /// accessors whose counts overflow, GLB with a wrong version, a length beyond the file or a
 /// chunk beyond the file, scene files that are empty, truncated, refer to a bad mesh, to
@@ -162,6 +163,11 @@ fn bad_mesh_and_scene_files_fail_cleanly() {
             "twoface.obj",
             b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2\n".to_vec(),
             vec!["twoface.obj:5", "a face needs at least 3"],
+        ),
+        (
+            "shortbin.glb",
+            glb(ONE_TRIANGLE_GLTF, &triangle_bin()[..32]),
+            vec!["shortbin.glb", "the BIN chunk holds 32"],
         ),
         (
             "fourth.glb",

@@ -2107,3 +2107,31 @@ fn a_view_straight_down_takes_its_up_from_camera_up() {
     );
     assert!(png.exists());
 }
+
+/// A command that traces one structure and is given several says which flag named them.
+#[test]
+fn one_structure_to_trace_is_asked_of_the_flag_that_named_more() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("never.png");
+    for (extra, needle) in [
+        (&["--quality", "0,2"][..], "--quality names 2 levels"),
+        (
+            &["--texels", "normals,height"][..],
+            "--texels names two texel formats",
+        ),
+        (
+            &["--heatmap", "h.png", "--heatmap-max", "0"][..],
+            "--heatmap-max",
+        ),
+    ] {
+        let mut args = vec!["render", "--method", "rbvh", "--out", arg(&png)];
+        args.extend(extra);
+        let out = rbvh(&args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && stderr.contains(needle),
+            "{args:?}: {stderr}"
+        );
+        assert!(!png.exists());
+    }
+}

@@ -153,6 +153,22 @@ fn open(path: &Path) -> Result<(Document, Vec<Data>, std::path::PathBuf)> {
             }
         }
     }
+    // A GLB's own buffer is its BIN chunk, which may be padded by up to 3 bytes but never
+    // shorter than the buffer says (glTF 2.0 §4.4.3.3): the importer would pad it with zeros,
+    // and the last indices or vertices would read 0 unsaid.
+    if let (Some(blob), Some(buffer)) = (&blob, document.buffers().next()) {
+        if matches!(buffer.source(), ::gltf::buffer::Source::Bin) && blob.len() < buffer.length() {
+            return Err(Error::parse(
+                path,
+                None,
+                format!(
+                    "buffer 0 is {} bytes, and the BIN chunk holds {}",
+                    buffer.length(),
+                    blob.len()
+                ),
+            ));
+        }
+    }
     let buffers = ::gltf::import_buffers(&document, Some(base), blob).map_err(|e| {
         Error::parse(
             path,

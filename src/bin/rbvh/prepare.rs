@@ -100,10 +100,15 @@ impl Structures {
             return Ok(Recipe::Exact);
         }
         let mut levels = self.quality.levels()?;
-        anyhow::ensure!(
-            levels.len() == 1,
-            "--quality and --texels: give one level in one texel format to trace"
-        );
+        if levels.len() != 1 {
+            // The flag that named more than one.
+            let presets = presets(&self.quality.quality)?.len();
+            anyhow::ensure!(
+                presets == 1,
+                "--quality names {presets} levels: give one level to trace"
+            );
+            anyhow::bail!("--texels names two texel formats: give one to trace");
+        }
         Ok(method.recipe(levels.remove(0), self.lod.params()))
     }
 

@@ -56,7 +56,7 @@ pub struct Args {
     heatmap: Option<PathBuf>,
     /// With --heatmap: the heat map's scale, this many steps or more dark red (default: the
     /// largest count), so that two renders' maps compare.
-    #[arg(long, requires = "heatmap")]
+    #[arg(long, requires = "heatmap", value_parser = clap::value_parser!(u32).range(1..))]
     heatmap_max: Option<u32>,
     /// Image width in pixels, 1..=16384.
     #[arg(long, default_value_t = 800)]
