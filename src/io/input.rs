@@ -5,7 +5,7 @@
 //! strokes, goldens, read once from start to end) may also be a pipe (`--rays <(make-rays)`,
 //! `/dev/stdin`), which, like any reader of one, waits for its writer. What a scene names
 //! (meshes, their buffers and textures) and an environment map, which the EXR reader seeks in,
-//! must be regular files ([`regular_file`]).
+//! must be regular files (`regular_file`).
 
 use std::fs::{File, Metadata};
 use std::path::Path;

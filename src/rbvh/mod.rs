@@ -153,8 +153,8 @@ impl Rbvh {
     /// sample met. A scene of points widens that by the farthest a splat reaches past its point
     /// (`splat::REACH_SPACINGS` spacings along its plane, up to 1/`splat::MIN_FACING` times that
     /// across it). The error names both boxes. A box can match another scene's, so each exact
-    /// triangle must then be the scene's triangle it names, or a piece of it
-    /// ([`Rbvh::check_triangles_of`]). (A two-level RBVH's file,
+    /// triangle must then be the scene's triangle it names, or a piece of it, in that triangle's
+    /// box. (A two-level RBVH's file,
     /// [`InstancedRbvh::check_built_from`], is checked by its meshes' boxes alone.)
     pub fn check_built_from(&self, scene: &Scene) -> Result<()> {
         let expected = scene.bounds();
