@@ -50,7 +50,14 @@ pub fn rename_target(path: &Path) -> io::Result<Option<PathBuf>> {
     let mut path = path.to_path_buf();
     // As the kernel's limit on links followed in one lookup (Linux's 40).
     for _ in 0..40 {
-        if path.starts_with("/proc") {
+        // Its folder as the kernel resolves it: `/dev/fd/1` lies in `/proc/self/fd` (`/dev/fd`
+        // is itself a link), where the file a descriptor holds is not to be replaced.
+        let folder = match path.parent() {
+            Some(folder) if !folder.as_os_str().is_empty() => folder,
+            _ => Path::new("."),
+        };
+        let in_proc = |p: &Path| p.starts_with("/proc");
+        if in_proc(&path) || std::fs::canonicalize(folder).is_ok_and(|f| in_proc(&f)) {
             return Ok(None);
         }
         match std::fs::symlink_metadata(&path) {
