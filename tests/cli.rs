@@ -725,7 +725,7 @@ fn render_ibl_refuses_bad_environments_and_samples() {
         // One structure to trace: both texel formats are for build and bench.
         (
             vec!["--method", "rbvh", "--texels", "normals,height"],
-            "one level in one texel format",
+            "--texels names two texel formats: give one to trace",
         ),
     ];
     common::every_case(cases, |(extra, needle)| {
