@@ -8,6 +8,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{ensure, Context as _, Result};
+use clap::builder::TypedValueParser as _;
 use rbvh::bench::metrics::image_errors;
 use rbvh::geom::Ray;
 use rbvh::gpu::{Query, Tracer};
@@ -37,7 +38,20 @@ use crate::render::{ibl_albedo, instance_offsets, load_environment, progressive,
 #[command(mut_arg("stats", |a| a.help(
     "Also print the scene, the RBVH (nodes, bytes, build time) and the device on stderr"
 )))]
-#[command(mut_arg("method", |a| a.default_value("rbvh").help(
+// `exact` is hidden from the help's values, not refused by clap: the command's own refusal says
+// why (the exact BVH is always the left picture).
+#[command(mut_arg("method", |a| a.default_value("rbvh").value_parser(
+    clap::builder::PossibleValuesParser::new([
+        clap::builder::PossibleValue::new("exact").hide(true),
+        clap::builder::PossibleValue::new("rbvh"),
+        clap::builder::PossibleValue::new("rbvh-lod"),
+    ])
+    .map(|name| match name.as_str() {
+        "exact" => Method::Exact,
+        "rbvh" => Method::Rbvh,
+        _ => Method::RbvhLod,
+    })
+).help(
     "What to compare with the exact BVH: `rbvh` (a Rasterized BVH at --quality) or `rbvh-lod` \
      (that RBVH traced with level of detail: each ray uses the coarsest representation whose \
      columns are at most 2^--lod-bias of its pixel's footprint wide)"
