@@ -26,5 +26,16 @@ mod rays;
 mod records;
 
 pub use atomic::{rename_target, write_atomically};
+
+/// A FIFO made at `dir/name` by coreutils' `mkfifo` (std has no call for it), for the tests of
+/// what readers and writers do with a pipe; a test fails, rather than passes unchecked, where it
+/// cannot be made.
+#[cfg(all(test, unix))]
+fn fifo_in(dir: &std::path::Path, name: &str) -> std::path::PathBuf {
+    let fifo = dir.join(name);
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    assert!(made.is_ok_and(|s| s.success()), "mkfifo {}", fifo.display());
+    fifo
+}
 pub use hits::{read_hits, write_hits};
 pub use rays::{read_rays, write_rays};
