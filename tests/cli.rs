@@ -313,6 +313,73 @@ fn sample_all_samples_what_the_presets_trace_exactly() {
     }
 }
 
+/// `--view` refines every level asked for where the scene's camera looks closely, at
+/// `rbvh::rbvh::VIEW_RATE` without a value: the level is named `Q0v`, the file keeps the rate,
+/// and a camera close to the blob makes it larger than the preset (fewer texels, since at the
+/// finer texel more of the blob's triangles cost fewer bytes traced exactly, and more exact
+/// triangles); a rate out of range is refused naming the flag.
+#[test]
+fn view_refines_levels_for_the_scenes_camera() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("close.toml");
+    std::fs::write(
+        &scene,
+        "[[mesh]]\nbuiltin = \"blob\"\n[camera]\neye = [0, 0, 1.6]\ntarget = [0, 0, 0]\nvfov = 40\n",
+    )
+    .unwrap();
+    let build = |extra: &[&str], label: &str| {
+        let file = dir.path().join(format!("{label}.rbvh"));
+        let mut args = vec![
+            "build",
+            "--scene",
+            arg(&scene),
+            "--quality",
+            "0",
+            "--out",
+            arg(&file),
+            "--stats",
+        ];
+        args.extend(extra);
+        let out = rbvh(&args);
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(
+            stdout
+                .lines()
+                .any(|l| l.split_whitespace().next() == Some(label)),
+            "{stdout}"
+        );
+        rbvh::rbvh::Rbvh::load(&file).unwrap()
+    };
+    let preset = build(&[], "Q0");
+    let viewed = build(&["--view"], "Q0v");
+    assert_eq!(preset.params.view_rate, 0.0);
+    assert_eq!(viewed.params.view_rate, rbvh::rbvh::VIEW_RATE);
+    assert!(
+        viewed.total_bytes() > preset.total_bytes()
+            && viewed.triangles.len() > preset.triangles.len(),
+        "{} bytes and {} exact triangles against {} and {}",
+        viewed.total_bytes(),
+        viewed.triangles.len(),
+        preset.total_bytes(),
+        preset.triangles.len()
+    );
+    let rate = build(&["--view", "200"], "Q0v");
+    assert_eq!(rate.params.view_rate, 200.0);
+    for bad in ["-1", "0.5", "nan"] {
+        let out = rbvh(&["build", "--scene", arg(&scene), "--view", bad]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && stderr.contains("--view"),
+            "{bad}: {stderr}"
+        );
+    }
+}
+
 /// What the CLI would otherwise get wrong quietly or refuse obscurely: an output name whose
 /// extension says another format, and a negative number (which clap took for a flag).
 #[test]

@@ -369,6 +369,70 @@ fn exact_edge_fraction_traces_long_triangles_exactly() {
     }
 }
 
+/// `view_rate` refines what the scene's camera sees closely and nothing else: without a camera
+/// the level is the preset's RBVH; with one near the default scene's objects it samples more
+/// texels, is named `Q0v`, and is closer to the exact BVH from that camera; a rate outside
+/// 0 or 1..=1e6 is refused, and so is a two-level build, which cannot be refined for one view.
+#[test]
+fn view_rate_refines_what_the_camera_sees_closely() {
+    let mut scene = Scene::builtin("default").unwrap();
+    let preset = RbvhParams::quality(0).unwrap();
+    let viewed = RbvhParams {
+        view_rate: rbvh::rbvh::VIEW_RATE,
+        ..preset
+    };
+    assert_eq!(viewed.level_label(), "Q0v");
+    assert_eq!(viewed.preset(), Some(0));
+    scene.camera = None;
+    let (a, b) = (
+        Rbvh::build(&scene, &preset).unwrap(),
+        Rbvh::build(&scene, &viewed).unwrap(),
+    );
+    let same = a.nodes == b.nodes
+        && a.heightfields == b.heightfields
+        && a.triangles == b.triangles
+        && a.atlas == b.atlas;
+    assert!(same, "no camera, no view: the preset's RBVH");
+    // The framing view, four times closer: its near objects fill the picture.
+    let framed = scene.camera_or_framed(1.0);
+    let close = rbvh::scene::Camera {
+        eye: framed.target + (framed.eye - framed.target) * 0.25,
+        ..framed
+    };
+    scene.camera = Some(close);
+    let (a, b) = (
+        Rbvh::build(&scene, &preset).unwrap(),
+        Rbvh::build(&scene, &viewed).unwrap(),
+    );
+    assert!(
+        b.stats.tile_texels > 2 * a.stats.tile_texels,
+        "{} against {}",
+        b.stats.tile_texels,
+        a.stats.tile_texels
+    );
+    let rays = close.primary_rays(64, 64);
+    let (mean_a, _, mismatch_a) = error_vs_exact(&scene, &a, &rays);
+    let (mean_b, _, mismatch_b) = error_vs_exact(&scene, &b, &rays);
+    assert!(mean_b < mean_a, "{mean_b} against {mean_a}");
+    assert!(
+        mismatch_b <= mismatch_a,
+        "{mismatch_b} against {mismatch_a}"
+    );
+    for bad in [-1.0, 0.5, f32::NAN, f32::INFINITY, 2.0e6] {
+        let params = RbvhParams {
+            view_rate: bad,
+            ..preset
+        };
+        let message = Rbvh::build(&scene, &params).unwrap_err().to_string();
+        assert!(message.contains("view_rate"), "{bad}: {message}");
+    }
+    let two = rbvh::scene::InstancedScene::single(scene);
+    let message = rbvh::rbvh::InstancedRbvh::build(&two, &viewed)
+        .unwrap_err()
+        .to_string();
+    assert!(message.contains("view_rate"), "{message}");
+}
+
 /// `exact_crease_deg` traces exactly every triangle that meets a neighbour at that angle or more
 /// and spans `CREASE_EDGE_TEXELS` texels: on the default scene at Q0 (its cube's, cylinder's and
 /// cone's edges; every object takes the scene's texel) every such triangle is among the RBVH's

@@ -139,7 +139,7 @@ fn save_load_round_trips_exactly() {
     assert_eq!(
         table,
         [
-            (*b"PARM", 7, REQUIRED, 216, 52),
+            (*b"PARM", 8, REQUIRED, 216, 56),
             (*b"HEAD", 1, REQUIRED, 272, 68),
             (*b"NODE", 1, REQUIRED, 344, 2 * 48),
             (*b"TRIS", 1, REQUIRED, 440, 2 * 48),
@@ -149,7 +149,6 @@ fn save_load_round_trips_exactly() {
         ]
     );
     assert_eq!(bytes.len(), 952 + 6 * 8);
-    assert!(bytes[268..272].iter().all(|&b| b == 0), "padding");
     // Each section's tag and CRC-32, in the table's order.
     for (k, s) in section_table(&bytes, &path).unwrap()[..6]
         .iter()
@@ -160,11 +159,12 @@ fn save_load_round_trips_exactly() {
         assert_eq!(word(&bytes, record + 4), crc32fast::hash(&bytes[s.bytes()]));
     }
     // The parameters: the sampling judgement's size, each object's rate, whether triangles are
-    // traced exactly where cheaper, from what size, from what edge and from what crease last.
+    // traced exactly where cheaper, from what size, from what edge, from what crease, and the
+    // view's rate last.
     assert_eq!(f32::from_bits(word(&bytes, parm(&bytes, 7))), 2.5);
     assert_eq!(f32::from_bits(word(&bytes, parm(&bytes, 8))), 0.375);
     assert_eq!(word(&bytes, parm(&bytes, 9)), 1);
-    for k in 10..13 {
+    for k in 10..14 {
         assert_eq!(f32::from_bits(word(&bytes, parm(&bytes, k))), 0.0);
     }
     // The structure: the atlas's pitch, rows and narrow rows last.
@@ -466,6 +466,35 @@ fn exact_edge_fraction_round_trips_and_is_checked() {
     set(&mut sampled, parm(&bytes, 11), 0.0078125f32.to_bits());
     let message = parse_error(Rbvh::from_bytes(&sampled, path), path);
     assert!(message.contains("exact_edge_fraction"), "{message}");
+}
+
+/// A `PARM` of version 7 loads as refined for no view (`view_rate` 0); a rate round-trips; a
+/// NaN, negative, infinite or sub-1 one is refused, naming the field.
+#[test]
+fn view_rate_round_trips_and_is_checked() {
+    let rbvh = sample();
+    let path = Path::new("view.rbvh");
+    assert_eq!(rbvh.params.view_rate, 0.0);
+    let viewed = Rbvh {
+        params: RbvhParams {
+            view_rate: 384.0,
+            ..rbvh.params
+        },
+        ..rbvh.clone()
+    };
+    let bytes = viewed.to_bytes();
+    assert_eq!(f32::from_bits(word(&bytes, parm(&bytes, 13))), 384.0);
+    assert_eq!(Rbvh::from_bytes(&bytes, path).unwrap(), viewed);
+    let mut p = parts(&bytes);
+    p[0].1 = 7;
+    p[0].3.truncate(4 * 13);
+    assert_eq!(Rbvh::from_bytes(&assemble(&p), path).unwrap(), rbvh);
+    for bad_value in [f32::NAN, -1.0, 0.5, f32::INFINITY] {
+        let mut bad = bytes.clone();
+        set(&mut bad, parm(&bytes, 13), bad_value.to_bits());
+        let message = parse_error(Rbvh::from_bytes(&bad, path), path);
+        assert!(message.contains("view_rate"), "{message}");
+    }
 }
 
 /// A version 11 file loads as tracing no triangle exactly for a crease (`exact_crease_deg` 0);
@@ -994,11 +1023,11 @@ fn broken_section_tables_are_refused_naming_the_section() {
     );
     refused(
         &edit(&|b| set(b, entry(1) + 12, 232)),
-        &["section HEAD (table entry 1, bytes 232..300): overlaps section PARM (table entry 0, bytes 184..236)"],
+        &["section HEAD (table entry 1, bytes 232..300): overlaps section PARM (table entry 0, bytes 184..240)"],
     );
     refused(
         &edit(&|b| set(b, entry(0) + 12, 176)),
-        &["section PARM (table entry 0, bytes 176..228): overlaps the section table (bytes 0..184)"],
+        &["section PARM (table entry 0, bytes 176..232): overlaps the section table (bytes 0..184)"],
     );
     refused(
         &edit(&|b| set(b, entry(1) + 12, 248)),
@@ -1008,10 +1037,10 @@ fn broken_section_tables_are_refused_naming_the_section() {
         ],
     );
     refused(
-        &edit(&|b| b[237] = 1),
+        &edit(&|b| b[309] = 1),
         &[
-            "section HEAD (table entry 1",
-            "padding byte 237 before it is 0x01",
+            "section NODE (table entry 2",
+            "padding byte 309 before it is 0x01",
         ],
     );
     refused(
@@ -1040,7 +1069,7 @@ fn broken_section_tables_are_refused_naming_the_section() {
     );
     refused(
         &with(&|p| drop(p.remove(4))),
-        &["no section LEAF of a version this build reads (the file's sections: PARM v7, HEAD v1, NODE v1, TRIS v1, TEXN v1)"],
+        &["no section LEAF of a version this build reads (the file's sections: PARM v8, HEAD v1, NODE v1, TRIS v1, TEXN v1)"],
     );
     refused(&with(&|p| drop(p.remove(0))), &["no section PARM"]);
     refused(
@@ -1061,13 +1090,13 @@ fn broken_section_tables_are_refused_naming_the_section() {
     );
     refused(
         &with(&|p| drop(p[0].3.drain(48..))),
-        &["section PARM (table entry 0, bytes 184..232): 48 bytes, not the 52 of its version 7"],
+        &["section PARM (table entry 0, bytes 184..232): 48 bytes, not the 56 of its version 8"],
     );
     refused(
-        &with(&|p| p[0].1 = 8),
+        &with(&|p| p[0].1 = 9),
         &[
             "section PARM (table entry 0",
-            "does not know its version 8: it reads 1..=7",
+            "does not know its version 9: it reads 1..=8",
         ],
     );
     let [_, height] = painted_and_height();
@@ -1121,11 +1150,12 @@ fn an_older_params_section_loads_with_defaults_for_later_fields() {
         exact_from_texels: 1.5,
         exact_edge_fraction: 0.0078125,
         exact_crease_deg: 30.0,
+        view_rate: 384.0,
         ..r.params
     };
     let bytes = r.to_bytes();
     // Each version's words, and the parameters it lacks, at their defaults.
-    let words = [7, 8, 9, 10, 11, 12, 13];
+    let words = [7, 8, 9, 10, 11, 12, 13, 14];
     for (version, &n) in (1u32..).zip(&words) {
         let mut p = parts(&bytes);
         p[0].1 = version;
@@ -1143,11 +1173,12 @@ fn an_older_params_section_loads_with_defaults_for_later_fields() {
             exact_from_texels: if n > 10 { q.exact_from_texels } else { 0.0 },
             exact_edge_fraction: if n > 11 { q.exact_edge_fraction } else { 0.0 },
             exact_crease_deg: if n > 12 { q.exact_crease_deg } else { 0.0 },
+            view_rate: if n > 13 { q.view_rate } else { 0.0 },
             ..q
         };
         assert_eq!(loaded.params, expected, "PARM version {version}");
         let saved = loaded.to_bytes();
-        assert_eq!(parts(&saved)[0].1, 7);
+        assert_eq!(parts(&saved)[0].1, 8);
         assert_eq!(Rbvh::from_bytes(&saved, path).unwrap().to_bytes(), saved);
     }
 }

@@ -362,6 +362,9 @@ fn level(record: &Value) -> String {
         q,
         record["params"]["texels"].as_str() == Some("height"),
         record["params"]["exact_when_cheaper"].as_bool() == Some(false),
+        record["params"]["view_rate"]
+            .as_f64()
+            .is_some_and(|r| r > 0.0),
     );
     match record["method"].as_str() {
         Some("rbvh-lod") => format!("{name} LOD"),

@@ -52,8 +52,8 @@
 //! `max_angle_deg` (normal cone, else null), `min_ratio` (projected area, else null),
 //! `subdivision` (`"spatial_median"` \| `"area_sah"`), `object_split`, `max_tile`,
 //! `min_leaf_texels`, `sampled_criterion_texels`, `texels` (`"height_normal"` \| `"height"`),
-//! `exact_when_cheaper`, `exact_from_texels`, `exact_edge_fraction`, `exact_crease_deg` — the
-//! fields of [`RbvhParams`].
+//! `exact_when_cheaper`, `exact_from_texels`, `exact_edge_fraction`, `exact_crease_deg`,
+//! `view_rate` — the fields of [`RbvhParams`].
 //!
 //! `lod` (`rbvh-lod` records, else null): `columns`, `min_leaves`, `bias` — the fields of
 //! [`LodParams`].
@@ -328,6 +328,9 @@ pub struct Params {
     /// The crease angle in degrees from which a triangle is traced exactly, 0 for none
     /// ([`RbvhParams::exact_crease_deg`]).
     pub exact_crease_deg: f32,
+    /// Texels across the view's field at a triangle's distance, 0 for none
+    /// ([`RbvhParams::view_rate`]).
+    pub view_rate: f32,
 }
 
 impl From<&RbvhParams> for Params {
@@ -355,13 +358,14 @@ impl From<&RbvhParams> for Params {
             exact_from_texels: p.exact_from_texels,
             exact_edge_fraction: p.exact_edge_fraction,
             exact_crease_deg: p.exact_crease_deg,
+            view_rate: p.view_rate,
         }
     }
 }
 
 impl Record {
     /// The level as tables and charts show it: `-` for exact, else its [`level_name`]
-    /// (`"Q2"`, `"Q2h"`, `"Q2s"`), as [`RbvhParams::level_label`] names the same level.
+    /// (`"Q2"`, `"Q2h"`, `"Q2s"`, `"Q2v"`), as [`RbvhParams::level_label`] names the same level.
     pub fn level_label(&self) -> String {
         let Some(q) = &self.quality else {
             return "-".into();
@@ -371,6 +375,7 @@ impl Record {
             q,
             params.is_some_and(|p| p.texels == TexelFormat::Height.name()),
             params.is_some_and(|p| !p.exact_when_cheaper),
+            params.is_some_and(|p| p.view_rate > 0.0),
         )
     }
 }

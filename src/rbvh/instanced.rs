@@ -53,7 +53,7 @@ use crate::geom::{Aabb, Hit, Ray};
 use crate::probe::TraceStats;
 use crate::progress::{Progress, Quiet};
 use crate::scene::InstancedScene;
-use crate::Result;
+use crate::{Error, Result};
 
 /// A two-level RBVH in its GPU layout.
 #[derive(Clone, Debug, PartialEq)]
@@ -97,6 +97,16 @@ impl InstancedRbvh {
     ) -> Result<InstancedRbvh> {
         let start = Instant::now();
         params.validate()?;
+        if params.view_rate > 0.0 {
+            // Each mesh is built once in its own space for every place it stands: no one
+            // distance from the camera to refine it for.
+            return Err(Error::param(
+                "view_rate",
+                "a scene with instances in two levels is built once a mesh, for every place it \
+                 stands, and cannot be refined for one view; build it flat"
+                    .to_string(),
+            ));
+        }
         scene.validate()?;
         let diagonal = scene.placed_bounds().diagonal();
         let texel = if diagonal > 0.0 {

@@ -40,6 +40,7 @@ pub use layout::{Atlas, GpuHeightfield, Texel};
 pub use march::DeviceTwin;
 pub use params::{
     level_name, RbvhParams, Refinement, Subdivision, TexelFormat, QUALITY_NAMES, SAMPLED_SUFFIX,
+    VIEWED_SUFFIX, VIEW_RATE,
 };
 pub use raster::CREST_TEXELS;
 pub use triangles::{ExactTriangles, GpuIndexedTriangle, GpuVertex};

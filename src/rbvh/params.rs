@@ -160,7 +160,31 @@ pub struct RbvhParams {
     /// MB) and on the default scene Q0 2.5 times as accurate for 0.06 MB (docs/paper-scale.md, "What
     /// the view asks of Q0").
     pub exact_crease_deg: f32,
+    /// Texels across the view's vertical field of view at a triangle's distance: where the
+    /// scene's camera ([`crate::scene::Scene::camera`]) sees a triangle, its texel is at most
+    /// that distance × 2·tan(vfov / 2) over this rate, however coarse its object's
+    /// (`build/view.rs`); 0 (the presets): none, and a scene without a camera is sampled as
+    /// without. What decides validity at the paper's scale is the texel against the view,
+    /// which no rule on the geometry can see: Sponza's courtyard at 16 cm a texel is 12 pixels
+    /// at the arcade five metres from the camera (docs/paper-scale.md, "Levels refined for
+    /// the view"). [`VIEW_RATE`] is the rate measured to make every preset valid there.
+    /// Triangles only: a point cloud's texel is its own. A level so built is named with
+    /// [`VIEWED_SUFFIX`] (`Q0v`).
+    pub view_rate: f32,
 }
+
+/// What a level's name gets appended when its texels are refined for the scene's view
+/// ([`RbvhParams::view_rate`] above 0): `Q0v`, so that it tells apart from the preset.
+pub const VIEWED_SUFFIX: &str = "v";
+
+/// The [`RbvhParams::view_rate`] that `rbvh --view` asks for: 384 texels across the view's
+/// field (a texel at most a pixel of a 384-pixel-high image at its distance). On the paper-scale
+/// scene and its scattered arrangement, every preset refined at this rate is valid for primary
+/// rays, where 256 left the scattered arrangement's Q0 just invalid (t p99 1.24% of the
+/// diagonal) and 128 the paper-scale scene's (10.3%). The presets do not take it: a view as
+/// close as the dragon close-up's asks the same texels of Q0 to Q3, which it samples finer than
+/// they did and which were valid without (docs/paper-scale.md, "Levels refined for the view").
+pub const VIEW_RATE: f32 = 384.0;
 
 /// What a level's name gets appended when every triangle a height field can hold is sampled
 /// (`exact_when_cheaper` off, the paper's rule): `Q2s`, so that it tells apart from the preset
@@ -169,15 +193,17 @@ pub const SAMPLED_SUFFIX: &str = "s";
 
 /// A level's name, the one rule the CLI, the bench's records and the README's tables name levels
 /// by: its quality (`Q2`, `custom`), then [`TexelFormat::level_suffix`] for height-only texels,
-/// then [`SAMPLED_SUFFIX`] where every triangle is sampled: `Q2`, `Q2h`, `Q2s`, `Q2hs`.
-pub fn level_name(quality: &str, height_only: bool, sampled: bool) -> String {
+/// then [`SAMPLED_SUFFIX`] where every triangle is sampled, then [`VIEWED_SUFFIX`] where its
+/// texels are refined for the view: `Q2`, `Q2h`, `Q2s`, `Q2hs`, `Q2v`.
+pub fn level_name(quality: &str, height_only: bool, sampled: bool, viewed: bool) -> String {
     let texels = if height_only {
         TexelFormat::Height
     } else {
         TexelFormat::HeightNormal
     };
     let sampled = if sampled { SAMPLED_SUFFIX } else { "" };
-    format!("{quality}{}{sampled}", texels.level_suffix())
+    let viewed = if viewed { VIEWED_SUFFIX } else { "" };
+    format!("{quality}{}{sampled}{viewed}", texels.level_suffix())
 }
 
 /// Quality preset names, coarsest to finest.
@@ -244,17 +270,19 @@ impl RbvhParams {
             exact_from_texels: 0.0,
             exact_edge_fraction: 0.0,
             exact_crease_deg: PRESET_CREASE_DEG,
+            view_rate: 0.0,
         }
     }
 
     /// The preset these parameters are, if any: the level whose [`RbvhParams::quality`] they equal
-    /// in everything but the texel format and `exact_when_cheaper` (which every preset can take or
-    /// leave).
+    /// in everything but the texel format, `exact_when_cheaper` and `view_rate` (which every
+    /// preset can take or leave).
     pub fn preset(&self) -> Option<u32> {
         let level = Self::presets().iter().position(|p| {
             RbvhParams {
                 texels: self.texels,
                 exact_when_cheaper: self.exact_when_cheaper,
+                view_rate: self.view_rate,
                 ..*p
             } == *self
         })?;
@@ -274,6 +302,7 @@ impl RbvhParams {
             self.quality_name(),
             self.texels == TexelFormat::Height,
             !self.exact_when_cheaper,
+            self.view_rate > 0.0,
         )
     }
 
@@ -355,6 +384,15 @@ impl RbvhParams {
                     format!("{v} is outside 0..={shown}{hint}"),
                 ));
             }
+        }
+        let view = self.view_rate;
+        if !(view == 0.0 || (view.is_finite() && (1.0..=1.0e6).contains(&view))) {
+            return Err(Error::param(
+                "view_rate",
+                format!(
+                    "{view} is neither 0 (none) nor in 1..=1e6 (texels across the view's field)"
+                ),
+            ));
         }
         // The crease angle is not among these: the presets set it, and their sampled twins
         // (`Q2s`) keep it, doing nothing.

@@ -289,7 +289,7 @@ pub fn flag(id: &str) -> String {
 }
 
 /// The clap ids of the flags that say how an RBVH is built ([`Quality`]).
-pub const BUILD_FLAGS: [&str; 15] = [
+pub const BUILD_FLAGS: [&str; 16] = [
     "quality",
     "texels_per_diagonal",
     "object_rate",
@@ -304,6 +304,7 @@ pub const BUILD_FLAGS: [&str; 15] = [
     "exact_edge_fraction",
     "exact_crease",
     "sample_all",
+    "view",
     "texels",
 ];
 
@@ -542,7 +543,7 @@ pub fn check_image_size(width: u32, height: u32) -> Result<()> {
 /// (the library names its fields: `texels_per_diagonal`, `lod columns`, `flip_mean`, ...); any
 /// other error as it is.
 pub fn flag_error(e: rbvh::Error) -> anyhow::Error {
-    const FLAGS: [(&str, &str); 23] = [
+    const FLAGS: [(&str, &str); 24] = [
         ("texels_per_diagonal", "--texels-per-diagonal"),
         ("object_rate", "--object-rate"),
         ("max_angle_deg", "--max-angle"),
@@ -553,6 +554,7 @@ pub fn flag_error(e: rbvh::Error) -> anyhow::Error {
         ("exact_from_texels", "--exact-from-texels"),
         ("exact_edge_fraction", "--exact-edge-fraction"),
         ("exact_crease_deg", "--exact-crease"),
+        ("view_rate", "--view"),
         ("lod columns", "--lod-columns"),
         ("lod min leaves", "--lod-min-leaves"),
         ("lod bias", "--lod-bias"),
@@ -1001,6 +1003,14 @@ pub struct Quality {
     /// of 30° or more spanning 2 texels.
     #[arg(long)]
     pub sample_all: bool,
+    /// Refine every level asked for where the scene's camera looks closely: a triangle it sees
+    /// gets a texel at most its distance's share of the field of view over RATE (texels across
+    /// the vertical field; without a value 384, a pixel of a 384-pixel-high image), however
+    /// coarse its object's; such a level is named with a `v`, e.g. Q0v. With it every preset
+    /// is valid for primary rays at the paper's scale, seen from the camera it was built for;
+    /// a scene without a camera (and a point cloud) is built as without.
+    #[arg(long, value_name = "RATE", num_args = 0..=1, default_missing_value = "384")]
+    pub view: Option<f32>,
     /// What each atlas texel holds: `normals` (height and normal, 3 or 4 bytes: 8- or 16-bit
     /// heights by tile) or `height` (height alone, 1 or 2 bytes: facet normals, no colours, no
     /// levels of detail); comma-separate both to build each level in each (a height-only level is
@@ -1111,6 +1121,7 @@ impl Quality {
             .map(|level| {
                 let mut p = RbvhParams::quality(level)?;
                 p.exact_when_cheaper = !self.sample_all;
+                p.view_rate = self.view.unwrap_or(0.0);
                 if let Some(r) = self.texels_per_diagonal {
                     p.texels_per_diagonal = r;
                 }

@@ -53,6 +53,7 @@ mod leaf;
 mod parts;
 mod recursion;
 mod source;
+mod view;
 
 use std::time::Instant;
 
@@ -129,6 +130,10 @@ struct Builder<'a> {
     /// Per scene object, its texel ([`object_texels`]); empty when every object takes the
     /// scene's.
     object_texel: Vec<f32>,
+    /// Per scene triangle, the texel the scene's view asks of it where finer than its object's
+    /// ([`RbvhParams::view_rate`], [`view::view_texels`]), `f32::INFINITY` elsewhere; empty
+    /// without a view.
+    view_texel: Vec<f32>,
     /// Per scene object, its box's diagonal, for [`RbvhParams::exact_edge_fraction`]; empty
     /// when that is 0.
     object_diagonal: Vec<f32>,
@@ -210,9 +215,30 @@ impl Rbvh {
                     let t = f64::from(object_texel.get(o).copied().unwrap_or(texel));
                     (area + object.area, estimate + object.area / (t * t))
                 });
+        let (view_texel, viewed) = match (&input, scene.camera) {
+            (Input::Triangles(tris), Some(camera)) if params.view_rate > 0.0 => {
+                view::view_texels(&camera, tris, params.view_rate, texel, |i| {
+                    object_texel
+                        .get(scene.object_of_triangle[i] as usize)
+                        .copied()
+                        .unwrap_or(texel)
+                })
+            }
+            _ => (Vec::new(), 0.0),
+        };
+        let estimate = estimate + viewed;
         if estimate > MAX_ESTIMATED_TEXELS {
-            // Named after the rate that asks for more: the objects', where any is finer.
-            let (name, what) = if object_texel.iter().any(|&t| t < texel) {
+            // Named after the rate that asks for more: the view's, where it refines anything,
+            // else the objects', where any is finer.
+            let (name, what) = if viewed > 0.0 {
+                (
+                    "view_rate",
+                    format!(
+                        " and {} across the view's field at each distance",
+                        params.view_rate
+                    ),
+                )
+            } else if object_texel.iter().any(|&t| t < texel) {
                 (
                     "object_rate",
                     format!(" and {} of it along each object's", params.object_rate),
@@ -247,6 +273,7 @@ impl Rbvh {
             params,
             texel,
             object_texel,
+            view_texel,
             object_diagonal: if params.exact_edge_fraction > 0.0 {
                 source.objects.iter().map(|o| o.bounds.diagonal()).collect()
             } else {

@@ -16,18 +16,23 @@ use crate::rbvh::splat::Splat;
 use crate::rbvh::split::split;
 
 impl Builder<'_> {
-    /// The texel of the set `order`: its objects' finest ([`RbvhParams::object_rate`]),
-    /// or the scene's. With object split on, a set that becomes a leaf lies in one object.
+    /// The texel of the set `order`: the finest its objects ([`RbvhParams::object_rate`]) and
+    /// the view ([`RbvhParams::view_rate`]) ask of its triangles, or the scene's. With object
+    /// split on, a set that becomes a leaf lies in one object.
     pub(super) fn texel_of(&self, order: &[u32]) -> f32 {
         if self.objects.is_empty() {
             // Points: the cloud is one object.
             return self.object_texel.first().copied().unwrap_or(self.texel);
         }
-        if self.object_texel.is_empty() {
+        if self.object_texel.is_empty() && self.view_texel.is_empty() {
             return self.texel;
         }
         order.iter().fold(self.texel, |t, &i| {
-            t.min(self.object_texel[self.objects[i as usize] as usize])
+            let i = i as usize;
+            let object = self.object_texel.get(self.objects[i] as usize);
+            let view = self.view_texel.get(i);
+            t.min(object.copied().unwrap_or(t))
+                .min(view.copied().unwrap_or(t))
         })
     }
 

@@ -199,6 +199,7 @@ pub(super) fn read(bytes: &[u8], version: u32, path: &Path) -> Result<Rbvh> {
         exact_from_texels,
         exact_edge_fraction,
         exact_crease_deg,
+        view_rate: 0.0,
     };
 
     let node_bytes = if version < 5 {

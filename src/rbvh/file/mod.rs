@@ -42,7 +42,7 @@
 //!
 //! | tag | version | flags | content |
 //! |---|---|---|---|
-//! | `PARM` | 7 | required | the build parameters (below), 52 bytes; versions 1–6 load, the later fields taking the values that mean "rule off" |
+//! | `PARM` | 8 | required | the build parameters (below), 56 bytes; versions 1–7 load, the later fields taking the values that mean "rule off" |
 //! | `HEAD` | 1 | required | the structure, 68 bytes: `bounds` (6 × f32: min x, y, z, max x, y, z), `depth` (u32), `texel_size` (f32), `stats.build_ms` (f64), `stats.heightfield_leaves`, `stats.triangle_leaves` (u32 each), `stats.tile_texels` (u64), `atlas.pitch`, `atlas.rows`, `atlas.narrow_rows` (u32 each: the last are the rows whose heights are 8-bit codes) |
 //! | `NODE` | 1 | required | `nodes`, 48 bytes each ([`crate::bvh::GpuNode`]) |
 //! | `TRIS` | 1 | required | `triangles`, 48 bytes each ([`crate::bvh::GpuTriangle`], gathered: the device's indexed form is made from them, [`crate::rbvh::ExactTriangles`]) |
@@ -71,6 +71,7 @@
 //! | 40..44 | 5 | `exact_from_texels` (f32; before: 0, what 96 bytes buy) |
 //! | 44..48 | 6 | `exact_edge_fraction` (f32; before: 0, none) |
 //! | 48..52 | 7 | `exact_crease_deg` (f32; before: 0, none) |
+//! | 52..56 | 8 | `view_rate` (f32; before: 0, none): the rate, not the view, which is the scene's camera at the build |
 //!
 //! Loading checks everything a tracer relies on, so a loaded RBVH is safe to trace and to upload:
 //! the magic and version; the table (every section inside the file, after the table, none
@@ -276,6 +277,7 @@ fn check(r: &Rbvh, top_nodes: usize) -> std::result::Result<(), Bad> {
         ("params.exact_from_texels", p.exact_from_texels),
         ("params.exact_edge_fraction", p.exact_edge_fraction),
         ("params.exact_crease_deg", p.exact_crease_deg),
+        ("params.view_rate", p.view_rate),
     ];
     for (name, x) in floats {
         if x.is_nan() {
@@ -308,6 +310,16 @@ fn check(r: &Rbvh, top_nodes: usize) -> std::result::Result<(), Bad> {
             format!(
                 "params.exact_crease_deg is {}: an angle in 0..=180 degrees",
                 p.exact_crease_deg
+            ),
+        ));
+    }
+    let view = p.view_rate;
+    if !(view == 0.0 || (1.0..=1.0e6).contains(&view)) {
+        return Err(Bad::of(
+            Part::Params,
+            format!(
+                "params.view_rate is {view}: 0 (none) or texels across the view's field, in \
+                 1..=1e6"
             ),
         ));
     }

@@ -101,11 +101,11 @@ const CHECKSUMS: [u8; 4] = *b"SUMS";
 /// Bytes of a `SUMS` record: the tag of the section it checks, its CRC-32 (u32).
 const CHECKSUM_BYTES: usize = 8;
 
-/// The version of `PARM` this build writes: 7, for the fields of the module docs' table.
-const PARAMS_VERSION: u32 = 7;
+/// The version of `PARM` this build writes: 8, for the fields of the module docs' table.
+const PARAMS_VERSION: u32 = 8;
 /// Words of `PARM` at each version, from 1: each version appended one parameter (the first had
 /// the paper's, `refinement` taking two words).
-const PARAMS_WORDS: [usize; PARAMS_VERSION as usize] = [7, 8, 9, 10, 11, 12, 13];
+const PARAMS_WORDS: [usize; PARAMS_VERSION as usize] = [7, 8, 9, 10, 11, 12, 13, 14];
 /// The version of `LEAF` this build writes: 2, whose records may carry their tile's plane in
 /// `axis_w` ([`GpuHeightfield::grid`] reads it back); version 1's never do, and read the same. A
 /// reader of version 1 alone refuses version 2, whose planes it would not undo where it places
@@ -349,6 +349,7 @@ fn put_params(out: &mut Vec<u8>, p: &RbvhParams) {
     put_f32(out, p.exact_from_texels);
     put_f32(out, p.exact_edge_fraction);
     put_f32(out, p.exact_crease_deg);
+    put_f32(out, p.view_rate);
 }
 
 /// `HEAD`.
@@ -783,6 +784,7 @@ fn read_params(
         exact_from_texels: float(10).unwrap_or(0.0),
         exact_edge_fraction: float(11).unwrap_or(0.0),
         exact_crease_deg: float(12).unwrap_or(0.0),
+        view_rate: float(13).unwrap_or(0.0),
         texels,
     })
 }
