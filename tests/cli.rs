@@ -271,38 +271,50 @@ fn rbvh_build_save_render_and_trace() {
     );
 }
 
+/// `rbvh build --scene SCENE --quality QUALITY --out DIR/LABEL-N.rbvh --stats` with `extra`
+/// flags: checks that it succeeds and prints a level named `label`, and loads the file.
+fn built_level(
+    dir: &Path,
+    scene: &str,
+    quality: &str,
+    extra: &[&str],
+    label: &str,
+) -> rbvh::rbvh::Rbvh {
+    let file = dir.join(format!("{label}-{}.rbvh", extra.len()));
+    let mut args = vec![
+        "build",
+        "--scene",
+        scene,
+        "--quality",
+        quality,
+        "--out",
+        arg(&file),
+        "--stats",
+    ];
+    args.extend(extra);
+    let out = rbvh(&args);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout
+            .lines()
+            .any(|l| l.split_whitespace().next() == Some(label)),
+        "{stdout}"
+    );
+    rbvh::rbvh::Rbvh::load(&file).unwrap()
+}
+
 /// The presets trace the cube's large faces exactly; `--sample-all` samples them as the paper
 /// does, names the level `Q2s`, and saves that choice in the file.
 #[test]
 fn sample_all_samples_what_the_presets_trace_exactly() {
     let dir = tempfile::tempdir().unwrap();
-    for (extra, label, sampled) in [(None, "Q2", false), (Some("--sample-all"), "Q2s", true)] {
-        let file = dir.path().join(format!("{label}.rbvh"));
-        let mut args = vec![
-            "build",
-            "--scene",
-            "cube",
-            "--quality",
-            "2",
-            "--out",
-            arg(&file),
-            "--stats",
-        ];
-        args.extend(extra);
-        let out = rbvh(&args);
-        let stdout = String::from_utf8_lossy(&out.stdout);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        assert!(
-            stdout
-                .lines()
-                .any(|l| l.split_whitespace().next() == Some(label)),
-            "{stdout}"
-        );
-        let r = rbvh::rbvh::Rbvh::load(&file).unwrap();
+    for (extra, label, sampled) in [(&[][..], "Q2", false), (&["--sample-all"][..], "Q2s", true)] {
+        let r = built_level(dir.path(), "cube", "2", extra, label);
         assert_eq!(r.params.exact_when_cheaper, !sampled, "{label}");
         assert_eq!(
             !r.heightfields.is_empty(),
@@ -327,34 +339,8 @@ fn view_refines_levels_for_the_scenes_camera() {
         "[[mesh]]\nbuiltin = \"blob\"\n[camera]\neye = [0, 0, 1.6]\ntarget = [0, 0, 0]\nvfov = 40\n",
     )
     .unwrap();
-    let build = |extra: &[&str], label: &str| {
-        let file = dir.path().join(format!("{label}.rbvh"));
-        let mut args = vec![
-            "build",
-            "--scene",
-            arg(&scene),
-            "--quality",
-            "0",
-            "--out",
-            arg(&file),
-            "--stats",
-        ];
-        args.extend(extra);
-        let out = rbvh(&args);
-        let stdout = String::from_utf8_lossy(&out.stdout);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        assert!(
-            stdout
-                .lines()
-                .any(|l| l.split_whitespace().next() == Some(label)),
-            "{stdout}"
-        );
-        rbvh::rbvh::Rbvh::load(&file).unwrap()
-    };
+    let build =
+        |extra: &[&str], label: &str| built_level(dir.path(), arg(&scene), "0", extra, label);
     let preset = build(&[], "Q0");
     let viewed = build(&["--view"], "Q0v");
     assert_eq!(preset.params.view_rate, 0.0);
