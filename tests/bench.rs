@@ -822,8 +822,8 @@ fn placed_bench(dir: &Path) -> BenchConfig {
 /// the two-level exact BVH is the referee, checked against its CPU twin, and the two-level RBVH
 /// errs against it as it errs against the flat exact BVH beside the flat scene: the two referees
 /// hit alike. Errors relative to each object are measured on the object as its instance places
-/// it. Points and levels of detail, built over the flat scene, are refused, and so are the steps,
-/// which the flat structures' CPU twins count.
+/// it. Points, levels of detail and levels refined for the view, built over the flat scene, are
+/// refused, and so are the steps, which the flat structures' CPU twins count.
 #[test]
 fn a_scene_measured_in_two_levels_alone_is_refereed_by_the_two_level_exact_bvh() {
     let dir = tempfile::tempdir().unwrap();
@@ -883,6 +883,16 @@ fn a_scene_measured_in_two_levels_alone_is_refereed_by_the_two_level_exact_bvh()
             Err(rbvh::Error::InvalidParameter { name, .. }) => assert_eq!(name, field),
             other => panic!("{field}: {:?}", other.map(|r| r.results.len())),
         }
+    }
+    // A level refined for one view is built over the flat scene.
+    let mut viewed = config.clone();
+    viewed.levels = vec![rbvh::rbvh::RbvhParams {
+        view_rate: rbvh::rbvh::VIEW_RATE,
+        ..q(2)
+    }];
+    match bench::run(&viewed) {
+        Err(rbvh::Error::InvalidParameter { name, .. }) => assert_eq!(name, "view_rate"),
+        other => panic!("view_rate: {:?}", other.map(|r| r.results.len())),
     }
 }
 

@@ -329,7 +329,8 @@ fn sample_all_samples_what_the_presets_trace_exactly() {
 /// `rbvh::rbvh::VIEW_RATE` without a value: the level is named `Q0v`, the file keeps the rate,
 /// and a camera close to the blob makes it larger than the preset (fewer texels, since at the
 /// finer texel more of the blob's triangles cost fewer bytes traced exactly, and more exact
-/// triangles); a rate out of range is refused naming the flag.
+/// triangles); a rate out of range, and `--view` on a scene without a camera, are refused
+/// naming the flag.
 #[test]
 fn view_refines_levels_for_the_scenes_camera() {
     let dir = tempfile::tempdir().unwrap();
@@ -356,12 +357,27 @@ fn view_refines_levels_for_the_scenes_camera() {
     );
     let rate = build(&["--view", "200"], "Q0v");
     assert_eq!(rate.params.view_rate, 200.0);
-    for bad in ["-1", "0.5", "nan"] {
-        let out = rbvh(&["build", "--scene", arg(&scene), "--view", bad]);
+    assert_ne!(rate.total_bytes(), viewed.total_bytes());
+    for (args, needle) in [
+        (
+            &["--scene", arg(&scene), "--view", "-1"][..],
+            "--view: -1 is neither 0",
+        ),
+        (
+            &["--scene", arg(&scene), "--view", "0.5"][..],
+            "--view: 0.5 is neither 0",
+        ),
+        (
+            &["--scene", arg(&scene), "--view", "0"][..],
+            "--view 0 refines nothing",
+        ),
+        (&["--scene", "blob", "--view"][..], "\"blob\" has none"),
+    ] {
+        let out = rbvh(&[&["build"][..], args].concat());
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(
-            !out.status.success() && stderr.contains("--view"),
-            "{bad}: {stderr}"
+            !out.status.success() && stderr.contains(needle),
+            "{args:?}: {stderr}"
         );
     }
 }

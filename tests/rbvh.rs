@@ -372,7 +372,8 @@ fn exact_edge_fraction_traces_long_triangles_exactly() {
 /// `view_rate` refines what the scene's camera sees closely and nothing else: without a camera
 /// the level is the preset's RBVH; with one near the default scene's objects it samples more
 /// texels, is named `Q0v`, and is closer to the exact BVH from that camera; a rate outside
-/// 0 or 1..=1e6 is refused, and so is a two-level build, which cannot be refined for one view.
+/// 0 or 1..=1e6, a view asking for more texels than the builder allows and a camera that is
+/// not one are refused, and so is a two-level build, which cannot be refined for one view.
 #[test]
 fn view_rate_refines_what_the_camera_sees_closely() {
     let mut scene = Scene::builtin("default").unwrap();
@@ -426,6 +427,25 @@ fn view_rate_refines_what_the_camera_sees_closely() {
         let message = Rbvh::build(&scene, &params).unwrap_err().to_string();
         assert!(message.contains("view_rate"), "{bad}: {message}");
     }
+    // A view that asks for more texels than the builder allows is refused by name before
+    // anything is built, as is a camera that is not one.
+    let huge = RbvhParams {
+        texels_per_diagonal: 4096.0,
+        view_rate: 1.0e6,
+        ..preset
+    };
+    let message = Rbvh::build(&scene, &huge).unwrap_err().to_string();
+    assert!(message.contains("view_rate"), "{message}");
+    let mut blind = scene.clone();
+    blind.camera = Some(rbvh::scene::Camera {
+        target: close.eye,
+        ..close
+    });
+    let message = Rbvh::build(&blind, &viewed).unwrap_err().to_string();
+    assert!(
+        message.contains("view_rate") && message.contains("differ from `eye`"),
+        "{message}"
+    );
     let two = rbvh::scene::InstancedScene::single(scene);
     let message = rbvh::rbvh::InstancedRbvh::build(&two, &viewed)
         .unwrap_err()

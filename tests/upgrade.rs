@@ -70,7 +70,7 @@ fn every_earlier_version_is_rewritten_as_the_current_one() {
         assert!(
             stdout.contains(&format!("v{version}.rbvh (version {version}) → "))
                 && stdout.contains("-new.rbvh (version 13)")
-                && stdout.contains("sections PARM v7, HEAD v1, NODE v1"),
+                && stdout.contains("sections PARM v8, HEAD v1, NODE v1"),
             "{stdout}"
         );
         assert_eq!(stdout.contains("and their colours"), r.colours.is_some());

@@ -351,6 +351,20 @@ impl<'a> SceneBench<'a> {
                 ),
             ));
         }
+        if config.levels.iter().any(|p| p.view_rate > 0.0) {
+            // Refused rather than measured as the presets under a name that says refined.
+            let why = match &flat {
+                None => Some("is measured in two levels alone, which a view cannot refine"),
+                Some(scene) if scene.camera.is_none() => Some("has no camera to refine for"),
+                Some(_) if config.points.is_some() => {
+                    Some("is measured as points, and the view refines triangles")
+                }
+                Some(_) => None,
+            };
+            if let Some(why) = why {
+                return Err(Error::param("view_rate", format!("{name} {why}")));
+            }
+        }
         if let Some(warning) = flat.as_ref().and_then(Scene::precision_warning) {
             observe(Event::Warning(warning));
         }
@@ -453,7 +467,9 @@ impl<'a> SceneBench<'a> {
                 flat_levels.extend(lod.map(|l| (l, None)));
             }
             let instanced = match &two_level {
-                Some(placed) if config.plain => {
+                // A level refined for the view is measured flat: a two-level RBVH builds each
+                // mesh once for every place it stands.
+                Some(placed) if config.plain && params.view_rate == 0.0 => {
                     observe(Event::Progress(format!(
                         "{name}: building the two-level RBVH {}",
                         params.level_label()

@@ -346,8 +346,8 @@ fn text(v: &Value) -> String {
 
 /// A record's level as the bench tables write it: `exact`, `exact, two levels` (a scene's with
 /// instances, method `exact-instanced`), `Q2`, `Q2h` (height-only), `Q2s`
-/// (every triangle a height field can hold sampled, `exact_when_cheaper` false), `Q2 LOD`,
-/// `Q2, two levels` (`rbvh-instanced`).
+/// (every triangle a height field can hold sampled, `exact_when_cheaper` false), `Q2v` (refined
+/// for the scene's view, `view_rate` above 0), `Q2 LOD`, `Q2, two levels` (`rbvh-instanced`).
 /// Records made before `exact_when_cheaper` existed have no such field and no `s`: they were
 /// the presets of their commit, which the table's caption names.
 fn level(record: &Value) -> String {
@@ -1018,6 +1018,13 @@ mod tests {
                 serde_json::json!({"texels": "height"}),
                 "rbvh-instanced",
                 "Q2h, two levels",
+            ),
+            (serde_json::json!({"view_rate": 384.0}), "rbvh", "Q2v"),
+            (serde_json::json!({"view_rate": 0.0}), "rbvh", "Q2"),
+            (
+                serde_json::json!({"texels": "height", "view_rate": 384.0}),
+                "rbvh-lod",
+                "Q2hv LOD",
             ),
         ];
         for (params, method, name) in cases {

@@ -255,6 +255,14 @@ impl BenchConfig {
                         .to_string(),
                 ));
             }
+            if self.levels.iter().any(|p| p.view_rate > 0.0) {
+                return Err(Error::param(
+                    "view_rate",
+                    "an RBVH refined for one view is built over the flat scene: not with \
+                     instances in two levels alone"
+                        .to_string(),
+                ));
+            }
         }
         if self.plot_dir.is_some() && !self.ray_types.contains(&RayType::Primary) {
             return Err(Error::param(

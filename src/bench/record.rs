@@ -620,6 +620,12 @@ mod tests {
         };
         r.params = Some(Params::from(&sampled));
         assert_eq!(r.level_label(), "Q2s");
+        let viewed = RbvhParams {
+            view_rate: 384.0,
+            ..sampled
+        };
+        r.params = Some(Params::from(&viewed));
+        assert_eq!(r.level_label(), "Q2sv");
     }
 
     #[test]

@@ -296,7 +296,7 @@ impl RbvhParams {
             .map_or("custom", |level| QUALITY_NAMES[level as usize])
     }
 
-    /// This level's [`level_name`]: `Q2`, `Q2h`, `Q2s`, `Q2hs`, `customh`.
+    /// This level's [`level_name`]: `Q2`, `Q2h`, `Q2s`, `Q2hs`, `Q2v`, `customh`.
     pub fn level_label(&self) -> String {
         level_name(
             self.quality_name(),

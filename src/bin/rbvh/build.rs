@@ -12,7 +12,7 @@ use rbvh::rbvh::{InstancedRbvh, Rbvh, RbvhParams, RbvhSource, Subdivision};
 use rbvh::scene::{InstancedScene, Instances, Scene};
 
 use crate::outputs::{self, output};
-use crate::prepare::{flag_error, InstancesArg, PointsArg, Quality};
+use crate::prepare::{check_view, flag_error, InstancesArg, PointsArg, Quality};
 use crate::progress::step;
 
 #[derive(clap::Args, Debug)]
@@ -67,12 +67,21 @@ pub fn run(a: Args) -> Result<()> {
     .with_context(|| format!("loading scene {:?}", a.scene))?;
     let table = a.stats || a.out.is_none();
     let levels = a.quality.levels()?;
+    let viewed = a.quality.view.is_some();
+    if viewed {
+        check_view(&a.scene, placed.camera.is_some(), a.points.points.is_some())?;
+        anyhow::ensure!(
+            Instances::from(a.instances) != Instances::TwoLevel,
+            "--instances two-level: --view refines a flat RBVH for one view, and a two-level \
+             one builds each mesh once for every place it stands"
+        );
+    }
     let fits = placed.check_flat_fits(rbvh::bench::provenance::available_memory());
     let two_level_out = a.out.is_some()
         && match Instances::from(a.instances) {
             Instances::TwoLevel => true,
             Instances::Flat => false,
-            Instances::Auto => placed.repeats_a_mesh() || fits.is_err(),
+            Instances::Auto => !viewed && (placed.repeats_a_mesh() || fits.is_err()),
         };
     if two_level_out {
         anyhow::ensure!(
@@ -110,7 +119,7 @@ pub fn run(a: Args) -> Result<()> {
     }
     // An RBVH of points is built over the flat scene: the two-level lines, of the meshes'
     // triangles, would not be what --points asked for.
-    if table && placed.instances.len() > 1 && a.points.points.is_none() {
+    if table && placed.instances.len() > 1 && a.points.points.is_none() && !viewed {
         two_levels(&placed, &levels, true, None)?;
     }
     if let Err(e) = fits {

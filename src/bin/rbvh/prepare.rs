@@ -539,6 +539,22 @@ pub fn check_image_size(width: u32, height: u32) -> Result<()> {
     Ok(())
 }
 
+/// `--view` refines an RBVH of triangles for the scene's camera: refused, naming the scene, where
+/// it has none (the RBVH would be the preset's, named as refined) or the RBVH is built from
+/// points.
+pub fn check_view(scene: &str, has_camera: bool, points: bool) -> Result<()> {
+    anyhow::ensure!(
+        has_camera,
+        "--view refines for the scene's camera, and {scene:?} has none: give it one ([camera] in \
+         a scene file, or --camera-eye and --camera-target where the command takes them)"
+    );
+    anyhow::ensure!(
+        !points,
+        "--view refines triangles for the scene's camera, and --points builds the RBVH from points"
+    );
+    Ok(())
+}
+
 /// The library's error about a parameter, reworded to name the command-line flag that set it
 /// (the library names its fields: `texels_per_diagonal`, `lod columns`, `flip_mean`, ...); any
 /// other error as it is.
@@ -622,6 +638,8 @@ fn load(c: &Common, progress: &dyn rbvh::progress::Progress) -> Result<Loaded> {
     }
     let flat_for = if c.structures.method()? == Method::RbvhLod {
         Some("--method rbvh-lod (levels of detail are built over a flat RBVH)")
+    } else if c.structures.quality.view.is_some() {
+        Some("--view (an RBVH refined for one view is built over the flat scene)")
     } else if c.source.points.points.is_some() {
         Some("--points (the RBVH of points sampled from, or scanned of, the flat scene)")
     } else if c.source.rbvh.is_some() {
@@ -715,10 +733,17 @@ fn prepare_on(c: &Common, camera: Option<Camera>, device: bool) -> Result<Prepar
         c.source.points.points.is_none() || method != Method::Exact || c.source.rbvh.is_some(),
         "--points builds the RBVH from points: add --method rbvh (the exact BVH traces the triangles)"
     );
-    c.source.points.apply(&mut scene)?;
     if camera.is_some() {
         scene.camera = camera;
     }
+    if c.structures.quality.view.is_some() {
+        check_view(
+            &c.source.scene,
+            scene.camera.is_some(),
+            c.source.points.points.is_some(),
+        )?;
+    }
+    c.source.points.apply(&mut scene)?;
     let load_ms = t.elapsed().as_secs_f64() * 1e3;
     if let Some(warning) = scene.precision_warning() {
         eprintln!("warning: {warning}");
@@ -1092,7 +1117,7 @@ impl Quality {
     }
 
     /// Every requested level in every requested texel format (each named by
-    /// `RbvhParams::level_label`: `Q2`, `Q2h`, `Q2s`, `custom`).
+    /// `RbvhParams::level_label`: `Q2`, `Q2h`, `Q2s`, `Q2v`, `custom`).
     pub fn levels(&self) -> Result<Vec<rbvh::rbvh::RbvhParams>> {
         let formats = self.texel_formats();
         Ok(self
@@ -1121,7 +1146,13 @@ impl Quality {
             .map(|level| {
                 let mut p = RbvhParams::quality(level)?;
                 p.exact_when_cheaper = !self.sample_all;
-                p.view_rate = self.view.unwrap_or(0.0);
+                if let Some(rate) = self.view {
+                    anyhow::ensure!(
+                        rate != 0.0,
+                        "--view 0 refines nothing: give a rate of at least 1, or leave --view out"
+                    );
+                    p.view_rate = rate;
+                }
                 if let Some(r) = self.texels_per_diagonal {
                     p.texels_per_diagonal = r;
                 }

@@ -71,7 +71,7 @@ use super::{ExactTriangles, Rbvh, RbvhParams, RbvhStats, TexelFormat};
 use crate::bvh::{ChildRef, GpuNode, GpuTriangle, LinearBvh};
 use crate::geom::Aabb;
 use crate::progress::{step, Progress, Quiet};
-use crate::scene::Scene;
+use crate::scene::{Camera, Scene};
 use crate::{Error, Result};
 use flatten::{upper_tree, Flattened};
 use leaf::pieces_subtree;
@@ -217,6 +217,15 @@ impl Rbvh {
                 });
         let (view_texel, viewed) = match (&input, scene.camera) {
             (Input::Triangles(tris), Some(camera)) if params.view_rate > 0.0 => {
+                // The view's texels need a view: a camera `Camera::look_at` would make.
+                Camera::look_at(camera.eye, camera.target, camera.up, camera.vfov_deg).map_err(
+                    |fault| {
+                        Error::param(
+                            "view_rate",
+                            format!("refines for the scene's camera, which is not one: {fault}"),
+                        )
+                    },
+                )?;
                 view::view_texels(&camera, tris, params.view_rate, texel, |i| {
                     object_texel
                         .get(scene.object_of_triangle[i] as usize)
@@ -226,11 +235,13 @@ impl Rbvh {
             }
             _ => (Vec::new(), 0.0),
         };
+        let alone = estimate;
         let estimate = estimate + viewed;
-        if estimate > MAX_ESTIMATED_TEXELS {
-            // Named after the rate that asks for more: the view's, where it refines anything,
-            // else the objects', where any is finer.
-            let (name, what) = if viewed > 0.0 {
+        // Not `>`: an estimate that overflowed to NaN is refused too.
+        if !(estimate <= MAX_ESTIMATED_TEXELS) {
+            // Named after the rate that asks for more: the view's, where the build fits
+            // without it, else the objects', where any is finer.
+            let (name, what) = if alone <= MAX_ESTIMATED_TEXELS {
                 (
                     "view_rate",
                     format!(

@@ -15,6 +15,12 @@ use crate::geom::Aabb;
 use crate::rbvh::splat::Splat;
 use crate::rbvh::split::split;
 
+/// The most the texels a set's triangles ask for may differ, as a ratio, for the set to be
+/// sampled at its finest: a height field at most twice as fine as some of its triangles need
+/// (four times their texels) where the view refines some of them
+/// ([`crate::rbvh::RbvhParams::view_rate`]).
+const VIEW_SPAN: f32 = 2.0;
+
 impl Builder<'_> {
     /// The texel of the set `order`: the finest its objects ([`RbvhParams::object_rate`]) and
     /// the view ([`RbvhParams::view_rate`]) ask of its triangles, or the scene's. With object
@@ -27,13 +33,34 @@ impl Builder<'_> {
         if self.object_texel.is_empty() && self.view_texel.is_empty() {
             return self.texel;
         }
-        order.iter().fold(self.texel, |t, &i| {
-            let i = i as usize;
-            let object = self.object_texel.get(self.objects[i] as usize);
-            let view = self.view_texel.get(i);
-            t.min(object.copied().unwrap_or(t))
-                .min(view.copied().unwrap_or(t))
-        })
+        order
+            .iter()
+            .fold(self.texel, |t, &i| t.min(self.triangle_texel(i as usize)))
+    }
+
+    /// The texel scene triangle `i` asks for: the scene's, its object's or the view's, the
+    /// finest.
+    fn triangle_texel(&self, i: usize) -> f32 {
+        let object = self.object_texel.get(self.objects[i] as usize);
+        let view = self.view_texel.get(i);
+        self.texel
+            .min(object.copied().unwrap_or(self.texel))
+            .min(view.copied().unwrap_or(self.texel))
+    }
+
+    /// Whether the triangles of `order` ask for texels more than [`VIEW_SPAN`] apart, which
+    /// only the view makes them do within one part (an object's texel is one): such a set is
+    /// split rather than sampled at its finest texel throughout, so that a surface reaching
+    /// from the camera into the distance is not sampled at its nearest texel everywhere.
+    fn spans_views(&self, order: &[u32]) -> bool {
+        if self.view_texel.is_empty() || order.len() < 2 {
+            return false;
+        }
+        let (finest, coarsest) = order.iter().fold((f32::MAX, 0.0f32), |(lo, hi), &i| {
+            let t = self.triangle_texel(i as usize);
+            (lo.min(t), hi.max(t))
+        });
+        coarsest > VIEW_SPAN * finest
     }
 
     pub(super) fn build(&self, order: &mut [u32], offset: u32, depth: u32) -> Node {
@@ -70,7 +97,7 @@ impl Builder<'_> {
         } else {
             self.texel
         };
-        if one_part {
+        if one_part && !self.spans_views(order) {
             if let Some(tiles) = self.heightfield(order, bounds.diagonal(), texel) {
                 self.progress.advance(n as u64);
                 let parts = self.parts(&tiles, order);

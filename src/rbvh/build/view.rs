@@ -72,7 +72,8 @@ pub(super) fn view_texels(
             let asked = ((nearest - eye).length() * per_distance).max(finest);
             let own = texel_of(i);
             if asked < own {
-                let area = f64::from((t[1] - t[0]).cross(t[2] - t[0]).length() * 0.5);
+                let [a, b, c] = t.map(|p| p.as_dvec3());
+                let area = (b - a).cross(c - a).length() * 0.5;
                 let added = area / f64::from(asked).powi(2) - area / f64::from(own).powi(2);
                 (asked, added)
             } else {
@@ -145,6 +146,20 @@ mod tests {
         assert_eq!(texels[0], f32::INFINITY);
         assert!(texels[1].is_finite());
         assert_eq!(texels[2], f32::INFINITY);
+    }
+
+    /// A long sliver crossing the view one unit ahead, whose corners and centroid all lie
+    /// outside the cone, is seen through its middle: its bounding sphere meets the cone.
+    #[test]
+    fn a_big_triangle_seen_between_its_corners_is_refined() {
+        let sliver = [[
+            Vec3::new(-100.0, 0.0, -1.0),
+            Vec3::new(100.0, 0.0, -1.0),
+            Vec3::new(100.0, 0.01, -1.0),
+        ]];
+        let (texels, _) = view_texels(&camera(), &sliver, 64.0, 1.0, |_| 1.0);
+        // Its nearest point lies on the axis, 1 ahead: 2 · 1 / 64.
+        assert!((texels[0] - 1.0 / 32.0).abs() < 1e-6, "{}", texels[0]);
     }
 
     #[test]
