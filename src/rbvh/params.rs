@@ -178,12 +178,14 @@ pub struct RbvhParams {
 pub const VIEWED_SUFFIX: &str = "v";
 
 /// The [`RbvhParams::view_rate`] that `rbvh --view` asks for: 384 texels across the view's
-/// field (a texel at most a pixel of a 384-pixel-high image at its distance). On the paper-scale
-/// scene and its scattered arrangement, every preset refined at this rate is valid for primary
-/// rays, where 256 left the scattered arrangement's Q0 just invalid (t p99 1.24% of the
-/// diagonal) and 128 the paper-scale scene's (10.3%). The presets do not take it: a view as
-/// close as the dragon close-up's asks the same texels of Q0 to Q3, which it samples finer than
-/// they did and which were valid without (docs/paper-scale.md, "Levels refined for the view").
+/// field (a texel at most a pixel of a 384-pixel-high image at its distance, on the view's
+/// axis; off it a pixel spans less, down to about 1/1.75 of that in the corners of a 4:3 image
+/// of a 55° field). On the paper-scale scene and its scattered arrangement, every preset
+/// refined at this rate is valid for primary rays, where 256 left the scattered arrangement's
+/// Q0 just invalid (t p99 1.24% of the diagonal) and 128 the paper-scale scene's (10.3%). The
+/// presets do not take it: a view as close as the dragon close-up's asks the same texels of Q0
+/// to Q2, which it samples finer than they did and which were valid without
+/// (docs/paper-scale.md, "Levels refined for the view").
 pub const VIEW_RATE: f32 = 384.0;
 
 /// What a level's name gets appended when every triangle a height field can hold is sampled

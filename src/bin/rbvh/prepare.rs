@@ -1030,10 +1030,11 @@ pub struct Quality {
     pub sample_all: bool,
     /// Refine every level asked for where the scene's camera looks closely: a triangle it sees
     /// gets a texel at most its distance's share of the field of view over RATE (texels across
-    /// the vertical field; without a value 384, a pixel of a 384-pixel-high image), however
-    /// coarse its object's; such a level is named with a `v`, e.g. Q0v. With it every preset
-    /// is valid for primary rays at the paper's scale, seen from the camera it was built for;
-    /// a scene without a camera (and a point cloud) is built as without.
+    /// the vertical field; without a value 384, a pixel of a 384-pixel-high image on the view's
+    /// axis), however coarse its object's; such a level is named with a `v`, e.g. Q0v. With it
+    /// every preset is valid for primary rays at the paper's scale, seen from the camera it was
+    /// built for. Needs a camera (the scene's, or --camera-eye); not with --points, or a scene
+    /// held in two levels.
     #[arg(long, value_name = "RATE", num_args = 0..=1, default_missing_value = "384")]
     pub view: Option<f32>,
     /// What each atlas texel holds: `normals` (height and normal, 3 or 4 bytes: 8- or 16-bit

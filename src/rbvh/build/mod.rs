@@ -237,8 +237,8 @@ impl Rbvh {
         };
         let alone = estimate;
         let estimate = estimate + viewed;
-        // Not `>`: an estimate that overflowed to NaN is refused too.
-        if !(estimate <= MAX_ESTIMATED_TEXELS) {
+        // An estimate that overflowed to NaN is refused too.
+        if estimate.is_nan() || estimate > MAX_ESTIMATED_TEXELS {
             // Named after the rate that asks for more: the view's, where the build fits
             // without it, else the objects', where any is finer.
             let (name, what) = if alone <= MAX_ESTIMATED_TEXELS {
