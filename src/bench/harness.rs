@@ -356,8 +356,8 @@ impl<'a> SceneBench<'a> {
             let why = match &flat {
                 None => Some("is measured in two levels alone, which a view cannot refine"),
                 Some(scene) if scene.camera.is_none() => Some("has no camera to refine for"),
-                Some(_) if config.points.is_some() => {
-                    Some("is measured as points, and the view refines triangles")
+                Some(scene) if scene.points.is_some() => {
+                    Some("is a point cloud, and the view refines triangles")
                 }
                 Some(_) => None,
             };

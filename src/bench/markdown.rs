@@ -23,6 +23,7 @@ use serde_json::Value;
 
 use super::provenance::Provenance;
 use super::shaders::{column_value, COLUMNS};
+use super::transcribed;
 use crate::gpu::ShaderStatistic;
 use crate::{Error, Result};
 
@@ -243,8 +244,10 @@ impl Block {
                 if self.view.is_some() || !self.filters.is_empty() {
                     Err("a transcribed file is shown as recorded: no view or filters".to_string())
                 } else {
-                    transcribed_table(json)
-                        .and_then(|table| Ok((table, transcribed_caption(&json["transcribed"])?)))
+                    transcribed::table(json).and_then(|(header, align, rows)| {
+                        let caption = transcribed::caption(&json["transcribed"])?;
+                        Ok((markdown(&header, &align, &rows), caption))
+                    })
                 }
             }
             _ if jsons.iter().any(|j| j.get("transcribed").is_some()) => {
@@ -838,78 +841,6 @@ fn shaders_table(json: &Value, which: Option<&[String]>) -> Made<String> {
     Ok(markdown(&header, &align, &cells))
 }
 
-/// A transcribed file's table, as recorded.
-fn transcribed_table(json: &Value) -> Made<String> {
-    let strings = |v: &Value, what: &str| -> Made<Vec<String>> {
-        v.as_array()
-            .ok_or_else(|| format!("transcribed {what}: not a list"))?
-            .iter()
-            .map(|c| {
-                c.as_str()
-                    .map(str::to_string)
-                    .ok_or_else(|| format!("transcribed {what}: cells are strings"))
-            })
-            .collect()
-    };
-    let header = strings(&json["columns"], "columns")?;
-    let align: Vec<char> = match &json["align"] {
-        Value::Null => Vec::new(),
-        v => strings(v, "align")?
-            .iter()
-            .map(|a| a.chars().next().unwrap_or('l'))
-            .collect(),
-    };
-    let rows = json["rows"]
-        .as_array()
-        .ok_or_else(|| "transcribed rows: not a list".to_string())?
-        .iter()
-        .map(|r| strings(r, "rows"))
-        .collect::<Made<Vec<_>>>()?;
-    if let Some(bad) = rows.iter().find(|r| r.len() != header.len()) {
-        return Err(format!(
-            "a transcribed row has {} cells for {} columns: {bad:?}",
-            bad.len(),
-            header.len()
-        ));
-    }
-    Ok(markdown(&header, &align, &rows))
-}
-
-fn transcribed_caption(t: &Value) -> Made<String> {
-    let field = |k: &str| -> Made<String> {
-        t[k].as_str()
-            .map(str::to_string)
-            .ok_or_else(|| format!("transcribed.{k}: required, a string"))
-    };
-    let commit = match &t["commit"] {
-        Value::String(c) => format!("measured at {c}"),
-        Value::Null => "measured at a commit not recorded".into(),
-        _ => return Err("transcribed.commit: a string or null".to_string()),
-    };
-    let note = t["note"].as_str().map_or(String::new(), |n| {
-        format!(" {}", n.trim_end_matches('.').to_string() + ".")
-    });
-    let raw = match &t["raw"] {
-        Value::Null => "no raw file kept".to_string(),
-        Value::Array(files) => {
-            let files = files
-                .iter()
-                .map(|f| f.as_str().map(str::to_string))
-                .collect::<Option<Vec<_>>>()
-                .filter(|f| !f.is_empty())
-                .ok_or("transcribed.raw: a list of file paths")?;
-            format!("raw records: {}", files.join(", "))
-        }
-        _ => return Err("transcribed.raw: a list of file paths".to_string()),
-    };
-    Ok(format!(
-        "Transcribed from {} ({raw}): {commit}; host: {}; device: {}.{note}",
-        field("source")?,
-        field("host")?,
-        field("device")?
-    ))
-}
-
 /// The line under a view of raw results: the tool, commit, date, host and device; of several
 /// invocations, how many, and only where they share host, device and settings (ratios from
 /// different machines are not pooled). `ranges`: whether the table brackets each median's range.
@@ -1035,31 +966,6 @@ mod tests {
             level(&serde_json::json!({"method": "exact-instanced"})),
             "exact, two levels"
         );
-    }
-
-    /// A transcription names its raw records where they were kept, else says none was; a `raw`
-    /// that is not a list of paths is refused.
-    #[test]
-    fn a_transcription_names_its_raw_records() {
-        let mut t = serde_json::json!({
-            "source": "s", "commit": "abc", "host": "h", "device": "d"
-        });
-        let caption = transcribed_caption(&t).unwrap();
-        assert!(caption.contains("(no raw file kept)"), "{caption}");
-        t["raw"] = serde_json::json!(["docs/results/a.json", "docs/results/b.json"]);
-        let caption = transcribed_caption(&t).unwrap();
-        assert!(
-            caption.contains("(raw records: docs/results/a.json, docs/results/b.json)"),
-            "{caption}"
-        );
-        for bad in [
-            serde_json::json!("a.json"),
-            serde_json::json!([]),
-            serde_json::json!([1]),
-        ] {
-            t["raw"] = bad;
-            assert!(transcribed_caption(&t).is_err());
-        }
     }
 
     #[test]

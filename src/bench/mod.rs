@@ -38,6 +38,7 @@ pub mod shaders;
 pub mod steps;
 pub mod table;
 pub mod traffic;
+mod transcribed;
 pub mod validate;
 
 use std::path::PathBuf;
@@ -229,6 +230,12 @@ impl BenchConfig {
                     format!("{count} point(s) to sample: give at least {MIN_POINTS}"),
                 ));
             }
+        }
+        if self.points.is_some() && self.levels.iter().any(|p| p.view_rate > 0.0) {
+            return Err(Error::param(
+                "view_rate",
+                "the view refines triangles, and the RBVHs are built from points".to_string(),
+            ));
         }
         if self.instances == Instances::TwoLevel {
             if self.points.is_some() {

@@ -164,12 +164,13 @@ pub struct RbvhParams {
     /// scene's camera ([`crate::scene::Scene::camera`]) sees a triangle, its texel is at most
     /// that distance × 2·tan(vfov / 2) over this rate, however coarse its object's
     /// (`build/view.rs`); 0 (the presets): none, and a scene without a camera is sampled as
-    /// without. What decides validity at the paper's scale is the texel against the view,
-    /// which no rule on the geometry can see: Sponza's courtyard at 16 cm a texel is 12 pixels
-    /// at the arcade five metres from the camera (docs/paper-scale.md, "Levels refined for
-    /// the view"). [`VIEW_RATE`] is the rate measured to make every preset valid there.
-    /// Triangles only: a point cloud's texel is its own. A level so built is named with
-    /// [`VIEWED_SUFFIX`] (`Q0v`).
+    /// without. A connected part whose triangles then ask texels more than twice apart is split
+    /// rather than sampled at its finest throughout. What decides validity at the paper's scale
+    /// is the texel against the view, which no rule on the geometry can see: Sponza's courtyard
+    /// at 16 cm a texel is 12 pixels at the arcade five metres from the camera
+    /// (docs/paper-scale.md, "Levels refined for the view"). [`VIEW_RATE`] is the rate measured
+    /// to make every preset valid there. Triangles only: a point cloud's texel is its own. A
+    /// level so built is named with [`VIEWED_SUFFIX`] (`Q0v`).
     pub view_rate: f32,
 }
 

@@ -10,9 +10,8 @@ use rbvh::bench::{self, BenchConfig, Device, Event, RayType};
 use rbvh::gpu::Context;
 use rbvh::scene::PointSource;
 
-use crate::prepare::{
-    context_options, flag_error, Given, InstancesArg, Method, PointsArg, Structures,
-};
+use crate::flags::{flag_error, Given};
+use crate::prepare::{context_options, InstancesArg, Method, PointsArg, Structures};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("quality", |a| a.default_value("all")))]

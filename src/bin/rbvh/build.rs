@@ -11,9 +11,11 @@ use rbvh::probe::TraceStats;
 use rbvh::rbvh::{InstancedRbvh, Rbvh, RbvhParams, RbvhSource, Subdivision};
 use rbvh::scene::{InstancedScene, Instances, Scene};
 
+use crate::flags::flag_error;
 use crate::outputs::{self, output};
-use crate::prepare::{check_view, flag_error, InstancesArg, PointsArg, Quality};
+use crate::prepare::{check_view, InstancesArg, PointsArg};
 use crate::progress::step;
+use crate::quality::Quality;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -33,7 +35,7 @@ pub struct Args {
     out: Option<PathBuf>,
     /// With --out: which RBVH of a scene of instances is saved: `two-level`, `flat`, or `auto`
     /// (two levels where the scene places a mesh more than once or is too large to flatten, as
-    /// render traces it).
+    /// render traces it; flat with --view).
     #[arg(long, value_enum, default_value_t = InstancesArg::Auto, requires = "out")]
     instances: InstancesArg,
     /// With --out: print the accounting table too (without --out it is what the command prints).
@@ -108,6 +110,10 @@ pub fn run(a: Args) -> Result<()> {
     // two-level lines are built.
     if let Err(e) = &fits {
         anyhow::ensure!(
+            !viewed,
+            "{e}: --view refines a flat RBVH, and this scene is held in two levels alone"
+        );
+        anyhow::ensure!(
             a.out.is_none(),
             "{e}; --out with --instances flat saves a flat RBVH"
         );
@@ -131,6 +137,10 @@ pub fn run(a: Args) -> Result<()> {
     scene
         .validate()
         .with_context(|| format!("loading scene {:?}", a.scene))?;
+    if viewed {
+        // A point cloud's file (.ply, .xyz) is points without --points.
+        check_view(&a.scene, true, scene.points.is_some())?;
+    }
     a.points.apply(&mut scene)?;
     if let Some(warning) = scene.precision_warning() {
         eprintln!("warning: {warning}");

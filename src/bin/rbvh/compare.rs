@@ -16,8 +16,9 @@ use rbvh::ibl::{self, Environment, Frame, Rendered, Settings};
 use rbvh::lod::{Cones, RayCone};
 use rbvh::output;
 
+use crate::flags::Given;
 use crate::outputs::{self, output};
-use crate::prepare::{prepare, CameraArgs, Common, Given, Loaded, Method};
+use crate::prepare::{prepare, CameraArgs, Common, Loaded, Method};
 use crate::progress::step;
 use crate::render::{ibl_albedo, instance_offsets, load_environment, progressive, sky_of};
 

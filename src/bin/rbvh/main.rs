@@ -4,10 +4,12 @@
 mod bench;
 mod build;
 mod compare;
+mod flags;
 mod outputs;
 mod paint;
 mod prepare;
 mod progress;
+mod quality;
 mod regress;
 mod render;
 mod report;
@@ -18,7 +20,7 @@ mod upgrade;
 
 use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 
-use crate::prepare::Given;
+use crate::flags::Given;
 
 #[derive(Parser)]
 #[command(

@@ -12,12 +12,13 @@ use rbvh::gpu::{Painter, Query, Tracer};
 use rbvh::surface::{strokes, Brush};
 use rbvh::{output, preview};
 
+use crate::flags::Given;
 use crate::outputs::{self, output};
 use crate::prepare::{
-    check_image_size, prepare, two_level_file, CameraArgs, Common, Given, InstancesArg, Method,
-    Prepared, TexelsArg,
+    check_image_size, prepare, two_level_file, CameraArgs, Common, InstancesArg, Method, Prepared,
 };
 use crate::progress::step;
+use crate::quality::TexelsArg;
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("rbvh", |a| a.help(

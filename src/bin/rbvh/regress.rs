@@ -7,10 +7,10 @@ use anyhow::{bail, ensure, Context as _, Result};
 use rbvh::gpu::Context;
 use rbvh::regress::{self, Config, Method, Mode, Tolerance};
 
-use crate::prepare::{
-    self, context_options, flag_error, presets, Given, Structures, BUILD_FLAGS, LOD_FLAGS,
-};
+use crate::flags::{flag_error, Given, BUILD_FLAGS, LOD_FLAGS};
+use crate::prepare::{self, context_options, Structures};
 use crate::progress::step;
+use crate::quality::presets;
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("method", |a| a.default_value("exact,rbvh,rbvh-lod").help(

@@ -21,8 +21,9 @@ use rbvh::scene::{Light, SceneView};
 use rbvh::structure::{Kind, Structure};
 use rbvh::surface::hit_albedo;
 
+use crate::flags::Given;
 use crate::outputs::{self, output};
-use crate::prepare::{check_image_size, prepare, CameraArgs, Common, Given, Prepared};
+use crate::prepare::{check_image_size, prepare, CameraArgs, Common, Prepared};
 use crate::progress::step;
 use crate::report::{report_counters, report_throughput};
 

@@ -8,8 +8,9 @@ use rbvh::gpu::Query;
 use rbvh::io;
 use rbvh::lod::{Cones, RayCone};
 
+use crate::flags::Given;
 use crate::outputs;
-use crate::prepare::{prepare, prepare_cpu, Common, Given, Method};
+use crate::prepare::{prepare, prepare_cpu, Common, Method};
 use crate::progress::step;
 use crate::report::{report_counters, report_throughput};
 

@@ -48,10 +48,11 @@ impl Builder<'_> {
             .min(view.copied().unwrap_or(self.texel))
     }
 
-    /// Whether the triangles of `order` ask for texels more than [`VIEW_SPAN`] apart, which
-    /// only the view makes them do within one part (an object's texel is one): such a set is
-    /// split rather than sampled at its finest texel throughout, so that a surface reaching
-    /// from the camera into the distance is not sampled at its nearest texel everywhere.
+    /// Whether the triangles of `order`, one connected part (of one object, whose texel is
+    /// one), ask for texels more than [`VIEW_SPAN`] apart, which only the view makes them do:
+    /// such a set is split rather than sampled at its finest texel throughout, so that a
+    /// surface reaching from the camera into the distance is not sampled at its nearest texel
+    /// everywhere.
     fn spans_views(&self, order: &[u32]) -> bool {
         if self.view_texel.is_empty() || order.len() < 2 {
             return false;
@@ -97,7 +98,7 @@ impl Builder<'_> {
         } else {
             self.texel
         };
-        if one_part && !self.spans_views(order) {
+        if one_part && !(same_part && self.spans_views(order)) {
             if let Some(tiles) = self.heightfield(order, bounds.diagonal(), texel) {
                 self.progress.advance(n as u64);
                 let parts = self.parts(&tiles, order);
