@@ -26,42 +26,35 @@ impl Builder<'_> {
     /// the view ([`RbvhParams::view_rate`]) ask of its triangles, or the scene's. With object
     /// split on, a set that becomes a leaf lies in one object.
     pub(super) fn texel_of(&self, order: &[u32]) -> f32 {
+        self.texels_of(order).0
+    }
+
+    /// The finest and the coarsest texel the triangles of `order` ask for, in one pass: a set
+    /// of one connected part (one object, whose texel is one) whose texels lie more than
+    /// [`VIEW_SPAN`] apart, which only the view makes them do, is split rather than sampled at
+    /// its finest texel throughout, so that a surface reaching from the camera into the
+    /// distance is not sampled at its nearest texel everywhere.
+    fn texels_of(&self, order: &[u32]) -> (f32, f32) {
         if self.objects.is_empty() {
             // Points: the cloud is one object.
-            return self.object_texel.first().copied().unwrap_or(self.texel);
+            let t = self.object_texel.first().copied().unwrap_or(self.texel);
+            return (t, t);
         }
         if self.object_texel.is_empty() && self.view_texel.is_empty() {
-            return self.texel;
+            return (self.texel, self.texel);
         }
         order
             .iter()
-            .fold(self.texel, |t, &i| t.min(self.triangle_texel(i as usize)))
-    }
-
-    /// The texel scene triangle `i` asks for: the scene's, its object's or the view's, the
-    /// finest.
-    fn triangle_texel(&self, i: usize) -> f32 {
-        let object = self.object_texel.get(self.objects[i] as usize);
-        let view = self.view_texel.get(i);
-        self.texel
-            .min(object.copied().unwrap_or(self.texel))
-            .min(view.copied().unwrap_or(self.texel))
-    }
-
-    /// Whether the triangles of `order`, one connected part (of one object, whose texel is
-    /// one), ask for texels more than [`VIEW_SPAN`] apart, which only the view makes them do:
-    /// such a set is split rather than sampled at its finest texel throughout, so that a
-    /// surface reaching from the camera into the distance is not sampled at its nearest texel
-    /// everywhere.
-    fn spans_views(&self, order: &[u32]) -> bool {
-        if self.view_texel.is_empty() || order.len() < 2 {
-            return false;
-        }
-        let (finest, coarsest) = order.iter().fold((f32::MAX, 0.0f32), |(lo, hi), &i| {
-            let t = self.triangle_texel(i as usize);
-            (lo.min(t), hi.max(t))
-        });
-        coarsest > VIEW_SPAN * finest
+            .fold((self.texel, 0.0f32), |(finest, coarsest), &i| {
+                let i = i as usize;
+                let object = self.object_texel.get(self.objects[i] as usize);
+                let view = self.view_texel.get(i);
+                let t = self
+                    .texel
+                    .min(object.copied().unwrap_or(self.texel))
+                    .min(view.copied().unwrap_or(self.texel));
+                (finest.min(t), coarsest.max(t))
+            })
     }
 
     pub(super) fn build(&self, order: &mut [u32], offset: u32, depth: u32) -> Node {
@@ -90,15 +83,16 @@ impl Builder<'_> {
         // The set's texel, a pass over its triangles, where a decision reads it: a set of several
         // parts at least `min_leaf_texels` of the scene's texel across is not small at any finer
         // one (no object's texel is coarser than the scene's), and is split.
-        let texel = if one_part
+        let (texel, coarsest) = if one_part
             || matches!(self.input, Input::Points(_))
             || bounds.diagonal() < self.params.min_leaf_texels * self.texel
         {
-            self.texel_of(order)
+            self.texels_of(order)
         } else {
-            self.texel
+            (self.texel, self.texel)
         };
-        if one_part && !(same_part && self.spans_views(order)) {
+        let spread = same_part && n > 1 && coarsest > VIEW_SPAN * texel;
+        if one_part && !spread {
             if let Some(tiles) = self.heightfield(order, bounds.diagonal(), texel) {
                 self.progress.advance(n as u64);
                 let parts = self.parts(&tiles, order);
