@@ -44,7 +44,9 @@ layout(push_constant) uniform PaintParams {
     uint brush_count;   // at most MAX_BRUSHES_PER_PASS (src/gpu/painter.rs), so the loop is bounded
     uint atlas_pitch;
     uint atlas_len;
-    uint atlas_wide_len;  // texels before the narrow band (atlas.glsl)
+    uint atlas_wide_len;  // texels before the bands of packed heights (atlas.glsl)
+    uint atlas_end12;     // texels before the end of the 12-bit band
+    uint atlas_end10;     // texels before the end of the 10-bit band
     uint reserved;        // zero: keeps the addresses 8-byte aligned
     uvec2 atlas_address;    // device addresses (low, high word) of the atlas and the colours,
     uvec2 colours_address;  // read with RBVH_DEVICE_ADDRESS; zero where they are bound
@@ -98,7 +100,7 @@ void main() {
     if (index >= pc.atlas_len) {
         return;
     }
-    uint code = rbvh_atlas_code(index, pc.atlas_len, pc.atlas_wide_len, false);
+    uint code = rbvh_atlas_code(index, pc.atlas_len, pc.atlas_wide_len, pc.atlas_end12, pc.atlas_end10, false);
     if (code == 0xFFFFu) {
         return;
     }

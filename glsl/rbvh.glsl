@@ -105,7 +105,9 @@ struct RbvhSizes {
     uint heightfield_count;
     uint atlas_pitch;  // texels per atlas row: a power of two (the march skips leaves otherwise)
     uint atlas_len;
-    uint atlas_wide_len;  // texels before the narrow band (atlas.glsl)
+    uint atlas_wide_len;  // texels before the bands of packed heights (atlas.glsl)
+    uint atlas_end12;     // texels before the end of the 12-bit band (atlas.glsl)
+    uint atlas_end10;     // texels before the end of the 10-bit band; the 8-bit band follows
 };
 
 // The direction of texel's octahedral normal before normalizing (octahedral_direction in
@@ -142,12 +144,14 @@ bool rbvh_is_hole(uint texel) {
 // once the ray is done, rbvh_normal_texel), so that a texel of the narrow band is one read.
 uint rbvh_texel(RbvhHeightfield leaf, RbvhSizes sz, int i, int j) {
     uint index = leaf.atlas_base + uint(j) * sz.atlas_pitch + uint(i);
-    return rbvh_atlas_code(index, sz.atlas_len, sz.atlas_wide_len, RBVH_HEIGHT_ONLY);
+    return rbvh_atlas_code(index, sz.atlas_len, sz.atlas_wide_len, sz.atlas_end12, sz.atlas_end10,
+                           RBVH_HEIGHT_ONLY);
 }
 
 // Where the blocks' height ranges start in the atlas words: after the texels' words.
 uint rbvh_texel_words(RbvhSizes sz) {
-    return rbvh_atlas_texel_words(sz.atlas_len, sz.atlas_wide_len, RBVH_HEIGHT_ONLY);
+    return rbvh_atlas_texel_words(sz.atlas_len, sz.atlas_wide_len, sz.atlas_end12, sz.atlas_end10,
+                                  RBVH_HEIGHT_ONLY);
 }
 
 // Frame-space ray of one leaf. Its shear (for the cells' triangles) is not kept here but made
@@ -418,14 +422,14 @@ uint rbvh_normal_texel(RbvhSizes sz, uint k00, uint choice, vec3 dir) {
         corner = uint(findLSB(choice >> 2));
     }
     uint nearest = rbvh_atlas_texel(k00 + (corner & 1u) + (corner >> 1) * sz.atlas_pitch, sz.atlas_len,
-                                    sz.atlas_wide_len);
+                                    sz.atlas_wide_len, sz.atlas_end12, sz.atlas_end10);
     if (!rbvh_faces(nearest, dir)) {
         for (uint q = 0u; q < 4u; ++q) {
             if ((choice & (4u << q)) == 0u) {
                 continue;
             }
             uint c = rbvh_atlas_texel(k00 + (q & 1u) + (q >> 1) * sz.atlas_pitch, sz.atlas_len,
-                                      sz.atlas_wide_len);
+                                      sz.atlas_wide_len, sz.atlas_end12, sz.atlas_end10);
             if (rbvh_faces(c, dir)) {
                 nearest = c;
                 break;

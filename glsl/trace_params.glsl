@@ -15,7 +15,9 @@ layout(push_constant) uniform Params {
     uint heightfield_count;
     uint atlas_pitch;
     uint atlas_len;
-    uint atlas_wide_len;  // atlas texels before the narrow band (atlas.glsl)
+    uint atlas_wide_len;  // atlas texels before the bands of packed heights (atlas.glsl)
+    uint atlas_end12;     // atlas texels before the end of the 12-bit band
+    uint atlas_end10;     // atlas texels before the end of the 10-bit band
     uint lod_node_count;  // LOD records (0 without LOD)
     uint lod_texel_len;   // LOD column words
     uint instance_count;  // instances of a two-level BVH (0 without)

@@ -44,7 +44,7 @@ void main() {
         return;
     }
     RbvhSizes sz = RbvhSizes(pc.node_count, pc.tri_count, pc.heightfield_count, pc.atlas_pitch, pc.atlas_len,
-                             pc.atlas_wide_len);
+                             pc.atlas_wide_len, pc.atlas_end12, pc.atlas_end10);
     uint steps;
     bool overflow;
 #ifdef RBVH_LOD

@@ -243,8 +243,8 @@ layout(local_size_x = 32) in;
 
 layout(push_constant) uniform EnginePush {
     uvec2 rbvh_arrays[6];
-    uint node_count, tri_count, heightfield_count, atlas_pitch, atlas_len, atlas_wide_len, lod_nodes,
-        lod_texels;
+    uint node_count, tri_count, heightfield_count, atlas_pitch, atlas_len, atlas_wide_len, atlas_end12,
+        atlas_end10, lod_nodes, lod_texels;
     float spread;
 } push;
 
@@ -262,7 +262,7 @@ layout(std430, set = 0, binding = 0) writeonly buffer EngineDepth { float depth[
 void main() {
     Ray ray = Ray(vec3(gl_GlobalInvocationID.x, 0.0, -10.0), 0.0, vec3(0.0, 0.0, 1.0), 1e30);
     RbvhSizes sz = RbvhSizes(push.node_count, push.tri_count, push.heightfield_count, push.atlas_pitch,
-                             push.atlas_len, push.atlas_wide_len);
+                             push.atlas_len, push.atlas_wide_len, push.atlas_end12, push.atlas_end10);
     uint steps;
     bool overflow;
     Hit hit = rbvh_trace_rbvh_lod(ray, vec2(0.0, push.spread), false, sz,
@@ -469,7 +469,7 @@ fn one_invocation_traces_rays_one_after_another_as_each_alone() {
         "two rays an invocation",
         bytemuck::cast_slice(&words),
         &[0, 1, 2, 3, 4, 5],
-        32,
+        40,
     )
     .unwrap();
     let nodes = ctx.upload_storage("nodes", &r.nodes).unwrap();
@@ -487,13 +487,16 @@ fn one_invocation_traces_rays_one_after_another_as_each_alone() {
             2 * std::mem::size_of::<Hit>() as u64 * u64::from(count),
         )
         .unwrap();
-    let push: [u32; 8] = [
+    let [wide_len, end12, end10] = r.atlas.band_ends().map(|end| end as u32);
+    let push: [u32; 10] = [
         r.nodes.len() as u32,
         r.triangles.len() as u32,
         r.heightfields.len() as u32,
         r.atlas.pitch,
         r.atlas.texels.len() as u32,
-        r.atlas.wide_len() as u32,
+        wide_len,
+        end12,
+        end10,
         count,
         other,
     ];

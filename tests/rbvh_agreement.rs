@@ -29,8 +29,9 @@ fn rays_for(scene: &Scene, side: u32, random: usize, seed: u64) -> Vec<Ray> {
 fn gpu_and_cpu_rbvh_casters_agree_at_every_level() {
     let ctx = common::context();
     let mut agreement = common::Agreement::default();
-    // Texels of tiles with 8- and with 16-bit heights: both decodes of the atlas are exercised.
-    let (mut narrow, mut wide) = (0u64, 0u64);
+    // Texels of tiles with 16-, 12-, 10- and 8-bit heights: every decode of the atlas is
+    // exercised.
+    let mut by_bits = [(16, 0u64), (12, 0), (10, 0), (8, 0)];
     for (k, name) in ["default", "blob", "sphere"].into_iter().enumerate() {
         let scene = Scene::builtin(name).unwrap();
         // Every preset (the large triangles exact where cheaper: leaves of one triangle each
@@ -41,8 +42,11 @@ fn gpu_and_cpu_rbvh_casters_agree_at_every_level() {
             .chain([common::sampled_preset(4)]);
         for (variant, params) in variants.enumerate() {
             let r = Arc::new(Rbvh::build(&scene, &params).unwrap());
-            narrow += r.narrow_texels();
-            wide += r.stats.tile_texels - r.narrow_texels();
+            for l in &r.heightfields {
+                let bits = r.atlas.bits_at(l.atlas_base as usize);
+                let texels = u64::from(l.res_u) * u64::from(l.res_v);
+                by_bits.iter_mut().find(|(b, _)| *b == bits).unwrap().1 += texels;
+            }
             let tracer = Tracer::new(&ctx, &Structure::from(r.clone())).unwrap();
             let rays = rays_for(&scene, 96, 4000, (k * 5 + variant) as u64);
             for (query, any) in [(Query::Closest, false), (Query::Any, true)] {
@@ -64,8 +68,8 @@ fn gpu_and_cpu_rbvh_casters_agree_at_every_level() {
     assert!(total >= 100_000);
     assert!(agreement.rate() < 1e-4, "{hit_miss} of {total}");
     assert!(
-        narrow > 0 && wide > 0,
-        "{narrow} texels 8-bit, {wide} 16-bit"
+        by_bits.iter().all(|&(_, texels)| texels > 0),
+        "texels by bits of height: {by_bits:?}"
     );
 }
 
@@ -218,7 +222,7 @@ fn a_tree_of_triangle_leaves_alone_is_traversed_to_its_end() {
     let atlas = rbvh::rbvh::Atlas {
         pitch: 8,
         rows: 8,
-        narrow_rows: 0,
+        packed_rows: [0; 3],
         texels: vec![rbvh::rbvh::Texel::HOLE; 64],
     };
     let r = hand_made(vec![GpuNode::new(a, b)], vec![far, near], vec![], atlas);
@@ -250,7 +254,7 @@ fn a_tile_that_wraps_across_atlas_rows_is_refused_or_empty() {
     let atlas = Atlas {
         pitch,
         rows,
-        narrow_rows: 0,
+        packed_rows: [0; 3],
         texels,
     };
     let r = Arc::new(one_leaf(
@@ -284,11 +288,11 @@ fn a_tile_that_wraps_across_atlas_rows_is_refused_or_empty() {
     assert!(gpu.iter().chain(&cpu).all(|h| !h.is_hit()));
 }
 
-/// The device stores a byte a height in the atlas's narrow rows: an RBVH built by hand with a code
-/// there that is not an 8-bit one (a multiple of 257) is refused by the upload, as by the loader,
-/// rather than traced with other heights than the CPU's.
+/// The device stores 12, 10 or 8 bits a height in the atlas's packed rows: an RBVH built by hand
+/// with a code there that is not one of its band's (a multiple of 63 in the 10-bit rows) is
+/// refused by the upload, as by the loader, rather than traced with other heights than the CPU's.
 #[test]
-fn a_wide_code_in_the_narrow_rows_is_refused() {
+fn a_code_off_its_band_in_the_packed_rows_is_refused() {
     use glam::Vec3;
     use rbvh::rbvh::{Atlas, Texel};
     let ctx = common::context();
@@ -296,9 +300,14 @@ fn a_wide_code_in_the_narrow_rows_is_refused() {
     let mut atlas = Atlas {
         pitch,
         rows,
-        narrow_rows: 4,
-        texels: vec![Texel::new(257, Vec3::Y); (pitch * rows) as usize],
+        packed_rows: [1, 1, 2],
+        texels: vec![Texel::HOLE; (pitch * rows) as usize],
     };
+    for (bits, range) in atlas.bands() {
+        for k in range {
+            atlas.texels[k] = Texel::new(2 * Texel::step(bits) as u16, Vec3::Y);
+        }
+    }
     let fine = Arc::new(one_leaf(
         0,
         (4, 4),
@@ -306,7 +315,7 @@ fn a_wide_code_in_the_narrow_rows_is_refused() {
         atlas.clone(),
         Vec3::new(5.0, 70.0, 1.0),
     ));
-    Tracer::new(&ctx, &Structure::from(fine)).expect("8-bit codes upload");
+    Tracer::new(&ctx, &Structure::from(fine)).expect("codes of their bands upload");
     atlas.texels[17] = Texel::new(300, Vec3::Y);
     let r = Arc::new(one_leaf(0, (4, 4), 0.001, atlas, Vec3::new(5.0, 70.0, 1.0)));
     let e = Tracer::new(&ctx, &Structure::from(r))
@@ -314,7 +323,7 @@ fn a_wide_code_in_the_narrow_rows_is_refused() {
         .expect("the upload refuses the code")
         .to_string();
     assert!(
-        e.contains("atlas texel 17 lies in the narrow rows but has height code 300"),
+        e.contains("atlas texel 17 lies in the 10-bit rows but has height code 300"),
         "{e}"
     );
 }
@@ -330,7 +339,7 @@ fn an_atlas_pitch_that_is_not_a_power_of_two_is_refused() {
     let atlas = Atlas {
         pitch,
         rows,
-        narrow_rows: 0,
+        packed_rows: [0; 3],
         texels: vec![Texel::new(0, Vec3::Y); (pitch * rows) as usize],
     };
     let r = Arc::new(one_leaf(0, (4, 4), 0.001, atlas, Vec3::new(5.0, 70.0, 1.0)));
@@ -388,7 +397,7 @@ fn block_jumps_agree_with_the_plain_walk_on_steep_unaligned_tiles() {
         let atlas = Atlas {
             pitch,
             rows,
-            narrow_rows: 0,
+            packed_rows: [0; 3],
             texels,
         };
         let r = Arc::new(one_leaf(
@@ -474,8 +483,8 @@ fn height_only_texels_hit_the_same_and_report_the_facet_normal() {
                 ..normals.params
             };
             let height = Arc::new(Rbvh::build(&scene, &params).unwrap());
-            // The same tiles and codes; the packing may place them apart, keeping the narrow
-            // band in one format and not in the other (`atlas::pack`).
+            // The same tiles and codes; the packing may place them apart, keeping a band of
+            // packed heights in one format and not in the other (`atlas::pack`).
             let placed_at = |r: &Rbvh| -> Vec<_> {
                 r.heightfields
                     .iter()

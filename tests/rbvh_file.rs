@@ -82,7 +82,7 @@ fn sample() -> Rbvh {
         atlas: Atlas {
             pitch: 8,
             rows: 9,
-            narrow_rows: 0,
+            packed_rows: [0; 3],
             texels,
         },
         bounds: unit,
@@ -140,21 +140,21 @@ fn save_load_round_trips_exactly() {
         table,
         [
             (*b"PARM", 8, REQUIRED, 216, 56),
-            (*b"HEAD", 1, REQUIRED, 272, 68),
-            (*b"NODE", 1, REQUIRED, 344, 2 * 48),
-            (*b"TRIS", 1, REQUIRED, 440, 2 * 48),
-            (*b"LEAF", 2, REQUIRED, 536, 2 * 64),
-            (*b"TEXN", 1, REQUIRED, 664, 72 * 4),
-            (*b"SUMS", 1, 0, 952, 6 * 8),
+            (*b"HEAD", 2, REQUIRED, 272, 76),
+            (*b"NODE", 1, REQUIRED, 352, 2 * 48),
+            (*b"TRIS", 1, REQUIRED, 448, 2 * 48),
+            (*b"LEAF", 2, REQUIRED, 544, 2 * 64),
+            (*b"TEXN", 1, REQUIRED, 672, 72 * 4),
+            (*b"SUMS", 1, 0, 960, 6 * 8),
         ]
     );
-    assert_eq!(bytes.len(), 952 + 6 * 8);
+    assert_eq!(bytes.len(), 960 + 6 * 8);
     // Each section's tag and CRC-32, in the table's order.
     for (k, s) in section_table(&bytes, &path).unwrap()[..6]
         .iter()
         .enumerate()
     {
-        let record = 952 + 8 * k;
+        let record = 960 + 8 * k;
         assert_eq!(&bytes[record..record + 4], &s.tag);
         assert_eq!(word(&bytes, record + 4), crc32fast::hash(&bytes[s.bytes()]));
     }
@@ -167,10 +167,13 @@ fn save_load_round_trips_exactly() {
     for k in 10..14 {
         assert_eq!(f32::from_bits(word(&bytes, parm(&bytes, k))), 0.0);
     }
-    // The structure: the atlas's pitch, rows and narrow rows last.
+    // The structure: the atlas's pitch, rows and packed rows last.
     let at = head(&bytes);
-    assert_eq!([56, 60, 64].map(|k| word(&bytes, at + k)), [8, 9, 0]);
-    assert_eq!(word(&bytes, 664), original.atlas.texels[0].0);
+    assert_eq!(
+        [56, 60, 64, 68, 72].map(|k| word(&bytes, at + k)),
+        [8, 9, 0, 0, 0]
+    );
+    assert_eq!(word(&bytes, 672), original.atlas.texels[0].0);
 }
 
 /// The little-endian u64 at byte `at`.
@@ -525,23 +528,29 @@ fn exact_crease_deg_round_trips_and_is_checked() {
     }
 }
 
-/// `sample()` with its last four atlas rows narrow: their codes made 8-bit ones.
-fn narrow_sample() -> Rbvh {
+/// `sample()` with its last four atlas rows packed — a row of 12-bit heights, one of 10-bit
+/// heights and two of 8-bit ones — their codes made codes of those bits.
+fn packed_sample() -> Rbvh {
     let mut r = sample();
-    r.atlas.narrow_rows = 4;
-    let wide = r.atlas.wide_len();
-    for t in &mut r.atlas.texels[wide..] {
-        let code = u32::from(t.height_code()) / Texel::NARROW_STEP * Texel::NARROW_STEP;
-        *t = Texel(t.0 & !0xFFFF | code);
+    r.atlas.packed_rows = [1, 1, 2];
+    for (bits, range) in r.atlas.bands().into_iter().skip(1) {
+        let step = Texel::step(bits);
+        for t in &mut r.atlas.texels[range] {
+            if !t.is_hole() {
+                let code = (u32::from(t.height_code()) / step).min((1 << bits) - 2) * step;
+                *t = Texel(t.0 & !0xFFFF | code);
+            }
+        }
     }
     r
 }
 
-/// A version 7 file (16-bit codes everywhere, no `narrow_rows`) loads with no narrow rows; an
-/// RBVH with narrow rows round-trips; narrow rows beyond the atlas, or a code in them that is
-/// not an 8-bit one (which the device could not store), are parse errors.
+/// A version 7 file (16-bit codes everywhere, no `narrow_rows`) loads with no packed rows; an
+/// RBVH with packed rows round-trips, and a `HEAD` of version 1 (its 8-bit rows alone) loads
+/// with no 12- or 10-bit rows; packed rows beyond the atlas, or a code in them that is not one
+/// of their bits (which the device could not store), are parse errors.
 #[test]
-fn narrow_rows_round_trip_and_are_checked() {
+fn packed_rows_round_trip_and_are_checked() {
     let rbvh = sample();
     let v7 = as_version(&rbvh, 7);
     assert_eq!(
@@ -549,34 +558,52 @@ fn narrow_rows_round_trip_and_are_checked() {
         all_sampled(&rbvh)
     );
 
-    let narrow = narrow_sample();
-    assert_eq!(narrow.atlas.wide_len(), 40);
-    let bytes = narrow.to_bytes();
-    let narrow_rows = head(&bytes) + 64;
-    assert_eq!(word(&bytes, narrow_rows), 4);
+    let packed = packed_sample();
+    assert_eq!(packed.atlas.band_ends(), [40, 48, 56]);
+    let bytes = packed.to_bytes();
+    let packed_rows = head(&bytes) + 64;
+    assert_eq!([0, 4, 8].map(|k| word(&bytes, packed_rows + k)), [1, 1, 2]);
     assert_eq!(
-        Rbvh::from_bytes(&bytes, Path::new("n.rbvh")).unwrap(),
-        narrow
+        Rbvh::from_bytes(&bytes, Path::new("p.rbvh")).unwrap(),
+        packed
+    );
+
+    // HEAD version 1: 8-bit rows alone, 68 bytes (the 12- and 10-bit codes are 16-bit ones).
+    let mut eight = packed.clone();
+    eight.atlas.packed_rows = [0, 0, 2];
+    let mut p = parts(&eight.to_bytes());
+    let head_part = p.iter_mut().find(|part| &part.0 == b"HEAD").unwrap();
+    assert_eq!(head_part.1, 2);
+    head_part.1 = 1;
+    head_part.3.drain(64..72);
+    assert_eq!(
+        Rbvh::from_bytes(&assemble(&p), Path::new("v1.rbvh")).unwrap(),
+        eight
     );
 
     let path = Path::new("rows.rbvh");
     let mut bad = bytes.clone();
-    set(&mut bad, narrow_rows, 10);
+    set(&mut bad, packed_rows, 7);
     let message = parse_error(Rbvh::from_bytes(&bad, path), path);
     assert!(
-        message.contains("narrow_rows 10 exceeds its 9 rows"),
+        message.contains("atlas.packed_rows [7, 1, 2] (12-, 10- and 8-bit rows) exceed its 9 rows"),
         "{message}"
     );
 
-    let mut odd = narrow.clone();
-    let k = (40..72).find(|&k| !odd.atlas.texels[k].is_hole()).unwrap();
-    odd.atlas.texels[k].0 += 1;
-    let path = Path::new("odd.rbvh");
-    let message = parse_error(Rbvh::from_bytes(&odd.to_bytes(), path), path);
-    assert!(
-        message.contains(&format!("atlas texel {k} lies in the narrow rows")),
-        "{message}"
-    );
+    for (rows, bits) in [(40..48, 12), (48..56, 10), (56..72, 8)] {
+        let mut odd = packed.clone();
+        let k = rows
+            .clone()
+            .find(|&k| !odd.atlas.texels[k].is_hole())
+            .unwrap();
+        odd.atlas.texels[k].0 += 1;
+        let path = Path::new("odd.rbvh");
+        let message = parse_error(Rbvh::from_bytes(&odd.to_bytes(), path), path);
+        assert!(
+            message.contains(&format!("atlas texel {k} lies in the {bits}-bit rows")),
+            "{message}"
+        );
+    }
 }
 
 /// A version 1–4 node whose box holds NaN has no grid to be quantized to: a parse error naming
@@ -946,7 +973,7 @@ fn unknown_sections_are_skipped_when_optional_and_refused_when_required() {
     p[2].2 = REQUIRED;
     let message = parse_error(Rbvh::from_bytes(&assemble(&p), path), path);
     assert!(
-        message.contains("section XTRA (table entry 2, bytes 368..371) is required")
+        message.contains("section XTRA (table entry 2, bytes 376..379) is required")
             && message.contains("does not know its tag"),
         "{message}"
     );
@@ -1015,7 +1042,7 @@ fn broken_section_tables_are_refused_naming_the_section() {
     );
     refused(
         &edit(&|b| set(b, entry(5) + 20, 72 * 4 + 8)),
-        &["section TEXN (table entry 5, bytes 632..928): truncated, the file has 920 bytes"],
+        &["section TEXN (table entry 5, bytes 640..936): truncated, the file has 928 bytes"],
     );
     refused(
         &edit(&|b| b[entry(5) + 12..entry(5) + 20].copy_from_slice(&u64::MAX.to_le_bytes())),
@@ -1023,7 +1050,7 @@ fn broken_section_tables_are_refused_naming_the_section() {
     );
     refused(
         &edit(&|b| set(b, entry(1) + 12, 232)),
-        &["section HEAD (table entry 1, bytes 232..300): overlaps section PARM (table entry 0, bytes 184..240)"],
+        &["section HEAD (table entry 1, bytes 232..308): overlaps section PARM (table entry 0, bytes 184..240)"],
     );
     refused(
         &edit(&|b| set(b, entry(0) + 12, 176)),
@@ -1032,15 +1059,15 @@ fn broken_section_tables_are_refused_naming_the_section() {
     refused(
         &edit(&|b| set(b, entry(1) + 12, 248)),
         &[
-            "section HEAD (table entry 1, bytes 248..316): a gap",
+            "section HEAD (table entry 1, bytes 248..324): a gap",
             "must start at byte 240",
         ],
     );
     refused(
-        &edit(&|b| b[309] = 1),
+        &edit(&|b| b[317] = 1),
         &[
             "section NODE (table entry 2",
-            "padding byte 309 before it is 0x01",
+            "padding byte 317 before it is 0x01",
         ],
     );
     refused(
@@ -1069,7 +1096,7 @@ fn broken_section_tables_are_refused_naming_the_section() {
     );
     refused(
         &with(&|p| drop(p.remove(4))),
-        &["no section LEAF of a version this build reads (the file's sections: PARM v8, HEAD v1, NODE v1, TRIS v1, TEXN v1)"],
+        &["no section LEAF of a version this build reads (the file's sections: PARM v8, HEAD v2, NODE v1, TRIS v1, TEXN v1)"],
     );
     refused(&with(&|p| drop(p.remove(0))), &["no section PARM"]);
     refused(
@@ -1082,11 +1109,11 @@ fn broken_section_tables_are_refused_naming_the_section() {
     );
     refused(
         &with(&|p| p[2].3.extend([0; 4])),
-        &["section NODE (table entry 2, bytes 312..412): 100 bytes, not a whole number of 48-byte records"],
+        &["section NODE (table entry 2, bytes 320..420): 100 bytes, not a whole number of 48-byte records"],
     );
     refused(
         &with(&|p| p[1].3.extend([0; 4])),
-        &["section HEAD (table entry 1, bytes 240..312): 72 bytes, not the 68 of its version"],
+        &["section HEAD (table entry 1, bytes 240..320): 80 bytes, not the 76 of its version"],
     );
     refused(
         &with(&|p| drop(p[0].3.drain(48..))),
@@ -1116,19 +1143,19 @@ fn broken_section_tables_are_refused_naming_the_section() {
     r.nodes[1].b_child = LEAF_BIT | 2;
     refused(
         &r.to_bytes(),
-        &["section NODE (table entry 2) at byte 392: node 1, child b: height-field leaf index"],
+        &["section NODE (table entry 2) at byte 400: node 1, child b: height-field leaf index"],
     );
     let mut r = sample();
     edit_triangle(&mut r, 1, |t| t.pad2 = 1);
     refused(
         &r.to_bytes(),
-        &["section TRIS (table entry 3) at byte 488: triangle 1"],
+        &["section TRIS (table entry 3) at byte 496: triangle 1"],
     );
     let mut r = sample();
     r.texel_size = f32::NAN;
     refused(
         &r.to_bytes(),
-        &["section HEAD (table entry 1, bytes 272..340): texel_size is NaN"],
+        &["section HEAD (table entry 1, bytes 272..348): texel_size is NaN"],
     );
     // A version 12 file has no table to read.
     let message = section_table(&as_v12(&sample()), path)

@@ -54,9 +54,14 @@ pub struct PaintParams {
     pub atlas_pitch: u32,
     /// GLSL `atlas_len`: texels in the atlas; reads at or beyond it are skipped.
     pub atlas_len: u32,
-    /// GLSL `atlas_wide_len`: texels before the atlas's narrow band
+    /// GLSL `atlas_wide_len`: texels before the atlas's bands of packed heights
     /// ([`Atlas::wide_len`](crate::rbvh::Atlas::wide_len)).
     pub atlas_wide_len: u32,
+    /// GLSL `atlas_end12`: texels before the end of the atlas's 12-bit band
+    /// ([`Atlas::bands`](crate::rbvh::Atlas::bands)).
+    pub atlas_end12: u32,
+    /// GLSL `atlas_end10`: texels before the end of the atlas's 10-bit band.
+    pub atlas_end10: u32,
     /// GLSL `reserved`: zero, so that the addresses are 8-byte aligned.
     pub reserved: u32,
     /// GLSL `atlas_address` (`uvec2`, low word first): the atlas's device address; 0 when bound.
@@ -65,7 +70,7 @@ pub struct PaintParams {
     /// when bound.
     pub colours_address: u64,
 }
-const _: () = assert!(std::mem::size_of::<PaintParams>() == 104);
+const _: () = assert!(std::mem::size_of::<PaintParams>() == 112);
 
 /// What one [`Painter::paint`] call did.
 #[derive(Clone, Copy, Debug, Default)]
@@ -166,26 +171,22 @@ fn own_parts(ctx: &Context, rbvh: &Rbvh) -> Result<(Vec<u32>, Vec<u32>, Reach)> 
 }
 
 /// The context, shared atlas, colour words and reach of [`Painter::sharing`]: the tracer must hold
-/// `rbvh`'s atlas (same pitch, texel count and narrow band).
+/// `rbvh`'s atlas (same pitch, texel count and bands).
 fn shared_parts(tracer: &Tracer, rbvh: &Rbvh) -> Result<(Context, Arc<Buffer>, Vec<u32>, Reach)> {
     no_height_only(rbvh)?;
-    let Some((atlas, pitch, len, wide_len)) = tracer.atlas() else {
+    let Some((atlas, pitch, len, ends)) = tracer.atlas() else {
         return Err(Error::param(
             "tracer",
             "an exact-BVH tracer has no atlas to paint: share an RBVH tracer",
         ));
     };
-    let ours = (
-        rbvh.atlas.pitch,
-        rbvh.atlas.texels.len(),
-        rbvh.atlas.wide_len(),
-    );
-    if (pitch, len as usize, wide_len as usize) != ours {
+    let ours = (rbvh.atlas.pitch, rbvh.atlas.texels.len(), band_ends(rbvh));
+    if (pitch, len as usize, ends) != ours {
         return Err(Error::param(
             "tracer",
             format!(
-                "its atlas ({len} texels, {wide_len} of them wide, pitch {pitch}) is not this \
-                 RBVH's ({} texels, {} wide, pitch {})",
+                "its atlas ({len} texels, its bands ending at {ends:?}, pitch {pitch}) is not \
+                 this RBVH's ({} texels, bands ending at {:?}, pitch {})",
                 ours.1, ours.2, ours.0
             ),
         ));
@@ -209,7 +210,14 @@ pub struct Painter {
     colours: Buffer,
     pitch: u32,
     atlas_len: u32,
-    atlas_wide_len: u32,
+    /// Where the atlas's 16-, 12- and 10-bit bands end ([`band_ends`]).
+    atlas_ends: [u32; 3],
+}
+
+/// Texels before the ends of `rbvh`'s 16-, 12- and 10-bit bands
+/// ([`crate::rbvh::Atlas::band_ends`]): GLSL `atlas_wide_len`, `atlas_end12` and `atlas_end10`.
+fn band_ends(rbvh: &Rbvh) -> [u32; 3] {
+    rbvh.atlas.band_ends().map(|end| end as u32)
 }
 
 impl Painter {
@@ -316,7 +324,7 @@ impl Painter {
             colours,
             pitch: rbvh.atlas.pitch,
             atlas_len: rbvh.atlas.texels.len() as u32,
-            atlas_wide_len: rbvh.atlas.wide_len() as u32,
+            atlas_ends: band_ends(rbvh),
         })
     }
 
@@ -406,7 +414,9 @@ impl Painter {
                 brush_count,
                 atlas_pitch: self.pitch,
                 atlas_len: self.atlas_len,
-                atlas_wide_len: self.atlas_wide_len,
+                atlas_wide_len: self.atlas_ends[0],
+                atlas_end12: self.atlas_ends[1],
+                atlas_end10: self.atlas_ends[2],
                 reserved: 0,
                 atlas_address,
                 colours_address,

@@ -77,9 +77,15 @@ pub struct TraceParams {
     /// GLSL `atlas_len`: texels in the atlas; the blocks' height ranges follow them in the same
     /// buffer, and texel reads at or beyond it see holes.
     pub atlas_len: u32,
-    /// GLSL `atlas_wide_len`: texels before the atlas's narrow band
+    /// GLSL `atlas_wide_len`: texels before the atlas's bands of packed heights
     /// ([`Atlas::wide_len`](crate::rbvh::Atlas::wide_len)), whose heights are 16-bit codes.
     pub atlas_wide_len: u32,
+    /// GLSL `atlas_end12`: texels before the end of the atlas's band of 12-bit heights
+    /// ([`Atlas::bands`](crate::rbvh::Atlas::bands)); the 10-bit band starts there.
+    pub atlas_end12: u32,
+    /// GLSL `atlas_end10`: texels before the end of the atlas's band of 10-bit heights; the
+    /// 8-bit band starts there and ends at `atlas_len`.
+    pub atlas_end10: u32,
     /// LOD records (one per node; 0 without LOD).
     pub lod_node_count: u32,
     /// LOD column words.
@@ -92,7 +98,7 @@ pub struct TraceParams {
     /// where arrays are bound or absent.
     pub addresses: [u64; 7],
 }
-const _: () = assert!(std::mem::size_of::<TraceParams>() == 104);
+const _: () = assert!(std::mem::size_of::<TraceParams>() == 112);
 
 const FLAG_ANY_HIT: u32 = 1;
 
@@ -107,8 +113,8 @@ const COUNT_CONSTANT_ID: u32 = 0;
 const JUMPS_CONSTANT_ID: u32 = 1;
 
 /// `constant_id` of the plain RBVH trace shaders' `rbvh_height_only`
-/// (`glsl/trace_rbvh_main.glsl`): the atlas holds height codes alone (two to a word, four in its
-/// narrow band: [`Atlas::device_words`](crate::rbvh::Atlas::device_words)).
+/// (`glsl/trace_rbvh_main.glsl`): the atlas holds height codes alone (two to a word, 12, 10 or 8
+/// bits each in its packed bands: [`Atlas::device_words`](crate::rbvh::Atlas::device_words)).
 const HEIGHT_ONLY_CONSTANT_ID: u32 = 2;
 
 /// One of a ray's two counter records as the trace shaders keep them (`glsl/trace_io.glsl`):
@@ -370,23 +376,27 @@ fn rbvh_parts<'a>(rbvh: &'a Rbvh, atlas_words: &'a [u32]) -> Result<(TraceParams
             ),
         ));
     }
-    if let Some((k, code)) = rbvh.atlas.first_wide_code_in_narrow_band() {
+    if let Some((k, code, bits)) = rbvh.atlas.first_code_off_its_band() {
         return Err(Error::param(
             "rbvh",
             format!(
-                "atlas texel {k} lies in the narrow rows but has height code {code}, not a \
-                 multiple of {} (an 8-bit code, all the device stores there)",
-                crate::rbvh::Texel::NARROW_STEP
+                "atlas texel {k} lies in the {bits}-bit rows but has height code {code}, not a \
+                 multiple of {} up to {} (a {bits}-bit code, all the device stores there)",
+                crate::rbvh::Texel::step(bits),
+                crate::rbvh::Texel::top(bits)
             ),
         ));
     }
+    let ends = rbvh.atlas.band_ends();
     let sizes = TraceParams {
         node_count: count("nodes", rbvh.nodes.len())?,
         tri_count: count("triangles", rbvh.triangles.len())?,
         heightfield_count: count("height fields", rbvh.heightfields.len())?,
         atlas_pitch: rbvh.atlas.pitch,
         atlas_len: count("atlas texels", rbvh.atlas.texels.len())?,
-        atlas_wide_len: count("atlas texels", rbvh.atlas.wide_len())?,
+        atlas_wide_len: count("atlas texels", ends[0])?,
+        atlas_end12: count("atlas texels", ends[1])?,
+        atlas_end10: count("atlas texels", ends[2])?,
         ..TraceParams::default()
     };
     // The shaders index the block ranges after the texels with 32 bits too.
@@ -937,13 +947,15 @@ impl Tracer {
             .sum()
     }
 
-    /// The RBVH atlas on the device with its pitch, texel count and wide texels, for a painter
-    /// that shares it ([`super::Painter::sharing`]); None for the exact BVH.
-    pub(crate) fn atlas(&self) -> Option<(&Arc<Buffer>, u32, u32, u32)> {
+    /// The RBVH atlas on the device with its pitch, texel count and the ends of its 16-, 12- and
+    /// 10-bit bands, for a painter that shares it ([`super::Painter::sharing`]); None for the
+    /// exact BVH.
+    pub(crate) fn atlas(&self) -> Option<(&Arc<Buffer>, u32, u32, [u32; 3])> {
         let sz = &self.sizes;
-        self.structure
-            .get(3)
-            .map(|b| (b, sz.atlas_pitch, sz.atlas_len, sz.atlas_wide_len))
+        self.structure.get(3).map(|b| {
+            let ends = [sz.atlas_wide_len, sz.atlas_end12, sz.atlas_end10];
+            (b, sz.atlas_pitch, sz.atlas_len, ends)
+        })
     }
 
     /// Traces `rays` without footprints or per-ray counters: [`Tracer::trace_with`] with

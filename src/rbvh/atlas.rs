@@ -9,7 +9,7 @@
 
 use std::borrow::Borrow;
 
-use super::layout::{Atlas, Texel};
+use super::layout::{Atlas, Texel, PACKED_BITS};
 use super::params::TexelFormat;
 use super::ranges::BLOCK;
 use super::raster::Tile;
@@ -22,13 +22,14 @@ const MIN_PITCH: u64 = 16;
 /// power of two above its width instead, so that packing still succeeds.
 const MAX_PITCH: u64 = 16384;
 
-/// What packing needs to know of a tile: its size in texels, and whether its heights are 8-bit
-/// codes (it then goes to the atlas's narrow band, [`Atlas::narrow_rows`]).
+/// What packing needs to know of a tile: its size in texels, and the bits of its height codes
+/// (16, or one of [`PACKED_BITS`]: it then goes to the atlas's band of that width,
+/// [`Atlas::packed_rows`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Footprint {
     pub res_u: u32,
     pub res_v: u32,
-    pub narrow: bool,
+    pub bits: u32,
 }
 
 impl Footprint {
@@ -37,7 +38,7 @@ impl Footprint {
         Footprint {
             res_u: tile.frame.res_u,
             res_v: tile.frame.res_v,
-            narrow: tile.narrow,
+            bits: tile.bits,
         }
     }
 }
@@ -48,65 +49,92 @@ pub struct Packing {
     /// Texels per atlas row.
     pub pitch: u32,
     pub rows: u32,
-    /// Rows at the end that hold the narrow tiles (and only those).
-    pub narrow_rows: u32,
+    /// Rows at the end that hold the packed tiles, band by band in the order of [`PACKED_BITS`]
+    /// (and only those: [`Atlas::packed_rows`]).
+    pub packed_rows: [u32; 3],
     /// Per tile (input order): atlas index of its texel (0, 0), `y * pitch + x`. Tiles without
     /// texels (a zero side) are not placed and get 0.
     pub bases: Vec<u32>,
 }
 
-/// Shelf packing of `tiles`: the wide ones first, then on new shelves the narrow ones (so that
-/// the narrow band is whole rows at the end); within each, sorted by `res_v` descending, ties
-/// by `res_u` descending then input index (deterministic), placed left to right on shelves as
-/// tall as their first tile, with a new shelf when the row is full. The pitch is the power of
-/// two, from the widest tile's (at least 16) up to 16384 (see [`MAX_PITCH`]), whose texels cost
-/// the device the fewest bytes in `format` (then the fewest texels, then the smallest pitch):
-/// every unused texel costs the device its bytes, and a pitch chosen for a square atlas left a
-/// last shelf of 64-texel tiles mostly empty (the default scene's Q2: 83.5% filled at pitch
-/// 1024). Without a narrow band that is the pitch of the fewest texels.
+/// Shelf packing of `tiles`: the 16-bit ones first, then on new shelves each band of packed
+/// heights, widest first (so that each band is whole rows, the 8-bit one at the end); within
+/// each, sorted by `res_v` descending, ties by `res_u` descending then input index
+/// (deterministic), placed left to right on shelves as tall as their first tile, with a new
+/// shelf when the row is full. The pitch is the power of two, from the widest tile's (at least
+/// 16) up to 16384 (see [`MAX_PITCH`]), whose texels cost the device the fewest bytes in `format`
+/// (then the fewest texels, then the smallest pitch): every unused texel costs the device its
+/// bytes, and a pitch chosen for a square atlas left a last shelf of 64-texel tiles mostly empty
+/// (the default scene's Q2: 83.5% filled at pitch 1024). Without packed bands that is the pitch
+/// of the fewest texels.
 ///
-/// The narrow tiles keep their band only where it costs the device fewer bytes in `format` than
-/// storing every tile wide: the band starts on a shelf of its own, and a few narrow tiles save
-/// less than that shelf's unused texels cost (the default scene's Q2, 1.4% of its texels narrow,
-/// took 0.508 → 0.513 MB of atlas with its band). A narrow tile stored wide keeps its codes,
-/// 16-bit ones (`257 c`, [`Texel::narrow_code_of`]) that every reader decodes the same; so one
-/// RBVH's builds in the two formats hold the same tiles and codes, placed apart only where one
-/// keeps the band and the other does not.
+/// Each band keeps its tiles only where that costs the device fewer bytes in `format` than
+/// storing them with 16-bit codes: a band starts on a shelf of its own, and a few tiles save less
+/// than that shelf's unused texels cost (the default scene's Q2, 1.4% of its texels 8-bit, took
+/// 0.508 → 0.513 MB of atlas with its band). Every choice of bands kept is packed and the
+/// cheapest taken (ties keep more bands). A tile stored with 16-bit codes keeps its codes
+/// (`step · c`, [`Texel::code_of`]), which every reader decodes the same; so one RBVH's builds in
+/// the two formats hold the same tiles and codes, placed apart only where one keeps a band and
+/// the other does not.
 ///
 /// Fails when the atlas would need more texels than a 32-bit texel index can address.
 pub fn pack(tiles: &[Footprint], format: TexelFormat) -> Result<Packing> {
-    let banded = pack_as_given(tiles, format)?;
-    if banded.narrow_rows == 0 {
-        return Ok(banded);
-    }
-    let wide: Vec<Footprint> = tiles
-        .iter()
-        .map(|&f| Footprint { narrow: false, ..f })
+    let present: Vec<usize> = (0..PACKED_BITS.len())
+        .filter(|&b| tiles.iter().any(|f| f.bits == PACKED_BITS[b]))
         .collect();
-    let unbanded = pack_as_given(&wide, format)?;
-    let cheaper = device_bytes(&unbanded, format) < device_bytes(&banded, format);
-    Ok(if cheaper { unbanded } else { banded })
+    let mut best: Option<(u64, Packing)> = None;
+    // Subsets of the present bands, all of them first.
+    for dropped in 0..1u32 << present.len() {
+        let kept: Vec<u32> = present
+            .iter()
+            .enumerate()
+            .filter(|&(n, _)| dropped & (1 << n) == 0)
+            .map(|(_, &b)| PACKED_BITS[b])
+            .collect();
+        let given: Vec<Footprint> = tiles
+            .iter()
+            .map(|&f| Footprint {
+                bits: if kept.contains(&f.bits) { f.bits } else { 16 },
+                ..f
+            })
+            .collect();
+        let packing = pack_as_given(&given, format)?;
+        let bytes = device_bytes(&packing, format);
+        if best.as_ref().is_none_or(|(least, _)| bytes < *least) {
+            best = Some((bytes, packing));
+        }
+    }
+    Ok(best
+        .expect("at least the packing with every present band")
+        .1)
 }
 
 /// What `packing`'s atlas costs the device in `format` (as [`Atlas::device_words`] lays it out:
-/// 4 or 2 bytes a wide texel, 3 or 1 a narrow one, 4 a block range), to a few bytes of rounding.
+/// 4 or 2 bytes a 16-bit texel, `bits / 8` a packed one with 2 more for its normal, 4 a block
+/// range), to a few bytes of rounding.
 fn device_bytes(packing: &Packing, format: TexelFormat) -> u64 {
     let (pitch, rows) = (u64::from(packing.pitch), u64::from(packing.rows));
     let blocks = pitch.div_ceil(u64::from(BLOCK)) * rows.div_ceil(u64::from(BLOCK));
-    texel_bytes(pitch, rows, u64::from(packing.narrow_rows), format) + 4 * blocks
+    texel_bytes(pitch, rows, packing.packed_rows.map(u64::from), format) + 4 * blocks
 }
 
-/// What `rows` rows of `pitch` texels cost the device in `format`, the last `narrow_rows` of them
-/// 8-bit (the block ranges aside).
-fn texel_bytes(pitch: u64, rows: u64, narrow_rows: u64, format: TexelFormat) -> u64 {
-    let (wide_bytes, narrow_bytes) = match format {
-        TexelFormat::HeightNormal => (4, 3),
-        TexelFormat::Height => (2, 1),
+/// What `rows` rows of `pitch` texels cost the device in `format`, the last `packed_rows` of
+/// them in the bands of [`PACKED_BITS`] (the block ranges aside).
+fn texel_bytes(pitch: u64, rows: u64, packed_rows: [u64; 3], format: TexelFormat) -> u64 {
+    let normal_bits = match format {
+        TexelFormat::HeightNormal => 16,
+        TexelFormat::Height => 0,
     };
-    (rows - narrow_rows) * pitch * wide_bytes + narrow_rows * pitch * narrow_bytes
+    let wide_rows = rows - packed_rows.iter().sum::<u64>();
+    let packed_bits: u64 = PACKED_BITS
+        .iter()
+        .zip(packed_rows)
+        .map(|(&bits, rows)| rows * pitch * (u64::from(bits) + normal_bits))
+        .sum();
+    wide_rows * pitch * format.bytes() + packed_bits.div_ceil(8)
 }
 
-/// [`pack`] with every tile's format as given.
+/// [`pack`] with every tile's bits as given.
 fn pack_as_given(tiles: &[Footprint], format: TexelFormat) -> Result<Packing> {
     let widest = tiles
         .iter()
@@ -120,7 +148,7 @@ fn pack_as_given(tiles: &[Footprint], format: TexelFormat) -> Result<Packing> {
     order.sort_unstable_by_key(|&i| {
         let f = tiles[i];
         (
-            f.narrow,
+            std::cmp::Reverse(f.bits),
             std::cmp::Reverse(f.res_v),
             std::cmp::Reverse(f.res_u),
             i,
@@ -129,8 +157,7 @@ fn pack_as_given(tiles: &[Footprint], format: TexelFormat) -> Result<Packing> {
     let (pitch, shelves) = std::iter::successors(Some(least), |&p| (p < most).then_some(p * 2))
         .map(|pitch| (pitch, shelve(tiles, &order, pitch)))
         .min_by_key(|(pitch, shelves)| {
-            let narrow_rows = shelves.rows - shelves.narrow_from;
-            let bytes = texel_bytes(*pitch, shelves.rows, narrow_rows, format);
+            let bytes = texel_bytes(*pitch, shelves.rows, shelves.packed_rows(), format);
             (bytes, pitch * shelves.rows, *pitch)
         })
         .expect("at least one pitch");
@@ -149,7 +176,7 @@ fn pack_as_given(tiles: &[Footprint], format: TexelFormat) -> Result<Packing> {
     Ok(Packing {
         pitch: pitch as u32,
         rows: shelves.rows as u32,
-        narrow_rows: (shelves.rows - shelves.narrow_from) as u32,
+        packed_rows: shelves.packed_rows().map(|r| r as u32),
         bases: shelves
             .origins
             .iter()
@@ -163,26 +190,36 @@ struct Shelves {
     /// Per tile (input order), its texel (0, 0) as (column, row); (0, 0) for a tile not placed.
     origins: Vec<(u64, u64)>,
     rows: u64,
-    /// First row of the narrow band (`rows` without narrow tiles).
-    narrow_from: u64,
+    /// First row of each band of [`PACKED_BITS`] (where the next begins, or `rows`, for a band
+    /// without tiles).
+    packed_from: [u64; 3],
 }
 
-/// Places `tiles` in `order` on shelves of `pitch` texels.
+impl Shelves {
+    /// Rows of each band of [`PACKED_BITS`].
+    fn packed_rows(&self) -> [u64; 3] {
+        let end = |b: usize| self.packed_from.get(b + 1).copied().unwrap_or(self.rows);
+        [0, 1, 2].map(|b| end(b) - self.packed_from[b])
+    }
+}
+
+/// Places `tiles` in `order` (16-bit tiles first, then by band) on shelves of `pitch` texels.
 fn shelve(tiles: &[Footprint], order: &[usize], pitch: u64) -> Shelves {
     let mut origins = vec![(0u64, 0u64); tiles.len()];
     let (mut x, mut shelf_y, mut shelf_h) = (0u64, 0u64, 0u64);
-    let mut narrow_from = None;
+    let mut starts: [Option<u64>; 3] = [None; 3];
     for &i in order {
         let f = tiles[i];
         let (u, v) = (u64::from(f.res_u), u64::from(f.res_v));
         if u == 0 || v == 0 {
             continue;
         }
-        if f.narrow && narrow_from.is_none() {
-            // The narrow band starts on a shelf of its own.
+        let band = PACKED_BITS.iter().position(|&b| b == f.bits);
+        if let Some(b) = band.filter(|&b| starts[b].is_none()) {
+            // Each band starts on a shelf of its own.
             shelf_y += shelf_h;
             (x, shelf_h) = (0, 0);
-            narrow_from = Some(shelf_y);
+            starts[b] = Some(shelf_y);
         }
         if x + u > pitch {
             shelf_y += shelf_h;
@@ -195,10 +232,15 @@ fn shelve(tiles: &[Footprint], order: &[usize], pitch: u64) -> Shelves {
         x += u;
     }
     let rows = shelf_y + shelf_h;
+    let mut packed_from = [rows; 3];
+    for b in (0..3).rev() {
+        let next = packed_from.get(b + 1).copied().unwrap_or(rows);
+        packed_from[b] = starts[b].unwrap_or(next);
+    }
     Shelves {
         origins,
         rows,
-        narrow_from: narrow_from.unwrap_or(rows),
+        packed_from,
     }
 }
 
@@ -225,7 +267,7 @@ pub fn assemble<T: Borrow<Tile>>(tiles: &[T], packing: &Packing) -> Atlas {
     Atlas {
         pitch: packing.pitch,
         rows: packing.rows,
-        narrow_rows: packing.narrow_rows,
+        packed_rows: packing.packed_rows,
         texels,
     }
 }
@@ -256,7 +298,7 @@ mod tests {
             .map(|&(res_u, res_v)| Footprint {
                 res_u,
                 res_v,
-                narrow: false,
+                bits: 16,
             })
             .collect()
     }
@@ -305,51 +347,54 @@ mod tests {
         }
     }
 
+    /// Each band of packed heights is whole rows after the 16-bit ones, widest first, and holds
+    /// its tiles alone.
     #[test]
-    fn narrow_tiles_fill_whole_rows_at_the_end() {
-        let s = sizes(300, 4, 64);
+    fn packed_tiles_fill_whole_rows_at_the_end_band_by_band() {
+        let s = sizes(400, 4, 64);
         let tiles: Vec<Footprint> = s
             .iter()
             .enumerate()
             .map(|(n, &(res_u, res_v))| Footprint {
                 res_u,
                 res_v,
-                narrow: n % 3 != 0,
+                bits: [16, 12, 10, 8][n % 4],
             })
             .collect();
         let p = pack(&tiles, TexelFormat::HeightNormal).unwrap();
         check_placement(&s, &p);
-        assert!(p.narrow_rows > 0 && p.narrow_rows < p.rows);
-        let band = (p.rows - p.narrow_rows) * p.pitch;
+        assert!(p.packed_rows.iter().all(|&r| r > 0), "{:?}", p.packed_rows);
+        let atlas = assemble::<Tile>(&[], &p);
+        let bands = Atlas {
+            texels: vec![Texel::HOLE; (p.pitch * p.rows) as usize],
+            ..atlas
+        }
+        .bands();
+        assert!(!bands[0].1.is_empty());
         for (f, &base) in tiles.iter().zip(&p.bases) {
             let last = base + (f.res_v - 1) * p.pitch + f.res_u - 1;
-            if f.narrow {
-                assert!(
-                    base >= band,
-                    "a narrow tile at {base} above the band at {band}"
-                );
-            } else {
-                assert!(
-                    last < band,
-                    "a wide tile reaching {last} into the band at {band}"
-                );
-            }
+            let (_, band) = bands.iter().find(|(bits, _)| *bits == f.bits).unwrap();
+            assert!(
+                band.contains(&(base as usize)) && band.contains(&(last as usize)),
+                "a {}-bit tile at {base}..={last} outside its band {band:?}",
+                f.bits
+            );
         }
-        let all_narrow: Vec<Footprint> = tiles
-            .iter()
-            .map(|&f| Footprint { narrow: true, ..f })
-            .collect();
-        let p = pack(&all_narrow, TexelFormat::HeightNormal).unwrap();
-        assert_eq!(p.narrow_rows, p.rows);
+        for bits in PACKED_BITS {
+            let all: Vec<Footprint> = tiles.iter().map(|&f| Footprint { bits, ..f }).collect();
+            let p = pack(&all, TexelFormat::HeightNormal).unwrap();
+            let b = PACKED_BITS.iter().position(|&x| x == bits).unwrap();
+            assert_eq!(p.packed_rows[b], p.rows, "{bits} bits");
+        }
         assert_eq!(
             pack(&wide(&s), TexelFormat::HeightNormal)
                 .unwrap()
-                .narrow_rows,
-            0
+                .packed_rows,
+            [0; 3]
         );
     }
 
-    /// A band of one small narrow tile would take a shelf of its own, where stored wide it fits
+    /// A band of one small 8-bit tile would take a shelf of its own, where stored wide it fits
     /// beside the last wide tile: it is stored wide, in either format.
     #[test]
     fn a_band_that_costs_more_than_it_saves_is_not_kept() {
@@ -357,15 +402,19 @@ mod tests {
         tiles.push(Footprint {
             res_u: 4,
             res_v: 8,
-            narrow: true,
+            bits: 8,
         });
         let sizes: Vec<(u32, u32)> = tiles.iter().map(|f| (f.res_u, f.res_v)).collect();
         for format in [TexelFormat::HeightNormal, TexelFormat::Height] {
             let p = pack(&tiles, format).unwrap();
             check_placement(&sizes, &p);
-            assert_eq!((p.pitch, p.rows, p.narrow_rows), (64, 320, 0), "{format:?}");
+            assert_eq!(
+                (p.pitch, p.rows, p.packed_rows),
+                (64, 320, [0; 3]),
+                "{format:?}"
+            );
             let banded = pack_as_given(&tiles, format).unwrap();
-            assert_eq!(banded.narrow_rows, 8);
+            assert_eq!(banded.packed_rows, [0, 0, 8]);
             assert!(device_bytes(&p, format) < device_bytes(&banded, format));
         }
     }
@@ -408,7 +457,7 @@ mod tests {
             Packing {
                 pitch: 16,
                 rows: 0,
-                narrow_rows: 0,
+                packed_rows: [0; 3],
                 bases: vec![]
             }
         );
@@ -451,7 +500,7 @@ mod tests {
                     .collect(),
                 h_scale: 1.0,
                 slope: glam::Vec2::ZERO,
-                narrow: false,
+                bits: 16,
                 covered: u * v,
                 sources: Vec::new(),
                 exposed: Vec::new(),

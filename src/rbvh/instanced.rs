@@ -395,11 +395,10 @@ fn merge(
             }
             t
         }));
-        let wide = r.atlas.wide_len();
         footprints.extend(r.heightfields.iter().map(|h| Footprint {
             res_u: h.res_u,
             res_v: h.res_v,
-            narrow: h.atlas_base as usize >= wide,
+            bits: r.atlas.bits_at(h.atlas_base as usize),
         }));
         heightfields.extend_from_slice(&r.heightfields);
         stats.heightfield_leaves += r.stats.heightfield_leaves;
@@ -496,7 +495,7 @@ fn repack(
     let atlas = Atlas {
         pitch: packing.pitch,
         rows: packing.rows,
-        narrow_rows: packing.narrow_rows,
+        packed_rows: packing.packed_rows,
         texels,
     };
     Ok((atlas, colours))

@@ -214,11 +214,40 @@ impl Texel {
     pub const MAX_CODE: u16 = 0xFFFE;
     /// An empty texel: [`Texel::HOLE_CODE`] with a zero normal word.
     pub const HOLE: Texel = Texel(Self::HOLE_CODE as u32);
-    /// The 16-bit code of one step of an 8-bit code ([`Texel::narrow_code_of`]): byte `c` is
-    /// code `c · 257` (`c` repeated in both bytes).
-    pub const NARROW_STEP: u32 = 0x101;
-    /// Largest height code of a surface texel of an 8-bit tile: `254 · NARROW_STEP`.
-    pub const NARROW_MAX: u32 = 254 * Self::NARROW_STEP;
+
+    /// The 16-bit code of one step of a `bits`-bit code ([`Texel::code_of`]; `bits` 16 or one of
+    /// [`PACKED_BITS`]): the largest odd number with `2^bits − 2` steps within [`Texel::MAX_CODE`]
+    /// — 1 for 16 bits, 15 for 12, 63 for 10, 257 for 8 (byte `c` is code `c · 257`, `c`
+    /// repeated in both bytes). Odd, so that a code keeps its step count's parity (the sampled
+    /// mark, [`Texel::is_sampled`]).
+    pub const fn step(bits: u32) -> u32 {
+        let s = Self::MAX_CODE as u32 / ((1 << bits) - 2);
+        s - (1 - s % 2)
+    }
+
+    /// Largest height code of a surface texel of a `bits`-bit tile: `(2^bits − 2) · step(bits)`
+    /// ([`Texel::MAX_CODE`] for 16 bits); `2^bits − 1` steps stand for a hole.
+    pub const fn top(bits: u32) -> u32 {
+        ((1 << bits) - 2) * Self::step(bits)
+    }
+
+    /// Whether a `bits`-bit tile can hold `code`: a hole, or a whole number of its steps up to
+    /// [`Texel::top`].
+    pub fn fits(code: u16, bits: u32) -> bool {
+        let code = u32::from(code);
+        code == u32::from(Self::HOLE_CODE)
+            || (code % Self::step(bits) == 0 && code <= Self::top(bits))
+    }
+
+    /// The 16-bit code the device reads for the `bits`-bit field `c` it stores
+    /// (`glsl/atlas.glsl`): `c` steps, or a hole for all ones.
+    pub fn expand(c: u32, bits: u32) -> u16 {
+        if c == (1 << bits) - 1 {
+            Self::HOLE_CODE
+        } else {
+            (c * Self::step(bits)) as u16
+        }
+    }
 
     /// A surface texel of height code `height_code` (at most [`Texel::MAX_CODE`]) and world-space
     /// unit `normal`, octahedrally encoded.
@@ -243,24 +272,16 @@ impl Texel {
         self.height_code() & 1 == 0
     }
 
-    /// The code nearest `q` (a height in quanta, clamped to `[0, MAX_CODE]`) whose parity says
-    /// whether the height was `sampled` ([`Texel::is_sampled`]): within one code of `q`.
-    pub fn code_of(q: f64, sampled: bool) -> u16 {
-        nearest_code(q, sampled, Self::MAX_CODE)
-    }
-
-    /// The code nearest `q` (in quanta of a 16-bit code, clamped to `[0, NARROW_MAX]`) among the
-    /// codes an 8-bit tile can hold: `NARROW_STEP · c` with `c` of `sampled`'s parity in
-    /// `0..=254`, within one step of `q`. `NARROW_STEP` is odd, so the product keeps `c`'s
-    /// parity (the sampled mark), and `255 · NARROW_STEP` is [`Texel::HOLE_CODE`]: the device
-    /// expands a stored byte `c` to its code by that one product, holes included.
-    pub fn narrow_code_of(q: f64, sampled: bool) -> u16 {
-        let step = f64::from(Self::NARROW_STEP);
-        nearest_code(
-            q / step,
+    /// The code nearest `q` (a height in quanta of a 16-bit code, clamped to `[0, top(bits)]`)
+    /// among the codes a `bits`-bit tile can hold: [`Texel::step`]`(bits) · c` with `c` of
+    /// `sampled`'s parity ([`Texel::is_sampled`]) in `0..=2^bits − 2`, within one step of `q`.
+    pub fn code_of(q: f64, sampled: bool, bits: u32) -> u16 {
+        let step = Self::step(bits);
+        (u32::from(nearest_code(
+            q / f64::from(step),
             sampled,
-            (Self::NARROW_MAX / Self::NARROW_STEP) as u16,
-        ) * Self::NARROW_STEP as u16
+            ((1u32 << bits) - 2) as u16,
+        )) * step) as u16
     }
 
     /// Bits 16–31 decoded: the world-space unit normal (meaningless for a hole).
@@ -376,37 +397,80 @@ fn sign(x: f32) -> f32 {
 /// The shaders require `pitch` to be a power of two (they locate tiles with shifts): the builder
 /// makes it one, and the file reader and the upload refuse any other.
 ///
-/// The last `narrow_rows` rows are the *narrow band*: every tile there has 8-bit height codes
-/// ([`Texel::narrow_code_of`]: multiples of [`Texel::NARROW_STEP`]), which the device stores a
-/// byte each ([`Atlas::device_words`]); the rows above hold 16-bit codes. The host keeps every
-/// texel as a full [`Texel`] either way, so that the CPU march reads the codes the device decodes.
+/// The last rows are the *bands of packed heights* ([`Atlas::packed_rows`]): every tile in the
+/// band of [`PACKED_BITS`]`[b]` has codes of that many bits ([`Texel::fits`]), which the device
+/// stores that many bits each ([`Atlas::device_words`]); the rows above hold 16-bit codes. The
+/// host keeps every texel as a full [`Texel`] either way, so that the CPU march reads the codes
+/// the device decodes.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Atlas {
     /// Texels per row; a power of two (the row stride of every tile).
     pub pitch: u32,
     /// Rows of texels.
     pub rows: u32,
-    /// Rows at the end of the atlas whose tiles have 8-bit height codes (0: none).
-    pub narrow_rows: u32,
+    /// Rows at the end of the atlas whose tiles have packed height codes, band by band in the
+    /// order of [`PACKED_BITS`] (the 12-bit rows first, the 8-bit ones last; 0: no such band).
+    pub packed_rows: [u32; 3],
     /// `pitch × rows` texels, row-major; unused texels are holes.
     pub texels: Vec<Texel>,
 }
 
+/// Widths of the height codes of the atlas's bands of packed heights, widest first (issue
+/// "Small and valid at every scale": bytes per texel that fit the surface). A tile whose heights
+/// span at most `2^b − 2` quanta of `NARROW_QUANTUM_TEXELS` (1/128 texel, `raster/quantize.rs`)
+/// takes the narrowest such `b`, 16 bits where none holds them. Measured on the presets' Q2
+/// before the 12- and 10-bit bands (docs/paper-scale.md, "Heights in 10 and 12 bits"): every
+/// tile's heights spanned at most 4,094 quanta (32 texels) over its plane, 55–90% at most 1,022.
+pub const PACKED_BITS: [u32; 3] = [12, 10, 8];
+
 impl Atlas {
-    /// Texels before the narrow band: those the device stores with 16-bit height codes.
-    pub fn wide_len(&self) -> usize {
-        let wide_rows = self.rows.saturating_sub(self.narrow_rows) as usize;
-        (wide_rows * self.pitch as usize).min(self.texels.len())
+    /// The atlas's bands as (bits, texel range), in the order the device stores them: the
+    /// 16-bit rows, then those of each of [`PACKED_BITS`] (empty ranges where a band has none).
+    pub fn bands(&self) -> [(u32, std::ops::Range<usize>); 4] {
+        let len = self.texels.len();
+        let packed: u32 = self.packed_rows.iter().sum();
+        let at = |rows: u32| (rows as usize * self.pitch as usize).min(len);
+        let mut start = at(self.rows.saturating_sub(packed));
+        let mut bands = [(16, 0..start), (0, 0..0), (0, 0..0), (0, 0..0)];
+        for (b, (&bits, &rows)) in PACKED_BITS.iter().zip(&self.packed_rows).enumerate() {
+            let end = (start + at(rows)).min(len);
+            bands[b + 1] = (bits, start..end);
+            start = end;
+        }
+        bands
     }
 
-    /// The first texel of the narrow band (index, code) whose height code is not an 8-bit one (a
-    /// multiple of [`Texel::NARROW_STEP`]), which the device could not store: None when all are.
-    pub fn first_wide_code_in_narrow_band(&self) -> Option<(usize, u16)> {
-        let wide = self.wide_len();
-        self.texels[wide..]
-            .iter()
-            .position(|t| u32::from(t.height_code()) % Texel::NARROW_STEP != 0)
-            .map(|k| (wide + k, self.texels[wide + k].height_code()))
+    /// Bits of the height codes of the band that holds texel `index` (16 beyond the atlas).
+    pub fn bits_at(&self, index: usize) -> u32 {
+        self.bands()
+            .into_iter()
+            .find(|(_, range)| range.contains(&index))
+            .map_or(16, |(bits, _)| bits)
+    }
+
+    /// Texels before the ends of the 16-, 12- and 10-bit bands ([`Atlas::bands`]; the 8-bit band
+    /// ends with the atlas): what the trace shaders take as `atlas_wide_len`, `atlas_end12` and
+    /// `atlas_end10` (`glsl/atlas.glsl`).
+    pub fn band_ends(&self) -> [usize; 3] {
+        let bands = self.bands();
+        [0, 1, 2].map(|b| bands[b].1.end)
+    }
+
+    /// Texels before the bands of packed heights: those the device stores with 16-bit codes.
+    pub fn wide_len(&self) -> usize {
+        self.bands()[0].1.end
+    }
+
+    /// The first texel of a band of packed heights (index, code, the band's bits) whose height
+    /// code that band cannot hold ([`Texel::fits`]), which the device could not store: None when
+    /// all can.
+    pub fn first_code_off_its_band(&self) -> Option<(usize, u16, u32)> {
+        self.bands().into_iter().skip(1).find_map(|(bits, range)| {
+            range
+                .clone()
+                .find(|&k| !Texel::fits(self.texels[k].height_code(), bits))
+                .map(|k| (k, self.texels[k].height_code(), bits))
+        })
     }
 }
 
@@ -440,7 +504,7 @@ mod tests {
             for q in [
                 0.0, 0.4, 0.5, 1.0, 1.5, 2.49, 777.7, 65533.0, 65533.6, 65534.0, 7e4, -3.0,
             ] {
-                let code = Texel::code_of(q, sampled);
+                let code = Texel::code_of(q, sampled, 16);
                 assert!(code <= Texel::MAX_CODE, "{q}: {code}");
                 let t = Texel::new(code, Vec3::Z);
                 assert_eq!(t.is_sampled(), sampled, "{q}: {code}");
@@ -448,41 +512,62 @@ mod tests {
                 assert!((f64::from(code) - clamped).abs() <= 1.0, "{q}: {code}");
             }
         }
-        assert_eq!(Texel::code_of(0.0, true), 0);
-        assert_eq!(Texel::code_of(0.0, false), 1);
-        assert_eq!(Texel::code_of(1e9, true), Texel::MAX_CODE);
-        assert_eq!(Texel::code_of(1e9, false), Texel::MAX_CODE - 1);
+        assert_eq!(Texel::code_of(0.0, true, 16), 0);
+        assert_eq!(Texel::code_of(0.0, false, 16), 1);
+        assert_eq!(Texel::code_of(1e9, true, 16), Texel::MAX_CODE);
+        assert_eq!(Texel::code_of(1e9, false, 16), Texel::MAX_CODE - 1);
         assert!(!Texel::HOLE.is_sampled());
     }
 
+    /// A packed code is a whole number of odd steps that keeps its mark, within a step of what
+    /// it stands for; the device's expansion of the stored field gives it back, all ones a hole.
     #[test]
-    fn narrow_codes_are_bytes_repeated_with_their_mark() {
-        let step = f64::from(Texel::NARROW_STEP);
-        for sampled in [true, false] {
-            for q in [
-                0.0, 100.0, 128.5, 257.0, 3000.3, 65277.0, 65278.0, 65534.0, 1e9, -5.0,
-            ] {
-                let code = Texel::narrow_code_of(q, sampled);
-                let byte = code & 0xFF;
-                assert_eq!(u32::from(code), u32::from(byte) * Texel::NARROW_STEP, "{q}");
-                assert!(
-                    u32::from(code) <= Texel::NARROW_MAX && byte != 0xFF,
-                    "{q}: {code}"
-                );
-                assert_eq!(
-                    Texel::new(code, Vec3::Z).is_sampled(),
-                    sampled,
-                    "{q}: {code}"
-                );
-                let clamped = q.clamp(0.0, f64::from(Texel::NARROW_MAX));
-                assert!((f64::from(code) - clamped).abs() <= step, "{q}: {code}");
-            }
-        }
-        assert_eq!(0xFF * Texel::NARROW_STEP, u32::from(Texel::HOLE_CODE));
+    fn packed_codes_are_steps_with_their_mark() {
         assert_eq!(
-            u32::from(Texel::narrow_code_of(1e9, true)),
-            Texel::NARROW_MAX
+            PACKED_BITS.map(Texel::step),
+            [15, 63, 257],
+            "steps of 12, 10 and 8 bits"
         );
+        assert_eq!(
+            (Texel::step(16), Texel::top(16)),
+            (1, u32::from(Texel::MAX_CODE))
+        );
+        for bits in PACKED_BITS {
+            let (step, top) = (Texel::step(bits), Texel::top(bits));
+            assert!(
+                step % 2 == 1 && top <= u32::from(Texel::MAX_CODE),
+                "{bits} bits"
+            );
+            for sampled in [true, false] {
+                for q in [
+                    0.0, 100.0, 128.5, 257.0, 3000.3, 61410.0, 65277.0, 65534.0, 1e9, -5.0,
+                ] {
+                    let code = Texel::code_of(q, sampled, bits);
+                    let c = u32::from(code) / step;
+                    assert_eq!(u32::from(code), c * step, "{bits} bits, {q}");
+                    assert!(
+                        u32::from(code) <= top && Texel::fits(code, bits),
+                        "{q}: {code}"
+                    );
+                    assert_eq!(Texel::expand(c, bits), code, "{bits} bits, {q}");
+                    assert_eq!(
+                        Texel::new(code, Vec3::Z).is_sampled(),
+                        sampled,
+                        "{q}: {code}"
+                    );
+                    let clamped = q.clamp(0.0, f64::from(top));
+                    assert!(
+                        (f64::from(code) - clamped).abs() <= f64::from(step),
+                        "{q}: {code}"
+                    );
+                }
+            }
+            assert_eq!(Texel::expand((1 << bits) - 1, bits), Texel::HOLE_CODE);
+            assert!(Texel::fits(Texel::HOLE_CODE, bits));
+            assert!(!Texel::fits(step as u16 + 1, bits), "{bits} bits");
+            assert_eq!(u32::from(Texel::code_of(1e9, true, bits)), top);
+        }
+        assert_eq!(0xFF * Texel::step(8), u32::from(Texel::HOLE_CODE));
     }
 
     #[test]
@@ -534,7 +619,7 @@ mod tests {
         let atlas = Atlas {
             pitch: 8,
             rows: 4,
-            narrow_rows: 0,
+            packed_rows: [0; 3],
             texels: vec![Texel::HOLE; 32],
         };
         let fits = |base, res_u, res_v| {

@@ -36,7 +36,7 @@ pub mod triangles;
 pub use build::{RbvhSource, CREASE_EDGE_TEXELS};
 pub use child::{Child, HEIGHTFIELD_COUNT};
 pub use instanced::InstancedRbvh;
-pub use layout::{Atlas, GpuHeightfield, Texel};
+pub use layout::{Atlas, GpuHeightfield, Texel, PACKED_BITS};
 pub use march::DeviceTwin;
 pub use params::{
     level_name, RbvhParams, Refinement, Subdivision, TexelFormat, QUALITY_NAMES, SAMPLED_SUFFIX,
@@ -229,14 +229,13 @@ impl Rbvh {
         Ok(())
     }
 
-    /// Texels of the tiles stored with 8-bit heights: those in the atlas's narrow band
-    /// ([`Atlas::narrow_rows`]). A tile whose codes are 8-bit ones but whose band would cost more
-    /// than it saves is stored wide (`atlas::pack`) and does not count.
+    /// Texels of the tiles stored with 8-bit heights: those in the atlas's 8-bit band
+    /// ([`Atlas::packed_rows`]). A tile whose codes are 8-bit ones but whose band would cost more
+    /// than it saves is stored with 16-bit codes (`atlas::pack`) and does not count.
     pub fn narrow_texels(&self) -> u64 {
-        let wide = self.atlas.wide_len() as u64;
         self.heightfields
             .iter()
-            .filter(|l| u64::from(l.atlas_base) >= wide)
+            .filter(|l| self.atlas.bits_at(l.atlas_base as usize) == 8)
             .map(|l| u64::from(l.res_u) * u64::from(l.res_v))
             .sum()
     }

@@ -75,26 +75,81 @@ pub fn block_ranges(atlas: &Atlas) -> Vec<u32> {
         .collect()
 }
 
+/// Where the device keeps one band's height codes ([`Atlas::device_words`]).
+struct DeviceBand {
+    /// Bits of a texel's field: 32 for the 16-bit band with normals (its word holds both), else
+    /// the band's bits.
+    field: u32,
+    /// The band's texels.
+    texels: std::ops::Range<usize>,
+    /// Its first word.
+    word: usize,
+}
+
+impl DeviceBand {
+    /// The word holding texel `index`'s field (its first bits where the field crosses into the
+    /// next word) and the field's shift in it.
+    fn word_of(&self, index: usize) -> (usize, u32) {
+        let bit = (index - self.texels.start) as u64 * u64::from(self.field);
+        (self.word + (bit / 32) as usize, (bit % 32) as u32)
+    }
+}
+
 impl Atlas {
+    /// Where the device keeps each band's codes in `format`, then the first word of the packed
+    /// bands' normals and the words the texels take in all.
+    fn device_layout(&self, format: TexelFormat) -> ([DeviceBand; 4], usize, usize) {
+        let mut word = 0;
+        let bands = self.bands().map(|(bits, texels)| {
+            let field = match (bits, format) {
+                (16, TexelFormat::HeightNormal) => 32,
+                _ => bits,
+            };
+            let band = DeviceBand {
+                field,
+                word,
+                texels,
+            };
+            word += (band.texels.len() * field as usize).div_ceil(32);
+            band
+        });
+        let normal_words = match format {
+            TexelFormat::HeightNormal => (self.texels.len() - self.wide_len()).div_ceil(2),
+            TexelFormat::Height => 0,
+        };
+        (bands, word, word + normal_words)
+    }
+
     /// The atlas as the trace shaders read it in `format`, in words:
-    /// 1. the wide texels (before [`Atlas::wide_len`]): one word each (height code in bits 0–15,
-    ///    normal in 16–31), or with [`TexelFormat::Height`] their height codes two to a word
+    /// 1. the 16-bit texels (before [`Atlas::wide_len`]): one word each (height code in bits
+    ///    0–15, normal in 16–31), or with [`TexelFormat::Height`] their height codes two to a word
     ///    (texel `2k` in the low half of word `k`, `2k + 1` in the high half);
-    /// 2. the narrow band's height codes a byte each, four to a word (low byte first): an 8-bit
-    ///    code `c` stands for the code `c · 257` ([`Texel::narrow_code_of`]), a hole for 255;
-    /// 3. with [`TexelFormat::HeightNormal`], the narrow band's normals two to a word;
+    /// 2. each band of packed heights ([`Atlas::packed_rows`]), 12-, 10- then 8-bit: its fields
+    ///    `bits` wide, one after another from the lowest bit of its first word (a field may cross
+    ///    into the next word), the field `c` standing for the code `c · step(bits)`, all ones
+    ///    for a hole ([`Texel::expand`]);
+    /// 3. with [`TexelFormat::HeightNormal`], the packed bands' normals two to a word;
     /// 4. [`block_ranges`], from word [`Atlas::texel_words`] on.
     ///
-    /// `glsl/atlas.glsl` reads it back.
+    /// Each part starts on a word, its last word padded with ones. `glsl/atlas.glsl` reads it back.
     pub fn device_words(&self, format: TexelFormat) -> Vec<u32> {
-        let (wide, narrow) = self.texels.split_at(self.wide_len());
-        let mut words: Vec<u32> = match format {
-            TexelFormat::HeightNormal => bytemuck::cast_slice::<Texel, u32>(wide).to_vec(),
-            TexelFormat::Height => pack_words(wide, 2, |t| u32::from(t.height_code())),
-        };
-        words.extend(pack_words(narrow, 4, |t| u32::from(t.height_code() & 0xFF)));
+        let (bands, _, _) = self.device_layout(format);
+        let mut words = Vec::new();
+        for band in &bands {
+            let texels = &self.texels[band.texels.clone()];
+            words.extend(match band.field {
+                32 => bytemuck::cast_slice::<Texel, u32>(texels).to_vec(),
+                16 => pack_bits(texels, 16, |t| u32::from(t.height_code())),
+                bits => pack_bits(texels, bits, |t| match t.is_hole() {
+                    true => u32::MAX,
+                    false => u32::from(t.height_code()) / Texel::step(bits),
+                }),
+            });
+        }
         if format == TexelFormat::HeightNormal {
-            words.extend(pack_words(narrow, 2, |t| t.0 >> 16));
+            words.extend(pack_bits(&self.texels[self.wide_len()..], 16, |t| {
+                t.0 >> 16
+            }));
         }
         words.extend(block_ranges(self));
         words
@@ -102,54 +157,47 @@ impl Atlas {
 
     /// Words the texels take in `format`, where the block ranges start.
     pub fn texel_words(&self, format: TexelFormat) -> u64 {
-        let wide = self.wide_len() as u64;
-        let narrow = self.texels.len() as u64 - wide;
-        let normals = match format {
-            TexelFormat::HeightNormal => narrow.div_ceil(2),
-            TexelFormat::Height => 0,
-        };
-        let wide_words = match format {
-            TexelFormat::HeightNormal => wide,
-            TexelFormat::Height => wide.div_ceil(2),
-        };
-        wide_words + narrow.div_ceil(4) + normals
+        self.device_layout(format).2 as u64
     }
 }
 
 impl Atlas {
     /// The device's read of texel `index`'s height code in `format` ([`Atlas::device_words`]):
-    /// the texel's word (its half-word without normals) above the narrow band, the word holding
-    /// its byte in it.
+    /// in the 16-bit band its word (its half-word without normals); in a packed band the word
+    /// holding its field, and the next with it (8 bytes) where the field crosses into it.
     pub(crate) fn code_read(&self, index: usize, format: TexelFormat) -> Read {
-        let wide = self.wide_len();
-        if index < wide {
-            let bytes = format.bytes();
-            return Read {
-                array: Array::Atlas,
-                offset: bytes * index as u64,
-                bytes: bytes as u32,
-            };
+        let [wide, bands @ ..] = self.device_layout(format).0;
+        let band = bands
+            .into_iter()
+            .find(|b| b.texels.contains(&index))
+            .filter(|_| index >= wide.texels.end);
+        match band {
+            None => {
+                let bytes = wide.field / 8;
+                Read {
+                    array: Array::Atlas,
+                    offset: u64::from(bytes) * index as u64,
+                    bytes,
+                }
+            }
+            Some(band) => {
+                let (word, shift) = band.word_of(index);
+                Read {
+                    bytes: if shift + band.field > 32 { 8 } else { 4 },
+                    ..word_read(word)
+                }
+            }
         }
-        let wide_words = match format {
-            TexelFormat::HeightNormal => wide,
-            TexelFormat::Height => wide.div_ceil(2),
-        };
-        word_read(wide_words + (index - wide) / 4)
     }
 
     /// The device's reads of texel `index` with its normal (the format with normals): its word
-    /// above the narrow band; in it, the word holding its code and the one holding its normal.
+    /// in the 16-bit band; in a packed band, the reads of its code and the word holding its
+    /// normal.
     pub(crate) fn normal_reads(&self, index: usize) -> impl Iterator<Item = Read> {
         let wide = self.wide_len();
-        let (first, normal) = if index < wide {
-            (word_read(index), None)
-        } else {
-            let k = index - wide;
-            let narrow = self.texels.len() - wide;
-            let normals = wide + narrow.div_ceil(4);
-            (word_read(wide + k / 4), Some(word_read(normals + k / 2)))
-        };
-        std::iter::once(first).chain(normal)
+        let normals = self.device_layout(TexelFormat::HeightNormal).1;
+        std::iter::once(self.code_read(index, TexelFormat::HeightNormal))
+            .chain((index >= wide).then(|| word_read(normals + (index - wide) / 2)))
     }
 }
 
@@ -162,19 +210,24 @@ fn word_read(word: usize) -> Read {
     }
 }
 
-/// `texels` as words of `per_word` fields of `32 / per_word` bits, the first texel in the lowest
-/// bits, each field `field(texel)`; a last word's missing fields are all ones (holes).
-fn pack_words(texels: &[Texel], per_word: usize, field: impl Fn(Texel) -> u32) -> Vec<u32> {
-    let bits = 32 / per_word;
-    texels
-        .chunks(per_word)
-        .map(|chunk| {
-            (0..per_word).fold(0u32, |word, k| {
-                let value = chunk.get(k).map_or(u32::MAX, |&t| field(t));
-                word | (value & (u32::MAX >> (32 - bits))) << (k * bits)
-            })
-        })
-        .collect()
+/// `texels` as fields of `bits` bits (at most 32) each, `field(texel)`, one after another from
+/// the lowest bit of the first word; the last word's missing bits are all ones (holes).
+fn pack_bits(texels: &[Texel], bits: u32, field: impl Fn(Texel) -> u32) -> Vec<u32> {
+    let mask = u64::from(u32::MAX >> (32 - bits));
+    let mut words = Vec::with_capacity((texels.len() * bits as usize).div_ceil(32));
+    let (mut acc, mut filled) = (0u64, 0u32);
+    for &t in texels {
+        acc |= (u64::from(field(t)) & mask) << filled;
+        filled += bits;
+        if filled >= 32 {
+            words.push(acc as u32);
+            (acc, filled) = (acc >> 32, filled - 32);
+        }
+    }
+    if filled > 0 {
+        words.push((acc | u64::MAX << filled) as u32);
+    }
+    words
 }
 
 #[cfg(test)]
@@ -189,47 +242,73 @@ mod tests {
         Atlas {
             pitch,
             rows,
-            narrow_rows: 0,
+            packed_rows: [0; 3],
             texels,
         }
     }
 
     /// Texel `index` as `glsl/atlas.glsl` reads it from `words` (its code, and with normals its
-    /// normal in the high half).
+    /// normal in the high half): the band it lies in, that band's first word after the words of
+    /// those before it (each rounded up), its field (a 32-bit word with normals in the 16-bit
+    /// band) from one word or two, expanded to a code, and a packed texel's normal after the
+    /// codes.
     fn device_texel(a: &Atlas, words: &[u32], format: TexelFormat, index: usize) -> u32 {
-        let wide = a.wide_len();
         let height_only = format == TexelFormat::Height;
-        if index < wide {
-            return if height_only {
-                (words[index / 2] >> (16 * (index % 2))) & 0xFFFF
-            } else {
-                words[index]
+        let (mut word, mut found) = (0, None);
+        for (n, (bits, range)) in a.bands().into_iter().enumerate() {
+            let field = match n {
+                0 if !height_only => 32,
+                _ => bits,
             };
+            if range.contains(&index) {
+                found = Some((field, bits, range.start, word));
+            }
+            word += (range.len() * field as usize).div_ceil(32);
         }
-        let k = index - wide;
-        let codes = if height_only { wide.div_ceil(2) } else { wide };
-        let code = ((words[codes + k / 4] >> (8 * (k % 4))) & 0xFF) * Texel::NARROW_STEP;
-        if height_only {
+        let normals = word;
+        let (field, bits, start, first) = found.expect("a texel of the atlas");
+        let bit = (index - start) * field as usize;
+        let (w, shift) = (first + bit / 32, (bit % 32) as u32);
+        let lo = u64::from(words[w]) >> shift;
+        let hi = if shift + field > 32 {
+            u64::from(words[w + 1]) << (32 - shift)
+        } else {
+            0
+        };
+        let raw = ((lo | hi) & u64::from(u32::MAX >> (32 - field))) as u32;
+        if field == 32 {
+            return raw;
+        }
+        let code = u32::from(Texel::expand(raw, bits));
+        if height_only || bits == 16 {
             return code;
         }
-        let normals = codes + (a.texels.len() - wide).div_ceil(4);
+        let k = index - a.wide_len();
         code | ((words[normals + k / 2] >> (16 * (k % 2))) & 0xFFFF) << 16
     }
 
     #[test]
-    fn narrow_rows_are_stored_a_byte_a_height_and_read_back() {
-        // 5 × 7 texels, the last 2 rows narrow (codes c · 257), some holes: 25 wide texels and 10
-        // narrow ones, so that the last word of each band is part padding in every format.
-        let mut a = atlas(5, 7, |x, y| {
+    fn packed_rows_are_stored_their_bits_a_height_and_read_back() {
+        // 5 × 9 texels: 3 rows of 16-bit codes, then 2 rows each of 12-, 10- and 8-bit codes
+        // (`step · c`), some holes; 10 texels a packed band, so that fields cross words and the
+        // last word of each band is part padding in every format.
+        let mut a = atlas(5, 9, |x, y| {
             let n = glam::Vec3::new(x as f32 - 2.5, y as f32 - 3.0, 2.0).normalize();
+            let bits = match y {
+                0..=2 => 16,
+                3..=4 => 12,
+                5..=6 => 10,
+                _ => 8,
+            };
+            let c = (x * 4001 + y * 13 + 7) % ((1 << bits) - 1);
             match (x + 2 * y) % 4 {
                 0 => Texel::HOLE,
-                _ if y >= 5 => Texel::new(((x * 31 + y) % 255) as u16 * 257, n),
-                _ => Texel::new((x * 4001 + y * 13) as u16, n),
+                _ => Texel::new((c * Texel::step(bits)) as u16, n),
             }
         });
-        a.narrow_rows = 2;
-        assert_eq!(a.wide_len(), 25);
+        a.packed_rows = [2, 2, 2];
+        assert_eq!(a.wide_len(), 15);
+        assert_eq!(a.first_code_off_its_band(), None);
         for format in [TexelFormat::HeightNormal, TexelFormat::Height] {
             let words = a.device_words(format);
             let k = a.texel_words(format) as usize;
@@ -244,12 +323,28 @@ mod tests {
                     want,
                     "{format:?} texel {i}"
                 );
+                let crossing = i >= 15 && {
+                    let (k, bits) = ((i - 15) % 10, [12, 10, 8][(i - 15) / 10]);
+                    k * bits % 32 + bits > 32
+                };
+                let bytes = match (i < 15, format) {
+                    (true, TexelFormat::Height) => 2,
+                    (false, _) if crossing => 8,
+                    _ => 4,
+                };
+                assert_eq!(a.code_read(i, format).bytes, bytes, "{format:?} texel {i}");
             }
         }
-        // Words: 25 wide texels at one (a half), 10 narrow codes at a quarter, their normals at a
-        // half, each band rounded up.
-        assert_eq!(a.texel_words(TexelFormat::HeightNormal), 25 + 3 + 5);
-        assert_eq!(a.texel_words(TexelFormat::Height), 13 + 3);
+        // Words: 15 wide texels at one (a half); 10 codes of 12, 10 and 8 bits (120, 100 and 80
+        // bits); the 30 packed texels' normals at a half; each part rounded up.
+        assert_eq!(
+            a.texel_words(TexelFormat::HeightNormal),
+            15 + 4 + 4 + 3 + 15
+        );
+        assert_eq!(a.texel_words(TexelFormat::Height), 8 + 4 + 4 + 3);
+        // A code its band cannot hold is found.
+        a.texels[40] = Texel::new(1000, glam::Vec3::Z);
+        assert_eq!(a.first_code_off_its_band(), Some((40, 1000, 8)));
     }
 
     #[test]
@@ -307,7 +402,7 @@ mod tests {
         let a = Atlas {
             pitch: 1,
             rows: 3,
-            narrow_rows: 0,
+            packed_rows: [0; 3],
             texels: vec![Texel::new(5, glam::Vec3::Z); 3],
         };
         let words = a.device_words(TexelFormat::Height);

@@ -190,12 +190,7 @@ mod tests {
                 for i in 0..16 {
                     let x = i as f32 + 0.5;
                     let h = height(&tile, i, j).unwrap_or_else(|| panic!("hole at {i},{j}"));
-                    let code_step = if tile.narrow {
-                        crate::rbvh::Texel::NARROW_STEP
-                    } else {
-                        1
-                    };
-                    let quantum = tile.h_scale * code_step as f32;
+                    let quantum = tile.h_scale * crate::rbvh::Texel::step(tile.bits) as f32;
                     assert!(
                         (h - (0.25 * x + 1.0)).abs() <= 1e-4 + quantum,
                         "step {step}: sample {i},{j}: {h}"

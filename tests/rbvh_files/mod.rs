@@ -95,7 +95,7 @@ pub fn as_v12(rbvh: &Rbvh) -> Vec<u8> {
         &mut out,
         &[
             p.object_rate.to_bits(),
-            rbvh.atlas.narrow_rows,
+            rbvh.atlas.packed_rows[2],
             u32::from(p.exact_when_cheaper),
             p.exact_from_texels.to_bits(),
             p.exact_edge_fraction.to_bits(),
@@ -115,6 +115,15 @@ pub fn as_v12(rbvh: &Rbvh) -> Vec<u8> {
         out.extend_from_slice(c);
     }
     out
+}
+
+/// `rbvh` as a file of version 12 or before loads it: those versions had no 12- or 10-bit rows,
+/// so [`as_v12`] writes its 8-bit rows alone, and the rows of the others load as 16-bit ones
+/// (their codes are 16-bit codes as well).
+pub fn as_v12_loads(rbvh: &Rbvh) -> Rbvh {
+    let mut r = rbvh.clone();
+    r.atlas.packed_rows = [0, 0, rbvh.atlas.packed_rows[2]];
+    r
 }
 
 /// Appends little-endian words.

@@ -95,7 +95,10 @@ pub(super) fn sampled_bytes(tiles: &[Tile], parts: usize, format: TexelFormat) -
     let tiles: u64 = tiles
         .iter()
         .map(|tile| {
-            let texel = format.bytes() - u64::from(tile.narrow);
+            // 12- and 10-bit tiles are priced as 16-bit ones: priced at their bits, fewer
+            // triangles were traced exactly, for more bytes in all and less accuracy
+            // (docs/paper-scale.md, "Heights in 10 and 12 bits").
+            let texel = format.bytes() - u64::from(tile.bits == 8);
             tile.texels.len() as u64 * texel + 64 + 48
         })
         .sum();

@@ -309,7 +309,7 @@ pub(super) fn read(bytes: &[u8], version: u32, path: &Path) -> Result<Rbvh> {
         atlas: Atlas {
             pitch,
             rows,
-            narrow_rows,
+            packed_rows: [0, 0, narrow_rows],
             texels: texel_words,
         },
         bounds,

@@ -43,7 +43,7 @@
 //! | tag | version | flags | content |
 //! |---|---|---|---|
 //! | `PARM` | 8 | required | the build parameters (below), 56 bytes; versions 1–7 load, the later fields taking the values that mean "rule off" |
-//! | `HEAD` | 1 | required | the structure, 68 bytes: `bounds` (6 × f32: min x, y, z, max x, y, z), `depth` (u32), `texel_size` (f32), `stats.build_ms` (f64), `stats.heightfield_leaves`, `stats.triangle_leaves` (u32 each), `stats.tile_texels` (u64), `atlas.pitch`, `atlas.rows`, `atlas.narrow_rows` (u32 each: the last are the rows whose heights are 8-bit codes) |
+//! | `HEAD` | 2 | required | the structure, 76 bytes: `bounds` (6 × f32: min x, y, z, max x, y, z), `depth` (u32), `texel_size` (f32), `stats.build_ms` (f64), `stats.heightfield_leaves`, `stats.triangle_leaves` (u32 each), `stats.tile_texels` (u64), `atlas.pitch`, `atlas.rows` (u32 each), `atlas.packed_rows` (3 × u32: the rows at the end whose heights are 12-, 10- and 8-bit codes, in that order); version 1 (68 bytes) ends with the 8-bit rows alone and loads with no 12- or 10-bit rows |
 //! | `NODE` | 1 | required | `nodes`, 48 bytes each ([`crate::bvh::GpuNode`]) |
 //! | `TRIS` | 1 | required | `triangles`, 48 bytes each ([`crate::bvh::GpuTriangle`], gathered: the device's indexed form is made from them, [`crate::rbvh::ExactTriangles`]) |
 //! | `LEAF` | 2 | required | `heightfields`, 64 bytes each ([`super::GpuHeightfield`]); since version 2 a record's `axis_w` may carry its tile's plane (version 1 loads: its records have none) |
@@ -77,8 +77,8 @@
 //! the magic and version; the table (every section inside the file, after the table, none
 //! overlapping another, no gap but the zero padding before an aligned start, no byte after the
 //! last, no tag twice, flags known, every required section known, every section this build needs
-//! present); each known section's length; `narrow_rows ≤ rows` with every texel of those rows a
-//! hole or an 8-bit code (a multiple of [`Texel::NARROW_STEP`]: what the device can store
+//! present); each known section's length; the packed rows within `rows` with every texel of
+//! those rows a hole or a code of its band's bits ([`Texel::fits`]: what the device can store
 //! there); no NaN in the parameters, the bounds, the texel size or the build time; enum tags and
 //! flags in range; every node's grid (a finite origin, exponents in range, reserved bits zero);
 //! every node's children (inner: a node index, with count 0; triangle leaf: a range within
@@ -378,8 +378,8 @@ fn check(r: &Rbvh, top_nodes: usize) -> std::result::Result<(), Bad> {
     check_triangles(r.triangles.gathered(), r.heightfields.len())
 }
 
-/// The atlas's shape: a power-of-two pitch, `pitch × rows` texels, narrow rows within the rows
-/// and holding only 8-bit codes.
+/// The atlas's shape: a power-of-two pitch, `pitch × rows` texels, packed rows within the rows
+/// and holding only codes of their band's bits.
 fn check_atlas(atlas: &Atlas) -> std::result::Result<(), Bad> {
     let (pitch, rows) = (atlas.pitch, atlas.rows);
     if !pitch.is_power_of_two() {
@@ -398,23 +398,25 @@ fn check_atlas(atlas: &Atlas) -> std::result::Result<(), Bad> {
             format!("the atlas has {n_texels} texels, not pitch × rows = {pitch} × {rows}"),
         ));
     }
-    if atlas.narrow_rows > rows {
+    let packed: u64 = atlas.packed_rows.iter().map(|&r| u64::from(r)).sum();
+    if packed > u64::from(rows) {
         return Err(Bad::of(
             Part::Head,
             format!(
-                "atlas.narrow_rows {} exceeds its {rows} rows",
-                atlas.narrow_rows
+                "atlas.packed_rows {:?} (12-, 10- and 8-bit rows) exceed its {rows} rows",
+                atlas.packed_rows
             ),
         ));
     }
-    if let Some((k, code)) = atlas.first_wide_code_in_narrow_band() {
+    if let Some((k, code, bits)) = atlas.first_code_off_its_band() {
         return Err(Bad::at(
             Part::Texels,
             k,
             format!(
-                "atlas texel {k} lies in the narrow rows but has height code {code}, not a \
-                 multiple of {} (an 8-bit code)",
-                Texel::NARROW_STEP
+                "atlas texel {k} lies in the {bits}-bit rows but has height code {code}, not a \
+                 multiple of {} up to {} (a {bits}-bit code)",
+                Texel::step(bits),
+                Texel::top(bits)
             ),
         ));
     }

@@ -111,8 +111,12 @@ const PARAMS_WORDS: [usize; PARAMS_VERSION as usize] = [7, 8, 9, 10, 11, 12, 13,
 /// reader of version 1 alone refuses version 2, whose planes it would not undo where it places
 /// samples in the world (painting, seam rays, level of detail).
 const LEAVES_VERSION: u32 = 2;
-/// Bytes of `HEAD`.
-const HEAD_BYTES: usize = 68;
+/// The version of `HEAD` this build writes: 2, whose atlas has rows of 12-, 10- and 8-bit
+/// heights ([`crate::rbvh::Atlas::packed_rows`]); version 1 has 8-bit rows alone, and reads
+/// the same.
+const HEAD_VERSION: u32 = 2;
+/// Bytes of `HEAD` at each version, from 1.
+const HEAD_BYTES: [usize; HEAD_VERSION as usize] = [68, 76];
 
 /// Every section this build knows, in the order it writes them.
 const KNOWN: [Known; 11] = [
@@ -124,7 +128,7 @@ const KNOWN: [Known; 11] = [
     },
     Known {
         tag: HEAD,
-        versions: 1..2,
+        versions: 1..HEAD_VERSION + 1,
         required: true,
         record: 0,
     },
@@ -226,7 +230,11 @@ pub(super) fn write<'a>(r: &'a Rbvh, extra: Vec<([u8; 4], usize, Put<'a>)>) -> V
             4 * PARAMS_WORDS[PARAMS_WORDS.len() - 1],
             Box::new(|out| put_params(out, &r.params)),
         ),
-        (HEAD, HEAD_BYTES, Box::new(|out| put_head(out, r))),
+        (
+            HEAD,
+            HEAD_BYTES[HEAD_BYTES.len() - 1],
+            Box::new(|out| put_head(out, r)),
+        ),
         (
             NODES,
             std::mem::size_of_val(r.nodes.as_slice()),
@@ -371,7 +379,9 @@ fn put_head(out: &mut Vec<u8>, r: &Rbvh) {
     out.extend_from_slice(&r.stats.tile_texels.to_le_bytes());
     put_u32(out, r.atlas.pitch);
     put_u32(out, r.atlas.rows);
-    put_u32(out, r.atlas.narrow_rows);
+    for rows in r.atlas.packed_rows {
+        put_u32(out, rows);
+    }
 }
 
 /// The section table of a version 13 file, checked (module docs): every section inside the
@@ -656,20 +666,26 @@ pub(super) fn parse<'a>(bytes: &'a [u8], path: &'a Path) -> Result<Parsed<'a>> {
     )
     .map_err(|why| err(format!("{}: {why}", params_section.place(params_entry))))?;
     let head_bytes = &bytes[head.bytes()];
-    if head_bytes.len() != HEAD_BYTES {
+    let head_len = HEAD_BYTES[head.version as usize - 1];
+    if head_bytes.len() != head_len {
         return Err(err(format!(
-            "{}: {} bytes, not the {HEAD_BYTES} of its version",
+            "{}: {} bytes, not the {head_len} of its version",
             head.place(head_entry),
             head_bytes.len()
         )));
     }
     let mut h = Reader::new(head_bytes, path);
     let (bounds, depth, texel_size, stats) = h.structure_head()?;
-    let (pitch, rows, narrow_rows) = (
-        h.u32("atlas.pitch")?,
-        h.u32("atlas.rows")?,
-        h.u32("atlas.narrow_rows")?,
-    );
+    let (pitch, rows) = (h.u32("atlas.pitch")?, h.u32("atlas.rows")?);
+    let packed_rows = if head.version >= 2 {
+        [
+            h.u32("atlas.packed_rows[0]")?,
+            h.u32("atlas.packed_rows[1]")?,
+            h.u32("atlas.packed_rows[2]")?,
+        ]
+    } else {
+        [0, 0, h.u32("atlas.narrow_rows")?]
+    };
 
     let array = |tag| need(tag).map(|(_, s)| &bytes[s.bytes()]);
     let texel_bytes = &bytes[texel_section.1.bytes()];
@@ -711,7 +727,7 @@ pub(super) fn parse<'a>(bytes: &'a [u8], path: &'a Path) -> Result<Parsed<'a>> {
         atlas: Atlas {
             pitch,
             rows,
-            narrow_rows,
+            packed_rows,
             texels: texel_words,
         },
         bounds,

@@ -279,7 +279,7 @@ pub(super) mod tests {
         let atlas = Atlas {
             pitch,
             rows: texels.len() as u32 / pitch,
-            narrow_rows: 0,
+            packed_rows: [0; 3],
             texels,
         };
         let root = GpuNode::new(hf_child(&l, 0), ChildRef::ABSENT);
@@ -381,7 +381,7 @@ pub(super) mod tests {
         let atlas = Atlas {
             pitch: 8,
             rows: 16,
-            narrow_rows: 0,
+            packed_rows: [0; 3],
             texels,
         };
         rbvh(vec![root, node1], vec![tri], vec![l0, l1], atlas)

@@ -408,7 +408,7 @@ mod tests {
         let atlas = Atlas {
             pitch: res_u + 3,
             rows: res_v,
-            narrow_rows: 0,
+            packed_rows: [0; 3],
             texels,
         };
         // A loose box, so that the march, not the box, decides at the tile's border.

@@ -80,14 +80,14 @@
 //!    (after dilation, the ring, the walls and the open boundary), `frame.origin` moves by
 //!    `h_lo · w`, so code 0 is the lowest height, and the code of height `h` is the code nearest `(h − h_lo) /
 //!    h_scale` whose parity tells a sampled height (even) from an extrapolated one (odd). A tile
-//!    whose range is at most 254 · [`quantize::NARROW_QUANTUM_TEXELS`] texels is *narrow*: `h_scale
-//!    = (h_hi − h_lo) / NARROW_MAX` and its codes are 8-bit ones ([`Texel::narrow_code_of`]), a
-//!    worst quantization error of `(h_hi − h_lo) / 254`, at most
-//!    [`quantize::NARROW_QUANTUM_TEXELS`] of a texel; the device stores them a byte each (issue
-//!    "Small and valid at every scale": bytes per texel that fit the surface). Any other tile takes
-//!    `h_scale = (h_hi − h_lo) / MAX_CODE` and 16-bit codes ([`Texel::code_of`]), a worst error of
-//!    `(h_hi − h_lo) / 65534`. (Flat or empty tiles: `h_scale` 0, narrow.) Both add the f32
-//!    rounding of the moved origin.
+//!    whose range is at most `2^b − 2` quanta of [`quantize::NARROW_QUANTUM_TEXELS`] (1/128
+//!    texel) for `b` one of [`PACKED_BITS`](crate::rbvh::PACKED_BITS) (12, 10, 8) takes the narrowest such `b`: `h_scale =
+//!    (h_hi − h_lo) / top(b)` and `b`-bit codes ([`Texel::code_of`], [`Texel::top`]), a worst
+//!    quantization error of `(h_hi − h_lo) / (2^b − 2)`, at most that quantum; the device stores
+//!    them `b` bits each (issue "Small and valid at every scale": bytes per texel that fit the
+//!    surface). Any other tile takes `h_scale = (h_hi − h_lo) / MAX_CODE` and 16-bit codes, a
+//!    worst error of `(h_hi − h_lo) / 65534`. (Flat or empty tiles: `h_scale` 0, 8 bits.) Both
+//!    add the f32 rounding of the moved origin.
 //! 6. **Exposed triangles** ([`Tile::exposed`], issue "No leaks between height fields"): the
 //!    leaf's triangles that meet the bare part of a cell (no cell triangle over it: the ring found
 //!    no surface for a corner), or rise more than [`CREST_TEXELS`] above a cell, or lie more than
@@ -185,9 +185,10 @@ pub struct Tile {
     /// of code `q` lies `q · h_scale + slope · (i + ½, j + ½)` above `frame.origin` along `w`.
     /// The record shears it into its height axis ([`Tile::heightfield`]).
     pub slope: Vec2,
-    /// Whether the codes are 8-bit ones (step 5 of the module docs): the tile goes to the atlas's
-    /// narrow band ([`crate::rbvh::Atlas::narrow_rows`]) where the band pays (`atlas::pack`).
-    pub narrow: bool,
+    /// Bits of the codes (step 5 of the module docs): 16, or one of [`crate::rbvh::PACKED_BITS`], whose
+    /// tiles go to the atlas's band of that width ([`crate::rbvh::Atlas::packed_rows`]) where the
+    /// band pays (`atlas::pack`).
+    pub bits: u32,
     /// Samples covered by triangles (before dilation).
     pub covered: u32,
     /// Per texel, the index (into the triangles given to [`rasterize`]) of the triangle whose
@@ -455,8 +456,7 @@ pub(super) mod tests {
 
     /// World height of one step of `tile`'s codes: its quantization error bound.
     pub(super) fn quantum(tile: &Tile) -> f32 {
-        let step = if tile.narrow { Texel::NARROW_STEP } else { 1 };
-        tile.h_scale * step as f32
+        tile.h_scale * Texel::step(tile.bits) as f32
     }
 
     /// Height of sample `k` measured along `w` from `reference`, decoded from the tile.

@@ -1,17 +1,20 @@
 //! Step 5 of rasterizing a leaf (see [`super`]): **quantization** of its heights into the packed
-//! [`Texel`]s of `layout.rs` — 8-bit codes for a narrow tile, 16-bit ones otherwise (issue "Small
-//! and valid at every scale": bytes per texel that fit the surface), the parity of each code
+//! [`Texel`]s of `layout.rs` — 8-, 10- or 12-bit codes for a tile whose heights span few enough
+//! quanta, 16-bit ones otherwise (issue "Small and valid at every scale": bytes per texel that
+//! fit the surface), the parity of each code
 //! telling a sampled height from an extrapolated one. The heights are measured from the tile's
 //! least-squares plane where that narrows their range ([`Tile::slope`]).
 
 use glam::{DVec3, Vec2, Vec3};
 
 use super::{Frame, Tile, NONE};
-use crate::rbvh::layout::{Texel, MIN_PLANE_SLOPE};
+use crate::rbvh::layout::{Texel, MIN_PLANE_SLOPE, PACKED_BITS};
 
-/// Largest quantization step, in texels, of a tile's 8-bit heights (step 5 of the module docs):
-/// a tile whose heights span at most 254 such steps (two texels) stores a byte per height instead
-/// of two (issue "Small and valid at every scale", bytes per texel that fit the surface). The
+/// Largest quantization step, in texels, of a tile's packed heights (step 5 of the module docs):
+/// a tile whose heights span at most `2^b − 2` such steps stores `b` bits per height for the
+/// narrowest `b` of [`PACKED_BITS`] that holds them — 254 steps (two texels) in 8 bits, 1,022 (8
+/// texels) in 10, 4,094 (32 texels) in 12 — instead of 16 (issue "Small and valid at every
+/// scale", bytes per texel that fit the surface). The
 /// step is what accuracy allows, measured (`rbvh bench`, default scene and dragon close-up, Q0,
 /// Q2 and Q4, 256 × 192): at 1/16 of a texel the default scene's t p99 rose by 14–83% (Q2
 /// 0.0217 → 0.0266% of the diagonal), at 1/32 and 1/64 by up to 13% and 4%; at 1/128 every
@@ -20,7 +23,7 @@ use crate::rbvh::layout::{Texel, MIN_PLANE_SLOPE};
 /// 8-bit tiles (89% at 1/64).
 pub const NARROW_QUANTUM_TEXELS: f32 = 1.0 / 128.0;
 
-/// Step 5 of the module docs: 8- or 16-bit heights over the tile's own range, measured from its
+/// Step 5 of the module docs: packed or 16-bit heights over the tile's own range, measured from its
 /// plane where that narrows the range ([`plane_slope`]), origin moved to the lowest.
 pub(in crate::rbvh) fn quantize(
     frame: &Frame,
@@ -58,13 +61,12 @@ pub(in crate::rbvh) fn quantize(
         (Vec2::ZERO, level)
     };
     let h_lo = if h_lo.is_finite() { h_lo as f32 } else { 0.0 };
-    let narrow = range <= 254.0 * f64::from(NARROW_QUANTUM_TEXELS) * f64::from(frame.texel);
-    let top = if narrow {
-        Texel::NARROW_MAX
-    } else {
-        u32::from(Texel::MAX_CODE)
-    };
-    let h_scale = (range / f64::from(top)) as f32;
+    let bits = PACKED_BITS
+        .into_iter()
+        .rev()
+        .find(|&b| range <= f64::from((1u32 << b) - 2) * quantum)
+        .unwrap_or(16);
+    let h_scale = (range / f64::from(Texel::top(bits))) as f32;
     let texels = (0..height.len())
         .zip(source)
         .zip(sampled)
@@ -77,12 +79,7 @@ pub(in crate::rbvh) fn quantize(
             } else {
                 0.0
             };
-            let code = if narrow {
-                Texel::narrow_code_of(q, sampled)
-            } else {
-                Texel::code_of(q, sampled)
-            };
-            Texel::new(code, normals[s as usize])
+            Texel::new(Texel::code_of(q, sampled, bits), normals[s as usize])
         })
         .collect();
     Tile {
@@ -93,7 +90,7 @@ pub(in crate::rbvh) fn quantize(
         texels,
         h_scale,
         slope,
-        narrow,
+        bits,
         covered,
         sources: Vec::new(),
         exposed: Vec::new(),
@@ -182,28 +179,42 @@ mod tests {
         [rect(0.0, 8.0), rect(8.0, 16.0)].concat()
     }
 
-    /// Heights spanning up to 254 steps of [`NARROW_QUANTUM_TEXELS`] over the tile's plane take
-    /// 8-bit codes, and err by at most that step; a span a little larger keeps 16-bit codes.
+    /// Heights spanning up to `2^b − 2` steps of [`NARROW_QUANTUM_TEXELS`] over the tile's plane
+    /// take `b`-bit codes for the narrowest `b` of [`PACKED_BITS`] that holds them, and err by at
+    /// most that step; a span past 4,094 steps keeps 16-bit codes.
     #[test]
-    fn narrow_tiles_err_by_at_most_their_quantum() {
+    fn packed_tiles_err_by_at_most_their_quantum() {
         let frame = Frame {
             texel: 0.5,
             ..xy_frame(16)
         };
         // The roof over the sample centres 0.5..15.5 of s spans 7 · rise world units.
-        let span_texels = 254.0 * NARROW_QUANTUM_TEXELS;
-        for (span, narrow) in [(0.0, true), (0.5, true), (0.99, true), (1.02, false)] {
-            let rise = span * span_texels * frame.texel / 7.0;
+        for (steps, bits) in [
+            (0.0, 8),
+            (127.0, 8),
+            (251.0, 8),
+            (259.0, 10),
+            (1010.0, 10),
+            (1035.0, 12),
+            (4050.0, 12),
+            (4150.0, 16),
+        ] {
+            let rise = steps * NARROW_QUANTUM_TEXELS * frame.texel / 7.0;
             let tile = plain(&roof(&frame, rise), &frame, 0.01).unwrap();
-            assert_eq!(tile.narrow, narrow, "a span of {span} × 254 steps");
-            assert_eq!(tile.slope, Vec2::ZERO, "a span of {span} × 254 steps");
-            assert!(quantum(&tile) <= NARROW_QUANTUM_TEXELS * frame.texel * 1.0001 || !narrow);
+            assert_eq!(tile.bits, bits, "a span of {steps} steps");
+            assert_eq!(tile.slope, Vec2::ZERO, "a span of {steps} steps");
+            assert!(
+                quantum(&tile) <= NARROW_QUANTUM_TEXELS * frame.texel * 1.0001 || bits == 16,
+                "a span of {steps} steps"
+            );
             for k in 0..256usize {
                 let want = rise * ((k % 16) as f32 + 0.5 - 8.0).abs();
                 let got = decoded(&tile, k, frame.origin);
-                assert!((got - want).abs() <= quantum(&tile) + 1e-5, "{span}: {k}");
-                let code = u32::from(tile.texels[k].height_code());
-                assert!(!narrow || code % Texel::NARROW_STEP == 0, "{span}: {k}");
+                assert!((got - want).abs() <= quantum(&tile) + 1e-5, "{steps}: {k}");
+                assert!(
+                    Texel::fits(tile.texels[k].height_code(), bits),
+                    "{steps}: {k}"
+                );
             }
         }
     }
@@ -221,7 +232,7 @@ mod tests {
         // 0.3 and 0.2 texels of height a texel: 7.5 texels of range over the tile.
         let plane = |s: f32, t: f32| (0.3 * s - 0.2 * t) * frame.texel + 1.0;
         let tile = plain(&square(&frame, 0.0, 16.0, plane), &frame, 0.01).unwrap();
-        assert!(tile.narrow);
+        assert_eq!(tile.bits, 8);
         assert!(
             (tile.slope - Vec2::new(0.3, -0.2) * frame.texel).length() < 1e-5,
             "{}",
