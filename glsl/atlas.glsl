@@ -29,42 +29,90 @@ uint rbvh_atlas_texel_words(uint len, uint wide_len, uint end12, uint end10, boo
     return rbvh_atlas_code_words(len, wide_len, end12, end10, height_only) + normal_words;
 }
 
-// The height code of texel `index` of an atlas of `len` texels (0xFFFF, a hole, at or beyond
-// `len`): what the walk reads. Its band's width, first texel and first word chosen by selects
-// rather than a branch: SIMD implementations such as lavapipe run both sides of a branch whose
-// lanes differ, and the two loads of a texel read both ways cost the march a tenth of its speed
-// there. A field that crosses into the next word (12- and 10-bit ones, at most 32 bits in all)
-// takes that word's low bits too. One return, the hole's made before the read: an early return,
-// once inlined into the walk's loops, leaves a value the compiler carries from one leaf to the
-// next (docs/speed.md, "Values the compiler carried from leaf to leaf").
-uint rbvh_atlas_code(uint index, uint len, uint wide_len, uint end12, uint end10, bool height_only) {
-    uint code = 0xFFFFu;
-    if (index < len) {
-        bool wide = index < wide_len;
-        bool in12 = index < end12;
-        bool in10 = index < end10;
-        uint wide_bits = height_only ? 16u : 32u;
-        uint words12 = rbvh_atlas_words(wide_len, wide_bits);
-        uint words10 = words12 + rbvh_atlas_words(end12 - wide_len, 12u);
-        uint words8 = words10 + rbvh_atlas_words(end10 - end12, 10u);
-        uint bits = wide ? wide_bits : (in12 ? 12u : (in10 ? 10u : 8u));
-        uint start = wide ? 0u : (in12 ? wide_len : (in10 ? end12 : end10));
-        uint first = wide ? 0u : (in12 ? words12 : (in10 ? words10 : words8));
-        uint step = wide ? 1u : (in12 ? 15u : (in10 ? 63u : 257u));
-        // Word indices and shifts made apart (a bit offset would overflow 32 bits past 2^27
-        // texels).
-        uint k = index - start;
-        uint word = first + (k >> 5u) * bits + (((k & 31u) * bits) >> 5u);
-        uint shift = ((k & 31u) * bits) & 31u;
-        uint field = RBVH_ATLAS_WORD(word) >> shift;
-        if (shift + bits > 32u) {
-            field |= RBVH_ATLAS_WORD(word + 1u) << (32u - shift);
-        }
-        uint mask = (1u << min(bits, 16u)) - 1u;
-        field &= mask;
-        code = field == mask ? 0xFFFFu : field * step;
+// The band (0: 16-bit, 1: 12-bit, 2: 10-bit, 3: 8-bit) that holds texel `index`.
+uint rbvh_atlas_band(uint index, uint wide_len, uint end12, uint end10) {
+    return index < wide_len ? 0u : (index < end12 ? 1u : (index < end10 ? 2u : 3u));
+}
+
+// Where a tile's fields lie (rbvh_atlas_tile): the word holding the field of its texel (0, 0), and
+// in bits 0-7 that field's first bit in the word, in bits 8-15 the band's field width (32 for the
+// 16-bit band with normals, whose word holds both), in bits 16-31 the step a field counts in.
+struct RbvhAtlasTile {
+    uint word;
+    uint phase_bits_step;
+};
+
+// The fields of the tile whose texel (0, 0) is atlas texel `base`: its band's width and first word
+// chosen by selects rather than a branch (SIMD implementations such as lavapipe run both sides of
+// a branch whose lanes differ). A tile lies in one band (rbvh_tile_fits), so a cell's four corners
+// are offsets from it. The walk makes it for each cell: kept through a leaf's walk, it cost RADV
+// 8 VGPRs (64 against 56) for no speed measured on lavapipe (docs/speed.md, "Heights in 10 and
+// 12 bits on lavapipe").
+RbvhAtlasTile rbvh_atlas_tile(uint base, uint wide_len, uint end12, uint end10, bool height_only) {
+    uint band = rbvh_atlas_band(base, wide_len, end12, end10);
+    uint wide_bits = height_only ? 16u : 32u;
+    uint words12 = rbvh_atlas_words(wide_len, wide_bits);
+    uint words10 = words12 + rbvh_atlas_words(end12 - wide_len, 12u);
+    uint words8 = words10 + rbvh_atlas_words(end10 - end12, 10u);
+    uint bits = band == 0u ? wide_bits : (band == 1u ? 12u : (band == 2u ? 10u : 8u));
+    uint start = band == 0u ? 0u : (band == 1u ? wide_len : (band == 2u ? end12 : end10));
+    uint first = band == 0u ? 0u : (band == 1u ? words12 : (band == 2u ? words10 : words8));
+    uint step = band == 0u ? 1u : (band == 1u ? 15u : (band == 2u ? 63u : 257u));
+    // Word index and bit apart (a bit offset would overflow 32 bits past 2^27 texels).
+    uint k = base - start;
+    uint word = first + (k >> 5u) * bits + (((k & 31u) * bits) >> 5u);
+    return RbvhAtlasTile(word, (((k & 31u) * bits) & 31u) | bits << 8u | step << 16u);
+}
+
+// The bits from `offset` (below 64) of the 64-bit value hi:lo, as many as fit in 32.
+uint rbvh_atlas_window(uint lo, uint hi, uint offset) {
+    uint low = offset < 32u ? lo >> offset : hi >> (offset - 32u);
+    uint high = (offset > 0u && offset < 32u) ? hi << (32u - offset) : 0u;
+    return low | high;
+}
+
+// The height code of a field read from the tile (0xFFFF, a hole, where `inside` is false): a
+// field `c` is the code c * step, all ones a hole.
+uint rbvh_atlas_decode(RbvhAtlasTile tile, uint field, bool inside) {
+    uint mask = 0xFFFFu >> (16u - min((tile.phase_bits_step >> 8u) & 0xFFu, 16u));
+    uint c = field & mask;
+    return inside && c != mask ? c * (tile.phase_bits_step >> 16u) : 0xFFFFu;
+}
+
+// The height codes of the tile's texels `d` and `d + 1` texels after its texel (0, 0) (d = j *
+// pitch + i; atlas texel `index` and the next; holes at or beyond `len`): what the walk reads, a
+// row of a cell. Both fields lie in the two words from the first's (a field of a packed band may
+// cross into the next word, 20 to 24 bits for the two; the 16-bit band's are two halves or two
+// words), read together, so that a cell's four corners take four reads, as one word each did.
+// `d * bits` stays below 2^31: a tile spans at most 4096 rows of at most 16384 texels. The words
+// read lie inside the buffer: the blocks' height ranges follow the texels.
+uvec2 rbvh_atlas_tile_pair(RbvhAtlasTile tile, uint d, uint index, uint len) {
+    uint bits = (tile.phase_bits_step >> 8u) & 0xFFu;
+    uint bit = (tile.phase_bits_step & 0xFFu) + d * bits;
+    uint word = tile.word + (bit >> 5u);
+    uint shift = bit & 31u;
+    uint lo = RBVH_ATLAS_WORD(word);
+    uint hi = RBVH_ATLAS_WORD(word + 1u);
+    return uvec2(rbvh_atlas_decode(tile, rbvh_atlas_window(lo, hi, shift), index < len),
+                 rbvh_atlas_decode(tile, rbvh_atlas_window(lo, hi, shift + bits), index + 1u < len));
+}
+
+// The height code of the tile's texel `d` alone (as rbvh_atlas_tile_pair's first).
+uint rbvh_atlas_tile_code(RbvhAtlasTile tile, uint d, uint index, uint len) {
+    uint bits = (tile.phase_bits_step >> 8u) & 0xFFu;
+    uint bit = (tile.phase_bits_step & 0xFFu) + d * bits;
+    uint word = tile.word + (bit >> 5u);
+    uint shift = bit & 31u;
+    uint field = RBVH_ATLAS_WORD(word) >> shift;
+    if (shift + bits > 32u) {
+        field |= RBVH_ATLAS_WORD(word + 1u) << (32u - shift);
     }
-    return code;
+    return rbvh_atlas_decode(tile, field, index < len);
+}
+
+// The height code of texel `index` alone (painting, a hit's normal).
+uint rbvh_atlas_code(uint index, uint len, uint wide_len, uint end12, uint end10, bool height_only) {
+    return rbvh_atlas_tile_code(rbvh_atlas_tile(index, wide_len, end12, end10, height_only), 0u, index, len);
 }
 
 // Texel `index` of an atlas with normals: its height code in bits 0-15 and its 8:8 octahedral

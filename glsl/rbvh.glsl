@@ -140,12 +140,9 @@ bool rbvh_is_hole(uint texel) {
     return (texel & 0xFFFFu) == RBVH_HOLE_CODE;
 }
 
-// The height code of sample (i, j) of `leaf`'s tile: the walk needs no normals (a hit's are read
-// once the ray is done, rbvh_normal_texel), so that a texel of the narrow band is one read.
-uint rbvh_texel(RbvhHeightfield leaf, RbvhSizes sz, int i, int j) {
-    uint index = leaf.atlas_base + uint(j) * sz.atlas_pitch + uint(i);
-    return rbvh_atlas_code(index, sz.atlas_len, sz.atlas_wide_len, sz.atlas_end12, sz.atlas_end10,
-                           RBVH_HEIGHT_ONLY);
+// The fields of `leaf`'s tile (rbvh_atlas_tile), which a texel read is an offset from.
+RbvhAtlasTile rbvh_leaf_tile(RbvhHeightfield leaf, RbvhSizes sz) {
+    return rbvh_atlas_tile(leaf.atlas_base, sz.atlas_wide_len, sz.atlas_end12, sz.atlas_end10, RBVH_HEIGHT_ONLY);
 }
 
 // Where the blocks' height ranges start in the atlas words: after the texels' words.
@@ -219,10 +216,15 @@ bool rbvh_cell_full(RbvhCell cell) {
            !rbvh_is_hole(rbvh_c11(cell));
 }
 
-// `cell` with the codes of its corners read from `leaf`'s tile.
+// `cell` with the codes of its corners read from `leaf`'s tile: two reads of two words a row
+// (rbvh_atlas_tile_pair).
 void rbvh_read_corners(RbvhHeightfield leaf, RbvhSizes sz, inout RbvhCell cell) {
-    cell.c00_c10 = rbvh_texel(leaf, sz, cell.i, cell.j) | rbvh_texel(leaf, sz, cell.i + 1, cell.j) << 16;
-    cell.c01_c11 = rbvh_texel(leaf, sz, cell.i, cell.j + 1) | rbvh_texel(leaf, sz, cell.i + 1, cell.j + 1) << 16;
+    RbvhAtlasTile tile = rbvh_leaf_tile(leaf, sz);
+    uint d = uint(cell.j) * sz.atlas_pitch + uint(cell.i);
+    uvec2 row0 = rbvh_atlas_tile_pair(tile, d, leaf.atlas_base + d, sz.atlas_len);
+    uvec2 row1 = rbvh_atlas_tile_pair(tile, d + sz.atlas_pitch, leaf.atlas_base + d + sz.atlas_pitch, sz.atlas_len);
+    cell.c00_c10 = row0.x | row0.y << 16;
+    cell.c01_c11 = row1.x | row1.y << 16;
 }
 
 // Step 4 (march/cell.rs), its cheap half: reads the cell's corners and tells whether its triangles
@@ -560,7 +562,9 @@ bool rbvh_tile_fits(RbvhHeightfield leaf, RbvhSizes sz) {
     bool sides = leaf.res_u >= 2u && leaf.res_v >= 2u && leaf.res_u <= sz.atlas_pitch;
     bool row = (leaf.atlas_base & (sz.atlas_pitch - 1u)) + leaf.res_u <= sz.atlas_pitch;
     uint last_texel = leaf.atlas_base + (leaf.res_v - 1u) * sz.atlas_pitch + (leaf.res_u - 1u);
-    return pitch && sides && row && last_texel < sz.atlas_len && last_texel >= leaf.atlas_base;
+    bool band = rbvh_atlas_band(leaf.atlas_base, sz.atlas_wide_len, sz.atlas_end12, sz.atlas_end10) ==
+                rbvh_atlas_band(last_texel, sz.atlas_wide_len, sz.atlas_end12, sz.atlas_end10);
+    return pitch && sides && row && last_texel < sz.atlas_len && last_texel >= leaf.atlas_base && band;
 }
 
 // Marches leaf `li` over [tmin, t_closest); returns t (< 0 on a miss) and, on a hit, where its

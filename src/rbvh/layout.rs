@@ -475,8 +475,8 @@ impl Atlas {
 }
 
 /// Whether every texel of `leaf`'s tile lies in the atlas: at least one sample per side, each tile
-/// row within one atlas row, and its last texel `atlas_base + (res_v − 1)·pitch + res_u − 1` in
-/// range.
+/// row within one atlas row, its last texel `atlas_base + (res_v − 1)·pitch + res_u − 1` in
+/// range, and in the band of its first ([`Atlas::bands`]).
 /// The loader rejects files with a leaf that does not fit; the march treats one as empty.
 pub(super) fn tile_fits(leaf: &GpuHeightfield, atlas: &Atlas) -> bool {
     if leaf.res_u == 0 || leaf.res_v == 0 || leaf.res_u > atlas.pitch {
@@ -490,7 +490,9 @@ pub(super) fn tile_fits(leaf: &GpuHeightfield, atlas: &Atlas) -> bool {
     let last = u64::from(leaf.atlas_base)
         + u64::from(leaf.res_v - 1) * u64::from(atlas.pitch)
         + u64::from(leaf.res_u - 1);
+    // One band: the device reads a tile's texels with its first texel's band (`glsl/atlas.glsl`).
     last < atlas.texels.len() as u64
+        && atlas.bits_at(leaf.atlas_base as usize) == atlas.bits_at(last as usize)
 }
 
 #[cfg(test)]
@@ -636,5 +638,16 @@ mod tests {
         assert!(!fits(u32::MAX, u32::MAX, u32::MAX));
         // Columns 6, 7 of one row, then 0, 1 of the next: in range, but wrapped.
         assert!(fits(6, 2, 2) && !fits(6, 3, 2) && !fits(14, 4, 1));
+        // With its last row 8-bit, a tile of rows 2 and 3 straddles two bands.
+        let banded = Atlas {
+            packed_rows: [0, 0, 1],
+            ..atlas.clone()
+        };
+        let leaf = |base, res_v| GpuHeightfield {
+            atlas_base: base,
+            ..flat_leaf(0.0, 4, res_v, 0.0)
+        };
+        assert!(tile_fits(&leaf(16, 1), &banded) && tile_fits(&leaf(24, 1), &banded));
+        assert!(!tile_fits(&leaf(16, 2), &banded) && tile_fits(&leaf(16, 2), &atlas));
     }
 }

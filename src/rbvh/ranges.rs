@@ -190,6 +190,21 @@ impl Atlas {
         }
     }
 
+    /// The device's read of a cell's row in `format`: texel `index` and the next, whose fields lie
+    /// in the two words from the first's (`rbvh_atlas_tile_pair` in `glsl/atlas.glsl`), read
+    /// together.
+    pub(crate) fn pair_read(&self, index: usize, format: TexelFormat) -> Read {
+        let bands = self.device_layout(format).0;
+        let band = bands
+            .iter()
+            .find(|b| b.texels.contains(&index))
+            .unwrap_or(&bands[3]);
+        Read {
+            bytes: 8,
+            ..word_read(band.word_of(index).0)
+        }
+    }
+
     /// The device's reads of texel `index` with its normal (the format with normals): its word
     /// in the 16-bit band; in a packed band, the reads of its code and the word holding its
     /// normal.
@@ -333,6 +348,14 @@ mod tests {
                     _ => 4,
                 };
                 assert_eq!(a.code_read(i, format).bytes, bytes, "{format:?} texel {i}");
+                // A row's two codes: the two words from the one holding the first's field.
+                let pair = a.pair_read(i, format);
+                assert_eq!(pair.bytes, 8, "{format:?} texel {i}");
+                assert_eq!(
+                    pair.offset,
+                    a.code_read(i, format).offset / 4 * 4,
+                    "texel {i}"
+                );
             }
         }
         // Words: 15 wide texels at one (a half); 10 codes of 12, 10 and 8 bits (120, 100 and 80

@@ -510,7 +510,7 @@ fn check_leaf(leaf: &GpuHeightfield, atlas: &Atlas) -> std::result::Result<(), S
     }
     if !tile_fits(leaf, atlas) {
         return Err(format!(
-            "its {}×{} tile at texel {} does not fit the {}×{} atlas",
+            "its {}×{} tile at texel {} does not fit the {}×{} atlas (or lies across two of its bands)",
             leaf.res_u, leaf.res_v, leaf.atlas_base, atlas.pitch, atlas.rows
         ));
     }

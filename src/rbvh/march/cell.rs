@@ -43,8 +43,9 @@ impl Cells<'_> {
             let i = ci + (k & 1) as i64;
             let j = cj + (k >> 1) as i64;
             let (c, index) = texel(atlas, leaf, i, j);
-            if let Some(index) = index {
-                probe.read(atlas.code_read(index, self.format));
+            // The device reads a row's two codes together (`rbvh_atlas_tile_pair`).
+            if let (0, Some(index)) = (k & 1, index) {
+                probe.read(atlas.pair_read(index, self.format));
             }
             corner[k] = c;
             if !c.is_hole() {

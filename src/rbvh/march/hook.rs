@@ -74,7 +74,7 @@ impl<'a> RbvhLeafHook<'a> {
                 probe.read(
                     self.rbvh
                         .atlas
-                        .code_read(texel as usize, TexelFormat::Height),
+                        .pair_read(texel as usize, TexelFormat::Height),
                 );
             }
         } else {

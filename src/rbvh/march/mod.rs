@@ -334,8 +334,8 @@ pub(super) mod tests {
         );
         assert_eq!((c.triangle_leaves, c.triangles), (0, 0));
         // World (0.3, 0.2) is frame (4.6, 4.4): cell (4, 3), texels 28, 29, 36, 37 of the 8 × 8
-        // tile; the block range word follows the 64 texels. Once the ray is done, the hit's
-        // normal: that of texel 36, the sample nearest the hit.
+        // tile, a row's two read together; the block range word follows the 64 texels. Once the
+        // ray is done, the hit's normal: that of texel 36, the sample nearest the hit.
         let read = |array, offset, bytes| Read {
             array,
             offset,
@@ -347,10 +347,8 @@ pub(super) mod tests {
                 read(Array::Nodes, 0, 48),
                 read(Array::Heightfields, 0, 64),
                 read(Array::Atlas, 4 * 64, 4),
-                read(Array::Atlas, 4 * 28, 4),
-                read(Array::Atlas, 4 * 29, 4),
-                read(Array::Atlas, 4 * 36, 4),
-                read(Array::Atlas, 4 * 37, 4),
+                read(Array::Atlas, 4 * 28, 8),
+                read(Array::Atlas, 4 * 36, 8),
                 read(Array::Atlas, 4 * 36, 4),
             ]
         );

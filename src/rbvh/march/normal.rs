@@ -18,8 +18,9 @@ pub(crate) struct HitNormal {
 }
 
 /// Atlas indices of the texels read for a hit's normal, in order: at most the nearest corner and
-/// then the four corners; for a facet's normal (height-only texels), the cell's corner codes
-/// present in the atlas, after the leaf's record (`facet`).
+/// then the four corners; for a facet's normal (height-only texels), the first corner of each of
+/// the cell's rows present in the atlas (the device reads a row's two codes together,
+/// [`crate::rbvh::Atlas::pair_read`]), after the leaf's record (`facet`).
 #[derive(Clone, Copy, Debug, Default)]
 pub(super) struct NormalReads {
     texels: [u32; 5],
@@ -85,14 +86,8 @@ impl Cells<'_> {
             facet: Some((self.leaf_index, skirt)),
             ..NormalReads::default()
         };
-        for k in 0..4 {
-            let (_, index) = texel(
-                self.atlas,
-                self.leaf,
-                ci + (k & 1) as i64,
-                cj + (k >> 1) as i64,
-            );
-            if let Some(index) = index {
+        for row in 0..2 {
+            if let (_, Some(index)) = texel(self.atlas, self.leaf, ci, cj + row) {
                 reads.push(index as u32);
             }
         }

@@ -152,11 +152,11 @@ impl Cells<'_> {
         if !(within && below >= -fr.slack && below * below * self.uu <= depth * depth) {
             return None;
         }
-        // The device read the cell's four corners before this test, as for any cell.
-        for k in 0..4 {
-            if let (_, Some(index)) = texel(atlas, leaf, ci + (k & 1) as i64, cj + (k >> 1) as i64)
-            {
-                probe.read(atlas.code_read(index, self.format));
+        // The device read the cell's four corners before this test, as for any cell: a row's two
+        // codes together.
+        for row in 0..2 {
+            if let (_, Some(index)) = texel(atlas, leaf, ci, cj + row) {
+                probe.read(atlas.pair_read(index, self.format));
             }
         }
         if self.format == TexelFormat::Height {
