@@ -79,18 +79,26 @@ uint rbvh_atlas_decode(RbvhAtlasTile tile, uint field, bool inside) {
     return inside && c != mask ? c * (tile.phase_bits_step >> 16u) : 0xFFFFu;
 }
 
+// The word holding the field of the tile's texel `d` texels after its texel (0, 0), and the
+// field's first bit in it: counted in groups of 32 fields, as rbvh_atlas_tile counts, so that no
+// product overflows 32 bits whatever the tile's size in a loaded file.
+uvec2 rbvh_atlas_tile_field(RbvhAtlasTile tile, uint d) {
+    uint bits = (tile.phase_bits_step >> 8u) & 0xFFu;
+    uint bit = (tile.phase_bits_step & 0xFFu) + (d & 31u) * bits;
+    return uvec2(tile.word + (d >> 5u) * bits + (bit >> 5u), bit & 31u);
+}
+
 // The height codes of the tile's texels `d` and `d + 1` texels after its texel (0, 0) (d = j *
 // pitch + i; atlas texel `index` and the next; holes at or beyond `len`): what the walk reads, a
 // row of a cell. Both fields lie in the two words from the first's (a field of a packed band may
 // cross into the next word, 20 to 24 bits for the two; the 16-bit band's are two halves or two
 // words), read together, so that a cell's four corners take four reads, as one word each did.
-// `d * bits` stays below 2^31: a tile spans at most 4096 rows of at most 16384 texels. The words
-// read lie inside the buffer: the blocks' height ranges follow the texels.
+// The words read lie inside the buffer: the blocks' height ranges follow the texels.
 uvec2 rbvh_atlas_tile_pair(RbvhAtlasTile tile, uint d, uint index, uint len) {
     uint bits = (tile.phase_bits_step >> 8u) & 0xFFu;
-    uint bit = (tile.phase_bits_step & 0xFFu) + d * bits;
-    uint word = tile.word + (bit >> 5u);
-    uint shift = bit & 31u;
+    uvec2 at = rbvh_atlas_tile_field(tile, d);
+    uint word = at.x;
+    uint shift = at.y;
     uint lo = RBVH_ATLAS_WORD(word);
     uint hi = RBVH_ATLAS_WORD(word + 1u);
     return uvec2(rbvh_atlas_decode(tile, rbvh_atlas_window(lo, hi, shift), index < len),
@@ -100,9 +108,9 @@ uvec2 rbvh_atlas_tile_pair(RbvhAtlasTile tile, uint d, uint index, uint len) {
 // The height code of the tile's texel `d` alone (as rbvh_atlas_tile_pair's first).
 uint rbvh_atlas_tile_code(RbvhAtlasTile tile, uint d, uint index, uint len) {
     uint bits = (tile.phase_bits_step >> 8u) & 0xFFu;
-    uint bit = (tile.phase_bits_step & 0xFFu) + d * bits;
-    uint word = tile.word + (bit >> 5u);
-    uint shift = bit & 31u;
+    uvec2 at = rbvh_atlas_tile_field(tile, d);
+    uint word = at.x;
+    uint shift = at.y;
     uint field = RBVH_ATLAS_WORD(word) >> shift;
     if (shift + bits > 32u) {
         field |= RBVH_ATLAS_WORD(word + 1u) << (32u - shift);

@@ -27,7 +27,7 @@ layout(std430, set = 0, binding = RBVH_PAINT_BRUSHES_BINDING) readonly buffer Br
     PaintBrush brushes[];
 };
 
-// 104 bytes: see src/gpu/painter.rs (PaintParams). The leaf's frame comes with each dispatch:
+// 112 bytes: see src/gpu/painter.rs (PaintParams). The leaf's frame comes with each dispatch:
 // step_u and step_v, the world vectors of one texel step at a constant height over the tile's
 // plane, and the unit height axis (SampleGrid in src/rbvh/layout.rs), computed once on the host
 // for the GPU and the CPU reference alike.

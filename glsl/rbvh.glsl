@@ -74,8 +74,8 @@ struct RbvhHeightfield {
     float h_scale;
 };
 
-// Atlas texels, as rbvh_texel returns them: bits 0-15 height code (0xFFFF = hole), bits 16-31
-// the 8:8 octahedral normal; atlas.glsl reads them from the atlas's words.
+// Atlas texels, as rbvh_atlas_texel returns them: bits 0-15 height code (0xFFFF = hole), bits
+// 16-31 the 8:8 octahedral normal; atlas.glsl reads them from the atlas's words.
 #ifdef RBVH_DEVICE_ADDRESS
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer RbvhHeightfieldsRef {
     RbvhHeightfield heightfields[];
@@ -182,7 +182,7 @@ RbvhFrameRay rbvh_frame_ray(RbvhHeightfield leaf, Ray ray, float t_closest) {
 }
 
 // One cell of the walk: its indices, the ray's parameter range over it, and its four corners'
-// height codes as the walk read them (rbvh_texel), two 16-bit codes a word (c00 | c10 << 16,
+// height codes as the walk read them (rbvh_read_corners), two 16-bit codes a word (c00 | c10 << 16,
 // c01 | c11 << 16): the walk carries them from cell to cell, and on a GPU a word is a register
 // (AMD's compiler reads a half-word as an operand at no cost).
 struct RbvhCell {
@@ -556,7 +556,8 @@ RbvhCell rbvh_walk_cell(RbvhGridWalk w, uint dirs, float t1) {
 // two samples or more each way, a power-of-two pitch (the builder makes it one, and the file
 // reader and the upload refuse any other; it spares divisions: SIMD implementations such as
 // lavapipe run both sides of a branch, and a vector division there is eight scalar ones), no
-// wrap across atlas rows (the block jumps count on it), and its last texel in the atlas.
+// wrap across atlas rows (the block jumps count on it), and its last texel in the atlas, in the
+// band of its first (rbvh_read_corners reads a tile with its first texel's band).
 bool rbvh_tile_fits(RbvhHeightfield leaf, RbvhSizes sz) {
     bool pitch = sz.atlas_pitch != 0u && (sz.atlas_pitch & (sz.atlas_pitch - 1u)) == 0u;
     bool sides = leaf.res_u >= 2u && leaf.res_v >= 2u && leaf.res_u <= sz.atlas_pitch;

@@ -298,3 +298,33 @@ fn a_painter_sharing_the_tracers_atlas_paints_the_same_and_uploads_only_colours(
     assert!(e.contains("no atlas"), "{e}");
     ctx.check_validation().unwrap();
 }
+
+/// Tiles of 12- and 10-bit heights (the sphere's, sampled at Q2) are painted on the device as on
+/// the CPU: the paint shader reads each texel's field, across two words where it crosses one.
+#[test]
+fn packed_heights_paint_as_on_the_cpu() {
+    let ctx = common::context();
+    let r = Rbvh::build(&Scene::load("sphere").unwrap(), &common::sampled_preset(2)).unwrap();
+    let brushes = [Brush::new(Vec3::new(0.0, 0.0, 1.0), 0.8, RED)];
+    let mut painter = Painter::new(&ctx, &r).unwrap();
+    painter.paint(&brushes).unwrap();
+    let gpu = painter.colours().unwrap();
+    let mut cpu = r.clone();
+    assert!(cpu.paint_cpu(&brushes) > 0);
+    let differ = gpu
+        .iter()
+        .zip(cpu.colours.as_ref().unwrap())
+        .filter(|(a, b)| a != b)
+        .count();
+    assert_eq!(differ, 0, "GPU and CPU painting differ in {differ} texels");
+    let mut painted_by_bits = std::collections::BTreeMap::new();
+    for (k, ..) in surface_texels(&r) {
+        if gpu[k] == RED {
+            *painted_by_bits.entry(r.atlas.bits_at(k)).or_insert(0) += 1;
+        }
+    }
+    assert!(
+        painted_by_bits.keys().any(|&bits| bits == 10 || bits == 12),
+        "painted texels by bits of height: {painted_by_bits:?}"
+    );
+}

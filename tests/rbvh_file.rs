@@ -529,10 +529,12 @@ fn exact_crease_deg_round_trips_and_is_checked() {
 }
 
 /// `sample()` with its last four atlas rows packed — a row of 12-bit heights, one of 10-bit
-/// heights and two of 8-bit ones — their codes made codes of those bits.
+/// heights and two of 8-bit ones — their codes made codes of those bits, and its second leaf cut
+/// to its first row (row 4, 16-bit), so that each tile lies in one band.
 fn packed_sample() -> Rbvh {
     let mut r = sample();
     r.atlas.packed_rows = [1, 1, 2];
+    r.heightfields[1].res_v = 1;
     for (bits, range) in r.atlas.bands().into_iter().skip(1) {
         let step = Texel::step(bits);
         for t in &mut r.atlas.texels[range] {

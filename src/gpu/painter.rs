@@ -22,7 +22,7 @@ use crate::{Error, Result};
 /// 65535 iterations; more brushes are painted in further passes, in order.
 pub const MAX_BRUSHES_PER_PASS: usize = 4096;
 
-/// Push constants of `glsl/paint_main.glsl` (104 bytes): the leaf's sample grid
+/// Push constants of `glsl/paint_main.glsl` (112 bytes): the leaf's sample grid
 /// ([`crate::rbvh::layout::SampleGrid`]), where its tile lies, and the device addresses of the
 /// atlas and the colours (zero where they are bound).
 #[repr(C)]

@@ -52,7 +52,7 @@ pub struct Traced {
     pub timing: Timing,
 }
 
-/// Push constants of the trace shaders (`glsl/trace_params.glsl`, 104 bytes); the exact one
+/// Push constants of the trace shaders (`glsl/trace_params.glsl`, 112 bytes); the exact one
 /// ignores the sizes after `tri_count`, the plain RBVH one the LOD sizes, all but the two-level
 /// ones `instance_count`.
 #[repr(C)]

@@ -83,8 +83,10 @@ pub fn pack(tiles: &[Footprint], format: TexelFormat) -> Result<Packing> {
         .filter(|&b| tiles.iter().any(|f| f.bits == PACKED_BITS[b]))
         .collect();
     let mut best: Option<(u64, Packing)> = None;
-    // Subsets of the present bands, all of them first.
-    for dropped in 0..1u32 << present.len() {
+    // Subsets of the present bands dropped, the fewest first, so that a tie keeps more bands.
+    let mut subsets: Vec<u32> = (0..1u32 << present.len()).collect();
+    subsets.sort_by_key(|&dropped| (dropped.count_ones(), dropped));
+    for dropped in subsets {
         let kept: Vec<u32> = present
             .iter()
             .enumerate()
@@ -417,6 +419,23 @@ mod tests {
             assert_eq!(banded.packed_rows, [0, 0, 8]);
             assert!(device_bytes(&p, format) < device_bytes(&banded, format));
         }
+        // Beside five whole 12-bit tiles, whose band pays, the small tile's band (10-bit now) is
+        // still dropped: each band is judged, not all of them together.
+        let mut mixed = tiles.clone();
+        mixed[5].bits = 10;
+        mixed.extend((0..5).map(|_| Footprint {
+            res_u: 64,
+            res_v: 64,
+            bits: 12,
+        }));
+        let sizes: Vec<(u32, u32)> = mixed.iter().map(|f| (f.res_u, f.res_v)).collect();
+        let p = pack(&mixed, TexelFormat::HeightNormal).unwrap();
+        check_placement(&sizes, &p);
+        assert_eq!((p.pitch, p.rows, p.packed_rows), (64, 640, [320, 0, 0]));
+        assert!(
+            p.bases[5] < 320 * 64,
+            "the 10-bit tile among the 16-bit rows"
+        );
     }
 
     /// Five 64 × 64 tiles: a square atlas (pitch 256) would leave its second shelf half empty

@@ -428,12 +428,12 @@ impl Atlas {
     /// 16-bit rows, then those of each of [`PACKED_BITS`] (empty ranges where a band has none).
     pub fn bands(&self) -> [(u32, std::ops::Range<usize>); 4] {
         let len = self.texels.len();
-        let packed: u32 = self.packed_rows.iter().sum();
-        let at = |rows: u32| (rows as usize * self.pitch as usize).min(len);
-        let mut start = at(self.rows.saturating_sub(packed));
+        let packed: u64 = self.packed_rows.iter().map(|&r| u64::from(r)).sum();
+        let at = |rows: u64| (rows as usize).saturating_mul(self.pitch as usize).min(len);
+        let mut start = at(u64::from(self.rows).saturating_sub(packed));
         let mut bands = [(16, 0..start), (0, 0..0), (0, 0..0), (0, 0..0)];
         for (b, (&bits, &rows)) in PACKED_BITS.iter().zip(&self.packed_rows).enumerate() {
-            let end = (start + at(rows)).min(len);
+            let end = start.saturating_add(at(u64::from(rows))).min(len);
             bands[b + 1] = (bits, start..end);
             start = end;
         }

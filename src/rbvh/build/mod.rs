@@ -344,8 +344,8 @@ impl Rbvh {
         let mut atlas = atlas::assemble(&out.tiles, &packing);
         let height_only = params.texels == TexelFormat::Height;
         if height_only {
-            // Only the height codes are kept (and uploaded, two to a word or, 8-bit, four): a
-            // hit's normal comes from the cell triangle it hit.
+            // Only the height codes are kept (and uploaded, two to a word, or packed 12, 10 or 8
+            // bits each): a hit's normal comes from the cell triangle it hit.
             for t in &mut atlas.texels {
                 *t = Texel(u32::from(t.height_code()));
             }
