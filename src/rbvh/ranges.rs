@@ -162,28 +162,32 @@ impl Atlas {
 }
 
 impl Atlas {
+    /// The band that holds texel `index` as the device keeps it in `format` (the last one for an
+    /// index past the atlas).
+    fn device_band(&self, index: usize, format: TexelFormat) -> DeviceBand {
+        let [wide, b12, b10, b8] = self.device_layout(format).0;
+        [wide, b12, b10]
+            .into_iter()
+            .find(|b| b.texels.contains(&index))
+            .unwrap_or(b8)
+    }
+
     /// The device's read of texel `index`'s height code in `format` ([`Atlas::device_words`]):
     /// in the 16-bit band its word (its half-word without normals); in a packed band the word
     /// holding its field, and the next with it (8 bytes) where the field crosses into it.
     pub(crate) fn code_read(&self, index: usize, format: TexelFormat) -> Read {
-        let [wide, bands @ ..] = self.device_layout(format).0;
-        let band = bands
-            .into_iter()
-            .find(|b| b.texels.contains(&index))
-            .filter(|_| index >= wide.texels.end);
-        match band {
-            None => {
-                let bytes = wide.field / 8;
-                Read {
-                    array: Array::Atlas,
-                    offset: u64::from(bytes) * index as u64,
-                    bytes,
-                }
-            }
-            Some(band) => {
+        let band = self.device_band(index, format);
+        match band.field {
+            // The 16-bit band (32 bits with normals).
+            16 | 32 => Read {
+                array: Array::Atlas,
+                offset: u64::from(band.field / 8) * index as u64,
+                bytes: band.field / 8,
+            },
+            field => {
                 let (word, shift) = band.word_of(index);
                 Read {
-                    bytes: if shift + band.field > 32 { 8 } else { 4 },
+                    bytes: if shift + field > 32 { 8 } else { 4 },
                     ..word_read(word)
                 }
             }
@@ -194,14 +198,9 @@ impl Atlas {
     /// in the two words from the first's (`rbvh_atlas_tile_pair` in `glsl/atlas.glsl`), read
     /// together.
     pub(crate) fn pair_read(&self, index: usize, format: TexelFormat) -> Read {
-        let bands = self.device_layout(format).0;
-        let band = bands
-            .iter()
-            .find(|b| b.texels.contains(&index))
-            .unwrap_or(&bands[3]);
         Read {
             bytes: 8,
-            ..word_read(band.word_of(index).0)
+            ..word_read(self.device_band(index, format).word_of(index).0)
         }
     }
 
