@@ -279,8 +279,11 @@ bool rbvh_test_triangles(RbvhShear sh, Ray ray, bool any_hit, uint first, uint e
 // Instances (RBVH_INSTANCES): what both two-level structures share, the exact BVH's (below) and
 // the RBVH's (rbvh.glsl).
 #ifdef RBVH_INSTANCES
-// The count of a top-level leaf (bvh::INSTANCE_LEAF): its reference is LEAF_BIT | instance.
-const uint RBVH_INSTANCE_LEAF = 0xFFFFFFFFu;
+// The count of a top-level leaf (bvh::INSTANCE_LEAF): its reference is LEAF_BIT | instance. No
+// mesh's leaf has it (an RBVH height field's is 0xFFFFFFFF), so a top-level leaf of another count
+// is the grafted mesh's (bvh::GRAFTED: the first instance, where it is the identity, walked in the
+// top level with the world ray).
+const uint RBVH_INSTANCE_LEAF = 0xFFFFFFFEu;
 
 // One instance (GpuInstance in src/bvh/layout.rs), 64 bytes: world to mesh space by rows (p'_i =
 // dot(row_i.xyz, p) + row_i.w), the root node of its mesh's tree, the mesh.
@@ -392,7 +395,7 @@ struct BvhInstanceHook {
     BvhInstanceSizes sz;
     uint best_slot;      // the nearest hit's triangle slot, RBVH_INVALID while none
     uint best_instance;  // its instance
-    uint entered;        // the instance the ray is in, RBVH_INVALID at the top level
+    uint entered;        // the instance the ray is in; in the top level the grafted one, 0
 };
 
 uint rbvh_node_count(BvhInstanceHook leaves) {
@@ -437,15 +440,17 @@ Ray rbvh_enter_instance(inout BvhInstanceHook leaves, uint reference, Ray ray) {
     return rbvh_ray_into(RBVH_BVH_INSTANCE(k), ray);
 }
 
-// Leaves the instance entered last: `ray` is the world's again (kept beside the stack).
+// Leaves the instance entered last: `ray` is the world's again (kept beside the stack), and the
+// leaves met next are the top level's grafted mesh's (bvh::GRAFTED).
 void rbvh_exit_instance(inout BvhInstanceHook leaves, inout Ray ray) {
     ray = rbvh_kept_world_ray();
-    leaves.entered = RBVH_INVALID;
+    leaves.entered = 0u;
 }
 
 bool rbvh_test(inout BvhInstanceHook leaves, Ray ray, bool any_hit, uint reference, uint count,
                inout float t_closest, inout uint steps, inout bool cut) {
-    // Triangles are the meshes': the traversal hands over leaves met inside an instance only.
+    // Triangles are the meshes': the traversal hands over leaves met inside an instance and, in
+    // the top level, the grafted mesh's.
     uint first = reference & ~RBVH_LEAF_BIT;
     uint end = rbvh_slot_end(first, count, leaves.sz.tri_count);
     bool hit = rbvh_test_triangles(rbvh_shear(ray), ray, any_hit, first, end, leaves.sz.tri_count, t_closest,
@@ -468,7 +473,7 @@ bool rbvh_test(inout BvhInstanceHook leaves, Ray ray, bool any_hit, uint referen
 // its mesh's triangle in `id`, the normal taken to world space by the instance (the transpose of
 // world_to_mesh: GpuInstance::normal_out).
 Hit rbvh_trace_instances(Ray ray, bool any_hit, BvhInstanceSizes sz, out uint steps, out bool overflow) {
-    BvhInstanceHook leaves = BvhInstanceHook(sz, RBVH_INVALID, RBVH_INVALID, RBVH_INVALID);
+    BvhInstanceHook leaves = BvhInstanceHook(sz, RBVH_INVALID, RBVH_INVALID, 0u);
     float t = rbvh_traverse_instances(ray, any_hit, leaves, steps, overflow);
     if (leaves.best_slot == RBVH_INVALID) {
         return rbvh_miss();

@@ -908,10 +908,10 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
 // The two-level RBVH's hook (trace_instanced in src/rbvh/march/hook.rs: src/bvh/top_level.rs's
 // InstanceHook around RbvhLeafHook): top-level
 // leaves enter instances (bvh.glsl's records), the meshes' leaves are the RBVH's own, marched and
-// tested in the mesh's space. A top-level leaf and a height field share their count
-// (RBVH_INSTANCE_LEAF = RBVH_HEIGHTFIELD_COUNT): the level the ray is in tells them apart.
-// The instance entered last (RBVH_STACK_INSTANCE's x, RBVH_INVALID before the first), which is
-// the one the ray is in while the traversal is inside one, and the nearest hit's
+// tested in the mesh's space, and the leaves of the mesh the top level grafts (bvh::GRAFTED, the
+// first instance where it is the identity) are marched there with the world ray.
+// The instance entered last (RBVH_STACK_INSTANCE's x; in the top level the grafted one, 0), which
+// is the one the ray is in while the traversal is inside one, and the nearest hit's
 // (RBVH_STACK_HIT_INSTANCE's x) are kept in rbvh_stack, not in registers through every march. A
 // hit copies the instance's index where it is found, read after the march: while the hook read
 // that index before the march too (to check that the ray was inside an instance), the compiler
@@ -919,7 +919,8 @@ Hit rbvh_trace_rbvh(Ray ray, bool any_hit, RbvhSizes sz, out uint steps, out boo
 // 56), so the hit was marked "the instance the ray is in" and named later, which cost lavapipe
 // a store in every round (docs/speed.md, "The two-level RBVH tracer's registers";
 // docs/paper-scale.md, "What two levels cost a ray on lavapipe"). The traversal now hands the
-// hook the leaves met inside an instance only, and the index is read once the march is done.
+// hook the leaves met inside an instance or grafted in the top level, and the index is read once
+// the march is done.
 
 struct RbvhInstanceHook {
     RbvhLeafHook inner;
@@ -980,13 +981,16 @@ Ray rbvh_level_ray(RbvhInstanceHook leaves, bool inside) {
     return ray;
 }
 
-// Leaves the instance entered last: nothing to do. The ray comes from rbvh_level_ray.
+// Leaves the instance entered last: the leaves met next are the top level's, the grafted mesh's.
+// The ray comes from rbvh_level_ray.
 void rbvh_exit_instance(inout RbvhInstanceHook leaves, inout Ray ray) {
+    rbvh_stack[RBVH_STACK_INSTANCE].x = 0u;
 }
 
 bool rbvh_test(inout RbvhInstanceHook leaves, Ray ray, bool any_hit, uint reference, uint count,
                inout float t_closest, inout uint steps, inout bool cut) {
-    // The traversal hands over the meshes' leaves alone, met inside an instance.
+    // The traversal hands over the meshes' leaves alone, met inside an instance or grafted in the
+    // top level; RBVH_STACK_INSTANCE names either (the grafted one, 0, outside any instance).
     bool hit = rbvh_test(leaves.inner, ray, any_hit, reference, count, t_closest, steps, cut);
     if (hit) {
         rbvh_stack[RBVH_STACK_HIT_INSTANCE].x = rbvh_stack[RBVH_STACK_INSTANCE].x;
@@ -1010,7 +1014,7 @@ bool rbvh_test(inout RbvhInstanceHook leaves, Ray ray, bool any_hit, uint refere
 Hit rbvh_trace_rbvh_instances(Ray ray, bool any_hit, RbvhSizes sz, uint instance_count, out uint steps,
                               out bool overflow) {
     RbvhInstanceHook leaves = RbvhInstanceHook(rbvh_leaf_hook(sz), instance_count);
-    rbvh_stack[RBVH_STACK_INSTANCE].x = RBVH_INVALID;
+    rbvh_stack[RBVH_STACK_INSTANCE].x = 0u;
     rbvh_stack[RBVH_STACK_HIT_INSTANCE].x = RBVH_INVALID;
     float t = rbvh_traverse_rbvh_instances(ray, any_hit, leaves, steps, overflow);
     if (leaves.inner.best == RBVH_INVALID) {

@@ -41,13 +41,16 @@
 // register through every leaf test; docs/speed.md, "The two-level RBVH tracer's registers"),
 // and the traversal pushes an instance's end (distance -inf, RBVH_INSTANCE_END, which no nearest
 // hit drops; its word the top level's visits so far) when it enters one, and leaves the instance
-// when it pops that entry; it hands the hook's rbvh_test leaves met inside an instance only (a
-// top-level leaf is an instance or nothing). Distances are
+// when it pops that entry. It hands the hook's rbvh_test the leaves met inside an instance and,
+// in the top level, every leaf whose count is not RBVH_INSTANCE_LEAF: the mesh the top level
+// grafts (bvh::GRAFTED, the first instance where it is the identity), walked there with the world
+// ray, so that its rays enter and leave no instance, each of which takes a round. Distances are
 // the same along both rays (the direction is transformed, not normalized). Visits are bounded per
 // level: a mesh placed twice may be visited twice.
 // It also uses, from bvh.glsl (included before it wherever it is instantiated: bvh.glsl,
 // rbvh.glsl, lod.glsl) and what that includes (common.glsl, intersect.glsl): Ray, BvhNode,
 // RBVH_BVH_NODE(i), rbvh_node_boxes, RBVH_LEAF_BIT, RBVH_INVALID, RBVH_STACK_SIZE, rbvh_stack,
+// with instances RBVH_INSTANCE_LEAF,
 // rbvh_keep_ray, rbvh_kept_ray, rbvh_stack_entry, rbvh_stack_pop, rbvh_ray_valid, with instances rbvh_keep_world_ray,
 // rbvh_safe_inverse, rbvh_intersect_box, RBVH_COUNT_RESET and RBVH_COUNT_ADD. Define the two names above and include it; then
 // `float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint steps, out bool
@@ -260,7 +263,8 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
             break;
         }
 #ifdef RBVH_TRAVERSE_INSTANCES
-        uint root = inside ? RBVH_INVALID : rbvh_instance_root(leaves, pending, pending_count);
+        bool instance_leaf = !inside && pending_count == RBVH_INSTANCE_LEAF;
+        uint root = instance_leaf ? rbvh_instance_root(leaves, pending, pending_count) : RBVH_INVALID;
         if (root != RBVH_INVALID) {
             ray = rbvh_enter_instance(leaves, pending, ray);
             if (sp < RBVH_STACK_SIZE) {
@@ -276,8 +280,9 @@ float RBVH_TRAVERSE(Ray ray, bool any_hit, inout RBVH_LEAVES leaves, out uint st
             }
             continue;
         }
-        // A top-level leaf that is no instance: nothing to test.
-        if (!inside) {
+        // An instance leaf with nothing to enter holds nothing; any other leaf met in the top
+        // level is the grafted mesh's.
+        if (instance_leaf) {
             continue;
         }
 #endif

@@ -36,8 +36,9 @@ pub struct RayCounters {
     pub triangles: u32,
     /// Instances entered (a two-level structure's top-level leaves; 0 in every other).
     pub instances: u32,
-    /// Of `nodes`, those of a two-level structure's top level (0 in every other): the rest were
-    /// visited in the instances' meshes.
+    /// Of `nodes`, those a two-level structure's ray visited outside any instance (0 in every
+    /// other): its top level's, and those of the mesh the top level grafts
+    /// ([`crate::bvh::GRAFTED`]); the rest were visited in the instances' meshes.
     pub top_nodes: u32,
 }
 const _: () = assert!(std::mem::size_of::<RayCounters>() == 40);

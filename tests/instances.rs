@@ -7,7 +7,7 @@ mod common;
 
 use common::{random_rays, Rng};
 use glam::{Mat4, Quat, Vec3};
-use rbvh::bvh::{Bvh, InstancedBvh, STACK_SIZE};
+use rbvh::bvh::{Bvh, InstancedBvh, GRAFTED, STACK_SIZE};
 use rbvh::geom::{Hit, Ray};
 use rbvh::scene::{Instance, InstancedScene, Scene};
 
@@ -55,6 +55,11 @@ fn placed() -> InstancedScene {
 fn compare(scene: &InstancedScene, two: &InstancedBvh, flat: &Bvh, rays: &[Ray], any: bool) {
     let bases = scene.flat_bases();
     let diagonal = scene.bounds().diagonal();
+    let first = scene.instances[GRAFTED as usize];
+    let grafted_nodes = match first.transform == Mat4::IDENTITY {
+        true => two.meshes[first.mesh as usize].nodes,
+        false => 0,
+    };
     let (mut disagree, mut other_triangle) = (0usize, 0usize);
     for (i, ray) in rays.iter().enumerate() {
         let (h, stats) = if any {
@@ -69,17 +74,21 @@ fn compare(scene: &InstancedScene, two: &InstancedBvh, flat: &Bvh, rays: &[Ray],
         };
         assert!(!stats.overflow, "ray {i} overflowed");
         // Counted per level: the top level's nodes among all, an instance entered per mesh
-        // tree walked, and a hit only inside one.
+        // tree walked, and a hit only inside one, or in the mesh the top level grafts (the
+        // first instance, placed where it is).
         let c = stats.counters;
         assert!(
-            c.top_nodes <= c.nodes && c.top_nodes <= two.top_nodes,
+            c.top_nodes <= c.nodes && c.top_nodes <= two.top_nodes + grafted_nodes,
             "ray {i}: {c:?}"
         );
         assert!(
             c.instances <= scene.instances.len() as u32,
             "ray {i}: {c:?}"
         );
-        assert!(!h.is_hit() || c.instances >= 1, "ray {i}: {c:?}");
+        assert!(
+            !h.is_hit() || c.instances >= 1 || h.instance == GRAFTED,
+            "ray {i}: {c:?}"
+        );
         if h.is_hit() != f.is_hit() {
             disagree += 1;
             continue;
@@ -188,6 +197,66 @@ fn moving_instances_rebuilds_the_top_level_as_a_fresh_build() {
     let flat = Bvh::build(&flat_scene).unwrap();
     let rays = random_rays(&flat_scene, 5_000, &mut Rng::new(5));
     compare(&scene, &two, &flat, &rays, false);
+}
+
+/// The top-level children that lead into a mesh's tree rather than to an instance leaf.
+fn grafted_roots(two: &InstancedBvh) -> Vec<u32> {
+    two.nodes[..two.top_nodes as usize]
+        .iter()
+        .flat_map(|n| n.children())
+        .filter(|c| !c.is_absent() && !c.is_leaf() && c.child >= two.top_nodes)
+        .map(|c| c.child)
+        .collect()
+}
+
+/// The first instance, placed where it is, lies in the top level: its mesh's tree is walked with
+/// the world ray and its hits are named without entering an instance; moved, it is entered as any
+/// other, and placed back where it was, grafted again. No other instance is grafted, though it
+/// places its mesh where it is.
+#[test]
+fn the_first_instance_where_it_is_lies_in_the_top_level() {
+    let mut scene = placed();
+    scene.instances.push(Instance {
+        mesh: 0,
+        transform: Mat4::IDENTITY,
+    });
+    let mut two = InstancedBvh::build(&scene).unwrap();
+    let cube = two.meshes[scene.instances[GRAFTED as usize].mesh as usize];
+    assert_eq!(grafted_roots(&two), vec![cube.root]);
+
+    let mut moved: Vec<Mat4> = scene.instances.iter().map(|i| i.transform).collect();
+    moved[GRAFTED as usize] = Mat4::from_translation(Vec3::new(0.0, 0.0, 0.5));
+    two.set_transforms(&moved).unwrap();
+    assert!(grafted_roots(&two).is_empty());
+    moved[GRAFTED as usize] = Mat4::IDENTITY;
+    two.set_transforms(&moved).unwrap();
+    assert_eq!(grafted_roots(&two), vec![cube.root]);
+
+    // A scene of one mesh placed once where it is: every ray walks the mesh in the top level.
+    let sphere = Scene::builtin("sphere").unwrap();
+    let mut single = InstancedScene::single(sphere.clone());
+    let rays = random_rays(&sphere, 1_000, &mut Rng::new(9));
+    for moved in [false, true] {
+        if moved {
+            single.instances[0].transform = Mat4::from_translation(Vec3::X);
+        }
+        let two = InstancedBvh::build(&single).unwrap();
+        let mut hits = 0;
+        for ray in &rays {
+            let (h, stats) = two.closest_hit(ray);
+            let entered = stats.counters.instances;
+            assert_eq!(
+                entered,
+                u32::from(moved && stats.counters.nodes > 1),
+                "{ray:?}"
+            );
+            if h.is_hit() {
+                hits += 1;
+                assert_eq!(h.instance, 0);
+            }
+        }
+        assert!(hits > 100, "{hits} hits");
+    }
 }
 
 #[test]

@@ -54,53 +54,82 @@ fn rays(scene: &InstancedScene, n: usize, seed: u64) -> Vec<Ray> {
     rays
 }
 
+/// [`placed`] with a first instance placing the torus where it is, which the top level grafts
+/// (`bvh::GRAFTED`): its mesh walked in the top level with the world ray.
+fn grafted() -> InstancedScene {
+    let mut scene = placed();
+    scene.instances.insert(
+        0,
+        Instance {
+            mesh: 1,
+            transform: Mat4::IDENTITY,
+        },
+    );
+    scene
+}
+
 /// The device traces the two-level RBVH as its twin does, ray for ray: the same hits (instance,
 /// id, `t` to 1e-5 relative, normal) and the same counters, closest and any hit, with both texel
-/// formats, through bindings and device addresses (under the validation layers where installed).
+/// formats, through bindings and device addresses (under the validation layers where installed),
+/// with and without a grafted first instance.
 #[test]
 fn the_device_traces_the_two_level_rbvh_as_its_twin_does() {
-    let scene = placed();
-    let rays = rays(&scene, 4_000, 5);
-    for (level, texels) in [(2, TexelFormat::HeightNormal), (1, TexelFormat::Height)] {
-        let params = RbvhParams {
-            texels,
-            ..RbvhParams::quality(level).unwrap()
-        };
-        let two = InstancedRbvh::build(&scene, &params).unwrap();
-        assert!(two.stats().heightfield_leaves > 0);
-        let structure = Structure::from(two.clone());
-        for addressing in [Addressing::Bindings, Addressing::DeviceAddress] {
-            let ctx = common::context_with(addressing);
-            let tracer = Tracer::new(&ctx, &structure).unwrap();
-            let twin = two.device_twin().with_block_jumps(tracer.block_jumps());
-            for query in [Query::Closest, Query::Any] {
-                let any = query == Query::Any;
-                let traced = tracer.trace_with(&rays, Cones::None, query, true).unwrap();
-                let counters = traced.counters.unwrap();
-                let mut hits = 0;
-                for (i, ray) in rays.iter().enumerate() {
-                    let (cpu, stats) = twin.trace(ray, any, &mut ());
-                    let gpu = traced.hits[i];
-                    let at = format!("Q{level} {addressing:?} {query:?} ray {i}");
-                    assert_eq!(gpu.is_hit(), cpu.is_hit(), "{at}");
-                    assert_eq!(counters[i], stats.counters, "{at}: counters");
-                    if any || !gpu.is_hit() {
-                        continue;
-                    }
-                    hits += 1;
-                    assert_eq!((gpu.instance, gpu.id), (cpu.instance, cpu.id), "{at}");
-                    assert!(
-                        (gpu.t - cpu.t).abs() <= 1e-5 * cpu.t,
-                        "{at}: t {} vs {}",
-                        gpu.t,
-                        cpu.t
-                    );
-                    assert!(gpu.normal().dot(cpu.normal()) > 0.9999, "{at}: normals");
+    for (scene, (level, texels)) in [
+        (placed(), (2, TexelFormat::HeightNormal)),
+        (placed(), (1, TexelFormat::Height)),
+        (grafted(), (2, TexelFormat::HeightNormal)),
+    ] {
+        let in_top_level = device_traces_as_twin(&scene, level, texels);
+        let first = scene.instances[0].transform;
+        assert_eq!(in_top_level > 0, first == Mat4::IDENTITY, "{in_top_level}");
+    }
+}
+
+/// Traces `scene`'s RBVH at `level` on the device and its twin, comparing them ray for ray;
+/// returns how many closest hits lay in the top level (named, entering no instance).
+fn device_traces_as_twin(scene: &InstancedScene, level: u32, texels: TexelFormat) -> usize {
+    let rays = rays(scene, 4_000, 5);
+    let params = RbvhParams {
+        texels,
+        ..RbvhParams::quality(level).unwrap()
+    };
+    let two = InstancedRbvh::build(scene, &params).unwrap();
+    assert!(two.stats().heightfield_leaves > 0);
+    let structure = Structure::from(two.clone());
+    let mut in_top_level = 0;
+    for addressing in [Addressing::Bindings, Addressing::DeviceAddress] {
+        let ctx = common::context_with(addressing);
+        let tracer = Tracer::new(&ctx, &structure).unwrap();
+        let twin = two.device_twin().with_block_jumps(tracer.block_jumps());
+        for query in [Query::Closest, Query::Any] {
+            let any = query == Query::Any;
+            let traced = tracer.trace_with(&rays, Cones::None, query, true).unwrap();
+            let counters = traced.counters.unwrap();
+            let mut hits = 0;
+            for (i, ray) in rays.iter().enumerate() {
+                let (cpu, stats) = twin.trace(ray, any, &mut ());
+                in_top_level += usize::from(!any && cpu.is_hit() && stats.counters.instances == 0);
+                let gpu = traced.hits[i];
+                let at = format!("Q{level} {addressing:?} {query:?} ray {i}");
+                assert_eq!(gpu.is_hit(), cpu.is_hit(), "{at}");
+                assert_eq!(counters[i], stats.counters, "{at}: counters");
+                if any || !gpu.is_hit() {
+                    continue;
                 }
-                assert!(any || hits * 4 > rays.len(), "{hits} hits");
+                hits += 1;
+                assert_eq!((gpu.instance, gpu.id), (cpu.instance, cpu.id), "{at}");
+                assert!(
+                    (gpu.t - cpu.t).abs() <= 1e-5 * cpu.t,
+                    "{at}: t {} vs {}",
+                    gpu.t,
+                    cpu.t
+                );
+                assert!(gpu.normal().dot(cpu.normal()) > 0.9999, "{at}: normals");
             }
+            assert!(any || hits * 4 > rays.len(), "{hits} hits");
         }
     }
+    in_top_level
 }
 
 /// The two-level exact BVH referees the two-level RBVH as the exact BVH referees a flat one:

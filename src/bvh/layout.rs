@@ -21,8 +21,10 @@ pub const MAX_NODES: usize = 1 << 30;
 pub const LEAF_BIT: u32 = 0x8000_0000;
 
 /// The `count` of a top-level leaf of a two-level structure: `child = LEAF_BIT | instance`
-/// ([`GpuInstance`]); no triangle leaf holds this many.
-pub const INSTANCE_LEAF: u32 = u32::MAX;
+/// ([`GpuInstance`]). No triangle leaf holds this many, and it is not an RBVH height field's
+/// count (`u32::MAX`, `crate::rbvh::HEIGHTFIELD_COUNT`), so that the top level can hold the
+/// leaves of the mesh it grafts ([`GRAFTED`](super::GRAFTED)) beside its instances.
+pub const INSTANCE_LEAF: u32 = u32::MAX - 1;
 
 /// An inner node holding both children's boxes (Aila & Laine 2009), quantized against the node's
 /// own box as compressed wide BVHs do (Ylitie, Karras & Laine, "Efficient Incoherent Ray Traversal

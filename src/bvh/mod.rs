@@ -31,6 +31,6 @@ pub use layout::{
     ChildRef, GpuInstance, GpuNode, GpuTriangle, INSTANCE_LEAF, LEAF_BIT, MAX_NODES, STACK_SIZE,
 };
 pub(crate) use morton::LinearBvh;
-pub use top_level::BottomLevel;
 pub(crate) use top_level::{check_transforms, index, place, top_node_count, Aim, InstanceHook};
+pub use top_level::{BottomLevel, GRAFTED};
 pub(crate) use traverse::{traverse, BvhLeafHook, Leaves, TriangleSlots};

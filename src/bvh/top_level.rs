@@ -4,9 +4,13 @@
 //! ([`place`]), and the traversal's hook that enters an instance by taking the ray into its
 //! mesh's space ([`InstanceHook`], around the bottom level's own leaves).
 //!
-//! A top-level leaf is `LEAF_BIT | instance` with the count [`INSTANCE_LEAF`]; it is told from a
-//! mesh's leaves by the level the traversal is in, not by its words (an RBVH's height-field leaf
-//! has the same count), since the top level holds instances only and a mesh's tree none.
+//! A top-level leaf is `LEAF_BIT | instance` with the count [`INSTANCE_LEAF`], which no mesh's
+//! leaf has. The first instance, where it places its mesh where it is (the identity: a scene
+//! file's `[[mesh]]` entries, [`InstancedScene`](crate::scene::InstancedScene)'s convention), is
+//! *grafted* ([`GRAFTED`]): its top-level child is its mesh's root, so a ray walks that tree in
+//! the top level with the world ray, entering no instance. Entering and leaving an instance take
+//! a round of the traversal each, which the rays of a scene placed around its own geometry paid
+//! for nearly every ray (docs/paper-scale.md, "The scene's own geometry in the top level").
 
 use glam::Mat4;
 use rayon::prelude::*;
@@ -77,6 +81,16 @@ pub(crate) fn check_transforms(transforms: &[Mat4], instances: usize) -> Result<
     Ok(())
 }
 
+/// The instance whose mesh the top level holds in place of a leaf, where it places it where it is
+/// (the identity transform, exactly): its tree's root is the top level's child, walked with the
+/// world ray. A leaf met in the top level is then that mesh's, and its hit is named by this
+/// instance, which is why one instance only, and always the first, is grafted: the device names
+/// such a hit without a record saying which. Moved elsewhere ([`InstancedBvh::set_transforms`]),
+/// it is an instance like the others.
+///
+/// [`InstancedBvh::set_transforms`]: super::InstancedBvh::set_transforms
+pub const GRAFTED: u32 = 0;
+
 /// Most boxes of a mesh's tree that an instance's world box is made from ([`cut`]): 16 turned
 /// dragons' top-level boxes enclose less empty space than their root boxes turned would, so
 /// that fewer rays enter an instance they miss, for up to 136 corners transformed per instance when
@@ -140,7 +154,8 @@ fn placed_box(mesh: &BottomLevel, cut: &[Aabb], m: Mat4) -> Aabb {
 }
 
 /// The top level over instances of meshes `mesh_of` (lying as `meshes` say in `nodes`) at
-/// `transforms`: `top_nodes` nodes ([`top_node_count`]), or an [`Error::InvalidParameter`]
+/// `transforms`, the [`GRAFTED`] instance's mesh in place of its leaf where it lies where it is:
+/// `top_nodes` nodes ([`top_node_count`]), or an [`Error::InvalidParameter`]
 /// where the tree came out otherwise or the two levels together are deeper than the traversal
 /// stack.
 pub(crate) fn place(
@@ -161,6 +176,11 @@ pub(crate) fn place(
             match bounds.is_empty() {
                 // A mesh with nothing in it: nothing to enter.
                 true => Placed::Leaf(ChildRef::ABSENT),
+                false if k as u32 == GRAFTED && m == Mat4::IDENTITY => Placed::Leaf(ChildRef {
+                    bounds,
+                    child: bottom.root,
+                    count: 0,
+                }),
                 false => Placed::Leaf(ChildRef {
                     bounds,
                     child: LEAF_BIT | k as u32,
@@ -184,7 +204,8 @@ pub(crate) fn place(
         .map(|&m| meshes[m as usize].depth)
         .max()
         .unwrap_or(0);
-    // The top level's entries, the instance's end, the mesh's entries.
+    // The top level's entries, the instance's end, the mesh's entries (a grafted mesh's without
+    // the end).
     if depth + 1 + deepest > STACK_SIZE {
         return Err(Error::param(
             "scene",
@@ -316,8 +337,9 @@ impl<P: Probe, L: Leaves<P> + Aim> Leaves<P> for InstanceHook<'_, L> {
         stats: &mut TraceStats,
         probe: &mut P,
     ) -> bool {
-        // The traversal hands over the leaves met inside an instance only.
-        let Some(k) = self.entered else { return false };
+        // The traversal hands over the leaves met inside an instance, and in the top level the
+        // grafted instance's.
+        let k = self.entered.unwrap_or(GRAFTED);
         let found = self.leaves.test(reference, count, t_closest, stats, probe);
         if found {
             self.best = Some(k);

@@ -15,7 +15,7 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::layout::{ChildRef, GpuNode, GpuTriangle, LEAF_BIT, STACK_SIZE};
+use super::layout::{ChildRef, GpuNode, GpuTriangle, INSTANCE_LEAF, LEAF_BIT, STACK_SIZE};
 use super::Bvh;
 use crate::geom::{intersect_triangle, safe_inverse, Hit, Ray, RayShear};
 use crate::probe::{element, Array, Probe, Read, TraceStats};
@@ -35,13 +35,14 @@ pub(crate) trait Leaves<P: Probe> {
         child
     }
 
-    /// Enters the instance that leaf `reference` with `count` names, if it names one (a top-level
-    /// leaf of a two-level structure, [`INSTANCE_LEAF`](super::INSTANCE_LEAF)): the hook takes the ray into the
-    /// instance's mesh space and returns that ray (the same `t` along it) and the root node of
-    /// the mesh's tree, where the traversal goes on, on the same stack, until it pops the
-    /// instance's end and calls [`Leaves::exit_instance`]. `None` for every other leaf, and always
-    /// in structures without instances: [`Leaves::test`] gets it, unless it is a top level's
-    /// (outside any instance, a leaf that names no instance holds nothing), as the shaders skip it.
+    /// Enters the instance that top-level leaf `reference` with `count`
+    /// [`INSTANCE_LEAF`] names, if it names one (where [`Leaves::has_instances`]): the hook takes
+    /// the ray into the instance's mesh space and returns that ray (the same `t` along it) and
+    /// the root node of the mesh's tree, where the traversal goes on, on the same stack, until it
+    /// pops the instance's end and calls [`Leaves::exit_instance`]. `None` for an instance leaf
+    /// that names nothing to enter, which holds nothing (as the shaders skip it). Every other
+    /// leaf goes to [`Leaves::test`]: inside an instance the mesh's, in the top level the grafted
+    /// mesh's ([`GRAFTED`](super::GRAFTED)).
     fn enter_instance(
         &mut self,
         _reference: u32,
@@ -84,7 +85,8 @@ pub(crate) trait Leaves<P: Probe> {
 /// transformed, not normalized), so the nearest hit bounds both levels. The stack holds the top
 /// level's entries, the end and the mesh's: [`InstancedBvh`](super::InstancedBvh) keeps their
 /// depths together within it. Visits are bounded per level: a mesh placed twice may be visited
-/// twice.
+/// twice. A mesh the top level grafts ([`GRAFTED`](super::GRAFTED)) is walked as part of the
+/// top level, its leaves (whose counts are not [`INSTANCE_LEAF`]) tested with the world ray.
 pub(crate) fn traverse<P: Probe, L: Leaves<P>>(
     nodes: &[GpuNode],
     ray: &Ray,
@@ -151,11 +153,12 @@ pub(crate) fn traverse_from<P: Probe, L: Leaves<P>>(
         };
         entry = None;
         if leaves.is_leaf(reference) {
-            let instance = match inside {
-                false => leaves.enter_instance(reference, count, probe),
-                // Inside an instance a leaf is the mesh's, tested (an RBVH's height field has the
-                // count of an instance leaf).
-                true => None,
+            // In the top level, a leaf of count INSTANCE_LEAF is an instance; any other is the
+            // grafted mesh's (super::GRAFTED), tested as inside an instance.
+            let instance_leaf = !inside && leaves.has_instances() && count == INSTANCE_LEAF;
+            let instance = match instance_leaf {
+                true => leaves.enter_instance(reference, count, probe),
+                false => None,
             };
             if let Some((mesh_ray, root)) = instance {
                 if sp < STACK_SIZE as usize {
@@ -171,7 +174,7 @@ pub(crate) fn traverse_from<P: Probe, L: Leaves<P>>(
                     leaves.exit_instance();
                     stats.overflow = true;
                 }
-            } else if (inside || !leaves.has_instances())
+            } else if !instance_leaf
                 && leaves.test(reference, count, &mut t_closest, &mut stats, probe)
                 && any_hit
             {
