@@ -15,7 +15,8 @@
 // RBVH_BVH_INSTANCES_ADDRESS (and those of rbvh.glsl and lod.glsl).
 // RBVH_INSTANCES makes the structure two-level (src/bvh/top_level.rs): a top level over instances
 // whose leaves (count RBVH_INSTANCE_LEAF) enter a mesh's tree in the same node array, the ray
-// taken into the mesh's space by the instance's record; rbvh_trace_instances traces the exact
+// taken into the mesh's space by the instance's record (the first instance, placed where it is,
+// grafted: its mesh's tree is walked in the top level, bvh::GRAFTED); rbvh_trace_instances traces the exact
 // BVH's (src/bvh/instanced.rs), rbvh.glsl's rbvh_trace_rbvh_instances the RBVH's.
 // The traversals read the arrays only through the accessor macros RBVH_BVH_NODE(i) and
 // RBVH_BVH_TRIANGLE(i) (or RBVH_EXACT_QUAD(i)), which hide the difference.
@@ -386,8 +387,9 @@ struct BvhInstanceSizes {
     uint instance_count;
 };
 
-// The two-level exact BVH's hook (InstanceHook in src/bvh/top_level.rs around BvhLeafHook): top-level leaves enter
-// instances, the meshes' leaves are triangle leaves tested in the mesh's space. The ray's shear is
+// The two-level exact BVH's hook (InstanceHook in src/bvh/top_level.rs around BvhLeafHook): top-level instance
+// leaves enter instances, the meshes' leaves are triangle leaves tested in the mesh's space (the
+// grafted mesh's in the top level, with the world ray). The ray's shear is
 // made where a leaf is tested, from the ray of the level the traversal is in, rather than kept
 // in the hook: 16 VGPRs fewer on RADV, 72 to 56, when it was made (docs/speed.md, "The two-level exact tracer's
 // registers"); the same shear as the CPU's, which makes it once per level.

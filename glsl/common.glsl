@@ -39,8 +39,9 @@ struct RbvhCounters {
     uint jumps;            // block jumps (src/rbvh/ranges.rs)
     uint triangle_leaves;  // triangle leaves tested
     uint triangles;        // triangles tested in them
-    uint instances;        // instances entered (a two-level BVH's top-level leaves)
-    uint top_nodes;        // of `nodes`, those of a two-level BVH's top level
+    uint instances;        // instances entered (a two-level BVH's top-level instance leaves)
+    uint top_nodes;        // of `nodes`, those a two-level BVH's ray visits outside any instance
+                           // (the top level's and the grafted mesh's, bvh::GRAFTED)
 };
 #ifndef RBVH_COUNT
 #define RBVH_COUNT false

@@ -30,7 +30,9 @@
 //     Ray rbvh_enter_instance(inout RBVH_LEAVES leaves, uint reference, Ray ray)
 //         enters that instance: the ray in its mesh's space
 //     void rbvh_exit_instance(inout RBVH_LEAVES leaves, inout Ray ray)
-//         leaves it: the world ray back in `ray` (the traversal keeps it with rbvh_keep_world_ray)
+//         leaves it: the world ray back in `ray` (the traversal keeps it with rbvh_keep_world_ray);
+//         the leaves met next, in the top level, are the grafted mesh's, whose hits the hook
+//         names instance 0 (bvh::GRAFTED)
 // and with RBVH_KEEPS_RAY
 //     Ray rbvh_level_ray(RBVH_LEAVES leaves, bool inside)
 //         the ray of the level a round is in: the world ray, kept with rbvh_keep_world_ray, or

@@ -75,7 +75,8 @@ pub struct MeanCounters {
     /// two-level structures, read as 0).
     #[serde(default)]
     pub instances: f64,
-    /// Top-level inner nodes visited per ray ([`RayCounters::top_nodes`]; as `instances`).
+    /// Inner nodes visited outside any instance per ray ([`RayCounters::top_nodes`]: the top
+    /// level's and the grafted mesh's; as `instances`).
     #[serde(default)]
     pub top_nodes: f64,
     /// Mean steps ([`RayCounters::steps`]) over the mean of the longest in each group of 8

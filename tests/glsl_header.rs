@@ -334,6 +334,7 @@ const CONSTANTS_PROBE: &str = r#"
 #version 460
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x = 1) in;
+#define RBVH_INSTANCES 1
 #include "lod.glsl"
 
 layout(std430, set = 0, binding = 0) writeonly buffer Out { uint words[]; };
@@ -353,12 +354,13 @@ void main() {
     words[11] = floatBitsToUint(float(RBVH_FLT_MIN));
     words[12] = floatBitsToUint(float(RBVH_MARCH_SKIRT_TEXELS));
     words[13] = floatBitsToUint(float(RBVH_MARCH_DIAGONAL_SKIRT_TEXELS));
+    words[14] = RBVH_INSTANCE_LEAF;
 }
 "#;
 
 #[test]
 fn shared_constants_are_the_rust_ones_in_the_compiled_shader() {
-    use rbvh::bvh::{LEAF_BIT, STACK_SIZE};
+    use rbvh::bvh::{INSTANCE_LEAF, LEAF_BIT, STACK_SIZE};
     use rbvh::geom::ROBUST_FAR_SCALE;
     use rbvh::gpu::ComputePipeline;
     use rbvh::lod::LOD_BIT;
@@ -367,7 +369,7 @@ fn shared_constants_are_the_rust_ones_in_the_compiled_shader() {
     };
     use rbvh::rbvh::{Texel, HEIGHTFIELD_COUNT};
 
-    let expected: [(&str, u32); 14] = [
+    let expected: [(&str, u32); 15] = [
         ("RBVH_LEAF_BIT", LEAF_BIT),
         ("RBVH_LOD_BIT", LOD_BIT),
         ("RBVH_HEIGHTFIELD_COUNT", HEIGHTFIELD_COUNT),
@@ -385,6 +387,7 @@ fn shared_constants_are_the_rust_ones_in_the_compiled_shader() {
             "RBVH_MARCH_DIAGONAL_SKIRT_TEXELS",
             MARCH_DIAGONAL_SKIRT_TEXELS.to_bits(),
         ),
+        ("RBVH_INSTANCE_LEAF", INSTANCE_LEAF),
     ];
     let words = compile(CONSTANTS_PROBE).unwrap();
     let ctx = common::context();

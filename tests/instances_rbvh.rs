@@ -78,6 +78,7 @@ fn the_device_traces_the_two_level_rbvh_as_its_twin_does() {
         (placed(), (2, TexelFormat::HeightNormal)),
         (placed(), (1, TexelFormat::Height)),
         (grafted(), (2, TexelFormat::HeightNormal)),
+        (grafted(), (1, TexelFormat::Height)),
     ] {
         let in_top_level = device_traces_as_twin(&scene, level, texels);
         let first = scene.instances[0].transform;
@@ -133,13 +134,20 @@ fn device_traces_as_twin(scene: &InstancedScene, level: u32, texels: TexelFormat
 }
 
 /// The two-level exact BVH referees the two-level RBVH as the exact BVH referees a flat one:
-/// the same rays hit, at distances within a few texels of the instance's mesh, at Q2.
+/// the same rays hit, at distances within a few texels of the instance's mesh, at Q2, with and
+/// without a grafted first instance.
 #[test]
 fn the_two_level_exact_bvh_referees_the_two_level_rbvh() {
-    let scene = placed();
-    let rays = rays(&scene, 6_000, 17);
-    let exact = InstancedBvh::build(&scene).unwrap();
-    let two = InstancedRbvh::build(&scene, &RbvhParams::quality(2).unwrap()).unwrap();
+    for scene in [placed(), grafted()] {
+        referee(&scene);
+    }
+}
+
+/// The two-level RBVH at Q2 against the two-level exact BVH of `scene`.
+fn referee(scene: &InstancedScene) {
+    let rays = rays(scene, 6_000, 17);
+    let exact = InstancedBvh::build(scene).unwrap();
+    let two = InstancedRbvh::build(scene, &RbvhParams::quality(2).unwrap()).unwrap();
     let (mut both, mut disagree, mut far) = (0usize, 0usize, 0usize);
     for ray in &rays {
         let (e, _) = exact.closest_hit(ray);
@@ -233,6 +241,11 @@ fn two_level_rbvh_files_hold_every_mesh_and_instance() {
             "{flat}"
         );
     }
+    // A grafted first instance: the top level built again on load grafts it as the build did.
+    let grafted_file = dir.path().join("grafted.rbvh");
+    let built = InstancedRbvh::build(&grafted(), &RbvhParams::quality(1).unwrap()).unwrap();
+    built.save(&grafted_file).unwrap();
+    assert_eq!(InstancedRbvh::load(&grafted_file).unwrap(), built);
     let flat_file = dir.path().join("flat.rbvh");
     let flat = scene.clone().into_flat();
     rbvh::rbvh::Rbvh::build(&flat, &RbvhParams::quality(0).unwrap())

@@ -6,7 +6,9 @@
 //! One node array and one traversal serve both levels ([`traverse`] with the instance hook of
 //! `top_level.rs`, which the two-level RBVH shares): the top level's nodes come first (node 0 its
 //! root), then each mesh's tree, its child references offset to where it lies; a top-level leaf
-//! is `LEAF_BIT | instance` with the count [`INSTANCE_LEAF`](super::INSTANCE_LEAF). Moving instances rebuilds the top level only
+//! is `LEAF_BIT | instance` with the count [`INSTANCE_LEAF`](super::INSTANCE_LEAF), but for the
+//! first instance placed where it is, whose mesh's root is the top level's child
+//! ([`GRAFTED`](super::GRAFTED)). Moving instances rebuilds the top level only
 //! ([`InstancedBvh::set_transforms`]): its node count depends only on how many instances there
 //! are, so the meshes' trees stay where they are.
 

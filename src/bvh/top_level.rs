@@ -256,8 +256,9 @@ pub(crate) trait Aim {
     fn aim(&mut self, ray: &Ray);
 }
 
-/// The two-level hook around a bottom level's `leaves`: the top level's leaves enter instances,
-/// the meshes' leaves are `leaves`' own, tested in the mesh's space.
+/// The two-level hook around a bottom level's `leaves`: the top level's instance leaves enter
+/// instances, the meshes' leaves are `leaves`' own, tested in the mesh's space (the grafted
+/// mesh's in the top level, with the world ray, named [`GRAFTED`]).
 pub(crate) struct InstanceHook<'a, L> {
     leaves: L,
     instances: &'a [GpuInstance],
@@ -345,5 +346,53 @@ impl<P: Probe, L: Leaves<P> + Aim> Leaves<P> for InstanceHook<'_, L> {
             self.best = Some(k);
         }
         found
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Vec3;
+
+    use super::*;
+
+    /// A mesh of `depth` levels (its nodes not needed: its box stands for them).
+    fn mesh(depth: u32) -> BottomLevel {
+        BottomLevel {
+            root: 0,
+            nodes: 0,
+            first_triangle: 0,
+            triangles: 1,
+            depth,
+            bounds: Aabb {
+                min: Vec3::ZERO,
+                max: Vec3::ONE,
+            },
+        }
+    }
+
+    /// The two levels together must fit the traversal's stack: the top level's entries, the
+    /// instance's end and the deepest mesh's entries. A placement that would overflow it is
+    /// refused, naming both depths; the grafted first instance counts as any other.
+    #[test]
+    fn levels_deeper_than_the_stack_together_are_refused() {
+        let apart = |k: f32| Mat4::from_translation(Vec3::new(2.0 * k, 0.0, 0.0));
+        for first in [Mat4::IDENTITY, apart(3.0)] {
+            let transforms = [first, apart(1.0)];
+            let fits = [mesh(STACK_SIZE - 2)];
+            let top = top_node_count(&fits, &[0, 0]);
+            let placed = place(&fits, &[], &transforms, &[0, 0], top).unwrap();
+            assert_eq!(placed.depth, 1);
+            let deep = [mesh(STACK_SIZE - 1)];
+            let e = place(&deep, &[], &transforms, &[0, 0], top)
+                .err()
+                .unwrap()
+                .to_string();
+            assert!(
+                e.contains("(depth 1)")
+                    && e.contains(&format!("(depth {})", STACK_SIZE - 1))
+                    && e.contains(&format!("{STACK_SIZE}-entry traversal stack")),
+                "{e}"
+            );
+        }
     }
 }

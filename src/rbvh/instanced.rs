@@ -60,7 +60,8 @@ use crate::{Error, Result};
 pub struct InstancedRbvh {
     /// Every mesh's RBVH in one set of arrays: the top level's nodes first (node 0 its root),
     /// then each mesh's tree; height fields, atlas and exact triangles of every mesh. Not an
-    /// RBVH to trace alone: its top level's leaves are instances.
+    /// RBVH to trace alone: its top level's leaves are instances (and the grafted first
+    /// instance's mesh, [`crate::bvh::GRAFTED`]).
     pub(crate) rbvh: Rbvh,
     /// Per instance of the scene, its record.
     pub instances: Vec<GpuInstance>,

@@ -174,8 +174,9 @@ impl Aim for RbvhLeafHook<'_> {
 }
 
 /// One ray through the arrays `rbvh` of a two-level RBVH (`crate::rbvh::InstancedRbvh`) over
-/// `instances`: the top level's leaves enter instances ([`InstanceHook`]), inside which the
-/// RBVH's own leaves are marched and tested, walking cells as `walk` says.
+/// `instances`: the top level's instance leaves enter instances ([`InstanceHook`]), inside which
+/// the RBVH's own leaves are marched and tested, walking cells as `walk` says (the grafted mesh's
+/// in the top level, [`crate::bvh::GRAFTED`]).
 pub(crate) fn trace_instanced<P: Probe>(
     rbvh: &Rbvh,
     instances: &[GpuInstance],
