@@ -393,3 +393,83 @@ fn surface_offsets_scale_with_each_instance() {
         "{grown} vs {offsets:?}"
     );
 }
+
+/// A mirrored instance leaks as its mesh does, which the bench's seam count for two levels
+/// relies on (it aims at each mesh in its own space, `bench::harness`): the mesh's seam rays,
+/// taken into the world by a mirroring, turning, scaling placement, are refereed by the flat
+/// copy's exact BVH (whose winding the mirror reversed, so that its outside stays outside) and
+/// traced through the two-level RBVH. As many rays enter the solid as in the mesh's space, and
+/// none leaks or passes through, there as here, on the closed blob.
+#[test]
+fn a_mirrored_instance_leaks_as_its_mesh_does() {
+    use rbvh::bench::seams::{closed_triangles, count_leaks, exact_entries};
+    use rbvh::bvh::Bvh;
+    use rbvh::rbvh::Rbvh;
+
+    let mesh = Scene::builtin("blob").unwrap();
+    let scale = 1.5;
+    let place = Mat4::from_scale_rotation_translation(
+        Vec3::new(-scale, scale, scale),
+        Quat::from_rotation_y(0.7),
+        Vec3::new(0.3, -0.2, 0.1),
+    );
+    let scene = InstancedScene {
+        name: "mirrored blob".into(),
+        meshes: vec![mesh.clone()],
+        instances: vec![Instance {
+            mesh: 0,
+            transform: place,
+        }],
+        ..InstancedScene::default()
+    };
+    let params = RbvhParams::quality(1).unwrap();
+    let two = InstancedRbvh::build(&scene, &params).unwrap();
+    // The mesh alone at the two-level RBVH's texel for it (its placed box, turned, is not its
+    // box scaled), so that the seam rays aim at the seams of the leaves the instance shows.
+    let at_texel = RbvhParams {
+        texels_per_diagonal: mesh.bounds().diagonal() / two.mesh_texels[0],
+        ..params
+    };
+    let own = Rbvh::build(&mesh, &at_texel).unwrap();
+    assert!((own.texel_size / two.mesh_texels[0] - 1.0).abs() < 1e-5);
+    let seam = own.seam_rays(50_000, 11);
+
+    let bvh = Bvh::build(&mesh).unwrap();
+    let inside = exact_entries(&bvh, &seam.rays, &seam.texels, &closed_triangles(&mesh));
+    let approx = own.trace_cpu(&seam.rays, false);
+    let in_mesh = count_leaks(&bvh, &seam.rays, &inside, &approx, &seam.texels);
+
+    let rays: Vec<Ray> = seam
+        .rays
+        .iter()
+        .map(|r| {
+            let dir = place.transform_vector3(r.dir()) / scale;
+            Ray::new(
+                place.transform_point3(r.origin()),
+                dir,
+                r.tmin * scale,
+                r.tmax * scale,
+            )
+        })
+        .collect();
+    let texels: Vec<f32> = seam.texels.iter().map(|t| t * scale).collect();
+    let flat = scene.clone().into_flat();
+    let world = Bvh::build(&flat).unwrap();
+    let entered = exact_entries(&world, &rays, &texels, &closed_triangles(&flat));
+    let approx = two.trace_cpu(&rays, false);
+    let in_world = count_leaks(&world, &rays, &entered, &approx, &texels);
+
+    let count = |e: &[Option<rbvh::bench::seams::Entry>]| e.iter().filter(|e| e.is_some()).count();
+    let (n_mesh, n_world) = (count(&inside), count(&entered));
+    assert!(
+        n_mesh * 2 > seam.rays.len(),
+        "{n_mesh} of {} enter",
+        seam.rays.len()
+    );
+    assert!(
+        n_mesh.abs_diff(n_world) * 1000 <= seam.rays.len(),
+        "{n_mesh} rays enter the mesh, {n_world} its mirrored placement"
+    );
+    assert_eq!((in_mesh.leaks, in_mesh.through), (0, 0), "{in_mesh:?}");
+    assert_eq!((in_world.leaks, in_world.through), (0, 0), "{in_world:?}");
+}
