@@ -413,15 +413,8 @@ fn a_mirrored_instance_leaks_as_its_mesh_does() {
         Quat::from_rotation_y(0.7),
         Vec3::new(0.3, -0.2, 0.1),
     );
-    let scene = InstancedScene {
-        name: "mirrored blob".into(),
-        meshes: vec![mesh.clone()],
-        instances: vec![Instance {
-            mesh: 0,
-            transform: place,
-        }],
-        ..InstancedScene::default()
-    };
+    let mut scene = InstancedScene::single(mesh.clone());
+    scene.instances[0].transform = place;
     let params = RbvhParams::quality(1).unwrap();
     let two = InstancedRbvh::build(&scene, &params).unwrap();
     // The mesh alone at the two-level RBVH's texel for it (its placed box, turned, is not its
