@@ -420,15 +420,16 @@ uint rbvh_enter(BvhInstanceHook leaves, uint child, uint count, float t_entry) {
     return child;
 }
 
-// The root of the mesh that the instance leaf `reference` names (count RBVH_INSTANCE_LEAF) places;
-// RBVH_INVALID for every other leaf. It returns its result, with one exit: inlined in the
+// The root of the mesh that the instance leaf `reference` names places (the traversal asks for
+// top-level leaves of count RBVH_INSTANCE_LEAF alone); RBVH_INVALID for an index past the
+// instances. It returns its result, with one exit: inlined in the
 // traversal's loop, an early return or an out parameter leaves the compiler a value merged
 // across rounds, which it holds in a register through every leaf test (docs/speed.md, "The
 // two-level RBVH tracer's registers").
 uint rbvh_instance_root(BvhInstanceHook leaves, uint reference, uint count) {
     uint k = reference & ~RBVH_LEAF_BIT;
     uint root = RBVH_INVALID;
-    if (count == RBVH_INSTANCE_LEAF && k < leaves.sz.instance_count) {
+    if (k < leaves.sz.instance_count) {
         root = RBVH_BVH_INSTANCE(k).root;
     }
     return root;

@@ -957,7 +957,7 @@ uint rbvh_hit_instance() {
 uint rbvh_instance_root(RbvhInstanceHook leaves, uint reference, uint count) {
     uint k = reference & ~RBVH_LEAF_BIT;
     uint root = RBVH_INVALID;
-    if (count == RBVH_INSTANCE_LEAF && k < leaves.instance_count) {
+    if (k < leaves.instance_count) {
         root = RBVH_BVH_INSTANCE(k).root;
     }
     return root;

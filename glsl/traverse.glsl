@@ -25,8 +25,9 @@
 // With RBVH_TRAVERSE_INSTANCES (the two-level structures: bvh.glsl's exact BVH, rbvh.glsl's RBVH),
 // two levels in one loop, as crate::bvh::traverse: the hook also has
 //     uint rbvh_instance_root(RBVH_LEAVES leaves, uint reference, uint count)
-//         the root of the mesh that leaf `reference` places if it is an instance (where the next
-//         round starts), else RBVH_INVALID (an instance whose root is RBVH_INVALID is none)
+//         the root of the mesh that top-level leaf `reference` places (where the next round
+//         starts), asked for leaves of count RBVH_INSTANCE_LEAF alone, which the traversal
+//         checks; RBVH_INVALID for none (an instance whose root is RBVH_INVALID is none)
 //     Ray rbvh_enter_instance(inout RBVH_LEAVES leaves, uint reference, Ray ray)
 //         enters that instance: the ray in its mesh's space
 //     void rbvh_exit_instance(inout RBVH_LEAVES leaves, inout Ray ray)

@@ -300,10 +300,8 @@ impl<'a, L> InstanceHook<'a, L> {
 }
 
 impl<P: Probe, L: Leaves<P> + Aim> Leaves<P> for InstanceHook<'_, L> {
-    fn enter_instance(&mut self, reference: u32, count: u32, probe: &mut P) -> Option<(Ray, u32)> {
-        if count != INSTANCE_LEAF {
-            return None;
-        }
+    fn enter_instance(&mut self, reference: u32, _count: u32, probe: &mut P) -> Option<(Ray, u32)> {
+        // The traversal hands over top-level leaves of count INSTANCE_LEAF alone.
         let k = reference & !LEAF_BIT;
         let instance = self.instances.get(k as usize)?;
         // The device reads the record here; the two-level RBVH's reads it again at the start of
