@@ -375,7 +375,7 @@ Hit rbvh_trace_bvh(Ray ray, bool any_hit, BvhSizes sz, out uint steps, out bool 
         return rbvh_miss();
     }
     BvhTriangle tri = rbvh_bvh_triangle(leaves.best_slot, sz.tri_count);
-    vec3 n = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
+    vec3 n = rbvh_unit_normal(tri.v0, tri.v1, tri.v2);
     return Hit(t, n.x, n.y, n.z, tri.prim, 0u, 0u, 0u);
 }
 
@@ -482,7 +482,7 @@ Hit rbvh_trace_instances(Ray ray, bool any_hit, BvhInstanceSizes sz, out uint st
         return rbvh_miss();
     }
     BvhTriangle tri = rbvh_bvh_triangle(leaves.best_slot, sz.tri_count);
-    vec3 n = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
+    vec3 n = rbvh_unit_normal(tri.v0, tri.v1, tri.v2);
     vec3 w = rbvh_normal_out(RBVH_BVH_INSTANCE(leaves.best_instance), n);
     return Hit(t, w.x, w.y, w.z, tri.prim, leaves.best_instance, 0u, 0u);
 }

@@ -884,7 +884,7 @@ Hit rbvh_rbvh_hit(RbvhLeafHook leaves, float t, Ray ray) {
     } else if ((id & RBVH_LEAF_BIT) == 0u) {
         BvhTriangle tri = rbvh_bvh_triangle(id, leaves.sz.tri_count);
         id = tri.prim;
-        nrm = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
+        nrm = rbvh_unit_normal(tri.v0, tri.v1, tri.v2);
     } else if (RBVH_HEIGHT_ONLY) {
         uvec2 b = rbvh_stack[RBVH_STACK_HIT];
         nrm = rbvh_height_field_facet(leaves.sz, id & ~RBVH_LEAF_BIT, b.x, b.y, ray, t);

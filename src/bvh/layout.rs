@@ -337,8 +337,9 @@ impl GpuTriangle {
         [self.v0.into(), self.v1.into(), self.v2.into()]
     }
 
-    /// The unit geometric normal as wound, `normalize((v1 − v0) × (v2 − v0))`; zero for a
-    /// degenerate triangle (which the watertight test never reports as hit).
+    /// The unit geometric normal as wound, `normalize((v1 − v0) × (v2 − v0))`
+    /// ([`crate::geom::unit_normal`], at any scale); zero for a degenerate triangle (which the
+    /// watertight test never reports as hit).
     pub fn normal(&self) -> Vec3 {
         Self::normal_of(self.vertices())
     }
@@ -346,7 +347,7 @@ impl GpuTriangle {
     /// [`GpuTriangle::normal`] of vertices `[v0, v1, v2]` however they are stored (an RBVH's
     /// indexed triangles, `crate::rbvh::ExactTriangles`, too).
     pub fn normal_of([a, b, c]: [Vec3; 3]) -> Vec3 {
-        (b - a).cross(c - a).normalize_or_zero()
+        crate::geom::unit_normal(a, b, c)
     }
 }
 

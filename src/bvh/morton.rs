@@ -160,7 +160,7 @@ impl<'s> LinearBvh<'s> {
             let [a, b, c] = self.scene.triangle(prim as usize);
             Hit {
                 t,
-                normal: (b - a).cross(c - a).normalize_or_zero().to_array(),
+                normal: crate::geom::unit_normal(a, b, c).to_array(),
                 id: prim,
                 instance: 0,
                 reserved: [0; 2],
@@ -197,7 +197,7 @@ impl<F: Fn(Vec3) -> bool> Leaves<()> for SceneTriangles<'_, '_, F> {
             stats.counters.triangles += 1;
             let [a, b, c] = self.bvh.scene.triangle(prim as usize);
             let hit = intersect_triangle(&self.shear, a, b, c, self.tmin, *t_closest);
-            let normal = || (b - a).cross(c - a).normalize_or_zero();
+            let normal = || crate::geom::unit_normal(a, b, c);
             if let Some(t) = hit.filter(|_| (self.accept)(normal())) {
                 *t_closest = t;
                 self.best = Some((prim, t));

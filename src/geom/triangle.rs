@@ -56,6 +56,32 @@ impl RayShear {
     }
 }
 
+/// The unit normal of the triangle `(a, b, c)` as wound, `normalize((b − a) × (c − a))`; zero for
+/// a degenerate one. The edges and then their cross product are scaled by powers of two before it
+/// is normalized, which is exact, so that a triangle of any size gets its normal: the squared
+/// cross product of a triangle a trillionth of a unit across underflows `f32`, and normalized
+/// plainly it was infinite on the device and zero here (tests/stability, scale and offset). The
+/// scaling changes no bit of any other normal. `rbvh_unit_normal` in `glsl/intersect.glsl`
+/// takes the same steps.
+pub fn unit_normal(a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
+    let n = pow2_scaled(b - a).cross(pow2_scaled(c - a));
+    pow2_scaled(n).normalize_or_zero()
+}
+
+/// `v` scaled by the power of two that brings its largest component's magnitude into
+/// `[0.5, 1)` (`frexp`'s exponent, kept within ±125 so that the factor is a normal `f32`); as it
+/// is where that component is zero or not finite.
+fn pow2_scaled(v: Vec3) -> Vec3 {
+    let m = v.abs().max_element();
+    if !(m > 0.0 && m.is_finite()) {
+        return v;
+    }
+    // m = f·2^e with f in [0.5, 1): e is the biased exponent − 126 (a subnormal m counts as
+    // 2^−126's, as `frexp` does not, which the clamp to −125 makes the same).
+    let e = ((((m.to_bits() >> 23) & 0xFF) as i32) - 126).clamp(-125, 125);
+    v * f32::from_bits(((127 - e) as u32) << 23)
+}
+
 /// Intersects the sheared ray with triangle `(a, b, c)` and returns the hit distance when it lies in
 /// `[tmin, tmax)`. The distance is measured in units of the ray's (unnormalised) direction.
 #[inline]

@@ -214,16 +214,48 @@ impl Scene {
     /// `COORDINATE_RESOLUTION_LIMIT` (1/1024) of its diagonal (about a quarter of the coarsest RBVH
     /// preset's texel): hits then err by that much, and RBVH leaves may crack. Recentring the
     /// scene near the origin removes the loss.
+    ///
+    /// Also where the scene is so small that float32 cannot square its triangles' areas (more
+    /// than 1% of them, [`Scene::area_underflows`]): an RBVH's builder then finds no surface to
+    /// sample and traces every such triangle exactly, as large as the exact BVH, with the right
+    /// hits (tests/stability, scale and offset: a unit sphere scaled by 1e-10 or less). Scaling
+    /// the scene up removes it.
     pub fn precision_warning(&self) -> Option<String> {
         let r = self.coordinate_resolution();
-        (r > COORDINATE_RESOLUTION_LIMIT).then(|| {
+        let far = (r > COORDINATE_RESOLUTION_LIMIT).then(|| {
             let c = self.bounds().center();
             format!(
-                "{}: the scene lies far from the origin (centre {c}); float32 resolves only {r:.1e} of its \
-                 diagonal there, so hits may err by that much and RBVH leaves may crack; recentre the scene",
-                self.name
+                "the scene lies far from the origin (centre {c}); float32 resolves only {r:.1e} of its \
+                 diagonal there, so hits may err by that much and RBVH leaves may crack; recentre the scene"
             )
-        })
+        });
+        let underflows = self.area_underflows();
+        let tiny = (underflows * 100 > self.triangles.len()).then(|| {
+            format!(
+                "{underflows} of its {} triangles are so small (the scene is {:.1e} units across) that \
+                 float32 cannot square their areas, so an RBVH traces them exactly instead of sampling \
+                 them, as large as the exact BVH; scale the scene up (by a power of two, which is exact)",
+                self.triangles.len(),
+                self.bounds().diagonal()
+            )
+        });
+        let said: Vec<String> = far.into_iter().chain(tiny).collect();
+        (!said.is_empty()).then(|| format!("{}: {}", self.name, said.join("; and ")))
+    }
+
+    /// How many triangles have an area (their edges' cross product) whose square float32 rounds
+    /// to zero: the RBVH builder weighs and compares triangles by those squares
+    /// (`rbvh::frame`), and finds no surface to sample in them.
+    pub fn area_underflows(&self) -> usize {
+        use rayon::prelude::*;
+        self.triangles
+            .par_iter()
+            .filter(|t| {
+                let [a, b, c] = t.map(|v| self.positions[v as usize]);
+                let n = (b - a).cross(c - a);
+                n != Vec3::ZERO && n.length_squared() == 0.0
+            })
+            .count()
     }
 
     /// The three corners of triangle `i`.

@@ -72,12 +72,25 @@ fn placed_errors(rays: &[Ray], truth: &[f64], hits: &[Hit]) -> (f64, usize) {
 ///   The tracers cannot fix this loss of precision; `Scene::precision_warning` tells the user
 ///   (tests/scenes.rs, tests/cli.rs).
 /// * A large sphere far away (s = 1e4 at 1e7: `u`/s = 1e-4) is as accurate as at the origin.
+/// * A tiny sphere (s = 1e-12 and 1e-18) keeps both paths' bounds, with unit normals: a hit's
+///   normal is scaled by powers of two before it is normalized (`geom::unit_normal`), where
+///   plainly normalized its squared length underflowed f32 and the device's normal was infinite.
+///   Its triangles' squared areas underflow too, so the RBVH builder samples none of them and
+///   traces them all exactly (right hits, no height field): `Scene::precision_warning` says so.
 #[test]
 fn scale_and_offset_keep_their_bounds_or_degrade_as_measured() {
     let ctx = common::context();
     let (_, _, chord) = common::sphere_oracle();
     let unit = Scene::builtin("sphere").unwrap();
     let cases = [
+        Placement {
+            scale: 1e-12,
+            offset: 0.0,
+        },
+        Placement {
+            scale: 1e-18,
+            offset: 0.0,
+        },
         Placement {
             scale: 1e-4,
             offset: 0.0,
@@ -113,6 +126,15 @@ fn scale_and_offset_keep_their_bounds_or_degrade_as_measured() {
         let u = ulp(p.offset + 3.0 * p.scale) as f64;
         let diag = scene.bounds().diagonal() as f64;
         let what = format!("scale {:e} offset {:e}", p.scale, p.offset);
+        let warned = scene
+            .precision_warning()
+            .is_some_and(|w| w.contains("cannot square their areas"));
+        assert_eq!(
+            warned,
+            p.scale < 1e-9,
+            "{what}: {:?}",
+            scene.precision_warning()
+        );
 
         let exact = Structure::from(Bvh::build(&scene).unwrap());
         for (which, hits) in PATHS
@@ -148,9 +170,11 @@ fn scale_and_offset_keep_their_bounds_or_degrade_as_measured() {
                 })
                 .count();
             println!(
-                "{what} RBVH Q0 {which}: worst error {worst:.3e} ({:.2e} of the diagonal), {misses} misses, {leaks} leaks; texel {:.2e}, ulp {u:.2e}",
+                "{what} RBVH Q0 {which}: worst error {worst:.3e} ({:.2e} of the diagonal), {misses} misses, {leaks} leaks; texel {:.2e}, ulp {u:.2e}; {} height fields, {} triangle leaves",
                 worst / diag,
-                r.texel_size
+                r.texel_size,
+                r.stats.heightfield_leaves,
+                r.stats.triangle_leaves
             );
             if u < r.texel_size as f64 {
                 let bound =
