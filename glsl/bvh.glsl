@@ -322,7 +322,7 @@ Ray rbvh_ray_into(BvhInstance inst, Ray ray) {
 // The normal `n` of a hit in instance `inst`'s mesh space, in world space (GpuInstance::normal_out):
 // by the transpose of world_to_mesh.
 vec3 rbvh_normal_out(BvhInstance inst, vec3 n) {
-    return normalize(inst.world_to_mesh[0].xyz * n.x + inst.world_to_mesh[1].xyz * n.y + inst.world_to_mesh[2].xyz * n.z);
+    return rbvh_unit(inst.world_to_mesh[0].xyz * n.x + inst.world_to_mesh[1].xyz * n.y + inst.world_to_mesh[2].xyz * n.z);
 }
 #endif  // RBVH_INSTANCES
 

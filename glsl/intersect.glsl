@@ -12,7 +12,8 @@ const float RBVH_FAR_SCALE = 1.0 + 2.0 * (3.0 * 5.9604645e-8) / (1.0 - 3.0 * 5.9
 
 // `v` scaled by the power of two that brings its largest component's magnitude into [0.5, 1), the
 // exponent kept within +-125; as it is where that component is zero or not finite (as
-// geom::triangle's pow2_scaled).
+// geom::triangle's pow2_scaled, to the bit but for subnormal components, which a device may flush
+// to zero: a sliver below 1e-38 units may then normalize to NaN here and to a unit vector there).
 vec3 rbvh_pow2_scaled(vec3 v) {
     float m = max(max(abs(v.x), abs(v.y)), abs(v.z));
     int e;
@@ -21,11 +22,16 @@ vec3 rbvh_pow2_scaled(vec3 v) {
     return (m > 0.0 && !isinf(m) && !isnan(m)) ? ldexp(v, ivec3(-e)) : v;
 }
 
+// `v` normalized at any magnitude (geom::unit): an instance's transformed normal too.
+vec3 rbvh_unit(vec3 v) {
+    return normalize(rbvh_pow2_scaled(v));
+}
+
 // The unit normal of the triangle (a, b, c) as wound, at any scale: geom::unit_normal's steps.
 // The edges and their cross product are scaled by powers of two (exact) before normalizing: a
 // triangle a trillionth of a unit across has a squared cross product below f32's range.
 vec3 rbvh_unit_normal(vec3 a, vec3 b, vec3 c) {
-    return normalize(rbvh_pow2_scaled(cross(rbvh_pow2_scaled(b - a), rbvh_pow2_scaled(c - a))));
+    return rbvh_unit(cross(rbvh_pow2_scaled(b - a), rbvh_pow2_scaled(c - a)));
 }
 
 // Conservative slab test (Ize, "Robust BVH Ray Traversal", JCGT 2013).

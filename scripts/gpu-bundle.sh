@@ -24,12 +24,22 @@ root=$(cd "$(dirname "$0")/.." && pwd)
 datasets=${2:-$root/../shared/datasets}
 rbvh=${RBVH:-$root/target/release/rbvh}
 [ -x "$rbvh" ] || { echo "no rbvh binary at $rbvh: build it (cargo build --release) or set RBVH" >&2; exit 2; }
+command -v xz >/dev/null || { echo "xz is missing (Debian: apt install xz-utils): it compresses the datasets" >&2; exit 2; }
 commit=${RBVH_COMMIT:-$(git -C "$root" rev-parse HEAD 2>/dev/null || echo unknown)}
 if [ "$commit" != unknown ] && [ -n "$(git -C "$root" status --porcelain --untracked-files=no 2>/dev/null)" ]; then
   echo "warning: $root has uncommitted changes: the results will name $commit, which is not the code that ran" >&2
 fi
 
-rm -rf "$out"
+# OUT_DIR is made anew: refused where it holds anything but an earlier bundle, or holds the
+# repository, so that a slip of the argument deletes nothing else.
+if [ -e "$out" ]; then
+  existing=$(cd "$out" && pwd)
+  case $root/ in "$existing"/*) echo "$out holds the repository: give the bundle a folder of its own" >&2; exit 2;; esac
+  if [ -n "$(ls -A "$out")" ] && { [ ! -f "$out/run.sh" ] || [ ! -f "$out/rbvh" ]; }; then
+    echo "$out exists and is not a bundle: give the bundle a new or empty folder" >&2; exit 2
+  fi
+  chmod -R u+w "$out" && rm -rf "$out"
+fi
 mkdir -p "$out/scripts" "$out/scenes" "$out/datasets"
 out=$(cd "$out" && pwd)
 strip -o "$out/rbvh" "$rbvh" 2>/dev/null || cp "$rbvh" "$out/rbvh"
@@ -64,9 +74,10 @@ case ${LOADER_DEB:-} in
       (cd "$fetched" && apt-get download libvulkan1 >/dev/null 2>&1) && mv "$fetched"/libvulkan1_*.deb "$out/" \
         || echo "warning: apt-get download libvulkan1 failed: the bundle has no Vulkan loader" >&2
       rm -rf "$fetched" ;;
-  *) cp "$LOADER_DEB" "$out/" ;;
+  *) cp "$LOADER_DEB" "$out/libvulkan1_bundled.deb" ;;
 esac
 
+quoted_commit=$(printf '%q' "$commit")
 cat > "$out/run.sh" <<EOF
 #!/usr/bin/env bash
 # Made by scripts/gpu-bundle.sh at $commit: unpacks the datasets and, where the system has no
@@ -75,19 +86,29 @@ set -uo pipefail
 budget=\${1:?usage: run.sh BUDGET_SECONDS [RESULTS_DIR]}
 here=\$(cd "\$(dirname "\$0")" && pwd)
 results=\${2:-\$here/results}
-find "\$here/datasets" -name '*.xz' -exec xz -d -k -f {} + || exit 2
-if ! ldconfig -p 2>/dev/null | grep -q 'libvulkan\.so\.1 '; then
+# Without xz the datasets stay packed and the window skips the steps that need them.
+if command -v xz >/dev/null; then
+  find "\$here/datasets" -name '*.xz' -exec xz -d -k -f {} + || echo "warning: unpacking the datasets failed" >&2
+else
+  echo "warning: xz is missing: the datasets stay packed, and the steps that need them are skipped" >&2
+fi
+# The system's loader where it has one (the cache read whole: grep -q closing the pipe early would
+# fail the test under pipefail); else the bundled one.
+cache=\$( (ldconfig -p || /sbin/ldconfig -p) 2>/dev/null )
+if ! grep -q 'libvulkan\.so\.1 ' <<<"\$cache"; then
   deb=\$(ls "\$here"/libvulkan1_*.deb 2>/dev/null | head -n 1)
   [ -n "\$deb" ] || { echo "no Vulkan loader on this machine and none bundled" >&2; exit 2; }
   mkdir -p "\$here/loader"
   if command -v dpkg-deb >/dev/null; then
-    dpkg-deb -x "\$deb" "\$here/loader"
+    dpkg-deb -x "\$deb" "\$here/loader" || { echo "unpacking \$deb failed" >&2; exit 2; }
   else
-    (cd "\$here/loader" && ar x "\$deb" && tar -xf data.tar.*) || exit 2
+    (cd "\$here/loader" && ar x "\$deb" && tar -xf data.tar.*) || { echo "unpacking \$deb failed" >&2; exit 2; }
   fi
-  export LD_LIBRARY_PATH="\$(dirname "\$(find "\$here/loader" -name 'libvulkan.so.1' | head -n 1)")\${LD_LIBRARY_PATH:+:\$LD_LIBRARY_PATH}"
+  lib=\$(find "\$here/loader" -name 'libvulkan.so.1' | head -n 1)
+  [ -n "\$lib" ] || { echo "\$deb holds no libvulkan.so.1" >&2; exit 2; }
+  export LD_LIBRARY_PATH="\$(dirname "\$lib")\${LD_LIBRARY_PATH:+:\$LD_LIBRARY_PATH}"
 fi
-RBVH="\$here/rbvh" RBVH_COMMIT=$commit exec bash "\$here/scripts/gpu-window.sh" "\$budget" "\$results" "\$here/datasets"
+RBVH="\$here/rbvh" RBVH_COMMIT=$quoted_commit exec bash "\$here/scripts/gpu-window.sh" "\$budget" "\$results" "\$here/datasets"
 EOF
 chmod +x "$out/run.sh" "$out/rbvh"
 echo "bundle of $commit in $out ($(du -sh "$out" | cut -f1)): copy it to the GPU machine and run $out/run.sh BUDGET_SECONDS there"

@@ -543,6 +543,6 @@ impl GpuInstance {
     /// normalized; for a mirroring transform it points as the flat copy's (whose winding
     /// [`crate::scene::Scene::append`] reverses) does.
     pub fn normal_out(&self, normal: Vec3) -> Vec3 {
-        (self.linear().transpose() * normal).normalize_or_zero()
+        crate::geom::unit(self.linear().transpose() * normal)
     }
 }

@@ -14,4 +14,4 @@ mod triangle;
 
 pub use aabb::{Aabb, ROBUST_FAR_SCALE};
 pub use ray::{safe_inverse, Hit, Ray};
-pub use triangle::{intersect_triangle, unit_normal, RayShear};
+pub use triangle::{intersect_triangle, unit, unit_normal, RayShear};

@@ -64,8 +64,14 @@ impl RayShear {
 /// scaling changes no bit of any other normal. `rbvh_unit_normal` in `glsl/intersect.glsl`
 /// takes the same steps.
 pub fn unit_normal(a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
-    let n = pow2_scaled(b - a).cross(pow2_scaled(c - a));
-    pow2_scaled(n).normalize_or_zero()
+    unit(pow2_scaled(b - a).cross(pow2_scaled(c - a)))
+}
+
+/// `v` normalized at any magnitude, zero where it is zero: scaled by a power of two first, as
+/// [`unit_normal`] scales its cross product (an instance's transformed normal, whose transform
+/// may scale by 1e-20, too). `rbvh_unit` in `glsl/intersect.glsl`.
+pub fn unit(v: Vec3) -> Vec3 {
+    pow2_scaled(v).normalize_or_zero()
 }
 
 /// `v` scaled by the power of two that brings its largest component's magnitude into
@@ -191,5 +197,28 @@ mod tests {
                 "ray {i} leaked through the shared edge"
             );
         }
+    }
+
+    #[test]
+    fn unit_normals_at_any_scale_and_the_same_bits_at_ordinary_ones() {
+        let (a, b, c) = (
+            Vec3::new(0.3, -1.2, 2.0),
+            Vec3::new(1.7, 0.4, -0.6),
+            Vec3::new(-0.9, 2.2, 0.8),
+        );
+        let plain = (b - a).cross(c - a).normalize_or_zero();
+        assert_eq!(unit_normal(a, b, c).to_array(), plain.to_array());
+        for scale in [1e-12f32, 1e-20, 1e-30, 1e30] {
+            let n = unit_normal(a * scale, b * scale, c * scale);
+            assert!(
+                n.is_finite() && (n.length() - 1.0).abs() < 1e-6 && n.dot(plain) > 0.999_999,
+                "scale {scale:e}: {n}"
+            );
+        }
+        // Degenerate: zero, as before.
+        assert_eq!(unit_normal(a, b, a), Vec3::ZERO);
+        assert_eq!(unit_normal(a, 2.0 * a, 3.0 * a), Vec3::ZERO);
+        assert_eq!(unit(Vec3::ZERO), Vec3::ZERO);
+        assert_eq!(unit(Vec3::new(0.0, 3e-39, 0.0)), Vec3::Y);
     }
 }

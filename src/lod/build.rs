@@ -282,7 +282,9 @@ fn divisions([a, b, c]: [Vec3; 3], spacing: f32) -> u32 {
 }
 
 fn triangle_samples([a, b, c]: [Vec3; 3], spacing: f32) -> Vec<Sample> {
-    let normal = crate::rbvh::layout::encode_octahedral((b - a).cross(c - a).normalize_or(Vec3::Z));
+    let unit = crate::geom::unit_normal(a, b, c);
+    let normal =
+        crate::rbvh::layout::encode_octahedral(if unit == Vec3::ZERO { Vec3::Z } else { unit });
     let divisions = divisions([a, b, c], spacing);
     let mut out = Vec::new();
     for i in 0..=divisions {

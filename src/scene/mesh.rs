@@ -252,8 +252,8 @@ impl Scene {
             .par_iter()
             .filter(|t| {
                 let [a, b, c] = t.map(|v| self.positions[v as usize]);
-                let n = (b - a).cross(c - a);
-                n != Vec3::ZERO && n.length_squared() == 0.0
+                crate::geom::unit_normal(a, b, c) != Vec3::ZERO
+                    && (b - a).cross(c - a).length_squared() == 0.0
             })
             .count()
     }
