@@ -14,12 +14,12 @@
 use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
-use rbvh::bvh::{BuildParams, Bvh, STACK_SIZE};
+use rbvh::bvh::{BuildParams, Bvh, InstancedBvh, STACK_SIZE};
 use rbvh::geom::{Hit, Ray};
 use rbvh::ibl::Environment;
 use rbvh::rbvh::file::{file_version, section_table, VERSION};
-use rbvh::rbvh::{Rbvh, RbvhParams, Refinement, Subdivision};
-use rbvh::scene::Scene;
+use rbvh::rbvh::{InstancedRbvh, Rbvh, RbvhParams, Refinement, Subdivision};
+use rbvh::scene::{Instance, InstancedScene, Scene};
 use rbvh::surface::strokes;
 
 #[path = "../../tests/rbvh_files/mod.rs"]
@@ -164,6 +164,57 @@ fn check_exact(scene: &Scene) {
     }
 }
 
+/// What a scene loaded with its instances must satisfy ([`InstancedScene::load`]): it
+/// validates, and where small, both two-level structures build over it, their CPU tracers
+/// trace probe rays without overflow to well-formed hits, and the two-level RBVH's file
+/// round-trips.
+fn check_instanced(scene: &InstancedScene) {
+    scene
+        .validate()
+        .expect("a scene loaded with its instances validates");
+    if scene.placed_triangle_count() == 0
+        || scene.placed_triangle_count() > MAX_BUILD_TRIANGLES
+        || scene.stored_triangle_count() > MAX_BUILD_TRIANGLES
+        || scene.meshes.iter().any(|m| m.points.is_some())
+    {
+        return;
+    }
+    let bvh = InstancedBvh::build(scene).expect("a two-level BVH builds on a valid scene");
+    let r = match InstancedRbvh::build(scene, &RbvhParams::quality(0).expect("Q0")) {
+        Ok(r) => Some(r),
+        Err(rbvh::Error::InvalidParameter { .. }) => None,
+        Err(e) => panic!("InstancedRbvh::build: {e}"),
+    };
+    if let Some(r) = &r {
+        let bytes = r.to_bytes();
+        let back = InstancedRbvh::from_bytes(&bytes, Path::new("fuzz.rbvh"))
+            .expect("a built two-level RBVH loads");
+        assert_eq!(back.to_bytes(), bytes, "save(load(two-level file)) differs");
+    }
+    for ray in probe_rays(scene.placed_bounds()) {
+        for any in [false, true] {
+            let traced = [
+                Some(if any {
+                    bvh.any_hit(&ray)
+                } else {
+                    bvh.closest_hit(&ray)
+                }),
+                r.as_ref().map(|r| {
+                    if any {
+                        r.any_hit(&ray)
+                    } else {
+                        r.closest_hit(&ray)
+                    }
+                }),
+            ];
+            for (hit, stats) in traced.into_iter().flatten() {
+                assert!(!stats.overflow, "{ray:?}: two-level traversal overflow");
+                check_hit(&ray, &hit);
+            }
+        }
+    }
+}
+
 /// Fuzz target: an OBJ file.
 pub fn obj(data: &[u8]) {
     let path = scratch_file("fuzz.obj", data);
@@ -212,8 +263,14 @@ pub fn gltf(data: &[u8]) {
         "fuzz.glb"
     };
     let path = scratch_file(name, body);
-    if let Ok(scene) = Scene::load(path.to_str().expect("utf-8 path")) {
+    let spec = path.to_str().expect("utf-8 path");
+    if let Ok(scene) = Scene::load(spec) {
         check_scene(&scene);
+    }
+    // Nodes that share a mesh load as its instances: another reader of the same file.
+    match InstancedScene::load(spec) {
+        Ok(scene) => check_instanced(&scene),
+        Err(e) => check_error(&e, Some(&path)),
     }
 }
 
@@ -230,8 +287,15 @@ pub fn scene_file(data: &[u8]) {
         return;
     }
     let path = scratch_file("fuzz.toml", data);
-    if let Ok(scene) = Scene::load(path.to_str().expect("utf-8 path")) {
-        check_scene(&scene);
+    let spec = path.to_str().expect("utf-8 path");
+    let flat = Scene::load(spec);
+    if let Ok(scene) = &flat {
+        check_scene(scene);
+    }
+    // The same file with its instances kept: whatever loads flat loads so too.
+    match InstancedScene::load(spec) {
+        Ok(scene) => check_instanced(&scene),
+        Err(e) => assert!(flat.is_err(), "loads flat but not with its instances: {e}"),
     }
 }
 
@@ -325,6 +389,7 @@ fn check_upgrade(r: &Rbvh, data: &[u8], version: u32) {
 /// promises "safe to trace and to upload").
 pub fn rbvh_file(data: &[u8]) {
     let path = Path::new("fuzz.rbvh");
+    two_level_file(data, path);
     let Ok(r) = Rbvh::from_bytes(data, path) else {
         return;
     };
@@ -367,6 +432,45 @@ pub fn rbvh_file(data: &[u8]) {
                 r.closest_hit(&ray)
             };
             // Corrupt-but-loadable trees may flag overflow (a cycle); hits must still be sane.
+            if hit.is_hit() {
+                assert!(
+                    !hit.t.is_nan() && hit.t >= ray.tmin && hit.t < ray.tmax,
+                    "{ray:?}: {hit:?}"
+                );
+            } else {
+                assert_eq!(hit, Hit::MISS);
+            }
+        }
+    }
+}
+
+/// The same bytes read as a two-level RBVH's file ([`InstancedRbvh::from_bytes`]): one that
+/// loads saves to bytes that load and save to themselves, and traces on the CPU to well-formed
+/// hits (a corrupt but loadable tree may flag overflow, as a flat one may).
+fn two_level_file(data: &[u8], path: &Path) {
+    let Ok(r) = InstancedRbvh::from_bytes(data, path) else {
+        return;
+    };
+    let saved = r.to_bytes();
+    let again = InstancedRbvh::from_bytes(&saved, path).expect("a saved two-level file loads");
+    assert_eq!(
+        again.to_bytes(),
+        saved,
+        "save(load(saved two-level file)) differs"
+    );
+    let bounds = r.bounds();
+    let bounds = if bounds.min.is_finite() && bounds.max.is_finite() {
+        bounds
+    } else {
+        rbvh::geom::Aabb::EMPTY
+    };
+    for ray in probe_rays(bounds) {
+        for any in [false, true] {
+            let (hit, _) = if any {
+                r.any_hit(&ray)
+            } else {
+                r.closest_hit(&ray)
+            };
             if hit.is_hit() {
                 assert!(
                     !hit.t.is_nan() && hit.t >= ray.tmin && hit.t < ray.tmax,
@@ -798,6 +902,24 @@ pub fn seeds() -> Vec<(&'static str, Vec<u8>)> {
                  [[mesh]]\nbuiltin = \"plane\"\ntranslate = [0, 1, 0]\nrotate = [10, 20, 30]\n\
                  scale = [1, 2, 3]\n"
         .to_vec();
+    // A mesh held once and placed twice, and a glTF mesh drawn by two nodes: both load with
+    // their instances.
+    let instanced_toml = b"name = \"placed\"\n[[mesh]]\nbuiltin = \"plane\"\n\
+                           [[instance]]\npath = \"mesh.obj\"\nscale = 2\n\
+                           [[instance]]\npath = \"mesh.obj\"\ntranslate = [0, 0, 1]\n\
+                           rotate = [0, 90, 0]\n"
+        .to_vec();
+    let mut gltf_nodes = vec![0u8];
+    gltf_nodes.extend(
+        std::str::from_utf8(gltf_json)
+            .expect("ASCII")
+            .replace(r#""nodes":[0]}]"#, r#""nodes":[0,1]}]"#)
+            .replace(
+                r#""scale":[2,2,2]}],"#,
+                r#""scale":[2,2,2]},{"mesh":0,"rotation":[0,0.7071068,0,0.7071068]}],"#,
+            )
+            .into_bytes(),
+    );
     let rbvh = {
         let mut s = Scene::new("seed");
         s.push_object(
@@ -817,6 +939,39 @@ pub fn seeds() -> Vec<(&'static str, Vec<u8>)> {
         };
         Rbvh::build(&s, &params).expect("seed RBVH")
     };
+    let two_level = {
+        let mut mesh = Scene::new("");
+        mesh.push_object(
+            "t",
+            &[
+                glam::Vec3::ZERO,
+                glam::Vec3::X,
+                glam::Vec3::Y,
+                glam::Vec3::new(0.0, 0.0, 1.0),
+            ],
+            &[[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]],
+        );
+        let placed = InstancedScene {
+            name: "seed".into(),
+            meshes: vec![mesh],
+            instances: vec![
+                Instance {
+                    mesh: 0,
+                    transform: glam::Mat4::IDENTITY,
+                },
+                Instance {
+                    mesh: 0,
+                    transform: glam::Mat4::from_translation(glam::Vec3::new(2.0, 0.0, 0.0)),
+                },
+            ],
+            ..InstancedScene::default()
+        };
+        let params = RbvhParams {
+            texels_per_diagonal: 16.0,
+            ..RbvhParams::quality(0).expect("preset")
+        };
+        InstancedRbvh::build(&placed, &params).expect("seed two-level RBVH")
+    };
     let mut geometry = vec![2, 1, 40, 0, 100, 1, 0, 12, 3, 9];
     for k in 0..120u8 {
         geometry.push(k.wrapping_mul(37).wrapping_add(11));
@@ -834,8 +989,11 @@ pub fn seeds() -> Vec<(&'static str, Vec<u8>)> {
         ("obj", obj),
         ("gltf", gltf),
         ("gltf", glb),
+        ("gltf", gltf_nodes),
         ("scene_file", toml),
+        ("scene_file", instanced_toml),
         ("rbvh_file", rbvh.to_bytes()),
+        ("rbvh_file", two_level.to_bytes()),
         // The readers of older versions: version 12, which every older one's header prefixes.
         ("rbvh_file", rbvh_files::as_v12(&rbvh)),
         ("builders", geometry),

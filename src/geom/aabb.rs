@@ -73,9 +73,18 @@ impl Aabb {
     }
 
     /// Length of the main diagonal, in scene units; 0 for the empty box. The scale that relative
-    /// tolerances (hit distances, texel sizes) are measured against.
+    /// tolerances (hit distances, texel sizes) are measured against. Finite for every box whose
+    /// extent is: where the f32 sum of squares overflows (an extent beyond about 1.8e19) it is
+    /// taken in f64, so that a vast scene still gets a finite texel; elsewhere it is the f32
+    /// length, bit for bit as before.
     pub fn diagonal(&self) -> f32 {
-        self.extent().length()
+        let e = self.extent();
+        let length = e.length();
+        if length.is_finite() || !e.is_finite() {
+            length
+        } else {
+            e.as_dvec3().length() as f32
+        }
     }
 
     /// Surface area; 0 for the empty box (the SAH's probability measure).
@@ -114,3 +123,30 @@ impl Aabb {
 /// `1 + 2γ₃` with `γₙ = nε / (1 − nε)`, `ε = 2⁻²⁴` (Ize 2013, pbrt-v3 §3.9).
 pub const ROBUST_FAR_SCALE: f32 =
     1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A box too long for f32 to square its extent has a finite diagonal all the same (a
+    /// two-level RBVH of such a scene saved an infinite texel its loader refused).
+    #[test]
+    fn diagonal_of_a_vast_box_is_finite() {
+        let b = Aabb {
+            min: Vec3::new(-1e21, 0.0, 0.0),
+            max: Vec3::new(1e21, 3e20, 5.8e-39),
+        };
+        let d = b.diagonal();
+        assert!(d.is_finite(), "{d}");
+        assert!(
+            (f64::from(d) / (4e42f64 + 9e40).sqrt() - 1.0).abs() < 1e-6,
+            "{d}"
+        );
+        let small = Aabb {
+            min: Vec3::ZERO,
+            max: Vec3::new(3.0, 4.0, 12.0),
+        };
+        assert_eq!(small.diagonal(), 13.0);
+        assert_eq!(Aabb::EMPTY.diagonal(), 0.0);
+    }
+}

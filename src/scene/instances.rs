@@ -242,7 +242,8 @@ impl InstancedScene {
         check_flat_triangles(&self.name, self.placed_triangle_count() as u64, available)
     }
 
-    /// Checks what a two-level build relies on: each mesh valid ([`Scene::validate`]), at most
+    /// Checks what a two-level build relies on: each mesh valid ([`Scene::validate`]; an unnamed
+    /// mesh's error names the scene and the mesh's index), at most
     /// [`MAX_INSTANCES`]
     /// instances, each naming a mesh that exists with a transform that is affine, finite and
     /// invertible ([`MIN_RELATIVE_DETERMINANT`]). The error names the scene and the instance.
@@ -251,8 +252,15 @@ impl InstancedScene {
             source_name: self.name.clone(),
             message,
         };
-        for mesh in &self.meshes {
-            mesh.validate()?;
+        for (m, mesh) in self.meshes.iter().enumerate() {
+            // An unnamed mesh (a glTF mesh read once for its nodes) is named by the scene.
+            mesh.validate().map_err(|e| match e {
+                Error::InvalidGeometry {
+                    source_name,
+                    message,
+                } if source_name.is_empty() => invalid(format!("mesh {m}: {message}")),
+                e => e,
+            })?;
         }
         if self.instances.len() > MAX_INSTANCES {
             return Err(invalid(format!(
