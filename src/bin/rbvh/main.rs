@@ -68,7 +68,8 @@ enum Command {
     Tables(tables::Args),
     /// List the built-in scenes, which every command takes for --scene without any file.
     Scenes,
-    /// Rewrite an .rbvh file of any version as the current one, painted colours and all.
+    /// Rewrite a flat .rbvh file of any version as the current one, painted colours and all (a
+    /// two-level RBVH's file, written only by the current version, is refused).
     Upgrade(upgrade::Args),
 }
 

@@ -1,4 +1,4 @@
-//! `rbvh upgrade`: an `.rbvh` file of any version rewritten as the current one. Every version
+//! `rbvh upgrade`: a flat `.rbvh` file of any version rewritten as the current one. Every version
 //! loads as it is (upgraded in memory on each load), but a painted colour channel lives only in
 //! its file and no scene rebuilds it, so an old file is worth keeping in a form that later builds
 //! read without the old readers' conversions, and that says what each of its sections is.
@@ -13,7 +13,7 @@ use crate::outputs::{self, output};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The RBVH file to read, of any version.
+    /// The flat RBVH file to read, of any version.
     input: PathBuf,
     /// Where to write it as the current version. It may be the input itself: the file is
     /// replaced only once the new one is complete, so a failure leaves the old one whole.
