@@ -164,11 +164,12 @@ fn check_exact(scene: &Scene) {
     }
 }
 
-/// What a scene loaded with its instances must satisfy ([`InstancedScene::load`]): it
-/// validates, and where small, both two-level structures build over it, their CPU tracers
+/// What a scene with instances must satisfy (loaded by [`InstancedScene::load`], or placed by
+/// [`builders`]): it validates, and where small, both two-level structures build over it (the
+/// RBVH with `params`), their CPU tracers
 /// trace probe rays without overflow to well-formed hits, and the two-level RBVH's file
 /// round-trips.
-fn check_instanced(scene: &InstancedScene) {
+fn check_instanced(scene: &InstancedScene, params: &RbvhParams) {
     scene
         .validate()
         .expect("a scene loaded with its instances validates");
@@ -180,7 +181,7 @@ fn check_instanced(scene: &InstancedScene) {
         return;
     }
     let bvh = InstancedBvh::build(scene).expect("a two-level BVH builds on a valid scene");
-    let r = match InstancedRbvh::build(scene, &RbvhParams::quality(0).expect("Q0")) {
+    let r = match InstancedRbvh::build(scene, params) {
         Ok(r) => Some(r),
         Err(rbvh::Error::InvalidParameter { .. }) => None,
         Err(e) => panic!("InstancedRbvh::build: {e}"),
@@ -269,7 +270,7 @@ pub fn gltf(data: &[u8]) {
     }
     // Nodes that share a mesh load as its instances: another reader of the same file.
     match InstancedScene::load(spec) {
-        Ok(scene) => check_instanced(&scene),
+        Ok(scene) => check_instanced(&scene, &RbvhParams::quality(0).expect("Q0")),
         Err(e) => check_error(&e, Some(&path)),
     }
 }
@@ -294,7 +295,7 @@ pub fn scene_file(data: &[u8]) {
     }
     // The same file with its instances kept: whatever loads flat loads so too.
     match InstancedScene::load(spec) {
-        Ok(scene) => check_instanced(&scene),
+        Ok(scene) => check_instanced(&scene, &RbvhParams::quality(0).expect("Q0")),
         Err(e) => assert!(flat.is_err(), "loads flat but not with its instances: {e}"),
     }
 }
@@ -573,9 +574,38 @@ pub fn decode_geometry(data: &[u8]) -> (Scene, RbvhParams) {
 }
 
 /// Fuzz target: both builders on small fuzzed geometry with fuzzed RBVH parameters, then their
-/// CPU tracers and, for the RBVH, the save/load round trip.
+/// CPU tracers and, for the RBVH, the save/load round trip; then the same geometry as a mesh
+/// placed twice, where it is and moved (turned, scaled unevenly or mirrored, as the first byte
+/// says), through both two-level structures.
 pub fn builders(data: &[u8]) {
     let (scene, params) = decode_geometry(data);
+    let extent = scene.bounds().extent().max_element();
+    let shift = glam::Vec3::new(
+        if extent.is_finite() {
+            1.5 * extent
+        } else {
+            0.0
+        },
+        0.0,
+        0.0,
+    );
+    let moved = match data.first().map_or(0, |m| m / 3 % 4) {
+        0 => glam::Mat4::from_translation(shift),
+        1 => glam::Mat4::from_translation(shift) * glam::Mat4::from_rotation_y(0.7),
+        2 => glam::Mat4::from_scale(glam::Vec3::new(-0.5, 0.5, 0.5)),
+        _ => {
+            glam::Mat4::from_rotation_z(0.4)
+                * glam::Mat4::from_scale(glam::Vec3::new(2.0, 1.0, 0.25))
+        }
+    };
+    let placed = InstancedScene {
+        name: "fuzz".into(),
+        meshes: vec![scene.clone()],
+        instances: [glam::Mat4::IDENTITY, moved]
+            .map(|transform| Instance { mesh: 0, transform })
+            .to_vec(),
+        ..InstancedScene::default()
+    };
     scene.validate().expect("decoded geometry is valid");
     check_exact(&scene);
     let median = BuildParams {
@@ -586,6 +616,9 @@ pub fn builders(data: &[u8]) {
     let bvh = Bvh::build_with(&scene, &median).expect("median build");
     bvh.validate().expect("median BVH validates");
     check_rbvh(&scene, &params);
+    if placed.validate().is_ok() {
+        check_instanced(&placed, &params);
+    }
 }
 
 /// A failed load must say what and where: an I/O or parse error naming a file (`file`, when
