@@ -177,6 +177,27 @@ impl ChildRef {
 }
 
 impl GpuNode {
+    /// This node in a world `2^k` times larger, exactly (`geom::scale`): its origin scaled and
+    /// each axis's grid step's exponent raised by `k`, its planes kept; an axis of no extent
+    /// (every plane 0) keeps the least exponent [`GpuNode::new`] gives it.
+    pub fn scaled_pow2(self, k: i32) -> GpuNode {
+        let s = crate::geom::scale::pow2(k);
+        let mut exponents = 0;
+        for axis in 0..3 {
+            let e = (self.exponents >> (8 * axis)) & 0xff;
+            let e = match self.planes[axis] {
+                0 => e,
+                _ => (e as i32 + k).clamp(MIN_EXPONENT as i32, MAX_EXPONENT as i32) as u32,
+            };
+            exponents |= e << (8 * axis);
+        }
+        GpuNode {
+            origin: self.origin.map(|x| x * s),
+            exponents,
+            ..self
+        }
+    }
+
     /// Packs two children, `a` and `b`, into one node, each box rounded outward to the node's
     /// grid; [`GpuNode::children`] decodes them, boxes containing the given ones. An absent child
     /// (a leaf of no triangles) or one with an empty box keeps no box of its own: it decodes to
@@ -294,6 +315,17 @@ pub struct GpuTriangle {
 const _: () = assert!(std::mem::size_of::<GpuTriangle>() == 48);
 
 impl GpuTriangle {
+    /// This triangle in a world `2^k` times larger, exactly (`geom::scale`).
+    pub fn scaled_pow2(self, k: i32) -> GpuTriangle {
+        let s = crate::geom::scale::pow2(k);
+        GpuTriangle {
+            v0: self.v0.map(|x| x * s),
+            v1: self.v1.map(|x| x * s),
+            v2: self.v2.map(|x| x * s),
+            ..self
+        }
+    }
+
     /// The bit of [`GpuTriangle::flags`] that marks an RBVH's *exact part*: a leaf's own
     /// triangle (or its part) traced exactly beside the height field that leaves it uncovered
     /// (`rbvh::raster::Exposed`), whose leaf index the bits from bit 2 up name. It is traced like

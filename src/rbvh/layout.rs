@@ -117,6 +117,20 @@ const _: () = assert!(std::mem::size_of::<GpuHeightfield>() == 64);
 /// The leaf frame's maps, in one place for every user outside the march (which inlines the same
 /// dot products: `march/walk.rs` step 1; `glsl/paint.comp` mirrors [`GpuHeightfield::sample_point`]).
 impl GpuHeightfield {
+    /// This leaf in a world `2^k` times larger, exactly (`geom::scale`): its origin and height
+    /// quantum scaled, its tangents over the texel scaled inversely; the height row, a unit axis
+    /// less the tile's plane in texels, has no unit and stays.
+    pub fn scaled_pow2(self, k: i32) -> GpuHeightfield {
+        let (s, inverse) = (crate::geom::scale::pow2(k), crate::geom::scale::pow2(-k));
+        GpuHeightfield {
+            origin: self.origin.map(|x| x * s),
+            axis_u: self.axis_u.map(|x| x * inverse),
+            axis_v: self.axis_v.map(|x| x * inverse),
+            h_scale: self.h_scale * s,
+            ..self
+        }
+    }
+
     /// Frame coordinates `(s, t, h)` of world point `p`: `s`, `t` in texels, `h` in world units.
     pub fn to_frame(&self, p: Vec3) -> Vec3 {
         let rel = p - Vec3::from(self.origin);

@@ -216,10 +216,12 @@ impl Scene {
     /// scene near the origin removes the loss.
     ///
     /// Also where the scene is so small that float32 cannot square its triangles' areas (more
-    /// than 1% of them, [`Scene::area_underflows`]): an RBVH's builder then finds no surface to
-    /// sample and traces every such triangle exactly, as large as the exact BVH, with the right
-    /// hits (tests/stability, scale and offset: a unit sphere scaled by 1e-10 or less). Scaling
-    /// the scene up removes it.
+    /// than 1% of them, [`Scene::area_underflows`]) and the RBVH builder cannot scale it up to
+    /// where it can (`geom::scale`: even the coarsest preset's texel, a 256th of the diagonal,
+    /// lies below [`TRACEABLE_TEXELS`](crate::geom::scale::TRACEABLE_TEXELS)): an RBVH's builder
+    /// then finds no surface to sample and traces every such triangle exactly, as large as the
+    /// exact BVH, with the right hits (tests/stability, scale and offset: a unit sphere scaled by
+    /// 1e-18; at 1e-12 it is built scaled up). Scaling the scene up removes it.
     pub fn precision_warning(&self) -> Option<String> {
         let r = self.coordinate_resolution();
         let far = (r > COORDINATE_RESOLUTION_LIMIT).then(|| {
@@ -229,7 +231,11 @@ impl Scene {
                  diagonal there, so hits may err by that much and RBVH leaves may crack; recentre the scene"
             )
         });
-        let underflows = self.area_underflows();
+        let coarsest_texel = self.bounds().diagonal() / 256.0;
+        let underflows = match coarsest_texel < *crate::geom::scale::TRACEABLE_TEXELS.start() {
+            true => self.area_underflows(),
+            false => 0,
+        };
         let tiny = (underflows * 100 > self.triangles.len()).then(|| {
             format!(
                 "{underflows} of its {} triangles are so small (the scene is {:.1e} units across) that \
@@ -401,6 +407,27 @@ impl Scene {
             }
         }
         Ok(())
+    }
+
+    /// This scene scaled by `2^k` ([`crate::geom::scale::pow2`]), exactly: its vertices, its
+    /// points and their spacing, its camera and a point light's position. What the RBVH builder
+    /// builds a scene too large or too small for float32's squares from (`geom::scale`).
+    pub fn scaled_pow2(&self, k: i32) -> Scene {
+        let s = crate::geom::scale::pow2(k);
+        let mut scaled = self.clone();
+        scaled.positions.iter_mut().for_each(|p| *p *= s);
+        if let Some(camera) = &mut scaled.camera {
+            camera.eye *= s;
+            camera.target *= s;
+        }
+        if let Some(Light::Point { position, .. }) = &mut scaled.light {
+            *position *= s;
+        }
+        if let Some(points) = &mut scaled.points {
+            points.positions.iter_mut().for_each(|p| *p *= s);
+            points.spacing.iter_mut().for_each(|d| *d *= s);
+        }
+        scaled
     }
 
     /// Appends `other`'s geometry transformed by the affine `m`. Its objects keep their names,

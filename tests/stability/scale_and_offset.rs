@@ -83,8 +83,13 @@ fn placed_errors(p: &Placement, rays: &[Ray], truth: &[f64], hits: &[Hit]) -> (f
 /// * A tiny sphere (s = 1e-12 and 1e-18) keeps both paths' bounds, with unit normals: a hit's
 ///   normal is scaled by powers of two before it is normalized (`geom::unit_normal`), where
 ///   plainly normalized its squared length underflowed f32 and the device's normal was infinite.
-///   Its triangles' squared areas underflow too, so the RBVH builder samples none of them and
-///   traces them all exactly (right hits, no height field): `Scene::precision_warning` says so.
+///   Its triangles' squared areas underflow f32 too: at 1e-12 the RBVH builder builds it scaled
+///   up by a power of two and scales the result back (`geom::scale`), height fields and all, in
+///   the RBVH path's bounds; at 1e-18, whose texel no tracer could follow, it samples none of
+///   them and traces them all exactly (right hits, no height field), and
+///   `Scene::precision_warning` says so.
+/// * A vast sphere (s = 1e12), whose squared areas overflow f32 (the builder refused it, asking
+///   for infinitely many texels), is built scaled down the same way, in the same bounds.
 #[test]
 fn scale_and_offset_keep_their_bounds_or_degrade_as_measured() {
     let ctx = common::context();
@@ -97,6 +102,10 @@ fn scale_and_offset_keep_their_bounds_or_degrade_as_measured() {
         },
         Placement {
             scale: 1e-18,
+            offset: 0.0,
+        },
+        Placement {
+            scale: 1e12,
             offset: 0.0,
         },
         Placement {
@@ -139,7 +148,7 @@ fn scale_and_offset_keep_their_bounds_or_degrade_as_measured() {
             .is_some_and(|w| w.contains("cannot square their areas"));
         assert_eq!(
             warned,
-            p.scale < 1e-9,
+            p.scale < 1e-15,
             "{what}: {:?}",
             scene.precision_warning()
         );
@@ -167,9 +176,10 @@ fn scale_and_offset_keep_their_bounds_or_degrade_as_measured() {
 
         let r = Arc::new(Rbvh::build(&scene, &q(0)).unwrap());
         // What the warning says: no height field where the areas underflow.
-        assert!(
-            !warned || r.stats.heightfield_leaves == 0,
-            "{what}: warned, yet {} height fields",
+        assert_eq!(
+            warned,
+            r.stats.heightfield_leaves == 0,
+            "{what}: warned {warned}, {} height fields",
             r.stats.heightfield_leaves
         );
         for (which, hits) in PATHS.iter().zip(rbvh_hits(&ctx, &r, &rays, Query::Closest)) {

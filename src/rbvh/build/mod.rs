@@ -52,6 +52,7 @@ mod flatten;
 mod leaf;
 mod parts;
 mod recursion;
+mod scale;
 mod source;
 mod view;
 
@@ -147,6 +148,9 @@ struct Builder<'a> {
     /// Per scene triangle, the angle at which it meets its neighbours
     /// ([`crate::scene::creases`]); empty for points.
     creases: &'a [f32],
+    /// The most samples one set's frame may have (`Builder::judged_frame`): four times the whole
+    /// build's estimated texels, and sixteen tiles of `max_tile` samples a side for the rims.
+    frame_samples: u64,
 }
 
 impl Rbvh {
@@ -188,8 +192,22 @@ impl Rbvh {
     /// mesh of a scene with instances is built in its own space at the texel its placements ask
     /// for ([`crate::rbvh::InstancedRbvh`]). Objects' own rates
     /// ([`RbvhParams::object_rate`]) are relative to their own boxes, so they are the same in
-    /// any space. `params` must be valid.
+    /// any space. `params` must be valid. A scene too large or too small for float32's squares
+    /// is built scaled by a power of two and scaled back (`scale.rs`).
     pub(crate) fn build_at(
+        source: &RbvhSource,
+        params: &RbvhParams,
+        texel: f32,
+        progress: &dyn Progress,
+    ) -> Result<Rbvh> {
+        match crate::geom::scale::rescale_exponent(source.scene.bounds().diagonal(), texel) {
+            Some(k) => scale::build_scaled(source, params, texel, k, progress),
+            None => Rbvh::build_native(source, params, texel, progress),
+        }
+    }
+
+    /// [`Rbvh::build_at`] of a scene as it is.
+    fn build_native(
         source: &RbvhSource,
         params: &RbvhParams,
         texel: f32,
@@ -298,6 +316,7 @@ impl Rbvh {
             surface,
             open,
             creases: &shared.creases,
+            frame_samples: (4.0 * estimate).ceil() as u64 + 16 * u64::from(params.max_tile).pow(2),
         };
         let (mut order, exact) = builder.exact_by_size();
         let root = step(
