@@ -179,20 +179,35 @@ impl ChildRef {
 impl GpuNode {
     /// This node in a world `2^k` times larger, exactly (`geom::scale`): its origin scaled and
     /// each axis's grid step's exponent raised by `k`, its planes kept; an axis of no extent
-    /// (every plane 0) keeps the least exponent [`GpuNode::new`] gives it.
+    /// (every plane 0) keeps the least exponent [`GpuNode::new`] gives it. Where a step or the
+    /// origin would leave the normal floats (boxes within ~1e-36 of zero), the scaled children's
+    /// boxes are packed again instead, as [`GpuNode::new`] packs any.
     pub fn scaled_pow2(self, k: i32) -> GpuNode {
         let s = crate::geom::scale::pow2(k);
+        let origin = self.origin.map(|x| x * s);
         let mut exponents = 0;
-        for axis in 0..3 {
+        let axes = self.planes.iter().zip(self.origin.iter().zip(&origin));
+        for (axis, (&planes, (&was, &now))) in axes.enumerate() {
             let e = (self.exponents >> (8 * axis)) & 0xff;
-            let e = match self.planes[axis] {
-                0 => e,
-                _ => (e as i32 + k).clamp(MIN_EXPONENT as i32, MAX_EXPONENT as i32) as u32,
+            let e = match planes {
+                0 => e as i32,
+                _ => e as i32 + k,
             };
-            exponents |= e << (8 * axis);
+            let normal = was == 0.0 || now.is_normal();
+            if !(MIN_EXPONENT as i32..=MAX_EXPONENT as i32).contains(&e) || !normal {
+                let [a, b] = self.children().map(|c| ChildRef {
+                    bounds: Aabb {
+                        min: c.bounds.min * s,
+                        max: c.bounds.max * s,
+                    },
+                    ..c
+                });
+                return GpuNode::new(a, b);
+            }
+            exponents |= (e as u32) << (8 * axis);
         }
         GpuNode {
-            origin: self.origin.map(|x| x * s),
+            origin,
             exponents,
             ..self
         }

@@ -73,17 +73,17 @@ impl Aabb {
     }
 
     /// Length of the main diagonal, in scene units; 0 for the empty box. The scale that relative
-    /// tolerances (hit distances, texel sizes) are measured against. Finite for every box whose
-    /// extent is: where the f32 sum of squares overflows (an extent beyond about 1.8e19) it is
-    /// taken in f64, so that a vast scene still gets a finite texel; elsewhere it is the f32
-    /// length, bit for bit as before.
+    /// tolerances (hit distances, texel sizes) are measured against. Finite for every box of
+    /// finite corners: where the f32 length overflows (an extent beyond about 1.8e19) it is taken
+    /// in f64 and held to `f32::MAX`, so that a vast scene still gets a finite texel; elsewhere
+    /// it is the f32 length, bit for bit as before.
     pub fn diagonal(&self) -> f32 {
-        let e = self.extent();
-        let length = e.length();
-        if length.is_finite() || !e.is_finite() {
+        let length = self.extent().length();
+        if length.is_finite() || self.is_empty() || !(self.min.is_finite() && self.max.is_finite())
+        {
             length
         } else {
-            e.as_dvec3().length() as f32
+            ((self.max.as_dvec3() - self.min.as_dvec3()).length()).min(f64::from(f32::MAX)) as f32
         }
     }
 
@@ -148,5 +148,11 @@ mod tests {
         };
         assert_eq!(small.diagonal(), 13.0);
         assert_eq!(Aabb::EMPTY.diagonal(), 0.0);
+        // Corners so far apart that the extent itself overflows f32: held to the largest float.
+        let widest = Aabb {
+            min: Vec3::new(-3e38, -3e38, 0.0),
+            max: Vec3::new(3e38, 3e38, 0.0),
+        };
+        assert_eq!(widest.diagonal(), f32::MAX);
     }
 }

@@ -26,12 +26,13 @@ pub const fn pow2(k: i32) -> f32 {
 
 /// The power of two `k` that takes `diagonal` into [1, 2) (`diagonal · 2^k`), where the scene lies
 /// outside [`NATIVE_DIAGONALS`] and its `texel` within [`TRACEABLE_TEXELS`]; None where it is to
-/// be built as it is.
+/// be built as it is. (A coordinate far from the rest may still leave float32 once scaled: the
+/// builder checks the scaled scene, `rbvh/build/scale.rs`.)
 pub fn rescale_exponent(diagonal: f32, texel: f32) -> Option<i32> {
     let outside = diagonal.is_normal() && diagonal > 0.0 && !NATIVE_DIAGONALS.contains(&diagonal);
     // floor(log2(diagonal)), from the float's exponent bits: exact where log2 may round.
-    (outside && TRACEABLE_TEXELS.contains(&texel))
-        .then(|| 127 - ((diagonal.to_bits() >> 23) & 0xff) as i32)
+    let k = 127 - ((diagonal.to_bits() >> 23) & 0xff) as i32;
+    (outside && TRACEABLE_TEXELS.contains(&texel) && (-126..=126).contains(&k)).then_some(k)
 }
 
 #[cfg(test)]

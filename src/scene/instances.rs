@@ -243,10 +243,10 @@ impl InstancedScene {
     }
 
     /// Checks what a two-level build relies on: each mesh valid ([`Scene::validate`]; an unnamed
-    /// mesh's error names the scene and the mesh's index), at most
-    /// [`MAX_INSTANCES`]
-    /// instances, each naming a mesh that exists with a transform that is affine, finite and
-    /// invertible ([`MIN_RELATIVE_DETERMINANT`]). The error names the scene and the instance.
+    /// mesh's error names the scene and the mesh's index), at most [`MAX_INSTANCES`] instances,
+    /// each naming a mesh that exists with a transform that is affine, finite and invertible
+    /// ([`MIN_RELATIVE_DETERMINANT`]) and places the mesh's box within float32's range. The error
+    /// names the scene and the instance.
     pub fn validate(&self) -> Result<()> {
         let invalid = |message: String| Error::InvalidGeometry {
             source_name: self.name.clone(),
@@ -268,17 +268,27 @@ impl InstancedScene {
                 self.instances.len()
             )));
         }
+        let mesh_bounds: Vec<Aabb> = self.meshes.iter().map(Scene::bounds).collect();
         for (k, instance) in self.instances.iter().enumerate() {
-            if instance.mesh as usize >= self.meshes.len() {
+            let Some(&bounds) = mesh_bounds.get(instance.mesh as usize) else {
                 return Err(invalid(format!(
                     "instance {k} places mesh {}, but there are only {} meshes",
                     instance.mesh,
                     self.meshes.len()
                 )));
-            }
+            };
             transform_fault(&instance.transform).map_or(Ok(()), |fault| {
                 Err(invalid(format!("instance {k}: {fault}")))
             })?;
+            // As the flat scene's vertices must be finite, so must the placed mesh's box.
+            let placed = transformed_box(bounds, instance.transform);
+            let beyond = !(placed.min.is_finite() && placed.max.is_finite());
+            if !bounds.is_empty() && beyond {
+                return Err(invalid(format!(
+                    "instance {k} places mesh {} beyond float32's range (its box reaches {} to {})",
+                    instance.mesh, placed.min, placed.max
+                )));
+            }
         }
         Ok(())
     }

@@ -17,6 +17,12 @@ use crate::rbvh::frame::{
 use crate::rbvh::raster::{rasterize, ring_reach, Frame, Ring, Tile, NO_SOURCE};
 use crate::rbvh::splat::{splat, Splat};
 
+/// How many times its surface in texels a set's frame may hold in samples (beside sixteen tiles
+/// for the rims, `Builder::frame_samples`) and still be rasterized as one height field. Far
+/// beyond any tile of a connected surface turned to its tightest rectangle; the structures of
+/// the built-in and benchmark scenes are the same with and without the bound.
+const FRAME_SURFACE_FACTOR: f64 = 64.0;
+
 impl Builder<'_> {
     /// The subtree of the set `order` made one height field of `tiles`: the tiles, and beside
     /// them, when they leave some of the set's triangles uncovered ([`Tile::exposed`]: over a
@@ -147,7 +153,7 @@ impl Builder<'_> {
     /// point `positions` reaching `margin` beyond them, and the criterion its samples must pass
     /// (None: its elements passed already); None when it is not representable as one height field
     /// at any sampling: no projection axis, or failing the criterion while larger than
-    /// `sampled_criterion_texels`, or a frame of more samples than the build allows one
+    /// `sampled_criterion_texels`, or a frame of samples out of proportion to its surface
     /// (`Builder::frame_samples`).
     fn judged_frame(
         &self,
@@ -165,11 +171,29 @@ impl Builder<'_> {
         // Elements that fail the criterion get a second hearing on their surface as sampled.
         let judge = (!elements_pass).then_some(self.params.refinement);
         // A set of little surface spread far (a degenerate triangle's long segment, rasterized
-        // at its neighbours' fine texel) would ask more samples than the whole build: not a
-        // height field at this rate (found by fuzzing: 5.9e17 units of segment at 6.5 a texel).
+        // at its neighbours' fine texel) would ask samples out of all proportion to its surface:
+        // not a height field at this rate (found by fuzzing: a 5.9e17-unit segment at 6.5 units
+        // a texel asked 4 GiB of windows).
         let frame = fit(positions, w, texel, margin);
         let samples = u64::from(frame.res_u) * u64::from(frame.res_v);
-        (samples <= self.frame_samples).then_some((frame, judge))
+        (samples as f64 <= self.frame_samples(elements, texel)).then_some((frame, judge))
+    }
+
+    /// The most samples the frame of a set of surface `elements` may have at `texel`:
+    /// [`FRAME_SURFACE_FACTOR`] times its surface in texels (the elements' lengths are twice a
+    /// triangle's area, a point's area), at most four times the whole build's estimated texels
+    /// (a coarse object's large surface in a set rasterized at a small neighbour's fine texel),
+    /// and sixteen tiles of `max_tile` samples a side for the rims of small sets.
+    fn frame_samples(&self, elements: &[Vec3], texel: f32) -> f64 {
+        // An element whose float32 cross product overflowed counts for nothing.
+        let surface: f64 = elements
+            .iter()
+            .map(|e| e.as_dvec3().length())
+            .filter(|a| a.is_finite())
+            .sum();
+        let texel = f64::from(texel);
+        (FRAME_SURFACE_FACTOR * surface / (texel * texel)).min(4.0 * self.estimate)
+            + 16.0 * f64::from(self.params.max_tile).powi(2)
     }
 
     /// The covered tiles of `frame`'s windows (at most `max_tile` samples a side), each sampled

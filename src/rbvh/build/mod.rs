@@ -148,9 +148,9 @@ struct Builder<'a> {
     /// Per scene triangle, the angle at which it meets its neighbours
     /// ([`crate::scene::creases`]); empty for points.
     creases: &'a [f32],
-    /// The most samples one set's frame may have (`Builder::judged_frame`): four times the whole
-    /// build's estimated texels, and sixteen tiles of `max_tile` samples a side for the rims.
-    frame_samples: u64,
+    /// The build's estimated texels (the refusal's estimate): four times it bounds any one set's
+    /// frame (`Builder::frame_samples`).
+    estimate: f64,
 }
 
 impl Rbvh {
@@ -316,7 +316,7 @@ impl Rbvh {
             surface,
             open,
             creases: &shared.creases,
-            frame_samples: (4.0 * estimate).ceil() as u64 + 16 * u64::from(params.max_tile).pow(2),
+            estimate,
         };
         let (mut order, exact) = builder.exact_by_size();
         let root = step(

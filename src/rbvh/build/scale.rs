@@ -12,7 +12,9 @@ use crate::rbvh::ExactTriangles;
 use crate::Result;
 
 /// Builds `source`'s scene scaled by `2^k` at the texel `texel · 2^k`, and scales the RBVH back.
-/// The scaled scene is a copy, prepared for this level alone.
+/// The scaled scene is a copy, prepared for this level alone. A scene that scaling would take
+/// beyond float32 (a vertex, the camera or a light far from the rest, beside a tiny part) is
+/// built as it is.
 pub(super) fn build_scaled(
     source: &RbvhSource,
     params: &RbvhParams,
@@ -22,6 +24,22 @@ pub(super) fn build_scaled(
 ) -> Result<Rbvh> {
     let start = Instant::now();
     let scene = source.scene.scaled_pow2(k);
+    let finite = |p: glam::Vec3| p.is_finite();
+    let fits = scene.validate().is_ok()
+        && scene
+            .camera
+            .is_none_or(|c| finite(c.eye) && finite(c.target))
+        && match scene.light {
+            Some(crate::scene::Light::Point { position, .. }) => finite(position),
+            _ => true,
+        }
+        && scene.points.as_ref().is_none_or(|points| {
+            points.positions.iter().all(|&p| finite(p))
+                && points.spacing.iter().all(|&d| d.is_normal())
+        });
+    if !fits {
+        return Rbvh::build_native(source, params, texel, progress);
+    }
     let scaled = RbvhSource::new(&scene)?;
     let mut rbvh = Rbvh::build_native(&scaled, params, texel * pow2(k), progress)?.scaled_pow2(-k);
     rbvh.stats.build_ms = source.new_ms + start.elapsed().as_secs_f64() * 1e3;
