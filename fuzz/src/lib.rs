@@ -420,19 +420,27 @@ pub fn rbvh_file(data: &[u8]) {
     }
     let again = Rbvh::from_bytes(&saved, path).expect("a saved file loads");
     assert_eq!(again.to_bytes(), saved, "save(load(saved file)) differs");
-    let bounds = if r.bounds.min.is_finite() && r.bounds.max.is_finite() {
-        r.bounds
+    check_loaded_hits(r.bounds, |ray, any| {
+        if any {
+            r.any_hit(ray).0
+        } else {
+            r.closest_hit(ray).0
+        }
+    });
+}
+
+/// Probe rays through a loaded structure's `bounds` (none where they are not finite), traced
+/// closest-hit and any-hit by `trace`: corrupt but loadable trees may flag overflow (a cycle),
+/// but every hit is well formed.
+fn check_loaded_hits(bounds: rbvh::geom::Aabb, trace: impl Fn(&Ray, bool) -> Hit) {
+    let bounds = if bounds.min.is_finite() && bounds.max.is_finite() {
+        bounds
     } else {
         rbvh::geom::Aabb::EMPTY
     };
     for ray in probe_rays(bounds) {
         for any in [false, true] {
-            let (hit, _) = if any {
-                r.any_hit(&ray)
-            } else {
-                r.closest_hit(&ray)
-            };
-            // Corrupt-but-loadable trees may flag overflow (a cycle); hits must still be sane.
+            let hit = trace(&ray, any);
             if hit.is_hit() {
                 assert!(
                     !hit.t.is_nan() && hit.t >= ray.tmin && hit.t < ray.tmax,
@@ -459,29 +467,13 @@ fn two_level_file(data: &[u8], path: &Path) {
         saved,
         "save(load(saved two-level file)) differs"
     );
-    let bounds = r.bounds();
-    let bounds = if bounds.min.is_finite() && bounds.max.is_finite() {
-        bounds
-    } else {
-        rbvh::geom::Aabb::EMPTY
-    };
-    for ray in probe_rays(bounds) {
-        for any in [false, true] {
-            let (hit, _) = if any {
-                r.any_hit(&ray)
-            } else {
-                r.closest_hit(&ray)
-            };
-            if hit.is_hit() {
-                assert!(
-                    !hit.t.is_nan() && hit.t >= ray.tmin && hit.t < ray.tmax,
-                    "{ray:?}: {hit:?}"
-                );
-            } else {
-                assert_eq!(hit, Hit::MISS);
-            }
+    check_loaded_hits(r.bounds(), |ray, any| {
+        if any {
+            r.any_hit(ray).0
+        } else {
+            r.closest_hit(ray).0
         }
-    }
+    });
 }
 
 /// A little-endian reader over the fuzz input that yields zeros once it runs out.
