@@ -1,11 +1,12 @@
-// Reading a texel of the atlas as src/rbvh/ranges.rs lays it out (Atlas::device_words): the
-// 16-bit band's texels before `wide_len` (one word each, height code and normal, or two to a word
-// height only), then the bands of packed heights — 12-bit texels up to `end12`, 10-bit ones up to
-// `end10`, 8-bit ones up to `len` — each band its fields one after another from the lowest bit of
-// its first word, then, unless `height_only`, the packed bands' normals two to a word; the
-// blocks' height ranges after all of them (rbvh_atlas_texel_words). Every part starts on a word.
-// A packed field c of b bits is the 16-bit code c * step(b) (Texel::step: 15, 63 and 257 for 12,
-// 10 and 8 bits), all ones a hole, so every reader sees 16-bit codes.
+// Reading the atlas as src/rbvh/words.rs lays it out (Atlas::device_words), in either texel
+// format: the 16-bit band's height codes two to a word, then the bands of packed heights —
+// 12-bit texels up to `end12`, 10-bit ones up to `end10`, 8-bit ones up to `len` — each band its
+// fields one after another from the lowest bit of its first word; the blocks' height ranges
+// after the codes (rbvh_atlas_code_words); then, with normals, the rank directory and the
+// normals of the texels that are not holes, in atlas order, two to a word (rbvh_atlas_normal).
+// Every part starts on a word. A packed field c of b bits is the 16-bit code c * step(b)
+// (Texel::step: 15, 63 and 257 for 12, 10 and 8 bits), all ones a hole, so every reader sees
+// 16-bit codes.
 //
 // The includer defines RBVH_ATLAS_WORD(i), the atlas's word i, before the #include.
 #ifndef RBVH_ATLAS_GLSL
@@ -17,16 +18,10 @@ uint rbvh_atlas_words(uint n, uint bits) {
     return (n >> 5u) * bits + (((n & 31u) * bits + 31u) >> 5u);
 }
 
-// Words of the height codes: where the packed bands' normals start.
-uint rbvh_atlas_code_words(uint len, uint wide_len, uint end12, uint end10, bool height_only) {
-    return rbvh_atlas_words(wide_len, height_only ? 16u : 32u) + rbvh_atlas_words(end12 - wide_len, 12u) +
+// Words of the height codes: where the blocks' height ranges start.
+uint rbvh_atlas_code_words(uint len, uint wide_len, uint end12, uint end10) {
+    return rbvh_atlas_words(wide_len, 16u) + rbvh_atlas_words(end12 - wide_len, 12u) +
            rbvh_atlas_words(end10 - end12, 10u) + rbvh_atlas_words(len - end10, 8u);
-}
-
-// Words of the texels: where the block ranges start.
-uint rbvh_atlas_texel_words(uint len, uint wide_len, uint end12, uint end10, bool height_only) {
-    uint normal_words = height_only ? 0u : (len - wide_len + 1u) >> 1;
-    return rbvh_atlas_code_words(len, wide_len, end12, end10, height_only) + normal_words;
 }
 
 // The band (0: 16-bit, 1: 12-bit, 2: 10-bit, 3: 8-bit) that holds texel `index`.
@@ -35,8 +30,8 @@ uint rbvh_atlas_band(uint index, uint wide_len, uint end12, uint end10) {
 }
 
 // Where a tile's fields lie (rbvh_atlas_tile): the word holding the field of its texel (0, 0), and
-// in bits 0-7 that field's first bit in the word, in bits 8-15 the band's field width (32 for the
-// 16-bit band with normals, whose word holds both), in bits 16-31 the step a field counts in.
+// in bits 0-7 that field's first bit in the word, in bits 8-15 the band's field width, in bits
+// 16-31 the step a field counts in.
 struct RbvhAtlasTile {
     uint word;
     uint phase_bits_step;
@@ -48,13 +43,12 @@ struct RbvhAtlasTile {
 // are offsets from it. The walk makes it for each cell: kept through a leaf's walk, it cost RADV
 // 8 VGPRs (64 against 56) for no speed measured on lavapipe (docs/speed.md, "Heights in 10 and
 // 12 bits on lavapipe").
-RbvhAtlasTile rbvh_atlas_tile(uint base, uint wide_len, uint end12, uint end10, bool height_only) {
+RbvhAtlasTile rbvh_atlas_tile(uint base, uint wide_len, uint end12, uint end10) {
     uint band = rbvh_atlas_band(base, wide_len, end12, end10);
-    uint wide_bits = height_only ? 16u : 32u;
-    uint words12 = rbvh_atlas_words(wide_len, wide_bits);
+    uint words12 = rbvh_atlas_words(wide_len, 16u);
     uint words10 = words12 + rbvh_atlas_words(end12 - wide_len, 12u);
     uint words8 = words10 + rbvh_atlas_words(end10 - end12, 10u);
-    uint bits = band == 0u ? wide_bits : (band == 1u ? 12u : (band == 2u ? 10u : 8u));
+    uint bits = band == 0u ? 16u : (band == 1u ? 12u : (band == 2u ? 10u : 8u));
     uint start = band == 0u ? 0u : (band == 1u ? wide_len : (band == 2u ? end12 : end10));
     uint first = band == 0u ? 0u : (band == 1u ? words12 : (band == 2u ? words10 : words8));
     uint step = band == 0u ? 1u : (band == 1u ? 15u : (band == 2u ? 63u : 257u));
@@ -91,9 +85,9 @@ uvec2 rbvh_atlas_tile_field(RbvhAtlasTile tile, uint d) {
 // The height codes of the tile's texels `d` and `d + 1` texels after its texel (0, 0) (d = j *
 // pitch + i; atlas texel `index` and the next; holes at or beyond `len`): what the walk reads, a
 // row of a cell. Both fields lie in the two words from the first's (a field of a packed band may
-// cross into the next word, 20 to 24 bits for the two; the 16-bit band's are two halves or two
-// words), read together, so that a cell's four corners take four reads, as one word each did.
-// The words read lie inside the buffer: the blocks' height ranges follow the texels.
+// cross into the next word, 20 to 24 bits for the two; the 16-bit band's are two halves of one
+// word or of two), read together, so that a cell's four corners take four reads, as one word each did.
+// The words read lie inside the buffer: the blocks' height ranges follow the codes.
 uvec2 rbvh_atlas_tile_pair(RbvhAtlasTile tile, uint d, uint index, uint len) {
     uint bits = (tile.phase_bits_step >> 8u) & 0xFFu;
     uvec2 at = rbvh_atlas_tile_field(tile, d);
@@ -118,24 +112,54 @@ uint rbvh_atlas_tile_code(RbvhAtlasTile tile, uint d, uint index, uint len) {
     return rbvh_atlas_decode(tile, field, index < len);
 }
 
-// The height code of texel `index` alone (painting, a hit's normal).
-uint rbvh_atlas_code(uint index, uint len, uint wide_len, uint end12, uint end10, bool height_only) {
-    return rbvh_atlas_tile_code(rbvh_atlas_tile(index, wide_len, end12, end10, height_only), 0u, index, len);
+// The height code of texel `index` alone (painting).
+uint rbvh_atlas_code(uint index, uint len, uint wide_len, uint end12, uint end10) {
+    return rbvh_atlas_tile_code(rbvh_atlas_tile(index, wide_len, end12, end10), 0u, index, len);
 }
 
-// Texel `index` of an atlas with normals: its height code in bits 0-15 and its 8:8 octahedral
-// normal in bits 16-31 (a hole at or beyond `len`), as the host's Texel holds it.
-uint rbvh_atlas_texel(uint index, uint len, uint wide_len, uint end12, uint end10) {
-    uint texel = 0xFFFFu;
-    if (index < wide_len && index < len) {
-        texel = RBVH_ATLAS_WORD(index);
-    } else if (index < len) {
-        uint k = index - wide_len;
-        uint normals = rbvh_atlas_code_words(len, wide_len, end12, end10, false);
-        uint normal = (RBVH_ATLAS_WORD(normals + (k >> 1)) << ((~k & 1u) << 4)) & 0xFFFF0000u;
-        texel = rbvh_atlas_code(index, len, wide_len, end12, end10, false) | normal;
+// Texels that are not holes among atlas texels [from, to), at most 16 of them, read a row of two
+// at a time from their bands' fields (a part in each band the texels span).
+uint rbvh_atlas_samples_between(uint from, uint to, uint len, uint wide_len, uint end12, uint end10) {
+    uint samples = 0u;
+    uint at = from;
+    for (uint part = 0u; part < 4u && at < to; ++part) {
+        uint band = rbvh_atlas_band(at, wide_len, end12, end10);
+        uint end = min(to, band == 0u ? wide_len : (band == 1u ? end12 : (band == 2u ? end10 : len)));
+        RbvhAtlasTile tile = rbvh_atlas_tile(at, wide_len, end12, end10);
+        for (uint d = 0u; d < 16u && at + d < end; d += 2u) {
+            uvec2 pair = rbvh_atlas_tile_pair(tile, d, at + d, len);
+            samples += uint(pair.x != 0xFFFFu) + uint(at + d + 1u < end && pair.y != 0xFFFFu);
+        }
+        at = end;
     }
-    return texel;
+    return samples;
+}
+
+// The normal of atlas texel `index`, not a hole, of an atlas with normals, in bits 16-31 (bits
+// 0-15 zero), where the host's Texel holds it. The normals are kept for the texels that are not
+// holes alone, texel `index`'s at its rank, the number of such texels before it. The rank
+// directory after the blocks' height ranges (src/rbvh/words.rs: a word a span of 256 texels
+// counting those before the span, in the next two a byte a group of 32 counting those in the
+// span before the group, and after the last span the count of all) gives those before its group
+// of 32, or before the next group; the texels between, at most 16, are counted from their codes
+// (RankCount in src/rbvh/words.rs).
+uint rbvh_atlas_normal(uint index, uint len, uint pitch, uint wide_len, uint end12, uint end10) {
+    uint rows = len / max(pitch, 1u);
+    uint blocks = ((pitch + 7u) >> 3) * ((rows + 7u) >> 3);
+    uint ranks = rbvh_atlas_code_words(len, wide_len, end12, end10) + blocks;
+    uint normals = ranks + ((len >> 8) + uint((len & 255u) != 0u)) * 3u + 1u;
+    uint span = ranks + (index >> 8) * 3u;
+    uint first = index & ~31u;
+    bool forward = (index & 31u) < 16u;
+    uint group = ((index >> 5) & 7u) + (forward ? 0u : 1u);
+    uint before = RBVH_ATLAS_WORD(group == 8u ? span + 3u : span);
+    if (group < 8u) {
+        before += (RBVH_ATLAS_WORD(span + 1u + (group >> 2)) >> ((group & 3u) << 3)) & 0xFFu;
+    }
+    uint counted = rbvh_atlas_samples_between(forward ? first : index, forward ? index : min(first + 32u, len), len,
+                                              wide_len, end12, end10);
+    uint rank = forward ? before + counted : before - counted;
+    return (RBVH_ATLAS_WORD(normals + (rank >> 1)) << ((~rank & 1u) << 4)) & 0xFFFF0000u;
 }
 
 #endif

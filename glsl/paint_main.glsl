@@ -100,7 +100,7 @@ void main() {
     if (index >= pc.atlas_len) {
         return;
     }
-    uint code = rbvh_atlas_code(index, pc.atlas_len, pc.atlas_wide_len, pc.atlas_end12, pc.atlas_end10, false);
+    uint code = rbvh_atlas_code(index, pc.atlas_len, pc.atlas_wide_len, pc.atlas_end12, pc.atlas_end10);
     if (code == 0xFFFFu) {
         return;
     }

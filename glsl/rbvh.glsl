@@ -74,8 +74,9 @@ struct RbvhHeightfield {
     float h_scale;
 };
 
-// Atlas texels, as rbvh_atlas_texel returns them: bits 0-15 height code (0xFFFF = hole), bits
-// 16-31 the 8:8 octahedral normal; atlas.glsl reads them from the atlas's words.
+// Atlas texels, as the host's Texel holds them: bits 0-15 height code (0xFFFF = hole), bits 16-31
+// the 8:8 octahedral normal; atlas.glsl reads codes (rbvh_atlas_tile_pair) and normals
+// (rbvh_atlas_normal, in bits 16-31) from the atlas's words.
 #ifdef RBVH_DEVICE_ADDRESS
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer RbvhHeightfieldsRef {
     RbvhHeightfield heightfields[];
@@ -142,13 +143,12 @@ bool rbvh_is_hole(uint texel) {
 
 // The fields of `leaf`'s tile (rbvh_atlas_tile), which a texel read is an offset from.
 RbvhAtlasTile rbvh_leaf_tile(RbvhHeightfield leaf, RbvhSizes sz) {
-    return rbvh_atlas_tile(leaf.atlas_base, sz.atlas_wide_len, sz.atlas_end12, sz.atlas_end10, RBVH_HEIGHT_ONLY);
+    return rbvh_atlas_tile(leaf.atlas_base, sz.atlas_wide_len, sz.atlas_end12, sz.atlas_end10);
 }
 
-// Where the blocks' height ranges start in the atlas words: after the texels' words.
+// Where the blocks' height ranges start in the atlas words: after the height codes.
 uint rbvh_texel_words(RbvhSizes sz) {
-    return rbvh_atlas_texel_words(sz.atlas_len, sz.atlas_wide_len, sz.atlas_end12, sz.atlas_end10,
-                                  RBVH_HEIGHT_ONLY);
+    return rbvh_atlas_code_words(sz.atlas_len, sz.atlas_wide_len, sz.atlas_end12, sz.atlas_end10);
 }
 
 // Frame-space ray of one leaf. Its shear (for the cells' triangles) is not kept here but made
@@ -423,15 +423,15 @@ uint rbvh_normal_texel(RbvhSizes sz, uint k00, uint choice, vec3 dir) {
     if ((choice & (4u << corner)) == 0u) {
         corner = uint(findLSB(choice >> 2));
     }
-    uint nearest = rbvh_atlas_texel(k00 + (corner & 1u) + (corner >> 1) * sz.atlas_pitch, sz.atlas_len,
-                                    sz.atlas_wide_len, sz.atlas_end12, sz.atlas_end10);
+    uint nearest = rbvh_atlas_normal(k00 + (corner & 1u) + (corner >> 1) * sz.atlas_pitch, sz.atlas_len,
+                                     sz.atlas_pitch, sz.atlas_wide_len, sz.atlas_end12, sz.atlas_end10);
     if (!rbvh_faces(nearest, dir)) {
         for (uint q = 0u; q < 4u; ++q) {
             if ((choice & (4u << q)) == 0u) {
                 continue;
             }
-            uint c = rbvh_atlas_texel(k00 + (q & 1u) + (q >> 1) * sz.atlas_pitch, sz.atlas_len,
-                                      sz.atlas_wide_len, sz.atlas_end12, sz.atlas_end10);
+            uint c = rbvh_atlas_normal(k00 + (q & 1u) + (q >> 1) * sz.atlas_pitch, sz.atlas_len,
+                                       sz.atlas_pitch, sz.atlas_wide_len, sz.atlas_end12, sz.atlas_end10);
             if (rbvh_faces(c, dir)) {
                 nearest = c;
                 break;

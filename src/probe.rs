@@ -126,7 +126,8 @@ pub enum Array {
     Triangles = 1,
     /// Height-field leaf records (`GpuHeightfield`, 64 bytes each).
     Heightfields = 2,
-    /// The atlas words (`Atlas::device_words`): texels, then the 8×8 blocks' height ranges.
+    /// The atlas words (`Atlas::device_words`): height codes, the 8×8 blocks' height ranges, then
+    /// with normals the rank directory and the normals of the texels that are not holes.
     Atlas = 3,
     /// Level-of-detail records (`GpuLod`, 48 bytes each).
     LodRecords = 4,
@@ -166,11 +167,17 @@ pub struct Read {
 /// Receives the reads of one traversal, in the order the device makes them. The CPU twins call it
 /// where their GLSL twins read memory; the no-op `()` costs nothing.
 pub trait Probe {
+    /// Whether it records reads at all: where it does not, the twin skips working out reads
+    /// that cost it more than the read itself (a hit normal's place among the device's words).
+    const RECORDS: bool = true;
+
     /// Records one read, called in the device's read order.
     fn read(&mut self, read: Read);
 }
 
 impl Probe for () {
+    const RECORDS: bool = false;
+
     #[inline(always)]
     fn read(&mut self, _: Read) {}
 }

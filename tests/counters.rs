@@ -224,8 +224,8 @@ fn the_twins_block_jumps_change_no_hit_and_save_cells() {
 
 /// Reads per array follow from the counters: a node read per node visited (and a node's leaf child
 /// and count read again where a leaf comes off the stack), a leaf record per leaf marched, four
-/// texels per cell (and a height field's hit's normal texels once the ray is done) and a range
-/// word per block entered, a triangle per triangle tested (and once more for a triangle hit's id
+/// texels per cell (and a height field's hit's normal once the ray is done: its place in the rank
+/// directory, the codes before it in its group, its word) and a range word per block entered, a triangle per triangle tested (and once more for a triangle hit's id
 /// and normal): the exact BVH's in one read, the RBVH's indexed in four (its slot, its vertices).
 #[test]
 fn the_twins_reads_match_their_counters() {
@@ -250,7 +250,8 @@ fn the_twins_reads_match_their_counters() {
             .count()
     };
     let mut rereads = [0usize; 2];
-    let texel_bytes = 4 * r.atlas.texel_words(r.params.texels);
+    let parts = r.atlas.device_parts(r.params.texels);
+    let (code_bytes, ranks_bytes) = (4 * parts.ranges as u64, 4 * parts.ranks as u64);
     for ray in &rays {
         let mut reads = Vec::new();
         let (hit, s) = twin.trace(ray, false, &mut reads);
@@ -270,22 +271,28 @@ fn the_twins_reads_match_their_counters() {
             .count();
         assert_eq!(slots, triangle_reads);
         assert_eq!(count(&reads, Array::Triangles), 4 * triangle_reads);
-        let texels = reads
-            .iter()
-            .filter(|r| r.array == Array::Atlas && r.offset < texel_bytes)
-            .count();
+        let in_atlas = |from: u64, to: u64| {
+            reads
+                .iter()
+                .filter(|r| r.array == Array::Atlas && (from..to).contains(&r.offset))
+                .count()
+        };
+        let codes = in_atlas(0, code_bytes);
         // A cell's corners are two reads, a row's two codes together; a height field's hit reads
-        // its normal's texel once the ray is done: one or two words, for up to five corners when
-        // the nearest faces away.
+        // its normal once the ray is done, for up to five corners when the nearest faces away:
+        // each one or two words of the rank directory and its word, and the codes of at most 16
+        // texels of its group of 32, a row of two at a time.
         let height_field_hit = hit.is_hit() && hit.id & rbvh::bvh::LEAF_BIT != 0;
-        let normal_reads = texels - (2 * c.cells as usize).min(texels);
-        assert!(texels >= 2 * c.cells as usize, "{ray:?}");
+        let normal_reads = in_atlas(ranks_bytes, u64::MAX);
+        let counted = codes - (2 * c.cells as usize).min(codes);
+        assert!(codes >= 2 * c.cells as usize, "{ray:?}");
         if height_field_hit {
-            assert!((1..=10).contains(&normal_reads), "{normal_reads}: {ray:?}");
+            assert!((2..=15).contains(&normal_reads), "{normal_reads}: {ray:?}");
+            assert!(counted <= 8 * normal_reads / 2, "{counted}: {ray:?}");
         } else {
-            assert_eq!(normal_reads, 0, "{ray:?}");
+            assert_eq!(normal_reads + counted, 0, "{ray:?}");
         }
-        let ranges = count(&reads, Array::Atlas) - texels;
+        let ranges = in_atlas(code_bytes, ranks_bytes);
         assert!(ranges >= c.jumps as usize && ranges <= (c.jumps + c.cells) as usize);
         assert!(reads.iter().all(|r| r.offset % 4 == 0 && r.bytes % 4 == 0));
 

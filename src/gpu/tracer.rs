@@ -74,8 +74,9 @@ pub struct TraceParams {
     pub heightfield_count: u32,
     /// GLSL `atlas_pitch`: texels per atlas row, a power of two; 0 for the exact BVH.
     pub atlas_pitch: u32,
-    /// GLSL `atlas_len`: texels in the atlas; the blocks' height ranges follow them in the same
-    /// buffer, and texel reads at or beyond it see holes.
+    /// GLSL `atlas_len`: texels in the atlas; the blocks' height ranges follow their codes in the
+    /// same buffer (then, with normals, the normals and their rank directory), and texel reads
+    /// at or beyond it see holes.
     pub atlas_len: u32,
     /// GLSL `atlas_wide_len`: texels before the atlas's bands of packed heights
     /// ([`Atlas::wide_len`](crate::rbvh::Atlas::wide_len)), whose heights are 16-bit codes.
@@ -113,8 +114,8 @@ const COUNT_CONSTANT_ID: u32 = 0;
 const JUMPS_CONSTANT_ID: u32 = 1;
 
 /// `constant_id` of the plain RBVH trace shaders' `rbvh_height_only`
-/// (`glsl/trace_rbvh_main.glsl`): the atlas holds height codes alone (two to a word, 12, 10 or 8
-/// bits each in its packed bands: [`Atlas::device_words`](crate::rbvh::Atlas::device_words)).
+/// (`glsl/trace_rbvh_main.glsl`): the atlas holds no normals, and a hit's normal is its cell
+/// triangle's ([`Atlas::device_words`](crate::rbvh::Atlas::device_words)).
 const HEIGHT_ONLY_CONSTANT_ID: u32 = 2;
 
 /// One of a ray's two counter records as the trace shaders keep them (`glsl/trace_io.glsl`):
@@ -362,8 +363,8 @@ fn count32(structure: &str, what: &str, n: usize) -> Result<u32> {
 }
 
 /// The shader sizes and the arrays (name, bytes) of an RBVH, in binding order; `atlas_words` is
-/// its atlas as the shaders read it ([`crate::rbvh::Rbvh::atlas_words`]: texels, then the
-/// blocks' height ranges).
+/// its atlas as the shaders read it ([`crate::rbvh::Rbvh::atlas_words`]: height codes, the
+/// blocks' height ranges, with normals the rank directory and the normals).
 fn rbvh_parts<'a>(rbvh: &'a Rbvh, atlas_words: &'a [u32]) -> Result<(TraceParams, Arrays<'a, 4>)> {
     let count = |what: &str, n: usize| count32("rbvh", what, n);
     if !rbvh.atlas.pitch.is_power_of_two() {

@@ -118,7 +118,7 @@ impl Rbvh {
         cone: &RayCone,
         any_hit: bool,
     ) -> (Hit, TraceStats) {
-        trace(self, lod, ray, cone, any_hit, Walk::Plain, &mut ())
+        trace(self, lod, ray, cone, any_hit, Walk::PLAIN, &mut ())
     }
 
     /// [`Rbvh::hit_lod`] for many rays, each with its footprint in `cones` (one per ray, or one
@@ -147,7 +147,7 @@ impl Rbvh {
             .enumerate()
             .map(|(i, r)| {
                 let cone = cones.get(i).unwrap_or(RayCone::POINT);
-                trace(self, lod, r, &cone, any_hit, Walk::Plain, &mut ()).0
+                trace(self, lod, r, &cone, any_hit, Walk::PLAIN, &mut ()).0
             })
             .collect())
     }

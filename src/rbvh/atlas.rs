@@ -13,6 +13,7 @@ use super::layout::{Atlas, Texel, PACKED_BITS};
 use super::params::TexelFormat;
 use super::ranges::BLOCK;
 use super::raster::Tile;
+use super::words::rank_words;
 use crate::{Error, Result};
 
 /// Smallest atlas pitch.
@@ -111,9 +112,10 @@ pub fn pack(tiles: &[Footprint], format: TexelFormat) -> Result<Packing> {
         .1)
 }
 
-/// What `packing`'s atlas costs the device in `format` (as [`Atlas::device_words`] lays it out:
-/// 4 or 2 bytes a 16-bit texel, `bits / 8` a packed one with 2 more for its normal, 4 a block
-/// range), to a few bytes of rounding.
+/// What `packing`'s atlas costs the device in `format` where packing decides it (as
+/// [`Atlas::device_words`] lays it out: 2 bytes a 16-bit code, `bits / 8` a packed one, 4 a
+/// block range, with normals 12 a span of the rank directory), to a few bytes of rounding. The
+/// normals themselves, one a texel that is not a hole, cost the same however the tiles lie.
 fn device_bytes(packing: &Packing, format: TexelFormat) -> u64 {
     let (pitch, rows) = (u64::from(packing.pitch), u64::from(packing.rows));
     let blocks = pitch.div_ceil(u64::from(BLOCK)) * rows.div_ceil(u64::from(BLOCK));
@@ -121,19 +123,20 @@ fn device_bytes(packing: &Packing, format: TexelFormat) -> u64 {
 }
 
 /// What `rows` rows of `pitch` texels cost the device in `format`, the last `packed_rows` of
-/// them in the bands of [`PACKED_BITS`] (the block ranges aside).
+/// them in the bands of [`PACKED_BITS`]: their height codes and, with normals, the rank
+/// directory over them (the block ranges and the normals aside).
 fn texel_bytes(pitch: u64, rows: u64, packed_rows: [u64; 3], format: TexelFormat) -> u64 {
-    let normal_bits = match format {
-        TexelFormat::HeightNormal => 16,
-        TexelFormat::Height => 0,
-    };
     let wide_rows = rows - packed_rows.iter().sum::<u64>();
     let packed_bits: u64 = PACKED_BITS
         .iter()
         .zip(packed_rows)
-        .map(|(&bits, rows)| rows * pitch * (u64::from(bits) + normal_bits))
+        .map(|(&bits, rows)| rows * pitch * u64::from(bits))
         .sum();
-    wide_rows * pitch * format.bytes() + packed_bits.div_ceil(8)
+    let ranks = match format {
+        TexelFormat::HeightNormal => 4 * rank_words((pitch * rows) as usize) as u64,
+        TexelFormat::Height => 0,
+    };
+    2 * wide_rows * pitch + packed_bits.div_ceil(8) + ranks
 }
 
 /// [`pack`] with every tile's bits as given.

@@ -269,14 +269,14 @@ impl InstancedRbvh {
             &self.instances,
             ray,
             false,
-            Walk::Plain,
+            Walk::PLAIN,
             &mut (),
         )
     }
 
     /// Whether anything is hit in `[tmin, tmax)`: the hit returned is *some* hit, not the closest.
     pub fn any_hit(&self, ray: &Ray) -> (Hit, TraceStats) {
-        trace_instanced(&self.rbvh, &self.instances, ray, true, Walk::Plain, &mut ())
+        trace_instanced(&self.rbvh, &self.instances, ray, true, Walk::PLAIN, &mut ())
     }
 
     /// The device's twin ([`super::DeviceTwin`]), read for read, instances included.
@@ -298,7 +298,7 @@ impl InstancedRbvh {
             &self.instances,
             ray,
             any_hit,
-            Walk::Plain,
+            Walk::PLAIN,
             &mut (),
         )
         .0

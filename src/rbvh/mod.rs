@@ -12,6 +12,8 @@
 //! * [`child`]: what a node's child is (inner, absent, triangles, height field): the one decoder of
 //!   its encoding, where a new kind of leaf starts;
 //! * [`ranges`]: height ranges of the atlas's 8 × 8 blocks, for the device march's jumps;
+//! * [`words`]: the atlas as the device holds it (codes, block ranges, normals where there are
+//!   samples and their rank directory), and the reads the device makes of it;
 //! * `instanced`: the RBVH of a scene with instances, in two levels ([`InstancedRbvh`]);
 //! * `march`: the CPU reference caster on exactly that packed data, and its [`DeviceTwin`];
 //! * [`file`](mod@file): save and load, and the file format's tables (its older versions in
@@ -32,6 +34,7 @@ pub(crate) mod raster;
 mod splat;
 mod split;
 pub mod triangles;
+pub mod words;
 
 pub use build::{RbvhSource, CREASE_EDGE_TEXELS};
 pub use child::{Child, HEIGHTFIELD_COUNT};
@@ -107,10 +110,11 @@ impl Rbvh {
             + std::mem::size_of_val(self.heightfields.as_slice())) as u64
     }
 
-    /// The atlas as the device holds it: the texels and the blocks' height ranges
-    /// ([`ranges::block_ranges`], 1/64 as many words).
+    /// The atlas as the device holds it ([`Atlas::device_words`]): the height codes, the blocks'
+    /// height ranges ([`ranges::block_ranges`], 1/64 as many words) and, with normals, the
+    /// normals of the texels that are not holes and their rank directory.
     pub fn atlas_bytes(&self) -> u64 {
-        4 * (self.atlas.texel_words(self.params.texels) + ranges::block_count(&self.atlas))
+        4 * self.atlas.device_parts(self.params.texels).end as u64
     }
 
     /// The atlas as the trace shaders read it, in this RBVH's texel format

@@ -39,8 +39,9 @@ pub enum Subdivision {
 /// requires).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum TexelFormat {
-    /// The height code and the sample's 8:8 octahedral normal: 32 bits, or 24 in a tile of 8-bit
-    /// heights; a hit reports the normal of the sample nearest it (the paper's texels).
+    /// The height code and the sample's 8:8 octahedral normal; the device keeps a normal for each
+    /// texel that is not a hole alone ([`crate::rbvh::Atlas::device_words`]). A hit reports the
+    /// normal of the sample nearest it (the paper's texels).
     #[default]
     HeightNormal,
     /// The height code alone, 16 or 8 bits: half the atlas or less. A hit reports the normal of the cell
@@ -54,8 +55,9 @@ pub enum TexelFormat {
 }
 
 impl TexelFormat {
-    /// Bytes of one texel of 16-bit height in the file and on the device (a texel of 8-bit height
-    /// takes one less there: [`crate::rbvh::Atlas::device_words`]).
+    /// Bytes of one texel of 16-bit height with its normal, if any, as the host and the file keep
+    /// it, and as the builder prices a texel against exact triangles (`build/exact.rs`; the
+    /// device keeps fewer: [`crate::rbvh::Atlas::device_words`]).
     pub fn bytes(self) -> u64 {
         match self {
             TexelFormat::HeightNormal => 4,

@@ -36,8 +36,8 @@ use rbvh::structure::Recipe;
      wide); one of them"
 )))]
 #[command(mut_arg("texels", |a| a.help(
-    "What each atlas texel holds: `normals` (height and normal, 3 to 4 bytes: 8-, 10-, 12- \
-     or 16-bit heights by tile) or `height` (height alone, 1 to 2 bytes: facet normals, no colours, no \
+    "What each atlas texel holds: `normals` (height and normal: 8-, 10-, 12- or 16-bit \
+     heights by tile, and a 16-bit normal where the texel is not a hole) or `height` (height alone, 1 to 2 bytes: facet normals, no colours, no \
      levels of detail); one of the two, since this command traces one RBVH (build and bench take \
      both, comma-separated)"
 )))]

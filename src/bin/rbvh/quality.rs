@@ -81,8 +81,8 @@ pub struct Quality {
     /// with --points, a point cloud, or a scene held in two levels.
     #[arg(long, value_name = "RATE", num_args = 0..=1, default_missing_value = "384")]
     pub view: Option<f32>,
-    /// What each atlas texel holds: `normals` (height and normal, 3 to 4 bytes: 8-, 10-, 12-
-    /// or 16-bit heights by tile) or `height` (height alone, 1 to 2 bytes: facet normals, no colours, no
+    /// What each atlas texel holds: `normals` (height and normal: 8-, 10-, 12- or 16-bit
+    /// heights by tile, and a 16-bit normal where the texel is not a hole) or `height` (height alone, 1 to 2 bytes: facet normals, no colours, no
     /// levels of detail); comma-separate both to build each level in each (a height-only level is
     /// named with an `h`, e.g. Q2h).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "normals")]

@@ -1,4 +1,4 @@
-//! The device march's block jumps (step 3 of [`super`], with [`super::Walk::Blocks`]): the
+//! The device march's block jumps (step 3 of [`super`], with [`super::Walk::blocks`]): the
 //! atlas-aligned 8×8 blocks a leaf's tile lies in and their height ranges
 //! ([`crate::rbvh::ranges`]), addressed as `rbvh_march` in `glsl/rbvh.glsl` addresses them, and
 //! the jump over a block the ray passes wholly above or below.
@@ -60,12 +60,12 @@ pub(super) enum Jump {
 
 impl<'a> Blocks<'a> {
     /// The blocks of `leaf`'s tile, with the atlas's block `ranges`, which the device reads
-    /// after its `texel_words` words of texels.
+    /// after its `code_words` words of height codes.
     pub(super) fn of(
         atlas: &Atlas,
         leaf: &GpuHeightfield,
         ranges: &'a [u32],
-        texel_words: u64,
+        code_words: u64,
     ) -> Blocks<'a> {
         let pitch = u64::from(atlas.pitch.max(1));
         // Rows as the device counts them: from the texel count (the loader makes it a whole
@@ -78,7 +78,7 @@ impl<'a> Blocks<'a> {
             tile_v: u64::from(leaf.atlas_base) / pitch,
             pitch: pitch.div_ceil(block),
             count: rows.div_ceil(block) * pitch.div_ceil(block),
-            first_word: texel_words,
+            first_word: code_words,
         }
     }
 

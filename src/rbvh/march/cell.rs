@@ -45,7 +45,7 @@ impl Cells<'_> {
             let (c, index) = texel(atlas, leaf, i, j);
             // The device reads a row's two codes together (`rbvh_atlas_tile_pair`).
             if let (0, Some(index)) = (k & 1, index) {
-                probe.read(atlas.pair_read(index, self.format));
+                probe.read(atlas.pair_read(index));
             }
             corner[k] = c;
             if !c.is_hole() {

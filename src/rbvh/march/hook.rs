@@ -11,7 +11,7 @@ use crate::bvh::{traverse, Aim, BvhLeafHook, GpuInstance, InstanceHook, Leaves};
 use crate::geom::{Hit, Ray};
 use crate::probe::{Probe, TraceStats};
 use crate::rbvh::child::Child;
-use crate::rbvh::{ExactTriangles, Rbvh, TexelFormat};
+use crate::rbvh::{ExactTriangles, Rbvh};
 
 /// An RBVH's leaves for the shared traversal (`crate::bvh::traverse`): hybrid triangle leaves
 /// tested exactly, height fields marched. Level of detail wraps it (`crate::lod`'s `RbvhLodLeafHook`),
@@ -71,15 +71,15 @@ impl<'a> RbvhLeafHook<'a> {
                 probe.read(read);
             }
             for texel in self.normal_reads.iter() {
-                probe.read(
-                    self.rbvh
-                        .atlas
-                        .pair_read(texel as usize, TexelFormat::Height),
-                );
+                probe.read(self.rbvh.atlas.pair_read(texel as usize));
             }
-        } else {
+        } else if P::RECORDS {
             for texel in self.normal_reads.iter() {
-                for read in self.rbvh.atlas.normal_reads(texel as usize) {
+                let reads = self
+                    .rbvh
+                    .atlas
+                    .normal_reads(texel as usize, self.walk.ranks);
+                for read in reads {
                     probe.read(read);
                 }
             }

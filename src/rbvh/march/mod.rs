@@ -53,21 +53,33 @@ use rayon::prelude::*;
 pub(crate) use hook::{trace_instanced, RbvhLeafHook};
 
 use super::ranges::block_ranges;
+use super::words::rank_directory;
 use super::Rbvh;
 use crate::bvh::GpuInstance;
 use crate::geom::{Hit, Ray};
 use crate::probe::{Probe, TraceStats};
 
-/// How the caster walks a leaf's cells.
+/// How the caster walks a leaf's cells, and what it knows of the device's atlas words beyond
+/// the texels, to report the reads the device makes of them.
 #[derive(Clone, Copy, Debug)]
-pub(crate) enum Walk<'a> {
-    /// Every cell the ray crosses: the referee of the device's block jumps, and the twin of a
-    /// device that does not jump ([`DeviceTwin::with_block_jumps`]).
-    Plain,
-    /// As the device does: on entering an 8×8 block whose height range (`ranges`, as
-    /// [`block_ranges`] gives them) the ray passes wholly above or below, straight to the block's
-    /// exit cell (`src/rbvh/ranges.rs`). Same hits, fewer cells.
-    Blocks(&'a [u32]),
+pub(crate) struct Walk<'a> {
+    /// `None`: every cell the ray crosses, the referee of the device's block jumps, and the twin
+    /// of a device that does not jump ([`DeviceTwin::with_block_jumps`]). `Some(ranges)`: as
+    /// the device does, on entering an 8×8 block whose height range (`ranges`, as
+    /// [`block_ranges`] gives them) the ray passes wholly above or below, straight to the
+    /// block's exit cell (`src/rbvh/ranges.rs`). Same hits, fewer cells.
+    pub(crate) blocks: Option<&'a [u32]>,
+    /// The atlas's rank directory ([`rank_directory`]), where a hit's normal lies among the
+    /// device's words: the twin's; empty where no read is reported.
+    pub(crate) ranks: &'a [u32],
+}
+
+impl Walk<'_> {
+    /// Every cell, no reads reported: the CPU reference.
+    pub(crate) const PLAIN: Walk<'static> = Walk {
+        blocks: None,
+        ranks: &[],
+    };
 }
 
 /// The device's twin, read for read: traces as `glsl/rbvh.glsl` does, with block jumps (the
@@ -76,13 +88,15 @@ pub(crate) enum Walk<'a> {
 /// equal the device's counters ray by ray, and reports to a [`Probe`] every
 /// read the shader makes of the structure's arrays, at its byte offset in the device buffers
 /// (`src/gpu/tracer.rs` binds them in [`Array`](crate::probe::Array) order; the atlas buffer
-/// holds the texels, then the block ranges). Made by [`Rbvh::device_twin`]; with level of detail, `crate::lod::LodTwin`.
+/// holds the texels' codes, the block ranges, then the normals and their rank directory:
+/// `src/rbvh/words.rs`). Made by [`Rbvh::device_twin`]; with level of detail, `crate::lod::LodTwin`.
 pub struct DeviceTwin<'a> {
     rbvh: &'a Rbvh,
     /// The instances of a two-level RBVH (`crate::rbvh::InstancedRbvh`), whose arrays `rbvh`
     /// holds; empty for one RBVH.
     instances: &'a [GpuInstance],
     ranges: Vec<u32>,
+    ranks: Vec<u32>,
     block_jumps: bool,
 }
 
@@ -94,6 +108,7 @@ impl<'a> DeviceTwin<'a> {
             rbvh,
             instances,
             ranges: block_ranges(&rbvh.atlas),
+            ranks: rank_directory(&rbvh.atlas.texels),
             block_jumps: true,
         }
     }
@@ -128,10 +143,9 @@ impl<'a> DeviceTwin<'a> {
 
     /// How it walks a leaf's cells.
     pub(crate) fn walk(&self) -> Walk<'_> {
-        if self.block_jumps {
-            Walk::Blocks(&self.ranges)
-        } else {
-            Walk::Plain
+        Walk {
+            blocks: self.block_jumps.then_some(&self.ranges[..]),
+            ranks: &self.ranks,
         }
     }
 }
@@ -146,13 +160,13 @@ impl Rbvh {
     /// height-only texels, the normal of the cell triangle hit); a triangle's is its geometric
     /// normal as wound.
     pub fn closest_hit(&self, ray: &Ray) -> (Hit, TraceStats) {
-        self.traverse(ray, false, Walk::Plain, &mut ())
+        self.traverse(ray, false, Walk::PLAIN, &mut ())
     }
 
     /// Whether anything is hit in `[tmin, tmax)`: the hit returned is *some* hit, not the closest.
     /// Ids and normals as in [`Rbvh::closest_hit`].
     pub fn any_hit(&self, ray: &Ray) -> (Hit, TraceStats) {
-        self.traverse(ray, true, Walk::Plain, &mut ())
+        self.traverse(ray, true, Walk::PLAIN, &mut ())
     }
 
     /// The device's twin ([`DeviceTwin`]); with level of detail, `Lod::device_twin`.
@@ -163,7 +177,7 @@ impl Rbvh {
     /// Traces many rays in parallel with `rayon`; hits in ray order.
     pub fn trace_cpu(&self, rays: &[Ray], any_hit: bool) -> Vec<Hit> {
         rays.par_iter()
-            .map(|r| self.traverse(r, any_hit, Walk::Plain, &mut ()).0)
+            .map(|r| self.traverse(r, any_hit, Walk::PLAIN, &mut ()).0)
             .collect()
     }
 
@@ -172,7 +186,7 @@ impl Rbvh {
     /// a leaf the traversal handed to the march (`crate::bench::steps`).
     pub(crate) fn march_alone(&self, leaf_index: u32, ray: &Ray) -> (bool, Option<f32>) {
         let mut stats = TraceStats::default();
-        let hit = self.march(leaf_index, ray, ray.tmax, Walk::Plain, &mut stats, &mut ());
+        let hit = self.march(leaf_index, ray, ray.tmax, Walk::PLAIN, &mut stats, &mut ());
         (stats.counters.walks > 0, hit.map(|(t, _)| t))
     }
 }
@@ -334,8 +348,12 @@ pub(super) mod tests {
         );
         assert_eq!((c.triangle_leaves, c.triangles), (0, 0));
         // World (0.3, 0.2) is frame (4.6, 4.4): cell (4, 3), texels 28, 29, 36, 37 of the 8 × 8
-        // tile, a row's two read together; the block range word follows the 64 texels. Once the
-        // ray is done, the hit's normal: that of texel 36, the sample nearest the hit.
+        // tile, a row's two codes read together (16 bits each, two to a word); the block range
+        // word follows the 64 texels' 32 words. Once the ray is done, the hit's normal: that of
+        // texel 36, the sample nearest the hit, whose rank (36, no hole before it) is its
+        // span's count (word 33, after the range) and its group's byte (word 34) and the codes
+        // of texels 32–35 before it in its group; its normal is the low half of word 37 + 18
+        // (after the span's three words and the total).
         let read = |array, offset, bytes| Read {
             array,
             offset,
@@ -346,10 +364,14 @@ pub(super) mod tests {
             [
                 read(Array::Nodes, 0, 48),
                 read(Array::Heightfields, 0, 64),
-                read(Array::Atlas, 4 * 64, 4),
-                read(Array::Atlas, 4 * 28, 8),
-                read(Array::Atlas, 4 * 36, 8),
-                read(Array::Atlas, 4 * 36, 4),
+                read(Array::Atlas, 4 * 32, 4),
+                read(Array::Atlas, 4 * 14, 8),
+                read(Array::Atlas, 4 * 18, 8),
+                read(Array::Atlas, 4 * 33, 4),
+                read(Array::Atlas, 4 * 34, 4),
+                read(Array::Atlas, 4 * 16, 8),
+                read(Array::Atlas, 4 * 17, 8),
+                read(Array::Atlas, 4 * (37 + 18), 4),
             ]
         );
     }

@@ -156,7 +156,7 @@ impl Cells<'_> {
         // codes together.
         for row in 0..2 {
             if let (_, Some(index)) = texel(atlas, leaf, ci, cj + row) {
-                probe.read(atlas.pair_read(index, self.format));
+                probe.read(atlas.pair_read(index));
             }
         }
         if self.format == TexelFormat::Height {

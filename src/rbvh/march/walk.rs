@@ -25,7 +25,7 @@ const CELLS: Grid = Grid::BETWEEN_SAMPLES;
 impl Rbvh {
     /// Marches height-field leaf `leaf_index` for the ray's interval `[tmin, t_closest)`; returns
     /// the hit distance and the world-space normal. Steps as numbered in the module docs; with
-    /// [`Walk::Blocks`], the block jumps of `glsl/rbvh.glsl`'s `rbvh_march`, statement for
+    /// [`Walk::blocks`], the block jumps of `glsl/rbvh.glsl`'s `rbvh_march`, statement for
     /// statement.
     pub(super) fn march<P: Probe>(
         &self,
@@ -121,13 +121,9 @@ impl Rbvh {
         // A straight line crosses each of the (res − 2) inner boundaries per axis at most once, so
         // it takes at most this many steps, each visiting one cell (two near a grid vertex).
         let max_steps = u64::from(leaf.res_u - 1) + u64::from(leaf.res_v - 1) - 1;
-        let blocks = match walk {
-            Walk::Plain => None,
-            Walk::Blocks(ranges) => {
-                let words = self.atlas.texel_words(self.params.texels);
-                Some(Blocks::of(&self.atlas, leaf, ranges, words))
-            }
-        };
+        let blocks = walk
+            .blocks
+            .map(|ranges| Blocks::of(&self.atlas, leaf, ranges, self.atlas.code_words()));
         let clearance = Clearance {
             o_h: o.z,
             d_h: d.z,
