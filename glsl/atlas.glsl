@@ -156,7 +156,7 @@ uint rbvh_atlas_normal(uint index, uint len, uint pitch, uint wide_len, uint end
     if (group < 8u) {
         before += (RBVH_ATLAS_WORD(span + 1u + (group >> 2)) >> ((group & 3u) << 3)) & 0xFFu;
     }
-    uint counted = rbvh_atlas_samples_between(forward ? first : index, forward ? index : min(first + 32u, len), len,
+    uint counted = rbvh_atlas_samples_between(forward ? first : index, forward ? index : first + min(32u, len - first), len,
                                               wide_len, end12, end10);
     uint rank = forward ? before + counted : before - counted;
     return (RBVH_ATLAS_WORD(normals + (rank >> 1)) << ((~rank & 1u) << 4)) & 0xFFFF0000u;

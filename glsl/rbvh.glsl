@@ -147,7 +147,7 @@ RbvhAtlasTile rbvh_leaf_tile(RbvhHeightfield leaf, RbvhSizes sz) {
 }
 
 // Where the blocks' height ranges start in the atlas words: after the height codes.
-uint rbvh_texel_words(RbvhSizes sz) {
+uint rbvh_ranges_word(RbvhSizes sz) {
     return rbvh_atlas_code_words(sz.atlas_len, sz.atlas_wide_len, sz.atlas_end12, sz.atlas_end10);
 }
 
@@ -463,7 +463,7 @@ int rbvh_block_exit(int c, uint a, int step, int last) {
 // inverted, and every ray passes it.
 bool rbvh_block_clear(RbvhHeightfield leaf, RbvhSizes sz, uint block, float o_h, float d_h, float t_a, float t_b,
                       float slack, float uu) {
-    uint range = RBVH_ATLAS(rbvh_texel_words(sz) + block);
+    uint range = RBVH_ATLAS(rbvh_ranges_word(sz) + block);
     uint code_lo = range & 0xFFFFu;
     uint code_hi = range >> 16;
     precise float lo_s = float(code_lo) * leaf.h_scale - slack - rbvh_skirt_height(uu);
@@ -638,7 +638,7 @@ float rbvh_march(uint li, RbvhSizes sz, Ray ray, float t_closest, out uint cells
         // carries only its position (`w`: grid.glsl's one walk, which the block jumps move too),
         // `dirs`, the block checked, the cells walked and the codes of the cell handed to the outer
         // loop; that cell is made anew from them (rbvh_walk_cell).
-        // Block jumps (src/rbvh/ranges.rs): the blocks' height ranges follow the texels.
+        // Block jumps (src/rbvh/ranges.rs): the blocks' height ranges follow the height codes.
         uint block_pitch = (sz.atlas_pitch + 7u) >> 3;
         uint block_count = ((rows + 7u) >> 3) * block_pitch;
         uint checked_block = 0xFFFFFFFFu;

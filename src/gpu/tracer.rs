@@ -400,8 +400,11 @@ fn rbvh_parts<'a>(rbvh: &'a Rbvh, atlas_words: &'a [u32]) -> Result<(TraceParams
         atlas_end10: count("atlas texels", ends[2])?,
         ..TraceParams::default()
     };
-    // The shaders index the block ranges after the texels with 32 bits too.
-    count("atlas words (texels and block ranges)", atlas_words.len())?;
+    // The shaders index the atlas's words with 32 bits too.
+    count(
+        "atlas words (height codes, block ranges, normals and their rank directory)",
+        atlas_words.len(),
+    )?;
     let arrays = [
         ("RBVH nodes", bytemuck::cast_slice(&rbvh.nodes)),
         (

@@ -4,7 +4,8 @@
 //!
 //! **Normals where there are samples.** A texel with normals was its height code and a 16-bit
 //! normal, holes and the packing's unused texels included: 12–25% of the presets' tile texels are
-//! holes and 2–12% of the atlas unused, and their normals were 7–18% of the atlas's bytes
+//! holes and 2–12% of the atlas unused, and their normals were a tenth to a fifth of the atlas's
+//! bytes
 //! (issue "Small and valid at every scale": at most 3 bytes a texel with normals at Q2). The
 //! device now keeps one normal per texel that is not a hole, in atlas order, and finds texel
 //! `k`'s by its *rank*, the number of such texels before it: a succinct rank directory
@@ -464,6 +465,55 @@ mod tests {
             };
             assert_eq!(reads.len(), words + counted.div_ceil(2) + 1, "texel {i}");
             assert!(counted <= 16);
+        }
+    }
+
+    #[test]
+    fn ranks_count_back_to_the_total_and_across_bands() {
+        // 8 × 64 texels, two whole spans: a texel in the second half of a span's last group
+        // counts back from the next span's count, or from the total after the last span. 35
+        // rows of 16-bit codes, then 5, 5 and 19 rows of 12-, 10- and 8-bit ones: at a pitch of
+        // 8 (a loaded file's) a half group may hold two bands, counted a part in each (the
+        // 16-bit band ends at texel 280, the 10-bit one begins at 320 and ends at 360).
+        let mut a = atlas(8, 64, |x, y| {
+            let bits = match y {
+                0..=34 => 16,
+                35..=39 => 12,
+                40..=44 => 10,
+                _ => 8,
+            };
+            let c = (x * 37 + y * 11 + 3) % ((1 << bits.min(12)) - 1);
+            let n = glam::Vec3::new(x as f32 - 3.5, 4.0, y as f32 - 31.5).normalize();
+            match (x * 7 + y * 3) % 5 {
+                0 => Texel::HOLE,
+                _ => Texel::new((c * Texel::step(bits)) as u16, n),
+            }
+        });
+        a.packed_rows = [5, 5, 19];
+        assert_eq!(a.band_ends(), [280, 320, 360]);
+        assert_eq!(a.first_code_off_its_band(), None);
+        let d = rank_directory(&a.texels);
+        assert_eq!(d.len(), 7);
+        assert_eq!(d[6] as usize, a.samples());
+        let words = a.device_words(TexelFormat::HeightNormal);
+        let mut back_to_a_count = 0;
+        for (i, t) in a.texels.iter().enumerate().filter(|(_, t)| !t.is_hole()) {
+            assert_eq!(device_normal(&a, &words, i), t.0 >> 16, "texel {i}");
+            let reads = a.normal_reads(i, &d);
+            assert_eq!(reads, a.normal_reads(i, &[]), "texel {i}");
+            if i % RANK_SPAN >= RANK_SPAN - RANK_GROUP / 2 {
+                back_to_a_count += 1;
+                let parts = a.device_parts(TexelFormat::HeightNormal);
+                let next = parts.ranks + RANK_SPAN_WORDS * (i / RANK_SPAN + 1);
+                assert_eq!(reads[0].offset, 4 * next as u64, "texel {i}");
+            }
+        }
+        assert!(back_to_a_count > 10);
+        // Texel 277 counts back over 277–279 (16-bit) and 280–287 (12-bit); 363 forward over
+        // 352–359 (10-bit) and 360–362 (8-bit): a pair read a part, rounded up, in each band.
+        for (i, pairs) in [(277, 2 + 4), (363, 4 + 2)] {
+            assert!(!a.texels[i].is_hole(), "texel {i}");
+            assert_eq!(a.normal_reads(i, &d).len(), 2 + pairs + 1, "texel {i}");
         }
     }
 }

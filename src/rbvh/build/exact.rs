@@ -88,9 +88,11 @@ impl Builder<'_> {
     }
 }
 
-/// The device bytes of a height field of `tiles` beside `parts` exact parts: each tile's texels
-/// (one byte less for 8-bit heights), its 64-byte leaf record and a 48-byte node over it, and
-/// each part's triangle at its 48 bytes gathered (as [`EXACT_TRIANGLE_BYTES`] counts it).
+/// The bytes a height field of `tiles` beside `parts` exact parts is priced at: each tile's texels
+/// at [`TexelFormat::bytes`] (one byte less for 8-bit heights; what the device kept before it
+/// kept normals only where there are samples, left so that the structures stay as measured),
+/// its 64-byte leaf record and a 48-byte node over it, and each part's triangle at its 48 bytes
+/// gathered (as [`EXACT_TRIANGLE_BYTES`] counts it).
 pub(super) fn sampled_bytes(tiles: &[Tile], parts: usize, format: TexelFormat) -> f32 {
     let tiles: u64 = tiles
         .iter()

@@ -17,7 +17,7 @@ pub(super) struct Blocks<'a> {
     tile_v: u64,
     pitch: u64,
     count: u64,
-    /// Where the ranges start in the device's atlas buffer, in words: after the texels.
+    /// Where the ranges start in the device's atlas buffer, in words: after the height codes.
     first_word: u64,
 }
 
