@@ -70,7 +70,7 @@ pub(crate) struct Walk<'a> {
     /// block's exit cell (`src/rbvh/ranges.rs`). Same hits, fewer cells.
     pub(crate) blocks: Option<&'a [u32]>,
     /// The atlas's rank directory ([`rank_directory`]), where a hit's normal lies among the
-    /// device's words: the twin's; empty where no read is reported.
+    /// device's words: the twin's; empty where no read is reported (`Probe::RECORDS` false).
     pub(crate) ranks: &'a [u32],
 }
 
