@@ -196,6 +196,8 @@ fn a_missing_golden_fails_with_advice_and_bless_creates_it() {
     config.mode = Mode::Compare;
     let report = regress::run(&ctx, &config).unwrap();
     assert!(report.passed(), "{}", report.table());
+    // The first run's render of the failing case is not left beside this run's results.
+    assert!(!out.join("sphere_exact_render.png").exists());
 
     // Another size than blessed is a failure naming both sizes, not a crash.
     config.width = 40;
@@ -304,4 +306,16 @@ fn a_missing_golden_folder_is_one_clear_error() {
         ..config
     };
     bless.validate().unwrap();
+
+    // An output folder that is a file is refused before any case runs, not at the first failure.
+    let golden = dir.path().join("golden");
+    std::fs::create_dir(&golden).unwrap();
+    let file = dir.path().join("notes.txt");
+    std::fs::write(&file, "kept").unwrap();
+    let e = Config::new(&golden, &file)
+        .validate()
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("notes.txt") && e.contains("not a folder"), "{e}");
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), "kept");
 }

@@ -185,20 +185,28 @@ pub fn render(
 
 /// Checks that no two cases share a golden file: two scene files with the same stem (or the same
 /// case given twice) would otherwise silently compare against, or bless, each other's goldens.
+/// Names are compared without case, since macOS's and Windows' file systems do not tell
+/// `Bunny_exact.png` from `bunny_exact.png`, and a golden folder moves between systems.
 pub fn check_unique_names(cases: &[Case]) -> Result<()> {
     let mut seen = std::collections::HashMap::new();
     for case in cases {
-        if let Some(other) = seen.insert(case.name(), &case.scene) {
-            return Err(Error::param(
-                "scene",
+        let name = case.name();
+        if let Some(other) = seen.insert(name.to_ascii_lowercase(), case) {
+            let why = if other.scene == case.scene && other.method == case.method {
+                format!("{:?} ({}) is given twice", case.scene, case.method)
+            } else {
                 format!(
-                    "{:?} and {:?} ({}) would share the golden files {}.*; rename one of the files",
-                    other,
+                    "{:?} ({}) and {:?} ({}) would share the golden files {}.* (names are \
+                     compared without case, as macOS and Windows file systems do); rename one \
+                     of the files",
+                    other.scene,
+                    other.method,
                     case.scene,
                     case.method,
-                    case.name()
-                ),
-            ));
+                    other.name()
+                )
+            };
+            return Err(Error::param("scene", why));
         }
     }
     Ok(())
@@ -223,6 +231,23 @@ mod tests {
         let cases = cross(&["a/x.obj".into(), "b/x.obj".into()], &[Method::EXACT]);
         let err = check_unique_names(&cases).unwrap_err().to_string();
         assert!(err.contains("a/x.obj") && err.contains("b/x.obj"), "{err}");
+        // One file on macOS and Windows.
+        let cases = cross(
+            &["a/Bunny.obj".into(), "b/bunny.obj".into()],
+            &[Method::EXACT],
+        );
+        let err = check_unique_names(&cases).unwrap_err().to_string();
+        assert!(
+            err.contains("a/Bunny.obj") && err.contains("b/bunny.obj"),
+            "{err}"
+        );
+        // A scene given twice has no file to rename.
+        let cases = cross(&["sphere".into(), "sphere".into()], &[Method::EXACT]);
+        let err = check_unique_names(&cases).unwrap_err().to_string();
+        assert!(
+            err.contains("given twice") && !err.contains("rename"),
+            "{err}"
+        );
         check_unique_names(&cross(
             &["sphere".into()],
             &[Method::EXACT, Method::rbvh(0)],

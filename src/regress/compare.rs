@@ -26,7 +26,7 @@ use super::golden::{Depth, Rgb8};
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Tolerance {
     /// Most mean ꟻLIP error over the image. Default 0.001: twice the worst camera-shift noise;
-    /// the visible breaks measured 0.0012 and more.
+    /// the broken shaders above measured 0.0011 and more.
     pub flip_mean: f64,
     /// A pixel whose ꟻLIP error exceeds this is an outlier. Default 0.1, not the "clearly
     /// different" 0.5 ꟻLIP's authors use for photographs: these previews are smooth grey shapes on

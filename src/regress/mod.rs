@@ -150,6 +150,17 @@ impl Config {
                 ),
             ));
         }
+        // Found out only at the first failing case, an unusable output folder would end the run
+        // there, without the report of the other cases.
+        if self.mode == Mode::Compare && self.out_dir.exists() && !self.out_dir.is_dir() {
+            return Err(Error::param(
+                "out",
+                format!(
+                    "{} is not a folder: give --out a folder for the failing cases' pictures",
+                    self.out_dir.display()
+                ),
+            ));
+        }
         cases::check_unique_names(&self.cases)
     }
 }
@@ -196,6 +207,9 @@ pub fn run_with(
     })
 }
 
+/// What a failing case writes into the output folder, `<case>_<suffix>.png`.
+const PICTURES: [&str; 4] = ["render", "diff", "compare", "depth_diff"];
+
 fn golden_png(dir: &Path, name: &str) -> PathBuf {
     dir.join(format!("{name}.png"))
 }
@@ -212,15 +226,22 @@ fn missing(path: &Path) -> String {
 }
 
 fn bless_case(config: &Config, name: &str, render: &cases::Render) -> Result<CaseResult> {
+    let depth = Depth::of_hits(&render.hits, config.width, config.height);
+    // A NaN distance is neither a hit nor a miss: blessed, it would fail every later compare of
+    // the same render, so the tracer's fault is named here instead.
+    let nan = depth.z.iter().filter(|z| z.is_nan()).count();
+    if nan > 0 {
+        return Err(Error::param(
+            "bless",
+            format!("{name}: {nan} pixels have a NaN hit distance; not blessed"),
+        ));
+    }
     let dir = &config.golden_dir;
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let png = golden_png(dir, name);
     write_png(&png, &render.image)?;
     let exr = golden_depth(dir, name);
-    golden::write_depth(
-        &exr,
-        &Depth::of_hits(&render.hits, config.width, config.height),
-    )?;
+    golden::write_depth(&exr, &depth)?;
     Ok(CaseResult {
         name: name.into(),
         image: Check::Blessed,
@@ -267,8 +288,16 @@ fn compare_case(config: &Config, name: &str, render: &cases::Render) -> Result<C
         depth,
         written: Vec::new(),
     };
+    // An earlier run's pictures of this case would sit beside this run's as if they were its.
+    let out = &config.out_dir;
+    for suffix in PICTURES {
+        let path = out.join(format!("{name}_{suffix}.png"));
+        match std::fs::remove_file(&path) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(Error::io(&path, e)),
+            _ => {}
+        }
+    }
     if !result.passed() {
-        let out = &config.out_dir;
         std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
         let mut write = |suffix: &str, picture: &crate::output::Image| -> Result<()> {
             let path = out.join(format!("{name}_{suffix}.png"));
@@ -290,4 +319,49 @@ fn compare_case(config: &Config, name: &str, render: &cases::Render) -> Result<C
         }
     }
     Ok(result)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geom::Hit;
+    use crate::output::Image;
+
+    /// A render with a NaN distance is not blessed (every later compare of it would fail) and
+    /// writes nothing.
+    #[test]
+    fn a_nan_distance_is_not_blessed() {
+        let dir = tempfile::tempdir().unwrap();
+        let golden = dir.path().join("golden");
+        let config = Config {
+            width: 2,
+            height: 1,
+            mode: Mode::Bless,
+            ..Config::new(&golden, dir.path().join("out"))
+        };
+        let hit = |t| Hit {
+            t,
+            id: 7,
+            ..Hit::MISS
+        };
+        let render = cases::Render {
+            image: Image {
+                width: 2,
+                height: 1,
+                pixels: vec![glam::Vec3::ZERO; 2],
+            },
+            hits: vec![hit(1.0), hit(f32::NAN)],
+        };
+        let e = bless_case(&config, "x_exact", &render)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("x_exact") && e.contains("NaN"), "{e}");
+        assert!(!golden.exists());
+        let render = cases::Render {
+            hits: vec![hit(1.0), Hit::MISS],
+            ..render
+        };
+        bless_case(&config, "x_exact", &render).unwrap();
+        assert!(golden.join("x_exact.png").exists());
+    }
 }

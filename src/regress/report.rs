@@ -136,7 +136,7 @@ impl Report {
         }
         let _ = writeln!(
             out,
-            "depth off: pixels whose depth differs by more than {:.0e} of itself, or that hit in one \
+            "depth off: pixels whose depth differs by more than {:e} of itself, or that hit in one \
              image and miss in the other; max Δz/z: the largest relative depth difference",
             t.depth_relative
         );
@@ -179,7 +179,7 @@ fn image_problem(check: &Check<ImageScore>, t: &Tolerance) -> Option<String> {
 fn depth_problem(check: &Check<DepthScore>, t: &Tolerance) -> Option<String> {
     match check {
         Check::Compared { score, pass: false } => Some(format!(
-            "{:.3}% of pixels off by more than {:.0e} relative or hit/miss (limit {}%); {} hit/miss mismatches, largest relative error {:.2e}",
+            "{:.3}% of pixels off by more than {:e} relative or hit/miss (limit {}%); {} hit/miss mismatches, largest relative error {:.2e}",
             100.0 * score.off_fraction,
             t.depth_relative,
             100.0 * t.depth_outlier_fraction,
