@@ -95,8 +95,11 @@ float rbvh_intersect_edges(float u, float v, float w, float az, float bz, float 
     precise float lo = tmin * det;
     precise float hi = tmax * det;
     bool inside = det > 0.0 ? (t_scaled >= lo && t_scaled < hi) : (t_scaled <= lo && t_scaled > hi);
+    // The quotient rounds apart from the products: checked again, so that a ray cast again with
+    // tmax at its hit does not meet the same triangle there (intersect_triangle says more).
+    precise float t = t_scaled / det;
     // One return: see rbvh_grid_start in grid.glsl.
-    return !mixed && det != 0.0 && inside ? t_scaled / det : -1.0;
+    return !mixed && det != 0.0 && inside && t >= tmin && t < tmax ? t : -1.0;
 }
 
 // The watertight test of the triangle whose vertices are A, B, C in the ray's sheared frame

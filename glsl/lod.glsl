@@ -148,8 +148,12 @@ float rbvh_lod_march(uint node, RbvhLodSizes lsz, Ray ray, float t_closest, inou
                     precise float to_bottom = za - bottom;
                     float t = za > top ? t_top : (za < bottom ? t_bottom : walk.t_in);
                     bool use_top = za > top || (za >= bottom && to_top <= to_bottom);
-                    normal_texel = use_top ? top_word : bottom_word;
-                    t_hit = min(max(t, walk.t_in), t_out);
+                    // The first column met ends the walk; a hit at t_closest is not nearer than
+                    // the one found (the stretch ends there), so [tmin, t_closest) holds.
+                    precise float t_met = min(max(t, walk.t_in), t_out);
+                    bool nearer = t_met < t_closest;
+                    normal_texel = nearer ? (use_top ? top_word : bottom_word) : RBVH_HOLE_CODE;
+                    t_hit = nearer ? t_met : -1.0;
                     stopped = true;
                     break;
                 }
@@ -200,7 +204,9 @@ uint rbvh_enter(RbvhLodLeafHook leaves, uint child, uint count, float t_entry) {
 bool rbvh_test(inout RbvhLodLeafHook leaves, Ray ray, bool any_hit, uint reference, uint count,
                inout float t_closest, inout uint steps, inout bool cut) {
     bool hit = false;
-    if ((reference & RBVH_LOD_BIT) == 0u) {
+    // A leaf's reference may have bit 30 set (a triangle slot from 2^30 on); only an inner
+    // node's carries RBVH_LOD_BIT alone.
+    if ((reference & (RBVH_LEAF_BIT | RBVH_LOD_BIT)) != RBVH_LOD_BIT) {
         hit = rbvh_test(leaves.rbvh, ray, any_hit, reference, count, t_closest, steps, cut);
     } else {
         RBVH_COUNT_ADD(leaves, 1u);

@@ -134,6 +134,48 @@ fn gpu_and_cpu_tracers_agree() {
     assert!((tally.hit_miss_edge as f64) < 1e-3 * tally.rays as f64);
 }
 
+/// A hit lies in `[tmin, tmax)` on the device too, whatever the rounding: each primary hit, cast
+/// again with `tmax` at its distance, is not met there, through the exact BVH and the RBVH (cell
+/// triangles, skirts and exact triangles), closest and any hit. Before the watertight test
+/// checked its quotient, 7-10% of them were (a point aimed at on a surface occluded by it).
+#[test]
+fn a_hit_cast_again_to_its_distance_is_not_met_there() {
+    let ctx = common::context();
+    for name in ["default", "blob"] {
+        let scene = Scene::builtin(name).unwrap();
+        let rays = scene.camera_or_framed(1.0).primary_rays(128, 128);
+        let mut rbvh_params = rbvh::rbvh::RbvhParams::quality(2).unwrap();
+        let mut structures = vec![
+            Structure::from(Bvh::build(&scene).unwrap()),
+            Structure::from(rbvh::rbvh::Rbvh::build(&scene, &rbvh_params).unwrap()),
+        ];
+        rbvh_params.texels = rbvh::rbvh::params::TexelFormat::Height;
+        structures.push(Structure::from(
+            rbvh::rbvh::Rbvh::build(&scene, &rbvh_params).unwrap(),
+        ));
+        for structure in &structures {
+            let tracer = Tracer::new(&ctx, structure).unwrap();
+            let first = tracer.trace(&rays, Query::Closest).unwrap().hits;
+            let again: Vec<Ray> = rays
+                .iter()
+                .zip(&first)
+                .filter(|(_, h)| h.is_hit())
+                .map(|(ray, h)| Ray { tmax: h.t, ..*ray })
+                .collect();
+            assert!(again.len() > 3000, "{name}: {} hits", again.len());
+            for query in [Query::Closest, Query::Any] {
+                let hits = tracer.trace(&again, query).unwrap().hits;
+                let met = again
+                    .iter()
+                    .zip(&hits)
+                    .filter(|(ray, h)| h.is_hit() && h.t >= ray.tmax)
+                    .count();
+                assert_eq!(met, 0, "{name} {:?} {query:?}", structure.kind());
+            }
+        }
+    }
+}
+
 #[test]
 fn invalid_rays_miss_on_the_gpu() {
     let ctx = common::context();

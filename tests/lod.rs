@@ -272,6 +272,55 @@ fn gpu_and_cpu_agree_with_lod_and_point_cones_change_nothing() {
     assert!(agreement.rate() < 1e-4, "{hit_miss} of {total}");
 }
 
+/// A coarse hit lies in `[tmin, tmax)` as every other hit does: the same ray again with `tmax` at
+/// its coarse hit finds nothing there, on the CPU and on the device (a column met at `t_closest`
+/// was once taken, so a ray aimed at a point on a coarse surface called itself occluded).
+#[test]
+fn a_coarse_hit_lies_before_tmax() {
+    let ctx = common::context();
+    for (name, level, lod_params) in [
+        ("default", 2, LodParams::default()),
+        (
+            "blob",
+            4,
+            LodParams {
+                columns: 8,
+                min_leaves: 1,
+                bias: 1.5,
+            },
+        ),
+    ] {
+        let scene = Scene::builtin(name).unwrap();
+        let r = Arc::new(Rbvh::build(&scene, &RbvhParams::quality(level).unwrap()).unwrap());
+        let with_lod = Structure::with_lod(r.clone(), Lod::build(&r, &lod_params).unwrap());
+        let lod = with_lod.lod().unwrap();
+        let (rays, cones) = rays_and_cones(&scene, 64, 0, 0);
+        let first = r.trace_cpu_lod(lod, &rays, &cones, false).unwrap();
+        let (again, cones): (Vec<Ray>, Vec<RayCone>) = rays
+            .iter()
+            .zip(&cones)
+            .zip(&first)
+            .filter(|(_, h)| h.is_hit() && h.id & rbvh::lod::LOD_BIT != 0)
+            .map(|((ray, cone), h)| (Ray { tmax: h.t, ..*ray }, *cone))
+            .unzip();
+        assert!(again.len() > 500, "{name}: {} coarse hits", again.len());
+        let tracer = Tracer::new(&ctx, &with_lod).unwrap();
+        let gpu = tracer
+            .trace_with(&again, &cones, Query::Closest, false)
+            .unwrap()
+            .hits;
+        let cpu = r.trace_cpu_lod(lod, &again, &cones, false).unwrap();
+        for (side, hits) in [("CPU", &cpu), ("GPU", &gpu)] {
+            let late = again
+                .iter()
+                .zip(hits.iter())
+                .filter(|(ray, h)| h.is_hit() && h.t >= ray.tmax)
+                .count();
+            assert_eq!(late, 0, "{name} Q{level} {side}: hits at or beyond tmax");
+        }
+    }
+}
+
 #[test]
 fn lod_refuses_mismatched_input() {
     let ctx = common::context();
@@ -300,6 +349,11 @@ fn lod_refuses_mismatched_input() {
         other.trace_cpu_lod(lod, &rays, &cones, false).unwrap_err(),
         "nodes",
     );
+    is_param(
+        other.hit_lod(lod, &rays[0], &cones[0], false).unwrap_err(),
+        "nodes",
+    );
+    r.hit_lod(lod, &rays[0], &cones[0], false).unwrap();
     let tracer = Tracer::new(&ctx, &with_lod).unwrap();
     is_param(
         tracer

@@ -133,7 +133,12 @@ pub fn intersect_triangle(
     if !(lo && hi) {
         return None;
     }
-    Some(t_scaled / det)
+    // The quotient rounds apart from the products, so the interval is checked on it too: without,
+    // 7-10% of the primary hits on the default scene and the blob, cast again with `tmax` at their
+    // distance, met the same triangle at `tmax` (a point aimed at on a surface was occluded by
+    // it), and a hit could round below `tmin`.
+    let t = t_scaled / det;
+    (t >= tmin && t < tmax).then_some(t)
 }
 
 #[cfg(test)]
@@ -176,6 +181,30 @@ mod tests {
         let r = shear([0.0, 0.0, -2.0], [0.0, 0.0, 1.0]);
         assert_eq!(intersect_triangle(&r, a, b, c, 0.0, 2.0), None);
         assert_eq!(intersect_triangle(&r, a, b, c, 2.0, 3.0), Some(2.0));
+    }
+
+    /// A hit cast again with `tmax` at its distance is not met there, nor with `tmin` above it,
+    /// whatever the rounding (before the quotient was checked, about one in ten was).
+    #[test]
+    fn a_hit_lies_in_the_interval_after_rounding() {
+        let mut rng = crate::random::SplitMix64::new(7);
+        let mut point = |scale: f32| {
+            Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * scale - scale * 0.5
+        };
+        let mut hits = 0;
+        for _ in 0..20_000 {
+            let (a, b, c) = (point(2.0), point(2.0), point(2.0));
+            let (o, target) = (point(20.0), (a + b + c) / 3.0 + point(0.2));
+            let r = RayShear::new(&Ray::new(o, target - o, 0.0, f32::INFINITY));
+            let Some(t) = intersect_triangle(&r, a, b, c, 0.0, f32::INFINITY) else {
+                continue;
+            };
+            hits += 1;
+            assert_eq!(intersect_triangle(&r, a, b, c, 0.0, t), None, "{t}");
+            let above = t + t.abs().max(f32::MIN_POSITIVE) * f32::EPSILON;
+            assert_eq!(intersect_triangle(&r, a, b, c, above, f32::INFINITY), None);
+        }
+        assert!(hits > 5_000, "{hits}");
     }
 
     #[test]

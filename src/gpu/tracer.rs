@@ -75,7 +75,7 @@ pub struct TraceParams {
     /// GLSL `atlas_pitch`: texels per atlas row, a power of two; 0 for the exact BVH.
     pub atlas_pitch: u32,
     /// GLSL `atlas_len`: texels in the atlas; the blocks' height ranges follow their codes in the
-    /// same buffer (then, with normals, the normals and their rank directory), and texel reads
+    /// same buffer (then, with normals, the rank directory and the normals), and texel reads
     /// at or beyond it see holes.
     pub atlas_len: u32,
     /// GLSL `atlas_wide_len`: texels before the atlas's bands of packed heights
@@ -402,7 +402,7 @@ fn rbvh_parts<'a>(rbvh: &'a Rbvh, atlas_words: &'a [u32]) -> Result<(TraceParams
     };
     // The shaders index the atlas's words with 32 bits too.
     count(
-        "atlas words (height codes, block ranges, normals and their rank directory)",
+        "atlas words (height codes, block ranges, rank directory and normals)",
         atlas_words.len(),
     )?;
     let arrays = [

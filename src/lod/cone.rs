@@ -13,7 +13,7 @@ use crate::{Error, Result};
 
 /// The cone of one ray: `width` (world units) at `t = 0` and `spread`, the growth of the width per
 /// unit of `t` (for a unit direction, the cone's full angle in radians, small-angle). 8 bytes; the
-/// per-ray record of the LOD trace's cone buffer (`vec2` in `glsl/trace_rbvh_lod.comp`).
+/// per-ray record of the LOD trace's cone buffer (`vec2` in `glsl/trace_rbvh_main.glsl`, under `RBVH_LOD`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct RayCone {

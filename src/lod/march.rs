@@ -101,10 +101,10 @@ pub(crate) fn march<P: Probe>(
                     } else {
                         (t_in, column.bottom)
                     };
-                    return Some((
-                        t.max(t_in).min(t_out),
-                        decode_octahedral((texel.0 >> 16) as u16),
-                    ));
+                    // The first column met ends the walk; a hit at t_closest is not nearer than
+                    // the one found (the stretch ends there), so [tmin, t_closest) holds.
+                    let t = t.max(t_in).min(t_out);
+                    return (t < t_closest).then(|| (t, decode_octahedral((texel.0 >> 16) as u16)));
                 }
             }
         }

@@ -178,8 +178,10 @@ impl Lod {
     /// The colour word of the coarse surface of `node` nearest `point` (a coarse hit's point): the
     /// column holding it — or, for a hit on a column's side, which lies on the border with an
     /// empty neighbour, the nearest non-empty column around it — and there its top or bottom
-    /// surface, whichever is nearer along the grid's axis. `None` without colours, for a node
-    /// without a coarse representation, or where the surface has no colour (triangle leaves).
+    /// surface, whichever is nearer along the grid's axis; where that surface has no colour (its
+    /// extreme sample came from a triangle leaf), the nearest column around it that has one.
+    /// `None` without colours, for a node without a coarse representation, or where no column
+    /// around the point has a colour.
     pub fn colour_at(&self, node: u32, point: glam::Vec3) -> Option<u32> {
         let colours = self.colours.as_ref()?;
         let record = self.nodes.get(node as usize).filter(|r| r.is_some())?;
@@ -242,7 +244,8 @@ pub(crate) fn no_height_only_texels(texels: crate::rbvh::TexelFormat) -> Result<
         return Err(Error::param(
             "lod",
             "levels of detail need the texels' normals, which a height-only RBVH does not keep: \
-             build it with normals (--texels normals, the default)",
+             build it with normals (--texels normals, the default; a height-only file must be \
+             built again, `rbvh build --out FILE.rbvh` without --texels height)",
         ));
     }
     Ok(())

@@ -56,7 +56,9 @@ impl<P: Probe> Leaves<P> for RbvhLodLeafHook<'_> {
         stats: &mut TraceStats,
         probe: &mut P,
     ) -> bool {
-        if node & LOD_BIT == 0 {
+        // A leaf's reference may have bit 30 set (a triangle slot from 2^30 on); only an inner
+        // node's carries LOD_BIT alone.
+        if node & (LEAF_BIT | LOD_BIT) != LOD_BIT {
             return self.inner.test(node, count, t_closest, stats, probe);
         }
         // A coarse representation chosen for this ray.
@@ -110,15 +112,17 @@ impl Rbvh {
     /// coarse representation in `lod` (built for this RBVH) is selected by `cone` at the child's
     /// box entry ([`crate::lod::selects`]) is marched instead of descended into. A hit on a
     /// coarse representation reports `id = LEAF_BIT | LOD_BIT | node`. The columns it visits
-    /// count as `cells`.
+    /// count as `cells`. Fails, as [`Rbvh::trace_cpu_lod`] does, where `lod` was not built for
+    /// this RBVH ([`Lod::check_for`]): its grids would be marched for other nodes.
     pub fn hit_lod(
         &self,
         lod: &Lod,
         ray: &Ray,
         cone: &RayCone,
         any_hit: bool,
-    ) -> (Hit, TraceStats) {
-        trace(self, lod, ray, cone, any_hit, Walk::PLAIN, &mut ())
+    ) -> Result<(Hit, TraceStats)> {
+        lod.check_for(self)?;
+        Ok(trace(self, lod, ray, cone, any_hit, Walk::PLAIN, &mut ()))
     }
 
     /// [`Rbvh::hit_lod`] for many rays, each with its footprint in `cones` (one per ray, or one

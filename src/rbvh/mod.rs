@@ -111,8 +111,8 @@ impl Rbvh {
     }
 
     /// The atlas as the device holds it ([`Atlas::device_words`]): the height codes, the blocks'
-    /// height ranges ([`ranges::block_ranges`], 1/64 as many words) and, with normals, the
-    /// normals of the texels that are not holes and their rank directory.
+    /// height ranges ([`ranges::block_ranges`], 1/64 as many words) and, with normals, a rank
+    /// directory and the normals of the texels that are not holes.
     pub fn atlas_bytes(&self) -> u64 {
         4 * self.atlas.device_parts(self.params.texels).end as u64
     }

@@ -88,7 +88,7 @@ impl Walk<'_> {
 /// equal the device's counters ray by ray, and reports to a [`Probe`] every
 /// read the shader makes of the structure's arrays, at its byte offset in the device buffers
 /// (`src/gpu/tracer.rs` binds them in [`Array`](crate::probe::Array) order; the atlas buffer
-/// holds the texels' codes, the block ranges, then the normals and their rank directory:
+/// holds the texels' codes, the block ranges, then the rank directory and the normals:
 /// `src/rbvh/words.rs`). Made by [`Rbvh::device_twin`]; with level of detail, `crate::lod::LodTwin`.
 pub struct DeviceTwin<'a> {
     rbvh: &'a Rbvh,
