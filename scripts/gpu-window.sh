@@ -37,6 +37,11 @@ case $budget in ''|*[!0-9]*) echo "BUDGET_SECONDS must be a whole number of seco
 [ -x "$rbvh" ] || { echo "no rbvh binary at $rbvh: build it (cargo build --release) or set RBVH" >&2; exit 2; }
 mkdir -p "$out" || exit 2
 out=$(cd "$out" && pwd)
+# Every path is absolute from here on: the commands run in the repository, whose git the bench
+# reads for the commit and whether the code was committed (run elsewhere, it read another
+# folder's or none).
+case $rbvh in /*) ;; *) rbvh=$(cd "$(dirname "$rbvh")" && pwd)/$(basename "$rbvh");; esac
+cd "$root" || exit 2
 # Inside the repository the bench reads the commit (and whether the code was committed) from git;
 # a tree without .git (as a GPU machine is handed) should be given RBVH_COMMIT.
 if [ -z "${RBVH_COMMIT:-}" ] && ! git -C "$root" rev-parse HEAD >/dev/null 2>&1; then

@@ -146,6 +146,12 @@ fn errors_name_the_culprit_and_leave_no_output() {
         1,
         "only the bad ray file remains"
     );
+    // A --plot that is a file is refused before anything is measured, not after every scene.
+    let out = rbvh(&["bench", "--quality", "0", "--plot", arg(&bad_rays)]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--plot") && err.contains("bad.bin"), "{err}");
+    assert_eq!(std::fs::read(&bad_rays).unwrap(), [0u8; 33]);
 }
 
 #[test]

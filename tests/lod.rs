@@ -613,6 +613,18 @@ fn recorded_lod_trace_matches_the_submitted_one() {
     assert!(plain
         .bind_with_cones(view(&ray_buf), view(&hit_buf), view(&cone_buf), n)
         .is_ok());
+    // More rays than one descriptor's range may hold is the device limit, named, not a binding
+    // whose shader reads past its range.
+    let range = ctx.limits().max_storage_buffer_range;
+    let too_many = u32::try_from(range / 32 + 1).unwrap_or(u32::MAX);
+    let e = plain
+        .bind(view(&ray_buf), view(&hit_buf), too_many)
+        .err()
+        .unwrap();
+    assert!(
+        matches!(&e, Error::DeviceLimit { limit, .. } if *limit == "maxStorageBufferRange"),
+        "{e}"
+    );
 }
 
 #[test]

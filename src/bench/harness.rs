@@ -665,7 +665,7 @@ impl<'a> SceneBench<'a> {
         for (i, c) in self.candidates.iter().enumerate() {
             let (errors, invalid) = if i == 0 {
                 let referee = self.hit_errors(&m, &exact_cpu, &m.hits[0])?;
-                (None, validate::invalid_reason(&referee))
+                (None, validate::invalid_reason_exact(&referee))
             } else {
                 let errors = self.hit_errors(&m, &m.hits[0], &m.hits[i])?;
                 let image = match (ray_type, &self.renders) {
@@ -674,7 +674,10 @@ impl<'a> SceneBench<'a> {
                     }
                     _ => None,
                 };
-                let invalid = validate::invalid_reason(&errors);
+                let invalid = match c.structure {
+                    Structure::ExactInstanced(_) => validate::invalid_reason_exact(&errors),
+                    _ => validate::invalid_reason(&errors),
+                };
                 let summary = |s: Option<Summary>, f: fn(&Summary) -> f64| s.as_ref().map(f);
                 let record = Errors {
                     miss_mismatch_rate: errors.miss_mismatch_rate,

@@ -119,8 +119,16 @@ pub fn git_dirty() -> Option<bool> {
         return None;
     }
     let out = Command::new("git")
-        .args(["status", "--porcelain", "--untracked-files=no", "--", "."])
-        .args([":(exclude)docs", ":(exclude)*.md"])
+        // Paths from the repository's top, wherever in it the command runs (relative ones
+        // would ask only about the current folder: run from `scenes/`, changed code was clean).
+        .args([
+            "status",
+            "--porcelain",
+            "--untracked-files=no",
+            "--",
+            ":(top)",
+        ])
+        .args([":(top,exclude)docs", ":(top,exclude,glob)**/*.md"])
         .output()
         .ok()?;
     out.status.success().then_some(!out.stdout.is_empty())

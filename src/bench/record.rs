@@ -39,7 +39,7 @@
 //! | `memory_bytes` | {`tree`,`atlas`,`triangles`,`total`,`texels`,`narrow_texels`} | bytes uploaded: nodes (+ height-field leaf records for RBVH), atlas texels, triangles, their sum; the tiles' texels and those of them stored with 8-bit heights (the narrow band; 0 for exact) |
 //! | `memory_ratio_vs_exact` | number | exact total / this total (above 1: smaller than exact) |
 //! | `error` | object \| null | errors against the exact BVH on the same rays (below); null for exact |
-//! | `valid` | bool | false when the hits are wrong rather than approximate (`bench::validate`); for exact: whether the GPU agrees with the CPU reference tracer |
+//! | `valid` | bool | false when the hits are wrong rather than approximate (`bench::validate`); for exact: whether the GPU agrees with the CPU reference tracer to rounding (`validate::invalid_reason_exact`) |
 //! | `invalid_reason` | string \| null | why `valid` is false |
 //! | `timing_source` | `"gpu_timestamps"` \| `"wall"` | GPU timestamp queries, or host wall time (submit to fence) when the device cannot time |
 //! | `passes` | int | trace passes per timed run, back to back in one submission (as many as make a run last `min_run_ms`); `mrays_per_s` is per pass |
@@ -78,7 +78,7 @@
 //! (`params.*`, `mrays_per_s.*`, `memory_bytes.*`, `error.*`, `counters.*`,
 //! `traffic.twin_counters.*`, the modelled caches by position as `traffic.caches.N.*`,
 //! `steps.*`). The run's settings (`runs`, `min_run_ms`, image size, `ao_radius`, `seed`), the per-run `samples` and the steps' `nodes_by_depth` bands are in the JSON only. Null
-//! is an empty cell; an infinite PSNR is `inf`.
+//! is an empty cell (as the PSNR of identical images, null in the JSON too).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -164,7 +164,7 @@ pub struct Record {
     /// Errors against the exact BVH on the same rays; None for exact.
     pub error: Option<Errors>,
     /// False when the hits are wrong rather than approximate ([`super::validate`]); for exact,
-    /// whether the GPU agrees with the CPU reference tracer.
+    /// whether the GPU agrees with the CPU reference tracer to rounding.
     pub valid: bool,
     /// Why `valid` is false; None when valid.
     pub invalid_reason: Option<String>,
@@ -182,7 +182,7 @@ pub struct Record {
     /// Where a ray's steps go (the CPU twin's account), with `--steps`; None for
     /// level-of-detail records.
     pub steps: Option<StepsRecord>,
-    /// Leaks through the seams between height fields, for plain RBVH records (the same for each
+    /// Leaks through the seams between height fields, for RBVH records, flat and two-level (the same for each
     /// ray type of a level); None for the other methods, or with no seam rays asked for.
     pub seams: Option<SeamRecord>,
 }

@@ -207,6 +207,23 @@ impl Context {
         );
     }
 
+    /// Records into `cmd` (recording) a barrier that makes the compute shaders' writes recorded
+    /// before it visible to those recorded after it, which read and write the same memory: what
+    /// painting again over an earlier recording's paint needs (`Painter::record`).
+    pub fn record_compute_to_compute(&self, cmd: vk::CommandBuffer) {
+        self.record_barrier(
+            cmd,
+            (
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::AccessFlags::SHADER_WRITE,
+            ),
+            (
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
+            ),
+        );
+    }
+
     /// Records into `cmd` (recording) a barrier that makes the compute shaders' reads recorded
     /// before it finish before transfers recorded after it write: what rewriting a buffer that
     /// earlier traces read needs (`Tracer::update_instances_recorded`).
@@ -275,7 +292,11 @@ impl Context {
         bytes: &[u8],
         cmd: vk::CommandBuffer,
     ) -> Result<(Buffer, Option<Buffer>)> {
-        let usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_DST;
+        // TRANSFER_SRC too: a painter's colours are read back by a copy where the memory is
+        // not host-visible (`Painter::colours`).
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER
+            | vk::BufferUsageFlags::TRANSFER_DST
+            | vk::BufferUsageFlags::TRANSFER_SRC;
         let mut buffer =
             self.create_buffer(name, bytes.len() as u64, usage, MemoryLocation::GpuOnly)?;
         let staging = self.write_recorded(&mut buffer, bytes, cmd)?;

@@ -95,6 +95,9 @@ pub struct DeviceLimits {
     pub min_storage_buffer_offset_alignment: u64,
     /// Nanoseconds per timestamp tick; None when the queue cannot time.
     pub timestamp_period_ns: Option<f64>,
+    /// The queue's `timestampValidBits` (36 to 64 where it can time): timestamps wrap at
+    /// `2^bits` ticks, so a difference is taken modulo that.
+    pub timestamp_valid_bits: u32,
     /// Whether the device is a CPU implementation (lavapipe, SwiftShader). Such SIMD code runs
     /// every branch of a divergent `if` and every loop at least once, whether or not a lane needs
     /// it, so the tracers leave the march's block jumps out there ([`crate::gpu::Tracer`]).
@@ -593,6 +596,7 @@ fn describe(
         min_storage_buffer_offset_alignment: props.limits.min_storage_buffer_offset_alignment,
         timestamp_period_ns: (timestamp_bits > 0 && props.limits.timestamp_period > 0.0)
             .then_some(props.limits.timestamp_period as f64),
+        timestamp_valid_bits: timestamp_bits,
         cpu: props.device_type == vk::PhysicalDeviceType::CPU,
         compile_only: is_null_device(instance, pd),
         pipeline_statistics: false,

@@ -241,7 +241,7 @@ impl Painter {
 
     /// Embedded use: as [`Painter::sharing`], *recording* any staging copy of the colours into
     /// `cmd` as [`Painter::record_new`] does; the returned staging buffers must live until `cmd`
-    /// has executed.
+    /// has executed. On an error, reset `cmd` rather than submit it, as for `record_new`.
     pub fn record_sharing(
         tracer: &Tracer,
         rbvh: &Rbvh,
@@ -273,7 +273,8 @@ impl Painter {
     /// Embedded use: as [`Painter::new`] with the context's (the engine's) allocator, *recording*
     /// any staging copies into `cmd`, followed by a barrier that makes them visible to compute
     /// shaders; nothing is submitted. Paint with [`Painter::record`]. The staging buffers are
-    /// returned and must live until `cmd` has executed.
+    /// returned and must live until `cmd` has executed. On an error, `cmd` may already hold
+    /// copies into buffers the error has freed: reset it (or free it) rather than submit it.
     pub fn record_new(
         ctx: &Context,
         rbvh: &Rbvh,
@@ -346,8 +347,11 @@ impl Painter {
     /// Embedded use: records the painting of `brushes` (at most [`MAX_BRUSHES_PER_PASS`]; in
     /// order, each composited over the texel, see [`crate::rgba::over`]) into the engine's `cmd`: a recorded upload of the
     /// brushes, a transfer-to-compute barrier where one was needed, and one dispatch per leaf they
-    /// reach. No barrier follows: the engine orders its readers of [`Painter::colour_buffer`]. The
-    /// returned recording must live until `cmd` has executed.
+    /// reach, after a compute-to-compute barrier, so that a recording composites over the paint
+    /// of the shaders recorded before it (another recording's, past [`MAX_BRUSHES_PER_PASS`]).
+    /// No barrier follows: the engine orders its readers of [`Painter::colour_buffer`]. The
+    /// returned recording must live until `cmd` has executed; on an error, reset `cmd` rather
+    /// than submit it (it may hold the brushes' copy into a buffer the error freed).
     pub fn record(&self, cmd: vk::CommandBuffer, brushes: &[Brush]) -> Result<PaintRecording> {
         if brushes.len() > MAX_BRUSHES_PER_PASS {
             return Err(Error::param(
@@ -365,6 +369,7 @@ impl Painter {
         }
         let set = self.descriptor_set(&brush_buf)?;
         let leaves = candidate_leaves(&self.heightfields, brushes);
+        ctx.record_compute_to_compute(cmd);
         self.record_leaves(ctx.device(), cmd, &set, &leaves, brushes.len() as u32);
         Ok(PaintRecording {
             _set: set,

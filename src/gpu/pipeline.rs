@@ -244,6 +244,20 @@ impl ComputePipeline {
     /// A descriptor set (in a pool of its own, freed with it) binding `buffers` — each a buffer
     /// and the offset its view starts at, to its end — to the pipeline's bindings, in order.
     pub fn descriptor_set(&self, buffers: &[(vk::Buffer, u64)]) -> Result<DescriptorSet> {
+        let whole: Vec<(vk::Buffer, u64, u64)> = buffers
+            .iter()
+            .map(|&(b, offset)| (b, offset, vk::WHOLE_SIZE))
+            .collect();
+        self.descriptor_set_ranged(&whole)
+    }
+
+    /// [`ComputePipeline::descriptor_set`] with each buffer's range in bytes from its offset
+    /// (`vk::WHOLE_SIZE`: to the buffer's end): an engine's buffer may be larger than the
+    /// device's `maxStorageBufferRange`, which a descriptor's range must not exceed.
+    pub fn descriptor_set_ranged(
+        &self,
+        buffers: &[(vk::Buffer, u64, u64)],
+    ) -> Result<DescriptorSet> {
         if buffers.len() != self.bindings.len() {
             return Err(Error::param(
                 "buffers",
@@ -285,11 +299,11 @@ impl ComputePipeline {
         let set = owned.set;
         let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers
             .iter()
-            .map(|&(b, offset)| {
+            .map(|&(b, offset, range)| {
                 [vk::DescriptorBufferInfo::default()
                     .buffer(b)
                     .offset(offset)
-                    .range(vk::WHOLE_SIZE)]
+                    .range(range)]
             })
             .collect();
         let writes: Vec<_> = infos

@@ -173,9 +173,11 @@ impl Context {
                         vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
                     )
                     .map_err(|r| Error::vk("vkGetQueryPoolResults", pass, r))?;
-                s.limits
-                    .timestamp_period_ns
-                    .map(|p| ticks[1].wrapping_sub(ticks[0]) as f64 * p * 1e-6)
+                s.limits.timestamp_period_ns.map(|p| {
+                    ticks_between(ticks[0], ticks[1], s.limits.timestamp_valid_bits) as f64
+                        * p
+                        * 1e-6
+                })
             } else {
                 None
             };
@@ -183,5 +185,31 @@ impl Context {
             self.check_validation()?;
             Ok(Timing { gpu_ms, wall_ms })
         }
+    }
+}
+
+/// Ticks from timestamp `start` to `end` on a queue whose timestamps keep `valid_bits` bits:
+/// they wrap at `2^valid_bits`, so a pass that crosses the wrap counts its own ticks (with 36
+/// bits, about an hour on some GPUs), not `2^64` less them.
+fn ticks_between(start: u64, end: u64, valid_bits: u32) -> u64 {
+    let mask = if valid_bits >= 64 {
+        u64::MAX
+    } else {
+        (1u64 << valid_bits) - 1
+    };
+    end.wrapping_sub(start) & mask
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ticks_between;
+
+    #[test]
+    fn a_pass_across_the_timestamps_wrap_counts_its_own_ticks() {
+        assert_eq!(ticks_between(10, 25, 64), 15);
+        assert_eq!(ticks_between(10, 25, 36), 15);
+        // 36 valid bits: from 5 ticks before the wrap to 7 after it.
+        assert_eq!(ticks_between((1 << 36) - 5, 7, 36), 12);
+        assert_eq!(ticks_between(u64::MAX - 1, 3, 64), 5);
     }
 }

@@ -527,7 +527,8 @@ impl Tracer {
     /// *recording* any staging copies into `cmd`, followed by a barrier that makes them visible
     /// to compute shaders. Nothing is submitted. Call [`Tracer::release_staging`] once `cmd` has
     /// executed. With levels of detail, bind the engine's rays, hits and cones with
-    /// [`Tracer::bind_with_cones`].
+    /// [`Tracer::bind_with_cones`]. On an error, `cmd` may already hold copies into buffers the
+    /// error has freed: reset it (or free it) rather than submit it.
     pub fn new_recorded(
         ctx: &Context,
         structure: &Structure,
@@ -769,7 +770,15 @@ impl Tracer {
         count: u32,
     ) -> Result<TraceBinding> {
         let align = self.ctx.limits().min_storage_buffer_offset_alignment.max(1);
-        for (what, view) in [("rays", Some(rays)), ("hits", Some(hits)), ("cones", cones)] {
+        // Each view's bytes for `count` rays: bound as the descriptor's range (an engine's
+        // buffer may exceed maxStorageBufferRange, which a range to its end would too).
+        let bytes = |per_ray: u64| (u64::from(count) * per_ray).max(per_ray);
+        let sized = [
+            ("rays", Some(rays), bytes(32)),
+            ("hits", Some(hits), bytes(32)),
+            ("cones", cones, bytes(8)),
+        ];
+        for (what, view, range) in sized {
             let Some(view) = view else { continue };
             if view.offset % align != 0 {
                 return Err(Error::param(
@@ -780,6 +789,11 @@ impl Tracer {
                     ),
                 ));
             }
+            self.ctx.check_storage_range(
+                &format!("the {count} rays' {what}"),
+                range,
+                "bind fewer rays at a time",
+            )?;
         }
         let status = self.ctx.host_storage("trace status", 4)?;
         let counters = self.ctx.create_buffer(
@@ -790,16 +804,16 @@ impl Tracer {
         )?;
         let views = self.views(
             [
-                (rays.buffer, rays.offset),
-                (hits.buffer, hits.offset),
-                (status.raw(), 0),
-                (counters.raw(), 0),
-                (counters.raw(), 0),
+                (rays.buffer, rays.offset, bytes(32)),
+                (hits.buffer, hits.offset, bytes(32)),
+                (status.raw(), 0, vk::WHOLE_SIZE),
+                (counters.raw(), 0, vk::WHOLE_SIZE),
+                (counters.raw(), 0, vk::WHOLE_SIZE),
             ],
-            cones.map(|c| (c.buffer, c.offset)),
+            cones.map(|c| (c.buffer, c.offset, bytes(8))),
         );
         Ok(TraceBinding {
-            set: self.pipeline.descriptor_set(&views)?,
+            set: self.pipeline.descriptor_set_ranged(&views)?,
             status,
             count,
             _counters: counters,
@@ -897,18 +911,23 @@ impl Tracer {
     /// (`per_trace`'s fifth).
     fn views(
         &self,
-        per_trace: [(vk::Buffer, u64); 5],
-        cones: Option<(vk::Buffer, u64)>,
-    ) -> Vec<(vk::Buffer, u64)> {
+        per_trace: [(vk::Buffer, u64, u64); 5],
+        cones: Option<(vk::Buffer, u64, u64)>,
+    ) -> Vec<(vk::Buffer, u64, u64)> {
         let bound = self.reach == Reach::Bindings;
         let [rays, hits, status, counters_head, counters_tail] = per_trace;
-        let mut views: Vec<(vk::Buffer, u64)> = Vec::new();
+        let mut views: Vec<(vk::Buffer, u64, u64)> = Vec::new();
         if bound {
-            views.extend(self.structure.iter().map(|b| (b.raw(), 0)));
+            views.extend(self.structure.iter().map(|b| (b.raw(), 0, vk::WHOLE_SIZE)));
         }
         views.extend([rays, hits, status, counters_head]);
         if bound {
-            views.extend(self.lod.iter().flatten().map(|b| (b.raw(), 0)));
+            views.extend(
+                self.lod
+                    .iter()
+                    .flatten()
+                    .map(|b| (b.raw(), 0, vk::WHOLE_SIZE)),
+            );
         }
         views.extend(cones);
         views.push(counters_tail);
@@ -1102,16 +1121,22 @@ impl Tracer {
             Some(c) => Some(self.ctx.upload_storage("ray cones", &c)?),
             None => None,
         };
-        let views = self.views(
-            [
-                (ray_buf.raw(), 0),
-                (hit_buf.raw(), 0),
-                (status.raw(), 0),
-                (counters_head.raw(), 0),
-                (counters_tail.raw(), 0),
-            ],
-            cone_buf.as_ref().map(|c| (c.raw(), 0)),
-        );
+        // The library's own buffers, each the batch's size: bound whole.
+        let whole = |b: vk::Buffer| (b, 0, vk::WHOLE_SIZE);
+        let views: Vec<(vk::Buffer, u64)> = self
+            .views(
+                [
+                    whole(ray_buf.raw()),
+                    whole(hit_buf.raw()),
+                    whole(status.raw()),
+                    whole(counters_head.raw()),
+                    whole(counters_tail.raw()),
+                ],
+                cone_buf.as_ref().map(|c| whole(c.raw())),
+            )
+            .into_iter()
+            .map(|(b, offset, _)| (b, offset))
+            .collect();
         let timing = pipeline.run_repeated(&views, n, passes, |first| {
             bytemuck::bytes_of(&TraceParams {
                 ray_offset: first,

@@ -126,6 +126,13 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         ],
         &inputs,
     )?;
+    // Found only once every scene was measured, a --plot that is a file lost the whole run.
+    if let Some(plot) = a.plot.as_deref().filter(|p| p.exists() && !p.is_dir()) {
+        anyhow::bail!(
+            "--plot {}: a file is there; --plot names the folder the charts go to",
+            plot.display()
+        );
+    }
     let (plain, lod) = (
         a.structures.has(Method::Rbvh),
         a.structures.has(Method::RbvhLod),
