@@ -1,6 +1,7 @@
 //! The validation layer is wired up: a deliberately invalid command (a barrier whose access mask
 //! does not fit its stage, harmless to the driver) must come back as `Error::Validation` naming the
 //! problem, not pass silently. Every other GPU test relies on this to fail on validation errors.
+//! A submission asked for from inside another's recording closure is an error, not a hang.
 
 mod common;
 
@@ -43,4 +44,21 @@ fn validation_errors_fail_the_submission() {
     }
     // The context stays usable, and clean submissions pass.
     ctx.submit("empty", |_, _| {}).unwrap();
+}
+
+#[test]
+fn a_submission_inside_another_is_an_error_not_a_hang() {
+    let ctx = common::context();
+    let mut inner = None;
+    ctx.submit("outer", |_, _| {
+        inner = Some(ctx.submit("inner", |_, _| {}));
+    })
+    .unwrap();
+    let e = inner.unwrap().unwrap_err().to_string();
+    assert!(
+        e.contains("inner") && e.contains("recording closure"),
+        "{e}"
+    );
+    // The context stays usable.
+    ctx.submit("after", |_, _| {}).unwrap();
 }

@@ -1,12 +1,34 @@
 //! One-shot command submission with GPU timing: record, submit, wait on a fence (bounded), read
 //! the timestamps, and turn any validation message into an error naming the pass.
 
+use std::cell::Cell;
 use std::time::Instant;
 
 use ash::vk;
 
 use super::Context;
 use crate::{Error, Result};
+
+thread_local! {
+    /// Whether this thread is inside [`Context::submit`] (its recording closure included).
+    static SUBMITTING: Cell<bool> = const { Cell::new(false) };
+}
+
+/// Marks this thread as submitting until dropped (a panicking closure included).
+struct Submitting;
+
+impl Submitting {
+    fn enter() -> Submitting {
+        SUBMITTING.with(|s| s.set(true));
+        Submitting
+    }
+}
+
+impl Drop for Submitting {
+    fn drop(&mut self) {
+        SUBMITTING.with(|s| s.set(false));
+    }
+}
 
 /// How long one submission may take before we call it hung. Every shader loop is bounded, so only
 /// a driver fault can get here; the error names the pass instead of hanging the process.
@@ -72,8 +94,20 @@ impl Context {
             )
         })?;
         // The command pool and the queue are externally synchronised objects shared by every clone
-        // of the context: one submission at a time.
+        // of the context: one submission at a time. A submission asked for from inside another's
+        // recording closure, on its thread, would wait for itself: an error instead.
+        if SUBMITTING.with(Cell::get) {
+            return Err(Error::param(
+                "context",
+                format!(
+                    "{pass}: submitted from inside another submission's recording closure; \
+                     record into that closure's command buffer (the *_recorded calls) or submit \
+                     after it"
+                ),
+            ));
+        }
         let _serial = own.submit_lock.lock().unwrap_or_else(|p| p.into_inner());
+        let _submitting = Submitting::enter();
         let mut scratch = Scratch {
             device,
             pool: own.command_pool,
