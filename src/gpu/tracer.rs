@@ -1121,19 +1121,10 @@ impl Tracer {
             Some(c) => Some(self.ctx.upload_storage("ray cones", &c)?),
             None => None,
         };
-        // The library's own buffers, each the batch's size: bound whole.
-        let whole = |b: vk::Buffer| (b, 0, vk::WHOLE_SIZE);
-        let views: Vec<(vk::Buffer, u64)> = self
-            .views(
-                [
-                    whole(ray_buf.raw()),
-                    whole(hit_buf.raw()),
-                    whole(status.raw()),
-                    whole(counters_head.raw()),
-                    whole(counters_tail.raw()),
-                ],
-                cone_buf.as_ref().map(|c| whole(c.raw())),
-            )
+        // The library's own buffers, each the batch's size, are bound whole.
+        let whole = |b: &Buffer| (b.raw(), 0, vk::WHOLE_SIZE);
+        let per_trace = [&ray_buf, &hit_buf, &status, &counters_head, &counters_tail].map(whole);
+        let views: Vec<(vk::Buffer, u64)> = (self.views(per_trace, cone_buf.as_ref().map(whole)))
             .into_iter()
             .map(|(b, offset, _)| (b, offset))
             .collect();
