@@ -342,6 +342,21 @@ mod tests {
     /// count before its group, plus the non-holes among the group's texels before it (their
     /// codes), or before the next group, minus those from it to the group's end, then the
     /// normal at that rank.
+    /// Texel `i`'s normal as the device reads it, checked against the texel's own, and the reads
+    /// that find it, the last of them the word of the normal at the texel's rank counted whole.
+    fn checked_normal_reads(a: &Atlas, words: &[u32], d: &[u32], i: usize) -> Vec<Read> {
+        assert_eq!(device_normal(a, words, i), a.texels[i].0 >> 16, "texel {i}");
+        let reads = a.normal_reads(i, d);
+        let rank = a.texels[..i].iter().filter(|t| !t.is_hole()).count();
+        let normals = a.device_parts(TexelFormat::HeightNormal).normals;
+        assert_eq!(
+            reads.last().unwrap().offset,
+            4 * (normals + rank / 2) as u64,
+            "texel {i}"
+        );
+        reads
+    }
+
     fn device_normal(a: &Atlas, words: &[u32], index: usize) -> u32 {
         let parts = a.device_parts(TexelFormat::HeightNormal);
         let count = RankCount::of(index, a.texels.len());
@@ -446,16 +461,8 @@ mod tests {
         }
         assert_eq!(d[9], before(600));
         let words = a.device_words(TexelFormat::HeightNormal);
-        for (i, t) in a.texels.iter().enumerate().filter(|(_, t)| !t.is_hole()) {
-            assert_eq!(device_normal(&a, &words, i), t.0 >> 16, "texel {i}");
-            let reads = a.normal_reads(i, &d);
-            // The last read is the word of the normal at the texel's rank, counted whole.
-            let rank = a.texels[..i].iter().filter(|t| !t.is_hole()).count();
-            let normals = a.device_parts(TexelFormat::HeightNormal).normals;
-            assert_eq!(
-                reads.last().unwrap().offset,
-                4 * (normals + rank / 2) as u64
-            );
+        for (i, _) in a.texels.iter().enumerate().filter(|(_, t)| !t.is_hole()) {
+            let reads = checked_normal_reads(&a, &words, &d, i);
             // The directory's words (one where the next group begins a span), a read a pair of
             // the group's texels before it or from it to the group's end (at most 16), the
             // normal's word.
@@ -499,16 +506,8 @@ mod tests {
         assert_eq!(d[6] as usize, a.samples());
         let words = a.device_words(TexelFormat::HeightNormal);
         let mut back_to_a_count = 0;
-        for (i, t) in a.texels.iter().enumerate().filter(|(_, t)| !t.is_hole()) {
-            assert_eq!(device_normal(&a, &words, i), t.0 >> 16, "texel {i}");
-            let reads = a.normal_reads(i, &d);
-            // The last read is the word of the normal at the texel's rank, counted whole.
-            let rank = a.texels[..i].iter().filter(|t| !t.is_hole()).count();
-            let normals = a.device_parts(TexelFormat::HeightNormal).normals;
-            assert_eq!(
-                reads.last().unwrap().offset,
-                4 * (normals + rank / 2) as u64
-            );
+        for (i, _) in a.texels.iter().enumerate().filter(|(_, t)| !t.is_hole()) {
+            let reads = checked_normal_reads(&a, &words, &d, i);
             if i % RANK_SPAN >= RANK_SPAN - RANK_GROUP / 2 {
                 back_to_a_count += 1;
                 let parts = a.device_parts(TexelFormat::HeightNormal);
