@@ -96,8 +96,10 @@ pub enum Error {
         hint: String,
     },
     /// The Vulkan validation layers reported errors (only when they are enabled).
-    #[error("Vulkan validation reported {} error(s):\n{}", messages.len(), messages.join("\n"))]
+    #[error("Vulkan validation reported {} error(s) during {during}:\n{}", messages.len(), messages.join("\n"))]
     Validation {
+        /// The pass (a submission, a pipeline's creation) whose calls they came from.
+        during: String,
         /// The layers' error messages, in the order they were reported.
         messages: Vec<String>,
     },
@@ -111,6 +113,20 @@ pub enum Error {
         device: String,
         /// What was asked of it.
         what: String,
+    },
+    /// A submission did not finish: the device reported itself lost, or gave no result within
+    /// the context's timeout ([`Context::set_submit_timeout`](crate::Context::set_submit_timeout)).
+    /// The device may still be running it, so from then on the context runs nothing (every
+    /// submission and allocation gives this error, `what` naming it) and frees none of its
+    /// objects, which the process's end returns to the driver.
+    #[error("{what}: the Vulkan context is lost, since {pass} did not finish ({reason}); it runs nothing more, and its objects are left to the driver rather than freed while the device may still use them: create a new context")]
+    DeviceLost {
+        /// What was asked: the pass that did not finish, or a later one refused.
+        what: String,
+        /// The submission that did not finish.
+        pass: String,
+        /// Why it is taken for unfinished: the timeout, or the `VkResult` of the wait.
+        reason: String,
     },
     /// A traversal was cut short on the GPU for some rays — its stack overflowed, or the device
     /// ended a shader loop early (lavapipe stops an invocation's loops after 65535 iterations) —

@@ -1,7 +1,8 @@
 //! The validation layer is wired up: a deliberately invalid command (a barrier whose access mask
 //! does not fit its stage, harmless to the driver) must come back as `Error::Validation` naming the
 //! problem, not pass silently. Every other GPU test relies on this to fail on validation errors.
-//! A submission asked for from inside another's recording closure is an error, not a hang.
+//! A submission asked for from inside another's recording closure is an error, not a hang. An
+//! error names the pass it came from, and one raised before a submission is not named for it.
 
 mod common;
 
@@ -34,7 +35,8 @@ fn validation_errors_fail_the_submission() {
         );
     });
     match result {
-        Err(Error::Validation { messages }) => {
+        Err(Error::Validation { during, messages }) => {
+            assert_eq!(during, "deliberately invalid barrier");
             assert!(
                 messages.iter().any(|m| m.contains("vkCmdPipelineBarrier")),
                 "{messages:?}"
@@ -61,4 +63,37 @@ fn a_submission_inside_another_is_an_error_not_a_hang() {
     );
     // The context stays usable.
     ctx.submit("after", |_, _| {}).unwrap();
+}
+
+#[test]
+fn errors_of_calls_before_a_submission_are_not_named_for_it() {
+    let ctx = common::context();
+    if !ctx.validation_enabled() {
+        eprintln!(
+            "SKIPPED errors_of_calls_before_a_submission_are_not_named_for_it: \
+             VK_LAYER_KHRONOS_validation is not installed; this test checked nothing"
+        );
+        return;
+    }
+    // A buffer with no usage at all is invalid (VkBufferCreateInfo's usage must not be 0),
+    // reported when it is created, outside any submission.
+    let _unused = ctx
+        .create_buffer(
+            "no usage",
+            16,
+            ash::vk::BufferUsageFlags::empty(),
+            rbvh::gpu_allocator::MemoryLocation::CpuToGpu,
+        )
+        .unwrap();
+    match ctx.submit("clean", |_, _| {}) {
+        Err(Error::Validation { during, messages }) => {
+            assert_eq!(during, "the calls before clean");
+            assert!(
+                messages.iter().any(|m| m.contains("vkCreateBuffer")),
+                "{messages:?}"
+            );
+        }
+        other => panic!("expected the buffer's validation error, got {other:?}"),
+    }
+    ctx.submit("clean", |_, _| {}).unwrap();
 }

@@ -81,6 +81,10 @@ impl Buffer {
 impl Drop for Buffer {
     fn drop(&mut self) {
         let s = &self.ctx.shared;
+        if s.is_lost() {
+            // The device may still use it (Error::DeviceLost): left to the driver.
+            return;
+        }
         if let Some(a) = self.allocation.take() {
             // An error here means a double free inside gpu-allocator's bookkeeping; nothing to do.
             let _ = s

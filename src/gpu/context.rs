@@ -9,7 +9,9 @@ use std::ffi::CStr;
 #[cfg(feature = "loaded")]
 use std::ffi::{c_char, c_void, CString};
 use std::mem::ManuallyDrop;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 use ash::vk;
 use gpu_allocator::vulkan::Allocator;
@@ -139,6 +141,12 @@ pub(crate) struct Owned {
     pub command_pool: vk::CommandPool,
     /// Serialises use of `command_pool` and `queue` (both externally synchronised in Vulkan).
     pub submit_lock: Mutex<()>,
+    /// How long [`Context::submit`] waits for a submission, in nanoseconds
+    /// ([`Context::set_submit_timeout`]).
+    pub submit_timeout_ns: AtomicU64,
+    /// The pass whose submission did not finish, and why: from then on the context is lost
+    /// ([`Error::DeviceLost`]).
+    pub lost: Mutex<Option<(String, String)>>,
 }
 
 /// An engine's own Vulkan objects, for [`Context::embedded`]. The engine keeps them alive (and
@@ -366,8 +374,16 @@ impl Context {
         &self.shared.device
     }
 
-    /// Errors reported by the validation layer since the last call, as an error value.
+    /// Errors reported by the validation layer since the last check, as an error value.
+    /// [`Context::submit`] and pipeline creation check after their own calls (naming their
+    /// pass), and a submission before its own, so that its errors are not taken for those of
+    /// calls made since the last submission (an upload's buffer, a descriptor set).
     pub fn check_validation(&self) -> Result<()> {
+        self.check_validation_of("the calls since the last check")
+    }
+
+    /// [`Context::check_validation`], the error saying its messages came `during` this.
+    pub(crate) fn check_validation_of(&self, during: &str) -> Result<()> {
         let Some(own) = &self.shared.own else {
             return Ok(());
         };
@@ -375,13 +391,20 @@ impl Context {
         if messages.is_empty() {
             Ok(())
         } else {
-            Err(Error::Validation { messages })
+            Err(Error::Validation {
+                during: during.to_string(),
+                messages,
+            })
         }
     }
 
-    /// Fails with [`Error::CompileOnly`], saying it cannot do `what`, on a device that only
-    /// compiles ([`DeviceLimits::compile_only`]).
+    /// Fails with [`Error::DeviceLost`], saying it cannot do `what`, once a submission did not
+    /// finish, and with [`Error::CompileOnly`] on a device that only compiles
+    /// ([`DeviceLimits::compile_only`]).
     pub fn check_runnable(&self, what: &str) -> Result<()> {
+        if let Some(lost) = self.lost_error(what) {
+            return Err(lost);
+        }
         if self.shared.limits.compile_only {
             return Err(Error::CompileOnly {
                 device: self.shared.device_name.clone(),
@@ -560,6 +583,8 @@ impl Partial {
                 queue,
                 command_pool,
                 submit_lock: Mutex::new(()),
+                submit_timeout_ns: AtomicU64::new(DEFAULT_SUBMIT_TIMEOUT_NS),
+                lost: Mutex::new(None),
             }),
         };
         Ok(Context {
@@ -781,6 +806,12 @@ fn pick_device(
 
 impl Drop for Shared {
     fn drop(&mut self) {
+        // A lost context's device may still run the submission that did not finish, on memory
+        // the allocator would free and a device we would destroy: all of it is left to the
+        // driver (the process's end) instead (Error::DeviceLost).
+        if self.is_lost() {
+            return;
+        }
         // SAFETY: the last handle is gone, so no buffer, pipeline or submission of ours is alive.
         // The allocator (our reference to it) goes before the device it allocates from; an owned
         // context then destroys its pool, device, messenger and instance, in that order.
@@ -850,5 +881,57 @@ impl Context {
             }
         }
         Ok(reach)
+    }
+}
+
+/// How long one submission may take before we call it hung, unless
+/// [`Context::set_submit_timeout`] says otherwise. Every shader loop is bounded, so only a driver
+/// fault (or a dispatch far larger than any the harness makes) gets here; the error names the
+/// pass instead of hanging the process.
+const DEFAULT_SUBMIT_TIMEOUT_NS: u64 = 600 * 1_000_000_000;
+
+impl Context {
+    /// How long [`Context::submit`] waits for one submission (600 s unless set): past it, the
+    /// submission is taken for hung and the context for lost ([`Error::DeviceLost`]), rather
+    /// than the process waiting on a faulty driver for ever. Every shader loop is bounded, so a
+    /// submission that takes longer is a device fault or a dispatch far beyond the harness's.
+    /// An embedded context never submits, and this changes nothing there.
+    pub fn set_submit_timeout(&self, timeout: Duration) {
+        if let Some(own) = &self.shared.own {
+            let ns = u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX);
+            own.submit_timeout_ns.store(ns, Ordering::Relaxed);
+        }
+    }
+
+    /// Whether a submission of this context did not finish ([`Error::DeviceLost`]): it then
+    /// runs nothing more, and frees none of its objects.
+    pub fn is_lost(&self) -> bool {
+        self.shared.is_lost()
+    }
+
+    /// The error that a lost context gives for `what`; None while it is not lost.
+    pub(crate) fn lost_error(&self, what: &str) -> Option<Error> {
+        let lost = self
+            .shared
+            .own
+            .as_ref()?
+            .lost
+            .lock()
+            .unwrap_or_else(|p| p.into_inner());
+        lost.as_ref().map(|(pass, reason)| Error::DeviceLost {
+            what: what.to_string(),
+            pass: pass.clone(),
+            reason: reason.clone(),
+        })
+    }
+}
+
+impl Shared {
+    /// Whether a submission did not finish: the device may still run it, so nothing it might
+    /// use is freed ([`Error::DeviceLost`]).
+    pub(crate) fn is_lost(&self) -> bool {
+        self.own
+            .as_ref()
+            .is_some_and(|own| own.lost.lock().unwrap_or_else(|p| p.into_inner()).is_some())
     }
 }

@@ -24,6 +24,10 @@ pub struct ComputePipeline {
 
 impl Drop for ComputePipeline {
     fn drop(&mut self) {
+        if self.ctx.shared.is_lost() {
+            // The device may still use it (Error::DeviceLost): left to the driver.
+            return;
+        }
         let d = &self.ctx.shared.device;
         // SAFETY: submissions are synchronous, so nothing is in flight.
         unsafe {
@@ -159,7 +163,7 @@ impl ComputePipeline {
             // SAFETY: created above with CAPTURE_STATISTICS on a device that enabled the extension.
             p.statistics = unsafe { statistics::query(&ctx.shared.instance, d, p.pipeline) };
         }
-        ctx.check_validation()?;
+        ctx.check_validation_of(&format!("the creation of pipeline {name}"))?;
         Ok(p)
     }
 
@@ -377,6 +381,10 @@ pub struct DescriptorSet {
 
 impl Drop for DescriptorSet {
     fn drop(&mut self) {
+        if self.ctx.shared.is_lost() {
+            // The device may still use it (Error::DeviceLost): left to the driver.
+            return;
+        }
         // SAFETY: the owner guarantees no pending command buffer uses the set any more.
         unsafe {
             self.ctx

@@ -2,6 +2,7 @@
 //! the timestamps, and turn any validation message into an error naming the pass.
 
 use std::cell::Cell;
+use std::sync::atomic::Ordering;
 use std::time::Instant;
 
 use ash::vk;
@@ -29,10 +30,6 @@ impl Drop for Submitting {
         SUBMITTING.with(|s| s.set(false));
     }
 }
-
-/// How long one submission may take before we call it hung. Every shader loop is bounded, so only
-/// a driver fault can get here; the error names the pass instead of hanging the process.
-const FENCE_TIMEOUT_NS: u64 = 600 * 1_000_000_000;
 
 /// Timing of one submission.
 #[derive(Clone, Copy, Debug, Default)]
@@ -107,6 +104,7 @@ impl Context {
             ));
         }
         let _serial = own.submit_lock.lock().unwrap_or_else(|p| p.into_inner());
+        self.check_validation_of(&format!("the calls before {pass}"))?;
         let _submitting = Submitting::enter();
         let mut scratch = Scratch {
             device,
@@ -193,9 +191,22 @@ impl Context {
             device
                 .queue_submit(own.queue, &submit, scratch.fence)
                 .map_err(|r| Error::vk("vkQueueSubmit", pass, r))?;
-            device
-                .wait_for_fences(&[scratch.fence], true, FENCE_TIMEOUT_NS)
-                .map_err(|r| Error::vk("vkWaitForFences", pass, r))?;
+            let timeout_ns = own.submit_timeout_ns.load(Ordering::Relaxed);
+            if let Err(r) = device.wait_for_fences(&[scratch.fence], true, timeout_ns) {
+                // The device may still run this submission: its command buffer, fence and
+                // queries, and every object it uses, must outlive it, so the context is lost
+                // and frees nothing from here on (Error::DeviceLost).
+                std::mem::forget(scratch);
+                let reason = match r {
+                    vk::Result::TIMEOUT => {
+                        format!("no result within {} s", timeout_ns as f64 * 1e-9)
+                    }
+                    r => format!("vkWaitForFences: {r}"),
+                };
+                *own.lost.lock().unwrap_or_else(|p| p.into_inner()) =
+                    Some((pass.to_string(), reason));
+                return Err(self.lost_error(pass).expect("marked lost above"));
+            }
             let wall_ms = start.elapsed().as_secs_f64() * 1e3;
             let gpu_ms = if timed {
                 let mut ticks = [0u64; 2];
@@ -216,7 +227,7 @@ impl Context {
                 None
             };
             drop(scratch);
-            self.check_validation()?;
+            self.check_validation_of(pass)?;
             Ok(Timing { gpu_ms, wall_ms })
         }
     }
