@@ -319,7 +319,7 @@ fn main() -> Result<(), Box<dyn Error>> {
             vk::AccessFlags::SHADER_READ,
         );
     }
-    tracer.record(cmd, &trace, Query::Closest);
+    tracer.record(cmd, &trace, Query::Closest)?;
     unsafe {
         // ... and after it: hits visible to the host.
         barrier(

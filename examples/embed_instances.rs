@@ -134,7 +134,7 @@ fn main() -> Result<(), Box<dyn Error>> {
         let update_ms = update.elapsed().as_secs_f64() * 1e3;
         let view = |buffer| BufferView { buffer, offset: 0 };
         let mut trace = tracer.bind(view(ray_buffer), view(hit_buffer), rays.len() as u32)?;
-        tracer.record(cmd, &trace, Query::Closest);
+        tracer.record(cmd, &trace, Query::Closest)?;
         let to_host = [vk::MemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::SHADER_WRITE)
             .dst_access_mask(vk::AccessFlags::HOST_READ)];

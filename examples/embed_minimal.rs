@@ -74,7 +74,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     let mut tracer = Tracer::new_recorded(&ctx, &rbvh, cmd)?;
     let view = |buffer| BufferView { buffer, offset: 0 };
     let mut trace = tracer.bind(view(ray_buffer), view(hit_buffer), rays.len() as u32)?;
-    tracer.record(cmd, &trace, Query::Closest);
+    tracer.record(cmd, &trace, Query::Closest)?;
 
     // The engine again: make the hits visible to the host, submit, wait, read.
     let to_host = [vk::MemoryBarrier::default()

@@ -594,7 +594,7 @@ fn recorded_lod_trace_matches_the_submitted_one() {
                     tracer.bind_with_cones(view(&ray_buf), view(&hit_buf), view(&cone_buf), n)?;
                 // A plain binding is refused: the LOD trace needs the cones.
                 assert!(tracer.bind(view(&ray_buf), view(&hit_buf), n).is_err());
-                tracer.record(cmd, &binding, Query::Closest);
+                tracer.record(cmd, &binding, Query::Closest)?;
                 Ok((tracer, binding))
             }),
         );
@@ -610,9 +610,21 @@ fn recorded_lod_trace_matches_the_submitted_one() {
         .any(|h| h.is_hit() && h.id & rbvh::lod::LOD_BIT != 0));
     // A tracer without levels of detail binds the cones an engine's rays carry, and ignores them.
     let plain = Tracer::new(&ctx, &Structure::from(r)).unwrap();
-    assert!(plain
+    let plain_binding = plain
         .bind_with_cones(view(&ray_buf), view(&hit_buf), view(&cone_buf), n)
-        .is_ok());
+        .unwrap();
+    // A binding is recorded by the tracer that made it alone: another's set holds another
+    // structure in another pipeline's layout, refused before anything is recorded.
+    let mut refused = Vec::new();
+    ctx.submit("bindings swapped", |_, cmd| {
+        refused.push(plain.record(cmd, &binding, Query::Closest));
+        refused.push(tracer.record(cmd, &plain_binding, Query::Closest));
+    })
+    .unwrap();
+    for e in refused {
+        let e = e.unwrap_err().to_string();
+        assert!(e.contains("binding") && e.contains("another tracer"), "{e}");
+    }
     // More rays than one descriptor's range may hold is the device limit, named, not a binding
     // whose shader reads past its range.
     let range = ctx.limits().max_storage_buffer_range;

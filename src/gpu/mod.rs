@@ -10,6 +10,7 @@ mod compiled;
 mod context;
 mod every_pipeline;
 mod painter;
+mod parts;
 mod pipeline;
 pub mod shaders;
 pub mod spirv;
@@ -23,9 +24,8 @@ pub use compiled::CompiledPipeline;
 pub use context::{Context, ContextOptions, DeviceLimits, External, Validation};
 pub use every_pipeline::compile_every_pipeline;
 pub use painter::{PaintParams, PaintRecording, PaintStats, Painter, MAX_BRUSHES_PER_PASS};
+pub use parts::TraceParams;
 pub use pipeline::{ComputePipeline, DescriptorSet};
 pub use statistics::{ShaderStatistic, StatisticValue};
 pub use submit::Timing;
-pub use tracer::{
-    BufferView, Placement, Query, TraceBinding, TraceParams, Traced, Tracer, OBSERVED_BATCH,
-};
+pub use tracer::{BufferView, Placement, Query, TraceBinding, Traced, Tracer, OBSERVED_BATCH};
