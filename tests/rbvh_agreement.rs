@@ -290,8 +290,8 @@ fn a_tile_that_wraps_across_atlas_rows_is_refused_or_empty() {
 
 /// The device stores 12, 10 or 8 bits a height in the atlas's packed rows: an RBVH built by hand
 /// with a code there that is not one of its band's (a multiple of 63 in the 10-bit rows, which
-/// hold the whole atlas) is refused by the upload, as by the loader, rather than traced with other
-/// heights than the CPU's.
+/// hold the whole atlas) is refused by the upload, the painter's and the loader, rather than traced
+/// or painted with other heights than the CPU's.
 #[test]
 fn a_code_off_its_band_in_the_packed_rows_is_refused() {
     use glam::Vec3;
@@ -319,7 +319,7 @@ fn a_code_off_its_band_in_the_packed_rows_is_refused() {
     Tracer::new(&ctx, &Structure::from(fine)).expect("codes of their bands upload");
     atlas.texels[17] = Texel::new(300, Vec3::Y);
     let r = Arc::new(one_leaf(0, (4, 4), 0.001, atlas, Vec3::new(5.0, 70.0, 1.0)));
-    let e = Tracer::new(&ctx, &Structure::from(r))
+    let e = Tracer::new(&ctx, &Structure::from(r.clone()))
         .err()
         .expect("the upload refuses the code")
         .to_string();
@@ -327,10 +327,18 @@ fn a_code_off_its_band_in_the_packed_rows_is_refused() {
         e.contains("atlas texel 17 lies in the 10-bit rows but has height code 300"),
         "{e}"
     );
+    // Painting reads the same heights: its upload refuses the code too, rather than paint at
+    // another height than the CPU's.
+    let e = rbvh::gpu::Painter::new(&ctx, &r)
+        .err()
+        .expect("the painter refuses the code")
+        .to_string();
+    assert!(e.contains("atlas texel 17 lies in the 10-bit rows"), "{e}");
 }
 
 /// The shaders locate a tile in the atlas with shifts, not divisions: an atlas whose pitch is not a
-/// power of two (which the builder never makes) is refused by the upload, and by the loader.
+/// power of two (which the builder never makes) is refused by the upload, the painter's, and the
+/// loader.
 #[test]
 fn an_atlas_pitch_that_is_not_a_power_of_two_is_refused() {
     use glam::Vec3;
@@ -347,6 +355,11 @@ fn an_atlas_pitch_that_is_not_a_power_of_two_is_refused() {
     let e = Tracer::new(&ctx, &Structure::from(r.clone()))
         .err()
         .expect("the upload refuses the pitch")
+        .to_string();
+    assert!(e.contains("atlas pitch 12: not a power of two"), "{e}");
+    let e = rbvh::gpu::Painter::new(&ctx, &r)
+        .err()
+        .expect("the painter refuses the pitch")
         .to_string();
     assert!(e.contains("atlas pitch 12: not a power of two"), "{e}");
     let e = Rbvh::from_bytes(&r.to_bytes(), std::path::Path::new("pitch.rbvh"))

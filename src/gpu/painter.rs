@@ -11,6 +11,7 @@ use bytemuck::{Pod, Zeroable};
 use ash::vk;
 
 use super::bindings;
+use super::parts::atlas_sizes;
 use super::pipeline::DescriptorSet;
 use super::{shaders, Buffer, BufferView, ComputePipeline, Context, Reach, Timing, Tracer};
 use crate::rbvh::GpuHeightfield;
@@ -161,6 +162,7 @@ fn reach_of(ctx: &Context, atlas_bytes: u64, colours: &[u32]) -> Result<Reach> {
 /// The atlas, colour words and reach of a painter that uploads its own atlas ([`Painter::new`],
 /// [`Painter::record_new`]).
 fn own_parts(ctx: &Context, rbvh: &Rbvh) -> Result<(Vec<u32>, Vec<u32>, Reach)> {
+    atlas_sizes(rbvh)?;
     let (atlas, colours) = channel_data(rbvh)?;
     let reach = reach_of(
         ctx,
@@ -180,8 +182,9 @@ fn shared_parts(tracer: &Tracer, rbvh: &Rbvh) -> Result<(Context, Arc<Buffer>, V
             "an exact-BVH tracer has no atlas to paint: share an RBVH tracer",
         ));
     };
-    let ours = (rbvh.atlas.pitch, rbvh.atlas.texels.len(), band_ends(rbvh));
-    if (pitch, len as usize, ends) != ours {
+    let [wide, end12, end10, our_len] = atlas_sizes(rbvh)?;
+    let ours = (rbvh.atlas.pitch, our_len, [wide, end12, end10]);
+    if (pitch, len, ends) != ours {
         return Err(Error::param(
             "tracer",
             format!(
@@ -210,14 +213,9 @@ pub struct Painter {
     colours: Buffer,
     pitch: u32,
     atlas_len: u32,
-    /// Where the atlas's 16-, 12- and 10-bit bands end ([`band_ends`]).
+    /// Where the atlas's 16-, 12- and 10-bit bands end ([`atlas_sizes`]): GLSL `atlas_wide_len`,
+    /// `atlas_end12` and `atlas_end10`.
     atlas_ends: [u32; 3],
-}
-
-/// Texels before the ends of `rbvh`'s 16-, 12- and 10-bit bands
-/// ([`crate::rbvh::Atlas::band_ends`]): GLSL `atlas_wide_len`, `atlas_end12` and `atlas_end10`.
-fn band_ends(rbvh: &Rbvh) -> [u32; 3] {
-    rbvh.atlas.band_ends().map(|end| end as u32)
 }
 
 impl Painter {
@@ -310,6 +308,7 @@ impl Painter {
             Reach::Bindings => (0, 0),
             Reach::DeviceAddresses => (address(&atlas)?, address(&colours)?),
         };
+        let [wide, end12, end10, atlas_len] = atlas_sizes(rbvh)?;
         Ok(Painter {
             pipeline: ComputePipeline::new(
                 ctx,
@@ -324,8 +323,8 @@ impl Painter {
             atlas,
             colours,
             pitch: rbvh.atlas.pitch,
-            atlas_len: rbvh.atlas.texels.len() as u32,
-            atlas_ends: band_ends(rbvh),
+            atlas_len,
+            atlas_ends: [wide, end12, end10],
         })
     }
 

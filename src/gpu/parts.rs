@@ -152,11 +152,11 @@ fn count32(structure: &str, what: &str, n: usize) -> Result<u32> {
     u32::try_from(n).map_err(|_| Error::param(structure, format!("{n} {what}: more than 2^32")))
 }
 
-/// The shader sizes and the arrays (name, bytes) of an RBVH, in binding order; `atlas_words` is
-/// its atlas as the shaders read it ([`crate::rbvh::Rbvh::atlas_words`]: height codes, the
-/// blocks' height ranges, with normals the rank directory and the normals).
-fn rbvh_parts<'a>(rbvh: &'a Rbvh, atlas_words: &'a [u32]) -> Result<(TraceParams, Arrays<'a, 4>)> {
-    let count = |what: &str, n: usize| count32("rbvh", what, n);
+/// What the shaders that read `rbvh`'s atlas (the trace, painting) are given of it, checked as
+/// they count on: texels before the ends of its 16-, 12- and 10-bit bands
+/// ([`crate::rbvh::Atlas::band_ends`]) and in all, each a 32-bit count; its pitch a power of two;
+/// each packed band's codes ones its fields can hold (a hand-made or edited atlas may break any).
+pub(super) fn atlas_sizes(rbvh: &Rbvh) -> Result<[u32; 4]> {
     if !rbvh.atlas.pitch.is_power_of_two() {
         return Err(Error::param(
             "rbvh",
@@ -178,16 +178,31 @@ fn rbvh_parts<'a>(rbvh: &'a Rbvh, atlas_words: &'a [u32]) -> Result<(TraceParams
             ),
         ));
     }
-    let ends = rbvh.atlas.band_ends();
+    let count = |n: usize| count32("rbvh", "atlas texels", n);
+    let [wide, end12, end10] = rbvh.atlas.band_ends();
+    Ok([
+        count(wide)?,
+        count(end12)?,
+        count(end10)?,
+        count(rbvh.atlas.texels.len())?,
+    ])
+}
+
+/// The shader sizes and the arrays (name, bytes) of an RBVH, in binding order; `atlas_words` is
+/// its atlas as the shaders read it ([`crate::rbvh::Rbvh::atlas_words`]: height codes, the
+/// blocks' height ranges, with normals the rank directory and the normals).
+fn rbvh_parts<'a>(rbvh: &'a Rbvh, atlas_words: &'a [u32]) -> Result<(TraceParams, Arrays<'a, 4>)> {
+    let count = |what: &str, n: usize| count32("rbvh", what, n);
+    let [wide_len, end12, end10, atlas_len] = atlas_sizes(rbvh)?;
     let sizes = TraceParams {
         node_count: count("nodes", rbvh.nodes.len())?,
         tri_count: count("triangles", rbvh.triangles.len())?,
         heightfield_count: count("height fields", rbvh.heightfields.len())?,
         atlas_pitch: rbvh.atlas.pitch,
-        atlas_len: count("atlas texels", rbvh.atlas.texels.len())?,
-        atlas_wide_len: count("atlas texels", ends[0])?,
-        atlas_end12: count("atlas texels", ends[1])?,
-        atlas_end10: count("atlas texels", ends[2])?,
+        atlas_len,
+        atlas_wide_len: wide_len,
+        atlas_end12: end12,
+        atlas_end10: end10,
         ..TraceParams::default()
     };
     // The shaders index the atlas's words with 32 bits too.
