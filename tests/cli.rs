@@ -154,6 +154,71 @@ fn errors_name_the_culprit_and_leave_no_output() {
     assert_eq!(std::fs::read(&bad_rays).unwrap(), [0u8; 33]);
 }
 
+/// A scene that fails to load after others were measured stops the bench with its error, and
+/// loses nothing: what was measured before it is shown and written where asked.
+#[test]
+fn a_bench_stopped_by_a_later_scene_keeps_the_earlier_ones() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.obj");
+    std::fs::write(&bad, "v 0 0 0\nv 1 0 0\nf 1 2 9\n").unwrap();
+    let (json, csv) = (dir.path().join("b.json"), dir.path().join("b.csv"));
+    let scenes = format!("sphere,{}", arg(&bad));
+    let out = rbvh(&[
+        "bench",
+        "--scene",
+        &scenes,
+        "--quality",
+        "0",
+        "--rays",
+        "primary",
+        "--width",
+        "16",
+        "--height",
+        "12",
+        "--runs",
+        "1",
+        "--json",
+        arg(&json),
+        "--csv",
+        arg(&csv),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("bad.obj:3") && err.contains("measured before (sphere: 2 records)"),
+        "{err}"
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let results = report["results"].as_array().unwrap();
+    assert_eq!(results.len(), 2);
+    assert!(results.iter().all(|r| r["scene"] == "sphere"));
+    assert_eq!(std::fs::read_to_string(&csv).unwrap().lines().count(), 3);
+    // Stopped at the first scene, nothing was measured: the error alone, no file written.
+    std::fs::remove_file(&json).unwrap();
+    let scenes = format!("{},sphere", arg(&bad));
+    let out = rbvh(&[
+        "bench",
+        "--scene",
+        &scenes,
+        "--quality",
+        "0",
+        "--rays",
+        "primary",
+        "--width",
+        "16",
+        "--height",
+        "12",
+        "--runs",
+        "1",
+        "--json",
+        arg(&json),
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("bad.obj:3"));
+    assert!(!json.exists());
+}
+
 #[test]
 fn rbvh_build_save_render_and_trace() {
     let dir = tempfile::tempdir().unwrap();

@@ -76,6 +76,22 @@ pub fn run_observed(
     observe: &mut dyn FnMut(Event),
     progress: &dyn Progress,
 ) -> Result<BenchReport> {
+    match run_keeping(config, observe, progress)? {
+        (report, None) => Ok(report),
+        (_, Some(error)) => Err(error),
+    }
+}
+
+/// [`run_observed`], keeping what a run measured before an error stopped it: the report of the
+/// scenes measured whole (their records, shaders and plots), and the error, None where the run
+/// reached its end. A scene's load or a device's failure late in a long run then costs that
+/// scene alone: the caller writes what was measured before it. An error before any scene is
+/// measured (the configuration, a scene that is not there, the device) is returned alone.
+pub fn run_keeping(
+    config: &BenchConfig,
+    observe: &mut dyn FnMut(Event),
+    progress: &dyn Progress,
+) -> Result<(BenchReport, Option<Error>)> {
     config.validate()?;
     // Every scene before any work: a mistyped last scene must not cost the others' run.
     for spec in &config.scenes {
@@ -106,80 +122,109 @@ pub fn run_observed(
         written: Vec::new(),
     };
     let mut plot_dirs = HashSet::new();
-    let measurements = config.scenes.len() * config.ray_types.len();
     let mut measurement = 0;
     for spec in &config.scenes {
-        let placed = {
-            observe(Event::Progress(format!("{spec}: loading")));
-            InstancedScene::load_observed(spec, progress)?
-        };
-        // A scene with instances is measured flat and in two levels: its meshes are kept (held
-        // once, a fraction of the flat scene) for the two-level builds. One too large to
-        // flatten is measured in two levels alone, refereed by its two-level exact BVH, as
-        // every scene is when asked for two levels alone.
-        let two_level = match config.instances {
-            Instances::Flat => None,
-            Instances::TwoLevel => Some(placed.clone()),
-            // An RBVH of points is built over the flat scene: no two-level candidate.
-            Instances::Auto => {
-                (placed.instances.len() > 1 && config.points.is_none()).then(|| placed.clone())
-            }
-        };
-        let fits = match config.instances {
-            Instances::TwoLevel => None,
-            _ => Some(placed.check_flat_fits(provenance::available_memory())),
-        };
-        let flat = match fits {
-            Some(Ok(())) => Some(flat_scene(placed, config, spec, observe)?),
-            Some(Err(too_large)) if two_level.is_none() || config.points.is_some() => {
-                return Err(too_large)
-            }
-            Some(Err(too_large)) => {
-                let steps = match config.steps {
-                    true => " (no steps: they are counted for flat structures)",
-                    false => "",
-                };
-                observe(Event::Warning(format!(
-                    "{too_large}; measured in two levels alone, refereed by the two-level exact \
-                     BVH{steps}"
-                )));
-                None
-            }
-            None => None,
-        };
-        let mut bench = SceneBench::new(&ctx, config, flat, two_level, observe, progress)?;
-        for c in &bench.candidates {
-            let compiled = c.tracer.compiled();
-            if !report
-                .shaders
-                .iter()
-                .any(|s| s.compiled.pipeline == compiled.pipeline)
-            {
-                report.shaders.push(ShaderRecord {
-                    method: c.method(),
-                    compiled,
-                });
-            }
-        }
-        for &ray_type in &config.ray_types {
-            measurement += 1;
-            let mut numbered = |event| {
-                observe(match event {
-                    Event::Progress(what) => {
-                        Event::Progress(format!("[{measurement}/{measurements}] {what}"))
-                    }
-                    warning => warning,
-                })
+        if let Err(error) = measure_scene(
+            &ctx,
+            config,
+            spec,
+            &mut report,
+            (&mut measurement, &mut plot_dirs),
+            observe,
+            progress,
+        ) {
+            return match report.results.is_empty() {
+                true => Err(error),
+                false => Ok((report, Some(error))),
             };
-            bench.measure(ray_type, &mut numbered)?;
         }
-        if let Some(dir) = &config.plot_dir {
-            let dir = dir.join(plot::scene_dir_name(bench.view().name(), &mut plot_dirs));
-            report.written.extend(bench.write_plots(dir)?);
-        }
-        report.results.extend(bench.records);
     }
-    Ok(report)
+    Ok((report, None))
+}
+
+/// Measures scene `spec` as `config` asks, its records, shaders and plots added to `report`
+/// once it is measured whole; `numbering` counts the measurements made and the plots' folders.
+fn measure_scene(
+    ctx: &Context,
+    config: &BenchConfig,
+    spec: &str,
+    report: &mut BenchReport,
+    numbering: (&mut usize, &mut HashSet<String>),
+    observe: &mut dyn FnMut(Event),
+    progress: &dyn Progress,
+) -> Result<()> {
+    let (measurement, plot_dirs) = numbering;
+    let measurements = config.scenes.len() * config.ray_types.len();
+    let placed = {
+        observe(Event::Progress(format!("{spec}: loading")));
+        InstancedScene::load_observed(spec, progress)?
+    };
+    // A scene with instances is measured flat and in two levels: its meshes are kept (held
+    // once, a fraction of the flat scene) for the two-level builds. One too large to
+    // flatten is measured in two levels alone, refereed by its two-level exact BVH, as
+    // every scene is when asked for two levels alone.
+    let two_level = match config.instances {
+        Instances::Flat => None,
+        Instances::TwoLevel => Some(placed.clone()),
+        // An RBVH of points is built over the flat scene: no two-level candidate.
+        Instances::Auto => {
+            (placed.instances.len() > 1 && config.points.is_none()).then(|| placed.clone())
+        }
+    };
+    let fits = match config.instances {
+        Instances::TwoLevel => None,
+        _ => Some(placed.check_flat_fits(provenance::available_memory())),
+    };
+    let flat = match fits {
+        Some(Ok(())) => Some(flat_scene(placed, config, spec, observe)?),
+        Some(Err(too_large)) if two_level.is_none() || config.points.is_some() => {
+            return Err(too_large)
+        }
+        Some(Err(too_large)) => {
+            let steps = match config.steps {
+                true => " (no steps: they are counted for flat structures)",
+                false => "",
+            };
+            observe(Event::Warning(format!(
+                "{too_large}; measured in two levels alone, refereed by the two-level exact \
+                 BVH{steps}"
+            )));
+            None
+        }
+        None => None,
+    };
+    let mut bench = SceneBench::new(ctx, config, flat, two_level, observe, progress)?;
+    for c in &bench.candidates {
+        let compiled = c.tracer.compiled();
+        if !report
+            .shaders
+            .iter()
+            .any(|s| s.compiled.pipeline == compiled.pipeline)
+        {
+            report.shaders.push(ShaderRecord {
+                method: c.method(),
+                compiled,
+            });
+        }
+    }
+    for &ray_type in &config.ray_types {
+        *measurement += 1;
+        let mut numbered = |event| {
+            observe(match event {
+                Event::Progress(what) => {
+                    Event::Progress(format!("[{measurement}/{measurements}] {what}"))
+                }
+                warning => warning,
+            })
+        };
+        bench.measure(ray_type, &mut numbered)?;
+    }
+    if let Some(dir) = &config.plot_dir {
+        let dir = dir.join(plot::scene_dir_name(bench.view().name(), plot_dirs));
+        report.written.extend(bench.write_plots(dir)?);
+    }
+    report.results.extend(bench.records);
+    Ok(())
 }
 
 /// `placed` flattened (known to fit in memory) and checked, with `config`'s points added: the

@@ -44,7 +44,7 @@ pub mod validate;
 use std::path::PathBuf;
 
 pub use crate::rays::RayType;
-pub use harness::{run, run_observed, Event};
+pub use harness::{run, run_keeping, run_observed, Event};
 pub use record::{write_csv, write_json, BenchReport, Record, ShaderRecord};
 pub use shaders::{shader_report, shader_report_table, write_shader_json, ShaderReport};
 pub use table::{host_line, shader_table, steps_table, table, work_table};

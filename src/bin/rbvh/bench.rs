@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use crate::outputs::{self, output};
 use crate::progress::Bar;
 use anyhow::{Context as _, Result};
-use rbvh::bench::{self, BenchConfig, Device, Event, RayType};
+use rbvh::bench::{self, BenchConfig, BenchReport, Device, Event, RayType};
 use rbvh::gpu::Context;
 use rbvh::scene::PointSource;
 
@@ -244,7 +244,7 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     config.instances = a.instances.into();
 
     let bar = Bar::new("benchmark");
-    let result = bench::run_observed(
+    let result = bench::run_keeping(
         &config,
         &mut |event| match event {
             Event::Progress(what) => bar.set_label(what),
@@ -256,17 +256,41 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         &bar,
     );
     bar.finish();
-    let report = result.map_err(flag_error).context("benchmark")?;
+    let (report, stopped) = result.map_err(flag_error).context("benchmark")?;
+    let invalid = report_and_write(&report, &a)?;
+    if let Some(error) = stopped {
+        let mut measured: Vec<&str> = report.results.iter().map(|r| r.scene.as_str()).collect();
+        measured.dedup();
+        let written = match (&a.json, &a.csv) {
+            (None, None) => "shown above (--json, --csv to keep them)",
+            _ => "shown and written above",
+        };
+        return Err(flag_error(error)).context(format!(
+            "benchmark stopped: the results of the scene(s) measured before ({}: {} records) are \
+             {written}",
+            measured.join(", "),
+            report.results.len()
+        ));
+    }
+    anyhow::ensure!(
+        invalid == 0 || a.allow_invalid,
+        "{invalid} measurement(s) INVALID (--allow-invalid to exit 0 all the same)"
+    );
+    Ok(())
+}
 
-    print!("{}", bench::table(&report));
+/// Prints `report`'s tables and writes the files `a` asks for; returns the invalid
+/// measurements' count.
+fn report_and_write(report: &BenchReport, a: &Args) -> Result<usize> {
+    print!("{}", bench::table(report));
     println!();
-    print!("{}", bench::work_table(&report));
-    let steps = bench::steps_table(&report);
+    print!("{}", bench::work_table(report));
+    let steps = bench::steps_table(report);
     if !steps.is_empty() {
         println!();
         print!("{steps}");
     }
-    print!("{}", bench::shader_table(&report));
+    print!("{}", bench::shader_table(report));
     let invalid = report.results.iter().filter(|r| !r.valid).count();
     if invalid > 0 {
         eprintln!(
@@ -274,19 +298,15 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
         );
     }
     if let Some(path) = &a.json {
-        bench::write_json(path, &report)?;
+        bench::write_json(path, report)?;
         eprintln!("wrote {}", path.display());
     }
     if let Some(path) = &a.csv {
-        bench::write_csv(path, &report)?;
+        bench::write_csv(path, report)?;
         eprintln!("wrote {}", path.display());
     }
     for path in &report.written {
         eprintln!("wrote {}", path.display());
     }
-    anyhow::ensure!(
-        invalid == 0 || a.allow_invalid,
-        "{invalid} measurement(s) INVALID (--allow-invalid to exit 0 all the same)"
-    );
-    Ok(())
+    Ok(invalid)
 }
