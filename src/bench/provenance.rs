@@ -134,21 +134,34 @@ pub fn git_dirty() -> Option<bool> {
     out.status.success().then_some(!out.stdout.is_empty())
 }
 
-/// The worker threads lavapipe (Mesa's llvmpipe) runs compute dispatches on, or None for any
-/// other device. Mesa reads `LP_NUM_THREADS` once, when the device is created; unset, it uses one
-/// thread per CPU, which `available_parallelism` reports (up to Mesa's own cap, `LP_MAX_THREADS`).
+/// Mesa's `LP_MAX_THREADS` (`lp_limits.h`; 32 in Mesa 22.3, which the project runs on): llvmpipe
+/// starts no more worker threads than this, whatever `LP_NUM_THREADS` or the CPU count says.
+const LP_MAX_THREADS: u32 = 32;
+
+/// The threads lavapipe (Mesa's llvmpipe) runs compute dispatches on, or None for any other
+/// device: [`lavapipe_threads_for`] of `LP_NUM_THREADS` and the CPUs this process may run on.
 pub fn lavapipe_threads(ctx: &Context) -> Option<u32> {
     if !ctx.device_name().contains("llvmpipe") {
         return None;
     }
-    std::env::var("LP_NUM_THREADS")
+    let cpus = std::thread::available_parallelism()
         .ok()
-        .and_then(|v| v.trim().parse().ok())
-        .or_else(|| {
-            std::thread::available_parallelism()
-                .ok()
-                .map(|n| n.get() as u32)
-        })
+        .map(|n| u32::try_from(n.get()).unwrap_or(u32::MAX));
+    Some(lavapipe_threads_for(
+        std::env::var("LP_NUM_THREADS").ok().as_deref(),
+        cpus,
+    ))
+}
+
+/// The threads llvmpipe runs on, as its screen counts its workers when the device is created
+/// (`llvmpipe_create_screen`, Mesa 22.3): one a CPU where there are several, `LP_NUM_THREADS`
+/// where it is a number, at most [`LP_MAX_THREADS`]; with no worker (one CPU, or
+/// `LP_NUM_THREADS=0`) a dispatch runs on the thread that submits it, one thread.
+fn lavapipe_threads_for(lp_num_threads: Option<&str>, cpus: Option<u32>) -> u32 {
+    let workers = lp_num_threads
+        .and_then(|v| v.trim().parse::<u32>().ok())
+        .unwrap_or(cpus.filter(|&n| n > 1).unwrap_or(0));
+    workers.clamp(1, LP_MAX_THREADS)
 }
 
 /// The machine a measurement ran on: what decides lavapipe's speed (the CPU, its caches, the Mesa
@@ -453,5 +466,19 @@ mod tests {
             "AMD EPYC, 2 cores (2 threads used), L3 16 MiB, virtual machine, Mesa 22.3.6"
         );
         assert_eq!(Host::default().summary(), "CPU not known");
+    }
+
+    #[test]
+    fn lavapipe_threads_are_counted_as_mesa_counts_its_workers() {
+        use super::lavapipe_threads_for as threads;
+        assert_eq!(threads(None, Some(2)), 2);
+        assert_eq!(threads(None, Some(1)), 1);
+        assert_eq!(threads(None, None), 1);
+        assert_eq!(threads(None, Some(128)), 32);
+        assert_eq!(threads(Some("4"), Some(2)), 4);
+        assert_eq!(threads(Some(" 8 "), Some(2)), 8);
+        assert_eq!(threads(Some("0"), Some(16)), 1);
+        assert_eq!(threads(Some("64"), Some(2)), 32);
+        assert_eq!(threads(Some("many"), Some(6)), 6);
     }
 }

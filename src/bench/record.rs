@@ -10,7 +10,7 @@
 //! | `date` | string | start of the run, UTC, ISO 8601 (`2025-01-31T12:00:00Z`) |
 //! | `git` | string \| null | `RBVH_COMMIT` where set, else `git rev-parse HEAD` in the working directory; null outside a repository |
 //! | `git_dirty` | bool \| null | whether tracked files other than documentation (`docs/`, `*.md`) differed from that commit (uncommitted code was measured); null outside a repository or with `RBVH_COMMIT` |
-//! | `host` | object | the machine ([`super::provenance::Host`]): `cpu`, `cores`, `logical_cpus`, `threads_used` (lavapipe's worker threads, `LP_NUM_THREADS` else one per CPU; null on other devices), `l2_bytes`, `l3_bytes`, `memory_bytes`, `os`, `virtualized`, `mesa`, `llvm`; null where the system does not tell |
+//! | `host` | object | the machine ([`super::provenance::Host`]): `cpu`, `cores`, `logical_cpus`, `threads_used` (the threads lavapipe traces on: `LP_NUM_THREADS` else one per CPU, at most Mesa's 32; null on other devices), `l2_bytes`, `l3_bytes`, `memory_bytes`, `os`, `virtualized`, `mesa`, `llvm`; null where the system does not tell |
 //! | `version` | string | this crate's version |
 //! | `runs` | int | timed runs per record, after one warm-up |
 //! | `min_run_ms` | number | shortest timed run asked for, in milliseconds (records' `passes`) |
