@@ -743,8 +743,37 @@ fn a_scene_with_instances_is_measured_in_two_levels_beside_the_flat_one() {
     let dir = tempfile::tempdir().unwrap();
     let mut config = placed_bench(dir.path());
     config.seam_rays = 4000;
+    config.plot_dir = Some(dir.path().join("plots"));
     let report = bench::run(&config).unwrap();
     assert_eq!(report.results.len(), 2 * 4);
+    // The charts draw the two-level structures too, each in the legend and in its colour.
+    let chart = report
+        .written
+        .iter()
+        .find(|p| p.ends_with("speed_vs_error.svg"))
+        .expect("a speed chart");
+    let svg = std::fs::read_to_string(chart).unwrap();
+    let texts: Vec<&str> = svg
+        .split('<')
+        .filter_map(|t| t.strip_prefix("text").and_then(|t| t.split('>').nth(1)))
+        .map(str::trim)
+        .collect();
+    for name in ["rbvh", "rbvh-instanced", "exact", "exact-instanced"] {
+        assert!(
+            texts.contains(&name),
+            "no {name:?} in the legend: {texts:?}"
+        );
+    }
+    let png = image::open(chart.with_extension("png")).unwrap().to_rgb8();
+    for (name, colour) in [
+        ("rbvh-instanced", [255, 0, 255]),
+        ("exact-instanced", [128, 0, 0]),
+    ] {
+        assert!(
+            png.pixels().any(|p| p.0 == colour),
+            "no {name} series in the PNG chart"
+        );
+    }
     for chunk in report.results.chunks(4) {
         let (flat, two) = (&chunk[0], &chunk[1]);
         assert_eq!(
