@@ -64,6 +64,19 @@ fn a_submission_that_does_not_finish_loses_the_context() {
         alloc.contains("allocate later") && alloc.contains("sixteen fills"),
         "{alloc}"
     );
+    // Nor is memory the device may still write read back, or written.
+    let mut host = buffer;
+    let read = ctx.read::<u32>(&mut host).unwrap_err().to_string();
+    assert!(
+        read.starts_with("read filled: the Vulkan context is lost"),
+        "{read}"
+    );
+    let write = ctx.write(&mut host, &[0; 4]).unwrap_err().to_string();
+    assert!(
+        write.starts_with("write filled: the Vulkan context is lost"),
+        "{write}"
+    );
+    let buffer = host;
     // The fills may still be running: the buffer is left to the driver, not destroyed under
     // them (which the validation layer reports as a buffer in use).
     drop(buffer);

@@ -84,9 +84,10 @@ pub fn run_observed(
 
 /// [`run_observed`], keeping what a run measured before an error stopped it: the report of the
 /// scenes measured whole (their records, shaders and plots), and the error, None where the run
-/// reached its end. A scene's load or a device's failure late in a long run then costs that
-/// scene alone: the caller writes what was measured before it. An error before any scene is
-/// measured (the configuration, a scene that is not there, the device) is returned alone.
+/// reached its end. A scene's load or a device's failure late in a long run then loses neither
+/// the scenes measured before it, which the caller can still write, nor the error (the run
+/// stops there: the scenes after it are not measured). An error before any scene is measured
+/// (the configuration, a scene that is not there, the device) is returned alone.
 pub fn run_keeping(
     config: &BenchConfig,
     observe: &mut dyn FnMut(Event),
@@ -194,19 +195,6 @@ fn measure_scene(
         None => None,
     };
     let mut bench = SceneBench::new(ctx, config, flat, two_level, observe, progress)?;
-    for c in &bench.candidates {
-        let compiled = c.tracer.compiled();
-        if !report
-            .shaders
-            .iter()
-            .any(|s| s.compiled.pipeline == compiled.pipeline)
-        {
-            report.shaders.push(ShaderRecord {
-                method: c.method(),
-                compiled,
-            });
-        }
-    }
     for &ray_type in &config.ray_types {
         *measurement += 1;
         let mut numbered = |event| {
@@ -222,6 +210,20 @@ fn measure_scene(
     if let Some(dir) = &config.plot_dir {
         let dir = dir.join(plot::scene_dir_name(bench.view().name(), plot_dirs));
         report.written.extend(bench.write_plots(dir)?);
+    }
+    // Only now, so that a scene stopped by an error adds no shader without a record.
+    for c in &bench.candidates {
+        let compiled = c.tracer.compiled();
+        if !report
+            .shaders
+            .iter()
+            .any(|s| s.compiled.pipeline == compiled.pipeline)
+        {
+            report.shaders.push(ShaderRecord {
+                method: c.method(),
+                compiled,
+            });
+        }
     }
     report.results.extend(bench.records);
     Ok(())

@@ -156,7 +156,10 @@ pub fn lavapipe_threads(ctx: &Context) -> Option<u32> {
 /// The threads llvmpipe runs on, as its screen counts its workers when the device is created
 /// (`llvmpipe_create_screen`, Mesa 22.3): one a CPU where there are several, `LP_NUM_THREADS`
 /// where it is a number, at most [`LP_MAX_THREADS`]; with no worker (one CPU, or
-/// `LP_NUM_THREADS=0`) a dispatch runs on the thread that submits it, one thread.
+/// `LP_NUM_THREADS=0`) a dispatch runs on the thread that submits it, one thread. `cpus` is what
+/// the standard library says this process may use, which a CPU quota (cgroups) may make fewer
+/// than the CPUs Mesa counts; `LP_NUM_THREADS` is read as a decimal number, where Mesa's
+/// `strtol` also takes hexadecimal and a trailing text.
 fn lavapipe_threads_for(lp_num_threads: Option<&str>, cpus: Option<u32>) -> u32 {
     let workers = lp_num_threads
         .and_then(|v| v.trim().parse::<u32>().ok())

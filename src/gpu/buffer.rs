@@ -320,6 +320,7 @@ impl Context {
         cmd: vk::CommandBuffer,
     ) -> Result<Option<Buffer>> {
         fits(buffer, bytes)?;
+        self.check_runnable(&format!("write {}", buffer.name))?;
         if let Some(dst) = buffer.host_slice_mut() {
             dst[..bytes.len()].copy_from_slice(bytes);
             return Ok(None);
@@ -389,6 +390,8 @@ impl Context {
         progress: &dyn Progress,
     ) -> Result<()> {
         fits(buffer, bytes)?;
+        // A lost context's device may still read it (Error::DeviceLost).
+        self.check_runnable(&format!("write {}", buffer.name))?;
         if bytes.is_empty() {
             return Ok(());
         }
@@ -427,6 +430,8 @@ impl Context {
 
     /// Reads `buffer` back as `T`s (its whole size, rounded down to whole elements).
     pub fn read<T: bytemuck::Pod>(&self, buffer: &mut Buffer) -> Result<Vec<T>> {
+        // A lost context's device may still write it (Error::DeviceLost).
+        self.check_runnable(&format!("read {}", buffer.name))?;
         let elem = std::mem::size_of::<T>() as u64;
         let len = (buffer.size / elem * elem) as usize;
         let mut out = vec![T::zeroed(); len / elem as usize];

@@ -808,8 +808,11 @@ impl Drop for Shared {
     fn drop(&mut self) {
         // A lost context's device may still run the submission that did not finish, on memory
         // the allocator would free and a device we would destroy: all of it is left to the
-        // driver (the process's end) instead (Error::DeviceLost).
+        // driver (the process's end) instead (Error::DeviceLost). Its own parts too, which
+        // dropping the fields would free: the loader's library (closing libvulkan under the
+        // device) and the messages the validation messenger still writes to.
         if self.is_lost() {
+            std::mem::forget(self.own.take());
             return;
         }
         // SAFETY: the last handle is gone, so no buffer, pipeline or submission of ours is alive.

@@ -159,22 +159,30 @@ fn reach_of(ctx: &Context, atlas_bytes: u64, colours: &[u32]) -> Result<Reach> {
     ])
 }
 
-/// The atlas, colour words and reach of a painter that uploads its own atlas ([`Painter::new`],
-/// [`Painter::record_new`]).
-fn own_parts(ctx: &Context, rbvh: &Rbvh) -> Result<(Vec<u32>, Vec<u32>, Reach)> {
-    atlas_sizes(rbvh)?;
+/// [`own_parts`]: the atlas's words, the colour words, their reach and the atlas's sizes
+/// ([`atlas_sizes`]).
+type OwnParts = (Vec<u32>, Vec<u32>, Reach, [u32; 4]);
+
+/// The atlas, colour words, reach and sizes of a painter that uploads its own atlas
+/// ([`Painter::new`], [`Painter::record_new`]).
+fn own_parts(ctx: &Context, rbvh: &Rbvh) -> Result<OwnParts> {
+    let sizes = atlas_sizes(rbvh)?;
     let (atlas, colours) = channel_data(rbvh)?;
     let reach = reach_of(
         ctx,
         std::mem::size_of_val(atlas.as_slice()) as u64,
         &colours,
     )?;
-    Ok((atlas, colours, reach))
+    Ok((atlas, colours, reach, sizes))
 }
 
-/// The context, shared atlas, colour words and reach of [`Painter::sharing`]: the tracer must hold
+/// [`shared_parts`]: the context, the tracer's atlas, the colour words, their reach and the
+/// atlas's sizes ([`atlas_sizes`]).
+type SharedParts = (Context, Arc<Buffer>, Vec<u32>, Reach, [u32; 4]);
+
+/// The context, shared atlas, colour words, reach and sizes of [`Painter::sharing`]: the tracer must hold
 /// `rbvh`'s atlas (same pitch, texel count and bands).
-fn shared_parts(tracer: &Tracer, rbvh: &Rbvh) -> Result<(Context, Arc<Buffer>, Vec<u32>, Reach)> {
+fn shared_parts(tracer: &Tracer, rbvh: &Rbvh) -> Result<SharedParts> {
     no_height_only(rbvh)?;
     let Some((atlas, pitch, len, ends)) = tracer.atlas() else {
         return Err(Error::param(
@@ -182,7 +190,8 @@ fn shared_parts(tracer: &Tracer, rbvh: &Rbvh) -> Result<(Context, Arc<Buffer>, V
             "an exact-BVH tracer has no atlas to paint: share an RBVH tracer",
         ));
     };
-    let [wide, end12, end10, our_len] = atlas_sizes(rbvh)?;
+    let sizes = atlas_sizes(rbvh)?;
+    let [wide, end12, end10, our_len] = sizes;
     let ours = (rbvh.atlas.pitch, our_len, [wide, end12, end10]);
     if (pitch, len, ends) != ours {
         return Err(Error::param(
@@ -198,7 +207,7 @@ fn shared_parts(tracer: &Tracer, rbvh: &Rbvh) -> Result<(Context, Arc<Buffer>, V
     let ctx = atlas.context().clone();
     // The tracer's buffer, block ranges included, is what gets bound.
     let reach = reach_of(&ctx, atlas.size(), &colours)?;
-    Ok((ctx, atlas.clone(), colours, reach))
+    Ok((ctx, atlas.clone(), colours, reach, sizes))
 }
 
 /// An RBVH's atlas and colour channel on the device, ready to paint.
@@ -222,19 +231,19 @@ impl Painter {
     /// Uploads the atlas and the colour channel of `rbvh` (white on every surface texel when it
     /// has none, as [`Rbvh::colour_channel`] creates it).
     pub fn new(ctx: &Context, rbvh: &Rbvh) -> Result<Painter> {
-        let (atlas, colours, reach) = own_parts(ctx, rbvh)?;
+        let (atlas, colours, reach, sizes) = own_parts(ctx, rbvh)?;
         let atlas = ctx.upload_unchecked(ATLAS, bytemuck::cast_slice(&atlas))?;
         let colours = ctx.upload_unchecked(COLOURS, bytemuck::cast_slice(&colours))?;
-        Self::with_buffers(ctx, rbvh, reach, Arc::new(atlas), colours)
+        Self::with_buffers(ctx, rbvh, reach, Arc::new(atlas), colours, sizes)
     }
 
     /// As [`Painter::new`], painting with the atlas `tracer` (made by [`Tracer::new`] for `rbvh`,
     /// with or without levels of detail) already holds on the device: only the colour channel is uploaded,
     /// which saves the atlas's size again on the device.
     pub fn sharing(tracer: &Tracer, rbvh: &Rbvh) -> Result<Painter> {
-        let (ctx, atlas, colours, reach) = shared_parts(tracer, rbvh)?;
+        let (ctx, atlas, colours, reach, sizes) = shared_parts(tracer, rbvh)?;
         let colours = ctx.upload_unchecked(COLOURS, bytemuck::cast_slice(&colours))?;
-        Self::with_buffers(&ctx, rbvh, reach, atlas, colours)
+        Self::with_buffers(&ctx, rbvh, reach, atlas, colours, sizes)
     }
 
     /// Embedded use: as [`Painter::sharing`], *recording* any staging copy of the colours into
@@ -245,14 +254,14 @@ impl Painter {
         rbvh: &Rbvh,
         cmd: vk::CommandBuffer,
     ) -> Result<(Painter, Vec<Buffer>)> {
-        let (ctx, atlas, colours, reach) = shared_parts(tracer, rbvh)?;
+        let (ctx, atlas, colours, reach, sizes) = shared_parts(tracer, rbvh)?;
         let (colours, staging) =
             ctx.upload_unchecked_recorded(COLOURS, bytemuck::cast_slice(&colours), cmd)?;
         if staging.is_some() {
             ctx.record_transfer_to_compute(cmd);
         }
         Ok((
-            Self::with_buffers(&ctx, rbvh, reach, atlas, colours)?,
+            Self::with_buffers(&ctx, rbvh, reach, atlas, colours, sizes)?,
             staging.into_iter().collect(),
         ))
     }
@@ -278,7 +287,7 @@ impl Painter {
         rbvh: &Rbvh,
         cmd: vk::CommandBuffer,
     ) -> Result<(Painter, Vec<Buffer>)> {
-        let (atlas, colours, reach) = own_parts(ctx, rbvh)?;
+        let (atlas, colours, reach, sizes) = own_parts(ctx, rbvh)?;
         let (atlas, stage_a) =
             ctx.upload_unchecked_recorded(ATLAS, bytemuck::cast_slice(&atlas), cmd)?;
         let (colours, stage_c) =
@@ -288,7 +297,7 @@ impl Painter {
             ctx.record_transfer_to_compute(cmd);
         }
         Ok((
-            Self::with_buffers(ctx, rbvh, reach, Arc::new(atlas), colours)?,
+            Self::with_buffers(ctx, rbvh, reach, Arc::new(atlas), colours, sizes)?,
             staging,
         ))
     }
@@ -299,6 +308,7 @@ impl Painter {
         reach: Reach,
         atlas: Arc<Buffer>,
         colours: Buffer,
+        [wide, end12, end10, atlas_len]: [u32; 4],
     ) -> Result<Painter> {
         let address = |b: &Buffer| {
             b.device_address()
@@ -308,7 +318,6 @@ impl Painter {
             Reach::Bindings => (0, 0),
             Reach::DeviceAddresses => (address(&atlas)?, address(&colours)?),
         };
-        let [wide, end12, end10, atlas_len] = atlas_sizes(rbvh)?;
         Ok(Painter {
             pipeline: ComputePipeline::new(
                 ctx,

@@ -79,6 +79,7 @@ impl ComputePipeline {
                 hint: "this device is below the Vulkan minimum of 128 bytes".into(),
             });
         }
+        ctx.check_validation_of(&format!("the calls before the creation of pipeline {name}"))?;
         let d = &ctx.shared.device;
         let mut p = ComputePipeline {
             ctx: ctx.clone(),

@@ -104,6 +104,8 @@ impl Context {
             ));
         }
         let _serial = own.submit_lock.lock().unwrap_or_else(|p| p.into_inner());
+        // Another thread's submission may have lost the context while this one waited for it.
+        self.check_runnable(pass)?;
         self.check_validation_of(&format!("the calls before {pass}"))?;
         let _submitting = Submitting::enter();
         let mut scratch = Scratch {
@@ -188,23 +190,31 @@ impl Context {
             let cmds = [cmd];
             let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
             let start = Instant::now();
-            device
-                .queue_submit(own.queue, &submit, scratch.fence)
-                .map_err(|r| Error::vk("vkQueueSubmit", pass, r))?;
+            let submitted = device.queue_submit(own.queue, &submit, scratch.fence);
             let timeout_ns = own.submit_timeout_ns.load(Ordering::Relaxed);
-            if let Err(r) = device.wait_for_fences(&[scratch.fence], true, timeout_ns) {
+            let unfinished = match submitted {
+                Err(vk::Result::ERROR_DEVICE_LOST) => {
+                    Some("vkQueueSubmit: the device is lost".into())
+                }
+                Err(r) => return Err(Error::vk("vkQueueSubmit", pass, r)),
+                Ok(()) => match device.wait_for_fences(&[scratch.fence], true, timeout_ns) {
+                    Ok(()) => None,
+                    Err(vk::Result::TIMEOUT) => {
+                        Some(format!("no result within {} s", timeout_ns as f64 / 1e9))
+                    }
+                    Err(r) => Some(format!("vkWaitForFences: {r}")),
+                },
+            };
+            if let Some(reason) = unfinished {
                 // The device may still run this submission: its command buffer, fence and
                 // queries, and every object it uses, must outlive it, so the context is lost
-                // and frees nothing from here on (Error::DeviceLost).
+                // and frees nothing from here on (Error::DeviceLost). The first loss is the
+                // one every later error names.
                 std::mem::forget(scratch);
-                let reason = match r {
-                    vk::Result::TIMEOUT => {
-                        format!("no result within {} s", timeout_ns as f64 * 1e-9)
-                    }
-                    r => format!("vkWaitForFences: {r}"),
-                };
-                *own.lost.lock().unwrap_or_else(|p| p.into_inner()) =
-                    Some((pass.to_string(), reason));
+                own.lost
+                    .lock()
+                    .unwrap_or_else(|p| p.into_inner())
+                    .get_or_insert((pass.to_string(), reason));
                 return Err(self.lost_error(pass).expect("marked lost above"));
             }
             let wall_ms = start.elapsed().as_secs_f64() * 1e3;

@@ -257,26 +257,30 @@ pub fn run(a: Args, given: &Given) -> Result<()> {
     );
     bar.finish();
     let (report, stopped) = result.map_err(flag_error).context("benchmark")?;
-    let invalid = report_and_write(&report, &a)?;
-    if let Some(error) = stopped {
-        let mut measured: Vec<&str> = report.results.iter().map(|r| r.scene.as_str()).collect();
-        measured.dedup();
-        let written = match (&a.json, &a.csv) {
-            (None, None) => "shown above (--json, --csv to keep them)",
-            _ => "shown and written above",
-        };
-        return Err(flag_error(error)).context(format!(
-            "benchmark stopped: the results of the scene(s) measured before ({}: {} records) are \
-             {written}",
-            measured.join(", "),
-            report.results.len()
-        ));
-    }
-    anyhow::ensure!(
-        invalid == 0 || a.allow_invalid,
-        "{invalid} measurement(s) INVALID (--allow-invalid to exit 0 all the same)"
-    );
-    Ok(())
+    let written = report_and_write(&report, &a);
+    let Some(error) = stopped else {
+        let invalid = written?;
+        anyhow::ensure!(
+            invalid == 0 || a.allow_invalid,
+            "{invalid} measurement(s) INVALID (--allow-invalid to exit 0 all the same)"
+        );
+        return Ok(());
+    };
+    let mut measured: Vec<&str> = report.results.iter().map(|r| r.scene.as_str()).collect();
+    measured.dedup();
+    let kept = match (
+        &written,
+        a.json.is_some() || a.csv.is_some() || a.plot.is_some(),
+    ) {
+        (Err(e), _) => format!("shown above, but writing them failed: {e:#}"),
+        (Ok(_), true) => "shown and written above".to_string(),
+        (Ok(_), false) => "shown above (--json, --csv or --plot keeps them)".to_string(),
+    };
+    Err(flag_error(error)).context(format!(
+        "benchmark stopped: the results of the scene(s) measured before ({}: {} records) are {kept}",
+        measured.join(", "),
+        report.results.len()
+    ))
 }
 
 /// Prints `report`'s tables and writes the files `a` asks for; returns the invalid
