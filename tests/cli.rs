@@ -162,26 +162,29 @@ fn a_bench_stopped_by_a_later_scene_keeps_the_earlier_ones() {
     let bad = dir.path().join("bad.obj");
     std::fs::write(&bad, "v 0 0 0\nv 1 0 0\nf 1 2 9\n").unwrap();
     let (json, csv) = (dir.path().join("b.json"), dir.path().join("b.csv"));
-    let scenes = format!("sphere,{}", arg(&bad));
-    let out = rbvh(&[
-        "bench",
-        "--scene",
-        &scenes,
-        "--quality",
-        "0",
-        "--rays",
-        "primary",
-        "--width",
-        "16",
-        "--height",
-        "12",
-        "--runs",
-        "1",
-        "--json",
-        arg(&json),
-        "--csv",
-        arg(&csv),
-    ]);
+    let bench = |scenes: String, outputs: &[&str]| {
+        let mut args = vec![
+            "bench",
+            "--scene",
+            &scenes,
+            "--quality",
+            "0",
+            "--rays",
+            "primary",
+            "--width",
+            "16",
+            "--height",
+            "12",
+            "--runs",
+            "1",
+        ];
+        args.extend_from_slice(outputs);
+        rbvh(&args)
+    };
+    let out = bench(
+        format!("sphere,{}", arg(&bad)),
+        &["--json", arg(&json), "--csv", arg(&csv)],
+    );
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
@@ -196,24 +199,7 @@ fn a_bench_stopped_by_a_later_scene_keeps_the_earlier_ones() {
     assert_eq!(std::fs::read_to_string(&csv).unwrap().lines().count(), 3);
     // Stopped at the first scene, nothing was measured: the error alone, no file written.
     std::fs::remove_file(&json).unwrap();
-    let scenes = format!("{},sphere", arg(&bad));
-    let out = rbvh(&[
-        "bench",
-        "--scene",
-        &scenes,
-        "--quality",
-        "0",
-        "--rays",
-        "primary",
-        "--width",
-        "16",
-        "--height",
-        "12",
-        "--runs",
-        "1",
-        "--json",
-        arg(&json),
-    ]);
+    let out = bench(format!("{},sphere", arg(&bad)), &["--json", arg(&json)]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("bad.obj:3"));
     assert!(!json.exists());
