@@ -98,6 +98,33 @@ impl Drop for Buffer {
     }
 }
 
+/// A write made ready for an engine's command buffer ([`Context::prepare_write`]): nothing left
+/// to do where the buffer's memory took the bytes at once, else a staging buffer holding them
+/// and the copy's destination and size, which [`PreparedWrite::record`] records.
+#[must_use = "the copy is not recorded until PreparedWrite::record"]
+pub(crate) struct PreparedWrite {
+    copy: Option<(Buffer, vk::Buffer, u64)>,
+}
+
+impl PreparedWrite {
+    /// Records the copy from the staging buffer into `cmd` (in the recording state), if any, and
+    /// returns that staging buffer, which must live until `cmd` has executed.
+    pub(crate) fn record(self, ctx: &Context, cmd: vk::CommandBuffer) -> Option<Buffer> {
+        let (staging, dst, size) = self.copy?;
+        if size > 0 {
+            let region = [vk::BufferCopy::default().size(size)];
+            // SAFETY: `cmd` is recording (the caller's contract); the staging buffer is returned
+            // to outlive it, and the destination is the caller's buffer, which must too.
+            unsafe {
+                ctx.shared
+                    .device
+                    .cmd_copy_buffer(cmd, staging.raw, dst, &region)
+            };
+        }
+        Some(staging)
+    }
+}
+
 impl Context {
     /// Creates a buffer of at least `size` bytes (Vulkan forbids empty buffers, so 0 becomes 4).
     pub fn create_buffer(
@@ -285,17 +312,19 @@ impl Context {
             bytes.len() as u64,
             "split the work into smaller batches or a smaller scene",
         )?;
-        self.upload_unchecked_recorded(name, bytes, cmd)
+        let (buffer, write) = self.upload_unchecked_prepared(name, bytes)?;
+        Ok((buffer, write.record(self, cmd)))
     }
 
-    /// As [`Context::upload_storage_recorded`], without the range check: for arrays whose reach
-    /// the caller has checked ([`Context::reach`]).
-    pub(crate) fn upload_unchecked_recorded(
+    /// [`Context::upload_storage_recorded`]'s fallible half, without the range check (for arrays
+    /// whose reach the caller has checked, [`Context::reach`]): the buffer, and its bytes written
+    /// or staged ([`Context::prepare_write`]), for a recording call to record the copy once
+    /// nothing can fail.
+    pub(crate) fn upload_unchecked_prepared(
         &self,
         name: &str,
         bytes: &[u8],
-        cmd: vk::CommandBuffer,
-    ) -> Result<(Buffer, Option<Buffer>)> {
+    ) -> Result<(Buffer, PreparedWrite)> {
         // TRANSFER_SRC too: a painter's colours are read back by a copy where the memory is
         // not host-visible (`Painter::colours`).
         let usage = vk::BufferUsageFlags::STORAGE_BUFFER
@@ -303,8 +332,8 @@ impl Context {
             | vk::BufferUsageFlags::TRANSFER_SRC;
         let mut buffer =
             self.create_buffer(name, bytes.len() as u64, usage, MemoryLocation::GpuOnly)?;
-        let staging = self.write_recorded(&mut buffer, bytes, cmd)?;
-        Ok((buffer, staging))
+        let write = self.prepare_write(&mut buffer, bytes)?;
+        Ok((buffer, write))
     }
 
     /// Writes `bytes` at the start of `buffer` (made with `TRANSFER_DST` usage) for an embedded
@@ -312,18 +341,27 @@ impl Context {
     /// staging buffer whose copy is *recorded* into `cmd` (in the recording state). The staging
     /// buffer is returned and must live until `cmd` has executed; the caller orders the copy
     /// after the buffer's last readers and before its next ones. More bytes than the buffer
-    /// holds are an error.
+    /// holds are an error, and an error records nothing.
     pub fn write_recorded(
         &self,
         buffer: &mut Buffer,
         bytes: &[u8],
         cmd: vk::CommandBuffer,
     ) -> Result<Option<Buffer>> {
+        Ok(self.prepare_write(buffer, bytes)?.record(self, cmd))
+    }
+
+    /// [`Context::write_recorded`]'s fallible half: checks the bytes fit, then writes them
+    /// where `buffer`'s memory is host-visible or fills a staging buffer with them, recording
+    /// nothing. The library's recording calls take every fallible step before they record any
+    /// copy ([`PreparedWrite::record`]), so that an error leaves the engine's command buffer as
+    /// it was, not holding copies into buffers the error freed.
+    pub(crate) fn prepare_write(&self, buffer: &mut Buffer, bytes: &[u8]) -> Result<PreparedWrite> {
         fits(buffer, bytes)?;
         self.check_runnable(&format!("write {}", buffer.name))?;
         if let Some(dst) = buffer.host_slice_mut() {
             dst[..bytes.len()].copy_from_slice(bytes);
-            return Ok(None);
+            return Ok(PreparedWrite { copy: None });
         }
         let staging_name = format!("staging for {}", buffer.name);
         let mut staging = self.create_buffer(
@@ -336,16 +374,9 @@ impl Context {
             Error::NoDevice(format!("{staging_name}: no host-visible coherent memory"))
         })?[..bytes.len()]
             .copy_from_slice(bytes);
-        if !bytes.is_empty() {
-            let region = [vk::BufferCopy::default().size(bytes.len() as u64)];
-            // SAFETY: `cmd` is recording (the caller's contract); both buffers outlive it.
-            unsafe {
-                self.shared
-                    .device
-                    .cmd_copy_buffer(cmd, staging.raw, buffer.raw, &region)
-            };
-        }
-        Ok(Some(staging))
+        Ok(PreparedWrite {
+            copy: Some((staging, buffer.raw, bytes.len() as u64)),
+        })
     }
 
     /// A host-visible storage buffer of `size` bytes, zero-filled from the host (no submission):

@@ -248,22 +248,21 @@ impl Painter {
 
     /// Embedded use: as [`Painter::sharing`], *recording* any staging copy of the colours into
     /// `cmd` as [`Painter::record_new`] does; the returned staging buffers must live until `cmd`
-    /// has executed. On an error, reset `cmd` rather than submit it, as for `record_new`.
+    /// has executed. An error records nothing, as for `record_new`.
     pub fn record_sharing(
         tracer: &Tracer,
         rbvh: &Rbvh,
         cmd: vk::CommandBuffer,
     ) -> Result<(Painter, Vec<Buffer>)> {
         let (ctx, atlas, colours, reach, sizes) = shared_parts(tracer, rbvh)?;
-        let (colours, staging) =
-            ctx.upload_unchecked_recorded(COLOURS, bytemuck::cast_slice(&colours), cmd)?;
-        if staging.is_some() {
+        let (colours, write) =
+            ctx.upload_unchecked_prepared(COLOURS, bytemuck::cast_slice(&colours))?;
+        let painter = Self::with_buffers(&ctx, rbvh, reach, atlas, colours, sizes)?;
+        let staging: Vec<Buffer> = write.record(&ctx, cmd).into_iter().collect();
+        if !staging.is_empty() {
             ctx.record_transfer_to_compute(cmd);
         }
-        Ok((
-            Self::with_buffers(&ctx, rbvh, reach, atlas, colours, sizes)?,
-            staging.into_iter().collect(),
-        ))
+        Ok((painter, staging))
     }
 
     /// Bytes this painter holds on the device: the colour channel, and the atlas unless it shares
@@ -280,26 +279,27 @@ impl Painter {
     /// Embedded use: as [`Painter::new`] with the context's (the engine's) allocator, *recording*
     /// any staging copies into `cmd`, followed by a barrier that makes them visible to compute
     /// shaders; nothing is submitted. Paint with [`Painter::record`]. The staging buffers are
-    /// returned and must live until `cmd` has executed. On an error, `cmd` may already hold
-    /// copies into buffers the error has freed: reset it (or free it) rather than submit it.
+    /// returned and must live until `cmd` has executed. An error records nothing: every step
+    /// that can fail comes before the first copy is recorded.
     pub fn record_new(
         ctx: &Context,
         rbvh: &Rbvh,
         cmd: vk::CommandBuffer,
     ) -> Result<(Painter, Vec<Buffer>)> {
         let (atlas, colours, reach, sizes) = own_parts(ctx, rbvh)?;
-        let (atlas, stage_a) =
-            ctx.upload_unchecked_recorded(ATLAS, bytemuck::cast_slice(&atlas), cmd)?;
-        let (colours, stage_c) =
-            ctx.upload_unchecked_recorded(COLOURS, bytemuck::cast_slice(&colours), cmd)?;
-        let staging: Vec<Buffer> = stage_a.into_iter().chain(stage_c).collect();
+        let (atlas, write_a) =
+            ctx.upload_unchecked_prepared(ATLAS, bytemuck::cast_slice(&atlas))?;
+        let (colours, write_c) =
+            ctx.upload_unchecked_prepared(COLOURS, bytemuck::cast_slice(&colours))?;
+        let painter = Self::with_buffers(ctx, rbvh, reach, Arc::new(atlas), colours, sizes)?;
+        let staging: Vec<Buffer> = [write_a, write_c]
+            .into_iter()
+            .filter_map(|w| w.record(ctx, cmd))
+            .collect();
         if !staging.is_empty() {
             ctx.record_transfer_to_compute(cmd);
         }
-        Ok((
-            Self::with_buffers(ctx, rbvh, reach, Arc::new(atlas), colours, sizes)?,
-            staging,
-        ))
+        Ok((painter, staging))
     }
 
     fn with_buffers(
@@ -358,8 +358,7 @@ impl Painter {
     /// reach, after a compute-to-compute barrier, so that a recording composites over the paint
     /// of the shaders recorded before it (another recording's, past [`MAX_BRUSHES_PER_PASS`]).
     /// No barrier follows: the engine orders its readers of [`Painter::colour_buffer`]. The
-    /// returned recording must live until `cmd` has executed; on an error, reset `cmd` rather
-    /// than submit it (it may hold the brushes' copy into a buffer the error freed).
+    /// returned recording must live until `cmd` has executed; an error records nothing.
     pub fn record(&self, cmd: vk::CommandBuffer, brushes: &[Brush]) -> Result<PaintRecording> {
         if brushes.len() > MAX_BRUSHES_PER_PASS {
             return Err(Error::param(
@@ -371,11 +370,15 @@ impl Painter {
             ));
         }
         let ctx = self.atlas.context().clone();
-        let (brush_buf, staging) = ctx.upload_storage_recorded("paint brushes", brushes, cmd)?;
+        let bytes: &[u8] = bytemuck::cast_slice(brushes);
+        ctx.check_storage_range("paint brushes", bytes.len() as u64, "record fewer brushes")?;
+        let (brush_buf, write) = ctx.upload_unchecked_prepared("paint brushes", bytes)?;
+        let set = self.descriptor_set(&brush_buf)?;
+        // Recorded once nothing can fail: an error leaves `cmd` as it was.
+        let staging = write.record(&ctx, cmd);
         if staging.is_some() {
             ctx.record_transfer_to_compute(cmd);
         }
-        let set = self.descriptor_set(&brush_buf)?;
         let leaves = candidate_leaves(&self.heightfields, brushes);
         ctx.record_compute_to_compute(cmd);
         self.record_leaves(ctx.device(), cmd, &set, &leaves, brushes.len() as u32);

@@ -308,8 +308,8 @@ impl Tracer {
     /// *recording* any staging copies into `cmd`, followed by a barrier that makes them visible
     /// to compute shaders. Nothing is submitted. Call [`Tracer::release_staging`] once `cmd` has
     /// executed. With levels of detail, bind the engine's rays, hits and cones with
-    /// [`Tracer::bind_with_cones`]. On an error, `cmd` may already hold copies into buffers the
-    /// error has freed: reset it (or free it) rather than submit it.
+    /// [`Tracer::bind_with_cones`]. An error records nothing: every step that can fail comes
+    /// before the first copy is recorded.
     pub fn new_recorded(
         ctx: &Context,
         structure: &Structure,
@@ -411,18 +411,22 @@ impl Tracer {
     ) -> Result<Self> {
         let reach = reach_of(ctx, arrays)?;
         let mut structure = Vec::new();
-        let mut staging = Vec::new();
+        let mut writes = Vec::new();
         for (array, bytes) in arrays {
-            let (buffer, stage) = ctx.upload_unchecked_recorded(array, bytes, cmd)?;
+            let (buffer, write) = ctx.upload_unchecked_prepared(array, bytes)?;
             structure.push(Arc::new(buffer));
-            staging.extend(stage);
-        }
-        if !staging.is_empty() {
-            ctx.record_transfer_to_compute(cmd);
+            writes.push(write);
         }
         let spirv = Cow::Borrowed(shader_spirv(shader.0, reach));
         let mut tracer = Self::assemble(ctx, shader, reach, spirv, structure, sizes)?;
-        tracer.staging = staging;
+        // Recorded once nothing can fail: an error leaves `cmd` as it was.
+        tracer.staging = writes
+            .into_iter()
+            .filter_map(|w| w.record(ctx, cmd))
+            .collect();
+        if !tracer.staging.is_empty() {
+            ctx.record_transfer_to_compute(cmd);
+        }
         Ok(tracer)
     }
 
@@ -459,10 +463,19 @@ impl Tracer {
         let placed = placed.into();
         let (top, instances) = self.instance_update(&placed)?;
         let ctx = self.ctx.clone();
+        // Both arrays checked before either is written, and the copies recorded once nothing
+        // can fail: an error leaves the structure and `cmd` as they were.
+        let arrays = [(0, top), (placed.instances_array, instances)];
+        for (k, _) in arrays {
+            self.structure_mut(k)?;
+        }
+        let mut writes = Vec::new();
+        for (k, bytes) in arrays {
+            writes.push(ctx.prepare_write(self.structure_mut(k)?, bytes)?);
+        }
         ctx.record_compute_to_transfer(cmd);
-        for (k, bytes) in [(0, top), (placed.instances_array, instances)] {
-            let staging = ctx.write_recorded(self.structure_mut(k)?, bytes, cmd)?;
-            self.staging.extend(staging);
+        for write in writes {
+            self.staging.extend(write.record(&ctx, cmd));
         }
         ctx.record_transfer_to_compute(cmd);
         Ok(())
