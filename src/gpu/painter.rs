@@ -371,7 +371,11 @@ impl Painter {
         }
         let ctx = self.atlas.context().clone();
         let bytes: &[u8] = bytemuck::cast_slice(brushes);
-        ctx.check_storage_range("paint brushes", bytes.len() as u64, "record fewer brushes")?;
+        ctx.check_storage_range(
+            "paint brushes",
+            bytes.len() as u64,
+            "split the work into smaller batches or a smaller scene",
+        )?;
         let (brush_buf, write) = ctx.upload_unchecked_prepared("paint brushes", bytes)?;
         let set = self.descriptor_set(&brush_buf)?;
         // Recorded once nothing can fail: an error leaves `cmd` as it was.

@@ -463,8 +463,10 @@ impl Tracer {
         let placed = placed.into();
         let (top, instances) = self.instance_update(&placed)?;
         let ctx = self.ctx.clone();
-        // Both arrays checked before either is written, and the copies recorded once nothing
-        // can fail: an error leaves the structure and `cmd` as they were.
+        // Both arrays' buffers checked before either is written, and the copies recorded once
+        // nothing can fail. Neither write can fail after the other: their sizes are the uploaded
+        // ones (instance_update), and the two buffers share a memory type, both written
+        // directly or both staged. An error leaves the structure and `cmd` as they were.
         let arrays = [(0, top), (placed.instances_array, instances)];
         for (k, _) in arrays {
             self.structure_mut(k)?;
