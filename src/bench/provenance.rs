@@ -139,7 +139,8 @@ pub fn git_dirty() -> Option<bool> {
 const LP_MAX_THREADS: u32 = 32;
 
 /// The threads lavapipe (Mesa's llvmpipe) runs compute dispatches on, or None for any other
-/// device: [`lavapipe_threads_for`] of `LP_NUM_THREADS` and the CPUs this process may run on.
+/// device: counted as Mesa counts its workers (`lavapipe_threads_for`), from `LP_NUM_THREADS` and
+/// the CPUs this process may run on.
 pub fn lavapipe_threads(ctx: &Context) -> Option<u32> {
     if !ctx.device_name().contains("llvmpipe") {
         return None;
