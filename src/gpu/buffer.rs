@@ -107,6 +107,11 @@ pub(crate) struct PreparedWrite {
 }
 
 impl PreparedWrite {
+    /// Whether the bytes are already in the buffer (its memory host-visible): no copy to record.
+    pub(crate) fn is_done(&self) -> bool {
+        self.copy.is_none()
+    }
+
     /// Records the copy from the staging buffer into `cmd` (in the recording state), if any, and
     /// returns that staging buffer, which must live until `cmd` has executed.
     pub(crate) fn record(self, ctx: &Context, cmd: vk::CommandBuffer) -> Option<Buffer> {

@@ -20,6 +20,7 @@ use ash::vk;
 use super::bindings;
 use super::compiled::{variant_name, CompiledPipeline};
 use super::parts::{with_parts, TraceParams};
+use super::buffer::PreparedWrite;
 use super::pipeline::DescriptorSet;
 use super::{shaders, Buffer, ComputePipeline, Context, Reach, Timing};
 use crate::bvh::{GpuInstance, GpuNode, InstancedBvh, STACK_SIZE};
@@ -439,14 +440,20 @@ impl Tracer {
     /// instance records (the uploaded [`InstancedBvh`] or [`InstancedRbvh`] after its
     /// `set_transforms`) over the device's, and leaves the meshes' trees where they are (issue
     /// "Instances": build the bottom levels once, move instances, rebuild and upload the top
-    /// level alone). Submits and waits. Fails for any other structure, and for a structure whose
-    /// arrays are not the uploaded ones' sizes (another scene).
+    /// level alone). Submits and waits, both arrays' copies in one submission. Fails for any
+    /// other structure, and for a structure whose arrays are not the uploaded ones' sizes
+    /// (another scene); an error before the submission leaves the structure as it was.
     pub fn update_instances<'b>(&mut self, placed: impl Into<Placement<'b>>) -> Result<()> {
-        let placed = placed.into();
-        let (top, instances) = self.instance_update(&placed)?;
+        let writes = self.prepare_instance_update(&placed.into())?;
+        if writes.iter().all(PreparedWrite::is_done) {
+            return Ok(());
+        }
         let ctx = self.ctx.clone();
-        ctx.write(self.structure_mut(0)?, top)?;
-        ctx.write(self.structure_mut(placed.instances_array)?, instances)?;
+        // The staging buffers outlive the submission, which `submit` waits for.
+        let mut staging = Vec::new();
+        ctx.submit("update instances", |_, cmd| {
+            staging.extend(writes.into_iter().filter_map(|w| w.record(&ctx, cmd)));
+        })?;
         Ok(())
     }
 
@@ -454,33 +461,41 @@ impl Tracer {
     /// barrier after the compute reads of the old placement, the copies from staging buffers
     /// (kept until [`Tracer::release_staging`]) and a barrier that makes them visible to compute
     /// shaders. Where the structure's memory is host-visible it is written at once instead: call
-    /// it when no submitted trace still reads the structure.
+    /// it when no submitted trace still reads the structure. An error leaves the structure and
+    /// `cmd` as they were.
     pub fn update_instances_recorded<'b>(
         &mut self,
         placed: impl Into<Placement<'b>>,
         cmd: vk::CommandBuffer,
     ) -> Result<()> {
-        let placed = placed.into();
-        let (top, instances) = self.instance_update(&placed)?;
+        let writes = self.prepare_instance_update(&placed.into())?;
         let ctx = self.ctx.clone();
-        // Both arrays' buffers checked before either is written, and the copies recorded once
-        // nothing can fail. Neither write can fail after the other: their sizes are the uploaded
-        // ones (instance_update), and the two buffers share a memory type, both written
-        // directly or both staged. An error leaves the structure and `cmd` as they were.
-        let arrays = [(0, top), (placed.instances_array, instances)];
-        for (k, _) in arrays {
-            self.structure_mut(k)?;
-        }
-        let mut writes = Vec::new();
-        for (k, bytes) in arrays {
-            writes.push(ctx.prepare_write(self.structure_mut(k)?, bytes)?);
-        }
         ctx.record_compute_to_transfer(cmd);
         for write in writes {
             self.staging.extend(write.record(&ctx, cmd));
         }
         ctx.record_transfer_to_compute(cmd);
         Ok(())
+    }
+
+    /// An instance update's fallible half, shared by the submitting and the recording calls:
+    /// both arrays' buffers checked before either is written, then each written where its memory
+    /// is host-visible or staged, with no copy recorded or submitted. Neither write can fail
+    /// after the other: their sizes are the uploaded ones (instance_update), and the two buffers
+    /// share a memory type, both written directly or both staged. So an error leaves the
+    /// structure as it was, on a discrete GPU too (the submitting call used to copy the top level
+    /// before it staged the instances).
+    fn prepare_instance_update(&mut self, placed: &Placement<'_>) -> Result<Vec<PreparedWrite>> {
+        let (top, instances) = self.instance_update(placed)?;
+        let ctx = self.ctx.clone();
+        let arrays = [(0, top), (placed.instances_array, instances)];
+        for (k, _) in arrays {
+            self.structure_mut(k)?;
+        }
+        arrays
+            .into_iter()
+            .map(|(k, bytes)| ctx.prepare_write(self.structure_mut(k)?, bytes))
+            .collect()
     }
 
     /// The bytes an instance update writes (the top level's nodes, the instance records), once
