@@ -199,7 +199,8 @@ pub struct Tracer {
 /// multiple of `minStorageBufferOffsetAlignment`).
 #[derive(Clone, Copy, Debug)]
 pub struct BufferView {
-    /// The engine's buffer, created with `STORAGE_BUFFER` usage; the view runs to its end.
+    /// The engine's buffer, created with `STORAGE_BUFFER` usage; the view covers the bound
+    /// rays' or hits' bytes from `offset` ([`Tracer::bind`]).
     pub buffer: vk::Buffer,
     /// Byte offset of the first element in `buffer`.
     pub offset: u64,

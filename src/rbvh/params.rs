@@ -44,11 +44,12 @@ pub enum TexelFormat {
     /// normal of the sample nearest it (the paper's texels).
     #[default]
     HeightNormal,
-    /// The height code alone, 16 or 8 bits: half the atlas or less. A hit reports the normal of the cell
-    /// triangle it hit (a facet normal, exact for the height field as sampled), so shading shows
-    /// the facets; for visibility (AO, shadows) the hits are the same as with normals where every
-    /// triangle is sampled (`exact_when_cheaper` counts a texel's bytes, so a height-only preset
-    /// may trace a few more triangles exactly, each hit exactly). Carries no
+    /// The height code alone, 8, 10, 12 or 16 bits by tile: about half the bytes a texel. A hit
+    /// reports the normal of the cell triangle it hit (a facet normal, exact for the height field
+    /// as sampled), so shading shows the facets; for visibility (AO, shadows) the hits are the
+    /// same as with normals where every triangle is sampled (`exact_when_cheaper` prices a texel
+    /// at its bytes, so a height-only preset samples triangles the normals preset traces
+    /// exactly: its atlas may not shrink, and its hits differ there). Carries no
     /// colour channel, and levels of detail (whose columns take their normals from the texels)
     /// are not built for it.
     Height,
