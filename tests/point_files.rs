@@ -298,13 +298,18 @@ fn clouds_that_span_no_surface_are_refused() {
          property float z\nend_header\n0 0 0\n1 1 1\n2 2 2\n3 3 3\n",
     );
     assert!(geometry_error(&line).contains("lie on one line"));
+    // Non-finite values are refused where they are read: the line of a text file, the vertex
+    // of a binary one.
     let nan = write(&dir, "nan.xyz", "0 0 0\n1 0 0\n0 nan 0\n");
-    assert!(geometry_error(&nan).contains("point 2 has a non-finite position"));
+    let e = PointCloud::load(&nan).unwrap_err().to_string();
+    assert!(e.contains("nan.xyz:3: `nan` is not a finite number"), "{e}");
     let header =
         "element vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
     let values = [0.0, 0.0, 0.0, 1.0, 0.0, f32::INFINITY, 0.0, 1.0, 0.0].map(Value::Float);
     let infinite = write(&dir, "infinite.ply", binary_ply(true, header, &values));
-    assert!(geometry_error(&infinite).contains("point 1 has a non-finite position"));
+    assert!(
+        geometry_error(&infinite).contains("vertex 1: its position (1.0, 0.0, inf) is not finite")
+    );
     let zero_normal = write(
         &dir,
         "zero_normal.xyz",

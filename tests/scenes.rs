@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use glam::Vec3;
 use rbvh::geom::Aabb;
 use rbvh::scene::builtin;
-use rbvh::scene::{Camera, Light, Scene};
+use rbvh::scene::{Camera, InstancedScene, Light, Scene};
 use rbvh::Error;
 
 fn repo(path: &str) -> PathBuf {
@@ -335,6 +335,59 @@ fn gltf_with_bin_file_applies_node_transforms() {
     let json = gltf_json(r#"{ "uri": "data.bin", "byteLength": 56 }"#, "", "[0, 2]");
     let scene = load(&write(dir.path(), "scene.gltf", json)).unwrap();
     check_gltf_scene(&scene);
+}
+
+/// A node rotation that is not a unit quaternion is refused, naming the node, where it used to
+/// skew and scale the mesh; one off by float rounding is normalized; a node matrix that is not
+/// affine is refused by the flat loader as by the two-level one (the flat one applied it with
+/// its last row ignored).
+#[test]
+fn gltf_node_transforms_are_unit_rotations_and_affine() {
+    let dir = tempfile::tempdir().unwrap();
+    write(dir.path(), "data.bin", gltf_bin());
+    let buffer = r#"{ "uri": "data.bin", "byteLength": 56 }"#;
+    let unit = r#""rotation": [0, 0, 0.70710678, 0.70710678]"#;
+    let with_child = |name: &str, child: &str| {
+        let json = gltf_json(buffer, "", "[0, 2]");
+        assert!(json.contains(unit));
+        write(dir.path(), name, json.replace(unit, child))
+    };
+    let skewed = with_child("skewed.gltf", r#""rotation": [0, 0, 1, 1]"#);
+    for e in [
+        load(&skewed).unwrap_err().to_string(),
+        InstancedScene::load(skewed.to_str().unwrap())
+            .unwrap_err()
+            .to_string(),
+    ] {
+        assert!(
+            e.contains("skewed.gltf")
+                && e.contains("node 1 (\"child\")")
+                && e.contains("unit quaternion"),
+            "{e}"
+        );
+    }
+    let rounded = with_child("rounded.gltf", r#""rotation": [0, 0, 0.7072, 0.7072]"#);
+    check_gltf_scene(&load(&rounded).unwrap());
+    let projective = with_child(
+        "projective.gltf",
+        r#""matrix": [0, 1, 0, 0, -1, 0, 0, 0, 0, 0, 1, 0.5, 0, 0, 0, 1]"#,
+    );
+    for e in [
+        load(&projective).unwrap_err().to_string(),
+        InstancedScene::load(projective.to_str().unwrap())
+            .unwrap_err()
+            .to_string(),
+    ] {
+        assert!(
+            e.contains("projective.gltf") && e.contains("node 1") && e.contains("not 0 0 0 1"),
+            "{e}"
+        );
+    }
+    let affine = with_child(
+        "affine.gltf",
+        r#""matrix": [0, 1, 0, 0, -1, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]"#,
+    );
+    check_gltf_scene(&load(&affine).unwrap());
 }
 
 #[test]
@@ -866,6 +919,55 @@ fn scene_files_place_point_clouds_but_not_beside_meshes() {
         e.contains("mixed.toml:4") && e.contains("point cloud"),
         "{e}"
     );
+    // A point cloud's [[mesh]] beside a mesh's [[instance]]: each structure used to drop one.
+    write(
+        dir.path(),
+        "tri.obj",
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    );
+    let beside = write(
+        dir.path(),
+        "beside.toml",
+        "[[mesh]]\npath = \"sphere.ply\"\n\n[[instance]]\npath = \"tri.obj\"\ntranslate = [5.0, 0.0, 0.0]\n",
+    );
+    for e in [
+        load(&beside).unwrap_err().to_string(),
+        InstancedScene::load(beside.to_str().unwrap())
+            .unwrap_err()
+            .to_string(),
+    ] {
+        assert!(
+            e.contains("beside.toml:4") && e.contains("point clouds or meshes, not both"),
+            "{e}"
+        );
+    }
+}
+
+/// `Scene::check` refuses an `[[instance]]` transform that loading refuses (not invertible), so
+/// that `rbvh bench` finds it before any work, as it finds a bad `[[mesh]]` one.
+#[test]
+fn scene_file_check_refuses_instances_that_loading_refuses() {
+    let dir = tempfile::tempdir().unwrap();
+    write(
+        dir.path(),
+        "tri.obj",
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    );
+    let flat = write(
+        dir.path(),
+        "flat.toml",
+        "[[instance]]\npath = \"tri.obj\"\n\n[[instance]]\npath = \"tri.obj\"\nscale = [1e-10, 1.0, 1.0]\n",
+    );
+    let spec = flat.to_str().unwrap();
+    for e in [
+        Scene::check(spec).unwrap_err().to_string(),
+        load(&flat).unwrap_err().to_string(),
+    ] {
+        assert!(
+            e.contains("flat.toml:4") && e.contains("not invertible"),
+            "{e}"
+        );
+    }
 }
 
 /// Nodes that draw one mesh are instances of it: the mesh read once in its own space, placed by

@@ -18,9 +18,9 @@ use std::sync::{Arc, OnceLock};
 use ash::vk;
 
 use super::bindings;
+use super::buffer::PreparedWrite;
 use super::compiled::{variant_name, CompiledPipeline};
 use super::parts::{with_parts, TraceParams};
-use super::buffer::PreparedWrite;
 use super::pipeline::DescriptorSet;
 use super::{shaders, Buffer, ComputePipeline, Context, Reach, Timing};
 use crate::bvh::{GpuInstance, GpuNode, InstancedBvh, STACK_SIZE};

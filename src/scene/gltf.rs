@@ -642,13 +642,81 @@ fn mesh_instances(document: &Document) -> std::result::Result<Vec<(Node<'_>, Mat
                     node.index()
                 ));
             }
-            let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+            let world = parent * node_matrix(&node)?;
+            if node.mesh().is_some() {
+                if let Some(fault) = placement_fault(&world) {
+                    return Err(format!(
+                        "node {}{}: {fault}",
+                        node.index(),
+                        node_name(&node)
+                    ));
+                }
+            }
             let children: Vec<Node> = node.children().collect();
             stack.extend(children.into_iter().rev().map(|c| (c, world)));
             instances.push((node, world));
         }
     }
     Ok(instances)
+}
+
+/// Largest distance from 1 of a node's rotation quaternion's length that [`node_matrix`]
+/// normalizes: glTF asks for unit quaternions, and exporters write them to float precision (the
+/// Khronos validator's tolerance is of this order); a rotation further off would skew and scale
+/// the mesh (`gltf` composes it as if it were unit), so it is refused.
+const UNIT_QUATERNION_TOLERANCE: f32 = 1e-3;
+
+/// The node's local transform: its matrix, or its translation, rotation and scale composed,
+/// the rotation normalized within [`UNIT_QUATERNION_TOLERANCE`] and refused beyond it.
+fn node_matrix(node: &Node) -> std::result::Result<Mat4, String> {
+    let transform = match node.transform() {
+        ::gltf::scene::Transform::Decomposed {
+            translation,
+            rotation,
+            scale,
+        } => {
+            let length = Vec4::from_array(rotation).length();
+            if !((length - 1.0).abs() <= UNIT_QUATERNION_TOLERANCE) {
+                return Err(format!(
+                    "node {}{}: its rotation {rotation:?} is not a unit quaternion (length \
+                     {length}): glTF rotations are unit quaternions",
+                    node.index(),
+                    node_name(node)
+                ));
+            }
+            ::gltf::scene::Transform::Decomposed {
+                translation,
+                rotation: (Vec4::from_array(rotation) / length).to_array(),
+                scale,
+            }
+        }
+        matrix => matrix,
+    };
+    Ok(Mat4::from_cols_array_2d(&transform.matrix()))
+}
+
+/// What is wrong with a mesh node's world transform for tracing its mesh, if anything: entries
+/// that are not finite, or a last row other than 0 0 0 1 (glTF matrices are affine: a
+/// projective one was applied with its last row ignored). A singular transform is allowed here:
+/// the flat scene's triangles are then degenerate and traced as nothing, while a two-level scene
+/// refuses it (`InstancedScene::validate`), since an instance needs its transform's inverse.
+fn placement_fault(world: &Mat4) -> Option<String> {
+    if !world.is_finite() {
+        return Some(format!(
+            "its world transform has entries that are not finite: {world}"
+        ));
+    }
+    (world.row(3) != Vec4::W).then(|| {
+        format!(
+            "its world transform's last row is {}, not 0 0 0 1: glTF placements are affine",
+            world.row(3)
+        )
+    })
+}
+
+/// ` ("name")` for a node with a name, else nothing: for error messages.
+fn node_name(node: &Node) -> String {
+    node.name().map(|n| format!(" ({n:?})")).unwrap_or_default()
 }
 
 /// A primitive's positions and the triangles indexing them.

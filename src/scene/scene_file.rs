@@ -105,8 +105,12 @@ pub(super) fn check(path: &Path) -> Result<()> {
     file.camera.map(|c| source.camera(&c)).transpose()?;
     file.light.map(|l| source.light(&l)).transpose()?;
     let dir = path.parent().unwrap_or(Path::new(""));
-    for entry in file.mesh.iter().chain(&file.instance) {
+    for entry in &file.mesh {
         source.transform(entry.get_ref())?;
+        source.mesh_exists(entry, dir)?;
+    }
+    for entry in &file.instance {
+        source.instance_transform(entry)?;
         source.mesh_exists(entry, dir)?;
     }
     Ok(())
@@ -157,6 +161,14 @@ pub(super) fn load(path: &Path, progress: &dyn Progress) -> Result<InstancedScen
             copied.append(mesh, transform);
             progress.advance(1);
         }
+        if let (Some(_), Some(first)) = (&copied.points, file.instance.first()) {
+            return Err(source.error(
+                first.span(),
+                "this [[instance]] places a triangle mesh beside the point clouds of the [[mesh]] \
+                 entries: an RBVH is built from one or the other, so a scene file places point \
+                 clouds or meshes, not both",
+            ));
+        }
         if !file.mesh.is_empty() {
             scene.meshes.push(copied);
             scene.instances.push(Instance {
@@ -166,10 +178,7 @@ pub(super) fn load(path: &Path, progress: &dyn Progress) -> Result<InstancedScen
         }
         let mut mesh_of: HashMap<(bool, &str), u32> = HashMap::new();
         for entry in &file.instance {
-            let transform = source.transform(entry.get_ref())?;
-            if let Some(fault) = transform_fault(&transform) {
-                return Err(source.error(entry.span(), fault));
-            }
+            let transform = source.instance_transform(entry)?;
             let named = source.mesh_ref(entry)?;
             let mesh = match mesh_of.entry(named.key()) {
                 Entry::Occupied(known) => *known.get(),
@@ -278,6 +287,16 @@ impl Source<'_> {
                 entry.span(),
                 "[light] needs exactly one of `direction` or `position`",
             )),
+        }
+    }
+
+    /// An `[[instance]]`'s [`Source::transform`], refused where no instance can have it
+    /// ([`transform_fault`]: it must be affine and invertible), by [`check`] as by [`load`].
+    fn instance_transform(&self, entry: &Spanned<MeshEntry>) -> Result<Mat4> {
+        let transform = self.transform(entry.get_ref())?;
+        match transform_fault(&transform) {
+            Some(fault) => Err(self.error(entry.span(), fault)),
+            None => Ok(transform),
         }
     }
 

@@ -17,11 +17,14 @@ use crate::{Error, Result};
 /// and a lying count therefore cannot be caught before reading.
 const UNKNOWN_LENGTH_CAPACITY: u64 = 1 << 16;
 
-/// A colour channel's byte: a `uchar` as it is, a `float`/`double` from 0–1.
-fn colour_byte(value: f64, ty: Scalar) -> u8 {
+/// A colour channel's byte: a `uchar` as it is (the ascii reader refuses one out of range), a
+/// `float`/`double` from 0–1, clamped; a NaN is an error, where it used to become 0 (black, or
+/// transparent).
+fn colour_byte(value: f64, ty: Scalar) -> std::result::Result<u8, String> {
     match ty {
-        Scalar::UChar => value as u8,
-        _ => (value.clamp(0.0, 1.0) * 255.0).round() as u8,
+        Scalar::UChar => Ok(value as u8),
+        _ if value.is_nan() => Err("a colour is NaN".to_owned()),
+        _ => Ok((value.clamp(0.0, 1.0) * 255.0).round() as u8),
     }
 }
 
@@ -87,15 +90,30 @@ impl<R: BufRead> Body<'_, R> {
             if !self.record(vertices, &layout.slots, &mut values, index)? {
                 return Err(self.ends_early(vertices, index));
             }
-            let v = |channel: usize| values[channel] as f32;
-            positions.push(Vec3::new(v(0), v(1), v(2)));
+            let vector = |what: &str, channel: usize| {
+                let [x, y, z] = [0, 1, 2].map(|k| values[channel + k]);
+                let v = Vec3::new(x as f32, y as f32, z as f32);
+                match v.is_finite() {
+                    true => Ok(v),
+                    false => Err(self.bad_vertex(
+                        index,
+                        format!("its {what} ({x:?}, {y:?}, {z:?}) is not finite in 32-bit floats"),
+                    )),
+                }
+            };
+            positions.push(vector("position", 0)?);
             if let Some(normals) = &mut normals {
-                normals.push(Vec3::new(v(NORMAL), v(NORMAL + 1), v(NORMAL + 2)));
+                normals.push(vector("normal", NORMAL)?);
             }
             if let Some((types, colours)) = &mut colours {
-                let byte =
-                    |i: usize| types[i].map_or(u8::MAX, |ty| colour_byte(values[COLOUR + i], ty));
-                colours.push(u32::from_le_bytes([byte(0), byte(1), byte(2), byte(3)]));
+                let mut bytes = [u8::MAX; 4];
+                for (i, byte) in bytes.iter_mut().enumerate() {
+                    if let Some(ty) = types[i] {
+                        *byte = colour_byte(values[COLOUR + i], ty)
+                            .map_err(|m| self.bad_vertex(index, m))?;
+                    }
+                }
+                colours.push(u32::from_le_bytes(bytes));
             }
         }
         Ok(RawPoints {
@@ -122,6 +140,19 @@ impl<R: BufRead> Body<'_, R> {
     /// Bytes left in the file, when its length is known.
     fn left(&self) -> Option<u64> {
         self.len.map(|len| len.saturating_sub(self.offset))
+    }
+
+    /// The error for vertex `index`, just read, whose values cannot be traced (as a NaN vertex
+    /// of a mesh is): named by its line in an ascii body.
+    fn bad_vertex(&self, index: u64, message: String) -> Error {
+        let source_name = match self.format {
+            Format::Ascii => format!("{}:{}", self.path.display(), self.line),
+            Format::Binary { .. } => self.path.display().to_string(),
+        };
+        Error::InvalidGeometry {
+            source_name,
+            message: format!("vertex {index}: {message}"),
+        }
     }
 
     /// The error for a file that ends after `done` of `element`'s records.
@@ -426,6 +457,57 @@ mod tests {
         );
         assert_eq!(line, Some(8));
         assert!(message.contains("not text"), "{message}");
+    }
+
+    /// Values that are no colour or no 32-bit float are refused at their vertex (and line, in
+    /// ascii), where a NaN colour became black and a double beyond f32 became an infinity that
+    /// the cloud then refused by point number alone.
+    #[test]
+    fn values_that_do_not_fit_are_refused_at_their_vertex() {
+        let header = format!(
+            "element vertex 2\n{XYZ}property float red\nproperty float green\nproperty float blue\nend_header\n"
+        );
+        // The header ends on line 10.
+        for (body, line, message) in [
+            (
+                "0 0 0 1 1 1\n0 0 0 nan 1 1\n",
+                12,
+                "vertex 1: a colour is NaN",
+            ),
+            (
+                "0 0 1e300 1 1 1\n0 0 0 1 1 1\n",
+                11,
+                "vertex 0: its position (0.0, 0.0, 1e300) is not finite in 32-bit floats",
+            ),
+        ] {
+            let e = load(&ascii(&format!("{header}{body}")))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains(&format!(":{line}:")) && e.contains(message),
+                "{e}"
+            );
+        }
+        use Scalar::*;
+        let doubles = header.replace("float", "double");
+        let values = [0.0, 0.0, 0.0, 1.0, f64::NAN, 1.0].map(|v| (Double, v));
+        let values: Vec<_> = [(Double, 0.0); 6].into_iter().chain(values).collect();
+        for big_endian in [false, true] {
+            let e = load(&binary(big_endian, &doubles, &values))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("vertex 1: a colour is NaN"), "{e}");
+        }
+        let values: Vec<_> = [1e300, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0]
+            .map(|v| (Double, v))
+            .into();
+        let e = load(&binary(false, &doubles, &values))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("vertex 0: its position (1e300, 0.0, 0.0) is not finite"),
+            "{e}"
+        );
     }
 
     #[test]
