@@ -943,6 +943,42 @@ fn scene_files_place_point_clouds_but_not_beside_meshes() {
     }
 }
 
+/// A `[[mesh]]` whose transform takes its vertices beyond 32-bit floats is refused at its own
+/// table (it was reported as "vertex 1" of the merged mesh under the scene's display name), and
+/// an `[[instance]]` whose scale overflows is told so (it was called not invertible).
+#[test]
+fn scene_file_transforms_beyond_floats_are_refused_at_their_entry() {
+    let dir = tempfile::tempdir().unwrap();
+    write(
+        dir.path(),
+        "tri.obj",
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    );
+    let far = "translate = [3e38, 0.0, 0.0]\nscale = 1e38\n";
+    let mesh = write(
+        dir.path(),
+        "far.toml",
+        format!("name = \"pretty\"\n\n[[mesh]]\npath = \"tri.obj\"\n\n[[mesh]]\npath = \"tri.obj\"\n{far}"),
+    );
+    let e = load(&mesh).unwrap_err().to_string();
+    assert!(
+        e.contains("far.toml:6") && e.contains("vertex 1 of its mesh beyond 32-bit floats"),
+        "{e}"
+    );
+    let instance = write(
+        dir.path(),
+        "huge.toml",
+        format!("[[mesh]]\npath = \"tri.obj\"\n\n[[instance]]\npath = \"tri.obj\"\n{far}"),
+    );
+    let e = Scene::check(instance.to_str().unwrap())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("huge.toml:4") && e.contains("scale is too large for 32-bit floats"),
+        "{e}"
+    );
+}
+
 /// `Scene::check` refuses an `[[instance]]` transform that loading refuses (not invertible), so
 /// that `rbvh bench` finds it before any work, as it finds a bad `[[mesh]]` one.
 #[test]

@@ -381,8 +381,9 @@ pub fn available_memory() -> Option<u64> {
 pub const FLAT_BYTES_PER_TRIANGLE: u64 = 212;
 
 /// What is wrong with `m` as an instance's transform, if anything: an entry that is not finite,
-/// a last row other than `0 0 0 1` (a projection, not a placement), or a linear part too close to
-/// singular to take rays into the mesh's space ([`MIN_RELATIVE_DETERMINANT`]).
+/// a last row other than `0 0 0 1` (a projection, not a placement), a linear part whose scale
+/// overflows 32-bit floats (it was reported as not invertible), or one too close to singular to
+/// take rays into the mesh's space ([`MIN_RELATIVE_DETERMINANT`]).
 pub fn transform_fault(m: &Mat4) -> Option<String> {
     if !m.is_finite() {
         return Some(format!(
@@ -401,7 +402,12 @@ pub fn transform_fault(m: &Mat4) -> Option<String> {
         .map(|c| c.length())
         .fold(0.0f32, f32::max);
     let det = linear.determinant();
-    // Written so that a determinant that overflowed to NaN is refused too.
+    if !det.is_finite() || !largest.is_finite() {
+        return Some(format!(
+            "the transform's scale is too large for 32-bit floats (determinant {det:e} of a \
+             linear part whose longest axis is {largest})"
+        ));
+    }
     let invertible = det.abs() > MIN_RELATIVE_DETERMINANT * largest.powi(3);
     if !invertible {
         return Some(format!(

@@ -158,7 +158,25 @@ pub(super) fn load(path: &Path, progress: &dyn Progress) -> Result<InstancedScen
                      or the other, so a scene file places point clouds or meshes, not both",
                 ));
             }
+            let placed = copied.positions.len();
+            let points = copied.points.as_ref().map_or(0, |p| p.positions.len());
             copied.append(mesh, transform);
+            let out_of_range = copied.positions[placed..]
+                .iter()
+                .position(|p| !p.is_finite());
+            let out_of_range = out_of_range.or_else(|| {
+                let cloud = &copied.points.as_ref()?.positions;
+                cloud[points..].iter().position(|p| !p.is_finite())
+            });
+            if let Some(k) = out_of_range {
+                return Err(source.error(
+                    entry.span(),
+                    format!(
+                        "this entry's transform takes vertex {k} of its mesh beyond 32-bit \
+                         floats (not finite): place it nearer or smaller"
+                    ),
+                ));
+            }
             progress.advance(1);
         }
         if let (Some(_), Some(first)) = (&copied.points, file.instance.first()) {
