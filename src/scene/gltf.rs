@@ -676,7 +676,9 @@ fn node_matrix(node: &Node) -> std::result::Result<Mat4, String> {
             scale,
         } => {
             let length = Vec4::from_array(rotation).length();
-            if !((length - 1.0).abs() <= UNIT_QUATERNION_TOLERANCE) {
+            // A length that is not a number (an overflowed component) is not unit either.
+            let unit = (length - 1.0).abs() <= UNIT_QUATERNION_TOLERANCE;
+            if !unit {
                 return Err(format!(
                     "node {}{}: its rotation {rotation:?} is not a unit quaternion (length \
                      {length}): glTF rotations are unit quaternions",
