@@ -53,8 +53,9 @@ pub const INSTANCE_LEAF: u32 = u32::MAX - 1;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuNode {
-    /// GLSL `BvhNode.origin`: lower corner of the node's box (the union of its present
-    /// children's boxes), world space.
+    /// GLSL `BvhNode.origin`: just below the lower corner of the node's box (the union of its
+    /// present children's boxes; a float below, a grid step below zero, so that every plane lies
+    /// strictly outside the children's triangles: `quantize_axis`), world space.
     pub origin: [f32; 3],
     /// GLSL `exponents`: bytes 0, 1, 2 the biased exponents (1..=254) of the grid steps along
     /// x, y, z; byte 3 zero.
@@ -108,29 +109,54 @@ fn first_exponent(extent: f64) -> u32 {
     (exp + 127).clamp(MIN_EXPONENT as i64, MAX_EXPONENT as i64) as u32
 }
 
-/// The exponent and the four planes (`[a_lo, a_hi, b_lo, b_hi]`) of one axis: lower planes rounded
-/// down and upper planes up, each checked as decoded. `spans` are the present children's
-/// `(lo, hi)` (absent ones `None`, encoded as the point `origin`), `origin` at most every `lo`.
-fn quantize_axis(origin: f32, spans: [Option<(f32, f32)>; 2]) -> (u32, [u32; 4]) {
+/// The origin, exponent and four planes (`[a_lo, a_hi, b_lo, b_hi]`) of one axis: lower planes
+/// strictly below their child's `lo` and upper planes strictly above its `hi`, each checked as
+/// decoded. `spans` are the present children's `(lo, hi)` (absent ones `None`, encoded as the
+/// point at the origin), `least` at most every `lo`; the origin lies a float below `least` (a
+/// grid step below zero), strictly below every `lo` and scaling with the node
+/// ([`GpuNode::scaled_pow2`]).
+///
+/// Strictly outside, not merely outside: a ray with a zero direction component whose origin lies
+/// exactly on a box's plane along that axis is in or out of the slab by the sign of its zero
+/// (`safe_inverse` takes `1/±0` as `±f32::MAX`, so the plane's distance is `0 · MAX = 0`), and a
+/// plane decoded exactly at a triangle's coordinate closed the box at `t = 0` for a ray running
+/// in that triangle's plane: rays along an axis missed half the edge midpoints of an
+/// axis-aligned cube. With every plane strictly outside its triangles, a ray on a plane runs
+/// outside them all and misses nothing there (`tests/stability/watertight.rs`).
+fn quantize_axis(least: f32, spans: [Option<(f32, f32)>; 2], widest: f64) -> (f32, u32, [u32; 4]) {
     let top = spans
         .iter()
         .flatten()
-        .fold(origin as f64, |m, &(_, hi)| m.max(hi as f64));
-    let mut e = first_exponent(top - origin as f64);
+        .fold(least as f64, |m, &(_, hi)| m.max(hi as f64));
+    // An axis of no extent (a flat node) takes its step from the node's widest axis, so that its
+    // planes lie a step off the flat children as the others do, and scale with the node.
+    let extent = match top - least as f64 {
+        0.0 => widest,
+        extent => extent,
+    };
+    let mut e = first_exponent(extent);
     loop {
         let step = grid_step(e);
+        // The next float below `least`: the box no looser than it must be; at zero, where the
+        // next float is subnormal (and would not scale with the node), a step below. Below
+        // -f32::MAX no float is finite: such a node's lower planes are not strict.
+        let origin = match (spans.iter().flatten().next(), least) {
+            (None, _) => least,
+            (Some(_), 0.0) => -step,
+            (Some(_), _) => least.next_down().max(-f32::MAX),
+        };
         let mut q = [0u32; 4];
         let mut fits = true;
         for (k, span) in spans.iter().enumerate() {
             let Some((lo, hi)) = *span else { continue };
             let mut q_lo = (((lo as f64 - origin as f64) / step as f64).floor())
                 .clamp(0.0, MAX_PLANE as f64) as u32;
-            while q_lo > 0 && plane(origin, q_lo, step) > lo {
+            while q_lo > 0 && plane(origin, q_lo, step) >= lo {
                 q_lo -= 1;
             }
             let mut q_hi = (((hi as f64 - origin as f64) / step as f64).ceil())
                 .clamp(0.0, MAX_PLANE as f64 + 1.0) as u32;
-            while q_hi <= MAX_PLANE && plane(origin, q_hi, step) < hi {
+            while q_hi <= MAX_PLANE && plane(origin, q_hi, step) <= hi {
                 q_hi += 1;
             }
             fits &= q_hi <= MAX_PLANE;
@@ -138,7 +164,7 @@ fn quantize_axis(origin: f32, spans: [Option<(f32, f32)>; 2]) -> (u32, [u32; 4])
             q[2 * k + 1] = q_hi.min(MAX_PLANE);
         }
         if fits || e == MAX_EXPONENT {
-            return (e, q);
+            return (origin, e, q);
         }
         e += 1;
     }
@@ -232,9 +258,20 @@ impl GpuNode {
             .unwrap_or(Vec3::ZERO);
         let mut exponents = 0u32;
         let mut planes = [0u32; 3];
+        let mut origin = origin;
+        let widest = (0..3)
+            .map(|axis| {
+                let spans = boxes.iter().flatten().map(|b| (b.min[axis], b.max[axis]));
+                let top = spans
+                    .clone()
+                    .fold(origin[axis] as f64, |m, (_, hi)| m.max(hi as f64));
+                top - origin[axis] as f64
+            })
+            .fold(0.0, f64::max);
         for axis in 0..3 {
             let spans = boxes.map(|b| b.map(|b| (b.min[axis], b.max[axis])));
-            let (e, q) = quantize_axis(origin[axis], spans);
+            let (o, e, q) = quantize_axis(origin[axis], spans, widest);
+            origin[axis] = o;
             exponents |= e << (8 * axis);
             planes[axis] = q[0] | q[1] << 8 | q[2] << 16 | q[3] << 24;
         }
@@ -431,12 +468,24 @@ mod tests {
                 contains(decoded.bounds, given.bounds),
                 "{given:?} decoded as {decoded:?}"
             );
+            // Strictly: a ray on a decoded plane runs outside the child (quantize_axis).
+            assert!(
+                decoded.bounds.min.cmplt(given.bounds.min).all()
+                    && decoded.bounds.max.cmpgt(given.bounds.max).all(),
+                "{given:?} decoded as {decoded:?}: a plane on the child's"
+            );
+            let widest = (0..3)
+                .map(|axis| (node_box.max[axis] as f64 - node_box.min[axis] as f64).max(0.0))
+                .fold(0.0, f64::max);
             for axis in 0..3 {
                 let extent = (node_box.max[axis] as f64 - node_box.min[axis] as f64).max(0.0);
                 let step = f32::from_bits(((node.exponents >> (8 * axis)) & 0xff) << 23) as f64;
                 let ulp = (node_box.min[axis].abs().max(node_box.max[axis].abs()) as f64)
                     * f32::EPSILON as f64;
-                assert!(step <= (2.0 * extent / 255.0).max(f32::MIN_POSITIVE as f64) + 2.0 * ulp);
+                // A flat axis steps as the widest; the origin a step below the box widens the
+                // grid's span by that step (255 steps over the extent and one more).
+                let spanned = if extent > 0.0 { extent } else { widest };
+                assert!(step <= (2.0 * spanned / 254.0).max(f32::MIN_POSITIVE as f64) + 2.0 * ulp);
                 let slack = 2.0 * step + ulp;
                 if decoded.bounds.max[axis].is_infinite() {
                     assert!(extent > f32::MAX as f64 / 2.0, "{decoded:?}");
@@ -506,8 +555,10 @@ mod tests {
         assert_eq!((db.child, db.count), (LEAF_BIT, 0));
         assert_eq!(db.bounds.min, Vec3::from(node.origin));
         assert_eq!(db.bounds.max, Vec3::from(node.origin));
-        // The absent child's point at zero did not stretch the grid: the step fits `a` alone.
-        assert_eq!(node.origin, [10.0, 20.0, 30.0]);
+        // The absent child's point at zero did not stretch the grid: the step fits `a` alone,
+        // and the origin lies a float below it.
+        let below = Vec3::new(10.0, 20.0, 30.0).to_array().map(f32::next_down);
+        assert_eq!(node.origin, below);
         assert!(da.bounds.max.x - a.bounds.max.x <= 2.0 / 255.0);
         // Both absent (an empty tree's root): a valid node of two points.
         let empty = GpuNode::new(ChildRef::ABSENT, ChildRef::ABSENT);

@@ -122,3 +122,61 @@ fn exact_path_is_watertight_at_vertices_and_edge_midpoints() {
     }
     println!("watertight: {total} rays at vertices and edge midpoints, no false miss");
 }
+
+/// **Bound: zero false misses along a face's plane.** Rays travelling exactly in the plane of one
+/// face of the built-in cube (its faces on the planes ±1) and aimed at that face's edge with a
+/// neighbouring face, along the neighbour's axis, with every sign of their zero components, hit
+/// the neighbour at the edge, on the GPU and the CPU, closest-hit and any-hit. The origin lies on
+/// a plane of the BVH nodes' boxes there; a box plane decoded exactly at the face made the slab
+/// test (`1/±0` taken as `±f32::MAX`) close the box at `t = 0` for one sign of zero, so a ray
+/// along an axis missed the edges of axis-aligned geometry (half the sign combinations at an
+/// edge, three of four at a corner); the nodes' planes now lie strictly outside their triangles.
+#[test]
+fn axis_rays_in_a_face_plane_hit_the_edge_they_aim_at() {
+    let ctx = common::context();
+    let scene = Scene::builtin("cube").unwrap();
+    let exact = Structure::from(Bvh::build(&scene).unwrap());
+    let dist = 2.0;
+    let mut rays = Vec::new();
+    for a in 0..3 {
+        for s in [-1.0f32, 1.0] {
+            for b in (0..3).filter(|&b| b != a) {
+                let c = 3 - a - b;
+                for t in [-1.0f32, 1.0] {
+                    for along in [-1.0f32, -0.5, 0.0, 0.37, 1.0] {
+                        for zeros in 0..4u32 {
+                            let mut target = Vec3::ZERO;
+                            target[a] = s;
+                            target[b] = t;
+                            target[c] = along;
+                            let mut dir = Vec3::ZERO;
+                            dir[a] = -s;
+                            dir[b] = if zeros & 1 == 0 { 0.0 } else { -0.0 };
+                            dir[c] = if zeros & 2 == 0 { 0.0 } else { -0.0 };
+                            let origin = target - dist * dir;
+                            rays.push(Ray::new(origin, dir, 0.0, f32::INFINITY));
+                        }
+                    }
+                }
+            }
+        }
+    }
+    for query in [Query::Closest, Query::Any] {
+        for (which, hits) in PATHS.iter().zip(exact_hits(&ctx, &exact, &rays, query)) {
+            let misses: Vec<_> = rays
+                .iter()
+                .zip(&hits)
+                .filter(|(_, h)| {
+                    !h.is_hit() || (query == Query::Closest && (h.t - dist).abs() > 1e-5)
+                })
+                .collect();
+            assert!(
+                misses.is_empty(),
+                "cube {which} {query:?}: {} false misses of {}, first {:?}",
+                misses.len(),
+                rays.len(),
+                misses[0]
+            );
+        }
+    }
+}
