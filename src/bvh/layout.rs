@@ -143,7 +143,7 @@ fn quantize_axis(least: f32, spans: [Option<(f32, f32)>; 2], widest: f64) -> (f3
         let origin = match (spans.iter().flatten().next(), least) {
             (None, _) => least,
             (Some(_), 0.0) => -step,
-            (Some(_), _) => least.next_down().max(-f32::MAX),
+            (Some(_), _) => next_down(least).max(-f32::MAX),
         };
         let mut q = [0u32; 4];
         let mut fits = true;
@@ -169,6 +169,15 @@ fn quantize_axis(least: f32, spans: [Option<(f32, f32)>; 2], widest: f64) -> (f3
         e += 1;
     }
 }
+/// The next float below `x`, finite and nonzero (`f32::next_down`, stable since Rust 1.86,
+/// after this crate's least supported version).
+fn next_down(x: f32) -> f32 {
+    match x > 0.0 {
+        true => f32::from_bits(x.to_bits() - 1),
+        false => f32::from_bits(x.to_bits() + 1),
+    }
+}
+
 /// One child as the builder sees it, before packing.
 #[derive(Clone, Copy, Debug)]
 pub struct ChildRef {
@@ -557,7 +566,7 @@ mod tests {
         assert_eq!(db.bounds.max, Vec3::from(node.origin));
         // The absent child's point at zero did not stretch the grid: the step fits `a` alone,
         // and the origin lies a float below it.
-        let below = Vec3::new(10.0, 20.0, 30.0).to_array().map(f32::next_down);
+        let below = [10.0f32, 20.0, 30.0].map(next_down);
         assert_eq!(node.origin, below);
         assert!(da.bounds.max.x - a.bounds.max.x <= 2.0 / 255.0);
         // Both absent (an empty tree's root): a valid node of two points.
